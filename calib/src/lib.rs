@@ -1,0 +1,1 @@
+//! tubeloc-calib (see the README for what this crate owns).

@@ -1,0 +1,34 @@
+//! `tubeloc`: the command-line program. It wires the library crates together, reads and writes
+//! files and draws progress bars; all computation lives in the libraries.
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+// One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
+
+/// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
+#[derive(Parser)]
+#[command(name = "tubeloc", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    // Subcommands are registered here, one variant each.
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result: anyhow::Result<()> = match cli.command {
+        // Dispatch: one arm per subcommand.
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

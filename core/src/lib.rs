@@ -1,0 +1,21 @@
+//! Core types of tubeloc, shared by every other crate.
+//!
+//! Conventions (see the README): the camera frame is OpenCV's (x right, y down, z forward),
+//! pixel centres sit at integer coordinates, the world frame is z up in metres, and `T_a_b`
+//! maps points of frame `b` into frame `a`. The tube frame has its origin at the tube's centre
+//! and +z along the axis toward the seal end.
+
+pub mod camera;
+pub mod error;
+pub mod files;
+pub mod plane;
+pub mod pose;
+pub mod rig;
+pub mod tube;
+
+pub use camera::{CameraModel, Distortion};
+pub use error::CoreError;
+pub use plane::Plane;
+pub use pose::Pose;
+pub use rig::{Rig, RigCamera};
+pub use tube::{TubeMaterial, TubeMesh, TubeModel, TubeSection};

@@ -1,0 +1,1 @@
+//! tubeloc-detect (see the README for what this crate owns).

@@ -1,0 +1,1 @@
+//! tubeloc-eval (see the README for what this crate owns).

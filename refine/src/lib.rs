@@ -1,0 +1,1 @@
+//! tubeloc-refine (see the README for what this crate owns).

@@ -1,0 +1,1 @@
+//! tubeloc-stereo (see the README for what this crate owns).

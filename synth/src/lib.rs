@@ -1,0 +1,1 @@
+//! tubeloc-synth (see the README for what this crate owns).

@@ -1,0 +1,1 @@
+//! Integration tests across tubeloc crates live in `tests/tests/`.
