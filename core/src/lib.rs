@@ -6,16 +6,20 @@
 //! and +z along the axis toward the seal end.
 
 pub mod camera;
+pub mod detection;
 pub mod error;
 pub mod files;
 pub mod plane;
 pub mod pose;
 pub mod rig;
 pub mod tube;
+pub mod tube_pose;
 
 pub use camera::{CameraModel, Distortion};
+pub use detection::{AxisSeed, DetectionSource, TubeDetection};
 pub use error::CoreError;
 pub use plane::Plane;
 pub use pose::Pose;
 pub use rig::{Rig, RigCamera};
 pub use tube::{TubeMaterial, TubeMesh, TubeModel, TubeSection};
+pub use tube_pose::{FailureReason, RefineFailure, ResidualStats, TubeAxisPose};
