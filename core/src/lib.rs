@@ -8,7 +8,9 @@
 pub mod camera;
 pub mod detection;
 pub mod error;
+pub mod coco;
 pub mod files;
+pub mod mask;
 pub mod plane;
 pub mod pose;
 pub mod rig;
@@ -16,8 +18,10 @@ pub mod tube;
 pub mod tube_pose;
 
 pub use camera::{CameraModel, Distortion};
+pub use coco::{CocoAnnotation, CocoCategory, CocoDataset, CocoImage, CocoResult, Segmentation};
 pub use detection::{AxisSeed, DetectionSource, TubeDetection};
 pub use error::CoreError;
+pub use mask::{BinaryMask, Rle};
 pub use plane::Plane;
 pub use pose::Pose;
 pub use rig::{Rig, RigCamera};

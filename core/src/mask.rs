@@ -1,0 +1,437 @@
+//! Binary masks and COCO run-length encoding (RLE), bit-compatible with pycocotools' `maskApi.c`.
+//!
+//! - [`BinaryMask`]: a row-major 0/1 image, `data[y * width + x]`.
+//! - [`Rle`]: COCO RLE. Pixels are visited in **column-major** (Fortran) order, index
+//!   `x * h + y`, and `counts` alternates run lengths starting with a (possibly empty) run of
+//!   zeros. `size` is `[h, w]` as COCO writes it.
+//!
+//! The compressed string form ([`Rle::to_compressed_string`]) is pycocotools' `rleToString`:
+//! each count (from the fourth on, the difference to the count two places earlier) is written
+//! as signed 5-bit chunks, least significant first, bit `0x20` meaning "more chunks follow",
+//! each chunk offset by 48 to make printable ASCII.
+
+use crate::error::CoreError;
+
+mod poly;
+
+/// A binary mask, row-major, one byte per pixel holding 0 or 1.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BinaryMask {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Row-major values, `data[y * width + x]`, each 0 or 1.
+    pub data: Vec<u8>,
+}
+
+impl BinaryMask {
+    /// An all-zero mask.
+    pub fn new(width: usize, height: usize) -> Self {
+        BinaryMask { width, height, data: vec![0; width * height] }
+    }
+
+    /// A mask with pixel `(x, y)` set where `f(x, y)` is true.
+    pub fn from_fn(width: usize, height: usize, mut f: impl FnMut(usize, usize) -> bool) -> Self {
+        let mut data = Vec::with_capacity(width * height);
+        for y in 0..height {
+            for x in 0..width {
+                data.push(f(x, y) as u8);
+            }
+        }
+        BinaryMask { width, height, data }
+    }
+
+    /// Whether pixel `(x, y)` is set (false outside the mask).
+    #[inline]
+    pub fn get(&self, x: usize, y: usize) -> bool {
+        x < self.width && y < self.height && self.data[y * self.width + x] != 0
+    }
+
+    /// Sets pixel `(x, y)`; ignored outside the mask.
+    #[inline]
+    pub fn set(&mut self, x: usize, y: usize, value: bool) {
+        if x < self.width && y < self.height {
+            self.data[y * self.width + x] = value as u8;
+        }
+    }
+
+    /// Number of set pixels.
+    pub fn area(&self) -> u64 {
+        self.data.iter().filter(|&&v| v != 0).count() as u64
+    }
+
+    /// Tight bounding box of the set pixels as COCO `[x, y, w, h]` in pixels (integer pixel
+    /// indices: `x` is the first set column, `w` the number of columns spanned); all zero when
+    /// the mask is empty. Identical to `Rle::from_mask(self).to_bbox()`.
+    pub fn bbox(&self) -> [f64; 4] {
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0usize, 0usize);
+        for y in 0..self.height {
+            let row = &self.data[y * self.width..(y + 1) * self.width];
+            if let Some(first) = row.iter().position(|&v| v != 0) {
+                let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
+                x0 = x0.min(first);
+                x1 = x1.max(last);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            }
+        }
+        if x0 == usize::MAX {
+            return [0.0; 4];
+        }
+        [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64]
+    }
+}
+
+/// COCO run-length encoding of a binary mask, column-major, runs alternating from zeros.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Rle {
+    /// `[h, w]`: image height and width in pixels (COCO order).
+    pub size: [u32; 2],
+    /// Run lengths, alternating 0-runs and 1-runs, starting with a 0-run (which may be 0).
+    pub counts: Vec<u32>,
+}
+
+impl Rle {
+    /// Image height in pixels.
+    pub fn height(&self) -> u32 {
+        self.size[0]
+    }
+    /// Image width in pixels.
+    pub fn width(&self) -> u32 {
+        self.size[1]
+    }
+
+    /// Encodes a mask (any non-zero byte counts as set), like `rleEncode`.
+    pub fn from_mask(mask: &BinaryMask) -> Rle {
+        let (w, h) = (mask.width, mask.height);
+        let mut counts = Vec::new();
+        let mut prev = false;
+        let mut run: u32 = 0;
+        for x in 0..w {
+            for y in 0..h {
+                let v = mask.data[y * w + x] != 0;
+                if v != prev {
+                    counts.push(run);
+                    run = 0;
+                    prev = v;
+                }
+                run += 1;
+            }
+        }
+        counts.push(run);
+        Rle { size: [h as u32, w as u32], counts }
+    }
+
+    /// Decodes into a row-major mask. Errors when the counts do not sum to `h * w`.
+    pub fn to_mask(&self) -> Result<BinaryMask, CoreError> {
+        self.check()?;
+        let (h, w) = (self.size[0] as usize, self.size[1] as usize);
+        let mut mask = BinaryMask::new(w, h);
+        let mut pos = 0usize;
+        let mut value = false;
+        for &c in &self.counts {
+            if value {
+                for i in pos..pos + c as usize {
+                    let (x, y) = (i / h, i % h);
+                    mask.data[y * w + x] = 1;
+                }
+            }
+            pos += c as usize;
+            value = !value;
+        }
+        Ok(mask)
+    }
+
+    /// Checks that the counts sum to `h * w` (what every valid COCO RLE satisfies).
+    pub fn check(&self) -> Result<(), CoreError> {
+        let total: u64 = self.counts.iter().map(|&c| c as u64).sum();
+        let expect = self.size[0] as u64 * self.size[1] as u64;
+        if total != expect {
+            return Err(CoreError::invalid(
+                "RLE",
+                format!("counts sum to {total} but size {}x{} (h x w) has {expect} pixels", self.size[0], self.size[1]),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Number of set pixels: the sum of the odd-indexed counts (`rleArea`).
+    pub fn area(&self) -> u64 {
+        self.counts.iter().skip(1).step_by(2).map(|&c| c as u64).sum()
+    }
+
+    /// Bounding box `[x, y, w, h]` exactly as `rleToBbox`: when a run of ones wraps from one
+    /// column into the next, the box spans the full image height.
+    pub fn to_bbox(&self) -> [f64; 4] {
+        let h = self.size[0] as u64;
+        let w = self.size[1] as u64;
+        let m = (self.counts.len() / 2) * 2;
+        if m == 0 || h == 0 {
+            return [0.0; 4];
+        }
+        let (mut xs, mut ys, mut xe, mut ye) = (w, h, 0u64, 0u64);
+        let mut cc: u64 = 0;
+        let mut xp = 0u64;
+        for j in 0..m {
+            cc += self.counts[j] as u64;
+            let t = cc.wrapping_sub((j % 2) as u64);
+            let y = t % h;
+            let x = (t - y) / h;
+            if j % 2 == 0 {
+                xp = x;
+            } else if xp < x {
+                ys = 0;
+                ye = h - 1;
+            }
+            xs = xs.min(x);
+            xe = xe.max(x);
+            ys = ys.min(y);
+            ye = ye.max(y);
+        }
+        [xs as f64, ys as f64, (xe as f64) - (xs as f64) + 1.0, (ye as f64) - (ys as f64) + 1.0]
+    }
+
+    /// Union (`intersect == false`) or intersection of several RLEs, like `rleMerge`.
+    /// An empty list gives an empty 0x0 RLE; differing sizes are an error.
+    pub fn merge(rles: &[Rle], intersect: bool) -> Result<Rle, CoreError> {
+        let Some(first) = rles.first() else {
+            return Ok(Rle { size: [0, 0], counts: Vec::new() });
+        };
+        let mut acc = first.counts.clone();
+        for (i, b) in rles.iter().enumerate().skip(1) {
+            if b.size != first.size {
+                return Err(CoreError::invalid(
+                    "RLE merge",
+                    format!("mask {i} has size {:?} but mask 0 has {:?} (h, w)", b.size, first.size),
+                ));
+            }
+            acc = merge_two(&acc, &b.counts, intersect);
+        }
+        Ok(Rle { size: first.size, counts: acc })
+    }
+
+    /// IoU of every detection against every ground truth, like `maskUtils.iou`: returns
+    /// `ious[d * gt.len() + g]`. For a crowd ground truth the union is replaced by the detection's
+    /// area (`|d ∩ g| / |d|`). Pairs of different sizes give -1; zero intersection gives 0.
+    pub fn iou(dt: &[Rle], gt: &[Rle], iscrowd: &[bool]) -> Vec<f64> {
+        let (m, n) = (dt.len(), gt.len());
+        let db: Vec<[f64; 4]> = dt.iter().map(|r| r.to_bbox()).collect();
+        let gb: Vec<[f64; 4]> = gt.iter().map(|r| r.to_bbox()).collect();
+        let mut out = bbox_iou(&db, &gb, iscrowd);
+        for d in 0..m {
+            for g in 0..n {
+                let o = &mut out[d * n + g];
+                if *o > 0.0 {
+                    *o = rle_pair_iou(&dt[d], &gt[g], iscrowd.get(g).copied().unwrap_or(false));
+                }
+            }
+        }
+        out
+    }
+
+    /// Rasterizes polygons exactly as pycocotools' `rleFrPoly` (each polygon separately, then
+    /// their union as `frPyObjects` + `merge` do). Each polygon is `[x0, y0, x1, y1, ...]` in
+    /// pixels; `h`, `w` give the image size.
+    pub fn from_polygons(polys: &[Vec<f64>], h: u32, w: u32) -> Result<Rle, CoreError> {
+        let rles: Vec<Rle> = polys.iter().map(|p| Rle::from_polygon(p, h, w)).collect();
+        Rle::merge(&rles, false)
+    }
+
+    /// Rasterizes one polygon `[x0, y0, x1, y1, ...]` exactly as `rleFrPoly`: vertices are
+    /// upsampled by 5, the boundary is walked densely, and pixels whose centre lies inside are set.
+    pub fn from_polygon(xy: &[f64], h: u32, w: u32) -> Rle {
+        poly::rle_from_polygon(xy, h, w)
+    }
+
+    /// The RLE of the box `[x, y, w, h]`, rasterized as the polygon of its four corners
+    /// (`rleFrBbox`).
+    pub fn from_bbox(bb: [f64; 4], h: u32, w: u32) -> Rle {
+        let (xs, ys) = (bb[0], bb[1]);
+        let (xe, ye) = (xs + bb[2], ys + bb[3]);
+        Rle::from_polygon(&[xs, ys, xs, ye, xe, ye, xe, ys], h, w)
+    }
+
+    /// Compressed string form, byte-identical to pycocotools' `rleToString`.
+    pub fn to_compressed_string(&self) -> String {
+        let mut s = Vec::with_capacity(self.counts.len() * 2);
+        for i in 0..self.counts.len() {
+            let mut x = self.counts[i] as i64;
+            if i > 2 {
+                x -= self.counts[i - 2] as i64;
+            }
+            loop {
+                let mut c = (x & 0x1f) as u8;
+                x >>= 5;
+                let more = if c & 0x10 != 0 { x != -1 } else { x != 0 };
+                if more {
+                    c |= 0x20;
+                }
+                s.push(c + 48);
+                if !more {
+                    break;
+                }
+            }
+        }
+        // Every byte is in 48..=111, plain ASCII.
+        String::from_utf8(s).unwrap_or_default()
+    }
+
+    /// Parses the compressed string form (`rleFrString`) for an image of `size = [h, w]`.
+    /// Errors on characters outside `'0'..='o'`, a truncated final count, counts out of the
+    /// `u32` range, or counts that do not sum to `h * w`.
+    pub fn from_compressed_string(s: &str, size: [u32; 2]) -> Result<Rle, CoreError> {
+        let bytes = s.as_bytes();
+        let mut counts: Vec<u32> = Vec::with_capacity(bytes.len());
+        let mut p = 0usize;
+        while p < bytes.len() {
+            let mut x: i64 = 0;
+            let mut k = 0u32;
+            loop {
+                let Some(&b) = bytes.get(p) else {
+                    return Err(CoreError::invalid("RLE string", format!("truncated count at byte {p}")));
+                };
+                if !(48..=111).contains(&b) {
+                    return Err(CoreError::invalid(
+                        "RLE string",
+                        format!("byte {p} is {:?}, outside the RLE alphabet '0'..'o'", b as char),
+                    ));
+                }
+                if k >= 12 {
+                    return Err(CoreError::invalid("RLE string", format!("count too long at byte {p}")));
+                }
+                let c = (b - 48) as i64;
+                x |= (c & 0x1f) << (5 * k);
+                p += 1;
+                k += 1;
+                if c & 0x20 == 0 {
+                    if c & 0x10 != 0 {
+                        x |= -1i64 << (5 * k);
+                    }
+                    break;
+                }
+            }
+            let m = counts.len();
+            if m > 2 {
+                x += counts[m - 2] as i64;
+            }
+            let v = u32::try_from(x).map_err(|_| {
+                CoreError::invalid("RLE string", format!("count {m} decodes to {x}, outside 0..2^32"))
+            })?;
+            counts.push(v);
+        }
+        let rle = Rle { size, counts };
+        rle.check()?;
+        Ok(rle)
+    }
+}
+
+/// Merges two count lists of the same size (union or intersection), as in `rleMerge`.
+fn merge_two(a: &[u32], b: &[u32], intersect: bool) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut ca, mut cb) = (a.first().copied().unwrap_or(0), b.first().copied().unwrap_or(0));
+    let (mut va, mut vb, mut v) = (false, false, false);
+    let (mut ia, mut ib) = (1usize, 1usize);
+    let mut cc: u32 = 0;
+    loop {
+        let c = ca.min(cb);
+        cc += c;
+        let mut ct: u64 = 0;
+        ca -= c;
+        if ca == 0 && ia < a.len() {
+            ca = a[ia];
+            ia += 1;
+            va = !va;
+        }
+        ct += ca as u64;
+        cb -= c;
+        if cb == 0 && ib < b.len() {
+            cb = b[ib];
+            ib += 1;
+            vb = !vb;
+        }
+        ct += cb as u64;
+        let vp = v;
+        v = if intersect { va && vb } else { va || vb };
+        if v != vp || ct == 0 {
+            out.push(cc);
+            cc = 0;
+        }
+        if ct == 0 {
+            break;
+        }
+    }
+    out
+}
+
+/// Mask IoU of one pair, as the inner loop of `rleIou` (sizes must match, else -1).
+fn rle_pair_iou(d: &Rle, g: &Rle, crowd: bool) -> f64 {
+    if d.size != g.size {
+        return -1.0;
+    }
+    let (a, b) = (&d.counts, &g.counts);
+    let (mut ca, mut cb) = (a.first().copied().unwrap_or(0), b.first().copied().unwrap_or(0));
+    let (mut va, mut vb) = (false, false);
+    let (mut ia, mut ib) = (1usize, 1usize);
+    let (mut inter, mut union) = (0u64, 0u64);
+    loop {
+        let c = ca.min(cb);
+        if va || vb {
+            union += c as u64;
+            if va && vb {
+                inter += c as u64;
+            }
+        }
+        let mut ct: u64 = 0;
+        ca -= c;
+        if ca == 0 && ia < a.len() {
+            ca = a[ia];
+            ia += 1;
+            va = !va;
+        }
+        ct += ca as u64;
+        cb -= c;
+        if cb == 0 && ib < b.len() {
+            cb = b[ib];
+            ib += 1;
+            vb = !vb;
+        }
+        ct += cb as u64;
+        if ct == 0 {
+            break;
+        }
+    }
+    if inter == 0 {
+        union = 1;
+    } else if crowd {
+        union = d.area();
+    }
+    inter as f64 / union as f64
+}
+
+/// Box IoU of every detection box against every ground-truth box, like `bbIou`: returns
+/// `ious[d * gt.len() + g]`, boxes `[x, y, w, h]`. For a crowd ground truth the union is the
+/// detection's area. Disjoint or touching boxes give 0.
+pub fn bbox_iou(dt: &[[f64; 4]], gt: &[[f64; 4]], iscrowd: &[bool]) -> Vec<f64> {
+    let n = gt.len();
+    let mut out = vec![0.0; dt.len() * n];
+    for (g, gb) in gt.iter().enumerate() {
+        let ga = gb[2] * gb[3];
+        let crowd = iscrowd.get(g).copied().unwrap_or(false);
+        for (d, db) in dt.iter().enumerate() {
+            let da = db[2] * db[3];
+            let w = (db[2] + db[0]).min(gb[2] + gb[0]) - db[0].max(gb[0]);
+            if w <= 0.0 {
+                continue;
+            }
+            let h = (db[3] + db[1]).min(gb[3] + gb[1]) - db[1].max(gb[1]);
+            if h <= 0.0 {
+                continue;
+            }
+            let i = w * h;
+            let u = if crowd { da } else { da + ga - i };
+            out[d * n + g] = i / u;
+        }
+    }
+    out
+}
