@@ -1,1 +1,5 @@
 //! tubeloc-eval (see the README for what this crate owns).
+pub mod pose;
+pub mod pose_bop;
+pub mod pose_match;
+pub mod pose_summary;
