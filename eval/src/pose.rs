@@ -17,7 +17,7 @@
 
 use nalgebra::{Point3, Unit, Vector3};
 use serde::{Deserialize, Serialize};
-use tubeloc_core::Pose;
+use tubeloc_core::{Pose, TubeAxisPose};
 
 /// Errors of the pose metrics (invalid inputs; never a panic).
 #[derive(Debug, thiserror::Error)]
@@ -62,6 +62,11 @@ impl AxisLine {
     pub fn from_pose(t_cam_tube: &Pose) -> Self {
         let axis = Unit::new_normalize(t_cam_tube.transform_vector(&Vector3::z()));
         AxisLine { centre: Point3::from(t_cam_tube.translation()), axis }
+    }
+
+    /// The axis line of a refined grasp pose, directed along its `end_direction`.
+    pub fn from_axis_pose(p: &TubeAxisPose) -> Result<Self, PoseEvalError> {
+        AxisLine::new(Point3::from(p.centre), p.end_direction)
     }
 }
 

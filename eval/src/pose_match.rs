@@ -8,7 +8,7 @@
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use tubeloc_core::Pose;
+use tubeloc_core::{Pose, Rle, TubeAxisPose};
 
 /// A ground-truth tube: image and pose `T_cam_tube` (metres).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -28,6 +28,14 @@ pub struct TubeEstimate {
     pub pose: Pose,
     /// Confidence score.
     pub score: f64,
+}
+
+impl TubeEstimate {
+    /// The estimate of a refined grasp pose: `T_cam_tube` with +z along its end direction
+    /// (rotation about the axis is arbitrary, which every symmetric metric ignores).
+    pub fn from_axis_pose(p: &TubeAxisPose) -> Self {
+        TubeEstimate { image_id: p.image_id, pose: p.to_pose(), score: p.score }
+    }
 }
 
 /// How estimates were matched to truths.
@@ -148,4 +156,31 @@ pub fn match_by_iou(
         let v = iou(e, t);
         (v >= min_iou).then_some(v)
     })
+}
+
+/// Matches by the IoU of COCO RLE masks (`Rle::iou`, no crowd), gated at `min_iou`;
+/// `estimate_masks[e]` and `truth_masks[t]` belong to `estimates[e]` and `truths[t]`. Masks of
+/// different image sizes never match. Fails when the mask counts differ from the tube counts.
+pub fn match_by_mask_iou(
+    truths: &[TubeTruth],
+    estimates: &[TubeEstimate],
+    truth_masks: &[Rle],
+    estimate_masks: &[Rle],
+    min_iou: f64,
+) -> Result<Matching, crate::pose::PoseEvalError> {
+    if truth_masks.len() != truths.len() || estimate_masks.len() != estimates.len() {
+        return Err(crate::pose::PoseEvalError::invalid(
+            "masks",
+            format!(
+                "{} truth masks for {} truths and {} estimate masks for {} estimates",
+                truth_masks.len(),
+                truths.len(),
+                estimate_masks.len(),
+                estimates.len()
+            ),
+        ));
+    }
+    Ok(match_by_iou(truths, estimates, min_iou, |e, t| {
+        Rle::iou(std::slice::from_ref(&estimate_masks[e]), std::slice::from_ref(&truth_masks[t]), &[false])[0]
+    }))
 }

@@ -3,7 +3,7 @@
 use nalgebra::{Rotation3, Vector3};
 use tubeloc_core::{CameraModel, Pose, TubeModel};
 use tubeloc_eval::pose_bop::ModelPoints;
-use tubeloc_eval::pose_match::{match_by_centre_distance, match_by_iou, MatchMethod, TubeEstimate, TubeTruth};
+use tubeloc_eval::pose_match::{match_by_centre_distance, match_by_iou, match_by_mask_iou, MatchMethod, TubeEstimate, TubeTruth};
 use tubeloc_eval::pose_summary::{evaluate_poses, percentile, summarize, PoseEvalConfig, PoseEvaluation};
 
 fn pose(x: f64, y: f64, z: f64) -> Pose {
@@ -104,4 +104,25 @@ fn evaluation_recalls_and_summaries_match_hand_computation() {
     let ev = evaluate_poses(&truths, &estimates, &m, &model, &PoseEvalConfig::default()).unwrap();
     assert_eq!(ev.bop.ar_mspd, None);
     assert!(ev.pairs.iter().all(|p| p.mspd_px.is_none()));
+}
+
+#[test]
+fn mask_iou_matching_uses_core_rle() {
+    use tubeloc_core::{BinaryMask, Rle, TubeAxisPose};
+    let rect = |x0: usize, x1: usize| Rle::from_mask(&BinaryMask::from_fn(20, 10, |x, y| x >= x0 && x < x1 && (2..8).contains(&y)));
+    let truths = vec![TubeTruth { image_id: 1, pose: pose(0.0, 0.0, 1.0) }, TubeTruth { image_id: 1, pose: pose(0.2, 0.0, 1.0) }];
+    let axis = TubeAxisPose::new(1, 0.9, Vector3::new(0.2, 0.0, 1.0), Vector3::new(0.0, 1.0, 0.0), 0.8).unwrap();
+    let estimates = vec![TubeEstimate::from_axis_pose(&axis), TubeEstimate { image_id: 1, pose: pose(0.0, 0.0, 1.0), score: 0.5 }];
+    // Truth masks: columns 0..8 and 10..18. Estimate 0 covers 10..16 (IoU 6/8 with truth 1),
+    // estimate 1 covers 4..8 (IoU 4/8 with truth 0: below a 0.6 gate, at a 0.5 gate).
+    let tm = vec![rect(0, 8), rect(10, 18)];
+    let em = vec![rect(10, 16), rect(4, 8)];
+    let m = match_by_mask_iou(&truths, &estimates, &tm, &em, 0.6).unwrap();
+    assert_eq!(m.pairs.len(), 1);
+    assert_eq!((m.pairs[0].estimate, m.pairs[0].truth), (0, 1));
+    assert!((m.pairs[0].similarity - 0.75).abs() < 1e-12);
+    assert_eq!(m.unmatched_estimates, vec![1]);
+    let m = match_by_mask_iou(&truths, &estimates, &tm, &em, 0.5).unwrap();
+    assert_eq!(m.pairs.len(), 2);
+    assert!(match_by_mask_iou(&truths, &estimates, &tm[..1], &em, 0.5).unwrap_err().to_string().contains("1 truth masks for 2 truths"));
 }
