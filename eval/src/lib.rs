@@ -7,3 +7,4 @@ pub mod plot;
 pub mod plot_pr;
 pub mod plot_hist;
 pub mod plot_bar;
+pub mod report;
