@@ -1,4 +1,5 @@
 //! tubeloc-eval (see the README for what this crate owns).
+pub mod coco_eval;
 pub mod pose;
 pub mod pose_bop;
 pub mod pose_match;
