@@ -30,3 +30,9 @@ pub mod simd;
 pub use error::{Result, StereoError};
 pub use region::{disparity_regions, Roi};
 pub use sgm::{disparity, Paths, SgmMatcher, SgmParams};
+pub mod rectify;
+pub mod synthetic;
+pub mod triangulate;
+
+pub use rectify::StereoRectification;
+pub use triangulate::{triangulate, RectifiedGeometry, StereoPoint};

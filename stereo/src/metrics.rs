@@ -43,6 +43,11 @@ impl GroundTruth {
         }
         GroundTruth { disparity, mask }
     }
+
+    /// Fraction of all pixels that are evaluated.
+    pub fn evaluated_fraction(&self) -> f64 {
+        self.mask.data.iter().filter(|&&m| m != 0).count() as f64 / self.mask.data.len().max(1) as f64
+    }
 }
 
 /// Scores of a disparity map.
