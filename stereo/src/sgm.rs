@@ -172,7 +172,6 @@ impl SgmMatcher {
     }
 
     fn compute_in_pool(&mut self, left: &Plane<u8>, right: &Plane<u8>) -> Result<Plane<f32>> {
-        let t0 = std::time::Instant::now();
         let p = &self.params;
         let (w, h, nd) = (left.width, left.height, p.num_disparities);
         let cl = census_transform(left, p.census_width, p.census_height)?;
@@ -184,18 +183,14 @@ impl SgmMatcher {
             grad_trunc: p.gradient_trunc,
             border: (p.census_weight as u32 * (p.census_width * p.census_height - 1) as u32 / 2).min(255) as u8,
         };
-        let t1 = t0.elapsed();
         self.cost.resize(w * h * nd, 0);
         cost_volume(&cl, &cr, grads.as_ref().map(|(a, b)| (a, b)), p.min_disparity, nd, wt, &mut self.cost);
-        let t2 = t0.elapsed();
         let mut out = Plane::<f32>::new(w, h);
         aggregate_select(&self.cost, left, &p.agg_params(), &mut self.sum, &mut out.data);
-        let t3 = t0.elapsed();
         if p.median {
             out = median3(&out);
         }
         remove_speckles(&mut out, p.speckle_size, p.speckle_range);
-        if std::env::var_os("STEREO_PROFILE").is_some() { eprintln!("census {:?} cost {:?} agg {:?} post {:?}", t1, t2 - t1, t3 - t2, t0.elapsed() - t3); }
         Ok(out)
     }
 }
