@@ -1,1 +1,259 @@
-//! tubeloc-refine (see the README for what this crate owns).
+//! tubeloc-refine: edge-based 6D pose refinement of sample tubes with a cylinder model.
+//!
+//! A detection ([`TubeDetection`]: Line2D template pose, learned mask axis, or box) seeds a
+//! robust Levenberg-Marquardt fit of the tube's projected occluding contour
+//! ([`contour`]) to image edges ([`edges`]), coarse to fine over an image pyramid, with an
+//! optional stereo term ([`fit::Scene`]). The fitted parameters are the centre and the axis
+//! direction (rotation about the axis is not observable and not optimized). Which end is the
+//! seal end is decided afterwards by fitting both end hypotheses and comparing their edge
+//! support ([`Refiner::refine`]). The output is a [`TubeAxisPose`] with a flip-free axis,
+//! covariance, residual statistics and a failure reason instead of NaN when the fit fails.
+
+pub mod contour;
+pub mod edges;
+pub mod error;
+pub mod fit;
+pub mod model;
+pub mod robust;
+pub mod seed;
+
+pub use contour::AxisState;
+pub use error::RefineError;
+pub use fit::{FitResult, Scene};
+pub use model::CylinderModel;
+pub use seed::{seed_from_detection, GroundPlane, Seed};
+
+use nalgebra::{Point2, Point3, Vector3};
+use serde::{Deserialize, Serialize};
+use tubeloc_core::{CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
+
+/// Tuning of the refiner. Pixel values are in pixels of the level they apply to unless noted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RefineConfig {
+    /// Half length of the 1D edge search along contour normals at the coarsest level (later
+    /// levels use at most 5).
+    pub search_radius_px: usize,
+    /// Spacing of contour samples along the projected contour.
+    pub sample_spacing_px: f64,
+    /// Minimum `|∇I · n|` (intensity per pixel, images in [0, 1]) for an edge.
+    pub min_gradient: f32,
+    /// Edge hypotheses weaker than this fraction of the strongest along a normal are dropped.
+    pub rel_edge_strength: f32,
+    /// Outer iterations at the coarsest level (half of it at the finer levels).
+    pub max_iterations: usize,
+    /// Coarsest level is chosen so the body is at least this wide (pixels).
+    pub min_body_width_px: f64,
+    /// Most pyramid levels.
+    pub max_levels: usize,
+    /// Nominal edge localization noise, full-resolution pixels (residual normalization).
+    pub edge_sigma_px: f64,
+    /// Nominal stereo point noise, metres.
+    pub stereo_sigma_m: f64,
+    /// A sample is an inlier when its edge lies within this many full-resolution pixels.
+    pub inlier_px: f64,
+    /// Fits with a smaller inlier fraction are rejected as `empty_terrain`.
+    pub min_inlier_fraction: f64,
+    /// Fewer visible (or matched) samples than this fail the fit.
+    pub min_samples: usize,
+    /// A fit moving the centre by more than this fraction of the seed distance diverged.
+    pub max_centre_shift_frac: f64,
+    /// A fit turning the axis by more than this (degrees, undirected) diverged.
+    pub max_axis_change_deg: f64,
+    /// Decide which end is the seal end by fitting both hypotheses.
+    pub decide_end: bool,
+    /// Score difference (mean truncated cost) that gives `end_confidence` ≈ 0.73 (logistic scale).
+    pub end_score_scale: f64,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        RefineConfig {
+            search_radius_px: 8,
+            sample_spacing_px: 3.0,
+            min_gradient: 0.004,
+            rel_edge_strength: 0.25,
+            max_iterations: 12,
+            min_body_width_px: 14.0,
+            max_levels: 4,
+            edge_sigma_px: 0.5,
+            stereo_sigma_m: 0.0015,
+            inlier_px: 2.0,
+            min_inlier_fraction: 0.5,
+            min_samples: 12,
+            max_centre_shift_frac: 0.3,
+            max_axis_change_deg: 50.0,
+            decide_end: true,
+            end_score_scale: 0.02,
+        }
+    }
+}
+
+impl RefineConfig {
+    /// Checks ranges.
+    pub fn validate(&self) -> Result<(), RefineError> {
+        let ok = self.search_radius_px >= 1
+            && self.search_radius_px <= 64
+            && self.sample_spacing_px > 0.0
+            && self.min_gradient >= 0.0
+            && self.max_levels >= 1
+            && self.edge_sigma_px > 0.0
+            && self.stereo_sigma_m > 0.0
+            && self.inlier_px > 0.0
+            && (0.0..=1.0).contains(&self.min_inlier_fraction)
+            && self.end_score_scale > 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(RefineError::Config(format!("{self:?}")))
+        }
+    }
+}
+
+/// One image (grayscale, intensities in [0, 1]) with its camera and optional scene data.
+#[derive(Clone, Copy, Debug)]
+pub struct RefineInput<'a> {
+    /// Grayscale image, row-major, `camera.width x camera.height`.
+    pub image: &'a Plane<f32>,
+    /// Camera of the image.
+    pub camera: &'a CameraModel,
+    /// Optional ground plane (camera frame) for mask seeds.
+    pub ground: Option<GroundPlane>,
+    /// Optional depth map and stereo points.
+    pub scene: Scene<'a>,
+}
+
+/// The pose refiner: a tube model and a configuration.
+#[derive(Clone, Debug)]
+pub struct Refiner {
+    /// The cylinder model of the tube.
+    pub model: CylinderModel,
+    /// Tuning.
+    pub config: RefineConfig,
+}
+
+impl Refiner {
+    /// A refiner for `tube` with `config`.
+    pub fn new(tube: &TubeModel, config: RefineConfig) -> Result<Self, RefineError> {
+        config.validate()?;
+        Ok(Refiner { model: CylinderModel::new(tube)?, config })
+    }
+
+    /// Refines one detection. Never returns NaN: failures come back with `converged = false`
+    /// and a [`tubeloc_core::RefineFailure`]; the pose is then the last finite estimate (or the
+    /// seed).
+    pub fn refine(&self, input: &RefineInput, det: &TubeDetection) -> TubeAxisPose {
+        match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
+            Ok(seed) => self.refine_seed(input, &seed, det.image_id, det.score, Some(det.bbox)),
+            Err(e) => failed(det.image_id, det.score, None, FailureReason::BadSeed, e.to_string()),
+        }
+    }
+
+    /// Refines from an explicit seed. `bbox` (COCO `[x, y, w, h]`) widens the region of
+    /// interest when given.
+    pub fn refine_seed(&self, input: &RefineInput, seed: &Seed, image_id: u64, score: f64, bbox: Option<[f64; 4]>) -> TubeAxisPose {
+        let cam = input.camera;
+        if input.image.width != cam.width as usize || input.image.height != cam.height as usize {
+            let msg = format!("image is {}x{} but the camera is {}x{}", input.image.width, input.image.height, cam.width, cam.height);
+            return failed(image_id, score, Some(&seed.state), FailureReason::BadSeed, msg);
+        }
+        let st = seed.state;
+        if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.a.norm() < 1e-9 || st.c.z <= 0.0 {
+            return failed(image_id, score, None, FailureReason::BadSeed, "seed is not finite or is behind the camera".into());
+        }
+        let st = AxisState { c: st.c, a: st.a.normalize() };
+        let Some((rect, top)) = self.region(cam, &st, bbox) else {
+            return failed(image_id, score, Some(&st), FailureReason::OutOfImage, "the seed projects outside the image".into());
+        };
+        let pyr = edges::build_pyramid(input.image, cam, rect, top + 1);
+        let top = top.min(pyr.len() - 1);
+        let a = fit::fit(&self.model, &self.config, &pyr, top, &input.scene, st);
+        let (best, conf) = if self.config.decide_end && a.failure.is_none() {
+            let flipped = AxisState { c: a.state.c, a: -a.state.a };
+            let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &input.scene, flipped);
+            let dscore = if b.failure.is_none() { b.score - a.score } else { 1.0 };
+            let p = 1.0 / (1.0 + (-dscore.abs() / self.config.end_score_scale).exp());
+            if dscore < 0.0 {
+                (b, p)
+            } else {
+                (a, p)
+            }
+        } else {
+            (a, if seed.end_known { 0.6 } else { 0.5 })
+        };
+        to_pose(image_id, score, &best, conf)
+    }
+
+    /// Region of interest (crop rectangle) and coarsest pyramid level for a state.
+    fn region(&self, cam: &CameraModel, st: &AxisState, bbox: Option<[f64; 4]>) -> Option<((usize, usize, usize, usize), usize)> {
+        let half = 0.5 * self.model.length;
+        let rmax = self.model.max_radius();
+        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        let f = st.frame()?;
+        for z in [-half, half] {
+            for k in 0..8 {
+                let phi = k as f64 * std::f64::consts::FRAC_PI_4;
+                let p = st.c + st.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * rmax;
+                if let Some(u) = cam.project(&Point3::from(p)) {
+                    x0 = x0.min(u.x);
+                    y0 = y0.min(u.y);
+                    x1 = x1.max(u.x);
+                    y1 = y1.max(u.y);
+                }
+            }
+        }
+        if x0 > x1 {
+            return None;
+        }
+        if let Some(b) = bbox {
+            x0 = x0.min(b[0]);
+            y0 = y0.min(b[1]);
+            x1 = x1.max(b[0] + b[2]);
+            y1 = y1.max(b[1] + b[3]);
+        }
+        let fpx = 0.5 * (cam.fx + cam.fy);
+        let body_px = 2.0 * self.model.body_radius() * fpx / st.c.norm();
+        let top = ((body_px / self.config.min_body_width_px).max(1.0).log2().floor() as usize).min(self.config.max_levels - 1);
+        let margin = (self.config.search_radius_px as f64 + 4.0) * (1u64 << top) as f64 + 0.1 * (x1 - x0).max(y1 - y0);
+        let rect = edges::roi([x0, y0, x1 - x0, y1 - y0], margin, cam.width as usize, cam.height as usize)?;
+        Some((rect, top))
+    }
+
+    /// Points of the fitted occluding contour in pixels (for overlays), sampled every
+    /// `spacing_px`; only silhouette points not hidden by the tube itself.
+    pub fn contour_pixels(&self, camera: &CameraModel, pose: &TubeAxisPose, spacing_px: f64) -> Vec<Point2<f64>> {
+        let st = AxisState { c: pose.centre, a: pose.end_direction };
+        let Some(f) = st.frame() else { return Vec::new() };
+        contour::build_samples(&self.model, &st, camera, spacing_px)
+            .iter()
+            .filter_map(|s| {
+                let p = s.eval(&self.model, &f)?;
+                if !s.on_silhouette(&self.model, &f, &p) || self.model.occludes(&st.c, &st.a, &(p.x + p.out * 1e-4)) {
+                    return None;
+                }
+                camera.project(&p.x)
+            })
+            .collect()
+    }
+}
+
+fn failed(image_id: u64, score: f64, st: Option<&AxisState>, reason: FailureReason, msg: String) -> TubeAxisPose {
+    let (c, a) = match st {
+        Some(s) if s.c.iter().chain(s.a.iter()).all(|v| v.is_finite()) && s.a.norm() > 1e-9 => (s.c, s.a),
+        _ => (Vector3::zeros(), Vector3::z()),
+    };
+    TubeAxisPose::new(image_id, score, c, a, 0.5).expect("finite centre and unit axis").fail(reason, msg)
+}
+
+fn to_pose(image_id: u64, score: f64, r: &FitResult, end_confidence: f64) -> TubeAxisPose {
+    let mut p = match TubeAxisPose::new(image_id, score, r.state.c, r.state.a, end_confidence) {
+        Ok(p) => p,
+        Err(e) => return failed(image_id, score, None, FailureReason::Diverged, e.to_string()),
+    };
+    p.covariance = r.covariance;
+    p.residuals = r.stats;
+    match &r.failure {
+        Some((reason, msg)) => p.fail(*reason, msg.clone()),
+        None => p,
+    }
+}

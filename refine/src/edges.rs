@@ -1,0 +1,258 @@
+//! Image side of the fit: a gradient pyramid of the region of interest and 1D edge searches
+//! along contour normals.
+//!
+//! Level 0 is the crop of the input image; level `k+1` averages 2x2 blocks of level `k` (pixel
+//! centres stay consistent with [`CameraModel::scaled`]). Each level is smoothed with the
+//! binomial kernel `[1 4 6 4 1]/16` (σ ≈ 1 px) and differentiated with central differences,
+//! giving `gx`, `gy` in intensity units per level pixel.
+
+use nalgebra::{Point2, Vector2};
+use tubeloc_core::{CameraModel, Plane};
+
+/// Gradient images of one pyramid level and the camera that maps into its pixels.
+#[derive(Clone, Debug)]
+pub struct GradientLevel {
+    /// Camera for this level's pixel grid (cropped and scaled).
+    pub camera: CameraModel,
+    /// Smoothed intensity.
+    pub smooth: Plane<f32>,
+    /// Horizontal derivative.
+    pub gx: Plane<f32>,
+    /// Vertical derivative.
+    pub gy: Plane<f32>,
+    /// Scale of this level relative to full resolution (1, 0.5, 0.25, ...).
+    pub scale: f64,
+}
+
+/// The crop rectangle `(x0, y0, w, h)` of `bbox` grown by `margin` pixels, clamped to the image.
+/// Returns `None` when the rectangle does not overlap the image.
+pub fn roi(bbox: [f64; 4], margin: f64, width: usize, height: usize) -> Option<(usize, usize, usize, usize)> {
+    let x0 = (bbox[0] - margin).floor().max(0.0);
+    let y0 = (bbox[1] - margin).floor().max(0.0);
+    let x1 = (bbox[0] + bbox[2] + margin).ceil().min(width as f64);
+    let y1 = (bbox[1] + bbox[3] + margin).ceil().min(height as f64);
+    if !(x1 - x0 >= 8.0 && y1 - y0 >= 8.0) {
+        return None;
+    }
+    Some((x0 as usize, y0 as usize, (x1 - x0) as usize, (y1 - y0) as usize))
+}
+
+fn crop(img: &Plane<f32>, x0: usize, y0: usize, w: usize, h: usize) -> Plane<f32> {
+    let mut data = Vec::with_capacity(w * h);
+    for y in y0..y0 + h {
+        data.extend_from_slice(&img.row(y)[x0..x0 + w]);
+    }
+    Plane::from_vec(w, h, data)
+}
+
+fn downsample(p: &Plane<f32>) -> Plane<f32> {
+    let (w, h) = (p.width / 2, p.height / 2);
+    let mut data = Vec::with_capacity(w * h);
+    for y in 0..h {
+        let (r0, r1) = (p.row(2 * y), p.row(2 * y + 1));
+        data.extend((0..w).map(|x| 0.25 * (r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1])));
+    }
+    Plane::from_vec(w, h, data)
+}
+
+/// Separable binomial blur `[1 4 6 4 1]/16` with clamped borders.
+fn blur(p: &Plane<f32>) -> Plane<f32> {
+    let (w, h) = (p.width, p.height);
+    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let mut tmp = vec![0f32; w * h];
+    for y in 0..h {
+        let row = p.row(y);
+        let out = &mut tmp[y * w..(y + 1) * w];
+        for x in 0..w {
+            let mut s = 0.0;
+            for (k, kv) in K.iter().enumerate() {
+                let xx = (x as isize + k as isize - 2).clamp(0, w as isize - 1) as usize;
+                s += kv * row[xx];
+            }
+            out[x] = s;
+        }
+    }
+    let mut data = vec![0f32; w * h];
+    for y in 0..h {
+        let out = &mut data[y * w..(y + 1) * w];
+        for (k, kv) in K.iter().enumerate() {
+            let yy = (y as isize + k as isize - 2).clamp(0, h as isize - 1) as usize;
+            let src = &tmp[yy * w..(yy + 1) * w];
+            for x in 0..w {
+                out[x] += kv * src[x];
+            }
+        }
+    }
+    Plane::from_vec(w, h, data)
+}
+
+fn gradients(p: &Plane<f32>) -> (Plane<f32>, Plane<f32>) {
+    let (w, h) = (p.width, p.height);
+    let mut gx = vec![0f32; w * h];
+    let mut gy = vec![0f32; w * h];
+    for y in 0..h {
+        let row = p.row(y);
+        let up = p.row(y.saturating_sub(1));
+        let dn = p.row((y + 1).min(h - 1));
+        let sy = if y == 0 || y == h - 1 { 1.0 } else { 0.5 };
+        for x in 0..w {
+            let xl = x.saturating_sub(1);
+            let xr = (x + 1).min(w - 1);
+            let sx = if x == 0 || x == w - 1 { 1.0 } else { 0.5 };
+            gx[y * w + x] = (row[xr] - row[xl]) * sx;
+            gy[y * w + x] = (dn[x] - up[x]) * sy;
+        }
+    }
+    (Plane::from_vec(w, h, gx), Plane::from_vec(w, h, gy))
+}
+
+/// Builds `levels` gradient levels for the crop `(x0, y0, w, h)` of `image` seen by `camera`.
+/// Stops early when a level would be smaller than 16 pixels on a side.
+pub fn build_pyramid(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usize, usize, usize), levels: usize) -> Vec<GradientLevel> {
+    let (x0, y0, w, h) = rect;
+    let mut cur = crop(image, x0, y0, w, h);
+    let mut cam = camera.cropped(x0 as u32, y0 as u32, w as u32, h as u32);
+    let mut out = Vec::with_capacity(levels);
+    let mut scale = 1.0;
+    for k in 0..levels.max(1) {
+        if k > 0 {
+            if cur.width / 2 < 16 || cur.height / 2 < 16 {
+                break;
+            }
+            cur = downsample(&cur);
+            cam = cam.scaled(0.5);
+            cam.width = cur.width as u32;
+            cam.height = cur.height as u32;
+            scale *= 0.5;
+        }
+        let smooth = blur(&cur);
+        let (gx, gy) = gradients(&smooth);
+        out.push(GradientLevel { camera: cam.clone(), smooth, gx, gy, scale });
+    }
+    out
+}
+
+/// Result of a 1D edge search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeHit {
+    /// Signed offset of the edge from the start point along the normal, level pixels.
+    pub offset: f64,
+    /// Directional derivative at the edge, `∇I · n` (sign = polarity along the outward normal).
+    pub strength: f32,
+}
+
+impl GradientLevel {
+    /// True when `p` is at least `margin` pixels inside this level's image.
+    #[inline]
+    pub fn inside(&self, p: &Point2<f64>, margin: f64) -> bool {
+        p.x >= margin && p.y >= margin && p.x <= self.gx.width as f64 - 1.0 - margin && p.y <= self.gx.height as f64 - 1.0 - margin
+    }
+
+    /// Directional derivative `∇I(q) · n` by bilinear interpolation of the gradient planes.
+    #[inline]
+    pub fn directional(&self, q: &Point2<f64>, n: &Vector2<f64>) -> f32 {
+        let (x, y) = (q.x as f32, q.y as f32);
+        self.gx.sample_bilinear(x, y) * n.x as f32 + self.gy.sample_bilinear(x, y) * n.y as f32
+    }
+
+    /// Searches `p + k n`, `k = -radius..=radius`, for local maxima of `|∇I · n|` above
+    /// `min_strength` with the requested polarity (`polarity` = +1 or -1 keeps only that sign
+    /// of `∇I · n`; 0 keeps both). Returns up to [`MAX_HYPOTHESES`] edges, strongest first,
+    /// each at least `rel_strength` times the strongest; offsets refined by a parabola through
+    /// the neighbours.
+    pub fn search_all(&self, p: &Point2<f64>, n: &Vector2<f64>, radius: usize, min_strength: f32, polarity: i8, rel_strength: f32) -> EdgeHits {
+        let mut buf = [0f32; 129];
+        let m = (2 * radius + 1).min(129);
+        let r = (m as isize - 1) / 2;
+        for (i, v) in buf.iter_mut().take(m).enumerate() {
+            let k = i as f64 - r as f64;
+            *v = self.directional(&(p + n * k), n);
+        }
+        let mut hits = EdgeHits::default();
+        let mut cand: [(usize, f32); 16] = [(0, 0.0); 16];
+        let mut nc = 0;
+        for i in 1..m - 1 {
+            let g = buf[i];
+            if polarity > 0 && g <= 0.0 || polarity < 0 && g >= 0.0 {
+                continue;
+            }
+            let a = g.abs();
+            if a < min_strength || a < buf[i - 1].abs() || a < buf[i + 1].abs() {
+                continue;
+            }
+            if nc < cand.len() {
+                cand[nc] = (i, a);
+                nc += 1;
+            }
+        }
+        let cand = &mut cand[..nc];
+        cand.sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+        let top = cand.first().map_or(0.0, |c| c.1);
+        for &(i, a) in cand.iter().take(MAX_HYPOTHESES) {
+            if a < rel_strength * top {
+                break;
+            }
+            let (l, c, rr) = (buf[i - 1].abs() as f64, buf[i].abs() as f64, buf[i + 1].abs() as f64);
+            let den = l - 2.0 * c + rr;
+            let delta = if den < -1e-12 { (0.5 * (l - rr) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            hits.hits[hits.len] = EdgeHit { offset: i as f64 - r as f64 + delta, strength: buf[i] };
+            hits.len += 1;
+        }
+        hits
+    }
+
+    /// The strongest edge of [`GradientLevel::search_all`], if any.
+    pub fn search(&self, p: &Point2<f64>, n: &Vector2<f64>, radius: usize, min_strength: f32, polarity: i8) -> Option<EdgeHit> {
+        let h = self.search_all(p, n, radius, min_strength, polarity, 1.0);
+        (h.len > 0).then(|| h.hits[0])
+    }
+}
+
+/// Most edge hypotheses kept per contour sample.
+pub const MAX_HYPOTHESES: usize = 3;
+
+/// Up to [`MAX_HYPOTHESES`] edges found along one normal, strongest first.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EdgeHits {
+    /// The hits; only the first `len` are valid.
+    pub hits: [EdgeHit; MAX_HYPOTHESES],
+    /// Number of valid hits.
+    pub len: usize,
+}
+
+impl Default for EdgeHit {
+    fn default() -> Self {
+        EdgeHit { offset: 0.0, strength: 0.0 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_a_subpixel_step_edge_on_every_level() {
+        // Vertical step at x = 40.3 (area-weighted), image 96x64.
+        let (w, h) = (96, 64);
+        let data: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let x = (i % w) as f64;
+                ((x + 0.5 - 40.3).clamp(0.0, 1.0) * 0.6 + 0.2) as f32
+            })
+            .collect();
+        let img = Plane::from_vec(w, h, data);
+        let cam = CameraModel::from_hfov(w as u32, h as u32, 60.0);
+        let pyr = build_pyramid(&img, &cam, (0, 0, w, h), 3);
+        assert_eq!(pyr.len(), 3);
+        for lv in &pyr {
+            // Edge position in this level's coordinates: (x + 0.5) s - 0.5 with x = 40.3 (pixel
+            // x covers [x - 0.5, x + 0.5], so the 50% crossing is at x = 40.3).
+            let xe = (40.3 + 0.5) * lv.scale - 0.5;
+            let p = Point2::new(xe - 2.2, 8.0 * lv.scale);
+            let hit = lv.search(&p, &Vector2::x(), 5, 0.01, 0).unwrap();
+            assert!((p.x + hit.offset - xe).abs() < 0.1, "level {}: {:?} vs {xe}", lv.scale, hit);
+            assert!(hit.strength > 0.0);
+            assert!(lv.search(&p, &Vector2::x(), 5, 0.01, -1).is_none(), "wrong polarity is rejected");
+        }
+    }
+}

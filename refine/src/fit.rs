@@ -1,0 +1,373 @@
+//! Levenberg-Marquardt fit of the cylinder contour to image edges (plus optional stereo points),
+//! coarse to fine.
+//!
+//! Each outer iteration (re)selects the visible silhouette samples, searches each one's image
+//! normal for the strongest edge ([`GradientLevel::search`]) and fixes these edge points `e_i`.
+//! The residuals are then `r_i(θ) = n_i · (π(X_i(θ)) - e_i) / σ_px` (pixels along the normal,
+//! normalized by the nominal edge noise) and, for stereo points `P_j`,
+//! `s_j(θ) = (ρ_j - R(z_j)) / σ_s` with `z_j = (P_j - c)·a`, `ρ_j = |P_j - c - z_j a|`.
+//! One damped Gauss-Newton step minimizes `Σ ρ_Tukey(r)`:
+//! `(JᵀWJ + λ diag(JᵀWJ)) δ = -JᵀW r`, accepted when the robust cost drops (λ ÷ 3), else
+//! λ × 4 and retry. Jacobians by central differences of the projection (exact enough and valid
+//! with lens distortion). θ = (c, δ1, δ2): centre plus an axis step in the tangent plane.
+
+use crate::contour::{build_samples, project_with_normal, AxisState, ContourSample};
+use crate::edges::{EdgeHits, GradientLevel};
+use crate::model::CylinderModel;
+use crate::robust::{mad_scale, tukey_rho, tukey_weight};
+use crate::RefineConfig;
+use nalgebra::{Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
+use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
+use tubeloc_core::{CameraModel, FailureReason, Plane, ResidualStats};
+
+/// Optional scene information for visibility and the stereo term.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Scene<'a> {
+    /// Depth map (Z in metres along the optical axis, ≤ 0 or non-finite = unknown) of the full
+    /// image and its camera; contour points behind the depth surface are occluded.
+    pub depth: Option<(&'a Plane<f32>, &'a CameraModel)>,
+    /// 3D points (camera frame, metres) triangulated in the detection's region.
+    pub stereo_points: &'a [Point3<f64>],
+}
+
+/// Outcome of [`fit`].
+#[derive(Clone, Debug)]
+pub struct FitResult {
+    /// Final pose parameters.
+    pub state: AxisState,
+    /// Residual statistics at the finest level (pixels of full resolution).
+    pub stats: ResidualStats,
+    /// 5x5 covariance over (centre, axis tangent in `tangent_basis(canonical axis)`).
+    pub covariance: [[f64; 5]; 5],
+    /// Fraction of visible samples whose edge lies within `inlier_px` of the fitted contour.
+    pub inlier_fraction: f64,
+    /// Mean truncated quadratic cost per visible sample at the finest level (for comparing the
+    /// two end hypotheses): `mean(min(r/τ, 1)²)` with missing edges counted as 1.
+    pub score: f64,
+    /// Why the fit failed, if it did.
+    pub failure: Option<(FailureReason, String)>,
+}
+
+/// A contour sample with its edge hypotheses: offsets along `n` from `u0`; the residual uses the
+/// hypothesis nearest to the current projection (a multi-hypothesis, ICP-like association).
+struct Assoc {
+    sample: ContourSample,
+    n: Vector2<f64>,
+    u0: Point2<f64>,
+    hyps: EdgeHits,
+}
+
+impl Assoc {
+    #[inline]
+    fn residual(&self, u: &Point2<f64>) -> f64 {
+        let s = self.n.dot(&(u - self.u0));
+        let mut best = f64::INFINITY;
+        for h in &self.hyps.hits[..self.hyps.len] {
+            let r = s - h.offset;
+            if r.abs() < best.abs() {
+                best = r;
+            }
+        }
+        best
+    }
+}
+
+struct Level<'a> {
+    lv: &'a GradientLevel,
+    radius: usize,
+    sigma_px: f64,
+}
+
+fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vector3<f64>, scene: &Scene) -> bool {
+    let push = 0.02 * model.body_radius() + 1e-4;
+    let xp = x + out * push;
+    if model.occludes(&st.c, &st.a, &xp) {
+        return false;
+    }
+    if let Some((depth, cam)) = scene.depth {
+        if let Some(u) = cam.project(x) {
+            let (ix, iy) = (u.x.round(), u.y.round());
+            if ix >= 0.0 && iy >= 0.0 && (ix as usize) < depth.width && (iy as usize) < depth.height {
+                let z = depth.get(ix as usize, iy as usize) as f64;
+                if z.is_finite() && z > 0.0 && z < x.z - 0.004 - 0.5 * model.max_radius() {
+                    return false;
+                }
+            }
+        }
+    }
+    true
+}
+
+/// Associates visible samples with image edges at `level`.
+fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8]) -> (Vec<Assoc>, usize, Vec<f32>) {
+    let mut out = Vec::with_capacity(samples.len());
+    let mut strengths = Vec::with_capacity(samples.len());
+    let Some(f) = st.frame() else { return (out, 0, strengths) };
+    let cam = &level.lv.camera;
+    let mut visible = 0;
+    for (i, s) in samples.iter().enumerate() {
+        let Some(p) = s.eval(model, &f) else { continue };
+        if !s.on_silhouette(model, &f, &p) {
+            continue;
+        }
+        let Some((u, n)) = project_with_normal(cam, &p) else { continue };
+        if !level.lv.inside(&u, level.radius as f64 + 1.0) {
+            continue;
+        }
+        if !is_visible(model, st, &p.x, &p.out, scene) {
+            continue;
+        }
+        visible += 1;
+        let hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, polarity.get(i).copied().unwrap_or(0), cfg.rel_edge_strength);
+        if hyps.len > 0 {
+            strengths.push(hyps.hits[0].strength);
+            out.push(Assoc { sample: *s, n, u0: u, hyps });
+        }
+    }
+    (out, visible, strengths)
+}
+
+/// Residuals (normalized) of the associations and stereo points at state `st`; missing
+/// projections give `None` entries (skipped).
+fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, out: &mut Vec<Option<f64>>) {
+    out.clear();
+    let f = st.frame();
+    for a in assoc {
+        let r = f.and_then(|f| a.sample.eval(model, &f)).and_then(|p| cam.project(&p.x)).map(|u| a.residual(&u) / sigma_px);
+        out.push(r);
+    }
+    let half = 0.5 * model.length;
+    for p in scene.stereo_points {
+        let rel = p.coords - st.c;
+        let z = rel.dot(&st.a);
+        if z.abs() > half + 0.01 {
+            out.push(None);
+            continue;
+        }
+        let rho = (rel - st.a * z).norm();
+        let rz = model.radius_at(z.clamp(-half, half));
+        out.push(Some((rho - rz) / cfg.stereo_sigma_m));
+    }
+}
+
+fn robust_cost(r: &[Option<f64>], c_img: f64, c_st: f64, n_img: usize) -> f64 {
+    r.iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let c = if i < n_img { c_img } else { c_st };
+            v.map_or(c * c / 6.0, |x| tukey_rho(x, c))
+        })
+        .sum()
+}
+
+/// Tukey thresholds (normalized units) for the image and stereo groups: `4.685 · MAD scale`,
+/// the image one clamped to `[2 px, 0.6 · search radius]` in level pixels so that a majority of
+/// wrong associations cannot inflate it.
+fn thresholds(r: &[Option<f64>], n_img: usize, scratch: &mut Vec<f64>, sigma_px: f64, radius: usize) -> (f64, f64) {
+    let img: Vec<f64> = r[..n_img].iter().flatten().copied().collect();
+    let st: Vec<f64> = r[n_img..].iter().flatten().copied().collect();
+    let s_img = mad_scale(&img, scratch).unwrap_or(1.0);
+    let s_st = mad_scale(&st, scratch).unwrap_or(1.0).max(1.0);
+    let lo = 2.0 / sigma_px;
+    let hi = (0.6 * radius as f64 / sigma_px).max(lo);
+    ((4.685 * s_img).clamp(lo, hi), 4.685 * s_st)
+}
+
+/// Normal equations `JᵀWJ`, `JᵀWr` by central differences at `st` for perturbation basis
+/// `(u1, u2)`; also returns `Σ w r²` and `Σ w`.
+#[allow(clippy::too_many_arguments)]
+fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64)) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+    let n_img = assoc.len();
+    let mut cols: [Vec<Option<f64>>; 5] = Default::default();
+    let steps = [1e-5, 1e-5, 1e-5, 1e-5, 1e-5];
+    let mut rp = Vec::new();
+    let mut rm = Vec::new();
+    for k in 0..5 {
+        let mut d = [0.0; 5];
+        d[k] = steps[k];
+        residuals(model, &st.updated(&d, u.0, u.1), assoc, cam, sigma_px, scene, cfg, &mut rp);
+        d[k] = -steps[k];
+        residuals(model, &st.updated(&d, u.0, u.1), assoc, cam, sigma_px, scene, cfg, &mut rm);
+        cols[k] = rp.iter().zip(&rm).map(|(a, b)| Some((a.as_ref()? - b.as_ref()?) / (2.0 * steps[k]))).collect();
+    }
+    let mut h = Matrix5::zeros();
+    let mut g = Vector5::zeros();
+    let (mut wrr, mut wsum) = (0.0, 0.0);
+    for i in 0..r0.len() {
+        let Some(r) = r0[i] else { continue };
+        let cthr = if i < n_img { c.0 } else { c.1 };
+        let w = tukey_weight(r, cthr);
+        if w <= 0.0 {
+            continue;
+        }
+        let mut j = Vector5::zeros();
+        let mut ok = true;
+        for k in 0..5 {
+            match cols[k][i] {
+                Some(v) if v.is_finite() => j[k] = v,
+                _ => ok = false,
+            }
+        }
+        if !ok {
+            continue;
+        }
+        h += j * j.transpose() * w;
+        g += j * (w * r);
+        wrr += w * r * r;
+        wsum += w;
+    }
+    (h, g, wrr, wsum)
+}
+
+/// Fits the model starting from `seed` over `levels` (coarsest last in the slice order given by
+/// [`crate::edges::build_pyramid`]: index 0 is full resolution). `first_level` is the coarsest
+/// index used; iterations run from it down to 0.
+pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], first_level: usize, scene: &Scene, seed: AxisState) -> FitResult {
+    let mut st = seed;
+    let mut iterations = 0;
+    let mut scratch = Vec::new();
+    let mut rbuf = Vec::new();
+    let mut rtrial = Vec::new();
+    let top = first_level.min(levels.len().saturating_sub(1));
+    let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
+        state: st,
+        stats: ResidualStats { iterations, ..Default::default() },
+        covariance: [[0.0; 5]; 5],
+        inlier_fraction: 0.0,
+        score: 1.0,
+        failure: Some((reason, msg)),
+    };
+    for li in (0..=top).rev() {
+        let lv = &levels[li];
+        let level = Level {
+            lv,
+            radius: cfg.search_radius_px,
+            sigma_px: cfg.edge_sigma_px,
+        };
+        let samples = build_samples(model, &st, &lv.camera, cfg.sample_spacing_px);
+        let polarity = vec![0i8; samples.len()];
+        let max_it = if li == top { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
+        let mut lambda = 1e-3;
+        for _ in 0..max_it {
+            iterations += 1;
+            let (assoc, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+            if visible < cfg.min_samples {
+                return fail(st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}"), iterations);
+            }
+            if assoc.len() < cfg.min_samples {
+                return fail(st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len()), iterations);
+            }
+            let n_img = assoc.len();
+            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rbuf);
+            let c = thresholds(&rbuf, n_img, &mut scratch, level.sigma_px, level.radius);
+            let cost0 = robust_cost(&rbuf, c.0, c.1, n_img);
+            let ax = st.a;
+            let (u1, u2) = tangent_basis(&ax);
+            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c);
+            let mut accepted = None;
+            for _ in 0..6 {
+                let mut hd = h;
+                for k in 0..5 {
+                    hd[(k, k)] += lambda * h[(k, k)].max(1e-12);
+                }
+                let Some(ch) = hd.cholesky() else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let d = ch.solve(&(-g));
+                let delta = [d[0], d[1], d[2], d[3], d[4]];
+                let trial = st.updated(&delta, &u1, &u2);
+                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rtrial);
+                let cost = robust_cost(&rtrial, c.0, c.1, n_img);
+                if cost.is_finite() && cost <= cost0 {
+                    lambda = (lambda / 3.0).max(1e-7);
+                    accepted = Some((trial, d));
+                    break;
+                }
+                lambda *= 4.0;
+            }
+            if std::env::var_os("REFINE_DEBUG").is_some() {
+                let med = { let mut v: Vec<f64> = rbuf.iter().flatten().map(|x| x.abs()).collect(); v.sort_by(|a, b| a.total_cmp(b)); v.get(v.len() / 2).copied().unwrap_or(0.0) };
+                eprintln!("L{li} it: vis {visible} assoc {n_img} cost0 {cost0:.1} med|r| {med:.2} c {:.2} acc {:?} c={:?} a={:?}", c.0, accepted.map(|x| x.1.as_slice().to_vec()), st.c.as_slice(), st.a.as_slice());
+            }
+            let Some((next, d)) = accepted else { break };
+            st = next;
+            if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.c.z < 0.02 {
+                return fail(seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice()), iterations);
+            }
+            let step_c = Vector3::new(d[0], d[1], d[2]).norm();
+            let step_a = (d[3] * d[3] + d[4] * d[4]).sqrt();
+            if step_c < 1e-6 && step_a < 1e-6 {
+                break;
+            }
+        }
+        let moved = (st.c - seed.c).norm();
+        if moved > cfg.max_centre_shift_frac * seed.c.norm() || axis_angle(&st.a, &seed.a) > cfg.max_axis_change_deg.to_radians() {
+            return fail(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees()), iterations);
+        }
+    }
+    finish(model, cfg, &levels[0], scene, st, iterations)
+}
+
+/// Final statistics and covariance at the finest level.
+fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, iterations: usize) -> FitResult {
+    let level = Level { lv, radius: cfg.search_radius_px, sigma_px: cfg.edge_sigma_px };
+    let samples = build_samples(model, &st, &lv.camera, cfg.sample_spacing_px);
+    let polarity = vec![0i8; samples.len()];
+    let (assoc, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+    let mut r = Vec::new();
+    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut r);
+    let n_img = assoc.len();
+    let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
+    let tau = cfg.inlier_px / to_px;
+    let mut inl = 0usize;
+    let mut ss = 0.0;
+    let mut score = 0.0;
+    for v in r[..n_img].iter().flatten() {
+        if v.abs() < tau {
+            inl += 1;
+            ss += (v * to_px).powi(2);
+        }
+        score += (v / tau).powi(2).min(1.0);
+    }
+    score += (visible.saturating_sub(n_img)) as f64;
+    let score = if visible > 0 { score / visible as f64 } else { 1.0 };
+    let stereo: Vec<f64> = r[n_img..].iter().flatten().map(|v| v * cfg.stereo_sigma_m).collect();
+    let stereo_in: Vec<f64> = stereo.iter().copied().filter(|v| v.abs() < 3.0 * cfg.stereo_sigma_m.max(1e-4) * 3.0).collect();
+    let stats = ResidualStats {
+        rms_px: if inl > 0 { (ss / inl as f64).sqrt() } else { 0.0 },
+        inliers: inl,
+        count: visible,
+        stereo_rms_m: if stereo_in.is_empty() { 0.0 } else { (stereo_in.iter().map(|v| v * v).sum::<f64>() / stereo_in.len() as f64).sqrt() },
+        stereo_points: stereo_in.len(),
+        iterations,
+    };
+    // Covariance in the tangent basis of the canonical axis.
+    let axis = canonical_axis(&st.a).unwrap_or(st.a);
+    let sgn = if axis.dot(&st.a) >= 0.0 { 1.0 } else { -1.0 };
+    let (b1, b2) = tangent_basis(&axis);
+    let (u1, u2) = (b1 * sgn, b2 * sgn);
+    let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, &mut Vec::new(), level.sigma_px, level.radius) };
+    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c);
+    let mut cov = [[0.0; 5]; 5];
+    if wsum > 6.0 {
+        if let Some(inv) = h.try_inverse() {
+            let s2 = (wrr / (wsum - 5.0)).max(1e-12);
+            for i in 0..5 {
+                for j in 0..5 {
+                    let v = inv[(i, j)] * s2;
+                    cov[i][j] = if v.is_finite() { v } else { 0.0 };
+                }
+            }
+        }
+    }
+    let inlier_fraction = if visible > 0 { inl as f64 / visible as f64 } else { 0.0 };
+    let failure = if visible < cfg.min_samples {
+        Some((FailureReason::OutOfImage, format!("only {visible} contour samples visible at full resolution")))
+    } else if inlier_fraction < cfg.min_inlier_fraction {
+        Some((FailureReason::EmptyTerrain, format!("only {inl} of {visible} contour samples ({:.0}%) lie on an image edge within {} px", 100.0 * inlier_fraction, cfg.inlier_px)))
+    } else {
+        None
+    };
+    FitResult { state: st, stats, covariance: cov, inlier_fraction, score, failure }
+}

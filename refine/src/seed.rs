@@ -1,0 +1,106 @@
+//! Initial poses for the fit from the different detectors.
+//!
+//! - Line2D: the template pose `T_cam_tube` gives centre and axis directly (end known, but
+//!   template flips happen, so the end is re-decided from the image).
+//! - Learned mask / axis seed (or the box alone): the axis is the image line through
+//!   `centre_px` along `direction_px`; its 3D placement comes from, in order of preference,
+//!   a ground plane (the axis lies `max_radius` above it, inside the plane through the camera
+//!   centre and the image line), stereo points (median depth of the region plus the radius), or
+//!   the tube's known size (`Z = f · 2 r_max / width_px` for masks, `Z = f · L / length_px`
+//!   for boxes), with the axis perpendicular to the viewing ray.
+
+use crate::contour::AxisState;
+use crate::error::RefineError;
+use crate::model::CylinderModel;
+use nalgebra::{Point2, Point3, Vector3};
+use tubeloc_core::{CameraModel, TubeDetection};
+
+/// The ground as a plane in the camera frame: points `X` with `normal · X = offset`, `normal`
+/// a unit vector pointing up (away from the ground, toward the sky), metres.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GroundPlane {
+    /// Unit upward normal, camera frame.
+    pub normal: Vector3<f64>,
+    /// Signed offset: `normal · X = offset` on the ground.
+    pub offset: f64,
+}
+
+impl GroundPlane {
+    /// The plane through `point` with upward normal `normal` (normalized here).
+    pub fn from_point_normal(point: &Vector3<f64>, normal: &Vector3<f64>) -> Self {
+        let n = normal.normalize();
+        GroundPlane { normal: n, offset: n.dot(point) }
+    }
+}
+
+/// A seed for the fit: pose parameters and whether the axis sign is known to point at the seal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Seed {
+    /// Centre and axis.
+    pub state: AxisState,
+    /// True when `state.a` points toward the seal end by the detector's claim.
+    pub end_known: bool,
+}
+
+/// Builds a seed from a detection. See the module docs for the order of preference.
+pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel, ground: Option<&GroundPlane>, stereo: &[Point3<f64>]) -> Result<Seed, RefineError> {
+    if let Some(t) = &det.t_cam_tube {
+        let c = t.translation();
+        let a = t.transform_vector(&Vector3::z());
+        if c.iter().any(|v| !v.is_finite()) || c.z <= 0.0 {
+            return Err(RefineError::Seed(format!("template pose places the tube behind the camera (z = {:.3} m)", c.z)));
+        }
+        return Ok(Seed { state: AxisState { c, a: a.normalize() }, end_known: true });
+    }
+    let from_mask = det.axis_seed.is_some();
+    let ax = det.axis_seed.unwrap_or_else(|| det.axis_seed_from_bbox());
+    ax.validate().map_err(|e| RefineError::Seed(e.to_string()))?;
+    let c_px = Point2::new(ax.centre_px[0], ax.centre_px[1]);
+    let d_px = nalgebra::Vector2::new(ax.direction_px[0], ax.direction_px[1]);
+    let r0 = camera.unproject(&c_px);
+    let r1 = camera.unproject(&(c_px + d_px * (0.25 * ax.length_px).max(5.0)));
+    let m = r0.cross(&r1);
+    if m.norm() < 1e-12 {
+        return Err(RefineError::Seed("axis seed has zero image length".into()));
+    }
+    let m = m.normalize();
+    let f = 0.5 * (camera.fx + camera.fy);
+    let mut state = None;
+    if let Some(g) = ground {
+        let h = model.max_radius();
+        let a = m.cross(&g.normal);
+        let den = g.normal.dot(&r0);
+        if a.norm() > 1e-3 && den.abs() > 1e-6 {
+            let t = (g.offset + h) / den;
+            if t > 0.0 {
+                state = Some(AxisState { c: r0 * t, a: a.normalize() });
+            }
+        }
+    }
+    if state.is_none() && !stereo.is_empty() {
+        let mut z: Vec<f64> = stereo.iter().map(|p| p.z).filter(|z| z.is_finite() && *z > 0.0).collect();
+        if !z.is_empty() {
+            let mid = z.len() / 2;
+            let (_, zm, _) = z.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+            let zc = *zm + model.body_radius();
+            state = Some(AxisState { c: r0 * (zc / r0.z), a: r0.cross(&m).normalize() });
+        }
+    }
+    let mut state = match state {
+        Some(s) => s,
+        None => {
+            let z = if from_mask { f * 2.0 * model.max_radius() / ax.width_px } else { f * (model.length + 2.0 * model.max_radius()) / ax.length_px };
+            if !(z.is_finite() && z > 0.0) {
+                return Err(RefineError::Seed(format!("cannot infer depth from the seed (width {} px, length {} px)", ax.width_px, ax.length_px)));
+            }
+            AxisState { c: r0 * (z / r0.z), a: r0.cross(&m).normalize() }
+        }
+    };
+    // Orient the axis along the image direction of the seed.
+    if let (Some(p0), Some(p1)) = (camera.project(&Point3::from(state.c)), camera.project(&Point3::from(state.c + state.a * 0.01))) {
+        if (p1 - p0).dot(&d_px) < 0.0 {
+            state.a = -state.a;
+        }
+    }
+    Ok(Seed { state, end_known: false })
+}
