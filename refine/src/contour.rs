@@ -13,7 +13,8 @@
 //! End outlines are the rim circles `c + z a + r (cos φ e1 + sin φ e2)` of each section end
 //! that is a free end or steps down to a narrower neighbour. A rim point is on the occluding
 //! contour when exactly one of its two faces (side: normal `n`, end: normal `s = ±a`) faces the
-//! camera (`n·X < 0` xor `s·X < 0`). Visibility against the rest of the tube is checked by ray
+//! camera (`n·X < 0` xor `s·X < 0`), and a visible crease when both do; both are image edges
+//! and both are used. Visibility against the rest of the tube is checked by ray
 //! tests ([`crate::model::CylinderModel::occludes`]), against the scene with a depth map.
 
 use crate::model::CylinderModel;
@@ -130,8 +131,8 @@ impl ContourSample {
         }
     }
 
-    /// True when a rim sample is on the occluding contour (exactly one face toward the camera);
-    /// always true for limbs.
+    /// True when a rim sample is a visible model edge: on the occluding contour (exactly one
+    /// face toward the camera) or a crease with both faces toward it; always true for limbs.
     pub fn on_silhouette(&self, model: &CylinderModel, f: &AxisFrame, p: &SamplePoint) -> bool {
         match self.kind {
             SampleKind::Limb { .. } => true,
@@ -140,7 +141,9 @@ impl ContourSample {
                 let _ = model;
                 let side_front = radial.dot(&p.x.coords) < 0.0;
                 let end_front = (f.a * end).dot(&p.x.coords) < 0.0;
-                side_front != end_front
+                // Occluding contour (one face toward the camera) or a visible crease (both):
+                // the rim between a section and its end face is an image edge in both cases.
+                side_front || end_front
             }
         }
     }
@@ -222,9 +225,10 @@ mod tests {
     }
 
     #[test]
-    fn silhouette_rims_are_half_circles_in_a_side_view() {
+    fn rim_edges_hide_only_the_back_facing_half() {
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
-        // Axis along x, camera looking at it slightly from the +x end: the +x cap faces away?
+        // Axis along x, off to the side: the camera sees the -x end face (toward it) and the
+        // side; the +x end face points away.
         let st = AxisState { c: Vector3::new(0.2, 0.0, 1.0), a: Vector3::x() };
         let f = st.frame().unwrap();
         let cam = CameraModel::from_hfov(640, 480, 60.0);
@@ -241,12 +245,11 @@ mod tests {
                 }
             }
         }
-        // Camera at x=0 sees the -x cap face (the cap toward it): its far half is silhouette;
-        // the +x cap is hidden, its near half is silhouette. Each about half of the circle.
-        for k in 0..2 {
-            let frac = on[k] as f64 / all[k] as f64;
-            assert!((frac - 0.5).abs() < 0.1, "end {k}: {on:?} of {all:?}");
-        }
+        // The -x rim is entirely a visible edge (silhouette half + crease half); of the +x rim
+        // only the half whose side faces the camera is an edge.
+        assert_eq!(on[0], all[0], "{on:?} of {all:?}");
+        let frac = on[1] as f64 / all[1] as f64;
+        assert!((frac - 0.5).abs() < 0.1, "{on:?} of {all:?}");
     }
 }
 

@@ -173,6 +173,21 @@ fn thresholds(r: &[Option<f64>], n_img: usize, scratch: &mut Vec<f64>, sigma_px:
     ((4.685 * s_img).clamp(lo, hi), 4.685 * s_st)
 }
 
+/// Largest image motion (level pixels) of the associated samples between two states.
+fn max_motion(model: &CylinderModel, a: &AxisState, b: &AxisState, assoc: &[Assoc], cam: &CameraModel) -> f64 {
+    let (Some(fa), Some(fb)) = (a.frame(), b.frame()) else { return f64::INFINITY };
+    let mut m: f64 = 0.0;
+    for s in assoc {
+        let pa = s.sample.eval(model, &fa).and_then(|p| cam.project(&p.x));
+        let pb = s.sample.eval(model, &fb).and_then(|p| cam.project(&p.x));
+        match (pa, pb) {
+            (Some(x), Some(y)) => m = m.max((x - y).norm()),
+            _ => return f64::INFINITY,
+        }
+    }
+    m
+}
+
 /// Normal equations `JᵀWJ`, `JᵀWr` by central differences at `st` for perturbation basis
 /// `(u1, u2)`; also returns `Σ w r²` and `Σ w`.
 #[allow(clippy::too_many_arguments)]
@@ -274,7 +289,13 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                     lambda *= 10.0;
                     continue;
                 };
-                let d = ch.solve(&(-g));
+                let mut d = ch.solve(&(-g));
+                // Trust region: no contour sample may move more than `max_step_px` level pixels,
+                // so that samples do not jump between edge hypotheses within one step.
+                let motion = max_motion(model, &st, &st.updated(&[d[0], d[1], d[2], d[3], d[4]], &u1, &u2), &assoc, &lv.camera);
+                if motion > cfg.max_step_px {
+                    d *= cfg.max_step_px / motion;
+                }
                 let delta = [d[0], d[1], d[2], d[3], d[4]];
                 let trial = st.updated(&delta, &u1, &u2);
                 residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rtrial);
@@ -285,10 +306,6 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                     break;
                 }
                 lambda *= 4.0;
-            }
-            if std::env::var_os("REFINE_DEBUG").is_some() {
-                let med = { let mut v: Vec<f64> = rbuf.iter().flatten().map(|x| x.abs()).collect(); v.sort_by(|a, b| a.total_cmp(b)); v.get(v.len() / 2).copied().unwrap_or(0.0) };
-                eprintln!("L{li} it: vis {visible} assoc {n_img} cost0 {cost0:.1} med|r| {med:.2} c {:.2} acc {:?} c={:?} a={:?}", c.0, accepted.map(|x| x.1.as_slice().to_vec()), st.c.as_slice(), st.a.as_slice());
             }
             let Some((next, d)) = accepted else { break };
             st = next;

@@ -40,6 +40,8 @@ pub struct RefineConfig {
     pub min_gradient: f32,
     /// Edge hypotheses weaker than this fraction of the strongest along a normal are dropped.
     pub rel_edge_strength: f32,
+    /// Most image motion of any contour sample in one step, level pixels (trust region).
+    pub max_step_px: f64,
     /// Outer iterations at the coarsest level (half of it at the finer levels).
     pub max_iterations: usize,
     /// Coarsest level is chosen so the body is at least this wide (pixels).
@@ -73,7 +75,8 @@ impl Default for RefineConfig {
             sample_spacing_px: 3.0,
             min_gradient: 0.004,
             rel_edge_strength: 0.25,
-            max_iterations: 12,
+            max_step_px: 2.0,
+            max_iterations: 16,
             min_body_width_px: 14.0,
             max_levels: 4,
             edge_sigma_px: 0.5,
@@ -167,7 +170,14 @@ impl Refiner {
         };
         let pyr = edges::build_pyramid(input.image, cam, rect, top + 1);
         let top = top.min(pyr.len() - 1);
-        let a = fit::fit(&self.model, &self.config, &pyr, top, &input.scene, st);
+        let mut a = fit::fit(&self.model, &self.config, &pyr, top, &input.scene, st);
+        if a.failure.is_some() && self.config.decide_end {
+            // A template flipped end to end misplaces the sections; retry the other end.
+            let b = fit::fit(&self.model, &self.config, &pyr, top, &input.scene, AxisState { c: st.c, a: -st.a });
+            if b.failure.is_none() {
+                a = b;
+            }
+        }
         let (best, conf) = if self.config.decide_end && a.failure.is_none() {
             let flipped = AxisState { c: a.state.c, a: -a.state.a };
             let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &input.scene, flipped);
