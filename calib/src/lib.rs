@@ -1,1 +1,29 @@
-//! tubeloc-calib (see the README for what this crate owns).
+//! tubeloc-calib: AprilTag detection, tag-pair ground-truth tube poses, and intrinsic and
+//! multi-camera calibration with rig files (tubeloc JSON and OpenCV YAML).
+//!
+//! - [`detect`]: wrapper of the AprilTag 3 detector (`apriltag` crate); corners in the tubeloc /
+//!   OpenCV pixel convention (pixel centres at integers).
+//! - [`mount`] + [`tagpose`]: the tag mount of `data/tag_mount.toml` and `T_cam_tube` from the
+//!   tag pair (PnP + Levenberg-Marquardt, covariance, single-tag fallback flagged).
+//! - [`calibrate`]: Zhang initialization, bundle adjustment of intrinsics, distortion and
+//!   board poses, outlier rejection, multi-camera extrinsics; [`views`] reads calibration sets.
+//! - [`yaml`]: OpenCV FileStorage YAML rig files.
+//! - [`lm`], [`geometry`]: the least-squares solver and projective helpers.
+
+pub mod calibrate;
+pub mod detect;
+pub mod error;
+pub mod geometry;
+pub mod lm;
+pub mod mount;
+pub mod tagpose;
+pub mod views;
+pub mod yaml;
+
+pub use calibrate::{calibrate, CalibrationInput, CalibrationOptions, CameraCalibration, CameraSpec, Observation, RigCalibration};
+pub use detect::{DetectorConfig, TagDetection, TagDetector, TagFamily};
+pub use error::CalibError;
+pub use mount::{MountedTag, TagMount};
+pub use tagpose::{estimate_tube_pose, TagPoseEstimate};
+pub use views::{load_calib_set, Board, CornerSource, LoadedSet};
+pub use yaml::{load_rig_yaml, rig_from_yaml, rig_to_yaml, save_rig_yaml};

@@ -1,0 +1,212 @@
+//! AprilTag detection: a thin, typed wrapper around the `apriltag` crate (AprilTag 3 C library).
+//!
+//! Pixel convention: the C library puts pixel centres at `(i + 0.5, j + 0.5)`; tubeloc (and
+//! OpenCV) put them at integers. Corners, centres and homographies returned here are shifted by
+//! `-0.5` px into the tubeloc/OpenCV convention.
+//!
+//! Corner order (the detector's): in the tag frame (x right, y down as printed, z into the
+//! tag, `s` = edge of the black square) corner `k` is
+//! `(-s/2, s/2), (s/2, s/2), (s/2, -s/2), (-s/2, -s/2)` for `k = 0..3`.
+
+use crate::error::CalibError;
+use apriltag::{families, DetectorBuilder, Family, Image};
+use serde::{Deserialize, Serialize};
+use tubeloc_core::Plane;
+
+/// Shift from the C detector's pixel convention to tubeloc's, pixels.
+pub const C_TO_OPENCV_PX: f64 = -0.5;
+
+/// Supported tag families.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum TagFamily {
+    /// tag36h11 (default; 587 ids).
+    #[default]
+    #[serde(rename = "tag36h11")]
+    Tag36h11,
+    /// tag25h9.
+    #[serde(rename = "tag25h9")]
+    Tag25h9,
+    /// tag16h5.
+    #[serde(rename = "tag16h5")]
+    Tag16h5,
+    /// tagStandard41h12.
+    #[serde(rename = "tagStandard41h12")]
+    TagStandard41h12,
+}
+
+impl TagFamily {
+    /// Parses a family name as the C library spells it (`"tag36h11"`).
+    pub fn from_name(name: &str) -> Result<Self, CalibError> {
+        match name {
+            "tag36h11" => Ok(TagFamily::Tag36h11),
+            "tag25h9" => Ok(TagFamily::Tag25h9),
+            "tag16h5" => Ok(TagFamily::Tag16h5),
+            "tagStandard41h12" => Ok(TagFamily::TagStandard41h12),
+            _ => Err(CalibError::invalid("tag family", format!("unknown family {name:?} (tag36h11, tag25h9, tag16h5, tagStandard41h12)"))),
+        }
+    }
+
+    fn to_family(self) -> Family {
+        match self {
+            TagFamily::Tag36h11 => families::Tag36h11::default().into(),
+            TagFamily::Tag25h9 => families::Tag25h9::default().into(),
+            TagFamily::Tag16h5 => families::Tag16h5::default().into(),
+            TagFamily::TagStandard41h12 => families::TagStandard41h12::default().into(),
+        }
+    }
+}
+
+/// Detector options (the C library's defaults except where noted).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DetectorConfig {
+    /// Families to look for.
+    pub families: Vec<TagFamily>,
+    /// Maximum number of corrected bits (2 by default; higher costs memory).
+    pub max_hamming: usize,
+    /// Quad detection on an image decimated by this factor (1 = full resolution).
+    pub decimation: f32,
+    /// Gaussian blur sigma applied before quad detection, pixels (0 = none).
+    pub sigma: f32,
+    /// Worker threads of the C detector.
+    pub threads: u8,
+    /// Snap quad edges to strong gradients (improves corners when decimating).
+    pub refine_edges: bool,
+    /// Sharpening of the decoded bit image.
+    pub sharpening: f64,
+    /// Detections with a smaller decision margin are dropped.
+    pub min_decision_margin: f32,
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        DetectorConfig { families: vec![TagFamily::Tag36h11], max_hamming: 2, decimation: 1.0, sigma: 0.0, threads: 1, refine_edges: true, sharpening: 0.25, min_decision_margin: 0.0 }
+    }
+}
+
+/// One detected tag (pixel coordinates in the tubeloc/OpenCV convention).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TagDetection {
+    /// Family of the tag.
+    pub family: TagFamily,
+    /// Tag id.
+    pub id: u32,
+    /// Bits corrected.
+    pub hamming: u32,
+    /// Decision margin of the decoder (larger is more confident).
+    pub decision_margin: f32,
+    /// Tag centre, pixels.
+    pub center: [f64; 2],
+    /// Corners in detector order (see the module doc), pixels.
+    pub corners: [[f64; 2]; 4],
+    /// Homography (row-major) from tag coordinates `(x, y) in [-1, 1]^2` (x right, y down as
+    /// printed; `±1` at the black square's edge) to pixels: `[u, v, w]^T = H [x, y, 1]^T`.
+    pub homography: [[f64; 3]; 3],
+}
+
+/// A reusable AprilTag detector.
+pub struct TagDetector {
+    inner: apriltag::Detector,
+    config: DetectorConfig,
+    families: Vec<TagFamily>,
+}
+
+impl std::fmt::Debug for TagDetector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TagDetector").field("config", &self.config).finish()
+    }
+}
+
+impl TagDetector {
+    /// Builds a detector; fails for an empty family list or invalid numbers.
+    pub fn new(config: DetectorConfig) -> Result<Self, CalibError> {
+        if config.families.is_empty() {
+            return Err(CalibError::invalid("detector", "no tag family given"));
+        }
+        if !(config.decimation >= 1.0 && config.decimation.is_finite()) {
+            return Err(CalibError::invalid("decimation", format!("must be >= 1, got {}", config.decimation)));
+        }
+        if !(config.sigma >= 0.0) || config.threads == 0 || config.max_hamming > 3 {
+            return Err(CalibError::invalid("detector", "sigma must be >= 0, threads >= 1, max_hamming <= 3"));
+        }
+        let mut b = DetectorBuilder::new();
+        for f in &config.families {
+            b = b.add_family_bits(f.to_family(), config.max_hamming);
+        }
+        let mut inner = b.build().map_err(|e| CalibError::Detector(e.to_string()))?;
+        inner.set_decimation(config.decimation);
+        inner.set_sigma(config.sigma);
+        inner.set_thread_number(config.threads);
+        inner.set_refine_edges(config.refine_edges);
+        inner.set_shapening(config.sharpening);
+        let families = config.families.clone();
+        Ok(TagDetector { inner, config, families })
+    }
+
+    /// The options in use.
+    pub fn config(&self) -> &DetectorConfig {
+        &self.config
+    }
+
+    /// The family that decoded a detection (read from the C struct's family name).
+    fn family_of(&self, d: apriltag::Detection) -> TagFamily {
+        let ptr = d.into_raw();
+        // SAFETY: `ptr` is a live detection whose `family` points at one of the detector's
+        // families (NUL-terminated name); ownership goes back to a `Detection` that frees it.
+        let name = unsafe {
+            let fam = ptr.as_ref().family;
+            let name = if fam.is_null() || (*fam).name.is_null() { None } else { std::ffi::CStr::from_ptr((*fam).name).to_str().ok().map(str::to_owned) };
+            drop(apriltag::Detection::from_raw(ptr.as_ptr()));
+            name
+        };
+        name.and_then(|n| TagFamily::from_name(&n).ok()).unwrap_or(self.families[0])
+    }
+
+    /// Detects tags in an 8-bit grey plane; detections sorted by (id, centre x).
+    pub fn detect(&mut self, plane: &Plane<u8>) -> Result<Vec<TagDetection>, CalibError> {
+        self.detect_raw(plane.width, plane.height, plane.width, &plane.data)
+    }
+
+    /// Detects tags in an `image` crate grey image.
+    pub fn detect_image(&mut self, img: &image::GrayImage) -> Result<Vec<TagDetection>, CalibError> {
+        let (w, h) = img.dimensions();
+        self.detect_raw(w as usize, h as usize, w as usize, img.as_raw())
+    }
+
+    /// Detects tags in a raw buffer with the given row stride (bytes).
+    pub fn detect_raw(&mut self, width: usize, height: usize, stride: usize, data: &[u8]) -> Result<Vec<TagDetection>, CalibError> {
+        if width == 0 || height == 0 || stride < width || data.len() < stride * (height - 1) + width {
+            return Err(CalibError::invalid("image", format!("{width}x{height} stride {stride} does not fit a buffer of {} bytes", data.len())));
+        }
+        let mut im = Image::zeros_with_alignment(width, height, 96).map_err(|e| CalibError::Detector(e.to_string()))?;
+        let s = im.stride();
+        let buf = im.as_slice_mut();
+        for y in 0..height {
+            buf[y * s..y * s + width].copy_from_slice(&data[y * stride..y * stride + width]);
+        }
+        let raw = self.inner.detect(&im);
+        let mut out = Vec::with_capacity(raw.len());
+        for d in raw {
+            if d.decision_margin() < self.config.min_decision_margin {
+                continue;
+            }
+            let hd = d.homography().data().to_vec();
+            let mut hm = [[0.0; 3]; 3];
+            for (r, row) in hm.iter_mut().enumerate() {
+                for (c, v) in row.iter_mut().enumerate() {
+                    *v = hd[r * 3 + c];
+                }
+            }
+            // Shift the output pixel frame by -0.5: H' = [1 0 -.5; 0 1 -.5; 0 0 1] H.
+            for c in 0..3 {
+                hm[0][c] += C_TO_OPENCV_PX * hm[2][c];
+                hm[1][c] += C_TO_OPENCV_PX * hm[2][c];
+            }
+            let shift = |p: [f64; 2]| [p[0] + C_TO_OPENCV_PX, p[1] + C_TO_OPENCV_PX];
+            let (id, hamming, margin, center, corners) = (d.id() as u32, d.hamming() as u32, d.decision_margin(), shift(d.center()), d.corners().map(shift));
+            let family = self.family_of(d);
+            out.push(TagDetection { family, id, hamming, decision_margin: margin, center, corners, homography: hm });
+        }
+        out.sort_by(|a, b| a.id.cmp(&b.id).then(a.center[0].total_cmp(&b.center[0])));
+        Ok(out)
+    }
+}
