@@ -119,17 +119,36 @@ def bench(args):
     left = cv2.imread(args.left, cv2.IMREAD_GRAYSCALE)
     right = cv2.imread(args.right, cv2.IMREAD_GRAYSCALE)
     cv2.setNumThreads(args.threads)
-    res = {"size": [left.shape[1], left.shape[0]], "ndisp": args.ndisp, "threads": cv2.getNumThreads(), "median_ms": {}}
+    res = {"size": [left.shape[1], left.shape[0]], "ndisp": args.ndisp, "opencv_threads": cv2.getNumThreads(),
+           "median_ms": {}, "bad2.0": {}}
+    gt = vis = None
+    if args.gt:
+        gt = read_pfm(args.gt)
+        vis = cv2.imread(args.visible, cv2.IMREAD_GRAYSCALE) > 0
     for name in ("SGBM", "3WAY"):
         m = sgbm(args.ndisp, args.block, 1, MODES[name])
-        m.compute(left, right)  # warm-up (allocations)
+        d = m.compute(left, right)  # warm-up (allocations)
         ts = []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
             m.compute(left, right)
             ts.append((time.perf_counter() - t0) * 1e3)
-        res["median_ms"][name] = statistics.median(ts)
-    print(json.dumps(res))
+        res["median_ms"]["opencv_" + name] = statistics.median(ts)
+        if gt is not None:
+            res["bad2.0"]["opencv_" + name] = score(to_float(d), gt, vis, 2.0)["bad"]
+    if args.ours_criterion:
+        import glob
+        import os
+        for est in glob.glob(os.path.join(args.ours_criterion, "*", "new", "estimates.json")):
+            name = est.split(os.sep)[-3]
+            with open(est) as f:
+                res["median_ms"]["tubeloc_" + name] = json.load(f)["median"]["point_estimate"] / 1e6
+    if args.ours and gt is not None:
+        res["bad2.0"]["tubeloc_eight_paths"] = score(read_pfm(args.ours), gt, vis, 2.0)["bad"]
+    ms = res["median_ms"]
+    if "tubeloc_eight_paths" in ms:
+        res["ratio_opencv_over_ours"] = {k: v / ms["tubeloc_eight_paths"] for k, v in ms.items() if k.startswith("opencv")}
+    print(json.dumps(res, indent=1))
 
 
 def main():
@@ -146,6 +165,10 @@ def main():
     b.add_argument("--block", type=int, default=3)
     b.add_argument("--repeat", type=int, default=7)
     b.add_argument("--threads", type=int, default=2)
+    b.add_argument("--gt", help="exact disparity PFM of the pair")
+    b.add_argument("--visible", help="PNG mask of pixels to evaluate (non-zero)")
+    b.add_argument("--ours", help="our disparity PFM on the same pair")
+    b.add_argument("--ours-criterion", help="criterion group folder with our timings")
     args = ap.parse_args()
     accuracy(args) if args.cmd == "accuracy" else bench(args)
 

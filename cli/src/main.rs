@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
+mod cmd_stereo;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -17,12 +18,15 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     // Subcommands are registered here, one variant each.
+    /// Stereo disparity (semi-global matching), optional rectification with a rig and point cloud.
+    Stereo(cmd_stereo::StereoArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result: anyhow::Result<()> = match cli.command {
         // Dispatch: one arm per subcommand.
+        Command::Stereo(a) => cmd_stereo::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

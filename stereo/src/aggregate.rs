@@ -253,15 +253,10 @@ crate::multiversion! {
                 *a = a.wrapping_add(b);
             }
             let sp = &*sp;
-            // Arg-min: vector min per 16-block, scalar search only in improving blocks.
-            let (mut m, mut bi) = (i16::MAX, 0usize);
-            for (bk, blk) in sp.chunks(16).enumerate() {
-                let bm = blk.iter().copied().fold(i16::MAX, i16::min);
-                if bm < m {
-                    m = bm;
-                    bi = bk * 16 + blk.iter().position(|&v| v == bm).unwrap_or(0);
-                }
-            }
+            // Arg-min as a vector min over packed keys (cost << 16 | d): the smallest cost wins,
+            // ties go to the smallest disparity.
+            let key = sp.iter().enumerate().map(|(d, &v)| ((v as i32) << 16) | d as i32).fold(i32::MAX, i32::min);
+            let (m, bi) = ((key >> 16) as i16, (key & 0xFFFF) as usize);
             let mut ok = true;
             if uniqueness > 0 {
                 let second = sp[..bi.saturating_sub(1)]

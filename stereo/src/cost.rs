@@ -75,8 +75,14 @@ pub(crate) fn cost_volume(
 crate::multiversion! {
     fn census_row(o: &mut [u8], l: u64, win: &[u64], weight: u8) {
         // o[k] pairs with win[len - 1 - k].
-        for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
-            *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
+        if weight == 1 {
+            for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
+                *c = (l ^ r).count_ones() as u8;
+            }
+        } else {
+            for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
+                *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
+            }
         }
     }
 }
