@@ -4,6 +4,7 @@
 //! `category_id`, `score`, `bbox` `[x, y, w, h]` in pixels with the top-left pixel's outer corner
 //! at `(-0.5, -0.5)` as COCO writes it) plus optional seeds for the refiner:
 //!
+//! - a mask (`segmentation`, compressed COCO RLE as pycocotools writes it),
 //! - a coarse pose `T_cam_tube` (Line2D: the pose of the matched template),
 //! - an [`AxisSeed`] in the image (learned segmenter, or computed from a mask),
 //! - the id of the matched template and the detector that produced it ([`DetectionSource`]).
@@ -11,7 +12,9 @@
 //! JSON is a superset of a COCO results entry: readers that only know COCO ignore the extra
 //! fields, and [`read_coco_results`] accepts plain COCO results (unknown fields are ignored).
 
+use crate::coco::Segmentation;
 use crate::error::CoreError;
+use crate::mask::Rle;
 use crate::pose::Pose;
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
@@ -133,6 +136,11 @@ pub struct TubeDetection {
     pub score: f64,
     /// Bounding box `[x, y, w, h]`, pixels, COCO convention.
     pub bbox: [f64; 4],
+    /// Instance mask, written as COCO `segmentation` in compressed RLE
+    /// (`{"size": [h, w], "counts": "..."}`); uncompressed RLE (`counts` as a number list) is
+    /// read too. Polygon segmentations are refused (COCO results carry RLE).
+    #[serde(rename = "segmentation", default, skip_serializing_if = "Option::is_none", with = "rle_serde")]
+    pub mask: Option<Rle>,
     /// Coarse pose of the tube in the camera frame (Line2D template pose), tube frame as in
     /// [`crate::tube`]: origin at the tube centre, +z toward the seal end.
     #[serde(rename = "T_cam_tube", default, skip_serializing_if = "Option::is_none")]
@@ -151,7 +159,7 @@ pub struct TubeDetection {
 impl TubeDetection {
     /// A detection with only the COCO fields set.
     pub fn new(image_id: u64, score: f64, bbox: [f64; 4], source: DetectionSource) -> Self {
-        TubeDetection { image_id, category_id: 1, score, bbox, t_cam_tube: None, axis_seed: None, template_id: None, source }
+        TubeDetection { image_id, category_id: 1, score, bbox, mask: None, t_cam_tube: None, axis_seed: None, template_id: None, source }
     }
 
     /// Checks finite score and box, non-negative box size, and a valid axis seed if present.
@@ -165,7 +173,20 @@ impl TubeDetection {
         if let Some(a) = &self.axis_seed {
             a.validate()?;
         }
+        if let Some(m) = &self.mask {
+            m.check()?;
+        }
         Ok(())
+    }
+
+    /// The principal axis of the mask ([`AxisSeed::from_pixels`] over the set pixel centres);
+    /// `None` without a mask or with fewer than 2 set pixels.
+    pub fn axis_seed_from_mask(&self) -> Result<Option<AxisSeed>, CoreError> {
+        let Some(rle) = &self.mask else { return Ok(None) };
+        let m = rle.to_mask()?;
+        let w = m.width;
+        let px = m.data.iter().enumerate().filter(|(_, v)| **v != 0).map(move |(i, _)| ((i % w) as f64, (i / w) as f64));
+        Ok(AxisSeed::from_pixels(px))
     }
 
     /// An axis seed from the box alone (the box diagonal that is longer; sign arbitrary):
@@ -179,7 +200,8 @@ impl TubeDetection {
 }
 
 /// Reads a detections file: a JSON array of COCO results entries, possibly with the extra
-/// fields of [`TubeDetection`]. Entries without `source` are marked `external`.
+/// fields of [`TubeDetection`]. Entries without `source` are marked `external`; entries with a
+/// mask but no `axis_seed` get the mask's principal axis ([`TubeDetection::axis_seed_from_mask`]).
 /// Errors name the file and the entry index.
 pub fn read_coco_results(path: &Path) -> Result<Vec<TubeDetection>, CoreError> {
     let text = std::fs::read(path).map_err(|e| CoreError::io(path, e))?;
@@ -188,12 +210,39 @@ pub fn read_coco_results(path: &Path) -> Result<Vec<TubeDetection>, CoreError> {
 
 /// Parses COCO results JSON text (see [`read_coco_results`]); `origin` names the source.
 pub fn parse_coco_results(text: &[u8], origin: &Path) -> Result<Vec<TubeDetection>, CoreError> {
-    let dets: Vec<TubeDetection> =
+    let mut dets: Vec<TubeDetection> =
         serde_json::from_slice(text).map_err(|e| CoreError::parse(origin, format!("invalid COCO results JSON: {e}")))?;
-    for (i, d) in dets.iter().enumerate() {
+    for (i, d) in dets.iter_mut().enumerate() {
         d.validate().map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
+        if d.axis_seed.is_none() {
+            d.axis_seed = d.axis_seed_from_mask().map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
+        }
     }
     Ok(dets)
+}
+
+/// Serde for `Option<Rle>` as a COCO RLE segmentation (compressed on output).
+mod rle_serde {
+    use super::{Rle, Segmentation};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &Option<Rle>, s: S) -> Result<S::Ok, S::Error> {
+        v.as_ref().map(Segmentation::from_rle).serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Rle>, D::Error> {
+        use serde::de::Error;
+        match Option::<Segmentation>::deserialize(d)? {
+            None => Ok(None),
+            Some(Segmentation::CompressedRle { size, counts }) => Rle::from_compressed_string(&counts, size).map(Some).map_err(D::Error::custom),
+            Some(Segmentation::UncompressedRle { size, counts }) => {
+                let rle = Rle { size, counts };
+                rle.check().map_err(D::Error::custom)?;
+                Ok(Some(rle))
+            }
+            Some(Segmentation::Polygons(_)) => Err(D::Error::custom("polygon segmentation in a results entry: COCO results carry RLE masks")),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -234,5 +283,38 @@ mod tests {
         let bad = br#"[{"image_id": 1, "bbox": [0, 0, -1, 1], "score": 1}]"#;
         let err = parse_coco_results(bad, Path::new("r.json")).unwrap_err().to_string();
         assert!(err.contains("r.json") && err.contains("entry 0"), "{err}");
+    }
+
+    #[test]
+    fn mask_round_trips_as_compressed_rle_and_seeds_the_axis() {
+        use crate::mask::BinaryMask;
+        // A 40x6 pixel bar at 45 degrees in a 64x48 image.
+        let m = BinaryMask::from_fn(64, 48, |x, y| {
+            let (u, v) = (x as f64 - 30.0, y as f64 - 20.0);
+            let (s, t) = ((u + v) / 2f64.sqrt(), (v - u) / 2f64.sqrt());
+            s.abs() <= 20.0 && t.abs() <= 3.0
+        });
+        let rle = Rle::from_mask(&m);
+        let mut d = TubeDetection::new(2, 0.7, m.bbox(), DetectionSource::External);
+        d.mask = Some(rle.clone());
+        let text = serde_json::to_string(&[&d]).unwrap();
+        assert!(text.contains(&format!("\"segmentation\":{{\"size\":[48,64],\"counts\":\"{}\"}}", rle.to_compressed_string())), "{text}");
+        let back = parse_coco_results(text.as_bytes(), Path::new("m.json")).unwrap();
+        assert_eq!(back[0].mask.as_ref(), Some(&rle));
+        let a = back[0].axis_seed.expect("axis seed from the mask");
+        assert!((a.centre_px[0] - 30.0).abs() < 0.6 && (a.centre_px[1] - 20.0).abs() < 0.6, "{a:?}");
+        let h = 0.5f64.sqrt();
+        assert!((a.direction_px[0].abs() - h).abs() < 0.02 && (a.direction_px[1].abs() - h).abs() < 0.02, "{a:?}");
+        assert!(a.direction_px[0] * a.direction_px[1] > 0.0, "{a:?}");
+        assert!((a.length_px - 41.0).abs() < 3.0 && a.width_px > 4.0 && a.width_px < 10.0, "{a:?}");
+        // Uncompressed RLE is read too; a bad RLE and a polygon are refused with the entry named.
+        let unc = format!("[{{\"image_id\":1,\"bbox\":[0,0,2,2],\"score\":1,\"segmentation\":{{\"size\":[48,64],\"counts\":{:?}}}}}]", rle.counts);
+        assert_eq!(parse_coco_results(unc.as_bytes(), Path::new("u.json")).unwrap()[0].mask.as_ref(), Some(&rle));
+        let bad = br#"[{"image_id":1,"bbox":[0,0,2,2],"score":1,"segmentation":{"size":[4,4],"counts":[3,2]}}]"#;
+        let err = parse_coco_results(bad, Path::new("b.json")).unwrap_err().to_string();
+        assert!(err.contains("b.json") && err.contains("counts sum to 5"), "{err}");
+        let poly = br#"[{"image_id":1,"bbox":[0,0,2,2],"score":1,"segmentation":[[0,0,5,0,5,5]]}]"#;
+        let err = parse_coco_results(poly, Path::new("p.json")).unwrap_err().to_string();
+        assert!(err.contains("polygon"), "{err}");
     }
 }
