@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
+mod cmd_eval;
 mod cmd_stereo;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
@@ -20,6 +21,8 @@ enum Command {
     // Subcommands are registered here, one variant each.
     /// Stereo disparity (semi-global matching), optional rectification with a rig and point cloud.
     Stereo(cmd_stereo::StereoArgs),
+    /// Evaluate COCO results against ground truth (AP/AR exactly as pycocotools), with breakdowns.
+    Eval(cmd_eval::EvalArgs),
 }
 
 fn main() -> ExitCode {
@@ -27,6 +30,7 @@ fn main() -> ExitCode {
     let result: anyhow::Result<()> = match cli.command {
         // Dispatch: one arm per subcommand.
         Command::Stereo(a) => cmd_stereo::run(a),
+        Command::Eval(a) => cmd_eval::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
