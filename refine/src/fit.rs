@@ -5,7 +5,13 @@
 //! normal for the strongest edge ([`GradientLevel::search`]) and fixes these edge points `e_i`.
 //! The residuals are then `r_i(θ) = n_i · (π(X_i(θ)) - e_i) / σ_px` (pixels along the normal,
 //! normalized by the nominal edge noise) and, for stereo points `P_j`,
-//! `s_j(θ) = (ρ_j - R(z_j)) / σ_s` with `z_j = (P_j - c)·a`, `ρ_j = |P_j - c - z_j a|`.
+//! `s_j(θ) = (ρ_j - R(z_j)) / σ_s` with `z_j = (P_j - c)·a`, `ρ_j = |P_j - c - z_j a|`,
+//! and, with a ground plane `n·X = d` (tube resting on it), the two prior residuals
+//! `g_1 = (n·c - d - r_max) / σ_g` (centre height) and `g_2 = (n·a) / σ_t` (axis parallel to
+//! the ground), quadratic (not robust).
+//! After the first iteration of each level, the contrast polarity of each limb is fixed to the
+//! sign most of its samples found (tube brighter or darker than the ground along that limb), so
+//! that texture and shading edges of the other polarity are not associated.
 //! One damped Gauss-Newton step minimizes `Σ ρ_Tukey(r)`:
 //! `(JᵀWJ + λ diag(JᵀWJ)) δ = -JᵀW r`, accepted when the robust cost drops (λ ÷ 3), else
 //! λ × 4 and retry. Jacobians by central differences of the projection (exact enough and valid
@@ -15,6 +21,7 @@ use crate::contour::{build_samples, project_with_normal, AxisState, ContourSampl
 use crate::edges::{EdgeHits, GradientLevel};
 use crate::model::CylinderModel;
 use crate::robust::{mad_scale, tukey_rho, tukey_weight};
+use crate::seed::GroundPlane;
 use crate::RefineConfig;
 use nalgebra::{Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
 use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
@@ -28,6 +35,9 @@ pub struct Scene<'a> {
     pub depth: Option<(&'a Plane<f32>, &'a CameraModel)>,
     /// 3D points (camera frame, metres) triangulated in the detection's region.
     pub stereo_points: &'a [Point3<f64>],
+    /// Ground plane the tube rests on (camera frame): adds the centre-height and axis-parallel
+    /// priors (`RefineConfig::ground_sigma_m`, `ground_tilt_sigma_deg`).
+    pub ground: Option<GroundPlane>,
 }
 
 /// Outcome of [`fit`].
@@ -98,11 +108,13 @@ fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vect
     true
 }
 
-/// Associates visible samples with image edges at `level`.
-fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8]) -> (Vec<Assoc>, usize, Vec<f32>) {
+/// Associates visible samples with image edges at `level`. Returns the associations, the
+/// number of visible samples inside the image, and the number of visible samples wherever
+/// they project (inside the image or not).
+fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8]) -> (Vec<Assoc>, usize, usize) {
     let mut out = Vec::with_capacity(samples.len());
-    let mut strengths = Vec::with_capacity(samples.len());
-    let Some(f) = st.frame() else { return (out, 0, strengths) };
+    let mut total = 0;
+    let Some(f) = st.frame() else { return (out, 0, total) };
     let cam = &level.lv.camera;
     let mut visible = 0;
     for (i, s) in samples.iter().enumerate() {
@@ -111,20 +123,56 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
             continue;
         }
         let Some((u, n)) = project_with_normal(cam, &p) else { continue };
-        if !level.lv.inside(&u, level.radius as f64 + 1.0) {
+        if !is_visible(model, st, &p.x, &p.out, scene) {
             continue;
         }
-        if !is_visible(model, st, &p.x, &p.out, scene) {
+        total += 1;
+        if !level.lv.inside(&u, level.radius as f64 + 1.0) {
             continue;
         }
         visible += 1;
         let hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, polarity.get(i).copied().unwrap_or(0), cfg.rel_edge_strength);
         if hyps.len > 0 {
-            strengths.push(hyps.hits[0].strength);
             out.push(Assoc { sample: *s, n, u0: u, hyps });
         }
     }
-    (out, visible, strengths)
+    (out, visible, total)
+}
+
+/// Limb polarity from the associations: for each limb (section, side) whose strongest edges
+/// agree in sign for at least 2/3 of at least 3 samples, every sample of that limb gets that
+/// sign (`+1`: intensity rises outward along the normal); others keep 0 (either sign).
+fn limb_polarity(samples: &[ContourSample], assoc: &[Assoc]) -> Vec<i8> {
+    use crate::contour::SampleKind;
+    let key = |s: &ContourSample| match s.kind {
+        SampleKind::Limb { side, .. } => Some(2 * s.section + (side > 0.0) as usize),
+        SampleKind::Rim { .. } => None,
+    };
+    let nk = 2 * samples.iter().map(|s| s.section + 1).max().unwrap_or(0);
+    let mut votes = vec![(0usize, 0usize); nk];
+    for a in assoc {
+        if let (Some(k), true) = (key(&a.sample), a.hyps.len > 0) {
+            if a.hyps.hits[0].strength > 0.0 {
+                votes[k].0 += 1;
+            } else {
+                votes[k].1 += 1;
+            }
+        }
+    }
+    let sign: Vec<i8> = votes
+        .iter()
+        .map(|&(p, m)| {
+            let n = p + m;
+            if n >= 3 && 3 * p >= 2 * n {
+                1
+            } else if n >= 3 && 3 * m >= 2 * n {
+                -1
+            } else {
+                0
+            }
+        })
+        .collect();
+    samples.iter().map(|s| key(s).map_or(0, |k| sign[k])).collect()
 }
 
 /// Residuals (normalized) of the associations and stereo points at state `st`; missing
@@ -148,13 +196,33 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
         let rz = model.radius_at(z.clamp(-half, half));
         out.push(Some((rho - rz) / cfg.stereo_sigma_m));
     }
+    if let Some(g) = &scene.ground {
+        out.push(Some((g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m));
+        out.push(Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()));
+    }
 }
 
-fn robust_cost(r: &[Option<f64>], c_img: f64, c_st: f64, n_img: usize) -> f64 {
+/// Threshold of residual `i`: image (`i < n_img`), stereo (`i < n_img + n_st`) or prior
+/// (effectively quadratic).
+#[inline]
+fn group_threshold(i: usize, n_img: usize, n_st: usize, c: (f64, f64)) -> f64 {
+    if i < n_img {
+        c.0
+    } else if i < n_img + n_st {
+        c.1
+    } else {
+        1e6
+    }
+}
+
+fn robust_cost(r: &[Option<f64>], c_img: f64, c_st: f64, n_img: usize, n_st: usize) -> f64 {
     r.iter()
         .enumerate()
         .map(|(i, v)| {
-            let c = if i < n_img { c_img } else { c_st };
+            let c = group_threshold(i, n_img, n_st, (c_img, c_st));
+            if c >= 1e6 {
+                return v.map_or(0.0, |x| 0.5 * x * x);
+            }
             v.map_or(c * c / 6.0, |x| tukey_rho(x, c))
         })
         .sum()
@@ -163,9 +231,9 @@ fn robust_cost(r: &[Option<f64>], c_img: f64, c_st: f64, n_img: usize) -> f64 {
 /// Tukey thresholds (normalized units) for the image and stereo groups: `4.685 · MAD scale`,
 /// the image one clamped to `[2 px, 0.6 · search radius]` in level pixels so that a majority of
 /// wrong associations cannot inflate it.
-fn thresholds(r: &[Option<f64>], n_img: usize, scratch: &mut Vec<f64>, sigma_px: f64, radius: usize) -> (f64, f64) {
+fn thresholds(r: &[Option<f64>], n_img: usize, n_st: usize, scratch: &mut Vec<f64>, sigma_px: f64, radius: usize) -> (f64, f64) {
     let img: Vec<f64> = r[..n_img].iter().flatten().copied().collect();
-    let st: Vec<f64> = r[n_img..].iter().flatten().copied().collect();
+    let st: Vec<f64> = r[n_img..(n_img + n_st).min(r.len())].iter().flatten().copied().collect();
     let s_img = mad_scale(&img, scratch).unwrap_or(1.0);
     let s_st = mad_scale(&st, scratch).unwrap_or(1.0).max(1.0);
     let lo = 2.0 / sigma_px;
@@ -210,8 +278,8 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
     let (mut wrr, mut wsum) = (0.0, 0.0);
     for i in 0..r0.len() {
         let Some(r) = r0[i] else { continue };
-        let cthr = if i < n_img { c.0 } else { c.1 };
-        let w = tukey_weight(r, cthr);
+        let cthr = group_threshold(i, n_img, scene.stereo_points.len(), c);
+        let w = if cthr >= 1e6 { 1.0 } else { tukey_weight(r, cthr) };
         if w <= 0.0 {
             continue;
         }
@@ -260,12 +328,15 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             sigma_px: cfg.edge_sigma_px,
         };
         let samples = build_samples(model, &st, &lv.camera, cfg.sample_spacing_px);
-        let polarity = vec![0i8; samples.len()];
+        let mut polarity = vec![0i8; samples.len()];
         let max_it = if li == top { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
         let mut lambda = 1e-3;
-        for _ in 0..max_it {
+        for it in 0..max_it {
             iterations += 1;
             let (assoc, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+            if cfg.limb_polarity && it == 0 {
+                polarity = limb_polarity(&samples, &assoc);
+            }
             if visible < cfg.min_samples {
                 return fail(st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}"), iterations);
             }
@@ -274,8 +345,9 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             }
             let n_img = assoc.len();
             residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rbuf);
-            let c = thresholds(&rbuf, n_img, &mut scratch, level.sigma_px, level.radius);
-            let cost0 = robust_cost(&rbuf, c.0, c.1, n_img);
+            let n_st = scene.stereo_points.len();
+            let c = thresholds(&rbuf, n_img, n_st, &mut scratch, level.sigma_px, level.radius);
+            let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
             let ax = st.a;
             let (u1, u2) = tangent_basis(&ax);
             let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c);
@@ -299,7 +371,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 let delta = [d[0], d[1], d[2], d[3], d[4]];
                 let trial = st.updated(&delta, &u1, &u2);
                 residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rtrial);
-                let cost = robust_cost(&rtrial, c.0, c.1, n_img);
+                let cost = robust_cost(&rtrial, c.0, c.1, n_img, n_st);
                 if cost.is_finite() && cost <= cost0 {
                     lambda = (lambda / 3.0).max(1e-7);
                     accepted = Some((trial, d));
@@ -331,7 +403,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let level = Level { lv, radius: cfg.search_radius_px, sigma_px: cfg.edge_sigma_px };
     let samples = build_samples(model, &st, &lv.camera, cfg.sample_spacing_px);
     let polarity = vec![0i8; samples.len()];
-    let (assoc, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+    let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
     let mut r = Vec::new();
     residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut r);
     let n_img = assoc.len();
@@ -349,7 +421,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     }
     score += (visible.saturating_sub(n_img)) as f64;
     let score = if visible > 0 { score / visible as f64 } else { 1.0 };
-    let stereo: Vec<f64> = r[n_img..].iter().flatten().map(|v| v * cfg.stereo_sigma_m).collect();
+    let stereo: Vec<f64> = r[n_img..(n_img + scene.stereo_points.len()).min(r.len())].iter().flatten().map(|v| v * cfg.stereo_sigma_m).collect();
     let stereo_in: Vec<f64> = stereo.iter().copied().filter(|v| v.abs() < 3.0 * cfg.stereo_sigma_m.max(1e-4) * 3.0).collect();
     let stats = ResidualStats {
         rms_px: if inl > 0 { (ss / inl as f64).sqrt() } else { 0.0 },
@@ -364,7 +436,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let sgn = if axis.dot(&st.a) >= 0.0 { 1.0 } else { -1.0 };
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
-    let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, &mut Vec::new(), level.sigma_px, level.radius) };
+    let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
     let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c);
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
@@ -381,6 +453,8 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let inlier_fraction = if visible > 0 { inl as f64 / visible as f64 } else { 0.0 };
     let failure = if visible < cfg.min_samples {
         Some((FailureReason::OutOfImage, format!("only {visible} contour samples visible at full resolution")))
+    } else if (visible as f64) < cfg.min_in_image_fraction * total as f64 {
+        Some((FailureReason::OutOfImage, format!("only {visible} of {total} visible contour samples ({:.0}%) lie inside the image: depth is not constrained enough", 100.0 * visible as f64 / total.max(1) as f64)))
     } else if inlier_fraction < cfg.min_inlier_fraction {
         Some((FailureReason::EmptyTerrain, format!("only {inl} of {visible} contour samples ({:.0}%) lie on an image edge within {} px", 100.0 * inlier_fraction, cfg.inlier_px)))
     } else {

@@ -56,6 +56,9 @@ pub struct RefineConfig {
     pub inlier_px: f64,
     /// Fits with a smaller inlier fraction are rejected as `empty_terrain`.
     pub min_inlier_fraction: f64,
+    /// Fits whose visible contour lies less than this fraction inside the image (tube cut by
+    /// the border) are flagged `out_of_image`.
+    pub min_in_image_fraction: f64,
     /// Fewer visible (or matched) samples than this fail the fit.
     pub min_samples: usize,
     /// A fit moving the centre by more than this fraction of the seed distance diverged.
@@ -66,6 +69,14 @@ pub struct RefineConfig {
     pub decide_end: bool,
     /// Score difference (mean truncated cost) that gives `end_confidence` ≈ 0.73 (logistic scale).
     pub end_score_scale: f64,
+    /// Fix each limb's edge polarity (tube brighter/darker than the ground) after the first
+    /// iteration of each level.
+    pub limb_polarity: bool,
+    /// Ground prior: standard deviation of the centre height above the ground (expected
+    /// height: the largest radius), metres.
+    pub ground_sigma_m: f64,
+    /// Ground prior: standard deviation of the axis elevation above the ground plane, degrees.
+    pub ground_tilt_sigma_deg: f64,
 }
 
 impl Default for RefineConfig {
@@ -83,11 +94,15 @@ impl Default for RefineConfig {
             stereo_sigma_m: 0.0015,
             inlier_px: 2.0,
             min_inlier_fraction: 0.5,
+            min_in_image_fraction: 0.7,
             min_samples: 12,
             max_centre_shift_frac: 0.3,
             max_axis_change_deg: 50.0,
             decide_end: true,
             end_score_scale: 0.02,
+            limb_polarity: true,
+            ground_sigma_m: 0.003,
+            ground_tilt_sigma_deg: 3.0,
         }
     }
 }
@@ -104,7 +119,10 @@ impl RefineConfig {
             && self.stereo_sigma_m > 0.0
             && self.inlier_px > 0.0
             && (0.0..=1.0).contains(&self.min_inlier_fraction)
-            && self.end_score_scale > 0.0;
+            && (0.0..=1.0).contains(&self.min_in_image_fraction)
+            && self.end_score_scale > 0.0
+            && self.ground_sigma_m > 0.0
+            && self.ground_tilt_sigma_deg > 0.0;
         if ok {
             Ok(())
         } else {
@@ -120,7 +138,8 @@ pub struct RefineInput<'a> {
     pub image: &'a Plane<f32>,
     /// Camera of the image.
     pub camera: &'a CameraModel,
-    /// Optional ground plane (camera frame) for mask seeds.
+    /// Optional ground plane (camera frame): places mask/box seeds on it and adds the resting
+    /// priors to the fit (see [`fit`]).
     pub ground: Option<GroundPlane>,
     /// Optional depth map and stereo points.
     pub scene: Scene<'a>,
@@ -169,18 +188,19 @@ impl Refiner {
             return failed(image_id, score, Some(&st), FailureReason::OutOfImage, "the seed projects outside the image".into());
         };
         let pyr = edges::build_pyramid(input.image, cam, rect, top + 1);
+        let scene = Scene { ground: input.scene.ground.or(input.ground), ..input.scene };
         let top = top.min(pyr.len() - 1);
-        let mut a = fit::fit(&self.model, &self.config, &pyr, top, &input.scene, st);
+        let mut a = fit::fit(&self.model, &self.config, &pyr, top, &scene, st);
         if a.failure.is_some() && self.config.decide_end {
             // A template flipped end to end misplaces the sections; retry the other end.
-            let b = fit::fit(&self.model, &self.config, &pyr, top, &input.scene, AxisState { c: st.c, a: -st.a });
+            let b = fit::fit(&self.model, &self.config, &pyr, top, &scene, AxisState { c: st.c, a: -st.a });
             if b.failure.is_none() {
                 a = b;
             }
         }
         let (best, conf) = if self.config.decide_end && a.failure.is_none() {
             let flipped = AxisState { c: a.state.c, a: -a.state.a };
-            let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &input.scene, flipped);
+            let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &scene, flipped);
             let dscore = if b.failure.is_none() { b.score - a.score } else { 1.0 };
             let p = 1.0 / (1.0 + (-dscore.abs() / self.config.end_score_scale).exp());
             if dscore < 0.0 {
