@@ -1,0 +1,42 @@
+//! Framework probe kept as a benchmark: one training step (forward + backward + AdamW) of
+//! `TubeNet` on a 4 x 1 x 256 x 256 batch, and inference on one 1024 x 1024 image (network +
+//! decoding). Run: `RAYON_NUM_THREADS=2 cargo bench -p tubeloc-detect --bench learned_probe`.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
+use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer};
+
+fn synthetic_image(size: usize) -> (Vec<u8>, Vec<u8>) {
+    let mut rgb = vec![0u8; size * size * 3];
+    let mut mask = vec![0u8; size * size];
+    for y in 0..size {
+        for x in 0..size {
+            let v = (((x * 7 + y * 13) % 31) * 4 + 60) as u8;
+            let on = (y as isize - (size / 2) as isize).abs() < 7 && x > size / 3 && x < size / 3 + size / 4;
+            let v = if on { 200 } else { v };
+            rgb[(y * size + x) * 3..][..3].copy_from_slice(&[v, v, v]);
+            mask[y * size + x] = on as u8;
+        }
+    }
+    (rgb, mask)
+}
+
+fn bench(c: &mut Criterion) {
+    let pre = Preprocess::default();
+    let (rgb, mask) = synthetic_image(512);
+    let img = TrainImage::new(512, 512, pre.apply(&rgb, 512, 512), &[mask]);
+    let model = LearnedModel::new(pre, 8, 1).unwrap();
+    let cfg = TrainConfig { batch: 4, augment: AugmentConfig { crop: 256, ..Default::default() }, ..Default::default() };
+    let mut trainer = Trainer::new(model, cfg).unwrap();
+    let images = vec![img];
+    let mut g = c.benchmark_group("learned");
+    g.sample_size(10);
+    g.bench_function("candle_train_step_4x1x256x256", |b| b.iter(|| trainer.step(&images).unwrap()));
+    let (rgb, _) = synthetic_image(1024);
+    let model = &trainer.model;
+    g.bench_function("candle_infer_1024", |b| b.iter(|| detect_rgb(model, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap()));
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

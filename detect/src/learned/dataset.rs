@@ -1,0 +1,143 @@
+//! COCO dataset directories (as written by `tubeloc synth`) to training images, and a simple
+//! mask AP at IoU 0.5 for validation during training.
+//!
+//! A dataset directory holds `annotations.json` and the images; an image's `file_name` is
+//! looked up relative to the directory, then under `images/`.
+
+use super::augment::TrainImage;
+use super::decode::{decode, DecodeConfig, LearnedInstance};
+use super::error::LearnedError;
+use super::model::LearnedModel;
+use super::preprocess::Preprocess;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use tubeloc_core::CocoDataset;
+
+/// Loads every image of a COCO dataset directory with its instance masks, preprocessed.
+/// `limit` keeps only the first `limit` images (by id order in the file).
+pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Result<Vec<TrainImage>, LearnedError> {
+    let ann = dir.join("annotations.json");
+    let ds = CocoDataset::load(&ann).map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: e.to_string() })?;
+    let n = limit.unwrap_or(usize::MAX).min(ds.images.len());
+    ds.images[..n]
+        .par_iter()
+        .map(|im| {
+            let mut p: PathBuf = dir.join(&im.file_name);
+            if !p.exists() {
+                p = dir.join("images").join(&im.file_name);
+            }
+            let err = |msg: String| LearnedError::Dataset { path: p.clone(), msg };
+            let rgb = image::open(&p).map_err(|e| err(e.to_string()))?.to_rgb8();
+            let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+            if (w, h) != (im.width as usize, im.height as usize) {
+                return Err(err(format!("image is {w}x{h} but annotations.json says {}x{}", im.width, im.height)));
+            }
+            let mut masks = Vec::new();
+            for a in ds.annotations.iter().filter(|a| a.image_id == im.id && a.iscrowd == 0) {
+                let Some(seg) = &a.segmentation else { continue };
+                let m = seg
+                    .to_rle(im.height, im.width)
+                    .and_then(|r| r.to_mask())
+                    .map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: format!("annotation {}: {e}", a.id) })?;
+                masks.push(m.data);
+            }
+            Ok(TrainImage::new(w, h, pre.apply(rgb.as_raw(), w, h), &masks))
+        })
+        .collect()
+}
+
+/// Runs the model on a preprocessed training image.
+pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    let (out, ow, oh) = model.predict_planes(&img.input, img.width, img.height)?;
+    Ok(decode(&out, ow, oh, img.width, img.height, cfg))
+}
+
+/// Mask AP at IoU 0.5 over images (all detections pooled, sorted by score, greedy matching to
+/// the unmatched ground truth of highest IoU, precision made monotone and sampled at 101
+/// recall points as COCO does). A quick validation figure; `tubeloc eval` gives the full one.
+pub fn ap50(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<f64, LearnedError> {
+    let per: Vec<(Vec<(f64, bool)>, usize)> = images
+        .iter()
+        .map(|img| {
+            let dets = detect_image(model, img, cfg)?;
+            let ngt = img.labels.iter().copied().max().unwrap_or(0) as usize;
+            let mut gt_area = vec![0usize; ngt + 1];
+            for &l in &img.labels {
+                gt_area[l as usize] += 1;
+            }
+            let present: Vec<usize> = (1..=ngt).filter(|&k| gt_area[k] > 0).collect();
+            let mut used = vec![false; ngt + 1];
+            let mut out = Vec::new();
+            for d in &dets {
+                let mut inter = vec![0usize; ngt + 1];
+                let mut area = 0usize;
+                for (m, &l) in d.mask.data.iter().zip(&img.labels) {
+                    if *m != 0 {
+                        area += 1;
+                        inter[l as usize] += 1;
+                    }
+                }
+                let best = present
+                    .iter()
+                    .filter(|&&k| !used[k])
+                    .map(|&k| (k, inter[k] as f64 / (area + gt_area[k] - inter[k]) as f64))
+                    .max_by(|a, b| a.1.total_cmp(&b.1));
+                let tp = matches!(best, Some((_, iou)) if iou >= 0.5);
+                if let (true, Some((k, _))) = (tp, best) {
+                    used[k] = true;
+                }
+                out.push((d.score, tp));
+            }
+            Ok((out, present.len()))
+        })
+        .collect::<Result<_, LearnedError>>()?;
+    let total_gt: usize = per.iter().map(|p| p.1).sum();
+    let mut all: Vec<(f64, bool)> = per.into_iter().flat_map(|p| p.0).collect();
+    Ok(average_precision(&mut all, total_gt))
+}
+
+/// COCO-style 101-point interpolated AP of scored hits (`true` = true positive).
+pub fn average_precision(dets: &mut [(f64, bool)], total_gt: usize) -> f64 {
+    if total_gt == 0 {
+        return 0.0;
+    }
+    dets.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (mut tp, mut fp) = (0usize, 0usize);
+    let mut rec = Vec::with_capacity(dets.len());
+    let mut prec = Vec::with_capacity(dets.len());
+    for &(_, hit) in dets.iter() {
+        if hit {
+            tp += 1
+        } else {
+            fp += 1
+        }
+        rec.push(tp as f64 / total_gt as f64);
+        prec.push(tp as f64 / (tp + fp) as f64);
+    }
+    for i in (0..prec.len().saturating_sub(1)).rev() {
+        prec[i] = prec[i].max(prec[i + 1]);
+    }
+    let mut sum = 0.0;
+    for k in 0..=100 {
+        let r = k as f64 / 100.0;
+        let i = rec.partition_point(|&x| x < r);
+        if i < prec.len() {
+            sum += prec[i];
+        }
+    }
+    sum / 101.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    #[test]
+    fn ap_of_perfect_and_half_detections() {
+        let mut d = vec![(0.9, true), (0.8, true)];
+        assert!((average_precision(&mut d, 2) - 1.0).abs() < 1e-12);
+        // One of two found, ranked first: precision 1 up to recall 0.5 (51 of 101 points).
+        let mut d = vec![(0.9, true), (0.1, false)];
+        assert!((average_precision(&mut d, 2) - 51.0 / 101.0).abs() < 1e-12);
+        assert_eq!(average_precision(&mut [], 0), 0.0);
+    }
+}

@@ -1,0 +1,264 @@
+//! From network outputs to tube instances.
+//!
+//! 1. Foreground cells: `σ(fg) > fg_threshold`; centre peaks: 3x3 local maxima of `σ(heat)`
+//!    above `peak_threshold`.
+//! 2. Connected foreground components (8-connectivity). A component holding several peaks is
+//!    split: each cell goes to the peak nearest in the peak's axis frame, with the across-axis
+//!    distance weighted [`DecodeConfig::across_weight`] times the along-axis one (tubes are
+//!    long and thin, so a cell belongs to the peak whose axis line passes near it).
+//! 3. Full-resolution mask: the foreground logit bilinearly upsampled (stride 4) and
+//!    thresholded at 0 inside the instance's cells, pixel `(x, y)` reading cell coordinate
+//!    `((x - 1.5) / 4, (y - 1.5) / 4)`.
+//! 4. Score = `max σ(heat)` of the instance's peak (0.5 × mean σ(fg) without one) × mean
+//!    `σ(fg)` over its cells. Axis seed: centre at the peak (sub-cell by a 3x3 weighted mean),
+//!    direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
+//!    predicted half-length, width from the mask's extent across the axis.
+
+use super::net::{HEADS, LENGTH_SCALE, STRIDE};
+use tubeloc_core::{AxisSeed, Plane};
+
+/// Thresholds of the decoder.
+#[derive(Clone, Copy, Debug)]
+pub struct DecodeConfig {
+    /// Foreground probability threshold for cells.
+    pub fg_threshold: f32,
+    /// Heatmap probability threshold for centre peaks.
+    pub peak_threshold: f32,
+    /// Weight of the across-axis distance when splitting components.
+    pub across_weight: f32,
+    /// Minimum mask area in pixels.
+    pub min_area: usize,
+    /// Minimum score.
+    pub min_score: f32,
+}
+
+impl Default for DecodeConfig {
+    fn default() -> Self {
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05 }
+    }
+}
+
+/// One detected tube.
+#[derive(Clone, Debug)]
+pub struct LearnedInstance {
+    /// Confidence in `[0, 1]`.
+    pub score: f64,
+    /// Full-resolution binary mask (1 = tube), image size.
+    pub mask: Plane<u8>,
+    /// COCO bbox `[x, y, w, h]` of the mask, pixels.
+    pub bbox: [f64; 4],
+    /// Image axis of the tube (seed for `refine`).
+    pub axis: AxisSeed,
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Decodes raw outputs (`HEADS` planes of `ow x oh`, from
+/// [`super::LearnedModel::predict_planes`]) of a `width x height` image into instances, sorted
+/// by decreasing score.
+pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
+    let n = ow * oh;
+    assert_eq!(out.len(), HEADS * n, "output plane size");
+    let fg: Vec<f32> = out[..n].iter().map(|&v| sigmoid(v)).collect();
+    let heat: Vec<f32> = out[n..2 * n].iter().map(|&v| sigmoid(v)).collect();
+    // Peaks.
+    let mut peaks = Vec::new();
+    for y in 0..oh {
+        for x in 0..ow {
+            let v = heat[y * ow + x];
+            if v < cfg.peak_threshold {
+                continue;
+            }
+            let mut is_max = true;
+            for dy in -1isize..=1 {
+                for dx in -1isize..=1 {
+                    let (xx, yy) = (x as isize + dx, y as isize + dy);
+                    if (dx, dy) != (0, 0) && xx >= 0 && yy >= 0 && (xx as usize) < ow && (yy as usize) < oh {
+                        let w = heat[yy as usize * ow + xx as usize];
+                        // Ties: the first in raster order wins.
+                        if w > v || (w == v && (dy < 0 || (dy == 0 && dx < 0))) {
+                            is_max = false;
+                        }
+                    }
+                }
+            }
+            if is_max {
+                peaks.push(y * ow + x);
+            }
+        }
+    }
+    // Components.
+    let mut comp = vec![u32::MAX; n];
+    let mut comps: Vec<Vec<usize>> = Vec::new();
+    let mut stack = Vec::new();
+    for s in 0..n {
+        if fg[s] <= cfg.fg_threshold || comp[s] != u32::MAX {
+            continue;
+        }
+        let id = comps.len() as u32;
+        let mut cells = Vec::new();
+        comp[s] = id;
+        stack.push(s);
+        while let Some(c) = stack.pop() {
+            cells.push(c);
+            let (x, y) = ((c % ow) as isize, (c / ow) as isize);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (xx, yy) = (x + dx, y + dy);
+                    if xx >= 0 && yy >= 0 && (xx as usize) < ow && (yy as usize) < oh {
+                        let d = yy as usize * ow + xx as usize;
+                        if comp[d] == u32::MAX && fg[d] > cfg.fg_threshold {
+                            comp[d] = id;
+                            stack.push(d);
+                        }
+                    }
+                }
+            }
+        }
+        comps.push(cells);
+    }
+    // Mean doubled-angle direction of a set of cells.
+    let direction = |cells: &[usize]| -> (f32, f32) {
+        let (mut c2, mut s2) = (0.0f32, 0.0f32);
+        for &c in cells {
+            c2 += fg[c] * out[2 * n + c];
+            s2 += fg[c] * out[3 * n + c];
+        }
+        let th = 0.5 * s2.atan2(c2);
+        (th.cos(), th.sin())
+    };
+    let mut groups: Vec<(Option<usize>, Vec<usize>)> = Vec::new();
+    for cells in comps {
+        let id = comp[cells[0]];
+        let mine: Vec<usize> = peaks.iter().copied().filter(|&p| comp[p] == id).collect();
+        if mine.len() <= 1 {
+            groups.push((mine.first().copied(), cells));
+            continue;
+        }
+        // Split along the axes: each peak's direction from the cells near it.
+        let dirs: Vec<(f32, f32)> = mine
+            .iter()
+            .map(|&p| {
+                let (px, py) = ((p % ow) as isize, (p / ow) as isize);
+                let near: Vec<usize> = cells.iter().copied().filter(|&c| ((c % ow) as isize - px).abs() <= 2 && ((c / ow) as isize - py).abs() <= 2).collect();
+                direction(&near)
+            })
+            .collect();
+        let mut parts: Vec<Vec<usize>> = vec![Vec::new(); mine.len()];
+        for &c in &cells {
+            let (x, y) = ((c % ow) as f32, (c / ow) as f32);
+            let best = (0..mine.len())
+                .min_by(|&a, &b| {
+                    let d = |k: usize| {
+                        let (px, py) = ((mine[k] % ow) as f32, (mine[k] / ow) as f32);
+                        let (dx, dy) = (x - px, y - py);
+                        let (ux, uy) = dirs[k];
+                        let along = dx * ux + dy * uy;
+                        let across = -dx * uy + dy * ux;
+                        along.abs() + cfg.across_weight * across.abs()
+                    };
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap_or(0);
+            parts[best].push(c);
+        }
+        for (k, part) in parts.into_iter().enumerate() {
+            if !part.is_empty() {
+                groups.push((Some(mine[k]), part));
+            }
+        }
+    }
+    let mut result = Vec::new();
+    let mut cell_owner = vec![u32::MAX; n];
+    for (gi, (peak, cells)) in groups.iter().enumerate() {
+        for &c in cells {
+            cell_owner[c] = gi as u32;
+        }
+        let _ = peak;
+    }
+    for (gi, (peak, cells)) in groups.iter().enumerate() {
+        let mean_fg = cells.iter().map(|&c| fg[c]).sum::<f32>() / cells.len() as f32;
+        let peak_v = peak.map(|p| heat[p]).unwrap_or(0.5 * mean_fg);
+        let score = peak_v * mean_fg;
+        if score < cfg.min_score {
+            continue;
+        }
+        // Full-resolution mask inside the cells' pixel box.
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for &c in cells {
+            let (x, y) = (c % ow, c / ow);
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x);
+            y1 = y1.max(y);
+        }
+        let px0 = (x0 * STRIDE).saturating_sub(STRIDE);
+        let py0 = (y0 * STRIDE).saturating_sub(STRIDE);
+        let px1 = ((x1 + 2) * STRIDE).min(width);
+        let py1 = ((y1 + 2) * STRIDE).min(height);
+        let mut mask = Plane::<u8>::new(width, height);
+        let mut pix = Vec::new();
+        for y in py0..py1 {
+            let v = ((y as f32 - 1.5) / STRIDE as f32).clamp(0.0, (oh - 1) as f32);
+            let (v0, fv) = (v.floor() as usize, v - v.floor());
+            let v1 = (v0 + 1).min(oh - 1);
+            for x in px0..px1 {
+                let u = ((x as f32 - 1.5) / STRIDE as f32).clamp(0.0, (ow - 1) as f32);
+                let (u0, fu) = (u.floor() as usize, u - u.floor());
+                let u1 = (u0 + 1).min(ow - 1);
+                // Owner: nearest cell.
+                let nc = (v.round() as usize).min(oh - 1) * ow + (u.round() as usize).min(ow - 1);
+                if cell_owner[nc] != gi as u32 {
+                    continue;
+                }
+                let l = |a: usize, b: usize| out[b * ow + a];
+                let val = (l(u0, v0) * (1.0 - fu) + l(u1, v0) * fu) * (1.0 - fv) + (l(u0, v1) * (1.0 - fu) + l(u1, v1) * fu) * fv;
+                if val > 0.0 {
+                    mask.data[y * width + x] = 1;
+                    pix.push((x as f64, y as f64));
+                }
+            }
+        }
+        if pix.len() < cfg.min_area {
+            continue;
+        }
+        let Some(mut axis) = AxisSeed::from_pixels(pix.iter().copied()) else { continue };
+        let (bx0, by0, bx1, by1) = pix.iter().fold((f64::MAX, f64::MAX, f64::MIN, f64::MIN), |a, &(x, y)| (a.0.min(x), a.1.min(y), a.2.max(x), a.3.max(y)));
+        let bbox = [bx0, by0, bx1 - bx0 + 1.0, by1 - by0 + 1.0];
+        // Network direction and length; centre at the peak when there is one.
+        let (dx, dy) = direction(cells);
+        let dir = if dx.abs() >= dy.abs() && dx < 0.0 || dy.abs() > dx.abs() && dy < 0.0 { (-dx, -dy) } else { (dx, dy) };
+        axis.direction_px = [dir.0 as f64, dir.1 as f64];
+        let half = cells.iter().map(|&c| fg[c] * out[4 * n + c]).sum::<f32>() / cells.iter().map(|&c| fg[c]).sum::<f32>().max(1e-6);
+        if half > 0.0 {
+            axis.length_px = (2.0 * half * LENGTH_SCALE) as f64;
+        }
+        if let Some(p) = peak {
+            let (px, py) = ((p % ow) as isize, (p / ow) as isize);
+            let (mut sw, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (xx, yy) = (px + dx, py + dy);
+                    if xx >= 0 && yy >= 0 && (xx as usize) < ow && (yy as usize) < oh {
+                        let w = heat[yy as usize * ow + xx as usize];
+                        sw += w;
+                        sx += w * xx as f32;
+                        sy += w * yy as f32;
+                    }
+                }
+            }
+            axis.centre_px = [(sx / sw * STRIDE as f32 + 1.5) as f64, (sy / sw * STRIDE as f32 + 1.5) as f64];
+        }
+        let perp = (-axis.direction_px[1], axis.direction_px[0]);
+        let (lo, hi) = pix.iter().fold((f64::MAX, f64::MIN), |a, &(x, y)| {
+            let t = (x - axis.centre_px[0]) * perp.0 + (y - axis.centre_px[1]) * perp.1;
+            (a.0.min(t), a.1.max(t))
+        });
+        axis.width_px = (hi - lo + 1.0).max(1.0);
+        result.push(LearnedInstance { score: score as f64, mask, bbox, axis });
+    }
+    result.sort_by(|a, b| b.score.total_cmp(&a.score));
+    result
+}

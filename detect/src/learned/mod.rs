@@ -1,0 +1,36 @@
+//! The learned tube segmenter: a small CNN trained from scratch on CPU (candle).
+//!
+//! See `README.md` beside this file for the framework probe (candle vs burn) and the figures
+//! behind the choice. Pipeline: [`preprocess`] (gray + box filter by default) →
+//! [`net::TubeNet`] (stride-4 foreground, centre heatmap, axis angle, half-length) →
+//! [`decode`] (instances with mask, score and [`tubeloc_core::AxisSeed`]). Training:
+//! [`augment`] crops, [`targets`], [`train::Trainer`]; weights: [`model::LearnedModel`]
+//! (safetensors with format version and checksum).
+
+pub mod augment;
+pub mod dataset;
+pub mod decode;
+pub mod error;
+pub mod model;
+pub mod net;
+pub mod preprocess;
+pub mod targets;
+pub mod train;
+
+pub use augment::{AugmentConfig, TrainImage};
+pub use decode::{decode, DecodeConfig, LearnedInstance};
+pub use error::LearnedError;
+pub use model::{LearnedModel, ModelMeta, FORMAT_VERSION};
+pub use net::NetConfig;
+pub use preprocess::Preprocess;
+pub use train::{TrainConfig, Trainer};
+
+/// Detects tubes in an interleaved RGB8 image (`width * height * 3` bytes).
+pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    if rgb.len() != width * height * 3 {
+        return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
+    }
+    let input = model.meta.preprocess.apply(rgb, width, height);
+    let (out, ow, oh) = model.predict_planes(&input, width, height)?;
+    Ok(decode(&out, ow, oh, width, height, cfg))
+}

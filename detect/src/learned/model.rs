@@ -1,0 +1,212 @@
+//! `LearnedModel`: the network, its weights and its metadata; safetensors save/load.
+//!
+//! File format: a safetensors file whose metadata holds `format = "tubeloc-learned"`,
+//! `format_version` ([`FORMAT_VERSION`]), `meta` (JSON [`ModelMeta`]) and `checksum`: CRC-32 of
+//! every tensor's name, shape (u64 LE) and little-endian f32 data, in name order. A file whose
+//! format, version, checksum, tensor names or shapes do not match is refused with a
+//! [`LearnedError::BadModel`] naming the file.
+
+use super::error::LearnedError;
+use super::net::{NetConfig, TubeNet, HEADS, STRIDE};
+use super::preprocess::Preprocess;
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Version of the weights file layout; bump when names, shapes or meaning change.
+pub const FORMAT_VERSION: u32 = 1;
+const FORMAT_NAME: &str = "tubeloc-learned";
+
+/// What a weights file says about the model besides its tensors.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelMeta {
+    /// Architecture.
+    pub net: NetConfig,
+    /// Input preprocessing the model was trained with.
+    pub preprocess: Preprocess,
+    /// Optimizer steps done so far.
+    pub steps: u64,
+    /// Free-form provenance (the command that trained it, validation AP50...).
+    #[serde(default)]
+    pub notes: String,
+}
+
+/// A network with its weights (CPU, f32).
+pub struct LearnedModel {
+    pub(crate) varmap: VarMap,
+    pub(crate) net: TubeNet,
+    /// Metadata saved with the weights.
+    pub meta: ModelMeta,
+}
+
+impl LearnedModel {
+    /// A freshly initialized model: He-normal weights `N(0, 2/fan_in)` drawn from
+    /// `ChaCha8Rng::seed_from_u64(seed)` in parameter-name order, zero biases, and head biases
+    /// set to the foreground/centre priors (`-2.2`, i.e. p ≈ 0.1).
+    pub fn new(preprocess: Preprocess, width: usize, seed: u64) -> Result<Self, LearnedError> {
+        let net_cfg = NetConfig { in_channels: preprocess.channels(), width };
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+        let net = TubeNet::new(vb, &net_cfg)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        for (name, var) in sorted_vars(&varmap) {
+            let shape = var.dims().to_vec();
+            let n: usize = shape.iter().product();
+            let vals: Vec<f32> = if name.ends_with(".weight") {
+                let fan_in: usize = shape[1..].iter().product();
+                let normal = Normal::new(0.0f32, (2.0 / fan_in as f32).sqrt()).map_err(|e| LearnedError::Invalid(e.to_string()))?;
+                let gain = if name.starts_with("head") { 0.1 } else { 1.0 };
+                (0..n).map(|_| gain * normal.sample(&mut rng)).collect()
+            } else if name == "head.bias" {
+                (0..n).map(|i| if i < 2 { -2.2 } else { 0.0 }).collect()
+            } else {
+                vec![0.0; n]
+            };
+            var.set(&Tensor::from_vec(vals, shape, &Device::Cpu)?)?;
+        }
+        Ok(LearnedModel { varmap, net, meta: ModelMeta { net: net_cfg, preprocess, steps: 0, notes: String::new() } })
+    }
+
+    /// Raw network outputs for a batch `(B, C, H, W)` (H, W multiples of 32): `(B, 5, H/4, W/4)`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor, LearnedError> {
+        Ok(self.net.forward(x)?)
+    }
+
+    /// Runs the network on one preprocessed image (`channels * width * height` values,
+    /// channel-major) of any size: pads to a multiple of 32 with zeros (the normalized mean
+    /// gray), returns the `HEADS` output planes at stride 4 as `(values, out_w, out_h)` with
+    /// `values[c * out_w * out_h + y * out_w + x]`, cropped to `ceil(width / 4)` x `ceil(height / 4)`.
+    pub fn predict_planes(&self, input: &[f32], width: usize, height: usize) -> Result<(Vec<f32>, usize, usize), LearnedError> {
+        let c = self.meta.net.in_channels;
+        if width == 0 || height == 0 || input.len() != c * width * height {
+            return Err(LearnedError::Invalid(format!("input has {} values, expected {c} x {width} x {height}", input.len())));
+        }
+        let a = TubeNet::ALIGN;
+        let (pw, ph) = (width.div_ceil(a) * a, height.div_ceil(a) * a);
+        let mut padded = vec![0f32; c * pw * ph];
+        for ch in 0..c {
+            for y in 0..height {
+                let src = &input[ch * width * height + y * width..][..width];
+                padded[ch * pw * ph + y * pw..][..width].copy_from_slice(src);
+            }
+        }
+        let x = Tensor::from_vec(padded, (1, c, ph, pw), &Device::Cpu)?;
+        let out = self.net.forward(&x)?;
+        let (ow, oh) = (pw / STRIDE, ph / STRIDE);
+        let all: Vec<f32> = out.flatten_all()?.to_vec1()?;
+        let (cw, chh) = (width.div_ceil(STRIDE), height.div_ceil(STRIDE));
+        let mut res = vec![0f32; HEADS * cw * chh];
+        for k in 0..HEADS {
+            for y in 0..chh {
+                res[k * cw * chh + y * cw..][..cw].copy_from_slice(&all[k * ow * oh + y * ow..][..cw]);
+            }
+        }
+        Ok((res, cw, chh))
+    }
+
+    /// Serializes weights and metadata (see the module doc) to bytes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LearnedError> {
+        let mut blobs = Vec::new();
+        for (name, var) in sorted_vars(&self.varmap) {
+            let v: Vec<f32> = var.as_tensor().flatten_all()?.to_vec1()?;
+            let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            blobs.push((name, var.dims().to_vec(), bytes));
+        }
+        let checksum = checksum(blobs.iter().map(|(n, s, b)| (n.as_str(), s.as_slice(), b.as_slice())));
+        let mut md = HashMap::new();
+        md.insert("format".to_string(), FORMAT_NAME.to_string());
+        md.insert("format_version".to_string(), FORMAT_VERSION.to_string());
+        md.insert("meta".to_string(), serde_json::to_string(&self.meta).map_err(|e| LearnedError::Invalid(e.to_string()))?);
+        md.insert("checksum".to_string(), format!("{checksum:08x}"));
+        let views = blobs
+            .iter()
+            .map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?)))
+            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
+            .map_err(|e| LearnedError::Invalid(e.to_string()))?;
+        safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))
+    }
+
+    /// Writes the model atomically to `path`.
+    pub fn save(&self, path: &Path) -> Result<(), LearnedError> {
+        let bytes = self.to_bytes()?;
+        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: std::io::Error::other(e.to_string()) })
+    }
+
+    /// Reads a model file; see [`LearnedModel::from_bytes`].
+    pub fn load(path: &Path) -> Result<Self, LearnedError> {
+        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: e })?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Parses a model from bytes; `origin` names the file in errors. Checks the format name,
+    /// version, checksum and that every tensor the architecture needs is present with the
+    /// right shape (and no others).
+    pub fn from_bytes(bytes: &[u8], origin: &Path) -> Result<Self, LearnedError> {
+        let bad = |m: String| LearnedError::bad_model(origin, m);
+        let st = safetensors::SafeTensors::deserialize(bytes).map_err(|e| bad(format!("not a safetensors file ({e})")))?;
+        let (_, header) = safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
+        let md = header.metadata().clone().unwrap_or_default();
+        if md.get("format").map(String::as_str) != Some(FORMAT_NAME) {
+            return Err(bad(format!("not a tubeloc learned model (format {:?})", md.get("format"))));
+        }
+        let ver = md.get("format_version").cloned().unwrap_or_default();
+        if ver != FORMAT_VERSION.to_string() {
+            return Err(bad(format!("format version {ver} but this program reads version {FORMAT_VERSION}")));
+        }
+        let meta: ModelMeta = serde_json::from_str(md.get("meta").map(String::as_str).unwrap_or(""))
+            .map_err(|e| bad(format!("bad meta: {e}")))?;
+        let mut tensors = st.tensors();
+        tensors.sort_by(|a, b| a.0.cmp(&b.0));
+        for (n, t) in &tensors {
+            if t.dtype() != safetensors::Dtype::F32 {
+                return Err(bad(format!("tensor {n} has dtype {:?}, expected F32", t.dtype())));
+            }
+        }
+        let sum = checksum(tensors.iter().map(|(n, t)| (n.as_str(), t.shape(), t.data())));
+        let want = md.get("checksum").cloned().unwrap_or_default();
+        if format!("{sum:08x}") != want {
+            return Err(bad(format!("checksum mismatch (file says {want}, data gives {sum:08x}): the file is corrupt")));
+        }
+        if meta.net.in_channels != meta.preprocess.channels() || meta.net.width == 0 || meta.net.width > 256 {
+            return Err(bad(format!("inconsistent architecture {:?} for preprocessing {:?}", meta.net, meta.preprocess)));
+        }
+        let mut model = LearnedModel::new(meta.preprocess, meta.net.width, 0)?;
+        model.meta = meta;
+        let vars = sorted_vars(&model.varmap);
+        if vars.len() != tensors.len() {
+            return Err(bad(format!("{} tensors, the architecture has {}", tensors.len(), vars.len())));
+        }
+        for ((name, var), (tn, t)) in vars.iter().zip(&tensors) {
+            if name != tn || var.dims() != t.shape() {
+                return Err(bad(format!("tensor {tn} {:?} does not match the architecture's {name} {:?}", t.shape(), var.dims())));
+            }
+            let vals: Vec<f32> = t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+            var.set(&Tensor::from_vec(vals, t.shape(), &Device::Cpu)?)?;
+        }
+        Ok(model)
+    }
+}
+
+pub(crate) fn sorted_vars(varmap: &VarMap) -> Vec<(String, candle_core::Var)> {
+    let data = varmap.data().lock().expect("varmap lock poisoned");
+    let mut v: Vec<(String, candle_core::Var)> = data.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+fn checksum<'a>(items: impl Iterator<Item = (&'a str, &'a [usize], &'a [u8])>) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    for (name, shape, data) in items {
+        h.update(name.as_bytes());
+        for &d in shape {
+            h.update(&(d as u64).to_le_bytes());
+        }
+        h.update(data);
+    }
+    h.finalize()
+}

@@ -1,0 +1,200 @@
+//! Learned segmenter: training lowers the loss, save/load round trip, refusal of bad files,
+//! decoding of hand-made network outputs.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::HashMap;
+use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
+use tubeloc_detect::learned::net::{HEADS, LENGTH_SCALE};
+use tubeloc_detect::learned::train::make_batch;
+use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer};
+
+/// A textured image with bright bars ("tubes") at random places and angles, plus their masks.
+fn bar_image(size: usize, bars: usize, seed: u64) -> (Vec<u8>, Vec<Vec<u8>>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut rgb: Vec<u8> = (0..size * size)
+        .flat_map(|_| {
+            let v = rng.random_range(70u8..130);
+            [v, v, v]
+        })
+        .collect();
+    let mut masks = Vec::new();
+    for _ in 0..bars {
+        let (cx, cy) = (rng.random_range(0.25..0.75) * size as f64, rng.random_range(0.25..0.75) * size as f64);
+        let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
+        let (len, wid) = (rng.random_range(40.0..70.0), rng.random_range(5.0..8.0));
+        let mut m = vec![0u8; size * size];
+        for y in 0..size {
+            for x in 0..size {
+                let (dx, dy) = (x as f64 - cx, y as f64 - cy);
+                let (a, b) = (dx * th.cos() + dy * th.sin(), -dx * th.sin() + dy * th.cos());
+                if a.abs() < len / 2.0 && b.abs() < wid / 2.0 {
+                    m[y * size + x] = 1;
+                    rgb[(y * size + x) * 3..][..3].copy_from_slice(&[215, 215, 215]);
+                }
+            }
+        }
+        masks.push(m);
+    }
+    (rgb, masks)
+}
+
+fn tiny_set(pre: Preprocess) -> Vec<TrainImage> {
+    (0..3)
+        .map(|i| {
+            let (rgb, masks) = bar_image(192, 2, 100 + i);
+            TrainImage::new(192, 192, pre.apply(&rgb, 192, 192), &masks)
+        })
+        .collect()
+}
+
+#[test]
+fn training_a_few_steps_lowers_the_loss() {
+    let pre = Preprocess::default();
+    let images = tiny_set(pre);
+    let aug = AugmentConfig { crop: 128, ..Default::default() };
+    let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 5, total_steps: 60, seed: 7, augment: aug, ..Default::default() };
+    let model = LearnedModel::new(pre, 4, 3).unwrap();
+    let mut trainer = Trainer::new(model, cfg).unwrap();
+    let held = make_batch(&images, &aug, 8, 12345, 0).unwrap();
+    let before = trainer.eval_loss(&held).unwrap();
+    for _ in 0..60 {
+        let l = trainer.step(&images).unwrap();
+        assert!(l.is_finite());
+    }
+    let after = trainer.eval_loss(&held).unwrap();
+    assert_eq!(trainer.model.meta.steps, 60);
+    assert!(after < 0.7 * before, "loss {before} -> {after}");
+}
+
+#[test]
+fn same_seed_gives_same_weights_and_save_load_gives_identical_outputs() {
+    let pre = Preprocess::GrayBox { radius: 2 };
+    let a = LearnedModel::new(pre, 4, 11).unwrap();
+    let b = LearnedModel::new(pre, 4, 11).unwrap();
+    let c = LearnedModel::new(pre, 4, 12).unwrap();
+    // Same seed -> same tensor bytes (the safetensors header's metadata key order may vary).
+    let tensors = |m: &LearnedModel| {
+        let bytes = m.to_bytes().unwrap();
+        let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+        let mut v: Vec<(String, Vec<u8>)> = st.tensors().into_iter().map(|(n, t)| (n, t.data().to_vec())).collect();
+        v.sort();
+        v
+    };
+    assert_eq!(tensors(&a), tensors(&b));
+    assert_ne!(tensors(&a), tensors(&c));
+
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.safetensors");
+    a.save(&path).unwrap();
+    let loaded = LearnedModel::load(&path).unwrap();
+    assert_eq!(loaded.meta, a.meta);
+    let (rgb, _) = bar_image(100, 1, 5);
+    let input = pre.apply(&rgb, 100, 100);
+    let (o1, w1, h1) = a.predict_planes(&input, 100, 100).unwrap();
+    let (o2, w2, h2) = loaded.predict_planes(&input, 100, 100).unwrap();
+    assert_eq!((w1, h1), (25, 25));
+    assert_eq!((w1, h1), (w2, h2));
+    assert!(o1.iter().zip(&o2).all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+#[test]
+fn corrupt_or_mismatched_weights_are_refused_with_a_clear_error() {
+    let model = LearnedModel::new(Preprocess::default(), 4, 1).unwrap();
+    let bytes = model.to_bytes().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, b: &[u8]| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, b).unwrap();
+        p
+    };
+    let err = |p: &std::path::Path| LearnedModel::load(p).err().expect("must be refused").to_string();
+
+    // A flipped bit in the tensor data.
+    let mut flipped = bytes.clone();
+    let n = flipped.len();
+    flipped[n - 10] ^= 0x40;
+    let e = err(&write("flipped.safetensors", &flipped));
+    assert!(e.contains("flipped.safetensors") && e.contains("checksum mismatch"), "{e}");
+
+    // Truncated.
+    let e = err(&write("short.safetensors", &bytes[..bytes.len() / 2]));
+    assert!(e.contains("short.safetensors") && e.contains("not a safetensors file"), "{e}");
+
+    // Another format version / another program's file.
+    let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+    let md: HashMap<String, String> = header.metadata().clone().unwrap();
+    let rewrite = |md: HashMap<String, String>| safetensors::serialize(st.tensors(), Some(md)).unwrap();
+    let mut v2 = md.clone();
+    v2.insert("format_version".into(), "999".into());
+    let e = err(&write("v999.safetensors", &rewrite(v2)));
+    assert!(e.contains("v999.safetensors") && e.contains("format version 999"), "{e}");
+    let mut other = md.clone();
+    other.remove("format");
+    let e = err(&write("other.safetensors", &rewrite(other)));
+    assert!(e.contains("not a tubeloc learned model"), "{e}");
+
+    // Width changed in the metadata: tensors no longer match the architecture.
+    let mut wide = md.clone();
+    wide.insert("meta".into(), md["meta"].replace("\"width\":4", "\"width\":8"));
+    let e = err(&write("wide.safetensors", &rewrite(wide)));
+    assert!(e.contains("does not match the architecture"), "{e}");
+
+    // Missing file.
+    let e = err(&dir.path().join("absent.safetensors"));
+    assert!(e.contains("absent.safetensors"), "{e}");
+}
+
+/// Hand-made outputs: two parallel bars in one connected blob plus a separate diagonal one.
+#[test]
+fn decoding_splits_touching_tubes_and_recovers_axes() {
+    let (ow, oh) = (64, 64);
+    let n = ow * oh;
+    let mut out = vec![-6.0f32; HEADS * n];
+    let mut put = |cx: f32, cy: f32, th: f32, half: f32, wid: f32| {
+        for y in 0..oh {
+            for x in 0..ow {
+                let (dx, dy) = (x as f32 - cx, y as f32 - cy);
+                let (a, b) = (dx * th.cos() + dy * th.sin(), -dx * th.sin() + dy * th.cos());
+                let c = y * ow + x;
+                if a.abs() <= half && b.abs() <= wid {
+                    out[c] = 4.0;
+                    out[2 * n + c] = (2.0 * th).cos();
+                    out[3 * n + c] = (2.0 * th).sin();
+                    out[4 * n + c] = half * 4.0 / LENGTH_SCALE;
+                }
+                let g = (-(dx * dx + dy * dy) / 4.5).exp();
+                let h = &mut out[n + c];
+                let p = (1.0 / (1.0 + (-*h).exp())).max(0.95 * g);
+                *h = (p / (1.0 - p)).ln();
+            }
+        }
+    };
+    // Two horizontal bars stacked so their masks touch (rows 20..22 and 23..25).
+    put(20.0, 21.0, 0.0, 10.0, 1.0);
+    put(20.0, 24.0, 0.0, 10.0, 1.0);
+    // A diagonal bar far away.
+    put(45.0, 45.0, std::f32::consts::FRAC_PI_4, 8.0, 1.0);
+    let inst = decode(&out, ow, oh, 256, 256, &DecodeConfig::default());
+    assert_eq!(inst.len(), 3, "{:?}", inst.iter().map(|i| i.axis).collect::<Vec<_>>());
+    let diag = inst.iter().find(|i| i.axis.centre_px[0] > 150.0).unwrap();
+    // Cell 45 -> pixel 45 * 4 + 1.5 = 181.5.
+    assert!((diag.axis.centre_px[0] - 181.5).abs() < 1.0 && (diag.axis.centre_px[1] - 181.5).abs() < 1.0, "{:?}", diag.axis);
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    assert!((diag.axis.direction_px[0] - s).abs() < 0.02 && (diag.axis.direction_px[1] - s).abs() < 0.02, "{:?}", diag.axis);
+    assert!((diag.axis.length_px - 64.0).abs() < 2.0, "{:?}", diag.axis);
+    for i in &inst {
+        let area = i.mask.data.iter().filter(|&&v| v != 0).count();
+        assert!(area > 100, "area {area}");
+        assert!(i.score > 0.5 && i.score <= 1.0, "score {}", i.score);
+    }
+    // The two touching bars are separate instances with disjoint masks.
+    let bars: Vec<_> = inst.iter().filter(|i| i.axis.centre_px[0] < 150.0).collect();
+    assert_eq!(bars.len(), 2);
+    assert!(bars[0].mask.data.iter().zip(&bars[1].mask.data).all(|(a, b)| *a == 0 || *b == 0));
+    let mut ys: Vec<f64> = bars.iter().map(|b| b.axis.centre_px[1]).collect();
+    ys.sort_by(f64::total_cmp);
+    // Rows 21 and 24 -> pixels 85.5 and 97.5.
+    assert!((ys[0] - 85.5).abs() < 2.0 && (ys[1] - 97.5).abs() < 2.0, "{ys:?}");
+}
