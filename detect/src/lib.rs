@@ -1,1 +1,3 @@
 //! tubeloc-detect (see the README for what this crate owns).
+
+pub mod learned;
