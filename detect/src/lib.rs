@@ -1,3 +1,4 @@
 //! tubeloc-detect (see the README for what this crate owns).
 
 pub mod learned;
+pub mod line2d;

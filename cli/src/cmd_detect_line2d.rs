@@ -1,0 +1,56 @@
+//! The `line2d` method of `tubeloc detect`: Line2D template matching with a library built by
+//! `tubeloc templates build`, writing COCO results with the coarse pose and template id.
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use tubeloc_core::CameraModel;
+use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary};
+
+/// Line2D options of `tubeloc detect`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct Line2dOpts {
+    /// Template library (`--method line2d`), from `tubeloc templates build`.
+    #[arg(long)]
+    pub templates: Option<PathBuf>,
+    /// Camera JSON of the images (coarse poses; its focal length must match the library's).
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Line2D detection threshold, percent of the maximal similarity.
+    #[arg(long, default_value_t = 80.0)]
+    pub threshold: f32,
+    /// Line2D coarse-level threshold, percent (default: --threshold).
+    #[arg(long)]
+    pub coarse_threshold: Option<f32>,
+    /// Line2D NMS: silhouette IoU above which the weaker detection is dropped.
+    #[arg(long, default_value_t = 0.3)]
+    pub nms_iou: f32,
+    /// Line2D: maximum detections per image.
+    #[arg(long, default_value_t = 100)]
+    pub max_detections: usize,
+    /// Line2D: minimum Sobel gradient magnitude.
+    #[arg(long, default_value_t = 30.0)]
+    pub grad_threshold: f32,
+}
+
+/// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries.
+pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)]) -> Result<Vec<serde_json::Value>> {
+    let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
+    let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
+    let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
+    let mut params = MatchParams { threshold: opts.threshold, coarse_threshold: opts.coarse_threshold, nms_iou: opts.nms_iou, max_detections: opts.max_detections, ..MatchParams::default() };
+    params.gradient.mag_threshold = opts.grad_threshold;
+    let det = Line2dDetector::new(lib, params)?;
+    let bar = ProgressBar::new(images.len() as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    let mut out = Vec::new();
+    for (id, path) in images {
+        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let dets = det.detect(img.as_raw(), w, h, camera.as_ref()).with_context(|| format!("detecting in {}", path.display()))?;
+        out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(out)
+}

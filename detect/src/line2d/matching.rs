@@ -1,0 +1,442 @@
+//! Coarse-to-fine matching of a template library against an image, and non-maximum suppression.
+//!
+//! Similarity of template `T` placed with its top-left pixel at `c` (Hinterstoisser et al.):
+//! `E(c) = Σ_f S_{o_f}(c + p_f)` where `S_o` is the response map of orientation `o`
+//! (see [`crate::line2d::response`]), i.e. for each feature the best `floor(4 |cos|)` over its
+//! spreading neighbourhood. The score in percent is `100 E / (4 n)` for `n` features.
+//!
+//! Pyramid: level 1 (half resolution, spreading `t1`, default 8) evaluates every template at
+//! every grid position `(c T, r T)` through the linearized memories; grid positions that reach
+//! the coarse threshold and are local maxima of the template's score map become candidates.
+//! Level 0 (full resolution, spreading `t0`, default 4) then evaluates the template's level-0
+//! features at every pixel of a `(2 t1 + 5)²` window around `2 (c T, r T)` and keeps the best.
+//!
+//! Accumulation is integer and cannot overflow: per-feature values are at most 4, so blocks of
+//! up to 63 features are summed in `u8` (`63 · 4 = 252 <= 255`, plain wrapping adds that never
+//! wrap, vectorized 32 lanes wide), and each block is widened into `u16` totals (up to
+//! 16383 features). Rayon runs across templates.
+
+use crate::line2d::detection::Line2dDetection;
+use crate::line2d::gradient::{downsample_rgb, quantize_rgb, GradientParams};
+use crate::line2d::response::{linearize, response_maps, spread, LinearMemories, ResponseMaps};
+use crate::line2d::template::{Template, TemplateLibrary};
+use crate::line2d::{Line2dError, SIM_MAX};
+use rayon::prelude::*;
+use tubeloc_core::CameraModel;
+
+/// Matching knobs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MatchParams {
+    /// Gradient quantization.
+    pub gradient: GradientParams,
+    /// Spreading / grid step at level 0 (full resolution), pixels.
+    pub t0: usize,
+    /// Spreading / grid step at level 1 (half resolution), pixels.
+    pub t1: usize,
+    /// Detection threshold, percent of the maximal similarity (0..100).
+    pub threshold: f32,
+    /// Threshold of the coarse level, percent (defaults to `threshold`).
+    pub coarse_threshold: Option<f32>,
+    /// Two detections whose placed silhouettes overlap with IoU above this are merged (NMS).
+    pub nms_iou: f32,
+    /// Maximum detections returned per image.
+    pub max_detections: usize,
+    /// Pose re-ranking spreading `T` at level 0 (0 = off): within each NMS cluster, the matches
+    /// scoring within `rerank_margin` of the best are re-scored with this tighter spreading
+    /// (best over +-1 px) and the winner gives the detection's template, pose and mask. This
+    /// separates views that the coarser `t0` scores alike (a thin tube's tilt vs distance).
+    pub rerank_t: usize,
+    /// Score margin (percentage points) of the matches re-ranked within a cluster.
+    pub rerank_margin: f32,
+}
+
+impl Default for MatchParams {
+    fn default() -> Self {
+        MatchParams { gradient: GradientParams::default(), t0: 4, t1: 8, threshold: 80.0, coarse_threshold: None, nms_iou: 0.3, max_detections: 100, rerank_t: 2, rerank_margin: 4.0 }
+    }
+}
+
+/// The precomputed image side: response maps at level 0, linearized memories at level 1.
+#[derive(Clone, Debug)]
+pub struct PreparedImage {
+    /// Original image width, pixels.
+    pub width: usize,
+    /// Original image height, pixels.
+    pub height: usize,
+    /// Level-0 response maps over the padded image (size a multiple of `2 t1`).
+    pub resp0: ResponseMaps,
+    /// Level-1 linearized memories (grid step `t1`).
+    pub lm1: LinearMemories,
+    /// Level-0 response maps with the re-ranking spreading (`rerank_t`), when enabled.
+    pub resp_rerank: Option<ResponseMaps>,
+}
+
+/// A raw match before NMS: template, level-0 top-left position and score in percent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RawMatch {
+    /// Template id.
+    pub template: u32,
+    /// Column of the template's top-left pixel at level 0.
+    pub x: i32,
+    /// Row of the template's top-left pixel at level 0.
+    pub y: i32,
+    /// Similarity, percent.
+    pub score: f32,
+}
+
+/// Computes the image side of the matcher (gradients, spreading, response maps, linearization).
+pub fn prepare_image(rgb: &[u8], width: usize, height: usize, p: &MatchParams) -> Result<PreparedImage, Line2dError> {
+    if rgb.len() != width * height * 3 {
+        return Err(Line2dError::invalid("image", format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
+    }
+    if width < 2 * p.t1 || height < 2 * p.t1 || p.t0 == 0 || p.t1 == 0 {
+        return Err(Line2dError::invalid("image", format!("{width}x{height} is too small for T = {}/{}", p.t0, p.t1)));
+    }
+    let m = 2 * p.t1;
+    let (wp, hp) = (width.div_ceil(m) * m, height.div_ceil(m) * m);
+    let q0 = quantize_rgb(rgb, width, height, &p.gradient);
+    let resp0 = response_maps(&spread(&q0, p.t0, wp, hp));
+    let resp_rerank = (p.rerank_t > 0).then(|| response_maps(&spread(&q0, p.rerank_t, wp, hp)));
+    let (rgb1, w1, h1) = downsample_rgb(rgb, width, height);
+    let q1 = quantize_rgb(&rgb1, w1, h1, &p.gradient);
+    let lm1 = linearize(&response_maps(&spread(&q1, p.t1, wp / 2, hp / 2)), p.t1);
+    Ok(PreparedImage { width, height, resp0, lm1, resp_rerank })
+}
+
+#[inline]
+fn add_u8_scalar(acc: &mut [u8], src: &[u8]) {
+    for (a, &s) in acc.iter_mut().zip(src) {
+        *a = a.wrapping_add(s);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn add_u8_avx2(acc: &mut [u8], src: &[u8]) {
+    add_u8_scalar(acc, src)
+}
+
+#[inline]
+fn widen_add_scalar(acc: &mut [u16], src: &[u8]) {
+    for (a, &s) in acc.iter_mut().zip(src) {
+        *a += s as u16;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn widen_add_avx2(acc: &mut [u16], src: &[u8]) {
+    widen_add_scalar(acc, src)
+}
+
+#[derive(Clone, Copy)]
+struct Simd {
+    avx2: bool,
+}
+
+impl Simd {
+    fn detect() -> Simd {
+        #[cfg(target_arch = "x86_64")]
+        {
+            Simd { avx2: std::is_x86_feature_detected!("avx2") }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            Simd { avx2: false }
+        }
+    }
+    #[inline]
+    fn add_u8(self, acc: &mut [u8], src: &[u8]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: AVX2 availability checked at run time in `detect`.
+            return unsafe { add_u8_avx2(acc, src) };
+        }
+        add_u8_scalar(acc, src)
+    }
+    #[inline]
+    fn widen_add(self, acc: &mut [u16], src: &[u8]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: as above.
+            return unsafe { widen_add_avx2(acc, src) };
+        }
+        widen_add_scalar(acc, src)
+    }
+}
+
+/// Level-1 score map (raw sums, `grid_h x grid_w`) of a template over the linearized memories.
+/// Positions whose template would cross the right or bottom border hold sums that wrapped
+/// across rows; callers must ignore them.
+pub fn coarse_scores(lm: &LinearMemories, t: &Template, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>) {
+    coarse_scores_with(Simd::detect(), lm, t, acc16, acc8)
+}
+
+fn coarse_scores_with(simd: Simd, lm: &LinearMemories, t: &Template, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>) {
+    let n = lm.grid_w * lm.grid_h;
+    acc16.clear();
+    acc16.resize(n, 0);
+    acc8.resize(n, 0);
+    let tt = lm.t;
+    for block in t.levels[1].features.chunks(63) {
+        acc8.fill(0);
+        for f in block {
+            let (fx, fy) = (f.x as usize, f.y as usize);
+            let start = (fy / tt) * lm.grid_w + fx / tt;
+            if start >= n {
+                continue;
+            }
+            let mem = lm.memory(f.ori as usize, fx % tt, fy % tt);
+            simd.add_u8(&mut acc8[..n - start], &mem[start..]);
+        }
+        simd.widen_add(acc16, acc8);
+    }
+}
+
+/// Raw level-0 score `E(x, y)` of a template at one position (bounds-checked, no SIMD).
+pub fn fine_score_at(resp: &ResponseMaps, t: &Template, x: usize, y: usize) -> u32 {
+    t.levels[0].features.iter().map(|f| resp.maps[f.ori as usize][(y + f.y as usize) * resp.width + x + f.x as usize] as u32).sum()
+}
+
+/// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid).
+fn fine_search(simd: Simd, resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, acc: &mut Vec<u16>) -> (u32, usize, usize) {
+    let nx = x_hi - x_lo + 1;
+    let mut best = (0u32, x_lo, y_lo);
+    let mut acc8 = [0u8; 64];
+    for y in y_lo..=y_hi {
+        acc.clear();
+        acc.resize(nx, 0);
+        for block in t.levels[0].features.chunks(63) {
+            for x0 in (0..nx).step_by(64) {
+                let m = (nx - x0).min(64);
+                acc8[..m].fill(0);
+                for f in block {
+                    let off = (y + f.y as usize) * resp.width + x_lo + x0 + f.x as usize;
+                    simd.add_u8(&mut acc8[..m], &resp.maps[f.ori as usize][off..off + m]);
+                }
+                simd.widen_add(&mut acc[x0..x0 + m], &acc8[..m]);
+            }
+        }
+        for (i, &v) in acc.iter().enumerate() {
+            if v as u32 > best.0 {
+                best = (v as u32, x_lo + i, y);
+            }
+        }
+    }
+    best
+}
+
+/// Raw matches of one template (coarse candidates verified at level 0), before NMS.
+pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, fine: &mut Vec<u16>) -> Vec<RawMatch> {
+    let simd = Simd::detect();
+    let lm = &img.lm1;
+    let l1 = &t.levels[1];
+    let l0 = &t.levels[0];
+    let (w0, h0) = (img.resp0.width, img.resp0.height);
+    if (l0.width as usize) > w0 || (l0.height as usize) > h0 {
+        return vec![];
+    }
+    let (w1, h1) = (lm.grid_w * lm.t, lm.grid_h * lm.t);
+    if (l1.width as usize) > w1 || (l1.height as usize) > h1 {
+        return vec![];
+    }
+    coarse_scores_with(simd, lm, t, acc16, acc8);
+    let tt = lm.t;
+    let cmax = (w1 - l1.width as usize) / tt;
+    let rmax = (h1 - l1.height as usize) / tt;
+    let n1 = l1.features.len() as f32;
+    let coarse_thr = p.coarse_threshold.unwrap_or(p.threshold);
+    let need1 = (coarse_thr / 100.0 * SIM_MAX as f32 * n1).ceil().max(1.0) as u16;
+    let n0 = l0.features.len() as f32;
+    let need0 = (p.threshold / 100.0 * SIM_MAX as f32 * n0).ceil().max(1.0) as u32;
+    let gw = lm.grid_w;
+    let rad = 2 * tt + 2;
+    let mut out = Vec::new();
+    for r in 0..=rmax {
+        for c in 0..=cmax {
+            let v = acc16[r * gw + c];
+            if v < need1 {
+                continue;
+            }
+            // Local maximum among valid 8-neighbours.
+            let mut is_max = true;
+            'n: for rr in r.saturating_sub(1)..=(r + 1).min(rmax) {
+                for cc in c.saturating_sub(1)..=(c + 1).min(cmax) {
+                    let u = acc16[rr * gw + cc];
+                    if u > v || (u == v && (rr, cc) < (r, c)) {
+                        is_max = false;
+                        break 'n;
+                    }
+                }
+            }
+            if !is_max {
+                continue;
+            }
+            let (gx, gy) = (2 * c * tt, 2 * r * tt);
+            let x_lo = gx.saturating_sub(rad);
+            let y_lo = gy.saturating_sub(rad);
+            let x_hi = (gx + rad).min(w0 - l0.width as usize);
+            let y_hi = (gy + rad).min(h0 - l0.height as usize);
+            if x_lo > x_hi || y_lo > y_hi {
+                continue;
+            }
+            let (e, x, y) = fine_search(simd, &img.resp0, t, x_lo, x_hi, y_lo, y_hi, fine);
+            if e >= need0 {
+                out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
+            }
+        }
+    }
+    out
+}
+
+/// All raw matches of a library (rayon across templates), sorted by decreasing score.
+pub fn match_all(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchParams) -> Vec<RawMatch> {
+    let mut all: Vec<RawMatch> = lib
+        .templates
+        .par_iter()
+        .map_init(|| (Vec::new(), Vec::new(), Vec::new()), |(a16, a8, f), t| match_template(img, t, p, a16, a8, f))
+        .flatten()
+        .collect();
+    all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
+    all
+}
+
+/// IoU of two templates' silhouettes placed at their match positions.
+pub fn placed_mask_iou(ta: &Template, a: &RawMatch, tb: &Template, b: &RawMatch) -> f32 {
+    let (aw, ah) = (ta.levels[0].width as i32, ta.levels[0].height as i32);
+    let (bw, bh) = (tb.levels[0].width as i32, tb.levels[0].height as i32);
+    let (x0, y0) = (a.x.max(b.x), a.y.max(b.y));
+    let (x1, y1) = ((a.x + aw).min(b.x + bw), (a.y + ah).min(b.y + bh));
+    if x1 <= x0 || y1 <= y0 {
+        return 0.0;
+    }
+    let (aa, ab) = (ta.area, tb.area);
+    let mut inter = 0u32;
+    for y in y0..y1 {
+        let ra = &ta.mask[((y - a.y) * aw + (x0 - a.x)) as usize..((y - a.y) * aw + (x1 - a.x)) as usize];
+        let rb = &tb.mask[((y - b.y) * bw + (x0 - b.x)) as usize..((y - b.y) * bw + (x1 - b.x)) as usize];
+        inter += ra.iter().zip(rb).map(|(&p, &q)| (p & q) as u32).sum::<u32>();
+    }
+    let uni = aa + ab - inter;
+    if uni == 0 {
+        0.0
+    } else {
+        inter as f32 / uni as f32
+    }
+}
+
+/// Greedy NMS over matches sorted by decreasing score: a match is dropped when its placed
+/// silhouette overlaps an already kept one with IoU above `iou`. Keeps at most `max`.
+pub fn nms(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: usize) -> Vec<RawMatch> {
+    nms_clusters(matches, lib, iou, max).into_iter().map(|c| c[0]).collect()
+}
+
+/// At most this many raw matches (the best-scoring) enter NMS.
+pub const MAX_NMS_INPUT: usize = 20_000;
+
+/// NMS returning each kept match (first) with the matches it suppressed (its cluster), in
+/// decreasing score order. A suppressed match joins the first kept match it overlaps.
+pub fn nms_clusters(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: usize) -> Vec<Vec<RawMatch>> {
+    let mut clusters: Vec<Vec<RawMatch>> = Vec::new();
+    for m in matches.iter().take(MAX_NMS_INPUT) {
+        let tm = &lib.templates[m.template as usize];
+        let hit = clusters.iter().position(|c| placed_mask_iou(&lib.templates[c[0].template as usize], &c[0], tm, m) > iou);
+        match hit {
+            Some(i) => clusters[i].push(*m),
+            None if clusters.len() < max => clusters.push(vec![*m]),
+            None => {}
+        }
+    }
+    clusters
+}
+
+/// Re-ranks a cluster: among matches within `margin` points of the best, the one with the best
+/// re-ranking score (response maps `rr`, best over +-1 px) wins; returns it with its position
+/// moved to that best pixel and the cluster's best LINE-2D score.
+pub fn rerank(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32) -> RawMatch {
+    let top = cluster[0];
+    let mut best = (0u64, top);
+    for m in cluster.iter().filter(|m| m.score >= top.score - margin) {
+        let t = &lib.templates[m.template as usize];
+        let (tw, th) = (t.levels[0].width as i32, t.levels[0].height as i32);
+        let n = t.levels[0].features.len() as u64;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (x, y) = (m.x + dx, m.y + dy);
+                if x < 0 || y < 0 || x + tw > rr.width as i32 || y + th > rr.height as i32 {
+                    continue;
+                }
+                let e = fine_score_at(rr, t, x as usize, y as usize) as u64;
+                // Compare e / n across templates with different feature counts exactly.
+                let key = e * 1_000_000 / n.max(1);
+                if key > best.0 {
+                    best = (key, RawMatch { template: m.template, x, y, score: top.score });
+                }
+            }
+        }
+    }
+    best.1
+}
+
+/// A ready-to-run detector: a library and matching parameters.
+pub struct Line2dDetector {
+    /// The template library.
+    pub library: TemplateLibrary,
+    /// Matching parameters.
+    pub params: MatchParams,
+}
+
+impl Line2dDetector {
+    /// A detector over `library`.
+    pub fn new(library: TemplateLibrary, params: MatchParams) -> Result<Self, Line2dError> {
+        if !(0.0..=100.0).contains(&params.threshold) || params.coarse_threshold.is_some_and(|c| !(0.0..=100.0).contains(&c)) {
+            return Err(Line2dError::invalid("threshold", "must be a percentage in 0..=100"));
+        }
+        if params.t0 == 0 || params.t1 == 0 || params.t1 > 64 || params.t0 > 64 {
+            return Err(Line2dError::invalid("T", "spreading steps must be in 1..=64"));
+        }
+        Ok(Line2dDetector { library, params })
+    }
+
+    /// Detects tubes in an interleaved RGB8 image. `camera` gives the intrinsics of this image
+    /// (for the coarse pose); without it the library's focal lengths and the image centre are
+    /// used. The camera's focal length must match the library's within 2 percent.
+    pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
+        let cam = self.camera_for(width, height, camera)?;
+        let img = prepare_image(rgb, width, height, &self.params)?;
+        let raw = match_all(&img, &self.library, &self.params);
+        let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
+        let kept: Vec<RawMatch> = match &img.resp_rerank {
+            Some(rr) => clusters.iter().map(|c| rerank(c, &self.library, rr, self.params.rerank_margin)).collect(),
+            None => clusters.iter().map(|c| c[0]).collect(),
+        };
+        Ok(kept.iter().map(|m| Line2dDetection::from_match(m, &self.library.templates[m.template as usize], &cam, width, height)).collect())
+    }
+
+    /// The camera used for poses: `camera`, checked against the library, or a pinhole with the
+    /// library's focal lengths centred on the image.
+    pub fn camera_for(&self, width: usize, height: usize, camera: Option<&CameraModel>) -> Result<CameraModel, Line2dError> {
+        let k = &self.library.params.camera;
+        match camera {
+            Some(c) => {
+                let rel = ((c.fx - k.fx) / k.fx).abs().max(((c.fy - k.fy) / k.fy).abs());
+                if rel > 0.02 {
+                    return Err(Line2dError::invalid(
+                        "camera",
+                        format!("focal length {:.1}x{:.1} px differs from the library's {:.1}x{:.1} px by {:.0}%: rebuild the templates with this camera (tubeloc templates build --camera)", c.fx, c.fy, k.fx, k.fy, rel * 100.0),
+                    ));
+                }
+                Ok(c.clone())
+            }
+            None => Ok(CameraModel {
+                width: width as u32,
+                height: height as u32,
+                fx: k.fx,
+                fy: k.fy,
+                cx: (width as f64 - 1.0) / 2.0,
+                cy: (height as f64 - 1.0) / 2.0,
+                distortion: Default::default(),
+            }),
+        }
+    }
+}

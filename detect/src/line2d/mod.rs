@@ -1,0 +1,81 @@
+//! Line2D (LINE-2D, Hinterstoisser et al. 2012): template matching on quantized gradient
+//! orientations with precomputed response maps, templates rendered from the tube model.
+//!
+//! Pipeline (one module per step):
+//! - [`render`]: exact analytic ray casting of the parametric tube (coaxial capped cylinders)
+//!   into a silhouette + depth image.
+//! - [`viewpoints`]: viewpoints on a subdivided icosahedron (upper hemisphere), in-plane
+//!   rotations and distances; views equal up to the tube's axial symmetry are deduplicated.
+//! - [`gradient`]: colour gradients (strongest channel, Sobel), orientation quantized into 8 bins
+//!   modulo 180 degrees, 3x3 majority vote, magnitude threshold.
+//! - [`template`]: contour features of a silhouette (spread-out selection) on a 2-level pyramid,
+//!   and the [`TemplateLibrary`] built from the tube model.
+//! - [`format`]: the versioned, checksummed binary library file (`.tlt`).
+//! - [`response`]: spreading over `T`, the 8 response maps via two 4-bit lookup tables and the
+//!   linearized memories.
+//! - [`matching`]: coarse-to-fine matching with saturation-free integer accumulation, rayon
+//!   across templates, non-maximum suppression.
+//! - [`detection`]: [`Line2dDetection`] with the coarse 6D pose and COCO output.
+
+pub mod detection;
+pub mod format;
+pub mod gradient;
+pub mod matching;
+pub mod mask;
+pub mod render;
+pub mod response;
+pub mod template;
+pub mod viewpoints;
+
+pub use detection::Line2dDetection;
+pub use gradient::GradientParams;
+pub use matching::{Line2dDetector, MatchParams};
+pub use render::{render_silhouette, Silhouette};
+pub use template::{Feature, LibraryParams, Template, TemplateLevel, TemplateLibrary};
+pub use viewpoints::{ViewParams, ViewSpec};
+
+use std::path::PathBuf;
+
+/// Number of quantized orientations (bins of 22.5 degrees over 0..180 degrees).
+pub const N_ORI: usize = 8;
+
+/// Highest per-feature similarity: `floor(4 |cos(0)|)`.
+pub const SIM_MAX: u32 = 4;
+
+/// Errors of the Line2D detector.
+#[derive(Debug, thiserror::Error)]
+pub enum Line2dError {
+    /// A library file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// File concerned.
+        path: PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
+    /// A library file is not a valid template library (magic, version, length, checksum...).
+    #[error("{path}: {message}")]
+    Format {
+        /// File concerned.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A parameter or input is out of range.
+    #[error("invalid {what}: {message}")]
+    Invalid {
+        /// Name of the value.
+        what: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// An error from the core crate.
+    #[error(transparent)]
+    Core(#[from] tubeloc_core::CoreError),
+}
+
+impl Line2dError {
+    pub(crate) fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
+        Line2dError::Invalid { what: what.into(), message: message.into() }
+    }
+}

@@ -1,0 +1,236 @@
+//! Line2D end-to-end and exactness tests: a rendered tube is found with its coarse pose; the
+//! response-map and linearized paths equal a brute-force evaluation of the similarity; library
+//! files round-trip and corrupt files are refused.
+
+use nalgebra::{Rotation3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tubeloc_core::{Pose, TubeModel};
+use tubeloc_detect::line2d::gradient::{downsample_rgb, quantize_rgb};
+use tubeloc_detect::line2d::matching::{coarse_scores, fine_score_at, match_template, prepare_image};
+use tubeloc_detect::line2d::render::{intersect_tube, Pinhole};
+use tubeloc_detect::line2d::response::similarity;
+use tubeloc_detect::line2d::template::{LibraryParams, TemplateLibrary};
+use tubeloc_detect::line2d::{Line2dDetector, MatchParams, ViewParams};
+
+/// A Mars-like textured background (smooth blobs + pixel noise) with the tube drawn at
+/// `t_cam_tube` (white alumina body and foot, gold seal, a little shading and noise).
+fn scene(w: usize, h: usize, k: &Pinhole, t_cam_tube: &Pose, seed: u64) -> Vec<u8> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let blobs: Vec<(f64, f64, f64, f64)> = (0..60).map(|_| (rng.random_range(0.0..w as f64), rng.random_range(0.0..h as f64), rng.random_range(5.0..40.0), rng.random_range(-35.0..35.0))).collect();
+    let tube = TubeModel::default();
+    let sections: Vec<(f64, f64, f64)> = tube.sections.iter().map(|s| { let (a, b) = tube.section_z_in_tube_frame(s); (a, b, s.radius) }).collect();
+    let inv = t_cam_tube.inverse();
+    let (o, rot) = (inv.translation(), inv.rotation());
+    let mut img = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let mut base = 120.0;
+            for &(bx, by, r, a) in &blobs {
+                let d2 = ((x as f64 - bx).powi(2) + (y as f64 - by).powi(2)) / (r * r);
+                if d2 < 4.0 {
+                    base += a * (-d2).exp();
+                }
+            }
+            let mut rgb = [base * 1.15, base * 0.85, base * 0.6];
+            let d = rot * Vector3::new((x as f64 - k.cx) / k.fx, (y as f64 - k.cy) / k.fy, 1.0);
+            if let Some(t) = intersect_tube(&sections, &o, &d) {
+                let p = o + d * t;
+                let zf = p.z + tube.length / 2.0;
+                let shade = 0.75 + 0.25 * (p.y / 0.0115).clamp(-1.0, 1.0);
+                rgb = if zf > 0.090 { [200.0 * shade, 165.0 * shade, 80.0 * shade] } else { [235.0 * shade, 232.0 * shade, 225.0 * shade] };
+            }
+            for c in 0..3 {
+                let n: f64 = rng.random_range(-12.0..12.0);
+                img[(y * w + x) * 3 + c] = (rgb[c] + n).clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    img
+}
+
+fn small_params(dmin: f64, dmax: f64, features: u32) -> LibraryParams {
+    let mut p = LibraryParams::default();
+    p.views = ViewParams { dist_min: dmin, dist_max: dmax, ..ViewParams::default() };
+    p.features = features;
+    p
+}
+
+#[test]
+fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
+    let (w, h) = (512usize, 384usize);
+    let mut params = small_params(1.8, 2.2, 64);
+    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    assert!(lib.len() > 500, "{} templates", lib.len());
+    // True pose: axis 60 degrees off the line of sight, between template views, off-centre.
+    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
+    let rot = Rotation3::rotation_between(&Vector3::z(), &axis).unwrap();
+    let t_true = Pose::from_parts(rot, Vector3::new(0.07, -0.04, 2.04));
+    let img = scene(w, h, &params.camera, &t_true, 7);
+    let det = Line2dDetector::new(lib, MatchParams::default()).unwrap();
+    let dets = det.detect(&img, w, h, None).unwrap();
+    assert!(!dets.is_empty(), "no detection");
+    let best = &dets[0];
+    let k = params.camera;
+    let c = t_true.translation();
+    let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
+    let err_px = ((best.centre_px[0] - u).powi(2) + (best.centre_px[1] - v).powi(2)).sqrt();
+    assert!(err_px < 8.0, "centre {:?} vs ({u:.1}, {v:.1}): {err_px:.1} px", best.centre_px);
+    // Coarse pose within one template step: undirected axis angle <= 10 deg view step (+ slack for
+    // the off-axis shift), distance within one 0.1 m step.
+    let a_det = best.t_cam_tube.rotation().column(2).into_owned();
+    let undirected = |a: &Vector3<f64>| a.angle(&axis).min((-a).angle(&axis)).to_degrees();
+    // The truth as a template would see it: centre moved onto the optical axis.
+    let to_centre = Rotation3::rotation_between(&c.normalize(), &Vector3::z()).unwrap();
+    let axis_c = to_centre * axis;
+    let nearest = det.library.templates.iter().map(|t| { let a = t.axis(); a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees() }).fold(f64::INFINITY, f64::min);
+    eprintln!("best: template {} similarity {:.1}, centre error {err_px:.1} px; nearest template axis {nearest:.1} deg", best.template_id, best.similarity);
+    if std::env::var("L2D_DEBUG").is_ok() {
+        for t0 in [4usize, 2] {
+            let pp = MatchParams { t0, threshold: 50.0, coarse_threshold: Some(50.0), ..MatchParams::default() };
+            let prep = prepare_image(&img, w, h, &pp).unwrap();
+            let (mut f, mut a16, mut a8) = (Vec::new(), Vec::new(), Vec::new());
+            let mut rows = vec![];
+            for t in &det.library.templates {
+                let a = t.axis();
+                let e = a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees();
+                let ms = match_template(&prep, t, &pp, &mut a16, &mut a8, &mut f);
+                let best = ms.iter().map(|m| m.score).fold(0.0f32, f32::max);
+                rows.push((best, t.id, e, t.distance));
+            }
+            rows.sort_by(|a, b| b.0.total_cmp(&a.0));
+            for r in rows.iter().take(8) { eprintln!("t0={t0} score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3); }
+            for r in rows.iter().filter(|r| r.2 < 6.0 && (r.3 - 2.0).abs() < 0.06) { eprintln!("t0={t0} near-true: score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3); }
+        }
+    }
+    let ang = undirected(&a_det);
+    eprintln!("axis error {ang:.1} deg, distance {:.3} m vs {:.3} m", best.t_cam_tube.translation().norm(), c.norm());
+    assert!(ang <= 12.0, "axis error {ang:.1} deg");
+    let dist_err = (best.t_cam_tube.translation().norm() - c.norm()).abs();
+    assert!(dist_err <= 0.11, "distance error {dist_err:.3} m");
+    assert!(best.similarity >= 80.0);
+    // The silhouette placed at the detection overlaps the true position.
+    assert!(best.bbox[0] <= u && u <= best.bbox[0] + best.bbox[2] && best.bbox[1] <= v && v <= best.bbox[1] + best.bbox[3]);
+    // COCO output carries the pose, template id and an RLE of the right area.
+    let j = best.to_coco_json(3);
+    assert_eq!(j["image_id"], 3);
+    assert_eq!(j["template_id"], best.template_id as u64);
+    assert!(j["T_cam_tube"]["rotation"].is_array() && j["segmentation"]["counts"].is_string());
+    // No confident false positive elsewhere on the background.
+    for d in &dets[1..] {
+        let e = ((d.centre_px[0] - u).powi(2) + (d.centre_px[1] - v).powi(2)).sqrt();
+        assert!(d.similarity < best.similarity || e < 40.0, "competing detection {:?} at {e:.0} px", d.similarity);
+    }
+}
+
+/// Brute force: `Σ_f max_{d ∈ [-T/2, T - T/2)²} s(o_f, Q(p + p_f + d))` on the one-hot plane `q`.
+fn brute(q: &tubeloc_core::Plane<u8>, feats: &[tubeloc_detect::line2d::Feature], t: usize, x: usize, y: usize) -> u32 {
+    let lo = (t / 2) as i64;
+    feats
+        .iter()
+        .map(|f| {
+            let mut best = 0u8;
+            for dy in -lo..(t as i64 - lo) {
+                for dx in -lo..(t as i64 - lo) {
+                    let (xx, yy) = (x as i64 + f.x as i64 + dx, y as i64 + f.y as i64 + dy);
+                    if xx < 0 || yy < 0 || xx >= q.width as i64 || yy >= q.height as i64 {
+                        continue;
+                    }
+                    let m = q.get(xx as usize, yy as usize);
+                    if m != 0 {
+                        best = best.max(similarity(f.ori, m.trailing_zeros() as u8));
+                    }
+                }
+            }
+            best as u32
+        })
+        .sum()
+}
+
+#[test]
+fn response_maps_and_linear_memories_equal_brute_force() {
+    let (w, h) = (160usize, 128usize);
+    // 150 features per level: more than 63, so the u8 blocks are widened into u16 totals.
+    let mut params = small_params(1.0, 1.0, 150);
+    params.views.step_deg = 30.0;
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let t = lib.templates.iter().find(|t| t.levels[0].width < 120 && t.levels[0].height < 100 && t.levels[0].features.len() > 63).expect("a small template").clone();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let img: Vec<u8> = (0..w * h * 3).map(|_| rng.random_range(0..=255u8)).collect();
+    let p = MatchParams { threshold: 0.0, coarse_threshold: Some(0.0), ..MatchParams::default() };
+    let prep = prepare_image(&img, w, h, &p).unwrap();
+    // Level 0: direct response-map sums at every valid position.
+    let q0 = quantize_rgb(&img, w, h, &p.gradient);
+    let (tw, th) = (t.levels[0].width as usize, t.levels[0].height as usize);
+    let mut checked = 0;
+    for y in (0..=h - th).step_by(3) {
+        for x in (0..=w - tw).step_by(2) {
+            assert_eq!(fine_score_at(&prep.resp0, &t, x, y), brute(&q0, &t.levels[0].features, p.t0, x, y), "level 0 at ({x},{y})");
+            checked += 1;
+        }
+    }
+    assert!(checked > 100);
+    // Level 1: linearized memories at every valid grid position.
+    let (rgb1, w1, h1) = downsample_rgb(&img, w, h);
+    let q1 = quantize_rgb(&rgb1, w1, h1, &p.gradient);
+    let (mut a16, mut a8) = (Vec::new(), Vec::new());
+    coarse_scores(&prep.lm1, &t, &mut a16, &mut a8);
+    let tt = p.t1;
+    let (tw1, th1) = (t.levels[1].width as usize, t.levels[1].height as usize);
+    let gw = prep.lm1.grid_w;
+    for r in 0..=(prep.lm1.grid_h * tt - th1) / tt {
+        for c in 0..=(gw * tt - tw1) / tt {
+            assert_eq!(a16[r * gw + c] as u32, brute(&q1, &t.levels[1].features, tt, c * tt, r * tt), "level 1 at grid ({c},{r})");
+        }
+    }
+    // The matcher's reported scores are the brute-force scores at the reported positions.
+    let (mut f, mut a16, mut a8) = (Vec::new(), Vec::new(), Vec::new());
+    let ms = match_template(&prep, &t, &p, &mut a16, &mut a8, &mut f);
+    assert!(!ms.is_empty());
+    for m in ms {
+        let e = brute(&q0, &t.levels[0].features, p.t0, m.x as usize, m.y as usize);
+        assert_eq!(m.score, 100.0 * e as f32 / (4.0 * t.levels[0].features.len() as f32));
+    }
+}
+
+#[test]
+fn library_round_trip_and_corrupt_files_are_refused() {
+    let mut params = small_params(1.5, 1.6, 80);
+    params.views.step_deg = 30.0;
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("lib.tlt");
+    lib.save(&path).unwrap();
+    let back = TemplateLibrary::load(&path).unwrap();
+    assert_eq!(back.params, lib.params);
+    assert_eq!(back.len(), lib.len());
+    for (a, b) in back.templates.iter().zip(&lib.templates) {
+        let (ang, d) = a.t_cam_tube.distance(&b.t_cam_tube);
+        assert!(ang < 1e-9 && d < 1e-12, "pose of template {} changed", a.id);
+        let same = a.id == b.id && a.levels == b.levels && a.mask == b.mask && a.centre == b.centre && (a.alpha_deg, a.psi_deg, a.distance) == (b.alpha_deg, b.psi_deg, b.distance);
+        assert!(same, "template {} differs after the round trip", a.id);
+    }
+    assert_eq!(back.templates[0].levels[0].features.len(), 80, "feature count is not capped at 63");
+    let bytes = std::fs::read(&path).unwrap();
+    let expect_err = |b: &[u8], needle: &str| {
+        let p = dir.path().join("bad.tlt");
+        std::fs::write(&p, b).unwrap();
+        let e = TemplateLibrary::load(&p).unwrap_err().to_string();
+        assert!(e.contains("bad.tlt") && e.contains(needle), "{e}");
+    };
+    expect_err(&bytes[..bytes.len() - 5], "length mismatch");
+    expect_err(&bytes[..10], "header");
+    let mut flipped = bytes.clone();
+    let i = bytes.len() / 2;
+    flipped[i] ^= 0x10;
+    expect_err(&flipped, "checksum");
+    let mut version = bytes.clone();
+    version[8] = 9;
+    expect_err(&version, "version 9");
+    let mut magic = bytes.clone();
+    magic[0] = b'X';
+    expect_err(&magic, "magic");
+    let missing = dir.path().join("missing.tlt");
+    assert!(TemplateLibrary::load(&missing).unwrap_err().to_string().contains("missing.tlt"));
+}
