@@ -162,7 +162,8 @@ impl TubeDetection {
         TubeDetection { image_id, category_id: 1, score, bbox, mask: None, t_cam_tube: None, axis_seed: None, template_id: None, source }
     }
 
-    /// Checks finite score and box, non-negative box size, and a valid axis seed if present.
+    /// Checks finite score and box, non-negative box size, a valid axis seed if present, and a
+    /// mask whose counts match its size, of at most [`crate::mask::MAX_MASK_PIXELS`] pixels.
     pub fn validate(&self) -> Result<(), CoreError> {
         if !self.score.is_finite() || self.bbox.iter().any(|v| !v.is_finite()) {
             return Err(CoreError::invalid("detection", "score and bbox must be finite"));
@@ -175,6 +176,13 @@ impl TubeDetection {
         }
         if let Some(m) = &self.mask {
             m.check()?;
+            let pixels = m.size[0] as u64 * m.size[1] as u64;
+            if pixels > crate::mask::MAX_MASK_PIXELS {
+                return Err(CoreError::invalid(
+                    "segmentation",
+                    format!("mask size {}x{} (h x w) exceeds the limit of {} pixels", m.size[0], m.size[1], crate::mask::MAX_MASK_PIXELS),
+                ));
+            }
         }
         Ok(())
     }

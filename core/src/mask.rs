@@ -83,6 +83,14 @@ impl BinaryMask {
     }
 }
 
+/// Most boundary points [`Rle::from_polygons`] walks for one polygon (`2^24`, about 3.4 million
+/// pixels of perimeter, far beyond any tube outline in a 5472 x 3648 image).
+pub const MAX_POLYGON_WALK: u64 = 1 << 24;
+
+/// Most pixels (`h * w`) of a mask that a detections file may carry (`2^27`, about 6.7 times a
+/// full-resolution 5472 x 3648 image); decoding allocates one byte per pixel.
+pub const MAX_MASK_PIXELS: u64 = 1 << 27;
+
 /// COCO run-length encoding of a binary mask, column-major, runs alternating from zeros.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Rle {
@@ -233,7 +241,27 @@ impl Rle {
     /// Rasterizes polygons exactly as pycocotools' `rleFrPoly` (each polygon separately, then
     /// their union as `frPyObjects` + `merge` do). Each polygon is `[x0, y0, x1, y1, ...]` in
     /// pixels; `h`, `w` give the image size.
+    ///
+    /// Errors when a polygon's boundary walk would exceed [`MAX_POLYGON_WALK`] points (the walk
+    /// takes `Σ max(|5 Δx|, |5 Δy|) + 1` points per polygon and allocates them), so that a
+    /// corrupt file with a coordinate like `1e9` is refused instead of exhausting memory.
     pub fn from_polygons(polys: &[Vec<f64>], h: u32, w: u32) -> Result<Rle, CoreError> {
+        for (i, xy) in polys.iter().enumerate() {
+            let k = xy.len() / 2;
+            let walk: f64 = (0..k)
+                .map(|j| {
+                    let n = (j + 1) % k;
+                    let (dx, dy) = (xy[2 * n] - xy[2 * j], xy[2 * n + 1] - xy[2 * j + 1]);
+                    5.0 * dx.abs().max(dy.abs()) + 1.0
+                })
+                .sum();
+            if !(walk <= MAX_POLYGON_WALK as f64) {
+                return Err(CoreError::invalid(
+                    "segmentation",
+                    format!("polygon {i}: boundary walk of {walk:.0} points exceeds the limit of {MAX_POLYGON_WALK} (coordinates far outside the image?)"),
+                ));
+            }
+        }
         let rles: Vec<Rle> = polys.iter().map(|p| Rle::from_polygon(p, h, w)).collect();
         Rle::merge(&rles, false)
     }
