@@ -7,6 +7,7 @@ use std::process::ExitCode;
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
 mod cmd_eval;
 mod cmd_stereo;
+mod cmd_refine;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -21,6 +22,8 @@ enum Command {
     // Subcommands are registered here, one variant each.
     /// Stereo disparity (semi-global matching), optional rectification with a rig and point cloud.
     Stereo(cmd_stereo::StereoArgs),
+    /// Refine detections into grasp-ready tube poses (cylinder contour fit, optional stereo and ground plane).
+    Refine(cmd_refine::RefineArgs),
     /// Evaluate COCO results against ground truth (AP/AR exactly as pycocotools), with breakdowns.
     Eval(cmd_eval::EvalArgs),
 }
@@ -30,6 +33,7 @@ fn main() -> ExitCode {
     let result: anyhow::Result<()> = match cli.command {
         // Dispatch: one arm per subcommand.
         Command::Stereo(a) => cmd_stereo::run(a),
+        Command::Refine(a) => cmd_refine::run(a),
         Command::Eval(a) => cmd_eval::run(a),
     };
     match result {

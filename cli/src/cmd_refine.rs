@@ -1,0 +1,227 @@
+//! `tubeloc refine`: refine detections into grasp-ready tube poses.
+//!
+//! Reads one image, its camera and a detections file (COCO results with the seeds of
+//! [`tubeloc_core::TubeDetection`]), fits the cylinder contour to the image edges for each
+//! detection and writes a JSON array of [`tubeloc_core::TubeAxisPose`] (camera frame, metres).
+//! With `--right R.png --rig rig.json` the pair is rectified, matched with SGM in the detection
+//! regions and triangulated; the points inside each detection's box (or mask) add the stereo
+//! term. `--ground nx,ny,nz,d` (camera frame, `n·X = d` on the ground, `n` pointing up) places
+//! mask/box seeds on the ground. `--overlay` draws the fitted contours (green: converged,
+//! red: failed).
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use nalgebra::{Point2, Point3, Vector3};
+use std::path::{Path, PathBuf};
+use tubeloc_core::{files, BinaryMask, CameraModel, Plane, Rig, TubeAxisPose, TubeDetection, TubeModel};
+use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
+use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
+
+/// Arguments of `tubeloc refine`.
+#[derive(Args, Debug)]
+pub struct RefineArgs {
+    /// Left (or only) image.
+    #[arg(long)]
+    image: PathBuf,
+    /// Camera model JSON of the image (ignored for the left image when --rig is given).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Detections: JSON array of COCO results with tubeloc seeds (`tubeloc detect --out`).
+    #[arg(long)]
+    detections: PathBuf,
+    /// Only refine detections of this COCO image id (default: all in the file).
+    #[arg(long)]
+    image_id: Option<u64>,
+    /// Output poses (JSON array of TubeAxisPose).
+    #[arg(long)]
+    out: PathBuf,
+    /// Overlay PNG with the fitted contours.
+    #[arg(long)]
+    overlay: Option<PathBuf>,
+    /// Right image of a stereo pair (needs --rig).
+    #[arg(long)]
+    right: Option<PathBuf>,
+    /// Rig JSON with both cameras.
+    #[arg(long)]
+    rig: Option<PathBuf>,
+    /// Camera names of the pair in the rig, "LEFT,RIGHT" (default: the rig's first stereo pair).
+    #[arg(long)]
+    pair: Option<String>,
+    /// Number of disparities searched (multiple of 16).
+    #[arg(long, default_value_t = 256)]
+    disparities: usize,
+    /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres.
+    #[arg(long, allow_hyphen_values = true)]
+    ground: Option<String>,
+    /// Refiner configuration JSON (fields of RefineConfig; missing fields keep their defaults).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Tube model TOML (default: the built-in model of data/tube.toml).
+    #[arg(long)]
+    tube: Option<PathBuf>,
+}
+
+fn parse_ground(s: &str) -> Result<GroundPlane> {
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--ground {s:?}: expected nx,ny,nz,d"))?;
+    if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
+        bail!("--ground {s:?}: expected 4 finite numbers nx,ny,nz,d");
+    }
+    let n = Vector3::new(v[0], v[1], v[2]);
+    let norm = n.norm();
+    if norm < 1e-9 {
+        bail!("--ground {s:?}: the normal is zero");
+    }
+    Ok(GroundPlane { normal: n / norm, offset: v[3] / norm })
+}
+
+fn load_gray_u8(path: &Path) -> Result<Plane<u8>> {
+    let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
+    Ok(Plane::from_vec(img.width() as usize, img.height() as usize, img.into_raw()))
+}
+
+/// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
+/// rectified pair, triangulated, kept where they project into the detection's mask or box.
+fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, Vec<Vec<Point3<f64>>>)> {
+    let right_path = args.right.as_ref().context("--rig needs --right")?;
+    let rig = Rig::load_json(rig_path)?;
+    let (ln, rn) = match &args.pair {
+        Some(p) => {
+            let (a, b) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
+            (a.trim().to_string(), b.trim().to_string())
+        }
+        None => rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", rig_path.display()))?,
+    };
+    let cam = |n: &str| rig.camera(n).with_context(|| format!("{}: no camera named {n:?}", rig_path.display()));
+    let (lcam, rcam) = (cam(&ln)?.model.clone(), cam(&rn)?.model.clone());
+    let rect = StereoRectification::new(&lcam, &rcam, &rig.relative_pose(&ln, &rn)?).with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
+    let right = load_gray_u8(right_path)?;
+    let (rl, rr) = rect.rectify_pair(left, &right).with_context(|| format!("{} / {}", args.image.display(), right_path.display()))?;
+    // Regions: each box mapped into rectified left pixels through its corners.
+    let mut rois = Vec::new();
+    for d in dets {
+        let [x, y, w, h] = d.bbox;
+        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for (u, v) in [(x, y), (x + w, y), (x, y + h), (x + w, y + h)] {
+            if let Some(p) = rect.project_left(&Point3::from(lcam.unproject(&Point2::new(u, v)))) {
+                (x0, y0, x1, y1) = (x0.min(p.x), y0.min(p.y), x1.max(p.x), y1.max(p.y));
+            }
+        }
+        if x1 > x0 && y1 > y0 {
+            rois.push(Roi::new(x0.floor() as i64, y0.floor() as i64, (x1 - x0).ceil() as i64 + 1, (y1 - y0).ceil() as i64 + 1));
+        }
+    }
+    let params = SgmParams { num_disparities: args.disparities, ..SgmParams::default() };
+    let disp = disparity_regions(&rl, &rr, &params, &rois, 32).with_context(|| format!("matching {} / {}", args.image.display(), right_path.display()))?;
+    let pts = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &rect.geometry(), 0.25));
+    let masks: Vec<Option<BinaryMask>> = dets.iter().map(|d| d.mask.as_ref().and_then(|m| m.to_mask().ok())).collect();
+    let per = dets
+        .iter()
+        .zip(&masks)
+        .map(|(d, m)| {
+            pts.iter()
+                .filter_map(|p| {
+                    let u = lcam.project(&p.point)?;
+                    let [x, y, w, h] = d.bbox;
+                    let inside = match m {
+                        Some(m) => u.x >= -0.5 && u.y >= -0.5 && m.get((u.x + 0.5) as usize, (u.y + 0.5) as usize),
+                        None => u.x >= x && u.y >= y && u.x <= x + w && u.y <= y + h,
+                    };
+                    inside.then_some(p.point)
+                })
+                .collect()
+        })
+        .collect();
+    Ok((lcam, per))
+}
+
+/// Draws the fitted contour of each pose into an RGB copy of the image.
+fn overlay(path: &Path, gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: &[TubeAxisPose]) -> Result<()> {
+    let (w, h) = (gray.width as u32, gray.height as u32);
+    let mut img = image::RgbImage::from_fn(w, h, |x, y| {
+        let v = gray.get(x as usize, y as usize);
+        image::Rgb([v, v, v])
+    });
+    for p in poses {
+        let col = if p.converged { [40, 230, 60] } else { [240, 40, 40] };
+        for u in refiner.contour_pixels(cam, p, 0.5) {
+            let (x, y) = (u.x.round(), u.y.round());
+            if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
+                img.put_pixel(x as u32, y as u32, image::Rgb(col));
+            }
+        }
+        if let Some(c) = cam.project(&Point3::from(p.centre)) {
+            for k in -3i64..=3 {
+                for (x, y) in [(c.x.round() as i64 + k, c.y.round() as i64), (c.x.round() as i64, c.y.round() as i64 + k)] {
+                    if x >= 0 && y >= 0 && x < w as i64 && y < h as i64 {
+                        img.put_pixel(x as u32, y as u32, image::Rgb(col));
+                    }
+                }
+            }
+        }
+    }
+    let mut buf = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut buf, image::ImageFormat::Png).context("cannot encode PNG")?;
+    files::write_atomic(path, &buf.into_inner())?;
+    Ok(())
+}
+
+/// Runs `tubeloc refine`.
+pub fn run(args: RefineArgs) -> Result<()> {
+    let config = match &args.config {
+        Some(p) => files::read_json::<RefineConfig>(p).with_context(|| format!("refine config {}", p.display()))?,
+        None => RefineConfig::default(),
+    };
+    let tube = match &args.tube {
+        Some(p) => TubeModel::load(p).with_context(|| format!("tube model {}", p.display()))?,
+        None => TubeModel::default(),
+    };
+    let refiner = Refiner::new(&tube, config).context("building the refiner")?;
+    let ground = args.ground.as_deref().map(parse_ground).transpose()?;
+    let mut dets = tubeloc_core::detection::read_coco_results(&args.detections)?;
+    if let Some(id) = args.image_id {
+        dets.retain(|d| d.image_id == id);
+    }
+    let gray = load_gray_u8(&args.image)?;
+    let (camera, stereo) = match &args.rig {
+        Some(rig) => {
+            let (c, s) = stereo_points(&args, &gray, rig, &dets)?;
+            (c, s)
+        }
+        None => {
+            if args.right.is_some() {
+                bail!("--right needs --rig (the pair's calibration)");
+            }
+            let p = args.camera.as_ref().context("--camera is required without --rig")?;
+            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()])
+        }
+    };
+    if gray.width != camera.width as usize || gray.height != camera.height as usize {
+        bail!("{} is {}x{} but the camera is {}x{}", args.image.display(), gray.width, gray.height, camera.width, camera.height);
+    }
+    let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
+    let bar = indicatif::ProgressBar::new(dets.len() as u64);
+    let mut poses = Vec::with_capacity(dets.len());
+    for (i, d) in dets.iter().enumerate() {
+        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: None, stereo_points: &stereo[i], ground: None } };
+        poses.push(refiner.refine(&input, d));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    for (i, p) in poses.iter().enumerate() {
+        let c = p.centre * 1e3;
+        let status = match &p.failure {
+            None => "ok".to_string(),
+            Some(f) => format!("FAILED {:?}: {}", f.reason, f.message),
+        };
+        println!(
+            "tube {i} (image {}, score {:.2}): centre [{:.1}, {:.1}, {:.1}] mm, axis [{:.3}, {:.3}, {:.3}], end conf {:.2}, rms {:.2} px, {}/{} inliers, {} stereo pts: {status}",
+            p.image_id, p.score, c.x, c.y, c.z, p.axis.x, p.axis.y, p.axis.z, p.end_confidence, p.residuals.rms_px, p.residuals.inliers, p.residuals.count, stereo[i].len()
+        );
+    }
+    files::write_json(&args.out, &poses).with_context(|| format!("writing {}", args.out.display()))?;
+    if let Some(o) = &args.overlay {
+        overlay(o, &gray, &refiner, &camera, &poses).with_context(|| format!("writing {}", o.display()))?;
+    }
+    eprintln!("{} poses ({} converged) -> {}", poses.len(), poses.iter().filter(|p| p.converged).count(), args.out.display());
+    Ok(())
+}
