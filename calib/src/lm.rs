@@ -9,6 +9,7 @@
 
 use crate::error::CalibError;
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
+use rayon::prelude::*;
 
 /// How a parameter block is updated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -118,74 +119,88 @@ impl<'a> Problem<'a> {
     }
 
     fn cost_at(&self, params: &[Vec<f64>]) -> Option<f64> {
-        let mut c = 0.0;
-        for rb in self.residuals.iter().filter(|r| r.active) {
-            let xs: Vec<&[f64]> = rb.blocks.iter().map(|&b| params[b].as_slice()).collect();
-            let mut r = vec![0.0; rb.len];
-            if !(rb.f)(&xs, &mut r) {
-                return None;
-            }
-            c += r.iter().map(|v| v * v).sum::<f64>();
-        }
+        let c = self
+            .residuals
+            .par_iter()
+            .filter(|r| r.active)
+            .map(|rb| {
+                let xs: Vec<&[f64]> = rb.blocks.iter().map(|&b| params[b].as_slice()).collect();
+                let mut r = vec![0.0; rb.len];
+                (rb.f)(&xs, &mut r).then(|| r.iter().map(|v| v * v).sum::<f64>())
+            })
+            .try_reduce(|| 0.0, |a, b| Some(a + b))?;
         c.is_finite().then_some(c)
     }
 
-    /// Builds `JᵀJ` and `Jᵀr` at the current parameters.
+    /// Builds `JᵀJ` and `Jᵀr` at the current parameters (residual blocks split across rayon
+    /// workers, each with its own accumulator).
     fn normal_equations(&self, offsets: &[Option<usize>], n: usize) -> Result<(DMatrix<f64>, DVector<f64>, f64), CalibError> {
-        let mut h = DMatrix::<f64>::zeros(n, n);
-        let mut g = DVector::<f64>::zeros(n);
-        let mut cost = 0.0;
-        let mut scratch: Vec<Vec<f64>> = Vec::new();
-        for rb in self.residuals.iter().filter(|r| r.active) {
-            scratch.clear();
-            scratch.extend(rb.blocks.iter().map(|&b| self.params[b].clone()));
-            let m = rb.len;
-            let mut r0 = vec![0.0; m];
-            {
-                let xs: Vec<&[f64]> = scratch.iter().map(|v| v.as_slice()).collect();
-                if !(rb.f)(&xs, &mut r0) {
-                    return Err(CalibError::Optimization("a residual became undefined (point behind a camera?)".into()));
+        let active: Vec<&ResidualBlock> = self.residuals.iter().filter(|r| r.active).collect();
+        let chunk = (active.len() / (4 * rayon::current_num_threads().max(1))).max(256);
+        active
+            .par_chunks(chunk)
+            .map(|blocks| {
+                let mut h = DMatrix::<f64>::zeros(n, n);
+                let mut g = DVector::<f64>::zeros(n);
+                let mut cost = 0.0;
+                for rb in blocks {
+                    cost += self.accumulate(rb, offsets, &mut h, &mut g)?;
                 }
+                Ok((h, g, cost))
+            })
+            .try_reduce(|| (DMatrix::zeros(n, n), DVector::zeros(n), 0.0), |a, b| Ok((a.0 + b.0, a.1 + b.1, a.2 + b.2)))
+    }
+
+    /// Adds one residual block's `JᵀJ` and `Jᵀr` (numeric Jacobian); returns its `Σr²`.
+    fn accumulate(&self, rb: &ResidualBlock, offsets: &[Option<usize>], h: &mut DMatrix<f64>, g: &mut DVector<f64>) -> Result<f64, CalibError> {
+        let mut scratch: Vec<Vec<f64>> = rb.blocks.iter().map(|&b| self.params[b].clone()).collect();
+        let m = rb.len;
+        let mut r0 = vec![0.0; m];
+        {
+            let xs: Vec<&[f64]> = scratch.iter().map(|v| v.as_slice()).collect();
+            if !(rb.f)(&xs, &mut r0) {
+                return Err(CalibError::Optimization("a residual became undefined (point behind a camera?)".into()));
             }
-            cost += r0.iter().map(|v| v * v).sum::<f64>();
-            // Columns of this block's Jacobian: (global column, derivative vector).
-            let mut cols: Vec<(usize, Vec<f64>)> = Vec::new();
-            let (mut rp, mut rm) = (vec![0.0; m], vec![0.0; m]);
-            for (slot, &b) in rb.blocks.iter().enumerate() {
-                let Some(off) = offsets[b] else { continue };
-                let kind = self.kinds[b];
-                let x = self.params[b].clone();
-                for i in 0..x.len() {
-                    let step = match kind {
-                        BlockKind::Euclidean => 1e-6 * x[i].abs().max(1.0),
-                        BlockKind::Pose => 1e-7,
-                    };
-                    let mut d = vec![0.0; x.len()];
-                    d[i] = step;
-                    plus(kind, &x, &d, &mut scratch[slot]);
-                    let okp = (rb.f)(&scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(), &mut rp);
-                    d[i] = -step;
-                    plus(kind, &x, &d, &mut scratch[slot]);
-                    let okm = (rb.f)(&scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(), &mut rm);
-                    scratch[slot].copy_from_slice(&x);
-                    if !(okp && okm) {
-                        return Err(CalibError::Optimization("a residual is undefined next to the current estimate".into()));
-                    }
-                    cols.push((off + i, (0..m).map(|k| (rp[k] - rm[k]) / (2.0 * step)).collect()));
+        }
+        let cost = r0.iter().map(|v| v * v).sum::<f64>();
+        // Columns of this block's Jacobian: (global column, derivative vector).
+        let mut cols: Vec<(usize, Vec<f64>)> = Vec::new();
+        let (mut rp, mut rm) = (vec![0.0; m], vec![0.0; m]);
+        for (slot, &b) in rb.blocks.iter().enumerate() {
+            let Some(off) = offsets[b] else { continue };
+            let kind = self.kinds[b];
+            let x = self.params[b].clone();
+            let mut d = vec![0.0; x.len()];
+            for i in 0..x.len() {
+                let step = match kind {
+                    BlockKind::Euclidean => 1e-6 * x[i].abs().max(1.0),
+                    BlockKind::Pose => 1e-7,
+                };
+                d[i] = step;
+                plus(kind, &x, &d, &mut scratch[slot]);
+                let okp = (rb.f)(&scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(), &mut rp);
+                d[i] = -step;
+                plus(kind, &x, &d, &mut scratch[slot]);
+                let okm = (rb.f)(&scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(), &mut rm);
+                d[i] = 0.0;
+                scratch[slot].copy_from_slice(&x);
+                if !(okp && okm) {
+                    return Err(CalibError::Optimization("a residual is undefined next to the current estimate".into()));
                 }
+                cols.push((off + i, (0..m).map(|k| (rp[k] - rm[k]) / (2.0 * step)).collect()));
             }
-            for (a, (ca, ja)) in cols.iter().enumerate() {
-                g[*ca] += ja.iter().zip(&r0).map(|(x, y)| x * y).sum::<f64>();
-                for (cb, jb) in cols[a..].iter() {
-                    let v: f64 = ja.iter().zip(jb).map(|(x, y)| x * y).sum();
-                    h[(*ca, *cb)] += v;
-                    if ca != cb {
-                        h[(*cb, *ca)] += v;
-                    }
+        }
+        for (a, (ca, ja)) in cols.iter().enumerate() {
+            g[*ca] += ja.iter().zip(&r0).map(|(x, y)| x * y).sum::<f64>();
+            for (cb, jb) in cols[a..].iter() {
+                let v: f64 = ja.iter().zip(jb).map(|(x, y)| x * y).sum();
+                h[(*ca, *cb)] += v;
+                if ca != cb {
+                    h[(*cb, *ca)] += v;
                 }
             }
         }
-        Ok((h, g, cost))
+        Ok(cost)
     }
 
     /// Runs Levenberg-Marquardt for at most `max_iterations`.
