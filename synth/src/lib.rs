@@ -18,6 +18,8 @@
 //! OpenCV frames; `T_a_b` maps frame-b points into frame a; the tube frame has +z toward the seal.
 
 pub mod calib_set;
+pub mod composite;
+pub mod dataset;
 pub mod error;
 pub mod heightfield;
 pub mod mount;
@@ -29,9 +31,11 @@ pub mod rig;
 pub mod rock;
 pub mod scene;
 pub mod sensor;
+pub mod single;
 pub mod sun;
 pub mod tags;
 pub mod terrain;
+pub mod truth;
 pub mod tube_shape;
 
 pub use error::SynthError;
@@ -41,3 +45,5 @@ pub use sensor::SensorOptions;
 pub use sun::Sun;
 pub use terrain::TerrainKind;
 pub use tube_shape::TubeShape;
+pub use dataset::{write_dataset, DatasetSpec, DatasetSummary};
+pub use truth::{tube_truth, Occlusion, TubeTruth};

@@ -2,25 +2,38 @@
 //!
 //! As in the paper, the mount sits a short distance from the tube and its arm is buried under
 //! sand so the tube looks isolated; only the two tag plates show above small sand piles.
-//! Tag frame (AprilTag convention): origin at the tag centre on the plate's top face, x to the
-//! right and y down in the tag image, z into the plate. Corners are listed in the detector's
+//! The tag transforms `T_tube_tag` come from `data/tag_mount.toml` (embedded at build time).
+//! Tag frame (AprilTag convention): origin at the tag centre on the printed face, x to the
+//! right and y down as printed, z into the plate. Corners are listed in the detector's
 //! order: `(−s/2, +s/2), (+s/2, +s/2), (+s/2, −s/2), (−s/2, −s/2)` (tag frame, `s` = edge of
-//! the black border square), i.e. counter-clockwise in the image.
+//! the black border square).
 
 use crate::heightfield::HeightField;
 use crate::objects::PlateObject;
 use crate::scene::sand;
 use crate::terrain::{srgb_to_linear, SAND_SRGB};
+use crate::tags::{TagFamily, TagTexture};
 use crate::SynthError;
 use nalgebra::{Matrix3, Point3, Rotation3, Vector3};
-use rand::Rng;
 use serde::{Deserialize, Serialize};
 use tubeloc_core::Pose;
 
-/// Tag ids carried by the mount.
-pub const MOUNT_TAG_IDS: [u32; 2] = [0, 1];
-/// Size of one tag cell (module), metres.
-pub const TAG_CELL_M: f64 = 0.008;
+/// The mount description shipped in `data/tag_mount.toml` (tag ids, sizes, `T_tube_tag`).
+pub const TAG_MOUNT_TOML: &str = include_str!("../../data/tag_mount.toml");
+
+#[derive(Deserialize)]
+struct MountFile {
+    family: TagFamily,
+    tags: Vec<MountFileTag>,
+}
+
+#[derive(Deserialize)]
+struct MountFileTag {
+    id: u32,
+    size_m: f64,
+    rotation: [[f64; 3]; 3],
+    translation_m: [f64; 3],
+}
 
 /// One tag of the mount.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -51,7 +64,7 @@ pub struct TagMount {
 }
 
 impl TagMount {
-    /// True when a disc of radius `rad` at `(x, y)` stays clear of the plates and the arm.
+    /// True when a disc of radius `rad` at `(x, y)` stays clear of the plates.
     pub fn clear_of(&self, x: f64, y: f64, rad: f64) -> bool {
         self.plates.iter().all(|p| {
             let c = p.t_world_box.translation();
@@ -60,51 +73,50 @@ impl TagMount {
     }
 }
 
-/// Tag bit image of `id`: `(cells, bits)` with `bits[row * cells + col]` true for white,
-/// including the white outer border; `None` while the tag36h11 table (`crate::tags`, owned by
-/// the calibration work) is not wired in, in which case the plates are drawn blank.
-fn tag_image(_id: u32) -> Option<(usize, Vec<bool>)> {
-    None
+/// Parses a mount description (TOML text, see `data/tag_mount.toml`) into `(family, [(id,
+/// size_m, T_tube_tag)])`.
+pub fn parse_mount(text: &str) -> Result<(TagFamily, Vec<(u32, f64, Pose)>), SynthError> {
+    let f: MountFile = toml::from_str(text).map_err(|e| SynthError::Invalid(format!("tag mount description: {e}")))?;
+    let mut out = Vec::new();
+    for t in f.tags {
+        let r = Matrix3::from_fn(|i, k| t.rotation[i][k]);
+        let pose = Pose::try_from_matrix(&r, Vector3::from(t.translation_m))?;
+        if !(t.size_m.is_finite() && t.size_m > 0.0) {
+            return Err(SynthError::Invalid(format!("tag {}: size_m must be positive", t.id)));
+        }
+        out.push((t.id, t.size_m, pose));
+    }
+    Ok((f.family, out))
 }
 
-/// Builds the mount beside tube `tube_index` (pose `t_world_tube`, radius `r`).
-pub fn build_mount<R: Rng>(rng: &mut R, t_world_tube: &Pose, tube_index: usize, r: f64) -> Result<TagMount, SynthError> {
-    let centre = t_world_tube.translation();
-    let axis = t_world_tube.transform_vector(&Vector3::z());
-    let perp = Vector3::new(-axis.y, axis.x, 0.0).normalize();
-    let side = if rng.random::<bool>() { 1.0 } else { -1.0 };
-    let ground = centre.z - r;
+/// `T_world_tube` rotation for the tube that carries the mount: axis along `axis` (horizontal),
+/// tube +y pointing down, as `data/tag_mount.toml` assumes.
+pub fn carrier_rotation(axis: &Vector3<f64>) -> Rotation3<f64> {
+    let z = axis.normalize();
+    let y = -Vector3::z();
+    let x = y.cross(&z);
+    Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]))
+}
+
+/// Builds the mount of tube `tube_index` (pose `t_world_tube`) from the shipped description.
+/// Each tag lies on a 3 mm plate whose box frame is the tag frame shifted half a thickness
+/// into the plate (box −z face = printed face).
+pub fn build_mount(t_world_tube: &Pose, tube_index: usize) -> Result<TagMount, SynthError> {
+    let (family, list) = parse_mount(TAG_MOUNT_TOML)?;
     let mut tags = Vec::new();
     let mut plates = Vec::new();
-    for (k, &id) in MOUNT_TAG_IDS.iter().enumerate() {
-        let (cells, bits) = match tag_image(id) {
-            Some(t) => t,
-            None => (10, vec![true; 100]),
-        };
-        let total = cells as f64 * TAG_CELL_M;
-        let black = (cells as f64 - 2.0) * TAG_CELL_M;
-        let along = if k == 0 { -0.075 } else { 0.075 };
-        let c = centre + perp * (side * 0.20) + axis * along;
-        let z = ground + 0.035 + rng.random_range(0.0..0.01);
-        // Plate frame: z up (tilted a little toward the tube side), x along the tube axis.
-        let tilt = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), side * rng.random_range(0.1..0.3));
-        let x = tilt * axis;
-        let zb = tilt * Vector3::z();
-        let y = zb.cross(&x);
-        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, zb]));
-        let half = Vector3::new(total / 2.0 + 0.006, total / 2.0 + 0.006, 0.003);
-        let t_world_box = Pose::from_parts(rot, Vector3::new(c.x, c.y, z));
-        // Tag frame in the plate frame: x = +x, y = −y, z = −z, origin on the top face.
-        let r_box_tag = Rotation3::from_matrix_unchecked(Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0));
-        let t_box_tag = Pose::from_parts(r_box_tag, Vector3::new(0.0, 0.0, half.z));
-        let t_world_tag = t_world_box * t_box_tag;
-        let s = black / 2.0;
+    for (id, size, t_tube_tag) in list {
+        let tex = TagTexture::new(family, id, size).ok_or_else(|| SynthError::Invalid(format!("{} has no id {id}", family.name())))?;
+        let t_world_tag = *t_world_tube * t_tube_tag;
+        let half = Vector3::new(tex.half_extent() + 0.006, tex.half_extent() + 0.006, 0.0015);
+        let t_world_box = t_world_tag * Pose::from_parts(Rotation3::identity(), Vector3::new(0.0, 0.0, half.z));
+        let s = size / 2.0;
         let corners_world = [(-s, s), (s, s), (s, -s), (-s, -s)].map(|(u, v)| {
             let p = t_world_tag.transform_point(&Point3::new(u, v, 0.0));
             [p.x, p.y, p.z]
         });
-        tags.push(MountTag { id, size_m: black, t_world_tag, t_tube_tag: t_world_tube.inverse() * t_world_tag, corners_world });
-        plates.push(PlateObject { t_world_box, half, albedo: [0.7, 0.7, 0.68], tag: Some((cells, bits, total / 2.0)) });
+        tags.push(MountTag { id, size_m: size, t_world_tag, t_tube_tag, corners_world });
+        plates.push(PlateObject { t_world_box, half, albedo: [0.70, 0.70, 0.68], tag: Some(tex) });
     }
     Ok(TagMount { tube_index, tags, plates })
 }

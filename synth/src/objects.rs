@@ -8,6 +8,7 @@
 
 use crate::ray::{clip_aabb, dda2, Ray};
 use crate::rock::Rock;
+use crate::tags::TagTexture;
 use crate::tube_shape::TubeShape;
 use nalgebra::{Point3, Vector3};
 use std::sync::Arc;
@@ -26,31 +27,28 @@ pub struct TubeInstance {
     pub seed: u32,
 }
 
-/// A thin oriented box (tag plate, post) with an optional tag image on its top face (+z).
+/// A thin oriented box (tag plate) with an optional tag printed on its −z face.
 #[derive(Clone, Debug)]
 pub struct PlateObject {
-    /// Pose of the box centre in the world (box axes = frame axes).
+    /// Pose of the box centre in the world (box axes = frame axes; for tag plates the frame
+    /// is the tag frame shifted half a thickness along +z, into the plate).
     pub t_world_box: Pose,
     /// Half extents along the box axes, metres.
     pub half: Vector3<f64>,
-    /// Linear albedo of the box.
+    /// Linear albedo of the plate.
     pub albedo: [f32; 3],
-    /// Tag image drawn on the +z face over `[-half.x, half.x] × [-half.y, half.y]`:
-    /// `(cells, bits)` with `bits[row * cells + col]` true for white, row 0 at +y... see
-    /// [`PlateObject::tag_albedo`].
-    pub tag: Option<(usize, Vec<bool>, f64)>,
+    /// Tag printed on the −z face, centred, in tag-plane coordinates `(x, y)` of the box frame.
+    pub tag: Option<TagTexture>,
 }
 
 impl PlateObject {
-    /// Albedo at box-frame point `(x, y)` on the top face: tag cells (side `cells` over the
-    /// central square of half-size `tag_half` metres; image row 0 at +y edge, column 0 at −x)
-    /// are black or white, the rest of the plate its own albedo.
-    pub fn tag_albedo(&self, x: f64, y: f64) -> [f32; 3] {
-        if let Some((cells, bits, tag_half)) = &self.tag {
-            let (u, v) = ((x + tag_half) / (2.0 * tag_half), (tag_half - y) / (2.0 * tag_half));
-            if (0.0..1.0).contains(&u) && (0.0..1.0).contains(&v) {
-                let (c, r) = ((u * *cells as f64) as usize, (v * *cells as f64) as usize);
-                return if bits[r * cells + c] { [0.85; 3] } else { [0.03; 3] };
+    /// Albedo at a point `q` of the box surface (box frame): tag cells on the printed face,
+    /// the plate's own albedo elsewhere.
+    pub fn albedo_at(&self, q: &Point3<f64>) -> [f32; 3] {
+        if q.z < -self.half.z + 1e-7 {
+            if let Some(v) = self.tag.as_ref().and_then(|t| t.sample(q.x, q.y)) {
+                let a = 0.03 + 0.82 * v;
+                return [a, a, a];
             }
         }
         self.albedo

@@ -237,8 +237,7 @@ fn shade(scene: &Scene, lut: &Lut, ray: &Ray, opts: &RenderOptions) -> Sample {
         }
         Hit::Object(ObjectHit::Plate(i, q, n)) => {
             let plate = &scene.objects.plates[i];
-            let top = (q.z - plate.half.z).abs() < 1e-6 || q.z > plate.half.z - 1e-6;
-            let alb = if top { plate.tag_albedo(q.x, q.y) } else { plate.albedo };
+            let alb = plate.albedo_at(&q);
             (alb, n, SurfaceKind::Plate, 0, Some((0.05, 8.0)), 0.55 + 0.45 * n.z as f32)
         }
     };

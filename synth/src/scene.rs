@@ -243,7 +243,12 @@ impl Scene {
                     break;
                 }
             }
-            let yaw = rng.random_range(0.0..std::f64::consts::TAU);
+            let mut yaw = rng.random_range(0.0..std::f64::consts::TAU);
+            // On slopes (ditch walls, channel banks) a lying tube settles along the contour.
+            let slope = hf.normal(pos.0, pos.1);
+            if slope.z < 0.995 {
+                yaw = slope.y.atan2(slope.x) + std::f64::consts::FRAC_PI_2 + (yaw - std::f64::consts::PI) * 0.1;
+            }
             let roll = rng.random_range(0.0..std::f64::consts::TAU);
             let axis = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
             let perp = Vector3::new(-yaw.sin(), yaw.cos(), 0.0);
@@ -299,7 +304,7 @@ impl Scene {
                             };
                             let g = if s.abs() <= hl * 0.8 { 1.0 } else { (-((s.abs() - hl * 0.8) / 0.05).powi(2)).exp() };
                             let ripple = 1.0 + 0.15 * fbm2((x / 0.03) as f32, (y / 0.03) as f32, 2, 0.5, params.seed ^ 0x3d) as f64;
-                            let target = base + (dune_top - base) * f * g * ripple;
+                            let target = old + (dune_top - old) * f * g * ripple;
                             if target > h {
                                 h = target;
                             }
@@ -312,7 +317,8 @@ impl Scene {
                             let rr = (ds / (1.6 * mound_rho)).powi(2) + (dq / mound_rho).powi(2);
                             if rr < 1.0 {
                                 let w = (1.0 - rr).powi(2);
-                                let target = base + mound_h * w * (1.0 + 0.05 * fbm2((x / 0.02) as f32, (y / 0.02) as f32, 2, 0.5, params.seed ^ 0x4e) as f64);
+                                let top = base + mound_h * (1.0 + 0.05 * fbm2((x / 0.02) as f32, (y / 0.02) as f32, 2, 0.5, params.seed ^ 0x4e) as f64);
+                                let target = old + (top - old) * w;
                                 if target > h {
                                     h = target;
                                 }
@@ -351,7 +357,10 @@ impl Scene {
         if config.with_tags && !tubes.is_empty() {
             let k = info.iter().position(|t| t.case == TubeCase::Unoccluded).unwrap_or(0);
             info[k].carries_tags = true;
-            let m = mount::build_mount(&mut rng, &tubes[k].t_world_tube, k, r)?;
+            let c = tubes[k].t_world_tube.translation();
+            let axis = tubes[k].t_world_tube.transform_vector(&Vector3::z());
+            tubes[k].t_world_tube = Pose::from_parts(mount::carrier_rotation(&axis), c);
+            let m = mount::build_mount(&tubes[k].t_world_tube, k)?;
             mount::cover_with_sand(&m, &mut hf, &mut labels, &mut lin, &tubes[k].t_world_tube, r);
             plates = m.plates.clone();
             mount_out = Some(m);
@@ -451,7 +460,7 @@ impl Scene {
 
     /// Sky visibility by horizon scanning: for 8 directions, the largest elevation angle `θ`
     /// of the top surface within 0.5 m; visibility `1 − mean(sin θ)`.
-    fn compute_sky(&self) -> Plane<f32> {
+    pub(crate) fn compute_sky(&self) -> Plane<f32> {
         let c = self.sky_cell;
         let n = ((self.hf.x1() - self.hf.x0) / c).floor() as usize + 1;
         let x0 = self.hf.x0;

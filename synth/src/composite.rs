@@ -1,0 +1,259 @@
+//! Composite mode: synthetic tubes, with shadows, rendered onto a real photograph whose camera
+//! and ground plane are known.
+//!
+//! The ground plane is given in the camera frame as `n · X + d = 0` (`n` unit, pointing toward
+//! the camera side). A ground frame is built on it: origin at the point of the plane hit by
+//! the optical axis (or the camera's foot point when the axis misses the plane), z = `n`,
+//! x = the camera x axis projected on the plane. The sun is given in that ground frame by
+//! azimuth (degrees from the camera's forward direction on the ground, positive toward the
+//! camera's right) and elevation (degrees above the plane).
+//!
+//! Tube pixels are shaded like the benchmark renderer with an exposure matched to the photo
+//! (the median linear intensity of the lower image half is taken as regolith in sunlight);
+//! ground pixels in a tube's shadow are darkened by `E_sky / (E_sun cos θ + E_sky)`.
+//! Colours use 2 × 2 samples per pixel at tube borders; the ground-truth masks use the pixel
+//! centre ray, exactly as in the benchmark.
+
+use crate::objects::{ObjectHit, Objects, TubeInstance};
+use crate::ray::Ray;
+use crate::render::{pixel_ray, RenderOutput, SurfaceKind};
+use crate::scene::lying_rotation;
+use crate::terrain::{srgb_to_linear, REGOLITH_SRGB};
+use crate::truth::{projected_rect, tube_truth, TubeTruth};
+use crate::tube_shape::TubeShape;
+use crate::SynthError;
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::sync::Arc;
+use tubeloc_core::{CameraModel, Plane, Pose, TubeMaterial};
+
+/// What to composite.
+#[derive(Clone, Debug)]
+pub struct CompositeConfig {
+    /// Ground plane in the camera frame: unit normal `n` (toward the camera) and `d` (metres),
+    /// `n · X + d = 0`.
+    pub ground: (Vector3<f64>, f64),
+    /// Sun azimuth and elevation in the ground frame, degrees.
+    pub sun_az_el_deg: (f64, f64),
+    /// Number of tubes to place.
+    pub tubes: usize,
+    /// Dust level of the tubes, [0, 1].
+    pub dust: f32,
+    /// Seed of the placement.
+    pub seed: u64,
+    /// Tube geometry.
+    pub tube_shape: Arc<TubeShape>,
+}
+
+/// The result: composited sRGB image, ground truth, and the frames used.
+#[derive(Clone, Debug)]
+pub struct Composite {
+    /// Composited image and per-pixel truth (instance, depth, surface).
+    pub output: RenderOutput,
+    /// Per-tube truth.
+    pub truth: Vec<TubeTruth>,
+    /// Pose of the camera in the ground frame.
+    pub t_ground_cam: Pose,
+    /// Placed tubes (poses in the ground frame).
+    pub tubes: Vec<TubeInstance>,
+}
+
+/// The ground frame of a plane given in the camera frame: returns `T_ground_cam`.
+pub fn ground_frame(n: &Vector3<f64>, d: f64) -> Result<Pose, SynthError> {
+    let nn = n.norm();
+    if !(nn.is_finite() && nn > 1e-9 && d.is_finite()) {
+        return Err(SynthError::Invalid(format!("ground plane ({}, {}, {}; {d}) needs a non-zero finite normal and finite d", n.x, n.y, n.z)));
+    }
+    let (mut n, mut d) = (n / nn, d / nn);
+    if d < 0.0 {
+        // Orient the normal toward the camera (camera origin on the positive side).
+        n = -n;
+        d = -d;
+    }
+    if d < 1e-6 {
+        return Err(SynthError::Invalid("the camera lies on the ground plane".into()));
+    }
+    let z_axis = Vector3::z();
+    let denom = n.dot(&z_axis);
+    let origin = if denom < -1e-6 { z_axis * (-d / denom) } else { -n * d };
+    let mut x = Vector3::x() - n * n.x;
+    if x.norm() < 1e-9 {
+        x = Vector3::y() - n * n.y;
+    }
+    let x = x.normalize();
+    let y = n.cross(&x);
+    let r_cam_ground = Matrix3::from_columns(&[x, y, n]);
+    let t_cam_ground = Pose::from_parts(Rotation3::from_matrix_unchecked(r_cam_ground), origin);
+    Ok(t_cam_ground.inverse())
+}
+
+/// Composites tubes onto `background` (sRGB, `cam.width × cam.height × 3`).
+pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) -> Result<Composite, SynthError> {
+    cam.validate()?;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    if background.len() != w * h * 3 {
+        return Err(SynthError::Invalid(format!("background has {} bytes, camera expects {w}x{h} RGB", background.len())));
+    }
+    let (az, el) = cfg.sun_az_el_deg;
+    if !(az.is_finite() && el.is_finite() && el > 0.0 && el <= 90.0) {
+        return Err(SynthError::Invalid(format!("sun elevation {el} must be in (0, 90] degrees and azimuth finite")));
+    }
+    if !(0.0..=1.0).contains(&cfg.dust) {
+        return Err(SynthError::Invalid(format!("dust {} must be in [0, 1]", cfg.dust)));
+    }
+    let t_ground_cam = ground_frame(&cfg.ground.0, cfg.ground.1)?;
+    // Sun in the ground frame: azimuth from the camera's forward direction on the ground.
+    let fwd = t_ground_cam.transform_vector(&Vector3::z());
+    let fwd = Vector3::new(fwd.x, fwd.y, 0.0);
+    let fwd = if fwd.norm() > 1e-9 { fwd.normalize() } else { Vector3::y() };
+    let right = Vector3::new(fwd.y, -fwd.x, 0.0);
+    let (a, e) = (az.to_radians(), el.to_radians());
+    let sun = (fwd * a.cos() + right * a.sin()) * e.cos() + Vector3::z() * e.sin();
+
+    // Place tubes at random pixels of the lower two thirds whose whole tube projects inside.
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let (hl, r) = cfg.tube_shape.bounds();
+    let mut objects = Objects::new(Vec::new(), Vec::new(), Vec::new());
+    let mut tries = 0;
+    while objects.tubes.len() < cfg.tubes && tries < 2000 {
+        tries += 1;
+        let (u, v) = (rng.random_range(0.0..w as f64), rng.random_range(h as f64 / 3.0..h as f64));
+        let (ray, _) = pixel_ray(cam, &t_ground_cam, u, v);
+        if ray.dir.z > -1e-3 {
+            continue;
+        }
+        let t = -ray.origin.z / ray.dir.z;
+        let p = ray.at(t);
+        if objects.tubes.iter().any(|o| (o.t_world_tube.translation().xy() - p.coords.xy()).norm() < 2.0 * hl + 0.03) {
+            continue;
+        }
+        let pose = Pose::from_parts(lying_rotation(rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(0.0..std::f64::consts::TAU)), Vector3::new(p.x, p.y, r));
+        let inst = TubeInstance { t_world_tube: pose, shape: cfg.tube_shape.clone(), dust: cfg.dust, seed: rng.random() };
+        let probe = Objects::new(Vec::new(), vec![inst.clone()], Vec::new());
+        let inside = projected_rect(&probe, 0, cam, &t_ground_cam).is_some_and(|(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w as i64 && v1 < h as i64);
+        if inside {
+            objects.tubes.push(inst);
+        }
+    }
+    if objects.tubes.len() < cfg.tubes {
+        return Err(SynthError::Invalid(format!("could place only {} of {} tubes fully inside the image on that ground plane", objects.tubes.len(), cfg.tubes)));
+    }
+    let ext = objects.tubes.iter().map(|t| t.t_world_tube.translation().xy().norm()).fold(0.0, f64::max) + 1.0;
+    let n = (2.0 * ext / 0.05).ceil() as usize;
+    objects.build_grid(-ext, -ext, 0.05, n, n);
+
+    // Exposure from the photo: median linear intensity of the lower half = sunlit regolith.
+    let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear([i as u8, 0, 0])[0]).collect();
+    let mut lows: Vec<f32> = background[w * 3 * (h / 2)..].chunks(3).map(|p| (lut[p[0] as usize] + lut[p[1] as usize] + lut[p[2] as usize]) / 3.0).collect();
+    lows.sort_by(|a, b| a.total_cmp(b));
+    let median = lows.get(lows.len() / 2).copied().unwrap_or(0.2).max(0.01);
+    let reg = srgb_to_linear(REGOLITH_SRGB);
+    let (e_sun, e_sky) = (1.0f32, 0.25f32);
+    let cos_sun = sun.z as f32;
+    let exposure = median / (((reg[0] + reg[1] + reg[2]) / 3.0) * (e_sun * cos_sun + e_sky));
+    let shadow_factor = e_sky / (e_sun * cos_sun + e_sky);
+
+    let mut rgb = vec![0u8; w * h * 3];
+    let mut depth = Plane::filled(w, h, f32::INFINITY);
+    let mut instance = Plane::<u16>::new(w, h);
+    let mut surface = Plane::<u8>::new(w, h);
+    let to_srgb = |v: f32| -> u8 {
+        let v = v.clamp(0.0, 1.0);
+        let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+        (s * 255.0 + 0.5) as u8
+    };
+    let objects_ref = &objects;
+    rgb.par_chunks_mut(w * 3).zip(depth.data.par_chunks_mut(w)).zip(instance.data.par_chunks_mut(w)).zip(surface.data.par_chunks_mut(w)).enumerate().for_each(|(y, (((row, drow), irow), srow))| {
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ (y as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        for x in 0..w {
+            let bg = [lut[background[(y * w + x) * 3] as usize], lut[background[(y * w + x) * 3 + 1] as usize], lut[background[(y * w + x) * 3 + 2] as usize]];
+            let (centre, zf) = pixel_ray(cam, &t_ground_cam, x as f64, y as f64);
+            let hit = objects_ref.intersect(&centre, 0.0, 1e3);
+            srow[x] = SurfaceKind::Ground as u8;
+            if let Some((t, ObjectHit::Tube(i, _, _))) = hit {
+                irow[x] = (i + 1) as u16;
+                drow[x] = (t * zf) as f32;
+                srow[x] = SurfaceKind::Tube as u8;
+            } else if centre.dir.z < 0.0 {
+                drow[x] = (-centre.origin.z / centre.dir.z * zf) as f32;
+            }
+            let mut acc = [0.0f32; 3];
+            let near = (0..4).map(|k| {
+                let (du, dv) = (((k & 1) as f64 - 0.5) * 0.5, ((k >> 1) as f64 - 0.5) * 0.5);
+                pixel_ray(cam, &t_ground_cam, x as f64 + du, y as f64 + dv).0
+            });
+            for ray in near {
+                let c = match objects_ref.intersect(&ray, 0.0, 1e3) {
+                    Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(objects_ref, i, mat, &n, &ray, t, &sun, e_sun, e_sky, exposure, &mut rng),
+                    _ => {
+                        if ray.dir.z < 0.0 {
+                            let t = -ray.origin.z / ray.dir.z;
+                            let p = ray.at(t);
+                            let sh = Ray { origin: p + Vector3::z() * 1e-4, dir: sun };
+                            if objects_ref.intersect(&sh, 0.0, 50.0).is_some() {
+                                bg.map(|v| v * shadow_factor)
+                            } else {
+                                bg
+                            }
+                        } else {
+                            bg
+                        }
+                    }
+                };
+                for k in 0..3 {
+                    acc[k] += c[k] * 0.25;
+                }
+            }
+            for k in 0..3 {
+                row[x * 3 + k] = to_srgb(acc[k]);
+            }
+        }
+    });
+    let output = RenderOutput { width: w, height: h, rgb, depth, instance, surface };
+    let truth = tube_truth(&objects, cam, &t_ground_cam, &output);
+    Ok(Composite { output, truth, t_ground_cam, tubes: objects.tubes })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, n: &Vector3<f64>, ray: &Ray, t: f64, sun: &Vector3<f64>, e_sun: f32, e_sky: f32, exposure: f32, rng: &mut ChaCha8Rng) -> [f32; 3] {
+    let (alb, ks, shin) = match mat {
+        TubeMaterial::Alumina => ([0.78f32, 0.79, 0.75], 0.12f32, 18.0f32),
+        TubeMaterial::Gold => ([0.45, 0.28, 0.05], 0.55, 40.0),
+        TubeMaterial::Titanium => ([0.45, 0.46, 0.48], 0.4, 30.0),
+        TubeMaterial::Plastic => ([0.05, 0.05, 0.05], 0.1, 10.0),
+    };
+    let dust = objects.tubes[i].dust * (0.55 + 0.45 * n.z.max(0.0) as f32);
+    let reg = srgb_to_linear(REGOLITH_SRGB);
+    let alb = [0, 1, 2].map(|k| alb[k] * (1.0 - dust) + reg[k] * dust);
+    let p = ray.at(t);
+    let ndl = n.dot(sun).max(0.0) as f32;
+    let lit = if ndl > 0.0 && objects.intersect(&Ray { origin: p + n * 2e-4, dir: *sun }, 0.0, 50.0).is_none() { 1.0 } else { 0.0 };
+    let ao = 0.55 + 0.45 * n.z as f32;
+    let hv = (sun - ray.dir).normalize();
+    let spec = ks * (1.0 - dust) * (n.dot(&hv).max(0.0) as f32).powf(shin) * lit;
+    let noise: f32 = rng.random_range(-0.01..0.01);
+    [0, 1, 2].map(|k| exposure * (alb[k] * (e_sun * ndl * lit + e_sky * ao) + spec * e_sun) + noise)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    #[test]
+    fn ground_frame_puts_the_plane_at_z0_and_camera_above() {
+        // Camera 1.5 m above a ground seen at 45 degrees: plane normal (0, -a, -a) in camera frame.
+        let a = std::f64::consts::FRAC_1_SQRT_2;
+        let t_ground_cam = ground_frame(&Vector3::new(0.0, -a, -a), 1.5).unwrap();
+        let cam_origin = t_ground_cam.transform_point(&Point3::origin());
+        assert!((cam_origin.z - 1.5).abs() < 1e-9, "{cam_origin:?}");
+        let t_cam_ground = t_ground_cam.inverse();
+        for p in [Point3::new(0.3, 0.2, 0.0), Point3::new(-1.0, 2.0, 0.0)] {
+            let pc = t_cam_ground.transform_point(&p);
+            assert!((pc.coords.dot(&Vector3::new(0.0, -a, -a)) + 1.5).abs() < 1e-9);
+        }
+        assert!(ground_frame(&Vector3::zeros(), 1.0).is_err());
+    }
+}
