@@ -1,9 +1,10 @@
 //! A single tube lying on flat ground, seen from a given camera pose: the fixture other crates
 //! (template matching, pose refinement, stereo) use in their unit tests.
 //!
-//! Given `T_cam_tube`, the ground is the plane tangent to the tube's bottom whose normal is the
-//! direction perpendicular to the tube axis closest to the camera's up (−y) direction, so the
-//! tube lies on it and the camera sees its top. World frame: origin on the ground under the
+//! Given `T_cam_tube`, the ground is the plane tangent to the tube's bottom whose normal bisects
+//! the camera's up direction (−y) and the direction from the tube toward the camera, made
+//! perpendicular to the tube axis: the tube lies on it and the camera looks down on it
+//! obliquely, as a rover mast camera does. World frame: origin on the ground under the
 //! tube centre, z = ground normal, so `T_world_tube` has the tube centre at height `r` (the
 //! largest section radius).
 
@@ -39,10 +40,14 @@ pub fn single_tube_scene(t_cam_tube: &Pose, ground: Ground, sun: Sun, seed: u64)
 pub fn single_tube_scene_with(t_cam_tube: &Pose, ground: Ground, sun: Sun, seed: u64, shape: Arc<TubeShape>) -> Result<(Scene, Pose), SynthError> {
     let (_hl, r) = shape.bounds();
     let axis_cam = t_cam_tube.transform_vector(&Vector3::z());
-    let up_cam = -Vector3::y();
-    let mut n_cam = up_cam - axis_cam * axis_cam.dot(&up_cam);
+    let toward_cam = -t_cam_tube.translation().normalize();
+    let blend = (toward_cam - Vector3::y()).normalize();
+    let mut n_cam = blend - axis_cam * axis_cam.dot(&blend);
     if n_cam.norm() < 1e-6 {
-        n_cam = -Vector3::z() - axis_cam * axis_cam.dot(&-Vector3::z());
+        n_cam = toward_cam - axis_cam * axis_cam.dot(&toward_cam);
+    }
+    if n_cam.norm() < 1e-6 {
+        return Err(SynthError::Invalid("the camera looks along the tube axis: no ground to lay it on".into()));
     }
     let n_cam = n_cam.normalize();
     // World axes in the camera frame: z = ground normal, x = tube axis, y = z × x.

@@ -71,7 +71,7 @@ fn analytic_silhouette(cam: &CameraModel, t_cam_tube: &Pose) -> Vec<bool> {
 fn unoccluded_tube_mask_matches_the_projected_silhouette() {
     let cam = CameraModel::from_hfov(640, 480, 50.0);
     let sun = Sun { elevation_deg: 55.0, azimuth_deg: 120.0 };
-    for (k, (yaw, dist, tilt)) in [(0.3f64, 0.6f64, 0.9f64), (1.2, 0.8, 0.6), (-0.7, 0.5, 1.1)].into_iter().enumerate() {
+    for (k, (yaw, dist, tilt)) in [(0.3f64, 0.45f64, 0.9f64), (1.2, 0.6, 0.6), (-0.7, 0.4, 1.1)].into_iter().enumerate() {
         // Tube axis horizontal in a ground tilted toward the camera by `tilt` (radians).
         let r = Rotation3::from_axis_angle(&Vector3::x_axis(), -tilt) * Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2 + yaw);
         let t_cam_tube = Pose::from_parts(r, Vector3::new(0.02 * k as f64, 0.01, dist));
@@ -86,7 +86,7 @@ fn unoccluded_tube_mask_matches_the_projected_silhouette() {
         let area_sil = sil.iter().filter(|&&b| b).count() as f64;
         let inter = sil.iter().zip(&t.visible.data).filter(|(a, b)| **a && **b != 0).count() as f64;
         let union = area_sil + t.visible_area as f64 - inter;
-        assert!(area_sil > 2000.0, "silhouette too small to test: {area_sil}");
+        assert!(area_sil > 800.0, "silhouette too small to test: {area_sil}");
         let rel = (t.visible_area as f64 - area_sil).abs() / area_sil;
         assert!(rel < 0.02, "case {k}: mask area {} vs silhouette {area_sil}", t.visible_area);
         assert!(inter / union > 0.97, "case {k}: IoU {}", inter / union);
@@ -100,8 +100,11 @@ fn unoccluded_tube_mask_matches_the_projected_silhouette() {
         }
         // Depth at the tube's centre pixel equals the camera-z of the surface seen there.
         let c = cam.project(&Point3::from(t_cam_tube.translation())).unwrap();
-        let d = out.depth.get(c.x.round() as usize, c.y.round() as usize) as f64;
-        assert!(d < t_cam_tube.translation().z && d > t_cam_tube.translation().z - 0.012, "depth {d}");
+        let (cu, cv) = (c.x.round() as usize, c.y.round() as usize);
+        let d = out.depth.get(cu, cv) as f64;
+        assert_eq!(out.instance.get(cu, cv), 1, "case {k}: centre pixel {c:?} not on the tube");
+        // The ray meets the surface before the axis, within r / sin(angle to the axis).
+        assert!(d < t_cam_tube.translation().z && d > t_cam_tube.translation().z - 0.04, "case {k}: depth {d}");
     }
 }
 
@@ -118,8 +121,8 @@ fn a_rock_in_front_hides_part_of_the_tube_and_is_named() {
     // A rock on the ground between the camera and one end of the tube.
     let cam_pos = t_world_cam.translation();
     let end = scene.objects.tubes[0].t_world_tube.transform_point(&Point3::new(0.0, 0.0, 0.05));
-    let towards = (Vector3::new(cam_pos.x, cam_pos.y, 0.0) - Vector3::new(end.x, end.y, 0.0)).normalize();
-    let c = Point3::new(end.x, end.y, 0.0) + towards * 0.06;
+    // On the line of sight to that end, 8 cm in front of it (floating: only visibility matters).
+    let c = end + (Point3::from(cam_pos) - end).normalize() * 0.08;
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(2);
     let rock = Rock::new(&mut rng, c, [0.03, 0.03, 0.03], 0.0, 0.0, 24, [0.1; 3]);
     let tubes = scene.objects.tubes.clone();
