@@ -8,6 +8,9 @@ use std::process::ExitCode;
 mod cmd_eval;
 mod cmd_stereo;
 mod cmd_refine;
+mod cmd_synth;
+mod cmd_synth_calib;
+mod cmd_synth_composite;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -26,6 +29,8 @@ enum Command {
     Refine(cmd_refine::RefineArgs),
     /// Evaluate COCO results against ground truth (AP/AR exactly as pycocotools), with breakdowns.
     Eval(cmd_eval::EvalArgs),
+    /// Render the synthetic Mars-yard benchmark (COCO ground truth, poses, rig), composites or calibration sets.
+    Synth(cmd_synth::SynthArgs),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +40,7 @@ fn main() -> ExitCode {
         Command::Stereo(a) => cmd_stereo::run(a),
         Command::Refine(a) => cmd_refine::run(a),
         Command::Eval(a) => cmd_eval::run(a),
+        Command::Synth(a) => cmd_synth::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
