@@ -96,6 +96,11 @@ fn main() {
         9,
     );
     let ours = resp_ms + match_ms;
+    let mut n_raw = 0;
+    let raw_ms = median_ms(|| n_raw = match_all(&prep, &lib, &p).len(), 5);
+    let raw = match_all(&prep, &lib, &p);
+    let nms_ms = median_ms(|| drop(black_box(nms(&raw, &lib, p.nms_iou, p.max_detections))), 5);
+    println!("  of which coarse+fine {raw_ms:.1} ms ({n_raw} raw matches), NMS {nms_ms:.1} ms");
     println!("tubeloc line2d: {} templates, 1024x1024: response maps {resp_ms:.1} ms, matching {match_ms:.1} ms, total {ours:.1} ms median ({n_det} detections, {} threads)", lib.len(), rayon::current_num_threads());
 
     // Peer: export the image and the silhouettes, run OpenCV's LINE-2D on them.
@@ -111,7 +116,7 @@ fn main() {
     }
     std::fs::write(dir.join("masks.bin"), masks).expect("write masks.bin");
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/linemod_peer.py");
-    match std::process::Command::new("python3").arg(&script).arg(&dir).args(["--repeats", "5"]).output() {
+    match std::process::Command::new("python3").arg(&script).arg(&dir).args(["--repeats", "3"]).output() {
         Ok(out) if out.status.success() => {
             let line = String::from_utf8_lossy(&out.stdout);
             println!("peer: {}", line.trim());

@@ -198,28 +198,43 @@ pub fn fine_score_at(resp: &ResponseMaps, t: &Template, x: usize, y: usize) -> u
     t.levels[0].features.iter().map(|f| resp.maps[f.ori as usize][(y + f.y as usize) * resp.width + x + f.x as usize] as u32).sum()
 }
 
-/// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid).
-fn fine_search(simd: Simd, resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, acc: &mut Vec<u16>) -> (u32, usize, usize) {
-    let nx = x_hi - x_lo + 1;
+/// Raw level-0 scores of one row segment: `acc[i] = E(x_lo + i * step, y)` for `i < acc.len()`.
+#[inline]
+fn fine_row(resp: &ResponseMaps, t: &Template, x_lo: usize, step: usize, y: usize, acc: &mut [u16]) {
+    acc.fill(0);
+    let w = resp.width;
+    for f in &t.levels[0].features {
+        let map = &resp.maps[f.ori as usize];
+        let base = (y + f.y as usize) * w + x_lo + f.x as usize;
+        for (i, a) in acc.iter_mut().enumerate() {
+            *a += map[base + i * step] as u16;
+        }
+    }
+}
+
+/// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid):
+/// every second pixel first, then the 8 neighbours of the best one.
+fn fine_search(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, acc: &mut Vec<u16>) -> (u32, usize, usize) {
+    let nx = (x_hi - x_lo) / 2 + 1;
+    acc.resize(nx, 0);
     let mut best = (0u32, x_lo, y_lo);
-    let mut acc8 = [0u8; 64];
-    for y in y_lo..=y_hi {
-        acc.clear();
-        acc.resize(nx, 0);
-        for block in t.levels[0].features.chunks(63) {
-            for x0 in (0..nx).step_by(64) {
-                let m = (nx - x0).min(64);
-                acc8[..m].fill(0);
-                for f in block {
-                    let off = (y + f.y as usize) * resp.width + x_lo + x0 + f.x as usize;
-                    simd.add_u8(&mut acc8[..m], &resp.maps[f.ori as usize][off..off + m]);
-                }
-                simd.widen_add(&mut acc[x0..x0 + m], &acc8[..m]);
+    for y in (y_lo..=y_hi).step_by(2) {
+        fine_row(resp, t, x_lo, 2, y, &mut acc[..nx]);
+        for (i, &v) in acc[..nx].iter().enumerate() {
+            if v as u32 > best.0 {
+                best = (v as u32, x_lo + 2 * i, y);
             }
         }
-        for (i, &v) in acc.iter().enumerate() {
-            if v as u32 > best.0 {
-                best = (v as u32, x_lo + i, y);
+    }
+    let (bx, by) = (best.1, best.2);
+    for y in by.saturating_sub(1).max(y_lo)..=(by + 1).min(y_hi) {
+        for x in bx.saturating_sub(1).max(x_lo)..=(bx + 1).min(x_hi) {
+            if (x - x_lo) % 2 == 0 && (y - y_lo) % 2 == 0 {
+                continue;
+            }
+            let e = fine_score_at(resp, t, x, y);
+            if e > best.0 {
+                best = (e, x, y);
             }
         }
     }
@@ -250,7 +265,7 @@ pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16:
     let n0 = l0.features.len() as f32;
     let need0 = (p.threshold / 100.0 * SIM_MAX as f32 * n0).ceil().max(1.0) as u32;
     let gw = lm.grid_w;
-    let rad = 2 * tt + 2;
+    let rad = tt + 2;
     let mut out = Vec::new();
     for r in 0..=rmax {
         for c in 0..=cmax {
@@ -280,7 +295,7 @@ pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16:
             if x_lo > x_hi || y_lo > y_hi {
                 continue;
             }
-            let (e, x, y) = fine_search(simd, &img.resp0, t, x_lo, x_hi, y_lo, y_hi, fine);
+            let (e, x, y) = fine_search(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, fine);
             if e >= need0 {
                 out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
             }
@@ -312,6 +327,11 @@ pub fn placed_mask_iou(ta: &Template, a: &RawMatch, tb: &Template, b: &RawMatch)
     }
     let (aa, ab) = (ta.area, tb.area);
     let mut inter = 0u32;
+    let ub = ((x1 - x0) * (y1 - y0)) as u32;
+    let ub = ub.min(aa).min(ab);
+    if ub == 0 {
+        return 0.0;
+    }
     for y in y0..y1 {
         let ra = &ta.mask[((y - a.y) * aw + (x0 - a.x)) as usize..((y - a.y) * aw + (x1 - a.x)) as usize];
         let rb = &tb.mask[((y - b.y) * bw + (x0 - b.x)) as usize..((y - b.y) * bw + (x1 - b.x)) as usize];
@@ -340,7 +360,18 @@ pub fn nms_clusters(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: 
     let mut clusters: Vec<Vec<RawMatch>> = Vec::new();
     for m in matches.iter().take(MAX_NMS_INPUT) {
         let tm = &lib.templates[m.template as usize];
-        let hit = clusters.iter().position(|c| placed_mask_iou(&lib.templates[c[0].template as usize], &c[0], tm, m) > iou);
+        let hit = clusters.iter().position(|c| {
+            let tk = &lib.templates[c[0].template as usize];
+            // Upper bound first: IoU <= min(areas, box overlap) / (sum of areas - that).
+            let k = &c[0];
+            let ox = (k.x + tk.levels[0].width as i32).min(m.x + tm.levels[0].width as i32) - k.x.max(m.x);
+            let oy = (k.y + tk.levels[0].height as i32).min(m.y + tm.levels[0].height as i32) - k.y.max(m.y);
+            if ox <= 0 || oy <= 0 {
+                return false;
+            }
+            let ub = ((ox * oy) as u32).min(tk.area).min(tm.area) as f32;
+            ub / ((tk.area + tm.area) as f32 - ub) > iou && placed_mask_iou(tk, k, tm, m) > iou
+        });
         match hit {
             Some(i) => clusters[i].push(*m),
             None if clusters.len() < max => clusters.push(vec![*m]),
