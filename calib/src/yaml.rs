@@ -191,7 +191,7 @@ pub fn parse_yaml(text: &str, path: &Path) -> Result<BTreeMap<String, YamlValue>
             let rows = rows.ok_or_else(|| err(ln, format!("{key}: missing rows")))?;
             let cols = cols.ok_or_else(|| err(ln, format!("{key}: missing cols")))?;
             let data = data.ok_or_else(|| err(ln, format!("{key}: missing data")))?;
-            if data.len() != rows * cols {
+            if rows.checked_mul(cols) != Some(data.len()) {
                 return Err(err(ln, format!("{key}: {} values for a {rows}x{cols} matrix", data.len())));
             }
             YamlValue::Matrix { rows, cols, dt: dt.unwrap_or_else(|| "d".into()), data }
