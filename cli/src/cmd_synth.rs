@@ -76,7 +76,6 @@ pub fn run(a: SynthArgs) -> Result<()> {
     match a.command {
         Some(SynthCommand::Composite(c)) => crate::cmd_synth_composite::run(c),
         Some(SynthCommand::Calib(c)) => crate::cmd_synth_calib::run(c),
-        Some(SynthCommand::Calib(c)) => crate::cmd_synth_calib::run(c),
         None => run_dataset(a.dataset),
     }
 }

@@ -5,12 +5,19 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
+mod cmd_calib;
+mod cmd_detect;
+mod cmd_detect_line2d;
+mod cmd_templates;
+mod cmd_detect_learned;
 mod cmd_eval;
+mod cmd_synth;
 mod cmd_stereo;
 mod cmd_refine;
-mod cmd_synth;
 mod cmd_synth_calib;
 mod cmd_synth_composite;
+mod cmd_train;
+mod cmd_demo;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -23,25 +30,54 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     // Subcommands are registered here, one variant each.
+    /// AprilTag detection, tag-pair ground-truth tube poses, and camera-rig calibration.
+    #[command(subcommand)]
+    Calib(cmd_calib::CalibCommand),
+    /// Detect tubes in images (line2d, learned or external results) and write COCO results with seeds.
+    Detect(cmd_detect::DetectArgs),
+    /// Build or inspect Line2D template libraries rendered from the tube model.
+    Templates(cmd_templates::TemplatesArgs),
+    /// Evaluate COCO results against ground truth (AP/AR exactly as pycocotools), with breakdowns.
+    Eval(cmd_eval::EvalArgs),
+    /// Train the learned tube segmenter on COCO dataset directories.
+    Train(cmd_train::TrainArgs),
+    /// Render the synthetic Mars-yard benchmark (COCO ground truth, poses, rig), composites or calibration sets.
+    Synth(cmd_synth::SynthArgs),
     /// Stereo disparity (semi-global matching), optional rectification with a rig and point cloud.
     Stereo(cmd_stereo::StereoArgs),
     /// Refine detections into grasp-ready tube poses (cylinder contour fit, optional stereo and ground plane).
     Refine(cmd_refine::RefineArgs),
-    /// Evaluate COCO results against ground truth (AP/AR exactly as pycocotools), with breakdowns.
-    Eval(cmd_eval::EvalArgs),
-    /// Render the synthetic Mars-yard benchmark (COCO ground truth, poses, rig), composites or calibration sets.
-    Synth(cmd_synth::SynthArgs),
+    /// Run the whole pipeline on a small generated with-tags scene and write a report (no arguments needed).
+    Demo(cmd_demo::DemoArgs),
+}
+
+/// Runs one parsed subcommand.
+fn dispatch(command: Command) -> anyhow::Result<()> {
+    match command {
+        // Dispatch: one arm per subcommand.
+        Command::Calib(c) => cmd_calib::run(c),
+        Command::Detect(a) => cmd_detect::run(a),
+        Command::Templates(a) => cmd_templates::run(a),
+        Command::Eval(a) => cmd_eval::run(a),
+        Command::Train(a) => cmd_train::run(a),
+        Command::Synth(a) => cmd_synth::run(a),
+        Command::Stereo(a) => cmd_stereo::run(a),
+        Command::Refine(a) => cmd_refine::run(a),
+        Command::Demo(a) => cmd_demo::run(a),
+    }
+}
+
+/// Runs a subcommand given as command-line words (as if typed after `tubeloc`), in-process.
+/// `demo` uses it to chain the same subcommands a user would run.
+pub(crate) fn run_words(words: &[String]) -> anyhow::Result<()> {
+    let argv = std::iter::once("tubeloc".to_string()).chain(words.iter().cloned());
+    let cli = Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("internal command `tubeloc {}`: {e}", words.join(" ")))?;
+    dispatch(cli.command)
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let result: anyhow::Result<()> = match cli.command {
-        // Dispatch: one arm per subcommand.
-        Command::Stereo(a) => cmd_stereo::run(a),
-        Command::Refine(a) => cmd_refine::run(a),
-        Command::Eval(a) => cmd_eval::run(a),
-        Command::Synth(a) => cmd_synth::run(a),
-    };
+    let result = dispatch(cli.command);
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -1,0 +1,80 @@
+//! `tubeloc detect`: find tubes in images with one of the detectors and write COCO results
+//! (mask RLE, bbox, score) plus the per-detection seeds that `refine` uses.
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+
+/// Which detector to run.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Method {
+    /// Line2D template matching.
+    Line2d,
+    /// The learned segmenter (`--model`, default: the shipped model in data/models/).
+    Learned,
+    /// Detections made elsewhere (`--results coco_results.json`), passed through with an axis
+    /// seed from each mask's principal axis.
+    External,
+}
+
+/// Arguments of `tubeloc detect`.
+#[derive(clap::Args)]
+pub struct DetectArgs {
+    /// Detector.
+    #[arg(long, value_enum)]
+    pub method: Method,
+    /// One input image.
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    /// COCO image id written for `--image`.
+    #[arg(long, default_value_t = 0)]
+    pub image_id: u64,
+    /// A COCO dataset directory (annotations.json + images): detect in all its images.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Learned model weights (safetensors).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// External COCO results to pass through (`--method external`).
+    #[arg(long)]
+    pub results: Option<PathBuf>,
+    /// Output detections (JSON list of COCO results with seeds).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Line2D options (`--templates`, `--camera`, `--threshold`, ...).
+    #[command(flatten)]
+    pub line2d: crate::cmd_detect_line2d::Line2dOpts,
+}
+
+/// Runs `tubeloc detect`.
+pub fn run(args: DetectArgs) -> Result<()> {
+    let dets = match args.method {
+        Method::Line2d => {
+            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
+            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images)?;
+            tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
+            eprintln!("{} detections -> {}", dets.len(), args.out.display());
+            return Ok(());
+        }
+        Method::Learned => {
+            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
+            let model = args.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+            crate::cmd_detect_learned::run_learned(&model, &images, &Default::default())?
+        }
+        Method::External => {
+            let results = args.results.as_deref().context("--method external needs --results FILE")?;
+            let mut sizes = std::collections::HashMap::new();
+            if let Some(d) = &args.dataset {
+                let ann = d.join("annotations.json");
+                let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+                sizes.extend(ds.images.iter().map(|im| (im.id, (im.width, im.height))));
+            } else if let Some(p) = &args.image {
+                let (w, h) = image::image_dimensions(p).with_context(|| format!("reading {}", p.display()))?;
+                sizes.insert(args.image_id, (w, h));
+            }
+            crate::cmd_detect_learned::run_external(results, &|id| sizes.get(&id).copied())?
+        }
+    };
+    tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!("{} detections -> {}", dets.len(), args.out.display());
+    Ok(())
+}

@@ -1,0 +1,117 @@
+//! The `learned` and `external` methods of `tubeloc detect`: run the learned segmenter, or
+//! pass COCO results made elsewhere through, writing COCO results (mask RLE, bbox, score) plus
+//! each instance's `axis_seed` and `source` (the fields of `tubeloc_core::TubeDetection`).
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use tubeloc_core::{AxisSeed, BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation, TubeDetection};
+use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel};
+
+/// One output entry: a COCO result with the detection's seed fields.
+#[derive(Serialize)]
+pub struct DetectionOut {
+    #[serde(flatten)]
+    det: TubeDetection,
+    segmentation: Option<Segmentation>,
+}
+
+/// The shipped model (`data/models/tubenet.safetensors`), looked up next to the current
+/// directory first, then in the source tree the program was built from.
+pub fn default_model() -> PathBuf {
+    let local = Path::new("data/models/tubenet.safetensors");
+    if local.exists() {
+        return local.to_path_buf();
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models/tubenet.safetensors")
+}
+
+/// Images to process: `(image_id, path)`.
+pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -> Result<Vec<(u64, PathBuf)>> {
+    match (image, dataset) {
+        (Some(p), None) => Ok(vec![(image_id, p.to_path_buf())]),
+        (None, Some(d)) => {
+            let ann = d.join("annotations.json");
+            let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+            Ok(ds
+                .images
+                .iter()
+                .map(|im| {
+                    let p = d.join(&im.file_name);
+                    (im.id, if p.exists() { p } else { d.join("images").join(&im.file_name) })
+                })
+                .collect())
+        }
+        _ => bail!("give exactly one of --image or --dataset"),
+    }
+}
+
+/// Runs the learned model over images; returns the output entries.
+pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
+    let model = LearnedModel::load(model_path).with_context(|| format!("loading model {}", model_path.display()))?;
+    let pb = ProgressBar::new(images.len() as u64);
+    pb.set_style(ProgressStyle::with_template("detect {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
+    let per: Vec<Vec<DetectionOut>> = images
+        .iter()
+        .map(|(id, p)| {
+            let rgb = image::open(p).with_context(|| format!("reading image {}", p.display()))?.to_rgb8();
+            let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+            let inst = detect_rgb(&model, rgb.as_raw(), w, h, cfg).with_context(|| format!("detecting in {}", p.display()))?;
+            pb.inc(1);
+            Ok(inst
+                .into_par_iter()
+                .map(|i| {
+                    let mask = BinaryMask { width: w, height: h, data: i.mask.data };
+                    let rle = Rle::from_mask(&mask);
+                    let mut det = TubeDetection::new(*id, i.score, i.bbox, DetectionSource::Learned);
+                    det.axis_seed = Some(i.axis);
+                    DetectionOut { det, segmentation: Some(Segmentation::from_rle(&rle)) }
+                })
+                .collect())
+        })
+        .collect::<Result<_>>()?;
+    pb.finish_and_clear();
+    Ok(per.into_iter().flatten().collect())
+}
+
+/// Passes external COCO results through: the mask's principal axis becomes the axis seed (the
+/// box diagonal when there is no mask). Polygon masks need the image size: `--image` or
+/// `--dataset` gives it.
+pub fn run_external(results: &Path, sizes: &(dyn Fn(u64) -> Option<(u32, u32)> + Sync)) -> Result<Vec<DetectionOut>> {
+    let text = std::fs::read(results).with_context(|| format!("reading {}", results.display()))?;
+    let list: Vec<CocoResult> = serde_json::from_slice(&text).with_context(|| format!("{}: not a COCO results list", results.display()))?;
+    list.into_par_iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let ctx = || format!("{}: entry {k} (image {})", results.display(), r.image_id);
+            let mask = match &r.segmentation {
+                None => None,
+                Some(seg) => {
+                    let (h, w) = match seg {
+                        Segmentation::CompressedRle { size, .. } | Segmentation::UncompressedRle { size, .. } => (size[0], size[1]),
+                        Segmentation::Polygons(_) => sizes(r.image_id).map(|(w, h)| (h, w)).with_context(|| format!("{}: polygon mask needs the image size (--image or --dataset)", ctx()))?,
+                    };
+                    Some(seg.to_rle(h, w).and_then(|x| x.to_mask()).with_context(ctx)?)
+                }
+            };
+            let bbox = match (r.bbox, &mask) {
+                (Some(b), _) => b,
+                (None, Some(m)) => m.bbox(),
+                (None, None) => bail!("{}: neither bbox nor segmentation", ctx()),
+            };
+            let mut det = TubeDetection::new(r.image_id, r.score, bbox, DetectionSource::External);
+            det.category_id = r.category_id;
+            det.axis_seed = Some(match &mask {
+                Some(m) => {
+                    let px = m.data.iter().enumerate().filter(|(_, &v)| v != 0).map(|(i, _)| ((i % m.width) as f64, (i / m.width) as f64));
+                    AxisSeed::from_pixels(px).unwrap_or_else(|| det.axis_seed_from_bbox())
+                }
+                None => det.axis_seed_from_bbox(),
+            });
+            det.validate().with_context(ctx)?;
+            Ok(DetectionOut { det, segmentation: r.segmentation })
+        })
+        .collect()
+}
