@@ -116,9 +116,8 @@ impl TerrainParams {
                 let edge = (d2 - d1) * scale; // ≈ twice the distance to the slab border, m
                 let crack_w = 0.010 + 0.010 * (0.5 + 0.5 * value2(xf / 0.2, yf / 0.2, s ^ 3));
                 let rise = 0.012 + 0.018 * ((id & 0xff) as f32 / 255.0);
-                let tiltx = (((id >> 8) & 0xff) as f32 / 255.0 - 0.5) * 0.04;
-                let tilty = (((id >> 16) & 0xff) as f32 / 255.0 - 0.5) * 0.04;
-                let slab_h = rise + tiltx * (xf - (xf / scale).floor() * scale) + tilty * (yf - (yf / scale).floor() * scale) + 0.0015 * fbm2(xf / 0.05, yf / 0.05, 2, 0.5, s ^ 9);
+                // Each slab has its own gentle warp (noise seeded by the slab id): no seams inside a slab.
+                let slab_h = rise + 0.006 * value2(xf / 0.35, yf / 0.35, id) + 0.0015 * fbm2(xf / 0.05, yf / 0.05, 2, 0.5, s ^ 9);
                 let t = ((edge - crack_w * 0.5) / crack_w).clamp(0.0, 1.0);
                 let t = t * t * (3.0 - 2.0 * t);
                 h = h * 0.3 + slab_h * t;
