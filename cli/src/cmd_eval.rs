@@ -66,6 +66,34 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             let p = out.join("breakdown.md");
             write_atomic(&p, table.as_bytes()).with_context(|| format!("writing {}", p.display()))?;
         }
+        let report = report_of(&args, &result, &breakdowns);
+        let md = tubeloc_eval::report::write_eval_report(out, &report).with_context(|| format!("writing the report in {}", out.display()))?;
+        eprintln!("report: {}", md.display());
     }
     Ok(())
+}
+
+/// The markdown report's content: the 12 numbers, the PR curves (area all, 100 detections) and
+/// each breakdown as AP50 / AP / AR100 per value.
+fn report_of(args: &EvalArgs, result: &tubeloc_eval::coco_eval::EvalResult, breakdowns: &[Breakdown]) -> tubeloc_eval::report::EvalReport {
+    use tubeloc_eval::coco_eval::STATS;
+    let pick = |r: &tubeloc_eval::coco_eval::EvalResult| vec![r.stats[1], r.stats[0], r.stats[8]];
+    tubeloc_eval::report::EvalReport {
+        title: "COCO evaluation".into(),
+        inputs: std::iter::once(("ground truth".to_string(), args.gt.display().to_string()))
+            .chain(args.dt.iter().map(|d| ("results".to_string(), d.display().to_string())))
+            .chain(std::iter::once(("IoU type".to_string(), result.iou_type.name().to_string())))
+            .collect(),
+        stats: STATS.iter().zip(result.stats).map(|(s, v)| (s.name.to_string(), v)).collect(),
+        pr_curves: result.iou_thrs.iter().enumerate().map(|(t, &thr)| (thr, result.pr_curve(t))).collect(),
+        breakdowns: breakdowns
+            .iter()
+            .map(|b| tubeloc_eval::report::Breakdown {
+                attribute: b.attribute.clone(),
+                metrics: vec!["AP50".into(), "AP".into(), "AR100".into()],
+                rows: b.rows.iter().map(|r| (r.value.clone(), r.num_images, pick(&r.result))).collect(),
+            })
+            .collect(),
+        poses: Vec::new(),
+    }
 }
