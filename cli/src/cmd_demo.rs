@@ -84,7 +84,16 @@ pub fn run(a: DemoArgs) -> Result<()> {
         let overlay = out.join(format!("overlay_{}.png", img.id));
         let image = dataset.join("images").join(&img.file_name);
         let id = img.id.to_string();
-        step(&format!("refine image {}", img.id), words(&["refine", "--image", &p(&image), "--camera", &p(&cam), "--detections", &p(&dets), "--image-id", &id, "--out", &p(&poses_path), "--overlay", &p(&overlay)]), &mut log)?;
+        let mut w = words(&["refine", "--image", &p(&image), "--camera", &p(&cam), "--detections", &p(&dets), "--image-id", &id, "--out", &p(&poses_path), "--overlay", &p(&overlay)]);
+        // The tripod's pose is known: the ground plane z_world = 0 in the camera frame is
+        // n = R_world_camᵀ ẑ, n·X = -t_z (t = camera position in the world).
+        if let Some(v) = img.extra.get("T_world_cam") {
+            let t_world_cam: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), img.id))?;
+            let n = t_world_cam.rotation().transpose() * nalgebra::Vector3::z();
+            w.push("--ground".into());
+            w.push(format!("{},{},{},{}", n.x, n.y, n.z, -t_world_cam.translation().z));
+        }
+        step(&format!("refine image {}", img.id), w, &mut log)?;
         overlays.push(overlay);
         let poses: Vec<TubeAxisPose> = files::read_json(&poses_path)?;
         estimates.extend(poses.iter().filter(|q| q.converged).map(TubeEstimate::from_axis_pose));
