@@ -7,7 +7,8 @@
 //! taking `r0` to `r1`: the tube keeps its distance and its orientation relative to the line of
 //! sight.
 
-use crate::line2d::mask::RleMask;
+use crate::line2d::mask::rle_from_box;
+use tubeloc_core::Rle;
 use crate::line2d::matching::RawMatch;
 use crate::line2d::template::Template;
 use nalgebra::{Point2, Rotation3, Vector3};
@@ -34,7 +35,7 @@ pub struct Line2dDetection {
     /// Coarse pose `T_cam_tube` (metres).
     pub t_cam_tube: Pose,
     /// The placed template silhouette as a COCO RLE over the whole image.
-    pub mask: RleMask,
+    pub mask: Rle,
 }
 
 impl Line2dDetection {
@@ -48,7 +49,7 @@ impl Line2dDetection {
             let (lx, ly) = (x as i64 - m.x as i64, y as i64 - m.y as i64);
             t.mask[(ly * tw + lx) as usize] != 0
         };
-        let mask = RleMask::from_box(height as u32, width as u32, x0 as u32, x1 as u32, y0 as u32, y1 as u32, inside);
+        let mask = rle_from_box(height as u32, width as u32, x0 as u32, x1 as u32, y0 as u32, y1 as u32, inside);
         let (mut bx0, mut by0, mut bx1, mut by1) = (i64::MAX, i64::MAX, -1, -1);
         for y in y0..y1 {
             for x in x0..x1 {
@@ -71,6 +72,7 @@ impl Line2dDetection {
         let mut d = TubeDetection::new(image_id, self.similarity as f64 / 100.0, self.bbox, DetectionSource::Line2d);
         d.t_cam_tube = Some(self.t_cam_tube);
         d.template_id = Some(self.template_id as u64);
+        d.mask = Some(self.mask.clone());
         d
     }
 
@@ -78,7 +80,6 @@ impl Line2dDetection {
     pub fn to_coco_json(&self, image_id: u64) -> serde_json::Value {
         let mut v = serde_json::to_value(self.to_tube_detection(image_id)).unwrap_or_else(|_| json!({}));
         if let Some(o) = v.as_object_mut() {
-            o.insert("segmentation".into(), json!({"size": [self.mask.height, self.mask.width], "counts": self.mask.to_compressed_string()}));
             o.insert("similarity".into(), json!(self.similarity));
         }
         v
