@@ -13,9 +13,9 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use nalgebra::{Point2, Point3, Vector3};
 use std::path::{Path, PathBuf};
-use tubeloc_core::{files, BinaryMask, CameraModel, Plane, Rig, TubeAxisPose, TubeDetection, TubeModel};
+use tubeloc_core::{files, BinaryMask, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
-use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
+use tubeloc_stereo::{disparity_regions, Roi, SgmParams};
 
 /// Arguments of `tubeloc refine`.
 #[derive(Args, Debug)]
@@ -74,27 +74,13 @@ fn parse_ground(s: &str) -> Result<GroundPlane> {
     Ok(GroundPlane { normal: n / norm, offset: v[3] / norm })
 }
 
-fn load_gray_u8(path: &Path) -> Result<Plane<u8>> {
-    let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
-    Ok(Plane::from_vec(img.width() as usize, img.height() as usize, img.into_raw()))
-}
 
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
 /// rectified pair, triangulated, kept where they project into the detection's mask or box.
 fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, Vec<Vec<Point3<f64>>>)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
-    let rig = Rig::load_json(rig_path)?;
-    let (ln, rn) = match &args.pair {
-        Some(p) => {
-            let (a, b) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
-            (a.trim().to_string(), b.trim().to_string())
-        }
-        None => rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", rig_path.display()))?,
-    };
-    let cam = |n: &str| rig.camera(n).with_context(|| format!("{}: no camera named {n:?}", rig_path.display()));
-    let (lcam, rcam) = (cam(&ln)?.model.clone(), cam(&rn)?.model.clone());
-    let rect = StereoRectification::new(&lcam, &rcam, &rig.relative_pose(&ln, &rn)?).with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
-    let right = load_gray_u8(right_path)?;
+    let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
+    let right = crate::cmd_stereo::load_gray(right_path)?;
     let (rl, rr) = rect.rectify_pair(left, &right).with_context(|| format!("{} / {}", args.image.display(), right_path.display()))?;
     // Regions: each box mapped into rectified left pixels through its corners.
     let mut rois = Vec::new();
@@ -181,7 +167,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     if let Some(id) = args.image_id {
         dets.retain(|d| d.image_id == id);
     }
-    let gray = load_gray_u8(&args.image)?;
+    let gray = crate::cmd_stereo::load_gray(&args.image)?;
     let (camera, stereo) = match &args.rig {
         Some(rig) => {
             let (c, s) = stereo_points(&args, &gray, rig, &dets)?;

@@ -59,7 +59,8 @@ pub struct StereoArgs {
     out: PathBuf,
 }
 
-fn load_gray(path: &Path) -> Result<Plane<u8>> {
+/// Reads an image as 8-bit grey, naming the file on error.
+pub(crate) fn load_gray(path: &Path) -> Result<Plane<u8>> {
     let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
     Ok(Plane::from_vec(img.width() as usize, img.height() as usize, img.into_raw()))
 }
@@ -102,17 +103,7 @@ pub fn run(args: StereoArgs) -> Result<()> {
     });
     let mut rect = None;
     if let Some(rig_path) = &args.rig {
-        let rig = Rig::load_json(rig_path)?;
-        let (ln, rn) = match &args.pair {
-            Some(p) => {
-                let (a, b) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
-                (a.trim().to_string(), b.trim().to_string())
-            }
-            None => rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", rig_path.display()))?,
-        };
-        let cam = |n: &str| rig.camera(n).with_context(|| format!("{}: no camera named {n:?}", rig_path.display()));
-        let t_lr = rig.relative_pose(&ln, &rn)?;
-        let r = StereoRectification::new(&cam(&ln)?.model, &cam(&rn)?.model, &t_lr).with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
+        let ((ln, rn), _, r) = rectification_from_rig(rig_path, args.pair.as_deref())?;
         let (rl, rr) = r.rectify_pair(&left, &right).with_context(|| format!("{} / {}", args.left.display(), args.right.display()))?;
         left = rl;
         right = rr;
@@ -160,4 +151,22 @@ pub fn run(args: StereoArgs) -> Result<()> {
     tubeloc_core::files::write_json(&args.out.join("disparity.json"), &header)?;
     println!("{}: {}x{} disparity, {:.1}% valid", args.out.display(), w, h, 100.0 * valid as f64 / (w as f64 * h as f64).max(1.0));
     Ok(())
+}
+
+/// Reads a rig file and rectifies one of its pairs: `pair` is "LEFT,RIGHT" (camera names), by
+/// default the rig's first stereo pair. Returns the pair's names, the left camera's model and the
+/// rectification.
+pub(crate) fn rectification_from_rig(rig_path: &Path, pair: Option<&str>) -> Result<((String, String), tubeloc_core::CameraModel, StereoRectification)> {
+    let rig = Rig::load_json(rig_path)?;
+    let (ln, rn) = match pair {
+        Some(p) => {
+            let (a, b) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
+            (a.trim().to_string(), b.trim().to_string())
+        }
+        None => rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", rig_path.display()))?,
+    };
+    let cam = |n: &str| rig.camera(n).with_context(|| format!("{}: no camera named {n:?}", rig_path.display()));
+    let (lcam, rcam) = (&cam(&ln)?.model, &cam(&rn)?.model);
+    let rect = StereoRectification::new(lcam, rcam, &rig.relative_pose(&ln, &rn)?).with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
+    Ok(((ln.clone(), rn.clone()), lcam.clone(), rect))
 }
