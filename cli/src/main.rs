@@ -18,6 +18,9 @@ mod cmd_synth_calib;
 mod cmd_synth_composite;
 mod cmd_train;
 mod cmd_demo;
+mod cmd_locate;
+mod cmd_bench;
+mod memory;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -49,11 +52,18 @@ enum Command {
     Refine(cmd_refine::RefineArgs),
     /// Run the whole pipeline on a small generated with-tags scene and write a report (no arguments needed).
     Demo(cmd_demo::DemoArgs),
+    /// The main job: detect, (stereo,) refine and write grasp-ready tube poses for one image or pair.
+    Locate(cmd_locate::LocateArgs),
+    /// Reproduce the paper's experiments on the paper preset and write a markdown report with plots.
+    Bench(cmd_bench::BenchArgs),
 }
 
-/// Runs one parsed subcommand.
-fn dispatch(command: Command) -> anyhow::Result<()> {
-    match command {
+/// Exit code of a run that finished but located no tube (`tubeloc locate`).
+const EXIT_NO_TUBE: u8 = 3;
+
+/// Runs one parsed subcommand; returns the process exit code of a successful run.
+fn dispatch(command: Command) -> anyhow::Result<u8> {
+    let done = match command {
         // Dispatch: one arm per subcommand.
         Command::Calib(c) => cmd_calib::run(c),
         Command::Detect(a) => cmd_detect::run(a),
@@ -64,7 +74,10 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Stereo(a) => cmd_stereo::run(a),
         Command::Refine(a) => cmd_refine::run(a),
         Command::Demo(a) => cmd_demo::run(a),
-    }
+        Command::Locate(a) => return cmd_locate::run(a).map(|n| if n == 0 { EXIT_NO_TUBE } else { 0 }),
+        Command::Bench(a) => cmd_bench::run(a),
+    };
+    done.map(|()| 0)
 }
 
 /// Runs a subcommand given as command-line words (as if typed after `tubeloc`), in-process.
@@ -72,14 +85,14 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
 pub(crate) fn run_words(words: &[String]) -> anyhow::Result<()> {
     let argv = std::iter::once("tubeloc".to_string()).chain(words.iter().cloned());
     let cli = Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("internal command `tubeloc {}`: {e}", words.join(" ")))?;
-    dispatch(cli.command)
+    dispatch(cli.command).map(|_| ())
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = dispatch(cli.command);
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => ExitCode::from(code),
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(1)

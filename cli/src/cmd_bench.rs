@@ -1,0 +1,411 @@
+//! `tubeloc bench`: the paper's experiments on the paper preset, in one resumable command.
+//!
+//! Stages (each one's outputs are written atomically and recorded in `<out>/bench_state.json`;
+//! a rerun skips the stages already done, so an interrupted run resumes where it stopped):
+//!
+//! 1. `dataset`: the paper preset (`tubeloc synth --preset paper`), unless `--dataset` is given.
+//! 2. `splits`: one COCO folder per split (`no-tags`, `with-tags`), optionally subsampled.
+//! 3. `templates`: the default Line2D library for the benchmark camera.
+//! 4. `line2d/<split>`, `learned/<split>`: detection and COCO evaluation (PR curves, breakdowns
+//!    by terrain, time, height and occlusion) — the paper's Tables I and II.
+//! 5. `poses/<detector>/<split>`: refinement of the detections and pose errors against the
+//!    renderer's exact poses (coarse seeds vs mono refinement), with histograms.
+//! 6. `stereo`: a small synthetic stereo set, refined with and without the stereo term.
+//! 7. `fullres`: `tubeloc locate` on one full-resolution 5472x3648 image in a child process,
+//!    with its peak memory.
+//! 8. `report.md`: everything above with the paper's figures beside ours.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use serde_json::{json, Value};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tubeloc_core::files;
+
+/// The parts of the benchmark that can be skipped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
+pub enum Part {
+    /// Line2D detection and evaluation.
+    Line2d,
+    /// Learned detection and evaluation.
+    Learned,
+    /// Refinement and pose errors on the benchmark splits.
+    Poses,
+    /// Stereo refinement on a synthetic stereo set.
+    Stereo,
+    /// Full-resolution memory measurement.
+    Fullres,
+}
+
+/// Arguments of `tubeloc bench`.
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Output folder: report.md, plots and every intermediate file (resumable).
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    /// An existing paper-preset dataset (default: render one into <out>/dataset).
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Scenes to render when generating the dataset (default: the paper preset's).
+    #[arg(long)]
+    pub scenes: Option<usize>,
+    /// Use at most this many images per split (evenly spaced by image id; default: all).
+    #[arg(long)]
+    pub images_per_split: Option<usize>,
+    /// Line2D library (default: built into <out>/templates.tlt for the benchmark camera).
+    #[arg(long)]
+    pub templates: Option<PathBuf>,
+    /// Learned model used on both splits (default: the shipped data/models/tubenet.safetensors).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Cross-split protocol: model trained on the with-tags split (tested on no-tags).
+    #[arg(long)]
+    pub model_trained_with_tags: Option<PathBuf>,
+    /// Cross-split protocol: model trained on the no-tags split (tested on with-tags).
+    #[arg(long)]
+    pub model_trained_no_tags: Option<PathBuf>,
+    /// Parts to skip (comma separated).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub skip: Vec<Part>,
+    /// Scenes of the synthetic stereo set.
+    #[arg(long, default_value_t = 2)]
+    pub stereo_scenes: usize,
+    /// Redo every stage even if recorded as done.
+    #[arg(long)]
+    pub fresh: bool,
+}
+
+/// The benchmark's splits, with the paper's Line2D (AP50, AR) and Mask R-CNN (AP50, AR) figures
+/// (Tables I and II; Mask R-CNN tested on this split after training on the other).
+const SPLITS: [(&str, (f64, f64), (f64, f64)); 2] = [("no-tags", (0.345, 0.184), (0.911, 0.555)), ("with-tags", (0.255, 0.153), (0.918, 0.575))];
+
+/// Stage bookkeeping: wall time per finished stage, persisted after each one.
+struct Stages {
+    path: PathBuf,
+    done: BTreeMap<String, Value>,
+}
+
+impl Stages {
+    fn load(out: &Path, fresh: bool) -> Result<Stages> {
+        let path = out.join("bench_state.json");
+        let done = if path.exists() && !fresh { files::read_json(&path).with_context(|| format!("{}: delete it or pass --fresh", path.display()))? } else { BTreeMap::new() };
+        Ok(Stages { path, done })
+    }
+
+    /// Runs `f` unless stage `name` is recorded as done and all `outputs` exist; records its
+    /// wall time (and what `f` returns) and the process peak memory so far.
+    fn run(&mut self, name: &str, outputs: &[PathBuf], f: impl FnOnce() -> Result<Value>) -> Result<()> {
+        if self.done.contains_key(name) && outputs.iter().all(|p| p.exists()) {
+            eprintln!("== bench: {name}: done in an earlier run, skipped");
+            return Ok(());
+        }
+        eprintln!("\n== bench: {name}");
+        let t = Instant::now();
+        let extra = f().with_context(|| format!("bench stage {name:?}"))?;
+        let rec = json!({"seconds": t.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb(), "result": extra});
+        self.done.insert(name.to_string(), rec);
+        files::write_json(&self.path, &self.done)?;
+        Ok(())
+    }
+
+    fn seconds(&self, name: &str) -> Option<f64> {
+        self.done.get(name)?.get("seconds")?.as_f64()
+    }
+
+    fn result(&self, name: &str) -> Option<&Value> {
+        self.done.get(name)?.get("result")
+    }
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+fn words(w: &[&str]) -> Vec<String> {
+    w.iter().map(|x| x.to_string()).collect()
+}
+
+/// Writes `<dir>/annotations.json` with the images of one split (evenly subsampled to at most
+/// `limit`), their annotations, and an `images` link to the dataset's images.
+fn write_split(dataset: &Path, split: &str, limit: Option<usize>, dir: &Path) -> Result<usize> {
+    let src = dataset.join("annotations.json");
+    let mut v: Value = files::read_json(&src)?;
+    let images = v.get("images").and_then(Value::as_array).with_context(|| format!("{}: no images array", src.display()))?;
+    let mut keep: Vec<Value> = images.iter().filter(|im| im.get("split").and_then(Value::as_str) == Some(split)).cloned().collect();
+    if keep.is_empty() {
+        bail!("{}: no images with split {split:?} (is it a paper-preset dataset?)", src.display());
+    }
+    keep.sort_by_key(|im| im.get("id").and_then(Value::as_u64).unwrap_or(0));
+    if let Some(n) = limit.filter(|&n| n > 0 && n < keep.len()) {
+        let step = keep.len() as f64 / n as f64;
+        keep = (0..n).map(|i| keep[(i as f64 * step) as usize].clone()).collect();
+    }
+    let ids: std::collections::HashSet<u64> = keep.iter().filter_map(|im| im.get("id").and_then(Value::as_u64)).collect();
+    let anns: Vec<Value> = v.get("annotations").and_then(Value::as_array).map(|a| a.iter().filter(|x| x.get("image_id").and_then(Value::as_u64).is_some_and(|id| ids.contains(&id))).cloned().collect()).unwrap_or_default();
+    let n = keep.len();
+    v["images"] = Value::Array(keep);
+    v["annotations"] = Value::Array(anns);
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let link = dir.join("images");
+    if !link.exists() {
+        let target = std::fs::canonicalize(dataset.join("images")).with_context(|| format!("{}/images", dataset.display()))?;
+        std::os::unix::fs::symlink(&target, &link).with_context(|| format!("linking {} -> {}", link.display(), target.display()))?;
+    }
+    files::write_json(&dir.join("annotations.json"), &v)?;
+    Ok(n)
+}
+
+/// `(AP50, AR100)` from a `metrics.json` written by `tubeloc eval --out`.
+fn ap50_ar(metrics: &Path) -> Option<(f64, f64)> {
+    let v: Value = files::read_json(metrics).ok()?;
+    let get = |name: &str| v["stats"].as_array()?.iter().find(|s| s["name"] == name)?["value"].as_f64();
+    Some((get("AP50")?, get("AR100")?))
+}
+
+/// Detection + evaluation of one detector on one split; returns ms per image.
+fn detect_and_eval(method: &str, extra: &[String], split_dir: &Path, out: &Path, n_images: usize) -> Result<Value> {
+    std::fs::create_dir_all(out)?;
+    let dets = out.join("detections.json");
+    let mut w = words(&["detect", "--method", method, "--dataset", &s(split_dir), "--out", &s(&dets)]);
+    w.extend(extra.iter().cloned());
+    let t = Instant::now();
+    crate::run_words(&w)?;
+    let ms = t.elapsed().as_secs_f64() * 1e3 / n_images.max(1) as f64;
+    crate::run_words(&words(&["eval", "--gt", &s(&split_dir.join("annotations.json")), "--dt", &s(&dets), "--out", &s(&out.join("eval")), "--by", "terrain", "time", "height_m", "occlusion"]))?;
+    Ok(json!({"ms_per_image": ms}))
+}
+
+/// Runs `tubeloc bench`.
+pub fn run(a: BenchArgs) -> Result<()> {
+    let out = a.out.clone();
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let mut st = Stages::load(&out, a.fresh)?;
+    let t0 = Instant::now();
+
+    // 1. Dataset.
+    let dataset = match &a.dataset {
+        Some(d) => d.clone(),
+        None => {
+            let d = out.join("dataset");
+            st.run("dataset", &[d.join("annotations.json")], || {
+                let mut w = words(&["synth", "--preset", "paper", "--out", &s(&d), "--force"]);
+                if let Some(n) = a.scenes {
+                    w.extend(["--scenes".into(), n.to_string()]);
+                }
+                crate::run_words(&w)?;
+                Ok(Value::Null)
+            })?;
+            d
+        }
+    };
+    if !dataset.join("annotations.json").exists() {
+        bail!("{}: no annotations.json (render one with `tubeloc synth --preset paper --out DIR`)", dataset.display());
+    }
+
+    // 2. Splits.
+    let split_dir = |split: &str| out.join("splits").join(split);
+    let outputs: Vec<PathBuf> = SPLITS.iter().map(|(sp, ..)| split_dir(sp).join("annotations.json")).collect();
+    st.run("splits", &outputs, || {
+        let mut r = serde_json::Map::new();
+        for (sp, ..) in SPLITS {
+            r.insert(sp.into(), json!(write_split(&dataset, sp, a.images_per_split, &split_dir(sp))?));
+        }
+        Ok(Value::Object(r))
+    })?;
+    let n_images = |sp: &str| st.result("splits").and_then(|r| r[sp].as_u64()).unwrap_or(0) as usize;
+    let n_img: BTreeMap<&str, usize> = SPLITS.iter().map(|(sp, ..)| (*sp, n_images(sp))).collect();
+
+    // The benchmark camera: the first image's (crops share the focal length).
+    let gt0: Value = files::read_json(&split_dir(SPLITS[0].0).join("annotations.json"))?;
+    let camera = out.join("camera.json");
+    files::write_json(&camera, &gt0["images"][0]["camera"])?;
+
+    // 3 + 4. Line2D.
+    if !a.skip.contains(&Part::Line2d) {
+        let lib = match &a.templates {
+            Some(l) => l.clone(),
+            None => {
+                let l = out.join("templates.tlt");
+                st.run("templates", &[l.clone()], || {
+                    crate::run_words(&words(&["templates", "build", "--camera", &s(&camera), "--out", &s(&l)]))?;
+                    Ok(Value::Null)
+                })?;
+                l
+            }
+        };
+        for (sp, ..) in SPLITS {
+            let dir = out.join("line2d").join(sp);
+            let extra = words(&["--templates", &s(&lib), "--camera", &s(&camera)]);
+            st.run(&format!("line2d/{sp}"), &[dir.join("eval/metrics.json")], || detect_and_eval("line2d", &extra, &split_dir(sp), &dir, n_img[sp]))?;
+        }
+    }
+
+    // 4. Learned.
+    if !a.skip.contains(&Part::Learned) {
+        for (sp, ..) in SPLITS {
+            let cross = if sp == "no-tags" { &a.model_trained_with_tags } else { &a.model_trained_no_tags };
+            let model = cross.clone().or_else(|| a.model.clone()).unwrap_or_else(crate::cmd_detect_learned::default_model);
+            if !model.exists() {
+                bail!("learned model {} not found (pass --model, or --skip learned)", model.display());
+            }
+            let dir = out.join("learned").join(sp);
+            let extra = words(&["--model", &s(&model)]);
+            st.run(&format!("learned/{sp}"), &[dir.join("eval/metrics.json")], || {
+                let mut r = detect_and_eval("learned", &extra, &split_dir(sp), &dir, n_img[sp])?;
+                r["model"] = json!(model);
+                r["protocol"] = json!(if cross.is_some() { "cross-split" } else { "trained on generated scenes" });
+                Ok(r)
+            })?;
+        }
+    }
+
+    // 5. Poses from each detector's detections.
+    if !a.skip.contains(&Part::Poses) {
+        for det in ["line2d", "learned"] {
+            for (sp, ..) in SPLITS {
+                let dets = out.join(det).join(sp).join("detections.json");
+                if !dets.exists() {
+                    continue;
+                }
+                let dir = out.join("poses").join(det).join(sp);
+                st.run(&format!("poses/{det}/{sp}"), &[dir.join("eval/pose_metrics.json")], || {
+                    std::fs::create_dir_all(&dir)?;
+                    let poses = dir.join("poses.json");
+                    crate::run_words(&words(&["refine", "--dataset", &s(&split_dir(sp)), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses)]))?;
+                    crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--poses", &s(&poses), "--seeds", &s(&dets), "--out", &s(&dir.join("eval"))]))?;
+                    Ok(Value::Null)
+                })?;
+            }
+        }
+    }
+
+    // 6. Stereo on a synthetic stereo set.
+    if !a.skip.contains(&Part::Stereo) {
+        let sdir = out.join("stereo");
+        let set = sdir.join("set");
+        st.run("stereo", &[sdir.join("eval_mono/pose_metrics.json"), sdir.join("eval_stereo/pose_metrics.json")], || {
+            crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--force"]))?;
+            let gt = set.join("annotations.json");
+            let dets = sdir.join("detections.json");
+            crate::run_words(&words(&["detect", "--method", "learned", "--dataset", &s(&set), "--out", &s(&dets)]))?;
+            for (mode, stereo) in [("mono", false), ("stereo", true)] {
+                let poses = sdir.join(format!("poses_{mode}.json"));
+                let mut w = words(&["refine", "--dataset", &s(&set), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses)]);
+                if stereo {
+                    w.push("--stereo".into());
+                }
+                crate::run_words(&w)?;
+                crate::run_words(&words(&["eval", "--gt", &s(&gt), "--poses", &s(&poses), "--seeds", &s(&dets), "--out", &s(&sdir.join(format!("eval_{mode}")))]))?;
+            }
+            Ok(Value::Null)
+        })?;
+    }
+
+    // 7. Full resolution, in a child process so that its peak memory is its own.
+    if !a.skip.contains(&Part::Fullres) {
+        let fdir = out.join("fullres");
+        st.run("fullres", &[fdir.join("poses.json")], || fullres(&dataset, &fdir))?;
+    }
+
+    // 8. Report.
+    let report = write_report(&out, &st, &n_img, &a)?;
+    eprintln!("\nbench finished in {:.0} s (this run); report: {}", t0.elapsed().as_secs_f64(), report.display());
+    Ok(())
+}
+
+/// Upscales one benchmark image to the rig camera's full 5472x3648 frame and runs `tubeloc
+/// locate` on it in a child process; returns its wall time and peak memory.
+fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
+    std::fs::create_dir_all(dir)?;
+    let rig_path = dataset.join("rig.json");
+    let rig = tubeloc_core::Rig::load_json(&rig_path)?;
+    let (l, _) = rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo pair", rig_path.display()))?;
+    let cam = rig.camera(&l).with_context(|| format!("{}: no camera {l}", rig_path.display()))?;
+    let gt: Value = files::read_json(&dataset.join("annotations.json"))?;
+    let first = gt["images"][0]["file_name"].as_str().context("dataset has no images")?;
+    let src = image::open(dataset.join("images").join(first)).with_context(|| format!("reading {first}"))?;
+    let big = src.resize_exact(cam.model.width, cam.model.height, image::imageops::FilterType::Triangle).to_rgb8();
+    let img_path = dir.join("fullres.png");
+    let mut buf = std::io::Cursor::new(Vec::new());
+    big.write_to(&mut buf, image::ImageFormat::Png)?;
+    files::write_atomic(&img_path, &buf.into_inner())?;
+    let exe = std::env::current_exe().context("locating the tubeloc executable")?;
+    let t = Instant::now();
+    let status = std::process::Command::new(&exe)
+        .args(["locate", "--rig", &s(&rig_path), "--image", &s(&img_path), "--out", &s(&dir.join("poses.json"))])
+        .status()
+        .with_context(|| format!("running {}", exe.display()))?;
+    if !matches!(status.code(), Some(0) | Some(3)) {
+        bail!("locate on the full-resolution image failed ({status})");
+    }
+    let doc: Value = files::read_json(&dir.join("poses.json"))?;
+    Ok(json!({"seconds": t.elapsed().as_secs_f64(), "peak_rss_mb": doc["run"]["peak_rss_mb"], "width": cam.model.width, "height": cam.model.height}))
+}
+
+fn f3(x: f64) -> String {
+    format!("{x:.3}")
+}
+
+/// Writes `<out>/report.md` from the stage results; returns its path.
+fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &BenchArgs) -> Result<PathBuf> {
+    let mut r = String::new();
+    let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
+    let _ = writeln!(r, "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n", env!("CARGO_PKG_VERSION"), n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "));
+    let table = |r: &mut String, det: &str, paper_of: &dyn Fn(usize) -> (f64, f64), title: &str| {
+        let _ = writeln!(r, "## {title}\n\n| test split | AP [.5] ours | AR [.5:.95] ours | AP [.5] paper | AR paper | ms / image | details |\n|---|---|---|---|---|---|---|");
+        for (i, (sp, ..)) in SPLITS.iter().enumerate() {
+            let m = out.join(det).join(sp).join("eval/metrics.json");
+            let (p_ap, p_ar) = paper_of(i);
+            match ap50_ar(&m) {
+                Some((ap, ar)) => {
+                    let ms = st.result(&format!("{det}/{sp}")).and_then(|v| v["ms_per_image"].as_f64()).map(|x| format!("{x:.0}")).unwrap_or_default();
+                    let _ = writeln!(r, "| {sp} | {} | {} | {} | {} | {ms} | [report]({det}/{sp}/eval/report.md) |", f3(ap), f3(ar), f3(p_ap), f3(p_ar));
+                }
+                None => {
+                    let _ = writeln!(r, "| {sp} | not run | | {} | {} | | |", f3(p_ap), f3(p_ar));
+                }
+            }
+        }
+        r.push('\n');
+    };
+    table(&mut r, "line2d", &|i| SPLITS[i].1, "Table I: Line2D");
+    let protocol = st.result("learned/no-tags").and_then(|v| v["protocol"].as_str().map(String::from)).unwrap_or_else(|| "not run".into());
+    table(&mut r, "learned", &|i| SPLITS[i].2, &format!("Table II: learned segmenter ({protocol}; the paper's Mask R-CNN was trained on the other split)"));
+    for det in ["line2d", "learned"] {
+        for (sp, ..) in SPLITS {
+            let dir = out.join(det).join(sp).join("eval");
+            if let Ok(md) = std::fs::read_to_string(dir.join("breakdown.md")) {
+                let _ = writeln!(r, "### {det} on {sp}: breakdown (AP50 / AP / AR100 per value)\n\n{md}\n");
+            }
+        }
+    }
+    let _ = writeln!(r, "PR curves: each detector's `eval/report.md` above holds the ten PR curves (IoU 0.50 to 0.95) as PNG.\n");
+    let _ = writeln!(r, "## Pose errors (tubes at least half visible, against the renderer's exact poses)\n");
+    for det in ["line2d", "learned"] {
+        for (sp, ..) in SPLITS {
+            let p = out.join("poses").join(det).join(sp).join("eval/report.md");
+            if p.exists() {
+                let _ = writeln!(r, "- {det} seeds on {sp}: [pose report](poses/{det}/{sp}/eval/report.md)");
+            }
+        }
+    }
+    for mode in ["mono", "stereo"] {
+        let p = out.join("stereo").join(format!("eval_{mode}/report.md"));
+        if p.exists() {
+            let _ = writeln!(r, "- synthetic stereo set, {mode} refinement: [pose report](stereo/eval_{mode}/report.md)");
+        }
+    }
+    let _ = writeln!(r, "\n## Timings and memory\n\n| stage | wall s | peak RSS of the bench process so far, MiB |\n|---|---|---|");
+    for (name, v) in &st.done {
+        let _ = writeln!(r, "| {name} | {:.1} | {} |", st.seconds(name).unwrap_or(0.0), v["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or_default());
+    }
+    if let Some(f) = st.result("fullres") {
+        let _ = writeln!(r, "\nFull resolution ({}x{}): `tubeloc locate` in a child process took {:.1} s with a peak RSS of {} MiB.", f["width"], f["height"], f["seconds"].as_f64().unwrap_or(0.0), f["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or("?".into()));
+    }
+    let _ = writeln!(r, "\nMachine: {} logical CPUs. Command: `tubeloc bench --out {}{}`.", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1), a.out.display(), a.images_per_split.map(|n| format!(" --images-per-split {n}")).unwrap_or_default());
+    let p = out.join("report.md");
+    files::write_atomic(&p, r.as_bytes())?;
+    Ok(p)
+}

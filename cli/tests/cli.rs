@@ -1,0 +1,161 @@
+//! End-to-end tests of the `tubeloc` program: exit codes, error messages, `locate` on a rendered
+//! scene (checked against the renderer's exact poses) and `bench` resuming an interrupted run.
+
+use serde_json::Value;
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn tubeloc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
+}
+
+fn ok(args: &[&str]) -> Output {
+    let o = tubeloc(args);
+    assert!(o.status.success(), "tubeloc {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr));
+    o
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// A rendered tiny dataset, its first image's camera as a one-camera rig, and a small library.
+struct Scene {
+    dir: tempfile::TempDir,
+    gt: Value,
+}
+
+impl Scene {
+    fn new(scenes: &str, resolution: &str) -> Scene {
+        let dir = tempfile::tempdir().unwrap();
+        let ds = dir.path().join("dataset");
+        ok(&["synth", "--preset", "tiny", "--scenes", scenes, "--scale", "0.25", "--resolution", resolution, "--seed", "7", "--out", p(&ds)]);
+        let gt: Value = serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap()).unwrap();
+        let cam = &gt["images"][0]["camera"];
+        std::fs::write(dir.path().join("camera.json"), cam.to_string()).unwrap();
+        let rig = serde_json::json!({"cameras": [{"name": "C", "model": cam, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 0, 1], [0, -1, 0]], "translation": [0.1, 0.2, 0.3]}}], "stereo_pairs": []});
+        std::fs::write(dir.path().join("rig.json"), rig.to_string()).unwrap();
+        let lib = dir.path().join("lib.tlt");
+        ok(&["templates", "build", "--out", p(&lib), "--camera", p(&dir.path().join("camera.json")), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]);
+        Scene { dir, gt }
+    }
+    fn path(&self, name: &str) -> std::path::PathBuf {
+        self.dir.path().join(name)
+    }
+    fn image(&self, i: usize) -> std::path::PathBuf {
+        self.path("dataset/images").join(self.gt["images"][i]["file_name"].as_str().unwrap())
+    }
+}
+
+fn vec3(v: &Value) -> [f64; 3] {
+    [v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap()]
+}
+
+#[test]
+fn bad_command_line_exits_2() {
+    let o = tubeloc(&["locate", "--image", "x.png"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--rig"), "{}", stderr(&o));
+}
+
+#[test]
+fn locate_errors_name_the_file_and_the_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = dir.path().join("rig.json");
+    std::fs::write(&rig, "{\"cameras\": [").unwrap();
+    let img = dir.path().join("img.png");
+    image::RgbImage::new(64, 48).save(&img).unwrap();
+    let out = dir.path().join("poses.json");
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("rig.json"), "{}", stderr(&o));
+
+    // A valid rig whose camera is not the image's size.
+    let cam = serde_json::json!({"width": 640, "height": 480, "fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0});
+    std::fs::write(&rig, serde_json::json!({"cameras": [{"name": "C", "model": cam, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}}], "stereo_pairs": []}).to_string()).unwrap();
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("img.png is 64x48 but rig camera \"C\""), "{}", stderr(&o));
+
+    // Line2D without a library; stereo without a pair.
+    image::RgbImage::new(640, 480).save(&img).unwrap();
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--detector", "line2d", "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("needs --templates"), "{}", stderr(&o));
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--right", p(&img), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no stereo pair"), "{}", stderr(&o));
+    assert!(!out.exists(), "a failed run must not leave an output");
+}
+
+#[test]
+fn locate_finds_tubes_on_a_rendered_scene_with_grasp_frames() {
+    let s = Scene::new("1", "512");
+    let out = s.path("out/poses.json");
+    // The mast pose is known, so is the ground plane z_world = 0 in the camera frame:
+    // n = R_world_cam^T e_z, n.X = -t_z.
+    let t = &s.gt["images"][0]["T_world_cam"];
+    let n = [t["rotation"][2][0].as_f64().unwrap(), t["rotation"][2][1].as_f64().unwrap(), t["rotation"][2][2].as_f64().unwrap()];
+    let ground = format!("{},{},{},{}", n[0], n[1], n[2], -t["translation"][2].as_f64().unwrap());
+    let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "line2d", "--templates", p(&s.path("lib.tlt")), "--ground", &ground, "--out", p(&out)]);
+    let code = o.status.code();
+    assert!(code == Some(0) || code == Some(3), "{}", stderr(&o));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(doc["schema"], "tubeloc.locate.v1");
+    assert!(s.path("out/poses.overlay.png").exists() && s.path("out/poses.detections.json").exists());
+    let tubes = doc["tubes"].as_array().unwrap();
+    let converged: Vec<&Value> = tubes.iter().filter(|t| t["converged"] == true).collect();
+    assert_eq!(code == Some(0), !converged.is_empty(), "exit 3 exactly when no tube converged");
+    for t in tubes {
+        // Grasp frame: +x along the flip-free axis, +z (approach) perpendicular to it and
+        // downward (against the ground normal), rig frame = T_rig_cam * camera frame.
+        let r = &t["T_cam_grasp"]["rotation"];
+        let col = |j: usize| [r[0][j].as_f64().unwrap(), r[1][j].as_f64().unwrap(), r[2][j].as_f64().unwrap()];
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let axis = vec3(&t["axis"]);
+        assert!((dot(col(0), axis).abs() - 1.0).abs() < 1e-6);
+        assert!(dot(col(2), axis).abs() < 1e-6);
+        assert!(dot(col(2), n) <= 1e-9, "approach must not point up: {:?}", col(2));
+        let tc = vec3(&t["T_cam_grasp"]["translation"]);
+        let tr = vec3(&t["T_rig_grasp"]["translation"]);
+        // T_rig_cam: x' = x + 0.1, y' = z + 0.2, z' = -y + 0.3.
+        assert!((tr[0] - (tc[0] + 0.1)).abs() < 1e-9 && (tr[1] - (tc[2] + 0.2)).abs() < 1e-9 && (tr[2] - (0.3 - tc[1])).abs() < 1e-9);
+    }
+    // At least one located tube lies within 50 mm of a rendered tube.
+    let id = s.gt["images"][0]["id"].clone();
+    let truths: Vec<[f64; 3]> = s.gt["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == id).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();
+    let best = converged
+        .iter()
+        .flat_map(|t| truths.iter().map(move |g| {
+            let c = vec3(&t["centre"]);
+            ((c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2)).sqrt()
+        }))
+        .fold(f64::INFINITY, f64::min);
+    assert!(best < 0.05, "nearest located tube is {:.1} mm from a rendered one", best * 1e3);
+}
+
+#[test]
+fn bench_runs_on_a_tiny_dataset_and_resumes() {
+    let s = Scene::new("2", "384");
+    let out = s.path("bench");
+    let (ds, lib) = (s.path("dataset"), s.path("lib.tlt"));
+    let args = ["bench", "--dataset", p(&ds), "--templates", p(&lib), "--skip", "learned,poses,stereo,fullres", "--out", p(&out)];
+    ok(&args);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("Table I: Line2D"), "{report}");
+    for split in ["no-tags", "with-tags"] {
+        let row = report.lines().find(|l| l.starts_with(&format!("| {split} |"))).unwrap_or_else(|| panic!("no {split} row in {report}"));
+        let ap: f64 = row.split('|').nth(2).unwrap().trim().parse().unwrap_or_else(|_| panic!("no AP in {row}"));
+        assert!((0.0..=1.0).contains(&ap));
+        assert!(out.join("line2d").join(split).join("eval/metrics.json").exists());
+    }
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(out.join("bench_state.json")).unwrap()).unwrap();
+    assert!(state["line2d/no-tags"]["seconds"].as_f64().unwrap() > 0.0);
+    // A second run resumes: every stage is skipped, the report is rewritten.
+    let o = ok(&args);
+    assert!(stderr(&o).contains("line2d/with-tags: done in an earlier run, skipped"), "{}", stderr(&o));
+}
