@@ -83,6 +83,10 @@ pub enum SampleKind {
         end: f64,
         /// Angle in the `(e1, e2)` basis, radians.
         phi: f64,
+        /// `cos(phi)` (precomputed).
+        cos: f64,
+        /// `sin(phi)` (precomputed).
+        sin: f64,
     },
 }
 
@@ -121,9 +125,8 @@ impl ContourSample {
                 let n = f.e1 * alpha + f.e2 * (side * beta);
                 Some(SamplePoint { x: Point3::from(f.c + f.a * t + n * s.r), out: n, tangent: f.a })
             }
-            SampleKind::Rim { end, phi } => {
+            SampleKind::Rim { end, cos: cs, sin: sn, .. } => {
                 let z = if end < 0.0 { s.z0 } else { s.z1 };
-                let (sn, cs) = phi.sin_cos();
                 let n = f.e1 * cs + f.e2 * sn;
                 let x = f.c + f.a * z + n * s.r;
                 Some(SamplePoint { x: Point3::from(x), out: (n + f.a * end).normalize(), tangent: f.e2 * cs - f.e1 * sn })
@@ -175,11 +178,22 @@ pub fn build_samples(model: &CylinderModel, state: &AxisState, camera: &CameraMo
             }
             for k in 0..m {
                 let phi = std::f64::consts::TAU * (k as f64 + 0.5) / m as f64;
-                out.push(ContourSample { section: i, kind: SampleKind::Rim { end, phi } });
+                let (sin, cos) = phi.sin_cos();
+                out.push(ContourSample { section: i, kind: SampleKind::Rim { end, phi, cos, sin } });
             }
         }
     }
     out
+}
+
+/// [`build_samples`] with the spacing widened so that at most about `max_samples` samples
+/// result (the per-curve minimum counts may exceed it slightly).
+pub fn build_samples_capped(model: &CylinderModel, state: &AxisState, camera: &CameraModel, spacing_px: f64, max_samples: usize) -> Vec<ContourSample> {
+    let s = build_samples(model, state, camera, spacing_px);
+    if s.len() <= max_samples.max(1) {
+        return s;
+    }
+    build_samples(model, state, camera, spacing_px * s.len() as f64 / max_samples.max(1) as f64)
 }
 
 /// Projects a sample point and returns the pixel and the unit image normal, oriented outward

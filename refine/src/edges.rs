@@ -4,24 +4,25 @@
 //! Level 0 is the crop of the input image; level `k+1` averages 2x2 blocks of level `k` (pixel
 //! centres stay consistent with [`CameraModel::scaled`]). Each level is smoothed with the
 //! binomial kernel `[1 4 6 4 1]/16` (σ ≈ 1 px) and differentiated with central differences,
-//! giving `gx`, `gy` in intensity units per level pixel.
+//! giving `(∂I/∂x, ∂I/∂y)` in intensity units per level pixel.
 
 use nalgebra::{Point2, Vector2};
 use tubeloc_core::{CameraModel, Plane};
 
-/// Gradient images of one pyramid level and the camera that maps into its pixels.
+/// Gradient image of one pyramid level and the camera that maps into its pixels.
 #[derive(Clone, Debug)]
 pub struct GradientLevel {
     /// Camera for this level's pixel grid (cropped and scaled).
     pub camera: CameraModel,
-    /// Smoothed intensity.
-    pub smooth: Plane<f32>,
-    /// Horizontal derivative.
-    pub gx: Plane<f32>,
-    /// Vertical derivative.
-    pub gy: Plane<f32>,
+    /// Width of the level, pixels.
+    pub width: usize,
+    /// Height of the level, pixels.
+    pub height: usize,
     /// Scale of this level relative to full resolution (1, 0.5, 0.25, ...).
     pub scale: f64,
+    /// `(∂I/∂x, ∂I/∂y)` of the smoothed level (intensity per level pixel), interleaved,
+    /// row-major (`grad[y * width + x]`), for one memory access per bilinear tap.
+    pub grad: Vec<[f32; 2]>,
 }
 
 /// The crop rectangle `(x0, y0, w, h)` of `bbox` grown by `margin` pixels, clamped to the image.
@@ -55,55 +56,66 @@ fn downsample(p: &Plane<f32>) -> Plane<f32> {
     Plane::from_vec(w, h, data)
 }
 
-/// Separable binomial blur `[1 4 6 4 1]/16` with clamped borders.
+/// One output sample of the binomial kernel `[1 4 6 4 1]/16` over five inputs.
+#[inline(always)]
+fn binom(a: f32, b: f32, c: f32, d: f32, e: f32) -> f32 {
+    ((a + e) + 4.0 * (b + d) + 6.0 * c) * (1.0 / 16.0)
+}
+
+/// Separable binomial blur `[1 4 6 4 1]/16` with clamped borders (interior loops without
+/// index clamping, so that they vectorize).
 fn blur(p: &Plane<f32>) -> Plane<f32> {
     let (w, h) = (p.width, p.height);
-    const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+    let cl = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
     let mut tmp = vec![0f32; w * h];
     for y in 0..h {
         let row = p.row(y);
         let out = &mut tmp[y * w..(y + 1) * w];
-        for x in 0..w {
-            let mut s = 0.0;
-            for (k, kv) in K.iter().enumerate() {
-                let xx = (x as isize + k as isize - 2).clamp(0, w as isize - 1) as usize;
-                s += kv * row[xx];
+        for x in (0..w.min(2)).chain(w.saturating_sub(2).max(2)..w) {
+            let xi = x as isize;
+            out[x] = binom(row[cl(xi - 2, w)], row[cl(xi - 1, w)], row[x], row[cl(xi + 1, w)], row[cl(xi + 2, w)]);
+        }
+        if w > 4 {
+            for (o, win) in out[2..w - 2].iter_mut().zip(row.windows(5)) {
+                *o = binom(win[0], win[1], win[2], win[3], win[4]);
             }
-            out[x] = s;
         }
     }
     let mut data = vec![0f32; w * h];
     for y in 0..h {
+        let yi = y as isize;
+        let r = |k: isize| &tmp[cl(yi + k, h) * w..(cl(yi + k, h) + 1) * w];
+        let (r0, r1, r2, r3, r4) = (r(-2), r(-1), r(0), r(1), r(2));
         let out = &mut data[y * w..(y + 1) * w];
-        for (k, kv) in K.iter().enumerate() {
-            let yy = (y as isize + k as isize - 2).clamp(0, h as isize - 1) as usize;
-            let src = &tmp[yy * w..(yy + 1) * w];
-            for x in 0..w {
-                out[x] += kv * src[x];
-            }
+        for x in 0..w {
+            out[x] = binom(r0[x], r1[x], r2[x], r3[x], r4[x]);
         }
     }
     Plane::from_vec(w, h, data)
 }
 
-fn gradients(p: &Plane<f32>) -> (Plane<f32>, Plane<f32>) {
+/// Central-difference gradients `(∂x, ∂y)` (one-sided at the borders), interleaved.
+fn gradients(p: &Plane<f32>) -> Vec<[f32; 2]> {
     let (w, h) = (p.width, p.height);
-    let mut gx = vec![0f32; w * h];
-    let mut gy = vec![0f32; w * h];
+    let mut g = vec![[0f32; 2]; w * h];
     for y in 0..h {
         let row = p.row(y);
         let up = p.row(y.saturating_sub(1));
         let dn = p.row((y + 1).min(h - 1));
         let sy = if y == 0 || y == h - 1 { 1.0 } else { 0.5 };
+        let out = &mut g[y * w..(y + 1) * w];
         for x in 0..w {
-            let xl = x.saturating_sub(1);
-            let xr = (x + 1).min(w - 1);
-            let sx = if x == 0 || x == w - 1 { 1.0 } else { 0.5 };
-            gx[y * w + x] = (row[xr] - row[xl]) * sx;
-            gy[y * w + x] = (dn[x] - up[x]) * sy;
+            out[x][1] = (dn[x] - up[x]) * sy;
+        }
+        if w >= 2 {
+            out[0][0] = row[1] - row[0];
+            out[w - 1][0] = row[w - 1] - row[w - 2];
+            for (o, win) in out[1..w - 1].iter_mut().zip(row.windows(3)) {
+                o[0] = 0.5 * (win[2] - win[0]);
+            }
         }
     }
-    (Plane::from_vec(w, h, gx), Plane::from_vec(w, h, gy))
+    g
 }
 
 /// Builds `levels` gradient levels for the crop `(x0, y0, w, h)` of `image` seen by `camera`.
@@ -125,9 +137,8 @@ pub fn build_pyramid(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usi
             cam.height = cur.height as u32;
             scale *= 0.5;
         }
-        let smooth = blur(&cur);
-        let (gx, gy) = gradients(&smooth);
-        out.push(GradientLevel { camera: cam.clone(), smooth, gx, gy, scale });
+        let grad = gradients(&blur(&cur));
+        out.push(GradientLevel { camera: cam.clone(), width: cur.width, height: cur.height, scale, grad });
     }
     out
 }
@@ -145,14 +156,36 @@ impl GradientLevel {
     /// True when `p` is at least `margin` pixels inside this level's image.
     #[inline]
     pub fn inside(&self, p: &Point2<f64>, margin: f64) -> bool {
-        p.x >= margin && p.y >= margin && p.x <= self.gx.width as f64 - 1.0 - margin && p.y <= self.gx.height as f64 - 1.0 - margin
+        p.x >= margin && p.y >= margin && p.x <= self.width as f64 - 1.0 - margin && p.y <= self.height as f64 - 1.0 - margin
     }
 
     /// Directional derivative `∇I(q) · n` by bilinear interpolation of the gradient planes.
     #[inline]
     pub fn directional(&self, q: &Point2<f64>, n: &Vector2<f64>) -> f32 {
-        let (x, y) = (q.x as f32, q.y as f32);
-        self.gx.sample_bilinear(x, y) * n.x as f32 + self.gy.sample_bilinear(x, y) * n.y as f32
+        let g = self.gradient(q.x as f32, q.y as f32);
+        g[0] * n.x as f32 + g[1] * n.y as f32
+    }
+
+    /// Bilinearly interpolated `(gx, gy)` at `(x, y)` (level pixels, clamped to the image).
+    #[inline]
+    pub fn gradient(&self, x: f32, y: f32) -> [f32; 2] {
+        let (w, h) = (self.width, self.height);
+        let x = x.clamp(0.0, (w - 1) as f32);
+        let y = y.clamp(0.0, (h - 1) as f32);
+        // Non-negative after the clamp: truncation is the floor.
+        let (x0, y0) = (x as usize, y as usize);
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+        let x1 = (x0 + 1).min(w - 1) - x0;
+        let y1 = if y0 + 1 < h { w } else { 0 };
+        let i = y0 * w + x0;
+        let (a, b, c, d) = (self.grad[i], self.grad[i + x1], self.grad[i + y1], self.grad[i + y1 + x1]);
+        let mut out = [0f32; 2];
+        for k in 0..2 {
+            let top = a[k] + (b[k] - a[k]) * fx;
+            let bot = c[k] + (d[k] - c[k]) * fx;
+            out[k] = top + (bot - top) * fy;
+        }
+        out
     }
 
     /// Searches `p + k n`, `k = -radius..=radius`, for local maxima of `|∇I · n|` above

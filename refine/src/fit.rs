@@ -14,16 +14,17 @@
 //! that texture and shading edges of the other polarity are not associated.
 //! One damped Gauss-Newton step minimizes `Σ ρ_Tukey(r)`:
 //! `(JᵀWJ + λ diag(JᵀWJ)) δ = -JᵀW r`, accepted when the robust cost drops (λ ÷ 3), else
-//! λ × 4 and retry. Jacobians by central differences of the projection (exact enough and valid
-//! with lens distortion). θ = (c, δ1, δ2): centre plus an axis step in the tangent plane.
+//! λ × 4 and retry. Jacobians from [`crate::jacobian`] (analytic projection, cheap 3D
+//! differences). θ = (c, δ1, δ2): centre plus an axis step in the tangent plane.
 
-use crate::contour::{build_samples, project_with_normal, AxisState, ContourSample};
+use crate::contour::{build_samples_capped, project_with_normal, AxisState, ContourSample};
 use crate::edges::{EdgeHits, GradientLevel};
 use crate::model::CylinderModel;
 use crate::robust::{mad_scale, tukey_rho, tukey_weight};
 use crate::seed::GroundPlane;
 use crate::RefineConfig;
-use nalgebra::{Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
+use crate::jacobian::{stereo_row, PerturbedFrames};
+use nalgebra::{Matrix2x5, Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
 use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
 use tubeloc_core::{CameraModel, FailureReason, Plane, ResidualStats};
 
@@ -241,57 +242,53 @@ fn thresholds(r: &[Option<f64>], n_img: usize, n_st: usize, scratch: &mut Vec<f6
     ((4.685 * s_img).clamp(lo, hi), 4.685 * s_st)
 }
 
-/// Largest image motion (level pixels) of the associated samples between two states.
-fn max_motion(model: &CylinderModel, a: &AxisState, b: &AxisState, assoc: &[Assoc], cam: &CameraModel) -> f64 {
-    let (Some(fa), Some(fb)) = (a.frame(), b.frame()) else { return f64::INFINITY };
-    let mut m: f64 = 0.0;
-    for s in assoc {
-        let pa = s.sample.eval(model, &fa).and_then(|p| cam.project(&p.x));
-        let pb = s.sample.eval(model, &fb).and_then(|p| cam.project(&p.x));
-        match (pa, pb) {
-            (Some(x), Some(y)) => m = m.max((x - y).norm()),
-            _ => return f64::INFINITY,
-        }
-    }
-    m
+/// Largest predicted image motion (level pixels) of the associated samples for step `d`, from
+/// their image Jacobians (linearized; the step is small by construction).
+fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
+    jac.iter().flatten().map(|j| (j * d).norm()).fold(0.0, f64::max)
 }
 
-/// Normal equations `JᵀWJ`, `JᵀWr` by central differences at `st` for perturbation basis
-/// `(u1, u2)`; also returns `Σ w r²` and `Σ w`.
+/// Normal equations `JᵀWJ`, `JᵀWr` at `st` for the perturbation basis `(u1, u2)` with the
+/// Jacobians of [`crate::jacobian`]; fills `jac` with the image Jacobian of each association
+/// and returns `Σ w r²` and `Σ w`.
 #[allow(clippy::too_many_arguments)]
-fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64)) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
     let n_img = assoc.len();
-    let mut cols: [Vec<Option<f64>>; 5] = Default::default();
-    let steps = [1e-5, 1e-5, 1e-5, 1e-5, 1e-5];
-    let mut rp = Vec::new();
-    let mut rm = Vec::new();
-    for k in 0..5 {
-        let mut d = [0.0; 5];
-        d[k] = steps[k];
-        residuals(model, &st.updated(&d, u.0, u.1), assoc, cam, sigma_px, scene, cfg, &mut rp);
-        d[k] = -steps[k];
-        residuals(model, &st.updated(&d, u.0, u.1), assoc, cam, sigma_px, scene, cfg, &mut rm);
-        cols[k] = rp.iter().zip(&rm).map(|(a, b)| Some((a.as_ref()? - b.as_ref()?) / (2.0 * steps[k]))).collect();
+    let n_st = scene.stereo_points.len();
+    jac.clear();
+    let pf = PerturbedFrames::new(st, u.0, u.1);
+    let f0 = st.frame();
+    for a in assoc {
+        let j = match (&pf, &f0) {
+            (Some(pf), Some(f0)) => a.sample.eval(model, f0).and_then(|p| pf.image_jacobian(model, &a.sample, cam, &p.x)),
+            _ => None,
+        };
+        jac.push(j);
     }
     let mut h = Matrix5::zeros();
     let mut g = Vector5::zeros();
     let (mut wrr, mut wsum) = (0.0, 0.0);
-    for i in 0..r0.len() {
-        let Some(r) = r0[i] else { continue };
-        let cthr = group_threshold(i, n_img, scene.stereo_points.len(), c);
+    for (i, r) in r0.iter().enumerate() {
+        let Some(r) = *r else { continue };
+        let cthr = group_threshold(i, n_img, n_st, c);
         let w = if cthr >= 1e6 { 1.0 } else { tukey_weight(r, cthr) };
         if w <= 0.0 {
             continue;
         }
-        let mut j = Vector5::zeros();
-        let mut ok = true;
-        for k in 0..5 {
-            match cols[k][i] {
-                Some(v) if v.is_finite() => j[k] = v,
-                _ => ok = false,
+        let j: Vector5<f64> = if i < n_img {
+            let Some(ji) = &jac[i] else { continue };
+            (ji.transpose() * assoc[i].n) / sigma_px
+        } else if i < n_img + n_st {
+            Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
+        } else {
+            let Some(gp) = &scene.ground else { continue };
+            if i == n_img + n_st {
+                Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m
+            } else {
+                Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians()
             }
-        }
-        if !ok {
+        };
+        if !j.iter().all(|v| v.is_finite()) {
             continue;
         }
         h += j * j.transpose() * w;
@@ -311,6 +308,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     let mut scratch = Vec::new();
     let mut rbuf = Vec::new();
     let mut rtrial = Vec::new();
+    let mut jbuf = Vec::new();
     let top = first_level.min(levels.len().saturating_sub(1));
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,
@@ -324,24 +322,35 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
         let lv = &levels[li];
         let level = Level {
             lv,
-            radius: cfg.search_radius_px,
+            radius: if li == top { cfg.search_radius_px } else { cfg.fine_search_radius_px.min(cfg.search_radius_px) },
             sigma_px: cfg.edge_sigma_px,
         };
-        let samples = build_samples(model, &st, &lv.camera, cfg.sample_spacing_px);
+        let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
         let mut polarity = vec![0i8; samples.len()];
         let max_it = if li == top { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
         let mut lambda = 1e-3;
+        // Edge associations are refreshed when the contour has moved more than
+        // `reassociate_px` since the last search (and on the first two iterations, before and
+        // after the limb polarity is fixed); in between the residuals follow the stored
+        // hypotheses along the normals.
+        let mut assoc = Vec::new();
+        let mut drift = f64::INFINITY;
         for it in 0..max_it {
             iterations += 1;
-            let (assoc, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
-            if cfg.limb_polarity && it == 0 {
-                polarity = limb_polarity(&samples, &assoc);
-            }
-            if visible < cfg.min_samples {
-                return fail(st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}"), iterations);
-            }
-            if assoc.len() < cfg.min_samples {
-                return fail(st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len()), iterations);
+            let fresh = it <= 1 || drift > cfg.reassociate_px;
+            if fresh {
+                let (a, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+                assoc = a;
+                drift = 0.0;
+                if cfg.limb_polarity && it == 0 {
+                    polarity = limb_polarity(&samples, &assoc);
+                }
+                if visible < cfg.min_samples {
+                    return fail(st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}"), iterations);
+                }
+                if assoc.len() < cfg.min_samples {
+                    return fail(st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len()), iterations);
+                }
             }
             let n_img = assoc.len();
             residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rbuf);
@@ -350,7 +359,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
             let ax = st.a;
             let (u1, u2) = tangent_basis(&ax);
-            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c);
+            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &mut jbuf);
             let mut accepted = None;
             for _ in 0..6 {
                 let mut hd = h;
@@ -364,7 +373,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 let mut d = ch.solve(&(-g));
                 // Trust region: no contour sample may move more than `max_step_px` level pixels,
                 // so that samples do not jump between edge hypotheses within one step.
-                let motion = max_motion(model, &st, &st.updated(&[d[0], d[1], d[2], d[3], d[4]], &u1, &u2), &assoc, &lv.camera);
+                let motion = max_motion(&jbuf, &d);
                 if motion > cfg.max_step_px {
                     d *= cfg.max_step_px / motion;
                 }
@@ -379,15 +388,24 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 }
                 lambda *= 4.0;
             }
-            let Some((next, d)) = accepted else { break };
+            let Some((next, d)) = accepted else {
+                if fresh {
+                    break;
+                }
+                drift = f64::INFINITY;
+                continue;
+            };
             st = next;
+            let motion = max_motion(&jbuf, &d);
+            drift += motion;
             if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.c.z < 0.02 {
                 return fail(seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice()), iterations);
             }
-            let step_c = Vector3::new(d[0], d[1], d[2]).norm();
-            let step_a = (d[3] * d[3] + d[4] * d[4]).sqrt();
-            if step_c < 1e-6 && step_a < 1e-6 {
-                break;
+            if motion < cfg.converged_px {
+                if fresh {
+                    break;
+                }
+                drift = f64::INFINITY;
             }
         }
         let moved = (st.c - seed.c).norm();
@@ -400,8 +418,8 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
 
 /// Final statistics and covariance at the finest level.
 fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, iterations: usize) -> FitResult {
-    let level = Level { lv, radius: cfg.search_radius_px, sigma_px: cfg.edge_sigma_px };
-    let samples = build_samples(model, &st, &lv.camera, cfg.sample_spacing_px);
+    let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
+    let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
     let polarity = vec![0i8; samples.len()];
     let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
     let mut r = Vec::new();
@@ -437,7 +455,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
     let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
-    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c);
+    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, &mut Vec::new());
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {

@@ -13,6 +13,7 @@ pub mod contour;
 pub mod edges;
 pub mod error;
 pub mod fit;
+pub mod jacobian;
 pub mod model;
 pub mod robust;
 pub mod seed;
@@ -31,17 +32,27 @@ use tubeloc_core::{CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetectio
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct RefineConfig {
-    /// Half length of the 1D edge search along contour normals at the coarsest level (later
-    /// levels use at most 5).
+    /// Half length of the 1D edge search along contour normals at the coarsest level.
     pub search_radius_px: usize,
+    /// Half length of the edge search at the finer levels (at most `search_radius_px`).
+    pub fine_search_radius_px: usize,
     /// Spacing of contour samples along the projected contour.
     pub sample_spacing_px: f64,
+    /// Most contour samples per level: the spacing is widened beyond `sample_spacing_px` for
+    /// large tubes so that the cost per iteration stays bounded.
+    pub max_samples: usize,
     /// Minimum `|∇I · n|` (intensity per pixel, images in [0, 1]) for an edge.
     pub min_gradient: f32,
     /// Edge hypotheses weaker than this fraction of the strongest along a normal are dropped.
     pub rel_edge_strength: f32,
     /// Most image motion of any contour sample in one step, level pixels (trust region).
     pub max_step_px: f64,
+    /// Re-run the edge search when the contour has moved more than this since the last search
+    /// (level pixels).
+    pub reassociate_px: f64,
+    /// A level has converged when a step moves no contour sample more than this (level pixels)
+    /// right after a fresh edge search.
+    pub converged_px: f64,
     /// Outer iterations at the coarsest level (half of it at the finer levels).
     pub max_iterations: usize,
     /// Coarsest level is chosen so the body is at least this wide (pixels).
@@ -83,10 +94,14 @@ impl Default for RefineConfig {
     fn default() -> Self {
         RefineConfig {
             search_radius_px: 8,
+            fine_search_radius_px: 5,
             sample_spacing_px: 3.0,
+            max_samples: 200,
             min_gradient: 0.004,
             rel_edge_strength: 0.25,
             max_step_px: 2.0,
+            reassociate_px: 1.0,
+            converged_px: 0.02,
             max_iterations: 16,
             min_body_width_px: 14.0,
             max_levels: 4,
@@ -112,9 +127,13 @@ impl RefineConfig {
     pub fn validate(&self) -> Result<(), RefineError> {
         let ok = self.search_radius_px >= 1
             && self.search_radius_px <= 64
+            && self.fine_search_radius_px >= 1
             && self.sample_spacing_px > 0.0
+            && self.max_samples >= 16
             && self.min_gradient >= 0.0
             && self.max_levels >= 1
+            && self.reassociate_px >= 0.0
+            && self.converged_px >= 0.0
             && self.edge_sigma_px > 0.0
             && self.stereo_sigma_m > 0.0
             && self.inlier_px > 0.0
