@@ -16,6 +16,7 @@ pub mod fit;
 pub mod jacobian;
 pub mod model;
 pub mod robust;
+pub mod search;
 pub mod seed;
 
 pub use contour::AxisState;
@@ -57,6 +58,15 @@ pub struct RefineConfig {
     pub max_iterations: usize,
     /// Coarsest level is chosen so the body is at least this wide (pixels).
     pub min_body_width_px: f64,
+    /// Align the seed's contour at the coarsest level over image translations and axis
+    /// rotations before the fit ([`search`]), widening the basin to ~10 mm / 5 degrees.
+    pub seed_search: bool,
+    /// Half width of the seed search's translation grid, pixels of the coarsest level.
+    pub seed_search_radius_px: usize,
+    /// Largest axis rotation tried by the seed search, degrees.
+    pub seed_search_rotation_deg: f64,
+    /// Most fits tried (seed-search hypotheses and the seed) until one succeeds.
+    pub max_hypotheses: usize,
     /// Most pyramid levels.
     pub max_levels: usize,
     /// Nominal edge localization noise, full-resolution pixels (residual normalization).
@@ -104,6 +114,10 @@ impl Default for RefineConfig {
             converged_px: 0.02,
             max_iterations: 16,
             min_body_width_px: 14.0,
+            seed_search: true,
+            seed_search_radius_px: 16,
+            seed_search_rotation_deg: 7.5,
+            max_hypotheses: 3,
             max_levels: 4,
             edge_sigma_px: 0.5,
             stereo_sigma_m: 0.0015,
@@ -209,7 +223,7 @@ impl Refiner {
         let pyr = edges::build_pyramid(input.image, cam, rect, top + 1);
         let scene = Scene { ground: input.scene.ground.or(input.ground), ..input.scene };
         let top = top.min(pyr.len() - 1);
-        let mut a = fit::fit(&self.model, &self.config, &pyr, top, &scene, st);
+        let mut a = self.fit_candidates(&pyr, top, &scene, &st);
         if a.failure.is_some() && self.config.decide_end {
             // A template flipped end to end misplaces the sections; retry the other end.
             let b = fit::fit(&self.model, &self.config, &pyr, top, &scene, AxisState { c: st.c, a: -st.a });
@@ -231,6 +245,36 @@ impl Refiner {
             (a, if seed.end_known { 0.6 } else { 0.5 })
         };
         to_pose(image_id, score, &best, conf)
+    }
+
+    /// Fits from the coarse-search hypotheses ([`search::coarse_search`]) and the seed itself,
+    /// best scored first, up to `max_hypotheses` fits; returns the first that succeeds, else the
+    /// first failure.
+    fn fit_candidates(&self, pyr: &[edges::GradientLevel], top: usize, scene: &Scene, st: &AxisState) -> FitResult {
+        let cfg = &self.config;
+        let mut cands: Vec<AxisState> = Vec::new();
+        if cfg.seed_search {
+            let spec = search::SearchSpec {
+                radius_px: cfg.seed_search_radius_px as i32,
+                step_px: 2,
+                max_rotation_deg: cfg.seed_search_rotation_deg,
+                rotation_step_deg: 2.5,
+                max_samples: 120,
+            };
+            let hyps = search::coarse_search(&self.model, &pyr[top], st, scene.ground.as_ref(), &spec);
+            cands.extend(hyps.iter().map(|h| h.state));
+        }
+        // The seed itself goes second (or first without the search).
+        cands.insert(cands.len().min(1), *st);
+        let mut first_fail = None;
+        for c in cands.iter().take(cfg.max_hypotheses.max(1)) {
+            let r = fit::fit(&self.model, cfg, pyr, top, scene, *c);
+            if r.failure.is_none() {
+                return r;
+            }
+            first_fail.get_or_insert(r);
+        }
+        first_fail.expect("at least the seed is fitted")
     }
 
     /// Region of interest (crop rectangle) and coarsest pyramid level for a state.
@@ -263,7 +307,8 @@ impl Refiner {
         let fpx = 0.5 * (cam.fx + cam.fy);
         let body_px = 2.0 * self.model.body_radius() * fpx / st.c.norm();
         let top = ((body_px / self.config.min_body_width_px).max(1.0).log2().floor() as usize).min(self.config.max_levels - 1);
-        let margin = (self.config.search_radius_px as f64 + 4.0) * (1u64 << top) as f64 + 0.1 * (x1 - x0).max(y1 - y0);
+        let extra = if self.config.seed_search { self.config.seed_search_radius_px as f64 } else { 0.0 };
+        let margin = (self.config.search_radius_px as f64 + 4.0 + extra) * (1u64 << top) as f64 + 0.1 * (x1 - x0).max(y1 - y0);
         let rect = edges::roi([x0, y0, x1 - x0, y1 - y0], margin, cam.width as usize, cam.height as usize)?;
         Some((rect, top))
     }
