@@ -11,6 +11,13 @@ use tubeloc_core::Plane;
 
 /// Census signatures of `img` over a `win_w x win_h` window, one `u64` per pixel.
 pub fn census_transform(img: &Plane<u8>, win_w: usize, win_h: usize) -> Result<Plane<u64>> {
+    let mut out = Plane::<u64>::new(0, 0);
+    census_into(img, win_w, win_h, &mut out)?;
+    Ok(out)
+}
+
+/// As [`census_transform`], writing into `out` (resized to the image, its buffer reused).
+pub fn census_into(img: &Plane<u8>, win_w: usize, win_h: usize, out: &mut Plane<u64>) -> Result<()> {
     if win_w % 2 == 0 || win_h % 2 == 0 || win_w * win_h < 9 || win_w * win_h > 65 {
         return Err(param("census window", format!("{win_w}x{win_h}: sizes must be odd, with 9 <= w*h <= 65")));
     }
@@ -26,7 +33,10 @@ pub fn census_transform(img: &Plane<u8>, win_w: usize, win_h: usize) -> Result<P
             *v = src[(px as isize - rx as isize).clamp(0, w as isize - 1) as usize];
         }
     }
-    let mut out = Plane::<u64>::new(w, h);
+    out.width = w;
+    out.height = h;
+    out.data.clear();
+    out.data.resize(w * h, 0);
     out.data.par_chunks_mut(w).enumerate().for_each(|(y, orow)| {
         let centre = &padded[(y + ry) * pw + rx..][..w];
         for dy in 0..win_h {
@@ -39,7 +49,7 @@ pub fn census_transform(img: &Plane<u8>, win_w: usize, win_h: usize) -> Result<P
             }
         }
     });
-    Ok(out)
+    Ok(())
 }
 
 crate::multiversion! {

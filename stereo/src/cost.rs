@@ -35,6 +35,7 @@ pub(crate) struct CostWeights {
 
 /// Fills `out` (`h * w * nd`) with the cost volume of census planes `cl`, `cr` and optional
 /// gradient planes.
+#[cfg(test)]
 pub(crate) fn cost_volume(
     cl: &Plane<u64>,
     cr: &Plane<u64>,
@@ -45,35 +46,41 @@ pub(crate) fn cost_volume(
     out: &mut [u8],
 ) {
     let w = cl.width;
-    out.par_chunks_mut(w * nd).enumerate().for_each(|(y, orow)| {
-        let (lr, rr) = (cl.row(y), cr.row(y));
-        let g = grads.map(|(gl, gr)| (gl.row(y), gr.row(y)));
-        for x in 0..w {
-            let o = &mut orow[x * nd..(x + 1) * nd];
-            // Valid candidates: 0 <= x - dmin - d <= w - 1.
-            let hi = (x as i64 - dmin as i64).min(nd as i64 - 1);
-            let lo = (x as i64 - dmin as i64 - (w as i64 - 1)).max(0);
-            if hi < lo {
-                o.fill(wt.border);
-                continue;
-            }
-            let (lo, hi) = (lo as usize, hi as usize);
-            o[..lo].fill(wt.border);
-            o[hi + 1..].fill(wt.border);
-            // Right pixels x - dmin - d for d in lo..=hi, i.e. the window rr[xr_lo..=xr_hi] reversed.
-            let xr_hi = (x as i64 - dmin as i64 - lo as i64) as usize;
-            let xr_lo = (x as i64 - dmin as i64 - hi as i64) as usize;
-            let win = &rr[xr_lo..=xr_hi];
-            census_row(&mut o[lo..=hi], lr[x], win, wt.census);
-            if let Some((gl, gr)) = g {
-                grad_row(&mut o[lo..=hi], gl[x], &gr[xr_lo..=xr_hi], wt.grad, wt.grad_trunc);
-            }
-        }
-    });
+    out.par_chunks_mut(w * nd).enumerate().for_each(|(y, orow)| cost_row(y, cl, cr, grads, dmin, nd, wt, orow));
 }
 
 crate::multiversion! {
-    fn census_row(o: &mut [u8], l: u64, win: &[u64], weight: u8) {
+/// Fills `orow` (`w * nd`, `[x][d]`) with the costs of row `y` (see the module doc).
+pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr: &Plane<u64>, grads: Option<(&Plane<i16>, &Plane<i16>)>, dmin: i32, nd: usize, wt: CostWeights, orow: &mut [u8]) {
+    let w = cl.width;
+    let (lr, rr) = (cl.row(y), cr.row(y));
+    let g = grads.map(|(gl, gr)| (gl.row(y), gr.row(y)));
+    for x in 0..w {
+        let o = &mut orow[x * nd..(x + 1) * nd];
+        // Valid candidates: 0 <= x - dmin - d <= w - 1.
+        let hi = (x as i64 - dmin as i64).min(nd as i64 - 1);
+        let lo = (x as i64 - dmin as i64 - (w as i64 - 1)).max(0);
+        if hi < lo {
+            o.fill(wt.border);
+            continue;
+        }
+        let (lo, hi) = (lo as usize, hi as usize);
+        o[..lo].fill(wt.border);
+        o[hi + 1..].fill(wt.border);
+        // Right pixels x - dmin - d for d in lo..=hi, i.e. the window rr[xr_lo..=xr_hi] reversed.
+        let xr_hi = (x as i64 - dmin as i64 - lo as i64) as usize;
+        let xr_lo = (x as i64 - dmin as i64 - hi as i64) as usize;
+        let win = &rr[xr_lo..=xr_hi];
+        census_row(&mut o[lo..=hi], lr[x], win, wt.census);
+        if let Some((gl, gr)) = g {
+            grad_row(&mut o[lo..=hi], gl[x], &gr[xr_lo..=xr_hi], wt.grad, wt.grad_trunc);
+        }
+    }
+}
+}
+
+#[inline(always)]
+fn census_row(o: &mut [u8], l: u64, win: &[u64], weight: u8) {
         // o[k] pairs with win[len - 1 - k].
         if weight == 1 {
             for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
@@ -84,16 +91,14 @@ crate::multiversion! {
                 *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
             }
         }
-    }
 }
 
-crate::multiversion! {
-    fn grad_row(o: &mut [u8], l: i16, win: &[i16], weight: u8, trunc: u8) {
+#[inline(always)]
+fn grad_row(o: &mut [u8], l: i16, win: &[i16], weight: u8, trunc: u8) {
         for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
             let diff = (l - r).unsigned_abs().min(trunc as u16) as u8;
             *c = c.saturating_add(diff.saturating_mul(weight));
         }
-    }
 }
 
 #[cfg(test)]

@@ -9,9 +9,9 @@
 //! Output: a [`Plane<f32>`] of left-image disparities in pixels, `x_left - x_right`, where
 //! **invalid pixels are `f32::NAN`** (occluded, inconsistent, ambiguous or speckle).
 
-use crate::aggregate::{aggregate_select, AggParams};
-use crate::census::census_transform;
-use crate::cost::{cost_volume, sobel_x, CostWeights};
+use crate::aggregate::{aggregate_select, AggBuffers, AggParams};
+use crate::census::census_into;
+use crate::cost::{cost_row, sobel_x, CostWeights};
 use crate::error::{param, Result, StereoError};
 use crate::post::{median3, remove_speckles};
 use serde::{Deserialize, Serialize};
@@ -124,6 +124,11 @@ impl SgmParams {
         Ok(())
     }
 
+    /// Largest pixel matching cost (census bits times weight plus truncated gradient term).
+    fn cost_max(&self) -> u32 {
+        self.census_weight as u32 * (self.census_width * self.census_height - 1) as u32 + self.gradient_weight as u32 * self.gradient_trunc as u32
+    }
+
     fn agg_params(&self) -> AggParams {
         let mut lut = [0i16; 256];
         for (di, v) in lut.iter_mut().enumerate() {
@@ -139,23 +144,26 @@ impl SgmParams {
             uniqueness: self.uniqueness,
             lr_max_diff: self.lr_max_diff,
             subpixel: self.subpixel,
+            narrow: self.cost_max() as i32 + lut.iter().copied().max().unwrap_or(0) as i32 <= 255,
         }
     }
 }
 
-/// A reusable matcher: holds the cost volume and aggregation buffers
-/// (`W·H·D` bytes plus `2·W·H·D` bytes) so repeated calls on same-size images do not reallocate.
+/// A reusable matcher: holds the census planes and aggregation buffers (`2·W·H·D` bytes for
+/// the partial path sums, plus row buffers) so repeated calls on same-size images do not
+/// reallocate. Matching costs are computed row by row inside the aggregation, never stored
+/// as a volume.
 pub struct SgmMatcher {
     params: SgmParams,
-    cost: Vec<u8>,
-    sum: Vec<i16>,
+    census: (Plane<u64>, Plane<u64>),
+    bufs: AggBuffers,
 }
 
 impl SgmMatcher {
     /// A matcher with validated parameters.
     pub fn new(params: SgmParams) -> Result<Self> {
         params.validate()?;
-        Ok(SgmMatcher { params, cost: Vec::new(), sum: Vec::new() })
+        Ok(SgmMatcher { params, census: (Plane::new(0, 0), Plane::new(0, 0)), bufs: AggBuffers::default() })
     }
 
     /// The parameters in use.
@@ -174,8 +182,10 @@ impl SgmMatcher {
     fn compute_in_pool(&mut self, left: &Plane<u8>, right: &Plane<u8>) -> Result<Plane<f32>> {
         let p = &self.params;
         let (w, h, nd) = (left.width, left.height, p.num_disparities);
-        let cl = census_transform(left, p.census_width, p.census_height)?;
-        let cr = census_transform(right, p.census_width, p.census_height)?;
+        let (cl, cr) = &mut self.census;
+        census_into(left, p.census_width, p.census_height, cl)?;
+        census_into(right, p.census_width, p.census_height, cr)?;
+        let (cl, cr) = (&*cl, &*cr);
         let grads = if p.gradient_weight > 0 { Some((sobel_x(left), sobel_x(right))) } else { None };
         let wt = CostWeights {
             census: p.census_weight,
@@ -183,10 +193,10 @@ impl SgmMatcher {
             grad_trunc: p.gradient_trunc,
             border: (p.census_weight as u32 * (p.census_width * p.census_height - 1) as u32 / 2).min(255) as u8,
         };
-        self.cost.resize(w * h * nd, 0);
-        cost_volume(&cl, &cr, grads.as_ref().map(|(a, b)| (a, b)), p.min_disparity, nd, wt, &mut self.cost);
+        let grads = grads.as_ref().map(|(a, b)| (a, b));
+        let dmin = p.min_disparity;
         let mut out = Plane::<f32>::new(w, h);
-        aggregate_select(&self.cost, left, &p.agg_params(), &mut self.sum, &mut out.data);
+        aggregate_select(left, &p.agg_params(), &mut self.bufs, &mut out.data, |y, row| cost_row(y, cl, cr, grads, dmin, nd, wt, row));
         if p.median {
             out = median3(&out);
         }
