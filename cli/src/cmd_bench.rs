@@ -37,6 +37,8 @@ pub enum Part {
     Stereo,
     /// Full-resolution memory measurement.
     Fullres,
+    /// Tag-pair ground truth on the with-tags split against the exact poses.
+    Tags,
 }
 
 /// Arguments of `tubeloc bench`.
@@ -303,6 +305,16 @@ pub fn run(a: BenchArgs) -> Result<()> {
         })?;
     }
 
+    // 6b. Tag-pair ground truth on the with-tags split (a copy, so the dataset is not modified).
+    if !a.skip.contains(&Part::Tags) {
+        let tdir = out.join("tags");
+        st.run("tags", &[tdir.join("annotations.json")], || {
+            write_split(&dataset, "with-tags", a.images_per_split, &tdir)?;
+            crate::run_words(&words(&["calib", "groundtruth", "--dataset", &s(&tdir)]))?;
+            tag_pose_errors(&tdir.join("annotations.json"))
+        })?;
+    }
+
     // 7. Full resolution, in a child process so that its peak memory is its own.
     if !a.skip.contains(&Part::Fullres) {
         let fdir = out.join("fullres");
@@ -342,6 +354,36 @@ fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     }
     let doc: Value = files::read_json(&dir.join("poses.json"))?;
     Ok(json!({"seconds": t.elapsed().as_secs_f64(), "peak_rss_mb": doc["run"]["peak_rss_mb"], "width": cam.model.width, "height": cam.model.height}))
+}
+
+/// Tag-pair poses (`T_cam_tube_tags`, from `calib groundtruth`) against the renderer's exact
+/// `T_cam_tube`, per camera height and per (two tags | one tag): count, median and p90 of the
+/// centre distance (mm) and of the axis angle (deg).
+fn tag_pose_errors(ann: &Path) -> Result<Value> {
+    use tubeloc_core::Pose;
+    let v: Value = files::read_json(ann)?;
+    let height: BTreeMap<u64, f64> = v["images"].as_array().into_iter().flatten().filter_map(|im| Some((im["id"].as_u64()?, im["height_m"].as_f64()?))).collect();
+    let mut groups: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    for a in v["annotations"].as_array().into_iter().flatten() {
+        let (Some(est), Some(gt)) = (a.get("T_cam_tube_tags"), a.get("T_cam_tube")) else { continue };
+        let est: Pose = serde_json::from_value(est.clone()).with_context(|| format!("{}: T_cam_tube_tags", ann.display()))?;
+        let gt: Pose = serde_json::from_value(gt.clone()).with_context(|| format!("{}: T_cam_tube", ann.display()))?;
+        let e = tubeloc_eval::pose::pose_axis_error(&est, &gt);
+        let h = a["image_id"].as_u64().and_then(|id| height.get(&id).copied()).unwrap_or(f64::NAN);
+        let tags = if a["tags_pose"]["single_tag"].as_bool().unwrap_or(false) { "one tag" } else { "two tags" };
+        let g = groups.entry(format!("{h} m, {tags}")).or_default();
+        g.0.push(e.centre_distance_mm);
+        g.1.push(e.axis_angle_deg);
+    }
+    let q = |x: &mut Vec<f64>, p: f64| {
+        x.sort_by(f64::total_cmp);
+        tubeloc_eval::pose_summary::percentile(x, p).unwrap_or(f64::NAN)
+    };
+    let mut r = serde_json::Map::new();
+    for (k, (mut d, mut ang)) in groups {
+        r.insert(k, json!({"n": d.len(), "pos_median_mm": q(&mut d, 50.0), "pos_p90_mm": q(&mut d, 90.0), "axis_median_deg": q(&mut ang, 50.0), "axis_p90_deg": q(&mut ang, 90.0)}));
+    }
+    Ok(Value::Object(r))
 }
 
 fn f3(x: f64) -> String {
@@ -395,6 +437,13 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &Benc
         let p = out.join("stereo").join(format!("eval_{mode}/report.md"));
         if p.exists() {
             let _ = writeln!(r, "- synthetic stereo set, {mode} refinement: [pose report](stereo/eval_{mode}/report.md)");
+        }
+    }
+    if let Some(Value::Object(t)) = st.result("tags") {
+        let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n\n| camera height, tags seen | tubes | position median mm | p90 mm | axis median deg | p90 deg |\n|---|---|---|---|---|---|");
+        for (k, g) in t {
+            let f = |n: &str| g[n].as_f64().map(|x| format!("{x:.2}")).unwrap_or_default();
+            let _ = writeln!(r, "| {k} | {} | {} | {} | {} | {} |", g["n"], f("pos_median_mm"), f("pos_p90_mm"), f("axis_median_deg"), f("axis_p90_deg"));
         }
     }
     let _ = writeln!(r, "\n## Timings and memory\n\n| stage | wall s | peak RSS of the bench process so far, MiB |\n|---|---|---|");

@@ -143,7 +143,7 @@ fn bench_runs_on_a_tiny_dataset_and_resumes() {
     let s = Scene::new("2", "384");
     let out = s.path("bench");
     let (ds, lib) = (s.path("dataset"), s.path("lib.tlt"));
-    let args = ["bench", "--dataset", p(&ds), "--templates", p(&lib), "--skip", "learned,poses,stereo,fullres", "--out", p(&out)];
+    let args = ["bench", "--dataset", p(&ds), "--templates", p(&lib), "--skip", "learned,poses,stereo,fullres,tags", "--out", p(&out)];
     ok(&args);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("Table I: Line2D"), "{report}");
@@ -158,4 +158,26 @@ fn bench_runs_on_a_tiny_dataset_and_resumes() {
     // A second run resumes: every stage is skipped, the report is rewritten.
     let o = ok(&args);
     assert!(stderr(&o).contains("line2d/with-tags: done in an earlier run, skipped"), "{}", stderr(&o));
+}
+
+#[test]
+fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("dataset");
+    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.5", "--resolution", "768", "--seed", "3", "--out", p(&ds)]);
+    let o = ok(&["calib", "groundtruth", "--dataset", p(&ds)]);
+    let gt: Value = serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap()).unwrap();
+    let mut posed = 0;
+    for a in gt["annotations"].as_array().unwrap() {
+        let Some(est) = a.get("T_cam_tube_tags") else { continue };
+        assert_eq!(a["carries_tags"], true, "tag pose on a tube without tags: {a}");
+        let (e, g) = (vec3(&est["translation"]), vec3(&a["T_cam_tube"]["translation"]));
+        let d = ((e[0] - g[0]).powi(2) + (e[1] - g[1]).powi(2) + (e[2] - g[2]).powi(2)).sqrt();
+        let axis = |r: &Value| [r[0][2].as_f64().unwrap(), r[1][2].as_f64().unwrap(), r[2][2].as_f64().unwrap()];
+        let (ae, ag) = (axis(&est["rotation"]), axis(&a["T_cam_tube"]["rotation"]));
+        let ang = (ae[0] * ag[0] + ae[1] * ag[1] + ae[2] * ag[2]).abs().min(1.0).acos().to_degrees();
+        assert!(d < 0.015 && ang < 1.0, "tag-pair pose {:.1} mm / {ang:.2} deg from the exact pose ({})", d * 1e3, String::from_utf8_lossy(&o.stdout));
+        posed += 1;
+    }
+    assert!(posed >= 1, "no tag pose added: {}", String::from_utf8_lossy(&o.stdout));
 }
