@@ -3,7 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
-use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagMount};
+use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount};
 use tubeloc_core::{files, CameraModel, Rig};
 
 /// Calibration subcommands.
@@ -20,6 +20,9 @@ pub enum CalibCommand {
 /// Options shared by the commands that detect tags.
 #[derive(Args, Clone)]
 pub struct DetectorArgs {
+    /// Tag families to look for (tag36h11, tag25h9, tag16h5, tagStandard41h12), comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "tag36h11")]
+    pub family: Vec<String>,
     /// Quad decimation factor (1 = full resolution).
     #[arg(long, default_value_t = 1.0)]
     pub decimate: f32,
@@ -37,7 +40,8 @@ pub struct DetectorArgs {
 
 impl DetectorArgs {
     fn detector(&self) -> Result<TagDetector> {
-        Ok(TagDetector::new(DetectorConfig { decimation: self.decimate, threads: self.threads, refine_edges: !self.no_refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)
+        let families = self.family.iter().map(|f| TagFamily::from_name(f.trim())).collect::<Result<Vec<_>, _>>()?;
+        Ok(TagDetector::new(DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: !self.no_refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)
     }
 }
 
