@@ -32,6 +32,7 @@ pub mod rock;
 pub mod scene;
 pub mod sensor;
 pub mod single;
+pub mod stereo_set;
 pub mod sun;
 pub mod tags;
 pub mod terrain;
