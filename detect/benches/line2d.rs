@@ -3,6 +3,9 @@
 //! (coarse + fine over all templates, NMS) separately, then the same image and silhouettes
 //! through OpenCV contrib's `cv2.linemod` LINE-2D (T = {4, 8}) via scripts/linemod_peer.py.
 //!
+//! Also prints CPU time per image (all threads, from /proc/self/stat), which the load of other
+//! processes on a shared machine does not inflate, and the peer's CPU time.
+//!
 //! Run: `cargo bench -p tubeloc-detect --bench line2d` (set `LINE2D_BENCH_QUICK=1` for a
 //! ~700-template library). The peer part needs `pip install opencv-contrib-python-headless`.
 
@@ -60,6 +63,26 @@ fn median_ms(mut f: impl FnMut(), n: usize) -> f64 {
     v[n / 2]
 }
 
+/// CPU time (user + system, all threads) of this process so far, ms (Linux `/proc/self/stat`;
+/// 0 elsewhere). Under load from other processes wall time inflates but CPU time does not.
+fn cpu_ms() -> f64 {
+    let Ok(s) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
+    // Fields after the parenthesised command name: state is field 3, utime 14, stime 15.
+    let rest = s.rsplit_once(')').map(|x| x.1).unwrap_or("");
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0) + f.get(12).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    ticks * 10.0 // USER_HZ = 100 on Linux
+}
+
+/// Mean CPU time per call over `n` calls, ms.
+fn cpu_per_call(mut f: impl FnMut(), n: usize) -> f64 {
+    let c0 = cpu_ms();
+    for _ in 0..n {
+        f();
+    }
+    (cpu_ms() - c0) / n as f64
+}
+
 fn main() {
     let quick = std::env::var("LINE2D_BENCH_QUICK").is_ok();
     let mut params = LibraryParams::default();
@@ -101,6 +124,13 @@ fn main() {
     let raw = match_all(&prep, &lib, &p);
     let nms_ms = median_ms(|| drop(black_box(nms(&raw, &lib, p.nms_iou, p.max_detections))), 5);
     println!("  of which coarse+fine {raw_ms:.1} ms ({n_raw} raw matches), NMS {nms_ms:.1} ms");
+    let resp_cpu = cpu_per_call(|| drop(black_box(prepare_image(&img, W, H, &p))), 20);
+    let match_cpu = cpu_per_call(|| drop(black_box(nms(&match_all(&prep, &lib, &p), &lib, p.nms_iou, p.max_detections))), 10);
+    println!(
+        "  CPU time per image (all threads): response maps {resp_cpu:.1} ms, matching {match_cpu:.1} ms, total {:.1} ms = {:.1} ms wall on 2 idle cores if perfectly parallel",
+        resp_cpu + match_cpu,
+        (resp_cpu + match_cpu) / 2.0
+    );
     println!("tubeloc line2d: {} templates, 1024x1024: response maps {resp_ms:.1} ms, matching {match_ms:.1} ms, total {ours:.1} ms median ({n_det} detections, {} threads)", lib.len(), rayon::current_num_threads());
 
     // Peer: export the image and the silhouettes, run OpenCV's LINE-2D on them.
@@ -120,8 +150,12 @@ fn main() {
         Ok(out) if out.status.success() => {
             let line = String::from_utf8_lossy(&out.stdout);
             println!("peer: {}", line.trim());
-            if let Some(ms) = serde_json::from_str::<serde_json::Value>(line.trim()).ok().and_then(|v| v["match_ms_median"].as_f64()) {
-                println!("ratio OpenCV / tubeloc (total per image) = {:.2}x", ms / ours);
+            let v = serde_json::from_str::<serde_json::Value>(line.trim()).ok();
+            if let Some(ms) = v.as_ref().and_then(|v| v["match_ms_median"].as_f64()) {
+                println!("ratio OpenCV / tubeloc (wall, total per image) = {:.2}x", ms / ours);
+            }
+            if let Some(ms) = v.as_ref().and_then(|v| v["match_cpu_ms_median"].as_f64()) {
+                println!("ratio OpenCV / tubeloc (CPU time, total per image) = {:.2}x", ms / (resp_cpu + match_cpu));
             }
         }
         Ok(out) => println!("peer skipped: {}", String::from_utf8_lossy(&out.stdout).trim()),

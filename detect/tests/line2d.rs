@@ -7,7 +7,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tubeloc_core::{Pose, TubeModel};
 use tubeloc_detect::line2d::gradient::{downsample_rgb, quantize_rgb};
-use tubeloc_detect::line2d::matching::{coarse_scores, fine_score_at, match_template, prepare_image};
+use tubeloc_detect::line2d::matching::{coarse_scores, fine_score_at, fine_search, match_template, prepare_image};
 use tubeloc_detect::line2d::render::{intersect_tube, Pinhole};
 use tubeloc_detect::line2d::response::similarity;
 use tubeloc_detect::line2d::template::{LibraryParams, TemplateLibrary};
@@ -90,12 +90,12 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
         for t0 in [4usize, 2] {
             let pp = MatchParams { t0, threshold: 50.0, coarse_threshold: Some(50.0), ..MatchParams::default() };
             let prep = prepare_image(&img, w, h, &pp).unwrap();
-            let (mut f, mut a16, mut a8) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut a16, mut a8) = (Vec::new(), Vec::new());
             let mut rows = vec![];
             for t in &det.library.templates {
                 let a = t.axis();
                 let e = a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees();
-                let ms = match_template(&prep, t, &pp, &mut a16, &mut a8, &mut f);
+                let ms = match_template(&prep, t, &pp, &mut a16, &mut a8);
                 let best = ms.iter().map(|m| m.score).fold(0.0f32, f32::max);
                 rows.push((best, t.id, e, t.distance));
             }
@@ -171,6 +171,26 @@ fn response_maps_and_linear_memories_equal_brute_force() {
         }
     }
     assert!(checked > 100);
+    // The 32-lane fine search equals the exhaustive maximum of the direct sums over windows
+    // (first position in row-major order on ties), including windows wider than 32 lanes.
+    for (x_lo, x_hi, y_lo, y_hi) in [(0, 20, 0, 20), (3, w - tw, 5, 9), (w - tw - 7, w - tw, h - th - 3, h - th)] {
+        let mut best = (0u32, x_lo, y_lo);
+        for y in y_lo..=y_hi {
+            for x in x_lo..=x_hi {
+                let e = fine_score_at(&prep.resp0, &t, x, y);
+                if e > best.0 {
+                    best = (e, x, y);
+                }
+            }
+        }
+        assert_eq!(fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, 1), best, "window x {x_lo}..={x_hi}, y {y_lo}..={y_hi}");
+        // Every second row, then the rows next to the best: at least the best of the even rows,
+        // and its score is the direct sum at its position.
+        let even = (y_lo..=y_hi).step_by(2).flat_map(|y| (x_lo..=x_hi).map(move |x| (x, y))).map(|(x, y)| fine_score_at(&prep.resp0, &t, x, y)).max().unwrap();
+        let (e2, x2, y2) = fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, 2);
+        assert!(e2 >= even && e2 <= best.0);
+        assert_eq!(e2, fine_score_at(&prep.resp0, &t, x2, y2));
+    }
     // Level 1: linearized memories at every valid grid position.
     let (rgb1, w1, h1) = downsample_rgb(&img, w, h);
     let q1 = quantize_rgb(&rgb1, w1, h1, &p.gradient);
@@ -185,8 +205,8 @@ fn response_maps_and_linear_memories_equal_brute_force() {
         }
     }
     // The matcher's reported scores are the brute-force scores at the reported positions.
-    let (mut f, mut a16, mut a8) = (Vec::new(), Vec::new(), Vec::new());
-    let ms = match_template(&prep, &t, &p, &mut a16, &mut a8, &mut f);
+    let (mut a16, mut a8) = (Vec::new(), Vec::new());
+    let ms = match_template(&prep, &t, &p, &mut a16, &mut a8);
     assert!(!ms.is_empty());
     for m in ms {
         let e = brute(&q0, &t.levels[0].features, p.t0, m.x as usize, m.y as usize);

@@ -9,7 +9,8 @@
 //! every grid position `(c T, r T)` through the linearized memories; grid positions that reach
 //! the coarse threshold and are local maxima of the template's score map become candidates.
 //! Level 0 (full resolution, spreading `t0`, default 4) then evaluates the template's level-0
-//! features at every pixel of a `(2 t1 + 5)²` window around `2 (c T, r T)` and keeps the best.
+//! features at every pixel of a `(2 t1 + 5)²` window around `2 (c T, r T)` and keeps the best;
+//! a row of the window is 32 lanes scored at once from contiguous response-map bytes.
 //!
 //! Accumulation is integer and cannot overflow: per-feature values are at most 4, so blocks of
 //! up to 63 features are summed in `u8` (`63 · 4 = 252 <= 255`, plain wrapping adds that never
@@ -177,18 +178,9 @@ fn coarse_scores_with(simd: Simd, lm: &LinearMemories, t: &Template, acc16: &mut
     acc16.clear();
     acc16.resize(n, 0);
     acc8.resize(n, 0);
-    let tt = lm.t;
     for block in t.levels[1].features.chunks(63) {
         acc8.fill(0);
-        for f in block {
-            let (fx, fy) = (f.x as usize, f.y as usize);
-            let start = (fy / tt) * lm.grid_w + fx / tt;
-            if start >= n {
-                continue;
-            }
-            let mem = lm.memory(f.ori as usize, fx % tt, fy % tt);
-            simd.add_u8(&mut acc8[..n - start], &mem[start..]);
-        }
+        add_features_u8(simd, lm, block, acc8);
         simd.widen_add(acc16, acc8);
     }
 }
@@ -198,51 +190,155 @@ pub fn fine_score_at(resp: &ResponseMaps, t: &Template, x: usize, y: usize) -> u
     t.levels[0].features.iter().map(|f| resp.maps[f.ori as usize][(y + f.y as usize) * resp.width + x + f.x as usize] as u32).sum()
 }
 
-/// Raw level-0 scores of one row segment: `acc[i] = E(x_lo + i * step, y)` for `i < acc.len()`.
-#[inline]
-fn fine_row(resp: &ResponseMaps, t: &Template, x_lo: usize, step: usize, y: usize, acc: &mut [u16]) {
-    acc.fill(0);
-    let w = resp.width;
-    for f in &t.levels[0].features {
-        let map = &resp.maps[f.ori as usize];
-        let base = (y + f.y as usize) * w + x_lo + f.x as usize;
-        for (i, a) in acc.iter_mut().enumerate() {
-            *a += map[base + i * step] as u16;
+/// Widest fine-search window handled in one pass of lanes (pixels).
+pub const FINE_LANES: usize = 32;
+
+/// Adds `src[..32]` into `acc` (u8, wrapping; callers keep sums <= 255), reading only what
+/// exists of `src` (the rest counts 0).
+#[inline(always)]
+fn add_lanes(acc: &mut [u8; FINE_LANES], map: &[u8], base: usize) {
+    match map.get(base..base + FINE_LANES) {
+        Some(s) => {
+            for (a, &v) in acc.iter_mut().zip(s) {
+                *a = a.wrapping_add(v);
+            }
+        }
+        None => {
+            for (a, &v) in acc.iter_mut().zip(map.get(base..).unwrap_or(&[])) {
+                *a = a.wrapping_add(v);
+            }
         }
     }
 }
 
-/// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid):
-/// every second pixel first, then the 8 neighbours of the best one.
-fn fine_search(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, acc: &mut Vec<u16>) -> (u32, usize, usize) {
-    let nx = (x_hi - x_lo) / 2 + 1;
-    acc.resize(nx, 0);
-    let mut best = (0u32, x_lo, y_lo);
-    for y in (y_lo..=y_hi).step_by(2) {
-        fine_row(resp, t, x_lo, 2, y, &mut acc[..nx]);
-        for (i, &v) in acc[..nx].iter().enumerate() {
-            if v as u32 > best.0 {
-                best = (v as u32, x_lo + 2 * i, y);
-            }
+/// Raw level-0 scores of 32 consecutive positions of one row: `out[i] = E(x_lo + i, y)`
+/// (lanes whose template would cross the row end hold wrapped sums; callers ignore them).
+#[inline(always)]
+fn fine_lanes(resp: &ResponseMaps, t: &Template, x_lo: usize, y: usize, out: &mut [u16; FINE_LANES]) {
+    let w = resp.width;
+    *out = [0; FINE_LANES];
+    for block in t.levels[0].features.chunks(63) {
+        let mut acc = [0u8; FINE_LANES];
+        for f in block {
+            add_lanes(&mut acc, &resp.maps[f.ori as usize], (y + f.y as usize) * w + x_lo + f.x as usize);
+        }
+        for (o, &a) in out.iter_mut().zip(&acc) {
+            *o += a as u16;
         }
     }
-    let (bx, by) = (best.1, best.2);
-    for y in by.saturating_sub(1).max(y_lo)..=(by + 1).min(y_hi) {
-        for x in bx.saturating_sub(1).max(x_lo)..=(bx + 1).min(x_hi) {
-            if (x - x_lo) % 2 == 0 && (y - y_lo) % 2 == 0 {
-                continue;
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
+    use std::arch::x86_64::*;
+    let w = resp.width;
+    let feats = &t.levels[0].features;
+    let n_map = resp.maps[0].len();
+    // Fast path: every 32-byte load of the window lies inside the maps.
+    let max_off = feats.iter().map(|f| (y_hi + f.y as usize) * w + x_lo + f.x as usize).max().unwrap_or(0);
+    if x_hi - x_lo + 1 > FINE_LANES || max_off + FINE_LANES > n_map {
+        return fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step);
+    }
+    let nx = x_hi - x_lo + 1;
+    let maps: [*const u8; 8] = std::array::from_fn(|o| resp.maps[o].as_ptr());
+    let mut row = [0u16; FINE_LANES];
+    let mut score_row = |y: usize, best: &mut (u32, usize, usize)| {
+        let mut lo16 = _mm256_setzero_si256();
+        let mut hi16 = _mm256_setzero_si256();
+        for block in feats.chunks(63) {
+            let mut acc = _mm256_setzero_si256();
+            for f in block {
+                // SAFETY: offset + 32 <= n_map checked above for the largest row y_hi.
+                let ptr = maps[f.ori as usize & 7].add((y + f.y as usize) * w + x_lo + f.x as usize);
+                acc = _mm256_add_epi8(acc, _mm256_loadu_si256(ptr as *const __m256i));
             }
-            let e = fine_score_at(resp, t, x, y);
-            if e > best.0 {
-                best = (e, x, y);
+            let z = _mm256_setzero_si256();
+            // Widen: unpack interleaves within 128-bit lanes; undone when storing below.
+            lo16 = _mm256_add_epi16(lo16, _mm256_unpacklo_epi8(acc, z));
+            hi16 = _mm256_add_epi16(hi16, _mm256_unpackhi_epi8(acc, z));
+        }
+        // lo16 = bytes [0..8, 16..24], hi16 = bytes [8..16, 24..32].
+        let a = _mm256_permute2x128_si256(lo16, hi16, 0x20);
+        let b = _mm256_permute2x128_si256(lo16, hi16, 0x31);
+        _mm256_storeu_si256(row.as_mut_ptr() as *mut __m256i, a);
+        _mm256_storeu_si256(row.as_mut_ptr().add(16) as *mut __m256i, b);
+        for (i, &v) in row[..nx].iter().enumerate() {
+            let cand = (v as u32, x_lo + i, y);
+            if cand.0 > best.0 || (cand.0 == best.0 && (cand.2, cand.1) < (best.2, best.1)) {
+                *best = cand;
+            }
+        }
+    };
+    let mut best = (0u32, x_lo, y_lo);
+    for y in (y_lo..=y_hi).step_by(row_step) {
+        score_row(y, &mut best);
+    }
+    if row_step == 2 {
+        let by = best.2;
+        for y in [by.wrapping_sub(1), by + 1] {
+            if y >= y_lo && y <= y_hi && (y - y_lo) % 2 == 1 {
+                score_row(y, &mut best);
             }
         }
     }
     best
 }
 
+#[inline(always)]
+fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
+    let mut row = [0u16; FINE_LANES];
+    let mut score_row = |y: usize, best: &mut (u32, usize, usize)| {
+        let mut x0 = x_lo;
+        while x0 <= x_hi {
+            let nx = (x_hi - x0 + 1).min(FINE_LANES);
+            fine_lanes(resp, t, x0, y, &mut row);
+            for (i, &v) in row[..nx].iter().enumerate() {
+                let cand = (v as u32, x0 + i, y);
+                if cand.0 > best.0 || (cand.0 == best.0 && (cand.2, cand.1) < (best.2, best.1)) {
+                    *best = cand;
+                }
+            }
+            x0 += FINE_LANES;
+        }
+    };
+    let mut best = (0u32, x_lo, y_lo);
+    for y in (y_lo..=y_hi).step_by(row_step) {
+        score_row(y, &mut best);
+    }
+    if row_step == 2 {
+        let by = best.2;
+        for y in [by.wrapping_sub(1), by + 1] {
+            if y >= y_lo && y <= y_hi && (y - y_lo) % 2 == 1 {
+                score_row(y, &mut best);
+            }
+        }
+    }
+    best
+}
+
+/// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid).
+/// Rows are scored whole, 32 consecutive positions at once (one contiguous 32-byte slice of
+/// the response map per feature, u8 blocks of 63 features widened to u16). With
+/// `row_step = 1` the search is exhaustive; with `row_step = 2` every second row is scored,
+/// then the two rows next to the best one. Ties go to the first position in row-major order.
+/// Returns `(E, x, y)`.
+pub fn fine_search(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
+    let row_step = row_step.clamp(1, 2);
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked at run time).
+        return unsafe { fine_search_avx2(resp, t, x_lo, x_hi, y_lo, y_hi, row_step) };
+    }
+    fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step)
+}
+
 /// Raw matches of one template (coarse candidates verified at level 0), before NMS.
-pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, fine: &mut Vec<u16>) -> Vec<RawMatch> {
+pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>) -> Vec<RawMatch> {
+    match_template_impl(img, t, p, acc16, acc8, TAIL_MAX)
+}
+
+fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<RawMatch> {
     let simd = Simd::detect();
     let lm = &img.lm1;
     let l1 = &t.levels[1];
@@ -255,53 +351,117 @@ pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16:
     if (l1.width as usize) > w1 || (l1.height as usize) > h1 {
         return vec![];
     }
-    coarse_scores_with(simd, lm, t, acc16, acc8);
     let tt = lm.t;
     let cmax = (w1 - l1.width as usize) / tt;
     let rmax = (h1 - l1.height as usize) / tt;
-    let n1 = l1.features.len() as f32;
+    let n1 = l1.features.len();
     let coarse_thr = p.coarse_threshold.unwrap_or(p.threshold);
-    let need1 = (coarse_thr / 100.0 * SIM_MAX as f32 * n1).ceil().max(1.0) as u16;
+    let need1 = (coarse_thr / 100.0 * SIM_MAX as f32 * n1 as f32).ceil().max(1.0) as u16;
     let n0 = l0.features.len() as f32;
     let need0 = (p.threshold / 100.0 * SIM_MAX as f32 * n0).ceil().max(1.0) as u32;
     let gw = lm.grid_w;
+    let n = gw * lm.grid_h;
     let rad = tt + 2;
     let mut out = Vec::new();
-    for r in 0..=rmax {
-        for c in 0..=cmax {
-            let v = acc16[r * gw + c];
-            if v < need1 {
-                continue;
+    let mut fine_at = |r: usize, c: usize| {
+        let (gx, gy) = (2 * c * tt, 2 * r * tt);
+        let x_lo = gx.saturating_sub(rad);
+        let y_lo = gy.saturating_sub(rad);
+        let x_hi = (gx + rad).min(w0 - l0.width as usize);
+        let y_hi = (gy + rad).min(h0 - l0.height as usize);
+        if x_lo > x_hi || y_lo > y_hi {
+            return;
+        }
+        let (e, x, y) = fine_search(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, 2);
+        if e >= need0 {
+            out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
+        }
+    };
+    let head = n1.min(63);
+    if n1 - head <= tail_max && n1 > 0 {
+        // Head block in u8 over all grid positions; the tail only where the head can still
+        // reach `need1` (each tail feature adds at most SIM_MAX).
+        let tail = &l1.features[head..];
+        let Some(need_head) = need1.checked_sub((SIM_MAX as usize * tail.len()) as u16).map(|v| v.max(1)) else {
+            return out;
+        };
+        if need_head > (SIM_MAX as usize * head) as u16 {
+            return out;
+        }
+        let need_head = need_head as u8;
+        acc8.clear();
+        acc8.resize(n, 0);
+        add_features_u8(simd, lm, &l1.features[..head], acc8);
+        let tails: Vec<(&[u8], usize)> = tail
+            .iter()
+            .map(|f| ((f.y as usize / tt) * gw + f.x as usize / tt, lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt)))
+            .map(|(start, m)| (m, start))
+            .collect();
+        // Exact score of a valid grid index, or None when it is surely below need1.
+        let score = |i: usize| -> Option<u16> {
+            let h = acc8[i];
+            if h < need_head {
+                return None;
             }
-            // Local maximum among valid 8-neighbours.
+            let v = h as u16 + tails.iter().map(|&(m, s)| m[s + i] as u16).sum::<u16>();
+            (v >= need1).then_some(v)
+        };
+        candidates(rmax, cmax, gw, |r| acc8[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need_head, score, &mut fine_at);
+    } else {
+        coarse_scores_with(simd, lm, t, acc16, acc8);
+        let score = |i: usize| (acc16[i] >= need1).then_some(acc16[i]);
+        candidates(rmax, cmax, gw, |r| acc16[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need1, score, &mut fine_at);
+    }
+    out
+}
+
+/// Level-1 features beyond the first u8 block of 63 that are added per surviving grid position
+/// (scalar) instead of over the whole grid; longer templates use the u16 path.
+const TAIL_MAX: usize = 8;
+
+/// Sums `features` (at most 63) into the u8 grid accumulator `acc` over the linearized memories.
+fn add_features_u8(simd: Simd, lm: &LinearMemories, features: &[crate::line2d::Feature], acc: &mut [u8]) {
+    let n = acc.len();
+    let tt = lm.t;
+    for f in features {
+        let (fx, fy) = (f.x as usize, f.y as usize);
+        let start = (fy / tt) * lm.grid_w + fx / tt;
+        if start >= n {
+            continue;
+        }
+        simd.add_u8(&mut acc[..n - start], &lm.memory(f.ori as usize, fx % tt, fy % tt)[start..]);
+    }
+}
+
+/// Calls `found(r, c)` for every grid position `(r <= rmax, c <= cmax)` whose score (`score`
+/// returns None below the threshold) is a strict local maximum among its valid 8-neighbours
+/// (ties go to the first in row-major order). `row_may_pass(r)` is a cheap upper-bound test.
+fn candidates(rmax: usize, cmax: usize, gw: usize, row_may_pass: impl Fn(usize) -> bool, score: impl Fn(usize) -> Option<u16>, found: &mut impl FnMut(usize, usize)) {
+    for r in 0..=rmax {
+        if !row_may_pass(r) {
+            continue;
+        }
+        for c in 0..=cmax {
+            let Some(v) = score(r * gw + c) else { continue };
             let mut is_max = true;
             'n: for rr in r.saturating_sub(1)..=(r + 1).min(rmax) {
                 for cc in c.saturating_sub(1)..=(c + 1).min(cmax) {
-                    let u = acc16[rr * gw + cc];
-                    if u > v || (u == v && (rr, cc) < (r, c)) {
-                        is_max = false;
-                        break 'n;
+                    if (rr, cc) == (r, c) {
+                        continue;
+                    }
+                    if let Some(u) = score(rr * gw + cc) {
+                        if u > v || (u == v && (rr, cc) < (r, c)) {
+                            is_max = false;
+                            break 'n;
+                        }
                     }
                 }
             }
-            if !is_max {
-                continue;
-            }
-            let (gx, gy) = (2 * c * tt, 2 * r * tt);
-            let x_lo = gx.saturating_sub(rad);
-            let y_lo = gy.saturating_sub(rad);
-            let x_hi = (gx + rad).min(w0 - l0.width as usize);
-            let y_hi = (gy + rad).min(h0 - l0.height as usize);
-            if x_lo > x_hi || y_lo > y_hi {
-                continue;
-            }
-            let (e, x, y) = fine_search(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, fine);
-            if e >= need0 {
-                out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
+            if is_max {
+                found(r, c);
             }
         }
     }
-    out
 }
 
 /// All raw matches of a library (rayon across templates), sorted by decreasing score.
@@ -309,7 +469,7 @@ pub fn match_all(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchParams) ->
     let mut all: Vec<RawMatch> = lib
         .templates
         .par_iter()
-        .map_init(|| (Vec::new(), Vec::new(), Vec::new()), |(a16, a8, f), t| match_template(img, t, p, a16, a8, f))
+        .map_init(|| (Vec::new(), Vec::new()), |(a16, a8), t| match_template(img, t, p, a16, a8))
         .flatten()
         .collect();
     all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
@@ -468,6 +628,45 @@ impl Line2dDetector {
                 cy: (height as f64 - 1.0) / 2.0,
                 distortion: Default::default(),
             }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::line2d::render::draw_tube_rgb;
+    use crate::line2d::template::LibraryParams;
+    use crate::line2d::ViewParams;
+    use nalgebra::{Rotation3, Vector3};
+    use rand::{Rng, SeedableRng};
+    use tubeloc_core::{Pose, TubeModel};
+
+    /// The head-block + per-position tail path finds exactly the matches of the full u16 path.
+    #[test]
+    fn head_tail_path_equals_full_u16_path() {
+        let (w, h) = (320usize, 256usize);
+        for features in [40u32, 64, 70] {
+            let mut lp = LibraryParams { features, ..LibraryParams::default() };
+            lp.views = ViewParams { dist_min: 1.6, dist_max: 1.6, step_deg: 30.0, ..ViewParams::default() };
+            lp.camera.cx = w as f64 / 2.0;
+            lp.camera.cy = h as f64 / 2.0;
+            let lib = TemplateLibrary::build(&TubeModel::default(), &lp, &|_| {}).unwrap();
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+            let mut img: Vec<u8> = (0..w * h * 3).map(|_| rng.random_range(90..=150u8)).collect();
+            let pose = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::y_axis(), 1.2), Vector3::new(0.02, 0.01, 1.6));
+            draw_tube_rgb(&mut img, w, h, &TubeModel::default(), &lp.camera, &pose);
+            let p = MatchParams { threshold: 55.0, ..MatchParams::default() };
+            let prep = prepare_image(&img, w, h, &p).unwrap();
+            let (mut a16, mut a8) = (Vec::new(), Vec::new());
+            let mut total = 0;
+            for t in &lib.templates {
+                let fast = match_template_impl(&prep, t, &p, &mut a16, &mut a8, TAIL_MAX);
+                let full = match_template_impl(&prep, t, &p, &mut a16, &mut a8, 0);
+                assert_eq!(fast, full, "template {} ({} level-1 features)", t.id, t.levels[1].features.len());
+                total += fast.len();
+            }
+            assert!(total > 0, "no match at all with {features} features");
         }
     }
 }
