@@ -13,6 +13,8 @@
 //! - [`triangulate::triangulate`]`(&Plane<f32>, &RectifiedGeometry, sigma_d)`: 3D points in the
 //!   rectified left frame with `σ_Z = Z² σ_d / (f B)`; [`triangulate::StereoPoint`].
 //! - [`metrics`]: Middlebury-style bad-N and mean absolute error on non-occluded pixels.
+//! - [`pair_eval`]: scores against exact disparity (valid and tube pixels) and distances of
+//!   triangulated tube points to the true tube surface.
 //! - [`io`]: PFM and 16-bit fixed-point disparity files, colour previews.
 
 pub(crate) mod aggregate;
@@ -21,6 +23,7 @@ pub(crate) mod cost;
 pub mod error;
 pub mod io;
 pub mod metrics;
+pub mod pair_eval;
 pub mod post;
 pub mod region;
 pub mod sgm;
