@@ -18,14 +18,17 @@ pub struct DetectionOut {
     segmentation: Option<Segmentation>,
 }
 
-/// The shipped model (`data/models/tubenet.safetensors`), looked up next to the current
-/// directory first, then in the source tree the program was built from.
+/// The shipped model (`data/models/tubenet.safetensors`), looked up under the current
+/// directory, then in the workspace the executable sits in (`<ws>/target/<profile>/tubeloc`),
+/// then in the source tree the program was built from (`CARGO_MANIFEST_DIR/..`).
 pub fn default_model() -> PathBuf {
-    let local = Path::new("data/models/tubenet.safetensors");
-    if local.exists() {
-        return local.to_path_buf();
+    let rel = Path::new("data/models/tubenet.safetensors");
+    let mut candidates = vec![rel.to_path_buf()];
+    if let Some(ws) = std::env::current_exe().ok().and_then(|e| e.parent()?.parent()?.parent().map(Path::to_path_buf)) {
+        candidates.push(ws.join(rel));
     }
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models/tubenet.safetensors")
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel);
+    candidates.into_iter().find(|p| p.exists()).unwrap_or(built)
 }
 
 /// Images to process: `(image_id, path)`.
@@ -50,6 +53,9 @@ pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -
 
 /// Runs the learned model over images; returns the output entries.
 pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
+    if !model_path.exists() {
+        bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model_path.display());
+    }
     let model = LearnedModel::load(model_path).with_context(|| format!("loading model {}", model_path.display()))?;
     let pb = ProgressBar::new(images.len() as u64);
     pb.set_style(ProgressStyle::with_template("detect {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));

@@ -1,4 +1,6 @@
-//! `tubeloc train`: train the learned tube segmenter on COCO dataset directories.
+//! `tubeloc train`: train the learned tube segmenter on COCO dataset directories and/or on
+//! freshly rendered scenes (`--generate N`, cached in a folder, seeds disjoint from the paper
+//! benchmark's).
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -11,8 +13,23 @@ use tubeloc_detect::learned::{DecodeConfig, LearnedModel, Preprocess, TrainConfi
 #[derive(clap::Args)]
 pub struct TrainArgs {
     /// Training dataset directory (annotations.json + images); repeat for several.
-    #[arg(long, required = true)]
+    #[arg(long)]
     pub train: Vec<PathBuf>,
+    /// Also train on N freshly rendered images of the paper preset's terrains and conditions
+    /// (scene seeds from --gen-seed, checked disjoint from the benchmark's seed 0), rendered
+    /// once into --gen-dir and reused when it already holds them.
+    #[arg(long)]
+    pub generate: Option<usize>,
+    /// Master seed of the generated scenes (must differ from the benchmark's 0).
+    #[arg(long, default_value_t = 1)]
+    pub gen_seed: u64,
+    /// Crop side of the generated images, pixels (the paper preset's scale 0.5; smaller crops
+    /// render faster and training crops are smaller still).
+    #[arg(long, default_value_t = 512)]
+    pub gen_crop: u32,
+    /// Cache folder of the generated images (default `<out>.gen`).
+    #[arg(long)]
+    pub gen_dir: Option<PathBuf>,
     /// Validation dataset directory (AP50 shown in the progress bar).
     #[arg(long)]
     pub val: Option<PathBuf>,
@@ -28,7 +45,8 @@ pub struct TrainArgs {
     /// Seed of the weight initialization and of the crop sampler.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Resume from a checkpoint or model file (its architecture and preprocessing win).
+    /// Resume from a checkpoint (`<out>.ckpt`, with its optimizer state `<out>.ckpt.opt`) or a
+    /// model file (fresh optimizer moments); its architecture and preprocessing win.
     #[arg(long)]
     pub resume: Option<PathBuf>,
     /// Input preprocessing: gray-box (paper), gray-box:R, or rgb.
@@ -60,16 +78,58 @@ pub struct TrainArgs {
     pub train_limit: Option<usize>,
 }
 
+/// Renders (or reuses) the generated training set: `n` images spread over
+/// `max(15, n / 16)` scenes cycling through the paper preset's terrains and times.
+fn generated_set(n: usize, seed: u64, crop: u32, dir: &std::path::Path) -> Result<()> {
+    use tubeloc_synth::DatasetSpec;
+    if seed == 0 {
+        bail!("--gen-seed 0 is the benchmark's seed; pick another");
+    }
+    let ann = dir.join("annotations.json");
+    if ann.exists() {
+        let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+        if ds.images.len() == n {
+            eprintln!("{}: reusing {} generated images", dir.display(), n);
+            return Ok(());
+        }
+        bail!("{} holds {} images, not {n}: remove it or pick another --gen-dir", dir.display(), ds.images.len());
+    }
+    let bench: Vec<u64> = DatasetSpec::preset("paper", 0)?.scenes.iter().map(|s| s.seed).collect();
+    let scenes = (n / 16).max(15);
+    let mut spec = DatasetSpec::preset("paper", seed)?.with_scenes(scenes)?;
+    spec.crop = crop;
+    for (k, s) in spec.scenes.iter_mut().enumerate() {
+        s.images = n / scenes + usize::from(k < n % scenes);
+        if bench.contains(&s.seed) {
+            bail!("generated scene {k} has the benchmark's scene seed {}; pick another --gen-seed", s.seed);
+        }
+    }
+    spec.scenes.retain(|s| s.images > 0);
+    let pb = ProgressBar::new(n as u64);
+    pb.set_style(ProgressStyle::with_template("render {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
+    tubeloc_synth::write_dataset(&spec, dir, (0, 1), false, &|done, _| pb.set_position(done as u64)).with_context(|| format!("rendering the generated set into {}", dir.display()))?;
+    pb.finish_and_clear();
+    Ok(())
+}
+
 /// Runs `tubeloc train`.
 pub fn run(args: TrainArgs) -> Result<()> {
     let pre = Preprocess::parse(&args.preprocess).with_context(|| format!("unknown --preprocess {:?} (gray-box, gray-box:R, rgb)", args.preprocess))?;
-    let model = match &args.resume {
-        Some(p) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?,
-        None => LearnedModel::new(pre, args.width, args.seed)?,
+    let mut dirs = args.train.clone();
+    if let Some(n) = args.generate {
+        let dir = args.gen_dir.clone().unwrap_or_else(|| PathBuf::from(format!("{}.gen", args.out.display())));
+        generated_set(n, args.gen_seed, args.gen_crop, &dir)?;
+        dirs.push(dir);
+    }
+    if dirs.is_empty() {
+        bail!("nothing to train on: give --train DATASET and/or --generate N");
+    }
+    let pre = match &args.resume {
+        Some(p) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?.meta.preprocess,
+        None => pre,
     };
-    let pre = model.meta.preprocess;
     let mut images = Vec::new();
-    for d in &args.train {
+    for d in &dirs {
         let mut v = load_coco_dir(d, pre, args.train_limit).with_context(|| format!("loading training set {}", d.display()))?;
         eprintln!("{}: {} images", d.display(), v.len());
         images.append(&mut v);
@@ -92,7 +152,14 @@ pub fn run(args: TrainArgs) -> Result<()> {
         augment: AugmentConfig { crop: args.crop, ..Default::default() },
         ..Default::default()
     };
-    let mut trainer = Trainer::new(model, cfg)?;
+    let mut trainer = match &args.resume {
+        Some(p) => {
+            let (t, had_opt) = Trainer::resume(p, cfg).with_context(|| format!("resuming from {}", p.display()))?;
+            eprintln!("resuming at step {} ({})", t.model.meta.steps, if had_opt { "with optimizer state" } else { "no optimizer state found: fresh moments" });
+            t
+        }
+        None => Trainer::new(LearnedModel::new(pre, args.width, args.seed)?, cfg)?,
+    };
     let start = trainer.model.meta.steps;
     let ckpt = PathBuf::from(format!("{}.ckpt", args.out.display()));
     let pb = ProgressBar::new(total);
@@ -100,15 +167,22 @@ pub fn run(args: TrainArgs) -> Result<()> {
     pb.set_position(start.min(total));
     let (mut ema, mut last_ap) = (f32::NAN, f64::NAN);
     let validate = |t: &Trainer| -> Result<f64> { if val.is_empty() { Ok(f64::NAN) } else { Ok(ap50(&t.model, &val, &DecodeConfig::default())?) } };
+    let t0 = std::time::Instant::now();
     while trainer.model.meta.steps < total {
         let l = trainer.step(&images)?;
         ema = if ema.is_nan() { l } else { 0.95 * ema + 0.05 * l };
         let k = trainer.model.meta.steps;
         if k % args.val_every == 0 {
             last_ap = validate(&trainer)?;
+            let line = format!("step {k}: loss {ema:.4} val AP50 {last_ap:.3} ({:.0} s)", t0.elapsed().as_secs_f64());
+            if pb.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                pb.println(line);
+            }
         }
         if k % args.ckpt_every == 0 {
-            trainer.model.save(&ckpt).with_context(|| format!("writing checkpoint {}", ckpt.display()))?;
+            trainer.save_checkpoint(&ckpt).with_context(|| format!("writing checkpoint {}", ckpt.display()))?;
         }
         pb.set_position(k);
         pb.set_message(format!("loss {ema:.4} val AP50 {last_ap:.3}"));
@@ -117,6 +191,6 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let ap = validate(&trainer)?;
     trainer.model.meta.notes = format!("steps {} seed {} val AP50 {ap:.4}", trainer.model.meta.steps, args.seed);
     trainer.model.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4})", args.out.display(), trainer.model.meta.steps);
+    eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)", args.out.display(), trainer.model.meta.steps, t0.elapsed().as_secs_f64());
     Ok(())
 }

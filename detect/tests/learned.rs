@@ -54,7 +54,7 @@ fn training_a_few_steps_lowers_the_loss() {
     let images = tiny_set(pre);
     let aug = AugmentConfig { crop: 128, ..Default::default() };
     let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 5, total_steps: 60, seed: 7, augment: aug, ..Default::default() };
-    let model = LearnedModel::new(pre, 4, 3).unwrap();
+    let model = LearnedModel::new(pre, 8, 3).unwrap();
     let mut trainer = Trainer::new(model, cfg).unwrap();
     let held = make_batch(&images, &aug, 8, 12345, 0).unwrap();
     let before = trainer.eval_loss(&held).unwrap();
@@ -197,4 +197,42 @@ fn decoding_splits_touching_tubes_and_recovers_axes() {
     ys.sort_by(f64::total_cmp);
     // Rows 21 and 24 -> pixels 85.5 and 97.5.
     assert!((ys[0] - 85.5).abs() < 2.0 && (ys[1] - 97.5).abs() < 2.0, "{ys:?}");
+}
+
+#[test]
+fn resumed_training_continues_exactly() {
+    let pre = Preprocess::default();
+    let images = tiny_set(pre);
+    let cfg = TrainConfig { batch: 2, lr: 3e-3, warmup: 2, total_steps: 6, seed: 5, augment: AugmentConfig { crop: 64, ..Default::default() }, ..Default::default() };
+    let weights = |t: &Trainer| {
+        let st = t.model.to_bytes().unwrap();
+        let st = safetensors::SafeTensors::deserialize(&st).unwrap();
+        let mut v: Vec<(String, Vec<u8>)> = st.tensors().into_iter().map(|(n, t)| (n, t.data().to_vec())).collect();
+        v.sort();
+        v
+    };
+    let mut straight = Trainer::new(LearnedModel::new(pre, 4, 9).unwrap(), cfg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("run.ckpt");
+    for k in 0..6 {
+        straight.step(&images).unwrap();
+        if k == 2 {
+            straight.save_checkpoint(&ckpt).unwrap();
+        }
+    }
+    let (mut resumed, had_opt) = Trainer::resume(&ckpt, cfg).unwrap();
+    assert!(had_opt);
+    assert_eq!(resumed.model.meta.steps, 3);
+    for _ in 3..6 {
+        resumed.step(&images).unwrap();
+    }
+    assert_eq!(weights(&resumed), weights(&straight));
+    // Without the optimizer state the continuation differs (fresh moments).
+    std::fs::remove_file(tubeloc_detect::learned::train::opt_path(&ckpt)).unwrap();
+    let (mut fresh, had_opt) = Trainer::resume(&ckpt, cfg).unwrap();
+    assert!(!had_opt);
+    for _ in 3..6 {
+        fresh.step(&images).unwrap();
+    }
+    assert_ne!(weights(&fresh), weights(&straight));
 }

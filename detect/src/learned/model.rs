@@ -19,7 +19,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 /// Version of the weights file layout; bump when names, shapes or meaning change.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 const FORMAT_NAME: &str = "tubeloc-learned";
 
 /// What a weights file says about the model besides its tensors.

@@ -9,19 +9,26 @@
 //! where `w` marks instance cells. Learning rate: linear warm-up over the first
 //! `warmup` steps, then cosine decay to 5% of `lr` at `total_steps`.
 //!
-//! Resuming reloads the weights and the step count; the AdamW moments start afresh (they are
-//! not stored in the weights file), and the crop sampler is reseeded with `(seed, step)`.
+//! Checkpoints ([`Trainer::save_checkpoint`]) hold the weights with the step count and, beside
+//! them (`<file>.opt`), the AdamW moments ([`super::optim::AdamW`]); batches are drawn from
+//! `(seed, step)`, so a run resumed from a checkpoint continues exactly as it would have.
 
 use super::augment::{sample_crop, AugmentConfig, TrainImage};
 use super::error::LearnedError;
 use super::model::LearnedModel;
+use super::optim::AdamW;
 use super::net::{HEADS, STRIDE};
 use super::targets::make_targets;
 use candle_core::{Device, Tensor};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// Where the optimizer state of checkpoint `path` lives: `<path>.opt`.
+pub fn opt_path(path: &Path) -> PathBuf {
+    PathBuf::from(format!("{}.opt", path.display()))
+}
 
 /// Optimizer and batch settings.
 #[derive(Clone, Copy, Debug)]
@@ -129,9 +136,31 @@ pub struct Trainer {
 impl Trainer {
     /// Wraps a model (fresh or resumed) for training.
     pub fn new(model: LearnedModel, config: TrainConfig) -> Result<Self, LearnedError> {
-        let params = ParamsAdamW { lr: config.lr, weight_decay: config.weight_decay, ..Default::default() };
-        let opt = AdamW::new(model.varmap.all_vars(), params)?;
+        let opt = AdamW::new(&model, config.lr, config.weight_decay)?;
         Ok(Trainer { model, config, opt })
+    }
+
+    /// Resumes from a checkpoint written by [`Trainer::save_checkpoint`]: the weights and step
+    /// count from `path`, the optimizer moments from `<path>.opt` (a plain model file without
+    /// one starts with fresh moments, which is reported as `false`).
+    pub fn resume(path: &Path, config: TrainConfig) -> Result<(Self, bool), LearnedError> {
+        let model = LearnedModel::load(path)?;
+        let mut t = Trainer::new(model, config)?;
+        let opt = opt_path(path);
+        let found = opt.exists();
+        if found {
+            t.opt.load_state(&opt)?;
+            if t.opt.t != t.model.meta.steps {
+                return Err(LearnedError::bad_model(&opt, format!("optimizer state is at step {} but the weights at step {}", t.opt.t, t.model.meta.steps)));
+            }
+        }
+        Ok((t, found))
+    }
+
+    /// Writes the weights to `path` and the optimizer state to `<path>.opt` (both atomically).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), LearnedError> {
+        self.opt.save(&opt_path(path))?;
+        self.model.save(path)
     }
 
     /// Learning rate at step `k` (warm-up then cosine, see the module doc).
@@ -148,10 +177,11 @@ impl Trainer {
     pub fn step(&mut self, images: &[TrainImage]) -> Result<f32, LearnedError> {
         let k = self.model.meta.steps;
         let batch = make_batch(images, &self.config.augment, self.config.batch, self.config.seed, k)?;
-        self.opt.set_learning_rate(self.learning_rate(k));
+        self.opt.lr = self.learning_rate(k);
         let out = self.model.forward(&batch.input)?;
         let l = loss(&out, &batch)?;
-        self.opt.backward_step(&l)?;
+        let grads = l.backward()?;
+        self.opt.step(&grads)?;
         self.model.meta.steps += 1;
         Ok(l.to_scalar::<f32>()?)
     }
