@@ -46,14 +46,25 @@ pub(crate) fn cost_volume(
     out: &mut [u8],
 ) {
     let w = cl.width;
-    out.par_chunks_mut(w * nd).enumerate().for_each(|(y, orow)| cost_row(y, cl, cr, grads, dmin, nd, wt, orow));
+    let mut cr_rev = cr.clone();
+    reverse_rows(&mut cr_rev);
+    out.par_chunks_mut(w * nd).enumerate().for_each(|(y, orow)| cost_row(y, cl, &cr_rev, grads, dmin, nd, wt, orow));
+}
+
+/// Reverses every row in place (the right census plane is stored this way, so that the
+/// candidates of a left pixel, right pixels `x - dmin - d` for increasing `d`, are contiguous
+/// and ascending in memory).
+pub(crate) fn reverse_rows(p: &mut Plane<u64>) {
+    let w = p.width.max(1);
+    p.data.par_chunks_mut(w).for_each(|r| r.reverse());
 }
 
 crate::multiversion! {
-/// Fills `orow` (`w * nd`, `[x][d]`) with the costs of row `y` (see the module doc).
-pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr: &Plane<u64>, grads: Option<(&Plane<i16>, &Plane<i16>)>, dmin: i32, nd: usize, wt: CostWeights, orow: &mut [u8]) {
+/// Fills `orow` (`w * nd`, `[x][d]`) with the costs of row `y` (see the module doc); `cr_rev` is
+/// the right census plane with reversed rows ([`reverse_rows`]).
+pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr_rev: &Plane<u64>, grads: Option<(&Plane<i16>, &Plane<i16>)>, dmin: i32, nd: usize, wt: CostWeights, orow: &mut [u8]) {
     let w = cl.width;
-    let (lr, rr) = (cl.row(y), cr.row(y));
+    let (lr, rr) = (cl.row(y), cr_rev.row(y));
     let g = grads.map(|(gl, gr)| (gl.row(y), gr.row(y)));
     for x in 0..w {
         let o = &mut orow[x * nd..(x + 1) * nd];
@@ -67,10 +78,10 @@ pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr: &Plane<u64>, grads: Option
         let (lo, hi) = (lo as usize, hi as usize);
         o[..lo].fill(wt.border);
         o[hi + 1..].fill(wt.border);
-        // Right pixels x - dmin - d for d in lo..=hi, i.e. the window rr[xr_lo..=xr_hi] reversed.
+        // Right pixels x - dmin - d for d in lo..=hi: reversed-row indices w-1-xr_hi..=w-1-xr_lo.
         let xr_hi = (x as i64 - dmin as i64 - lo as i64) as usize;
         let xr_lo = (x as i64 - dmin as i64 - hi as i64) as usize;
-        let win = &rr[xr_lo..=xr_hi];
+        let win = &rr[w - 1 - xr_hi..=w - 1 - xr_lo];
         census_row(&mut o[lo..=hi], lr[x], win, wt.census);
         if let Some((gl, gr)) = g {
             grad_row(&mut o[lo..=hi], gl[x], &gr[xr_lo..=xr_hi], wt.grad, wt.grad_trunc);
@@ -81,13 +92,13 @@ pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr: &Plane<u64>, grads: Option
 
 #[inline(always)]
 fn census_row(o: &mut [u8], l: u64, win: &[u64], weight: u8) {
-        // o[k] pairs with win[len - 1 - k].
+        // o[k] pairs with win[k].
         if weight == 1 {
-            for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
+            for (c, &r) in o.iter_mut().zip(win) {
                 *c = (l ^ r).count_ones() as u8;
             }
         } else {
-            for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
+            for (c, &r) in o.iter_mut().zip(win) {
                 *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
             }
         }

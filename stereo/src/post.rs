@@ -9,19 +9,20 @@ pub fn median3(disp: &Plane<f32>) -> Plane<f32> {
     let mut out = disp.clone();
     out.data.par_chunks_mut(w).enumerate().for_each(|(y, orow)| {
         let mut buf = [0f32; 9];
+        // Interior pixels whose whole 3x3 is valid: vectorized network over the row.
+        let mut fast = vec![0f32; w.saturating_sub(2)];
+        let mut has_nan = vec![0u8; w.saturating_sub(2)];
+        let interior = y > 0 && y + 1 < h && w > 2;
+        if interior {
+            median_row(disp.row(y - 1), disp.row(y), disp.row(y + 1), &mut fast, &mut has_nan);
+        }
         for (x, o) in orow.iter_mut().enumerate() {
             if disp.get(x, y).is_nan() {
                 continue;
             }
-            if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
-                let r0 = &disp.row(y - 1)[x - 1..x + 2];
-                let r1 = &disp.row(y)[x - 1..x + 2];
-                let r2 = &disp.row(y + 1)[x - 1..x + 2];
-                let v = [r0[0], r0[1], r0[2], r1[0], r1[1], r1[2], r2[0], r2[1], r2[2]];
-                if v.iter().all(|a| !a.is_nan()) {
-                    *o = median9(v);
-                    continue;
-                }
+            if interior && x > 0 && x + 1 < w && has_nan[x - 1] == 0 {
+                *o = fast[x - 1];
+                continue;
             }
             let mut n = 0;
             for yy in y.saturating_sub(1)..(y + 2).min(h) {
@@ -41,13 +42,31 @@ pub fn median3(disp: &Plane<f32>) -> Plane<f32> {
     out
 }
 
+crate::multiversion! {
+    /// Median of each 3x3 window of three rows (`out[i]` centred on column `i + 1`) and
+    /// whether the window holds a `NaN` (then `out[i]` is meaningless).
+    fn median_row(r0: &[f32], r1: &[f32], r2: &[f32], out: &mut [f32], has_nan: &mut [u8]) {
+        let n = out.len();
+        let (a0, a1, a2) = (&r0[..n], &r0[1..n + 1], &r0[2..n + 2]);
+        let (b0, b1, b2) = (&r1[..n], &r1[1..n + 1], &r1[2..n + 2]);
+        let (c0, c1, c2) = (&r2[..n], &r2[1..n + 1], &r2[2..n + 2]);
+        let has_nan = &mut has_nan[..n];
+        for i in 0..n {
+            let p = [a0[i], a1[i], a2[i], b0[i], b1[i], b2[i], c0[i], c1[i], c2[i]];
+            has_nan[i] = p.iter().fold(0u8, |acc, v| acc | u8::from(v.is_nan()));
+            out[i] = median9(p);
+        }
+    }
+}
+
 /// Median of 9 finite values with the 19-exchange network of Paeth (Graphics Gems).
-#[inline]
+#[inline(always)]
 fn median9(mut p: [f32; 9]) -> f32 {
     let mut s = |a: usize, b: usize| {
         let (x, y) = (p[a], p[b]);
-        p[a] = x.min(y);
-        p[b] = x.max(y);
+        // Plain compare-selects (minps/maxps); inputs are finite.
+        p[a] = if x < y { x } else { y };
+        p[b] = if x < y { y } else { x };
     };
     s(1, 2); s(4, 5); s(7, 8); s(0, 1); s(3, 4); s(6, 7); s(1, 2); s(4, 5); s(7, 8);
     s(0, 3); s(5, 8); s(4, 7); s(3, 6); s(1, 4); s(2, 5); s(4, 7); s(4, 2); s(6, 4); s(4, 2);

@@ -11,7 +11,7 @@
 
 use crate::aggregate::{aggregate_select, AggBuffers, AggParams};
 use crate::census::census_into;
-use crate::cost::{cost_row, sobel_x, CostWeights};
+use crate::cost::{cost_row, reverse_rows, sobel_x, CostWeights};
 use crate::error::{param, Result, StereoError};
 use crate::post::{median3, remove_speckles};
 use serde::{Deserialize, Serialize};
@@ -185,6 +185,7 @@ impl SgmMatcher {
         let (cl, cr) = &mut self.census;
         census_into(left, p.census_width, p.census_height, cl)?;
         census_into(right, p.census_width, p.census_height, cr)?;
+        reverse_rows(cr);
         let (cl, cr) = (&*cl, &*cr);
         let grads = if p.gradient_weight > 0 { Some((sobel_x(left), sobel_x(right))) } else { None };
         let wt = CostWeights {
