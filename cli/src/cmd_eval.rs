@@ -1,4 +1,5 @@
-//! `tubeloc eval`: COCO evaluation (pycocotools-identical), with per-attribute breakdowns.
+//! `tubeloc eval`: COCO evaluation (pycocotools-identical), with per-attribute breakdowns; with
+//! `--poses`, evaluation of refined tube poses against exact poses ([`poses`]).
 
 use anyhow::Context;
 use std::path::PathBuf;
@@ -8,6 +9,8 @@ use tubeloc_core::CocoDataset;
 use tubeloc_eval::breakdown::{self, Breakdown};
 use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
 
+mod poses;
+
 /// Arguments of `tubeloc eval`.
 #[derive(clap::Args)]
 pub struct EvalArgs {
@@ -15,8 +18,19 @@ pub struct EvalArgs {
     #[arg(long)]
     gt: PathBuf,
     /// Detections: COCO results JSON files; several files (shards) are concatenated in order.
-    #[arg(long, required = true, num_args = 1..)]
+    #[arg(long, required_unless_present = "poses", num_args = 1..)]
     dt: Vec<PathBuf>,
+    /// Pose evaluation instead: refined poses (JSON arrays of TubeAxisPose, `tubeloc refine
+    /// --out`), each `LABEL=PATH` or `PATH` (label: the file stem); overlaid in the histograms.
+    #[arg(long, num_args = 1..)]
+    poses: Vec<String>,
+    /// Pose evaluation: least visible fraction (annotations' `visible_fraction`) of the
+    /// ground-truth tubes evaluated.
+    #[arg(long, default_value_t = 0.5)]
+    min_visible: f64,
+    /// Pose evaluation: gate of the greedy matching on the centre distance, millimetres.
+    #[arg(long, default_value_t = 50.0)]
+    match_mm: f64,
     /// IoU type: segm (mask IoU) or bbox (box IoU).
     #[arg(long, default_value = "segm")]
     iou_type: IouType,
@@ -31,6 +45,9 @@ pub struct EvalArgs {
 
 /// Runs the evaluation, prints the summary (and breakdown table), writes the JSON files.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
+    if !args.poses.is_empty() {
+        return poses::run(&args.gt, &args.poses, args.min_visible, args.match_mm, args.out.as_deref());
+    }
     let gt = CocoDataset::load(&args.gt).with_context(|| format!("loading ground truth {}", args.gt.display()))?;
     let mut dt = Vec::new();
     for path in &args.dt {

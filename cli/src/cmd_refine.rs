@@ -8,6 +8,12 @@
 //! term. `--ground nx,ny,nz,d` (camera frame, `n·X = d` on the ground, `n` pointing up) places
 //! mask/box seeds on the ground. `--overlay` draws the fitted contours (green: converged,
 //! red: failed).
+//!
+//! Dataset mode (`--dataset DIR`, module [`dataset`]): every image of a COCO dataset directory
+//! (optionally one `--split`), each with the camera of its `images[].camera` and, with
+//! `--ground auto`, the ground plane of its `images[].T_world_cam`; seeds from `--detections`
+//! (matched by image id) or from the exact annotation poses (`--gt-seeds MM,DEG`); images in
+//! parallel; one JSON array of poses, each with its `image_id`.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -17,51 +23,80 @@ use tubeloc_core::{files, BinaryMask, CameraModel, Plane, TubeAxisPose, TubeDete
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
 use tubeloc_stereo::{disparity_regions, Roi, SgmParams};
 
+mod dataset;
+
 /// Arguments of `tubeloc refine`.
 #[derive(Args, Debug)]
 pub struct RefineArgs {
-    /// Left (or only) image.
-    #[arg(long)]
-    image: PathBuf,
+    /// Left (or only) image (or --dataset).
+    #[arg(long, required_unless_present = "dataset")]
+    pub(crate) image: Option<PathBuf>,
+    /// A COCO dataset directory (annotations.json + images/): refine in every image, with the
+    /// camera of images[].camera; see the module docs.
+    #[arg(long, conflicts_with_all = ["image", "right", "rig", "overlay"])]
+    pub(crate) dataset: Option<PathBuf>,
+    /// Dataset mode: only images whose images[].split is this value.
+    #[arg(long, requires = "dataset")]
+    pub(crate) split: Option<String>,
+    /// Dataset mode: only the first N images (after --split).
+    #[arg(long, requires = "dataset")]
+    pub(crate) max_images: Option<usize>,
+    /// Dataset mode, instead of --detections: seeds from the annotations' exact T_cam_tube,
+    /// perturbed by "MM,DEG" (centre uniform within ±MM per coordinate, axis turned by DEG);
+    /// "0,0" gives exact seeds. Only tubes with visible_fraction >= --min-visible.
+    #[arg(long, requires = "dataset")]
+    pub(crate) gt_seeds: Option<String>,
+    /// Dataset mode with --gt-seeds: random seed of the perturbation.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// Dataset mode with --gt-seeds: least visible fraction of a tube to seed it.
+    #[arg(long, default_value_t = 0.5)]
+    pub(crate) min_visible: f64,
+    /// Dataset mode: also write the seeds as poses (JSON array of TubeAxisPose), to evaluate the
+    /// seeds alone.
+    #[arg(long, requires = "dataset")]
+    pub(crate) seeds_out: Option<PathBuf>,
     /// Camera model JSON of the image (ignored for the left image when --rig is given).
     #[arg(long)]
-    camera: Option<PathBuf>,
+    pub(crate) camera: Option<PathBuf>,
     /// Detections: JSON array of COCO results with tubeloc seeds (`tubeloc detect --out`).
-    #[arg(long)]
-    detections: PathBuf,
+    #[arg(long, required_unless_present = "gt_seeds")]
+    pub(crate) detections: Option<PathBuf>,
     /// Only refine detections of this COCO image id (default: all in the file).
     #[arg(long)]
-    image_id: Option<u64>,
+    pub(crate) image_id: Option<u64>,
     /// Output poses (JSON array of TubeAxisPose).
     #[arg(long)]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Overlay PNG with the fitted contours.
     #[arg(long)]
-    overlay: Option<PathBuf>,
+    pub(crate) overlay: Option<PathBuf>,
     /// Right image of a stereo pair (needs --rig).
     #[arg(long)]
-    right: Option<PathBuf>,
+    pub(crate) right: Option<PathBuf>,
     /// Rig JSON with both cameras.
     #[arg(long)]
-    rig: Option<PathBuf>,
+    pub(crate) rig: Option<PathBuf>,
     /// Camera names of the pair in the rig, "LEFT,RIGHT" (default: the rig's first stereo pair).
     #[arg(long)]
-    pair: Option<String>,
+    pub(crate) pair: Option<String>,
     /// Number of disparities searched (multiple of 16).
     #[arg(long, default_value_t = 256)]
-    disparities: usize,
-    /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres.
+    pub(crate) disparities: usize,
+    /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres; with
+    /// --dataset, "auto" takes it from images[].T_world_cam (ground = world z = 0; only its
+    /// orientation is used as a prior, since the terrain has relief).
     #[arg(long, allow_hyphen_values = true)]
-    ground: Option<String>,
+    pub(crate) ground: Option<String>,
     /// Refiner configuration JSON (fields of RefineConfig; missing fields keep their defaults).
     #[arg(long)]
-    config: Option<PathBuf>,
+    pub(crate) config: Option<PathBuf>,
     /// Tube model TOML (default: the built-in model of data/tube.toml).
     #[arg(long)]
-    tube: Option<PathBuf>,
+    pub(crate) tube: Option<PathBuf>,
 }
 
-fn parse_ground(s: &str) -> Result<GroundPlane> {
+pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
     let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--ground {s:?}: expected nx,ny,nz,d"))?;
     if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
         bail!("--ground {s:?}: expected 4 finite numbers nx,ny,nz,d");
@@ -81,7 +116,8 @@ fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[T
     let right_path = args.right.as_ref().context("--rig needs --right")?;
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
-    let (rl, rr) = rect.rectify_pair(left, &right).with_context(|| format!("{} / {}", args.image.display(), right_path.display()))?;
+    let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
+    let (rl, rr) = rect.rectify_pair(left, &right).with_context(|| format!("{} / {}", left_path.display(), right_path.display()))?;
     // Regions: each box mapped into rectified left pixels through its corners.
     let mut rois = Vec::new();
     for d in dets {
@@ -97,7 +133,7 @@ fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[T
         }
     }
     let params = SgmParams { num_disparities: args.disparities, ..SgmParams::default() };
-    let disp = disparity_regions(&rl, &rr, &params, &rois, 32).with_context(|| format!("matching {} / {}", args.image.display(), right_path.display()))?;
+    let disp = disparity_regions(&rl, &rr, &params, &rois, 32).with_context(|| format!("matching {} / {}", left_path.display(), right_path.display()))?;
     let pts = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &rect.geometry(), 0.25));
     let masks: Vec<Option<BinaryMask>> = dets.iter().map(|d| d.mask.as_ref().and_then(|m| m.to_mask().ok())).collect();
     let per = dets
@@ -151,8 +187,8 @@ fn overlay(path: &Path, gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, 
     Ok(())
 }
 
-/// Runs `tubeloc refine`.
-pub fn run(args: RefineArgs) -> Result<()> {
+/// The refiner of the arguments (config and tube model files).
+pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
     let config = match &args.config {
         Some(p) => files::read_json::<RefineConfig>(p).with_context(|| format!("refine config {}", p.display()))?,
         None => RefineConfig::default(),
@@ -161,13 +197,23 @@ pub fn run(args: RefineArgs) -> Result<()> {
         Some(p) => TubeModel::load(p).with_context(|| format!("tube model {}", p.display()))?,
         None => TubeModel::default(),
     };
-    let refiner = Refiner::new(&tube, config).context("building the refiner")?;
+    Refiner::new(&tube, config).context("building the refiner")
+}
+
+/// Runs `tubeloc refine`.
+pub fn run(args: RefineArgs) -> Result<()> {
+    if args.dataset.is_some() {
+        return dataset::run(&args);
+    }
+    let refiner = refiner_of(&args)?;
     let ground = args.ground.as_deref().map(parse_ground).transpose()?;
-    let mut dets = tubeloc_core::detection::read_coco_results(&args.detections)?;
+    let det_path = args.detections.as_ref().context("--detections is required without --dataset")?;
+    let image_path = args.image.as_ref().context("--image is required without --dataset")?;
+    let mut dets = tubeloc_core::detection::read_coco_results(det_path)?;
     if let Some(id) = args.image_id {
         dets.retain(|d| d.image_id == id);
     }
-    let gray = crate::cmd_stereo::load_gray(&args.image)?;
+    let gray = crate::cmd_stereo::load_gray(image_path)?;
     let (camera, stereo) = match &args.rig {
         Some(rig) => {
             let (c, s) = stereo_points(&args, &gray, rig, &dets)?;
@@ -182,7 +228,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
         }
     };
     if gray.width != camera.width as usize || gray.height != camera.height as usize {
-        bail!("{} is {}x{} but the camera is {}x{}", args.image.display(), gray.width, gray.height, camera.width, camera.height);
+        bail!("{} is {}x{} but the camera is {}x{}", image_path.display(), gray.width, gray.height, camera.width, camera.height);
     }
     let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
     let bar = indicatif::ProgressBar::new(dets.len() as u64);

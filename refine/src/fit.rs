@@ -8,7 +8,10 @@
 //! `s_j(θ) = (ρ_j - R(z_j)) / σ_s` with `z_j = (P_j - c)·a`, `ρ_j = |P_j - c - z_j a|`,
 //! and, with a ground plane `n·X = d` (tube resting on it), the two prior residuals
 //! `g_1 = (n·c - d - r_max) / σ_g` (centre height) and `g_2 = (n·a) / σ_t` (axis parallel to
-//! the ground), quadratic (not robust).
+//! the ground), quadratic (not robust); `g_1` only when `RefineConfig::ground_height_known`.
+//! With `RefineConfig::seed_distance_sigma_frac = f > 0`, the prior `(|c| - |c_seed|) / (f |c_seed|)`
+//! keeps the distance of the centre near the seed's (mono depth from a narrow tube's width is
+//! weak: 0.1 px of width error on a 12 px wide tube is ~1% of the distance).
 //! After the first iteration of each level, the contrast polarity of each limb is fixed to the
 //! sign most of its samples found (tube brighter or darker than the ground along that limb), so
 //! that texture and shading edges of the other polarity are not associated.
@@ -178,7 +181,8 @@ fn limb_polarity(samples: &[ContourSample], assoc: &[Assoc]) -> Vec<i8> {
 
 /// Residuals (normalized) of the associations and stereo points at state `st`; missing
 /// projections give `None` entries (skipped).
-fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, out: &mut Vec<Option<f64>>) {
+#[allow(clippy::too_many_arguments)]
+fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, seed_dist: f64, out: &mut Vec<Option<f64>>) {
     out.clear();
     let f = st.frame();
     for a in assoc {
@@ -198,8 +202,11 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
         out.push(Some((rho - rz) / cfg.stereo_sigma_m));
     }
     if let Some(g) = &scene.ground {
-        out.push(Some((g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m));
+        out.push(cfg.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m));
         out.push(Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()));
+    }
+    if cfg.seed_distance_sigma_frac > 0.0 {
+        out.push(Some((st.c.norm() - seed_dist) / (cfg.seed_distance_sigma_frac * seed_dist)));
     }
 }
 
@@ -252,7 +259,7 @@ fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
 /// Jacobians of [`crate::jacobian`]; fills `jac` with the image Jacobian of each association
 /// and returns `Σ w r²` and `Σ w`.
 #[allow(clippy::too_many_arguments)]
-fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), seed_dist: f64, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
@@ -281,11 +288,16 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         } else if i < n_img + n_st {
             Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
-            let Some(gp) = &scene.ground else { continue };
-            if i == n_img + n_st {
-                Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m
-            } else {
-                Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians()
+            // Priors in the order of `residuals`: ground height, ground tilt, seed distance.
+            let k = i - n_img - n_st;
+            match (&scene.ground, k) {
+                (Some(gp), 0) => Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
+                (Some(gp), 1) => Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians(),
+                _ => {
+                    let d = st.c.norm();
+                    let ch = st.c / d.max(1e-12);
+                    Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * seed_dist)
+                }
             }
         };
         if !j.iter().all(|v| v.is_finite()) {
@@ -353,13 +365,13 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 }
             }
             let n_img = assoc.len();
-            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rbuf);
+            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed.c.norm(), &mut rbuf);
             let n_st = scene.stereo_points.len();
             let c = thresholds(&rbuf, n_img, n_st, &mut scratch, level.sigma_px, level.radius);
             let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
             let ax = st.a;
             let (u1, u2) = tangent_basis(&ax);
-            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &mut jbuf);
+            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, seed.c.norm(), &mut jbuf);
             let mut accepted = None;
             for _ in 0..6 {
                 let mut hd = h;
@@ -379,7 +391,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 }
                 let delta = [d[0], d[1], d[2], d[3], d[4]];
                 let trial = st.updated(&delta, &u1, &u2);
-                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut rtrial);
+                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed.c.norm(), &mut rtrial);
                 let cost = robust_cost(&rtrial, c.0, c.1, n_img, n_st);
                 if cost.is_finite() && cost <= cost0 {
                     lambda = (lambda / 3.0).max(1e-7);
@@ -413,17 +425,17 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             return fail(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees()), iterations);
         }
     }
-    finish(model, cfg, &levels[0], scene, st, iterations)
+    finish(model, cfg, &levels[0], scene, st, seed.c.norm(), iterations)
 }
 
 /// Final statistics and covariance at the finest level.
-fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, iterations: usize) -> FitResult {
+fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, seed_dist: f64, iterations: usize) -> FitResult {
     let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
     let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
     let polarity = vec![0i8; samples.len()];
     let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
     let mut r = Vec::new();
-    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &mut r);
+    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed_dist, &mut r);
     let n_img = assoc.len();
     let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
     let tau = cfg.inlier_px / to_px;
@@ -455,7 +467,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
     let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
-    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, &mut Vec::new());
+    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, seed_dist, &mut Vec::new());
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {

@@ -88,6 +88,9 @@ pub struct RefineConfig {
     pub max_axis_change_deg: f64,
     /// Decide which end is the seal end by fitting both hypotheses.
     pub decide_end: bool,
+    /// When the seed claims which end is the seal end (`Seed::end_known`), the image must favour
+    /// the other end with at least this confidence to flip it.
+    pub end_override_confidence: f64,
     /// Score difference (mean truncated cost) that gives `end_confidence` ≈ 0.73 (logistic scale).
     pub end_score_scale: f64,
     /// Fix each limb's edge polarity (tube brighter/darker than the ground) after the first
@@ -96,6 +99,13 @@ pub struct RefineConfig {
     /// Ground prior: standard deviation of the centre height above the ground (expected
     /// height: the largest radius), metres.
     pub ground_sigma_m: f64,
+    /// The tube rests on the given ground plane itself (centre `max_radius` above it). False
+    /// when only the plane's orientation is trusted (e.g. the world's z = 0 of a tripod pose over
+    /// terrain with relief): then only the tilt prior is used and seeds keep their height.
+    pub ground_height_known: bool,
+    /// Prior on the centre's distance from the camera: standard deviation as a fraction of the
+    /// seed's distance; 0 disables it.
+    pub seed_distance_sigma_frac: f64,
     /// Ground prior: standard deviation of the axis elevation above the ground plane, degrees.
     pub ground_tilt_sigma_deg: f64,
 }
@@ -129,8 +139,11 @@ impl Default for RefineConfig {
             max_axis_change_deg: 50.0,
             decide_end: true,
             end_score_scale: 0.02,
+            end_override_confidence: 0.9,
             limb_polarity: true,
             ground_sigma_m: 0.003,
+            ground_height_known: true,
+            seed_distance_sigma_frac: 0.0,
             ground_tilt_sigma_deg: 3.0,
         }
     }
@@ -154,7 +167,9 @@ impl RefineConfig {
             && (0.0..=1.0).contains(&self.min_inlier_fraction)
             && (0.0..=1.0).contains(&self.min_in_image_fraction)
             && self.end_score_scale > 0.0
+            && (0.5..=1.0).contains(&self.end_override_confidence)
             && self.ground_sigma_m > 0.0
+            && self.seed_distance_sigma_frac >= 0.0
             && self.ground_tilt_sigma_deg > 0.0;
         if ok {
             Ok(())
@@ -236,8 +251,13 @@ impl Refiner {
             let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &scene, flipped);
             let dscore = if b.failure.is_none() { b.score - a.score } else { 1.0 };
             let p = 1.0 / (1.0 + (-dscore.abs() / self.config.end_score_scale).exp());
-            if dscore < 0.0 {
+            // A detector that claims the end (template pose) is overruled only by clear image
+            // evidence; small tubes often cannot tell the ends apart in grey levels.
+            let keeps_claim = seed.end_known && a.state.a.dot(&st.a) > 0.0;
+            if dscore < 0.0 && (!keeps_claim || p >= self.config.end_override_confidence) {
                 (b, p)
+            } else if dscore < 0.0 {
+                (a, 0.5)
             } else {
                 (a, p)
             }
@@ -261,7 +281,7 @@ impl Refiner {
                 rotation_step_deg: 2.5,
                 max_samples: 120,
             };
-            let hyps = search::coarse_search(&self.model, &pyr[top], st, scene.ground.as_ref(), &spec);
+            let hyps = search::coarse_search(&self.model, &pyr[top], st, scene.ground.as_ref(), cfg.ground_height_known, &spec);
             cands.extend(hyps.iter().map(|h| h.state));
         }
         // The seed itself goes second (or first without the search).

@@ -153,13 +153,15 @@ pub fn onto_ground(st: &AxisState, g: &GroundPlane, h: f64) -> Option<AxisState>
     (t > 0.0 && t.is_finite() && a.norm() > 1e-3).then(|| AxisState { c: st.c * t, a: a.normalize() })
 }
 
-/// Scores rotated and shifted copies of `seed` at level `lv` and returns them best first (one
+/// Scores rotated and shifted copies of `seed` at level `lv` (`height_known`: see
+/// [`crate::RefineConfig::ground_height_known`]) and returns them best first (one
 /// per rotation, each at its best translation). The unmoved seed is among the candidates
 /// scored (rotation 0, translation 0 competes on the same grid).
-pub fn coarse_search(model: &CylinderModel, lv: &GradientLevel, seed: &AxisState, ground: Option<&GroundPlane>, spec: &SearchSpec) -> Vec<Hypothesis> {
+pub fn coarse_search(model: &CylinderModel, lv: &GradientLevel, seed: &AxisState, ground: Option<&GroundPlane>, height_known: bool, spec: &SearchSpec) -> Vec<Hypothesis> {
     // With a ground plane, first put the seed on it: centre `max_radius` above the plane along
-    // its viewing ray (same pixel), axis parallel to the plane.
-    let seed = &match ground.and_then(|g| onto_ground(seed, g, model.max_radius())) {
+    // its viewing ray (same pixel; with `height_known` false the seed keeps its height), axis
+    // parallel to the plane.
+    let seed = &match ground.and_then(|g| onto_ground(seed, g, if height_known { model.max_radius() } else { g.normal.dot(&seed.c) - g.offset })) {
         Some(s) => s,
         None => *seed,
     };

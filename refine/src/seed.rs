@@ -42,6 +42,27 @@ pub struct Seed {
     pub end_known: bool,
 }
 
+/// A seed `pos_m` / `ang_deg` away from a known pose, for measuring the basin of the fit:
+/// the centre moved by a uniform random offset in `[-pos_m, pos_m]` per camera coordinate and
+/// the axis turned by exactly `ang_deg` about a random direction perpendicular to it.
+/// Deterministic in
+/// `seed` (ChaCha8).
+pub fn perturbed(state: &AxisState, pos_m: f64, ang_deg: f64, seed: u64) -> AxisState {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let dc = Vector3::new(rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0)) * pos_m;
+    let dir = loop {
+        let v = Vector3::new(rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0));
+        let v = v - state.a * state.a.dot(&v) / state.a.norm_squared().max(1e-300);
+        let n = v.norm();
+        if n > 1e-3 {
+            break v / n;
+        }
+    };
+    let r = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_unchecked(dir), ang_deg.to_radians());
+    AxisState { c: state.c + dc, a: r * state.a }
+}
+
 /// Builds a seed from a detection. See the module docs for the order of preference.
 pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel, ground: Option<&GroundPlane>, stereo: &[Point3<f64>]) -> Result<Seed, RefineError> {
     if let Some(t) = &det.t_cam_tube {
@@ -103,4 +124,22 @@ pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &Cy
         }
     }
     Ok(Seed { state, end_known: false })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn perturbation_has_the_requested_size_and_is_reproducible() {
+        let st = AxisState { c: Vector3::new(0.1, 0.2, 1.5), a: Vector3::new(1.0, 0.5, -0.2).normalize() };
+        for k in 0..20 {
+            let p = perturbed(&st, 0.01, 5.0, k);
+            assert_eq!(p, perturbed(&st, 0.01, 5.0, k));
+            let d = p.c - st.c;
+            assert!(d.iter().all(|v| v.abs() <= 0.01 + 1e-15), "{d:?}");
+            assert!((p.a.dot(&st.a).clamp(-1.0, 1.0).acos().to_degrees() - 5.0).abs() < 1e-9);
+        }
+        assert_ne!(perturbed(&st, 0.01, 5.0, 1), perturbed(&st, 0.01, 5.0, 2));
+    }
 }

@@ -1,0 +1,159 @@
+//! `tubeloc refine --dataset DIR`: refine in every image of a COCO dataset directory.
+
+use super::{parse_ground, refiner_of, RefineArgs};
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, TubeAxisPose, TubeDetection};
+use tubeloc_refine::seed::perturbed;
+use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
+
+/// What to refine in one image: detections, or seeds made from exact poses.
+enum Work {
+    Detection(TubeDetection),
+    /// Seed state from an annotation's exact pose.
+    GtSeed(AxisState),
+}
+
+/// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`:
+/// `n = R_world_camᵀ ẑ`, `n·X = -t_z`.
+fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
+    let Some(v) = img.extra.get("T_world_cam") else { return Ok(None) };
+    let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("image {}: T_world_cam", img.id))?;
+    let n = t.rotation().transpose() * nalgebra::Vector3::z();
+    Ok(Some(GroundPlane { normal: n.normalize(), offset: -t.translation().z / n.norm() }))
+}
+
+fn camera_of(img: &CocoImage) -> Result<CameraModel> {
+    let v = img.extra.get("camera").with_context(|| format!("image {} has no \"camera\" (needed in dataset mode)", img.id))?;
+    let c: CameraModel = serde_json::from_value(v.clone()).with_context(|| format!("image {}: camera", img.id))?;
+    c.validate().with_context(|| format!("image {}: camera", img.id))?;
+    Ok(c)
+}
+
+fn parse_pair(s: &str) -> Result<(f64, f64)> {
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--gt-seeds {s:?}: expected MM,DEG"))?;
+    if v.len() != 2 || v.iter().any(|x| !x.is_finite() || *x < 0.0) {
+        bail!("--gt-seeds {s:?}: expected two non-negative numbers MM,DEG");
+    }
+    Ok((v[0] * 1e-3, v[1]))
+}
+
+/// Runs the dataset mode.
+pub fn run(args: &RefineArgs) -> Result<()> {
+    let dir = args.dataset.as_ref().context("--dataset")?;
+    let ann = dir.join("annotations.json");
+    let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+    let mut refiner = refiner_of(args)?;
+    let auto_ground = args.ground.as_deref() == Some("auto");
+    if auto_ground {
+        // World z = 0 of the tripod pose is the nominal ground, but the terrain has relief:
+        // trust its orientation (tubes lie parallel to it), not its height.
+        refiner.config.ground_height_known = false;
+    }
+    let mut images: Vec<&CocoImage> = ds
+        .images
+        .iter()
+        .filter(|im| args.split.as_ref().is_none_or(|s| im.extra.get("split").and_then(|v| v.as_str()) == Some(s.as_str())))
+        .collect();
+    if let Some(n) = args.max_images {
+        images.truncate(n);
+    }
+    if images.is_empty() {
+        bail!("{}: no images{}", ann.display(), args.split.as_ref().map(|s| format!(" in split {s:?}")).unwrap_or_default());
+    }
+    // Work per image.
+    let mut work: BTreeMap<u64, Vec<Work>> = images.iter().map(|im| (im.id, Vec::new())).collect();
+    match (&args.detections, &args.gt_seeds) {
+        (Some(p), None) => {
+            for d in tubeloc_core::detection::read_coco_results(p)? {
+                if let Some(w) = work.get_mut(&d.image_id) {
+                    w.push(Work::Detection(d));
+                }
+            }
+        }
+        (None, Some(spec)) => {
+            let (pos, deg) = parse_pair(spec)?;
+            for a in &ds.annotations {
+                let Some(w) = work.get_mut(&a.image_id) else { continue };
+                let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
+                let Some(v) = a.extra.get("T_cam_tube") else { continue };
+                if vis < args.min_visible {
+                    continue;
+                }
+                let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", ann.display(), a.id))?;
+                let st = AxisState { c: t.translation(), a: t.transform_vector(&nalgebra::Vector3::z()) };
+                w.push(Work::GtSeed(perturbed(&st, pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15))));
+            }
+        }
+        _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
+    }
+    let fixed_ground = if auto_ground { None } else { args.ground.as_deref().map(parse_ground).transpose()? };
+    let bar = ProgressBar::new(images.len() as u64);
+    bar.set_style(ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}").expect("template"));
+    let per_image: Vec<(Vec<TubeAxisPose>, Vec<TubeAxisPose>)> = images
+        .par_iter()
+        .map(|im| -> Result<_> {
+            let items = &work[&im.id];
+            if items.is_empty() {
+                bar.inc(1);
+                return Ok((Vec::new(), Vec::new()));
+            }
+            let camera = camera_of(im)?;
+            let ground = if auto_ground { ground_of(im)? } else { fixed_ground };
+            let path = {
+                let p = dir.join(&im.file_name);
+                if p.exists() { p } else { dir.join("images").join(&im.file_name) }
+            };
+            let gray = crate::cmd_stereo::load_gray(&path)?;
+            if gray.width != camera.width as usize || gray.height != camera.height as usize {
+                bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
+            }
+            let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
+            let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene::default() };
+            let mut poses = Vec::with_capacity(items.len());
+            let mut seeds = Vec::new();
+            for w in items {
+                match w {
+                    Work::Detection(d) => poses.push(refiner.refine(&input, d)),
+                    Work::GtSeed(st) => {
+                        poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
+                        if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
+                            seeds.push(p);
+                        }
+                    }
+                }
+            }
+            bar.inc(1);
+            Ok((poses, seeds))
+        })
+        .collect::<Result<_>>()?;
+    bar.finish_and_clear();
+    let (mut poses, mut seeds) = (Vec::new(), Vec::new());
+    for (p, s) in per_image {
+        poses.extend(p);
+        seeds.extend(s);
+    }
+    let mut reasons: BTreeMap<String, usize> = BTreeMap::new();
+    for p in &poses {
+        if let Some(f) = &p.failure {
+            *reasons.entry(format!("{:?}", f.reason)).or_default() += 1;
+        }
+    }
+    files::write_json(&args.out, &poses).with_context(|| format!("writing {}", args.out.display()))?;
+    if let Some(s) = &args.seeds_out {
+        files::write_json(s, &seeds).with_context(|| format!("writing {}", s.display()))?;
+    }
+    let out: PathBuf = args.out.clone();
+    eprintln!(
+        "{} images, {} poses ({} converged; failures {:?}) -> {}",
+        images.len(),
+        poses.len(),
+        poses.iter().filter(|p| p.converged).count(),
+        reasons,
+        out.display()
+    );
+    Ok(())
+}
