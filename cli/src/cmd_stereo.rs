@@ -8,6 +8,11 @@
 //!   regions when `--rig` is given),
 //! - with `--rig`: `rectified_left.png`, `rectified_right.png`; with `--ply` also `points.ply`
 //!   (points in the original left camera frame, metres, with per-point `sigma_z`).
+//!
+//! With `--set DIR` (a `tubeloc synth stereo` folder) instead of `--left/--right`, every pair of
+//! the set is matched and scored against its exact disparity: bad-1/bad-2/MAE over valid and
+//! over tube pixels, and distances of triangulated tube points to the true tube surface
+//! (median, p90); results in `--out DIR/stereo_eval.json`.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -19,11 +24,17 @@ use tubeloc_stereo::{disparity_regions, io, Paths, Roi, SgmMatcher, SgmParams, S
 #[derive(Args, Debug)]
 pub struct StereoArgs {
     /// Left image (any format the image crate reads; converted to grey).
-    #[arg(long)]
-    left: PathBuf,
+    #[arg(long, required_unless_present = "set")]
+    left: Option<PathBuf>,
     /// Right image.
+    #[arg(long, required_unless_present = "set")]
+    right: Option<PathBuf>,
+    /// Evaluate on a synthetic stereo set (`tubeloc synth stereo` output) instead of one pair.
+    #[arg(long, conflicts_with_all = ["left", "right", "rig", "rois", "ply"])]
+    set: Option<PathBuf>,
+    /// With --set: evaluate at most this many pairs.
     #[arg(long)]
-    right: PathBuf,
+    limit: Option<usize>,
     /// Rig JSON file: the pair is rectified with it before matching.
     #[arg(long)]
     rig: Option<PathBuf>,
@@ -95,16 +106,20 @@ pub fn run(args: StereoArgs) -> Result<()> {
         4 => Paths::Four,
         n => bail!("--paths must be 8 or 4, got {n}"),
     };
+    if let Some(set) = &args.set {
+        return eval_set(set, &params, args.limit, &args.out);
+    }
+    let (Some(left_path), Some(right_path)) = (args.left.clone(), args.right.clone()) else { bail!("--left and --right are required without --set") };
     let rois = args.rois.iter().map(|s| parse_roi(s)).collect::<Result<Vec<_>>>()?;
-    let (mut left, mut right) = (load_gray(&args.left)?, load_gray(&args.right)?);
+    let (mut left, mut right) = (load_gray(&left_path)?, load_gray(&right_path)?);
     let mut header = serde_json::json!({
-        "left": args.left, "right": args.right, "params": params,
+        "left": left_path, "right": right_path, "params": params,
         "disparity_convention": "d = x_left - x_right in (rectified) left pixels; PFM invalid = +inf; PNG16 = round(16 d), 0 invalid",
     });
     let mut rect = None;
     if let Some(rig_path) = &args.rig {
         let ((ln, rn), _, r) = rectification_from_rig(rig_path, args.pair.as_deref())?;
-        let (rl, rr) = r.rectify_pair(&left, &right).with_context(|| format!("{} / {}", args.left.display(), args.right.display()))?;
+        let (rl, rr) = r.rectify_pair(&left, &right).with_context(|| format!("{} / {}", left_path.display(), right_path.display()))?;
         left = rl;
         right = rr;
         for (name, p) in [("rectified_left.png", &left), ("rectified_right.png", &right)] {
@@ -121,11 +136,11 @@ pub fn run(args: StereoArgs) -> Result<()> {
         rect = Some(r);
     }
     let disp = if rois.is_empty() {
-        SgmMatcher::new(params.clone())?.compute(&left, &right).with_context(|| format!("matching {} / {}", args.left.display(), args.right.display()))?
+        SgmMatcher::new(params.clone())?.compute(&left, &right).with_context(|| format!("matching {} / {}", left_path.display(), right_path.display()))?
     } else {
         header["regions"] = serde_json::to_value(&rois)?;
         header["margin"] = args.margin.into();
-        disparity_regions(&left, &right, &params, &rois, args.margin).with_context(|| format!("matching {} / {}", args.left.display(), args.right.display()))?
+        disparity_regions(&left, &right, &params, &rois, args.margin).with_context(|| format!("matching {} / {}", left_path.display(), right_path.display()))?
     };
     let (w, h) = (disp.width as u32, disp.height as u32);
     write_atomic(&args.out.join("disparity.pfm"), &io::encode_pfm(&disp))?;
@@ -169,4 +184,59 @@ pub(crate) fn rectification_from_rig(rig_path: &Path, pair: Option<&str>) -> Res
     let (lcam, rcam) = (&cam(&ln)?.model, &cam(&rn)?.model);
     let rect = StereoRectification::new(lcam, rcam, &rig.relative_pose(&ln, &rn)?).with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
     Ok(((ln.clone(), rn.clone()), lcam.clone(), rect))
+}
+
+/// Matches every pair of a synthetic stereo set and scores it against the exact disparity.
+fn eval_set(dir: &Path, params: &SgmParams, limit: Option<usize>, out: &Path) -> Result<()> {
+    use tubeloc_core::{CameraModel, CocoDataset, Pose, Segmentation, TubeModel};
+    use tubeloc_stereo::pair_eval::PairEval;
+    let ann_path = dir.join("annotations.json");
+    let ds = CocoDataset::load(&ann_path).with_context(|| format!("reading stereo set {}", ann_path.display()))?;
+    let model = TubeModel::default();
+    let mut matcher = SgmMatcher::new(params.clone())?;
+    let (mut total, mut per_pair) = (PairEval::default(), Vec::new());
+    let images: Vec<_> = ds.images.iter().take(limit.unwrap_or(usize::MAX)).collect();
+    let bar = indicatif::ProgressBar::new(images.len() as u64);
+    let mut ms = Vec::new();
+    for img in images {
+        let e = &img.extra;
+        let field = |k: &str| e.get(k).with_context(|| format!("{}: image {} has no {k:?} (not a stereo set?)", ann_path.display(), img.id));
+        let cam: CameraModel = serde_json::from_value(field("camera")?.clone()).with_context(|| format!("image {}: camera", img.id))?;
+        let baseline = field("baseline_m")?.as_f64().context("baseline_m is not a number")?;
+        let geom = tubeloc_stereo::RectifiedGeometry { f: cam.fx, cx: cam.cx, cy: cam.cy, baseline };
+        let left = load_gray(&dir.join("images").join(&img.file_name))?;
+        let right = load_gray(&dir.join("right").join(field("right_file_name")?.as_str().context("right_file_name")?))?;
+        let gt_path = dir.join("disparity").join(field("disparity_file_name")?.as_str().context("disparity_file_name")?);
+        let gt = io::decode_pfm(&std::fs::read(&gt_path).with_context(|| format!("reading {}", gt_path.display()))?).with_context(|| format!("decoding {}", gt_path.display()))?;
+        let t0 = std::time::Instant::now();
+        let est = matcher.compute(&left, &right).with_context(|| format!("matching {}", img.file_name))?;
+        ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        let mut masks = Vec::new();
+        for a in ds.annotations.iter().filter(|a| a.image_id == img.id) {
+            let Some(Segmentation::CompressedRle { counts, size }) = &a.segmentation else { continue };
+            let mask = tubeloc_core::Rle::from_compressed_string(counts, *size)?.to_mask()?;
+            let pose: Pose = serde_json::from_value(a.extra.get("T_cam_tube").cloned().unwrap_or_default()).with_context(|| format!("annotation {}: T_cam_tube", a.id))?;
+            masks.push((mask, pose));
+        }
+        let tubes: Vec<_> = masks.iter().map(|(m, p)| (m, *p)).collect();
+        let mut one = PairEval::default();
+        one.add(&est, &gt, &geom, &tubes, &model);
+        total.add(&est, &gt, &geom, &tubes, &model);
+        per_pair.push(serde_json::json!({"image_id": img.id, "file_name": img.file_name, "summary": one.summary()}));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    ms.sort_by(f64::total_cmp);
+    let s = total.summary();
+    let report = serde_json::json!({
+        "set": dir, "pairs": per_pair.len(), "params": params, "total": s, "per_pair": per_pair,
+        "median_match_ms": ms.get(ms.len() / 2),
+        "definitions": "valid: finite exact disparity, inside the right image, not occluded; tube: valid pixels in the visible tube masks; bad-t: no estimate or |error| > t px; MAE over pixels with an estimate; distances: triangulated tube points to the true tube surface",
+    });
+    tubeloc_core::files::write_json(&out.join("stereo_eval.json"), &report)?;
+    println!(
+        "{} pairs: valid px bad-1 {:.4} bad-2 {:.4} MAE {:.3} px (density {:.3}); tube px bad-1 {:.4} bad-2 {:.4} MAE {:.3} px; tube points {} median {:.2} mm p90 {:.2} mm",
+        per_pair.len(), s.valid.bad1, s.valid.bad2, s.valid.mae, s.valid.density, s.tube.bad1, s.tube.bad2, s.tube.mae, s.tube_points, s.tube_median_mm, s.tube_p90_mm
+    );
+    Ok(())
 }

@@ -27,6 +27,8 @@ pub enum SynthCommand {
     Composite(crate::cmd_synth_composite::CompositeArgs),
     /// Render a calibration set: a tag board seen by a rig's cameras, with exact corners.
     Calib(crate::cmd_synth_calib::SynthCalibArgs),
+    /// Render stereo pairs (both cameras of a rig pair, same crop) with exact disparity maps.
+    Stereo(crate::cmd_synth_stereo::SynthStereoArgs),
 }
 
 /// Options of the benchmark dataset.
@@ -76,6 +78,7 @@ pub fn run(a: SynthArgs) -> Result<()> {
     match a.command {
         Some(SynthCommand::Composite(c)) => crate::cmd_synth_composite::run(c),
         Some(SynthCommand::Calib(c)) => crate::cmd_synth_calib::run(c),
+        Some(SynthCommand::Stereo(c)) => crate::cmd_synth_stereo::run(c),
         None => run_dataset(a.dataset),
     }
 }

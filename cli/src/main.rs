@@ -15,6 +15,7 @@ mod cmd_synth;
 mod cmd_stereo;
 mod cmd_refine;
 mod cmd_synth_calib;
+mod cmd_synth_stereo;
 mod cmd_synth_composite;
 mod cmd_train;
 mod cmd_demo;
