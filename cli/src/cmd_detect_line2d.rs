@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use tubeloc_core::CameraModel;
-use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary};
+use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, VerifyParams};
 
 /// Line2D options of `tubeloc detect`.
 #[derive(clap::Args, Clone, Debug)]
@@ -31,6 +31,32 @@ pub struct Line2dOpts {
     /// Line2D: minimum Sobel gradient magnitude.
     #[arg(long, default_value_t = 30.0)]
     pub grad_threshold: f32,
+    /// Line2D verification: weight of the silhouette-vs-ring luminance contrast in the score
+    /// (score = (similarity/100 + w clamp(C,-1,1)) / (1 + w)).
+    #[arg(long, default_value_t = 0.5)]
+    pub contrast_weight: f32,
+    /// Line2D verification: drop matches whose contrast C is below this.
+    #[arg(long, default_value_t = -0.2, allow_hyphen_values = true)]
+    pub min_contrast: f32,
+    /// Line2D verification: ring of background samples from this many px outside the silhouette...
+    #[arg(long, default_value_t = 2)]
+    pub ring_inner: u32,
+    /// ...to this many px (inside samples are at least --ring-inner px inside).
+    #[arg(long, default_value_t = 6)]
+    pub ring_outer: u32,
+    /// Line2D verification: weight of the contrast when choosing the template (mask, pose)
+    /// within an NMS cluster (0 = Line2D re-ranking only).
+    #[arg(long, default_value_t = 0.0)]
+    pub rerank_contrast_weight: f32,
+    /// Line2D: matches within this many similarity points of a cluster's best are re-ranked.
+    #[arg(long, default_value_t = 15.0)]
+    pub rerank_margin: f32,
+    /// Line2D: re-ranking bonus `w area / max area` for larger silhouettes within a cluster.
+    #[arg(long, default_value_t = 0.3)]
+    pub rerank_area_weight: f32,
+    /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
+    #[arg(long)]
+    pub no_verify: bool,
 }
 
 /// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries.
@@ -38,8 +64,9 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)]) -> Result<Vec<se
     let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
     let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
-    let mut params = MatchParams { threshold: opts.threshold, coarse_threshold: opts.coarse_threshold, nms_iou: opts.nms_iou, max_detections: opts.max_detections, ..MatchParams::default() };
+    let mut params = MatchParams { threshold: opts.threshold, coarse_threshold: opts.coarse_threshold, nms_iou: opts.nms_iou, max_detections: opts.max_detections, rerank_margin: opts.rerank_margin, rerank_area_weight: opts.rerank_area_weight, ..MatchParams::default() };
     params.gradient.mag_threshold = opts.grad_threshold;
+    params.verify = (!opts.no_verify).then(|| VerifyParams { contrast_weight: opts.contrast_weight, min_contrast: opts.min_contrast, ring_inner: opts.ring_inner, ring_outer: opts.ring_outer, rerank_weight: opts.rerank_contrast_weight, ..VerifyParams::default() });
     let det = Line2dDetector::new(lib, params)?;
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));

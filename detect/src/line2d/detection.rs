@@ -21,8 +21,14 @@ use tubeloc_core::{CameraModel, Pose};
 pub struct Line2dDetection {
     /// Id of the matched template in its library.
     pub template_id: u32,
-    /// Similarity, percent of the maximum (0..100).
+    /// Line2D similarity, percent of the maximum (0..100).
     pub similarity: f32,
+    /// Detection score in 0..=1 (the COCO score): `similarity / 100` without verification,
+    /// else the verified score `(similarity / 100 + w clamp(C, -1, 1)) / (1 + w)`
+    /// (see [`crate::line2d::verify`]).
+    pub score: f32,
+    /// Luminance contrast `C` of the silhouette against a ring around it, when verified.
+    pub contrast: Option<f32>,
     /// Column of the placed template's top-left pixel.
     pub x: i32,
     /// Row of the placed template's top-left pixel.
@@ -64,12 +70,12 @@ impl Line2dDetection {
         let bbox = if bx1 < 0 { [x0 as f64, y0 as f64, 0.0, 0.0] } else { [bx0 as f64, by0 as f64, (bx1 - bx0 + 1) as f64, (by1 - by0 + 1) as f64] };
         let centre_px = [m.x as f64 + t.centre[0] as f64, m.y as f64 + t.centre[1] as f64];
         let t_cam_tube = adjust_pose(&t.t_cam_tube, camera, centre_px);
-        Line2dDetection { template_id: t.id, similarity: m.score, x: m.x, y: m.y, bbox, centre_px, t_cam_tube, mask }
+        Line2dDetection { template_id: t.id, similarity: m.score, score: m.score / 100.0, contrast: None, x: m.x, y: m.y, bbox, centre_px, t_cam_tube, mask }
     }
 
-    /// The core detection record (score = similarity / 100, coarse pose, template id).
+    /// The core detection record (score, coarse pose, template id).
     pub fn to_tube_detection(&self, image_id: u64) -> TubeDetection {
-        let mut d = TubeDetection::new(image_id, self.similarity as f64 / 100.0, self.bbox, DetectionSource::Line2d);
+        let mut d = TubeDetection::new(image_id, self.score as f64, self.bbox, DetectionSource::Line2d);
         d.t_cam_tube = Some(self.t_cam_tube);
         d.template_id = Some(self.template_id as u64);
         d.mask = Some(self.mask.clone());
@@ -81,6 +87,9 @@ impl Line2dDetection {
         let mut v = serde_json::to_value(self.to_tube_detection(image_id)).unwrap_or_else(|_| json!({}));
         if let Some(o) = v.as_object_mut() {
             o.insert("similarity".into(), json!(self.similarity));
+            if let Some(c) = self.contrast {
+                o.insert("contrast".into(), json!(c));
+            }
         }
         v
     }

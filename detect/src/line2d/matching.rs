@@ -21,6 +21,7 @@ use crate::line2d::detection::Line2dDetection;
 use crate::line2d::gradient::{downsample_rgb, quantize_rgb, GradientParams};
 use crate::line2d::response::{linearize, response_maps, spread, LinearMemories, ResponseMaps};
 use crate::line2d::template::{Template, TemplateLibrary};
+use crate::line2d::verify::{contrast, luminance, verified_score, SampleCache, VerifyParams};
 use crate::line2d::{Line2dError, SIM_MAX};
 use rayon::prelude::*;
 use tubeloc_core::CameraModel;
@@ -49,11 +50,17 @@ pub struct MatchParams {
     pub rerank_t: usize,
     /// Score margin (percentage points) of the matches re-ranked within a cluster.
     pub rerank_margin: f32,
+    /// Radiometric verification of raw matches before NMS (None = Line2D score only).
+    pub verify: Option<VerifyParams>,
+    /// Re-ranking bonus for larger silhouettes: `w · area / max area` among the re-ranked
+    /// matches of a cluster. A tube's white body alone looks like a whole, farther tube; this
+    /// prefers the template covering the whole tube when it scores nearly as well.
+    pub rerank_area_weight: f32,
 }
 
 impl Default for MatchParams {
     fn default() -> Self {
-        MatchParams { gradient: GradientParams::default(), t0: 4, t1: 8, threshold: 80.0, coarse_threshold: None, nms_iou: 0.3, max_detections: 100, rerank_t: 2, rerank_margin: 4.0 }
+        MatchParams { gradient: GradientParams::default(), t0: 4, t1: 8, threshold: 80.0, coarse_threshold: None, nms_iou: 0.3, max_detections: 100, rerank_t: 2, rerank_margin: 15.0, verify: Some(VerifyParams::default()), rerank_area_weight: 0.3 }
     }
 }
 
@@ -545,21 +552,27 @@ pub fn nms_clusters(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: 
 /// re-ranking score (response maps `rr`, best over +-1 px) wins; returns it with its position
 /// moved to that best pixel and the cluster's best LINE-2D score.
 pub fn rerank(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32) -> RawMatch {
+    rerank_with(cluster, lib, rr, margin, |_, _, _| 0.0)
+}
+
+/// [`rerank`] with a bonus: the key of a candidate placed at `(x, y)` is
+/// `E_rr / (4 n) + bonus(template, x, y)` (fraction of the maximal re-ranking similarity plus
+/// e.g. the weighted verification contrast).
+pub fn rerank_with(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32, bonus: impl Fn(&Template, i32, i32) -> f32) -> RawMatch {
     let top = cluster[0];
-    let mut best = (0u64, top);
+    let mut best = (f64::NEG_INFINITY, top);
     for m in cluster.iter().filter(|m| m.score >= top.score - margin) {
         let t = &lib.templates[m.template as usize];
         let (tw, th) = (t.levels[0].width as i32, t.levels[0].height as i32);
-        let n = t.levels[0].features.len() as u64;
+        let n = t.levels[0].features.len().max(1) as f64;
         for dy in -1..=1 {
             for dx in -1..=1 {
                 let (x, y) = (m.x + dx, m.y + dy);
                 if x < 0 || y < 0 || x + tw > rr.width as i32 || y + th > rr.height as i32 {
                     continue;
                 }
-                let e = fine_score_at(rr, t, x as usize, y as usize) as u64;
-                // Compare e / n across templates with different feature counts exactly.
-                let key = e * 1_000_000 / n.max(1);
+                let e = fine_score_at(rr, t, x as usize, y as usize) as f64;
+                let key = e / (SIM_MAX as f64 * n) + bonus(t, x, y) as f64;
                 if key > best.0 {
                     best = (key, RawMatch { template: m.template, x, y, score: top.score });
                 }
@@ -575,6 +588,8 @@ pub struct Line2dDetector {
     pub library: TemplateLibrary,
     /// Matching parameters.
     pub params: MatchParams,
+    /// Verification samples per template, computed on first use.
+    samples: SampleCache,
 }
 
 impl Line2dDetector {
@@ -586,7 +601,8 @@ impl Line2dDetector {
         if params.t0 == 0 || params.t1 == 0 || params.t1 > 64 || params.t0 > 64 {
             return Err(Line2dError::invalid("T", "spreading steps must be in 1..=64"));
         }
-        Ok(Line2dDetector { library, params })
+        let samples = SampleCache::new(library.len());
+        Ok(Line2dDetector { library, params, samples })
     }
 
     /// Detects tubes in an interleaved RGB8 image. `camera` gives the intrinsics of this image
@@ -596,12 +612,57 @@ impl Line2dDetector {
         let cam = self.camera_for(width, height, camera)?;
         let img = prepare_image(rgb, width, height, &self.params)?;
         let raw = match_all(&img, &self.library, &self.params);
-        let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
-        let kept: Vec<RawMatch> = match &img.resp_rerank {
-            Some(rr) => clusters.iter().map(|c| rerank(c, &self.library, rr, self.params.rerank_margin)).collect(),
-            None => clusters.iter().map(|c| c[0]).collect(),
+        // Verified scores (percent scale, so that NMS and re-ranking margins keep their units);
+        // `sims` keeps each match's Line2D similarity and contrast.
+        let mut sims = std::collections::HashMap::new();
+        let raw = match &self.params.verify {
+            None => raw,
+            Some(v) => {
+                let luma = luminance(rgb);
+                let mut scored: Vec<(RawMatch, f32, Option<f32>)> = raw
+                    .into_par_iter()
+                    .take(MAX_NMS_INPUT * 4)
+                    .filter_map(|m| {
+                        let t = &self.library.templates[m.template as usize];
+                        let c = contrast(&luma, width, height, self.samples.get(t, v), m.x, m.y);
+                        verified_score(m.score, c, v).map(|s| (RawMatch { score: 100.0 * s / (1.0 + v.contrast_weight), ..m }, m.score, c))
+                    })
+                    .collect();
+                scored.sort_by(|a, b| b.0.score.total_cmp(&a.0.score).then(a.0.template.cmp(&b.0.template)).then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x))));
+                scored.into_iter().map(|(m, sim, c)| {
+                    sims.insert((m.template, m.x, m.y), (sim, c));
+                    m
+                }).collect()
+            }
         };
-        Ok(kept.iter().map(|m| Line2dDetection::from_match(m, &self.library.templates[m.template as usize], &cam, width, height)).collect())
+        let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
+        let luma = self.params.verify.is_some().then(|| luminance(rgb));
+        Ok(clusters
+            .iter()
+            .map(|c| {
+                // Verification picks the cluster (where); the Line2D similarity, re-ranked,
+                // picks the template (pose) within it.
+                let mut by_sim: Vec<RawMatch> = c.iter().map(|m| RawMatch { score: sims.get(&(m.template, m.x, m.y)).map_or(m.score, |s| s.0), ..*m }).collect();
+                by_sim.sort_by(|a, b| b.score.total_cmp(&a.score));
+                let margin = self.params.rerank_margin;
+                let max_area = by_sim.iter().filter(|m| m.score >= by_sim[0].score - margin).map(|m| self.library.templates[m.template as usize].area).max().unwrap_or(1).max(1) as f32;
+                let aw = self.params.rerank_area_weight;
+                let m = match (&img.resp_rerank, &self.params.verify, &luma) {
+                    (Some(rr), Some(v), Some(l)) if v.rerank_weight > 0.0 => rerank_with(&by_sim, &self.library, rr, margin, |t, x, y| {
+                        v.rerank_weight * contrast(l, width, height, self.samples.get(t, v), x, y).unwrap_or(-1.0).clamp(-1.0, 1.0) + aw * t.area as f32 / max_area
+                    }),
+                    (Some(rr), _, _) => rerank_with(&by_sim, &self.library, rr, margin, |t, _, _| aw * t.area as f32 / max_area),
+                    _ => by_sim[0],
+                };
+                let t = &self.library.templates[m.template as usize];
+                let mut d = Line2dDetection::from_match(&m, t, &cam, width, height);
+                if let (Some(v), Some(l)) = (&self.params.verify, &luma) {
+                    d.score = (c[0].score / 100.0).max(0.0);
+                    d.contrast = contrast(l, width, height, self.samples.get(t, v), m.x, m.y);
+                }
+                d
+            })
+            .collect())
     }
 
     /// The camera used for poses: `camera`, checked against the library, or a pinhole with the

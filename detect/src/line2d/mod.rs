@@ -15,6 +15,8 @@
 //!   linearized memories.
 //! - [`matching`]: coarse-to-fine matching with saturation-free integer accumulation, rayon
 //!   across templates, non-maximum suppression.
+//! - [`verify`]: radiometric verification (bright silhouette against a ring around it)
+//!   rescoring raw matches before NMS.
 //! - [`detection`]: [`Line2dDetection`] with the coarse 6D pose and COCO output.
 
 pub mod detection;
@@ -25,6 +27,7 @@ pub mod mask;
 pub mod render;
 pub mod response;
 pub mod template;
+pub mod verify;
 pub mod viewpoints;
 
 pub use detection::Line2dDetection;
@@ -32,6 +35,7 @@ pub use gradient::GradientParams;
 pub use matching::{Line2dDetector, MatchParams};
 pub use render::{render_silhouette, Silhouette};
 pub use template::{Feature, LibraryParams, Template, TemplateLevel, TemplateLibrary};
+pub use verify::VerifyParams;
 pub use viewpoints::{ViewParams, ViewSpec};
 
 use std::path::PathBuf;

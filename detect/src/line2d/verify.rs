@@ -1,0 +1,255 @@
+//! Verification of Line2D matches by the tube's radiometric signature.
+//!
+//! Line2D only looks at gradient orientations along the silhouette contour, so straight rock
+//! edges, slab seams and shadow borders score as high as tubes. The sample tubes are white
+//! alumina (plus a gold seal): brighter than the terrain just around them. For each template,
+//! `n` inside samples (silhouette pixels at least `ring_inner` px from its border) and `n` ring
+//! samples (pixels `ring_inner..=ring_outer` px outside it, Chebyshev distance) are chosen spread
+//! out once; a match placed at `(x, y)` then gets the luminance contrast
+//!
+//! `C = (mean_in L - mean_ring L) / (mean_ring L + 1)`, with `L = (R + G + B) / 3`,
+//!
+//! over the samples that fall inside the image, in O(n) per match. The verified score is
+//! `s = similarity / 100 + w · clamp(C, -1, 1)`; matches with `C < min_contrast` are dropped.
+//! Scoring happens before non-maximum suppression so that a verified tube wins its cluster
+//! over a brighter-edged rock it overlaps.
+
+use crate::line2d::template::Template;
+
+/// Knobs of the radiometric verification.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VerifyParams {
+    /// Weight `w` of the clamped contrast in the verified score (0 = Line2D score only).
+    pub contrast_weight: f32,
+    /// Matches with contrast below this are dropped (`-inf` keeps all).
+    pub min_contrast: f32,
+    /// Inside samples are at least this far from the silhouette border, and ring samples at
+    /// least this far outside it, pixels (skips the blurred edge).
+    pub ring_inner: u32,
+    /// Ring samples are at most this far outside the silhouette, pixels.
+    pub ring_outer: u32,
+    /// Samples per set (inside, ring).
+    pub samples: usize,
+    /// Weight of the contrast when re-ranking the templates of one NMS cluster (which
+    /// template, hence mask and pose, the detection reports); 0 = Line2D re-ranking only.
+    pub rerank_weight: f32,
+}
+
+impl Default for VerifyParams {
+    fn default() -> Self {
+        VerifyParams { contrast_weight: 0.5, min_contrast: -0.2, ring_inner: 2, ring_outer: 6, samples: 48, rerank_weight: 0.0 }
+    }
+}
+
+/// Sample offsets of one template, relative to its level-0 top-left pixel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TemplateSamples {
+    /// Inside samples `(dx, dy)`.
+    pub inside: Vec<(i16, i16)>,
+    /// Ring samples `(dx, dy)` (may be negative or beyond the template box).
+    pub ring: Vec<(i16, i16)>,
+}
+
+/// Chessboard (Chebyshev) distance transform, capped at 255: for pixels with `mask == target`,
+/// the distance to the nearest pixel with `mask != target` (1 when 8-adjacent to one); 0
+/// elsewhere. Pixels outside the box never count as `!= target`. Two raster passes.
+fn chessboard_distance(mask: &[u8], w: usize, h: usize, target: u8) -> Vec<u8> {
+    let mut d: Vec<u8> = mask.iter().map(|&m| if m == target { 255 } else { 0 }).collect();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if d[i] == 0 {
+                continue;
+            }
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1].saturating_add(1));
+            }
+            if y > 0 {
+                for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    v = v.min(d[(y - 1) * w + xx].saturating_add(1));
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            if d[i] == 0 {
+                continue;
+            }
+            let mut v = d[i];
+            if x + 1 < w {
+                v = v.min(d[i + 1].saturating_add(1));
+            }
+            if y + 1 < h {
+                for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                    v = v.min(d[(y + 1) * w + xx].saturating_add(1));
+                }
+            }
+            d[i] = v;
+        }
+    }
+    d
+}
+
+/// Up to `n` spread-out points of `pts` (a regular stride over the list, which is in row-major
+/// order; cheap and deterministic).
+fn thin(pts: Vec<(i16, i16)>, n: usize) -> Vec<(i16, i16)> {
+    if pts.len() <= n || n == 0 {
+        return pts;
+    }
+    (0..n).map(|i| pts[i * pts.len() / n]).collect()
+}
+
+/// Chooses the inside and ring samples of a template.
+pub fn template_samples(t: &Template, p: &VerifyParams) -> TemplateSamples {
+    let (tw, th) = (t.levels[0].width as usize, t.levels[0].height as usize);
+    let pad = p.ring_outer as usize + 1;
+    let (w, h) = (tw + 2 * pad, th + 2 * pad);
+    let mut m = vec![0u8; w * h];
+    for y in 0..th {
+        for x in 0..tw {
+            m[(y + pad) * w + x + pad] = t.mask[y * tw + x];
+        }
+    }
+    let din = chessboard_distance(&m, w, h, 1);
+    let dout = chessboard_distance(&m, w, h, 0);
+    let mut inside = Vec::new();
+    let mut ring = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (dx, dy) = (x as i16 - pad as i16, y as i16 - pad as i16);
+            if m[y * w + x] == 1 {
+                if din[y * w + x] as u32 > p.ring_inner {
+                    inside.push((dx, dy));
+                }
+            } else {
+                let d = dout[y * w + x] as u32;
+                // `d` counts erosion steps of the background: 1 next to the silhouette.
+                if d > p.ring_inner && d <= p.ring_outer {
+                    ring.push((dx, dy));
+                }
+            }
+        }
+    }
+    if inside.is_empty() {
+        inside = (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).filter(|&(x, y)| t.mask[y * tw + x] != 0).map(|(x, y)| (x as i16, y as i16)).collect();
+    }
+    TemplateSamples { inside: thin(inside, p.samples), ring: thin(ring, p.samples) }
+}
+
+/// Per-template samples of a library, computed on first use (only templates that match).
+#[derive(Debug, Default)]
+pub struct SampleCache {
+    cells: Vec<std::sync::OnceLock<TemplateSamples>>,
+}
+
+impl SampleCache {
+    /// An empty cache for `n` templates.
+    pub fn new(n: usize) -> Self {
+        SampleCache { cells: (0..n).map(|_| std::sync::OnceLock::new()).collect() }
+    }
+
+    /// The samples of `t` (computed once, thread-safe).
+    pub fn get(&self, t: &Template, p: &VerifyParams) -> &TemplateSamples {
+        self.cells[t.id as usize].get_or_init(|| template_samples(t, p))
+    }
+}
+
+/// Luminance `L = (R + G + B) / 3` of an interleaved RGB8 image.
+pub fn luminance(rgb: &[u8]) -> Vec<u8> {
+    rgb.chunks_exact(3).map(|c| ((c[0] as u16 + c[1] as u16 + c[2] as u16) / 3) as u8).collect()
+}
+
+/// Contrast `C` of the samples placed at `(x, y)` in a `w x h` luminance image; `None` when
+/// fewer than a quarter of either sample set falls inside the image.
+pub fn contrast(luma: &[u8], w: usize, h: usize, s: &TemplateSamples, x: i32, y: i32) -> Option<f32> {
+    let mean = |pts: &[(i16, i16)]| -> Option<f32> {
+        let (mut sum, mut n) = (0u32, 0usize);
+        for &(dx, dy) in pts {
+            let (xx, yy) = (x + dx as i32, y + dy as i32);
+            if xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h {
+                sum += luma[yy as usize * w + xx as usize] as u32;
+                n += 1;
+            }
+        }
+        (n > 0 && n * 4 >= pts.len()).then(|| sum as f32 / n as f32)
+    };
+    let li = mean(&s.inside)?;
+    let lr = mean(&s.ring)?;
+    Some((li - lr) / (lr + 1.0))
+}
+
+/// Verified score `similarity / 100 + w clamp(C, -1, 1)`, or `None` when the match is dropped
+/// (`C < min_contrast`, or no contrast measurable while `min_contrast` is finite).
+pub fn verified_score(similarity: f32, c: Option<f32>, p: &VerifyParams) -> Option<f32> {
+    match c {
+        Some(c) if c >= p.min_contrast || !p.min_contrast.is_finite() => Some(similarity / 100.0 + p.contrast_weight * c.clamp(-1.0, 1.0)),
+        Some(_) => None,
+        None if p.min_contrast.is_finite() && p.min_contrast > -1.0 => None,
+        None => Some(similarity / 100.0 - p.contrast_weight),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::line2d::template::TemplateLevel;
+
+    fn rect_template(tw: usize, th: usize) -> Template {
+        Template {
+            id: 0,
+            alpha_deg: 90.0,
+            psi_deg: 0.0,
+            distance: 1.0,
+            t_cam_tube: tubeloc_core::Pose::identity(),
+            centre: [tw as f32 / 2.0, th as f32 / 2.0],
+            levels: vec![TemplateLevel { width: tw as u16, height: th as u16, features: vec![] }],
+            mask: vec![1; tw * th],
+            area: (tw * th) as u32,
+        }
+    }
+
+    #[test]
+    fn samples_lie_inside_and_in_the_ring() {
+        let t = rect_template(30, 12);
+        let p = VerifyParams::default();
+        let s = template_samples(&t, &p);
+        assert_eq!(s.inside.len(), p.samples);
+        assert_eq!(s.ring.len(), p.samples);
+        for &(x, y) in &s.inside {
+            assert!(x >= 2 && y >= 2 && x < 28 && y < 10, "inside sample ({x},{y}) too close to the border");
+        }
+        for &(x, y) in &s.ring {
+            // Chebyshev distance outside the rectangle [0, 30) x [0, 12).
+            let d = (-x).max(x - 29).max(-y).max(y - 11);
+            assert!((3..=6).contains(&d), "ring sample ({x},{y}) at distance {d}");
+        }
+    }
+
+    #[test]
+    fn bright_tube_on_dark_ground_has_positive_contrast_and_wins() {
+        let (w, h) = (80usize, 60usize);
+        let t = rect_template(30, 12);
+        let p = VerifyParams::default();
+        let s = template_samples(&t, &p);
+        let mut luma = vec![80u8; w * h];
+        for y in 20..32 {
+            for x in 25..55 {
+                luma[y * w + x] = 200;
+            }
+        }
+        let c = contrast(&luma, w, h, &s, 25, 20).unwrap();
+        assert!((c - (200.0 - 80.0) / 81.0).abs() < 1e-4, "contrast {c}");
+        // The same template on flat ground has no contrast; on a dark stripe it is negative.
+        assert_eq!(contrast(&luma, w, h, &s, 2, 40).unwrap(), 0.0);
+        let hi = verified_score(85.0, Some(c), &p).unwrap();
+        let lo = verified_score(95.0, Some(0.0), &p).unwrap();
+        assert!(hi > lo);
+        assert_eq!(verified_score(95.0, Some(-0.5), &p), None);
+        // Fully outside the image: not measurable.
+        assert_eq!(contrast(&luma, w, h, &s, 500, 500), None);
+    }
+}
