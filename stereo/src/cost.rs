@@ -1,4 +1,5 @@
-//! Pixel-wise matching cost volume `C(x, y, d)`, `u8`, laid out `[y][x][d]` (contiguous over d).
+//! Pixel-wise matching costs `C(x, y, d)`, `u8`, one row at a time laid out `[x][d]`
+//! (contiguous over d).
 //!
 //! `C = census_weight · popcount(cL(x) ^ cR(x - dmin - d)) + grad_weight · min(|gL(x) - gR(x - dmin - d)|, grad_trunc)`
 //! where `c` are census signatures and `g` horizontal Sobel gradients divided by 4. Candidates

@@ -1,7 +1,8 @@
 //! Semi-global matching (Hirschmüller 2008) with a census matching cost.
 //!
-//! Pipeline: census transform of both images ([`census`](crate::census)) → cost volume
-//! `C(x, y, d)` (Hamming distance, optional gradient term) → aggregation along 8 or 4 paths
+//! Pipeline: census transform of both images ([`census`](crate::census)) → matching costs
+//! `C(x, y, d)` (Hamming distance, optional gradient term; computed row by row inside the
+//! aggregation, never stored as a volume) → aggregation along 8 or 4 paths
 //! with edge-adapted `P2` → winner-takes-all with parabola sub-pixel refinement
 //! `d* = d + (S(d-1) - S(d+1)) / (2 (S(d-1) - 2 S(d) + S(d+1)))` → uniqueness and left-right
 //! consistency checks → optional 3x3 median → speckle removal.
