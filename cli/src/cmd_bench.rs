@@ -274,10 +274,13 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 let dir = out.join("poses").join(det).join(sp);
                 st.run(&format!("poses/{det}/{sp}"), &[dir.join("eval/pose_metrics.json")], || {
                     std::fs::create_dir_all(&dir)?;
-                    let poses = dir.join("poses.json");
-                    crate::run_words(&words(&["refine", "--dataset", &s(&split_dir(sp)), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses)]))?;
-                    crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--poses", &s(&poses), "--seeds", &s(&dets), "--out", &s(&dir.join("eval"))]))?;
-                    Ok(Value::Null)
+                    let (poses, seeds) = (dir.join("poses.json"), dir.join("seeds.json"));
+                    let t = Instant::now();
+                    crate::run_words(&words(&["refine", "--dataset", &s(&split_dir(sp)), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses), "--seeds-out", &s(&seeds)]))?;
+                    let secs = t.elapsed().as_secs_f64();
+                    crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval"))]))?;
+                    let n: Vec<Value> = files::read_json(&poses)?;
+                    Ok(json!({"refine_seconds": secs, "poses": n.len()}))
                 })?;
             }
         }
