@@ -3,7 +3,8 @@
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
-use tubeloc_core::{CameraModel, TubeModel};
+use tubeloc_core::{CameraModel, TubeMaterial, TubeMesh, TubeModel};
+use tubeloc_detect::line2d::mesh::MeshShape;
 use tubeloc_detect::line2d::render::Pinhole;
 use tubeloc_detect::line2d::{LibraryParams, TemplateLibrary, ViewParams};
 
@@ -57,9 +58,14 @@ pub struct BuildArgs {
     /// Tube model TOML (default: the embedded data/tube.toml).
     #[arg(long)]
     tube: Option<PathBuf>,
-    /// Tube mesh (OBJ) instead of the parametric model: not supported yet.
-    #[arg(long)]
+    /// Tube mesh (Wavefront OBJ, metres, axis +z) rendered instead of the parametric model,
+    /// e.g. ../shared/data/sample_tube/sample_tube.obj.
+    #[arg(long, conflicts_with = "tube")]
     tube_mesh: Option<PathBuf>,
+    /// With --tube-mesh: keep the grey plastic cap of the CAD model (not flight hardware;
+    /// excluded by default).
+    #[arg(long)]
+    mesh_keep_cap: bool,
 }
 
 fn parse_range(s: &str) -> Result<(f64, f64, f64)> {
@@ -89,9 +95,16 @@ pub fn run(args: TemplatesArgs) -> Result<()> {
 }
 
 fn build(a: BuildArgs) -> Result<()> {
-    if a.tube_mesh.is_some() {
-        bail!("--tube-mesh is not supported yet: templates are rendered from the parametric model (--tube)");
-    }
+    let shape = match &a.tube_mesh {
+        Some(p) => {
+            let mesh = TubeMesh::load_obj(p).with_context(|| format!("reading {}", p.display()))?;
+            let exclude: &[TubeMaterial] = if a.mesh_keep_cap { &[] } else { &[TubeMaterial::Plastic] };
+            let shape = MeshShape::from_mesh(&mesh, exclude).with_context(|| format!("{}: no triangle left after excluding the cap", p.display()))?;
+            eprintln!("mesh {}: {} triangles, length {:.1} mm", p.display(), shape.triangles.len(), shape.length() * 1000.0);
+            Some(shape)
+        }
+        None => None,
+    };
     let tube = match &a.tube {
         Some(p) => TubeModel::load(p).with_context(|| format!("reading {}", p.display()))?,
         None => TubeModel::default(),
@@ -109,7 +122,10 @@ fn build(a: BuildArgs) -> Result<()> {
     let total = tubeloc_detect::line2d::viewpoints::generate_views(&params.views)?.len();
     let bar = ProgressBar::new(total as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} templates {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
-    let lib = TemplateLibrary::build(&tube, &params, &|n| bar.set_position(n as u64))?;
+    let lib = match &shape {
+        Some(m) => TemplateLibrary::build_from_mesh(m, &params, &|n| bar.set_position(n as u64))?,
+        None => TemplateLibrary::build(&tube, &params, &|n| bar.set_position(n as u64))?,
+    };
     bar.finish_and_clear();
     lib.save(&a.out).with_context(|| format!("writing {}", a.out.display()))?;
     eprintln!("{} templates -> {}", lib.len(), a.out.display());

@@ -254,3 +254,57 @@ fn library_round_trip_and_corrupt_files_are_refused() {
     let missing = dir.path().join("missing.tlt");
     assert!(TemplateLibrary::load(&missing).unwrap_err().to_string().contains("missing.tlt"));
 }
+
+/// Templates rendered from the CAD mesh (cap excluded) agree with the parametric model's.
+#[test]
+fn mesh_silhouettes_match_the_parametric_model_and_build_a_library() {
+    use tubeloc_core::{TubeMaterial, TubeMesh};
+    use tubeloc_detect::line2d::mesh::{render_mesh_silhouette, MeshShape};
+    use tubeloc_detect::line2d::render::render_silhouette;
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/sample_tube/sample_tube.obj");
+    if !path.exists() {
+        eprintln!("skipping: {} not found (third-party data absent)", path.display());
+        return;
+    }
+    let mesh = TubeMesh::load_obj(&path).unwrap();
+    let shape = MeshShape::from_mesh(&mesh, &[TubeMaterial::Plastic]).unwrap();
+    let tube = TubeModel::default();
+    assert!((shape.length() - tube.length).abs() < 0.01, "mesh length {} vs model {}", shape.length(), tube.length);
+    let k = Pinhole { fx: 1720.0, fy: 1720.0, cx: 400.0, cy: 300.0 };
+    for (axis, t) in [(Vector3::x(), Vector3::new(0.0, 0.0, 1.5)), (Vector3::new(0.6, 0.3, -0.7).normalize(), Vector3::new(0.05, -0.03, 2.2))] {
+        let pose = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), t);
+        let a = render_mesh_silhouette(&shape, &k, &pose, Some((800, 600)));
+        let b = render_silhouette(&tube, &k, &pose, Some((800, 600)));
+        // IoU of the two silhouettes on the image.
+        let at = |s: &tubeloc_detect::line2d::Silhouette, x: i32, y: i32| {
+            let (lx, ly) = (x - s.x0, y - s.y0);
+            lx >= 0 && ly >= 0 && (lx as usize) < s.width && (ly as usize) < s.height && s.mask[ly as usize * s.width + lx as usize] != 0
+        };
+        let (mut inter, mut uni) = (0, 0);
+        for y in 0..600 {
+            for x in 0..800 {
+                let (p, q) = (at(&a, x, y), at(&b, x, y));
+                inter += (p && q) as usize;
+                uni += (p || q) as usize;
+            }
+        }
+        let iou = inter as f64 / uni as f64;
+        assert!(iou > 0.8, "mesh vs parametric silhouette IoU {iou:.3} (areas {} / {})", a.area(), b.area());
+        // Depth along the line of sight agrees at the centre pixel within 5 mm.
+        let (u, v) = ((k.fx * t.x / t.z + k.cx).round() as i32, (k.fy * t.y / t.z + k.cy).round() as i32);
+        if at(&a, u, v) && at(&b, u, v) {
+            let i = |s: &tubeloc_detect::line2d::Silhouette| ((v - s.y0) as usize) * s.width + (u - s.x0) as usize;
+            assert!((a.depth[i(&a)] - b.depth[i(&b)]).abs() < 0.005, "depth {} vs {}", a.depth[i(&a)], b.depth[i(&b)]);
+        }
+    }
+    let mut params = small_params(2.0, 2.0, 48);
+    params.views.step_deg = 30.0;
+    let lib = TemplateLibrary::build_from_mesh(&shape, &params, &|_| {}).unwrap();
+    let reference = TemplateLibrary::build(&tube, &params, &|_| {}).unwrap();
+    assert_eq!(lib.len(), reference.len());
+    for (m, r) in lib.templates.iter().zip(&reference.templates) {
+        assert_eq!(m.levels[0].features.len(), 48);
+        let rel = (m.area as f64 - r.area as f64).abs() / r.area as f64;
+        assert!(rel < 0.25, "template {}: mesh area {} vs model {}", m.id, m.area, r.area);
+    }
+}

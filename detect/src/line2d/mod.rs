@@ -4,6 +4,7 @@
 //! Pipeline (one module per step):
 //! - [`render`]: exact analytic ray casting of the parametric tube (coaxial capped cylinders)
 //!   into a silhouette + depth image.
+//! - [`mesh`]: the same from a triangle mesh of the tube (the CAD model's OBJ) by rasterization.
 //! - [`viewpoints`]: viewpoints on a subdivided icosahedron (upper hemisphere), in-plane
 //!   rotations and distances; views equal up to the tube's axial symmetry are deduplicated.
 //! - [`gradient`]: colour gradients (strongest channel, Sobel), orientation quantized into 8 bins
@@ -22,8 +23,9 @@
 pub mod detection;
 pub mod format;
 pub mod gradient;
-pub mod matching;
 pub mod mask;
+pub mod matching;
+pub mod mesh;
 pub mod render;
 pub mod response;
 pub mod template;

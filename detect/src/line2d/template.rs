@@ -9,6 +9,7 @@
 //! children are), in the same local frame halved.
 
 use crate::line2d::gradient::orientation_bin;
+use crate::line2d::mesh::{render_mesh_silhouette, MeshShape};
 use crate::line2d::render::{render_silhouette, Pinhole, Silhouette};
 use crate::line2d::viewpoints::{generate_views, ViewParams, ViewSpec};
 use crate::line2d::Line2dError;
@@ -240,6 +241,17 @@ impl TemplateLibrary {
     /// Renders and extracts all templates of `params` for `tube` (rayon across views).
     /// `progress` is called with the number of templates done so far (from any thread).
     pub fn build(tube: &TubeModel, params: &LibraryParams, progress: &(dyn Fn(usize) + Sync)) -> Result<TemplateLibrary, Line2dError> {
+        Self::build_with(params, progress, |k, pose| render_silhouette(tube, k, pose, None))
+    }
+
+    /// Like [`TemplateLibrary::build`], with silhouettes rendered from a triangle mesh
+    /// ([`crate::line2d::mesh`]) instead of the parametric model.
+    pub fn build_from_mesh(shape: &MeshShape, params: &LibraryParams, progress: &(dyn Fn(usize) + Sync)) -> Result<TemplateLibrary, Line2dError> {
+        Self::build_with(params, progress, |k, pose| render_mesh_silhouette(shape, k, pose, None))
+    }
+
+    /// Builds a library with `render(intrinsics, T_cam_tube)` giving each view's silhouette.
+    pub fn build_with(params: &LibraryParams, progress: &(dyn Fn(usize) + Sync), render: impl Fn(&Pinhole, &Pose) -> Silhouette + Sync) -> Result<TemplateLibrary, Line2dError> {
         if params.features == 0 || params.features > 4096 {
             return Err(Line2dError::invalid("features", format!("must be in 1..=4096, got {}", params.features)));
         }
@@ -252,7 +264,7 @@ impl TemplateLibrary {
         let built: Vec<Option<Template>> = views
             .par_iter()
             .map(|v| {
-                let sil = render_silhouette(tube, &k, &v.t_cam_tube, None);
+                let sil = render(&k, &v.t_cam_tube);
                 let t = Template::from_silhouette(0, v, &sil, k.cx, k.cy, params.features as usize);
                 progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
                 t
