@@ -52,6 +52,11 @@ pub struct RefineArgs {
     /// Dataset mode with --gt-seeds: least visible fraction of a tube to seed it.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) min_visible: f64,
+    /// Dataset mode: camera JSON the detector assumed (e.g. `tubeloc detect` without the crop's
+    /// own camera); template poses are re-anchored to each image's camera (same pixel, same
+    /// distance, see `tubeloc_refine::seed::reanchored`).
+    #[arg(long, requires = "dataset")]
+    pub(crate) detections_camera: Option<PathBuf>,
     /// Dataset mode: also write the seeds as poses (JSON array of TubeAxisPose), to evaluate the
     /// seeds alone.
     #[arg(long, requires = "dataset")]

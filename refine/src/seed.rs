@@ -63,6 +63,18 @@ pub fn perturbed(state: &AxisState, pos_m: f64, ang_deg: f64, seed: u64) -> Axis
     AxisState { c: state.c + dc, a: r * state.a }
 }
 
+/// A template pose found under camera `from` moved to camera `to` so that it looks the same:
+/// its centre is turned about the camera centre from its viewing ray under `from` onto the ray
+/// of the same pixel under `to` (the axis turned alike). For detections made with another
+/// principal point or focal length than the image's own camera (e.g. a crop). `None` when the
+/// centre does not project.
+pub fn reanchored(state: &AxisState, from: &CameraModel, to: &CameraModel) -> Option<AxisState> {
+    let u = from.project(&Point3::from(state.c))?;
+    let new_ray = to.unproject(&u);
+    let r = nalgebra::Rotation3::rotation_between(&state.c, &new_ray)?;
+    Some(AxisState { c: r * state.c, a: r * state.a })
+}
+
 /// Builds a seed from a detection. See the module docs for the order of preference.
 pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel, ground: Option<&GroundPlane>, stereo: &[Point3<f64>]) -> Result<Seed, RefineError> {
     if let Some(t) = &det.t_cam_tube {
@@ -129,6 +141,21 @@ pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &Cy
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reanchored_pose_projects_to_the_same_pixel_at_the_same_distance() {
+        let from = CameraModel::from_hfov(1024, 1024, 40.0);
+        let mut to = from.clone();
+        to.cx = -237.5;
+        to.cy = 776.5;
+        let st = AxisState { c: Vector3::new(0.2, -0.1, 2.5), a: Vector3::new(1.0, 0.3, 0.1).normalize() };
+        let r = reanchored(&st, &from, &to).unwrap();
+        let (u0, u1) = (from.project(&Point3::from(st.c)).unwrap(), to.project(&Point3::from(r.c)).unwrap());
+        assert!((u0 - u1).norm() < 1e-9, "{u0} vs {u1}");
+        assert!((r.c.norm() - st.c.norm()).abs() < 1e-12);
+        // The axis keeps its angle to the viewing ray.
+        assert!((r.a.dot(&r.c.normalize()) - st.a.dot(&st.c.normalize())).abs() < 1e-12);
+    }
 
     #[test]
     fn perturbation_has_the_requested_size_and_is_reproducible() {

@@ -90,6 +90,10 @@ pub fn run(args: &RefineArgs) -> Result<()> {
         }
         _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
     }
+    let det_camera = match &args.detections_camera {
+        Some(p) => Some(CameraModel::load_json(p).with_context(|| format!("detections camera {}", p.display()))?),
+        None => None,
+    };
     let fixed_ground = if auto_ground { None } else { args.ground.as_deref().map(parse_ground).transpose()? };
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}").expect("template"));
@@ -117,7 +121,23 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             let mut seeds = Vec::new();
             for w in items {
                 match w {
-                    Work::Detection(d) => poses.push(refiner.refine(&input, d)),
+                    Work::Detection(d) => {
+                        let mut d = d.clone();
+                        if let (Some(from), Some(t)) = (&det_camera, &d.t_cam_tube) {
+                            let st = AxisState { c: t.translation(), a: t.transform_vector(&nalgebra::Vector3::z()) };
+                            if let Some(r) = tubeloc_refine::seed::reanchored(&st, from, &camera) {
+                                let rot = nalgebra::Rotation3::rotation_between(&st.c, &r.c).unwrap_or_else(nalgebra::Rotation3::identity);
+                                d.t_cam_tube = Some(Pose::from_parts(nalgebra::Rotation3::from_matrix_unchecked(rot.matrix() * t.rotation()), r.c));
+                            }
+                        }
+                        let d = &d;
+                        poses.push(refiner.refine(&input, d));
+                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &[]) {
+                            if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
+                                seeds.push(p);
+                            }
+                        }
+                    }
                     Work::GtSeed(st) => {
                         poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
