@@ -34,5 +34,6 @@ fn main() {
             bad += 1;
         }
     }
+    println!("times_ms {}", times.iter().map(|t| format!("{t:.2}")).collect::<Vec<_>>().join(" "));
     println!("{paths:?}: median {:.1} ms (min {:.1}), bad-2.0 {:.4} on {n} visible px", times[times.len() / 2], times[0], bad as f64 / n as f64);
 }
