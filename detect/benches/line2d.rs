@@ -126,6 +126,11 @@ fn main() {
     println!("  of which coarse+fine {raw_ms:.1} ms ({n_raw} raw matches), NMS {nms_ms:.1} ms");
     let resp_cpu = cpu_per_call(|| drop(black_box(prepare_image(&img, W, H, &p))), 20);
     let match_cpu = cpu_per_call(|| drop(black_box(nms(&match_all(&prep, &lib, &p), &lib, p.nms_iou, p.max_detections))), 10);
+    let det = tubeloc_detect::line2d::Line2dDetector::new(lib.clone(), p.clone()).expect("detector");
+    let _ = det.detect(&img, W, H, None).expect("detect"); // fills the verification sample cache
+    let detect_ms = median_ms(|| drop(black_box(det.detect(&img, W, H, None))), 5);
+    let detect_cpu = cpu_per_call(|| drop(black_box(det.detect(&img, W, H, None))), 5);
+    println!("  Line2dDetector::detect end to end (+ verification, re-ranking, masks): {detect_ms:.1} ms wall median, {detect_cpu:.1} ms CPU");
     println!(
         "  CPU time per image (all threads): response maps {resp_cpu:.1} ms, matching {match_cpu:.1} ms, total {:.1} ms = {:.1} ms wall on 2 idle cores if perfectly parallel",
         resp_cpu + match_cpu,
