@@ -159,13 +159,6 @@ fn write_split(dataset: &Path, split: &str, limit: Option<usize>, dir: &Path) ->
     Ok(n)
 }
 
-/// `(AP50, AR100)` from a `metrics.json` written by `tubeloc eval --out`.
-fn ap50_ar(metrics: &Path) -> Option<(f64, f64)> {
-    let v: Value = files::read_json(metrics).ok()?;
-    let get = |name: &str| v["stats"].as_array()?.iter().find(|s| s["name"] == name)?["value"].as_f64();
-    Some((get("AP50")?, get("AR100")?))
-}
-
 /// Detection + evaluation of one detector on one split; returns ms per image.
 fn detect_and_eval(method: &str, extra: &[String], split_dir: &Path, out: &Path, n_images: usize) -> Result<Value> {
     std::fs::create_dir_all(out)?;
@@ -314,7 +307,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         st.run("tags", &[tdir.join("annotations.json")], || {
             write_split(&dataset, "with-tags", a.images_per_split, &tdir)?;
             crate::run_words(&words(&["calib", "groundtruth", "--dataset", &s(&tdir)]))?;
-            tag_pose_errors(&tdir.join("annotations.json"))
+            crate::figures::tag_pose_errors(&tdir.join("annotations.json"))
         })?;
     }
 
@@ -359,36 +352,6 @@ fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     Ok(json!({"seconds": t.elapsed().as_secs_f64(), "peak_rss_mb": doc["run"]["peak_rss_mb"], "width": cam.model.width, "height": cam.model.height}))
 }
 
-/// Tag-pair poses (`T_cam_tube_tags`, from `calib groundtruth`) against the renderer's exact
-/// `T_cam_tube`, per camera height and per (two tags | one tag): count, median and p90 of the
-/// centre distance (mm) and of the axis angle (deg).
-fn tag_pose_errors(ann: &Path) -> Result<Value> {
-    use tubeloc_core::Pose;
-    let v: Value = files::read_json(ann)?;
-    let height: BTreeMap<u64, f64> = v["images"].as_array().into_iter().flatten().filter_map(|im| Some((im["id"].as_u64()?, im["height_m"].as_f64()?))).collect();
-    let mut groups: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
-    for a in v["annotations"].as_array().into_iter().flatten() {
-        let (Some(est), Some(gt)) = (a.get("T_cam_tube_tags"), a.get("T_cam_tube")) else { continue };
-        let est: Pose = serde_json::from_value(est.clone()).with_context(|| format!("{}: T_cam_tube_tags", ann.display()))?;
-        let gt: Pose = serde_json::from_value(gt.clone()).with_context(|| format!("{}: T_cam_tube", ann.display()))?;
-        let e = tubeloc_eval::pose::pose_axis_error(&est, &gt);
-        let h = a["image_id"].as_u64().and_then(|id| height.get(&id).copied()).unwrap_or(f64::NAN);
-        let tags = if a["tags_pose"]["single_tag"].as_bool().unwrap_or(false) { "one tag" } else { "two tags" };
-        let g = groups.entry(format!("{h} m, {tags}")).or_default();
-        g.0.push(e.centre_distance_mm);
-        g.1.push(e.axis_angle_deg);
-    }
-    let q = |x: &mut Vec<f64>, p: f64| {
-        x.sort_by(f64::total_cmp);
-        tubeloc_eval::pose_summary::percentile(x, p).unwrap_or(f64::NAN)
-    };
-    let mut r = serde_json::Map::new();
-    for (k, (mut d, mut ang)) in groups {
-        r.insert(k, json!({"n": d.len(), "pos_median_mm": q(&mut d, 50.0), "pos_p90_mm": q(&mut d, 90.0), "axis_median_deg": q(&mut ang, 50.0), "axis_p90_deg": q(&mut ang, 90.0)}));
-    }
-    Ok(Value::Object(r))
-}
-
 fn f3(x: f64) -> String {
     format!("{x:.3}")
 }
@@ -403,7 +366,7 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &Benc
         for (i, (sp, ..)) in SPLITS.iter().enumerate() {
             let m = out.join(det).join(sp).join("eval/metrics.json");
             let (p_ap, p_ar) = paper_of(i);
-            match ap50_ar(&m) {
+            match crate::figures::ap50_ar(&m) {
                 Some((ap, ar)) => {
                     let ms = st.result(&format!("{det}/{sp}")).and_then(|v| v["ms_per_image"].as_f64()).map(|x| format!("{x:.0}")).unwrap_or_default();
                     let _ = writeln!(r, "| {sp} | {} | {} | {} | {} | {ms} | [report]({det}/{sp}/eval/report.md) |", f3(ap), f3(ar), f3(p_ap), f3(p_ar));
@@ -431,23 +394,20 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &Benc
     for det in ["line2d", "learned"] {
         for (sp, ..) in SPLITS {
             let p = out.join("poses").join(det).join(sp).join("eval/report.md");
-            if p.exists() {
-                let _ = writeln!(r, "- {det} seeds on {sp}: [pose report](poses/{det}/{sp}/eval/report.md)");
+            if let Some(t) = crate::figures::pose_table(&p) {
+                let _ = writeln!(r, "### {det} detections on {sp}: coarse seeds and mono refinement ([report with histograms](poses/{det}/{sp}/eval/report.md))\n\n{t}");
             }
         }
     }
     for mode in ["mono", "stereo"] {
         let p = out.join("stereo").join(format!("eval_{mode}/report.md"));
-        if p.exists() {
-            let _ = writeln!(r, "- synthetic stereo set, {mode} refinement: [pose report](stereo/eval_{mode}/report.md)");
+        if let Some(t) = crate::figures::pose_table(&p) {
+            let _ = writeln!(r, "### synthetic stereo set, {mode} refinement ([report with histograms](stereo/eval_{mode}/report.md))\n\n{t}");
         }
     }
     if let Some(Value::Object(t)) = st.result("tags") {
-        let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n\n| camera height, tags seen | tubes | position median mm | p90 mm | axis median deg | p90 deg |\n|---|---|---|---|---|---|");
-        for (k, g) in t {
-            let f = |n: &str| g[n].as_f64().map(|x| format!("{x:.2}")).unwrap_or_default();
-            let _ = writeln!(r, "| {k} | {} | {} | {} | {} | {} |", g["n"], f("pos_median_mm"), f("pos_p90_mm"), f("axis_median_deg"), f("axis_p90_deg"));
-        }
+        let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n");
+        r += &crate::figures::tag_table(t);
     }
     let _ = writeln!(r, "\n## Timings and memory\n\n| stage | wall s | peak RSS of the bench process so far, MiB |\n|---|---|---|");
     for (name, v) in &st.done {

@@ -1,17 +1,18 @@
 //! `tubeloc demo`: the whole pipeline on a small generated with-tags scene, no arguments needed.
 //!
-//! It chains the same subcommands a user runs (synth, templates, detect, eval, refine), then
-//! compares the refined tube poses with the renderer's exact poses and writes `report.md`.
+//! It chains the same subcommands a user runs: render a with-tags scene, derive the paper's
+//! tag-pair ground truth from the rendered AprilTags, detect tubes with both detectors (Line2D
+//! with a small library built for the scene's camera; the learned segmenter with the shipped
+//! model), score the detections with COCO metrics, refine every detection into a tube axis
+//! pose, score the poses against the renderer's exact poses (with histograms), run the main job
+//! `tubeloc locate` on the first image, and write `report.md`.
 
 use anyhow::{Context, Result};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use tubeloc_core::{files, CameraModel, CocoDataset, Pose, TubeAxisPose};
-use tubeloc_eval::pose::{axis_error, AxisLine};
-use tubeloc_eval::pose_match::{match_by_centre_distance, TubeEstimate, TubeTruth};
-use tubeloc_eval::pose_summary::summarize;
+use tubeloc_core::{files, CameraModel, CocoDataset, Pose};
 
 /// Arguments of `tubeloc demo`.
 #[derive(Args, Debug)]
@@ -25,6 +26,9 @@ pub struct DemoArgs {
     /// Crop side of the rendered images, pixels.
     #[arg(long, default_value_t = 512)]
     pub resolution: u32,
+    /// Learned model (default: the shipped data/models/tubenet.safetensors; skipped if absent).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
 }
 
 fn words(s: &[&str]) -> Vec<String> {
@@ -35,10 +39,20 @@ fn p(path: &Path) -> String {
     path.display().to_string()
 }
 
+/// The ground plane `n·X = d` (camera frame, n up) of the world plane z = 0 seen from a camera
+/// at `T_world_cam`: `n = R_world_camᵀ ẑ`, `d = -t_z`, as "nx,ny,nz,d".
+fn ground_of(t_world_cam: &Pose) -> String {
+    let n = t_world_cam.rotation().transpose() * nalgebra::Vector3::z();
+    format!("{},{},{},{}", n.x, n.y, n.z, -t_world_cam.translation().z)
+}
+
 /// Runs `tubeloc demo`.
 pub fn run(a: DemoArgs) -> Result<()> {
     let t0 = Instant::now();
     let out = &a.out;
+    if out.exists() {
+        std::fs::remove_dir_all(out).with_context(|| format!("replacing {}", out.display()))?;
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let dataset = out.join("dataset");
     let mut log = Vec::<(String, f64)>::new();
@@ -52,118 +66,105 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 1. A with-tags CFA6 scene from the tiny preset, at quarter resolution.
     let (res, seed) = (a.resolution.to_string(), a.seed.to_string());
-    step("render scene", words(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.25", "--resolution", &res, "--seed", &seed, "--force", "--out", &p(&dataset)]), &mut log)?;
+    step("render a with-tags scene", words(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.25", "--resolution", &res, "--seed", &seed, "--force", "--out", &p(&dataset)]), &mut log)?;
     let gt_path = dataset.join("annotations.json");
+
+    // 2. The paper's ground truth: tube poses from the AprilTag pair on the tagged tube.
+    step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset)]), &mut log)?;
+    let tags = crate::figures::tag_pose_errors(&gt_path)?;
+
     let gt = CocoDataset::load(&gt_path)?;
     let first = gt.images.first().with_context(|| format!("{}: no images", gt_path.display()))?;
-    let cam_of = |img: &tubeloc_core::CocoImage| -> Result<CameraModel> {
-        let v = img.extra.get("camera").with_context(|| format!("{}: image {} has no camera", gt_path.display(), img.id))?;
-        serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: bad camera", gt_path.display(), img.id))
-    };
+    let camera: CameraModel = serde_json::from_value(first.extra.get("camera").cloned().with_context(|| format!("{}: image {} has no camera", gt_path.display(), first.id))?).with_context(|| format!("{}: image {}: camera", gt_path.display(), first.id))?;
     let cam_path = out.join("camera.json");
-    files::write_json(&cam_path, &cam_of(first)?)?;
+    files::write_json(&cam_path, &camera)?;
 
-    // 2. A Line2D library for this camera (coarser than the default library, to stay quick).
+    // 3. Detectors: Line2D (a library coarser than the default, to stay quick) and the
+    //    learned segmenter when a model is available.
     let lib = out.join("templates.tlt");
-    step("build templates", words(&["templates", "build", "--out", &p(&lib), "--camera", &p(&cam_path), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]), &mut log)?;
-
-    // 3. Detect, 4. evaluate the detections with COCO metrics.
-    let dets = out.join("line2d_detections.json");
-    step("detect (line2d)", words(&["detect", "--method", "line2d", "--dataset", &p(&dataset), "--templates", &p(&lib), "--camera", &p(&cam_path), "--out", &p(&dets)]), &mut log)?;
-    let eval_dir = out.join("eval_line2d");
-    step("evaluate detections", words(&["eval", "--gt", &p(&gt_path), "--dt", &p(&dets), "--out", &p(&eval_dir)]), &mut log)?;
-
-    // 5. Refine each image's detections into tube axis poses.
-    let mut truths = Vec::new();
-    let mut estimates = Vec::new();
-    let mut overlays = Vec::new();
-    for img in &gt.images {
-        let cam = out.join(format!("camera_{}.json", img.id));
-        files::write_json(&cam, &cam_of(img)?)?;
-        let poses_path = out.join(format!("poses_{}.json", img.id));
-        let overlay = out.join(format!("overlay_{}.png", img.id));
-        let image = dataset.join("images").join(&img.file_name);
-        let id = img.id.to_string();
-        let mut w = words(&["refine", "--image", &p(&image), "--camera", &p(&cam), "--detections", &p(&dets), "--image-id", &id, "--out", &p(&poses_path), "--overlay", &p(&overlay)]);
-        // The tripod's pose is known: the ground plane z_world = 0 in the camera frame is
-        // n = R_world_camᵀ ẑ, n·X = -t_z (t = camera position in the world).
-        if let Some(v) = img.extra.get("T_world_cam") {
-            let t_world_cam: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), img.id))?;
-            let n = t_world_cam.rotation().transpose() * nalgebra::Vector3::z();
-            w.push("--ground".into());
-            w.push(format!("{},{},{},{}", n.x, n.y, n.z, -t_world_cam.translation().z));
-        }
-        step(&format!("refine image {}", img.id), w, &mut log)?;
-        overlays.push(overlay);
-        let poses: Vec<TubeAxisPose> = files::read_json(&poses_path)?;
-        estimates.extend(poses.iter().filter(|q| q.converged).map(TubeEstimate::from_axis_pose));
-        for ann in gt.annotations.iter().filter(|an| an.image_id == img.id) {
-            let vis = ann.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(0.0);
-            if let Some(v) = ann.extra.get("T_cam_tube") {
-                if vis >= 0.5 {
-                    let pose: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", gt_path.display(), ann.id))?;
-                    truths.push(TubeTruth { image_id: img.id, pose });
-                }
-            }
-        }
+    step("build Line2D templates", words(&["templates", "build", "--out", &p(&lib), "--camera", &p(&cam_path), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]), &mut log)?;
+    let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+    let mut detectors: Vec<(&str, Vec<String>)> = vec![("line2d", words(&["--templates", &p(&lib), "--camera", &p(&cam_path)]))];
+    if model.exists() {
+        detectors.push(("learned", words(&["--model", &p(&model)])));
+    } else {
+        eprintln!("demo: no learned model at {} (skipping the learned detector)", model.display());
+    }
+    let mut pose_inputs = Vec::new();
+    for (det, extra) in &detectors {
+        let dets = out.join(format!("{det}_detections.json"));
+        let mut w = words(&["detect", "--method", det, "--dataset", &p(&dataset), "--out", &p(&dets)]);
+        w.extend(extra.iter().cloned());
+        step(&format!("detect ({det})"), w, &mut log)?;
+        step(&format!("evaluate detections ({det})"), words(&["eval", "--gt", &p(&gt_path), "--dt", &p(&dets), "--out", &p(&out.join(format!("eval_{det}")))]), &mut log)?;
+        let (poses, seeds) = (out.join(format!("{det}_poses.json")), out.join(format!("{det}_seeds.json")));
+        step(&format!("refine ({det} seeds)"), words(&["refine", "--dataset", &p(&dataset), "--detections", &p(&dets), "--ground", "auto", "--out", &p(&poses), "--seeds-out", &p(&seeds)]), &mut log)?;
+        pose_inputs.push(format!("{det}-coarse={}", p(&seeds)));
+        pose_inputs.push(format!("{det}-refined={}", p(&poses)));
     }
 
-    // 6. Pose errors against the renderer's exact poses (tubes at least half visible).
-    let matching = match_by_centre_distance(&truths, &estimates, 0.05);
-    let mut angle = Vec::new();
-    let mut perp = Vec::new();
-    let mut along = Vec::new();
-    for m in &matching.pairs {
-        let est = AxisLine::from_pose(&estimates[m.estimate].pose);
-        let e = axis_error(&est, &AxisLine::from_pose(&truths[m.truth].pose));
-        angle.push(e.axis_angle_deg);
-        perp.push(e.perpendicular_mm);
-        along.push(e.along_axis_mm.abs());
+    // 4. Pose errors against the renderer's exact poses, all detectors in one set of histograms.
+    let pose_dir = out.join("eval_poses");
+    let mut w = words(&["eval", "--gt", &p(&gt_path), "--out", &p(&pose_dir), "--poses"]);
+    w.extend(pose_inputs);
+    step("evaluate poses", w, &mut log)?;
+
+    // 5. The main job on the first image: a one-camera rig, the known ground plane.
+    let rig = serde_json::json!({"cameras": [{"name": "demo", "model": camera, "T_rig_cam": Pose::identity()}], "stereo_pairs": []});
+    let rig_path = out.join("rig.json");
+    files::write_json(&rig_path, &rig)?;
+    let image = dataset.join("images").join(&first.file_name);
+    let mut w = words(&["locate", "--rig", &p(&rig_path), "--image", &p(&image), "--out", &p(&out.join("locate/poses.json"))]);
+    match detectors.last() {
+        Some(("learned", _)) => w.extend(words(&["--detector", "learned", "--model", &p(&model)])),
+        _ => w.extend(words(&["--detector", "line2d", "--templates", &p(&lib)])),
     }
-    let metrics: serde_json::Value = files::read_json(&eval_dir.join("metrics.json"))?;
-    let report = build_report(&a, &log, &metrics, &matching.method.to_string(), truths.len(), estimates.len(), &angle, &perp, &along, &overlays, out);
+    if let Some(v) = first.extra.get("T_world_cam") {
+        let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), first.id))?;
+        w.extend(["--ground".to_string(), ground_of(&t)]);
+    }
+    eprintln!("\n== demo: locate: tubeloc {}", w.join(" "));
+    let t = Instant::now();
+    crate::run_words(&w).context("demo step \"locate\"")?;
+    log.push(("locate (first image)".into(), t.elapsed().as_secs_f64()));
+
+    let report = build_report(&a, &log, &detectors.iter().map(|d| d.0).collect::<Vec<_>>(), &tags, out);
     let report_path = out.join("report.md");
     files::write_atomic(&report_path, report.as_bytes())?;
-    println!("\ndemo finished in {:.1} s: {} tubes (>= half visible), {} refined poses, {} matched; report: {}", t0.elapsed().as_secs_f64(), truths.len(), estimates.len(), matching.pairs.len(), report_path.display());
+    println!("\ndemo finished in {:.1} s; report: {}", t0.elapsed().as_secs_f64(), report_path.display());
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
-fn build_report(a: &DemoArgs, log: &[(String, f64)], metrics: &serde_json::Value, method: &str, n_truth: usize, n_est: usize, angle: &[f64], perp: &[f64], along: &[f64], overlays: &[PathBuf], out: &Path) -> String {
+fn build_report(a: &DemoArgs, log: &[(String, f64)], detectors: &[&str], tags: &serde_json::Value, out: &Path) -> String {
     let mut r = String::new();
-    let _ = writeln!(r, "# tubeloc demo\n\nScene: tiny preset, with-tags CFA6, seed {}, {} px crops at quarter resolution.\n", a.seed, a.resolution);
+    let _ = writeln!(r, "# tubeloc demo\n\nScene: tiny preset, with-tags CFA6, seed {}, {} px crops at quarter resolution. Every number below was measured by this run.\n", a.seed, a.resolution);
+    let _ = writeln!(r, "## Detection (COCO, segm; PR curves in each `eval_*/report.md`)\n\n| detector | AP [.5] | AR [.5:.95] | report |\n|---|---|---|---|");
+    for det in detectors {
+        let m = crate::figures::ap50_ar(&out.join(format!("eval_{det}/metrics.json")));
+        let (ap, ar) = m.map(|(x, y)| (format!("{x:.3}"), format!("{y:.3}"))).unwrap_or_default();
+        let _ = writeln!(r, "| {det} | {ap} | {ar} | [eval_{det}/report.md](eval_{det}/report.md) |");
+    }
+    if !detectors.contains(&"learned") {
+        let _ = writeln!(r, "\nThe learned detector was skipped: no model file.");
+    }
+    let _ = writeln!(r, "\n## Tube poses vs the renderer's exact poses (tubes at least half visible)\n");
+    match crate::figures::pose_table(&out.join("eval_poses/report.md")) {
+        Some(t) => {
+            let _ = writeln!(r, "{t}\nHistograms: [eval_poses/report.md](eval_poses/report.md).\n\n![axis angle](eval_poses/pose_axis_angle.png)\n");
+        }
+        None => {
+            let _ = writeln!(r, "(no pose table: see eval_poses/)\n");
+        }
+    }
+    let _ = writeln!(r, "## Tag-pair ground truth vs exact poses\n\nThe paper's ground truth comes from two AprilTags on one tube (`tubeloc calib groundtruth`); here it is checked against the renderer's exact pose.\n");
+    match tags {
+        serde_json::Value::Object(t) if !t.is_empty() => r += &crate::figures::tag_table(t),
+        _ => r += "No tag pair was detected in this scene.\n",
+    }
+    let _ = writeln!(r, "\n## The main job: `tubeloc locate` on the first image\n\nGrasp poses: [locate/poses.json](locate/poses.json).\n\n![fitted contours (green: located, red: rejected)](locate/poses.overlay.png)\n");
     let _ = writeln!(r, "## Steps\n\n| step | seconds |\n|---|---:|");
     for (name, s) in log {
         let _ = writeln!(r, "| {name} | {s:.2} |");
     }
-    let _ = writeln!(r, "\n## Line2D detections (COCO, segm)\n\n| metric | value |\n|---|---:|");
-    match metrics.get("stats").and_then(|s| s.as_array()) {
-        Some(stats) => {
-            for st in stats {
-                let name = st.get("name").and_then(|v| v.as_str()).unwrap_or("?");
-                let value = st.get("value").and_then(|v| v.as_f64()).map(|x| format!("{x:.3}")).unwrap_or_else(|| "-".into());
-                let _ = writeln!(r, "| {name} | {value} |");
-            }
-        }
-        None => {
-            let _ = writeln!(r, "| (see eval_line2d/metrics.json) | |");
-        }
-    }
-    let fmt = |v: &[f64], thr: &[f64], unit: &str| {
-        let s = summarize(v, thr);
-        let within: Vec<String> = s.within.iter().map(|w| format!("{:.0}% within {} {unit}", 100.0 * w.fraction, w.threshold)).collect();
-        format!("{} | {} | {} |", s.median.map(|x| format!("{x:.2}")).unwrap_or("-".into()), s.p90.map(|x| format!("{x:.2}")).unwrap_or("-".into()), within.join(", "))
-    };
-    let _ = writeln!(r, "\n## Mono refinement vs exact poses\n\nTubes at least half visible: {n_truth}; converged refined poses: {n_est}; matched {} ({method}).\n", angle.len());
-    let _ = writeln!(r, "| error | median | p90 | within |\n|---|---:|---:|---|");
-    let _ = writeln!(r, "| axis angle (deg) | {}", fmt(angle, &[1.0, 2.0, 5.0], "deg"));
-    let _ = writeln!(r, "| perpendicular position (mm) | {}", fmt(perp, &[2.0, 5.0, 10.0], "mm"));
-    let _ = writeln!(r, "| along-axis position (mm) | {}", fmt(along, &[2.0, 5.0, 10.0], "mm"));
-    let _ = writeln!(r, "\n## Overlays (fitted contours)\n");
-    for o in overlays {
-        let rel = o.strip_prefix(out).unwrap_or(o);
-        let _ = writeln!(r, "![{}]({})", rel.display(), rel.display());
-    }
-    let _ = writeln!(r, "\nCOCO summary, PR data and breakdowns: `eval_line2d/`. Detections: `line2d_detections.json`. Poses: `poses_*.json`.");
     r
 }

@@ -22,6 +22,7 @@ mod cmd_demo;
 mod cmd_locate;
 mod cmd_bench;
 mod memory;
+mod figures;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]

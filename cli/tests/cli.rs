@@ -181,3 +181,22 @@ fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
     }
     assert!(posed >= 1, "no tag pose added: {}", String::from_utf8_lossy(&o.stdout));
 }
+
+#[test]
+fn demo_runs_the_whole_pipeline_and_reports_measured_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    ok(&["demo", "--out", p(&out)]);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let row = report.lines().find(|l| l.starts_with("| line2d |")).unwrap_or_else(|| panic!("no line2d row in {report}"));
+    let ap: f64 = row.split('|').nth(2).unwrap().trim().parse().unwrap_or_else(|_| panic!("no AP in {row}"));
+    assert!((0.0..=1.0).contains(&ap));
+    assert!(report.lines().any(|l| l.starts_with("| line2d-refined |")), "{report}");
+    for f in ["locate/poses.json", "locate/poses.overlay.png", "eval_poses/pose_metrics.json", "eval_line2d/metrics.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // The tag-pair ground truth of the tagged tube agrees with the exact pose to centimetres.
+    let row = report.lines().find(|l| l.contains("two tags |")).unwrap_or_else(|| panic!("no tag-pair row in {report}"));
+    let pos: f64 = row.split('|').nth(3).unwrap().trim().parse().unwrap();
+    assert!(pos < 10.0, "tag-pair position error {pos} mm");
+}
