@@ -17,13 +17,13 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use nalgebra::{Point2, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
-use tubeloc_core::{files, BinaryMask, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
+use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
-use tubeloc_stereo::{disparity_regions, Roi, SgmParams};
 
 mod dataset;
+mod stereo;
 
 /// Arguments of `tubeloc refine`.
 #[derive(Args, Debug)]
@@ -85,9 +85,18 @@ pub struct RefineArgs {
     /// Camera names of the pair in the rig, "LEFT,RIGHT" (default: the rig's first stereo pair).
     #[arg(long)]
     pub(crate) pair: Option<String>,
-    /// Number of disparities searched (multiple of 16).
+    /// Number of disparities searched (multiple of 16); the window starts at the disparity of
+    /// the farthest seed + 0.5 m.
     #[arg(long, default_value_t = 256)]
     pub(crate) disparities: usize,
+    /// Dataset mode: add the stereo term, with each image's right image (images[].right_file_name
+    /// under DIR/right/, images[].right_camera, images[].T_left_right).
+    #[arg(long, requires = "dataset")]
+    pub(crate) stereo: bool,
+    /// Stereo: erode each detection mask by this many pixels before keeping its points (SGM
+    /// fattens the foreground at the tube's outline).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) stereo_erode: usize,
     /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres; with
     /// --dataset, "auto" takes it from images[].T_world_cam (ground = world z = 0; only its
     /// orientation is used as a prior, since the terrain has relief).
@@ -116,48 +125,23 @@ pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
 
 
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
-/// rectified pair, triangulated, kept where they project into the detection's mask or box.
+/// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
+/// `--stereo-erode`) or box (see [`stereo`]).
 fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, Vec<Vec<Point3<f64>>>)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
     let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
-    let (rl, rr) = rect.rectify_pair(left, &right).with_context(|| format!("{} / {}", left_path.display(), right_path.display()))?;
-    // Regions: each box mapped into rectified left pixels through its corners.
-    let mut rois = Vec::new();
-    for d in dets {
-        let [x, y, w, h] = d.bbox;
-        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-        for (u, v) in [(x, y), (x + w, y), (x, y + h), (x + w, y + h)] {
-            if let Some(p) = rect.project_left(&Point3::from(lcam.unproject(&Point2::new(u, v)))) {
-                (x0, y0, x1, y1) = (x0.min(p.x), y0.min(p.y), x1.max(p.x), y1.max(p.y));
-            }
-        }
-        if x1 > x0 && y1 > y0 {
-            rois.push(Roi::new(x0.floor() as i64, y0.floor() as i64, (x1 - x0).ceil() as i64 + 1, (y1 - y0).ceil() as i64 + 1));
-        }
-    }
-    let params = SgmParams { num_disparities: args.disparities, ..SgmParams::default() };
-    let disp = disparity_regions(&rl, &rr, &params, &rois, 32).with_context(|| format!("matching {} / {}", left_path.display(), right_path.display()))?;
-    let pts = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &rect.geometry(), 0.25));
-    let masks: Vec<Option<BinaryMask>> = dets.iter().map(|d| d.mask.as_ref().and_then(|m| m.to_mask().ok())).collect();
-    let per = dets
+    let regions: Vec<stereo::Region> = dets
         .iter()
-        .zip(&masks)
-        .map(|(d, m)| {
-            pts.iter()
-                .filter_map(|p| {
-                    let u = lcam.project(&p.point)?;
-                    let [x, y, w, h] = d.bbox;
-                    let inside = match m {
-                        Some(m) => u.x >= -0.5 && u.y >= -0.5 && m.get((u.x + 0.5) as usize, (u.y + 0.5) as usize),
-                        None => u.x >= x && u.y >= y && u.x <= x + w && u.y <= y + h,
-                    };
-                    inside.then_some(p.point)
-                })
-                .collect()
+        .map(|d| stereo::Region {
+            bbox: d.bbox,
+            mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()),
+            seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z),
         })
         .collect();
+    let per = stereo::points_rectified(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
+        .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
     Ok((lcam, per))
 }
 

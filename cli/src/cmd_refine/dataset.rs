@@ -6,15 +6,17 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, TubeAxisPose, TubeDetection};
+use nalgebra::Point3;
+use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seed::perturbed;
 use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
 
 /// What to refine in one image: detections, or seeds made from exact poses.
 enum Work {
     Detection(TubeDetection),
-    /// Seed state from an annotation's exact pose.
-    GtSeed(AxisState),
+    /// Seed state from an annotation's exact pose, with the annotation's box and segmentation
+    /// (the region of its stereo points, standing in for a segmenter's mask).
+    GtSeed(AxisState, [f64; 4], Option<Segmentation>),
 }
 
 /// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`:
@@ -31,6 +33,27 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
     let c: CameraModel = serde_json::from_value(v.clone()).with_context(|| format!("image {}: camera", img.id))?;
     c.validate().with_context(|| format!("image {}: camera", img.id))?;
     Ok(c)
+}
+
+/// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
+/// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
+/// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
+fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<Vec<Vec<Point3<f64>>>> {
+    let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
+    let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
+    let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
+    let t_lr: Pose = serde_json::from_value(field("T_left_right")?.clone()).with_context(|| format!("image {}: T_left_right", im.id))?;
+    let rpath = dir.join("right").join(rname);
+    let right = crate::cmd_stereo::load_gray(&rpath)?;
+    let (h, w) = (camera.height, camera.width);
+    let regions: Vec<super::stereo::Region> = items
+        .iter()
+        .map(|it| match it {
+            Work::Detection(d) => super::stereo::Region { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) },
+            Work::GtSeed(st, bbox, seg) => super::stereo::Region { bbox: *bbox, mask: seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()), seed_z: Some(st.c.z) },
+        })
+        .collect();
+    super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode).with_context(|| format!("stereo for {}", rpath.display()))
 }
 
 fn parse_pair(s: &str) -> Result<(f64, f64)> {
@@ -85,7 +108,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 }
                 let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", ann.display(), a.id))?;
                 let st = AxisState { c: t.translation(), a: t.transform_vector(&nalgebra::Vector3::z()) };
-                w.push(Work::GtSeed(perturbed(&st, pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15))));
+                w.push(Work::GtSeed(perturbed(&st, pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
             }
         }
         _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
@@ -116,10 +139,17 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
             }
             let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
+            let stereo_pts = if args.stereo { stereo_of(args, dir, im, &camera, &gray, items)? } else { vec![Vec::new(); items.len()] };
+            // Diagnostics: TUBELOC_DEBUG_STEREO_DIR=D writes each image's stereo points (left
+            // camera frame, metres, one list per work item) to D/<image id>.json.
+            if let Ok(dbg) = std::env::var("TUBELOC_DEBUG_STEREO_DIR") {
+                let pts: Vec<Vec<[f64; 3]>> = stereo_pts.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
+                files::write_json(&std::path::Path::new(&dbg).join(format!("{}.json", im.id)), &pts)?;
+            }
             let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene::default() };
             let mut poses = Vec::with_capacity(items.len());
             let mut seeds = Vec::new();
-            for w in items {
+            for (k, w) in items.iter().enumerate() {
                 match w {
                     Work::Detection(d) => {
                         let mut d = d.clone();
@@ -131,14 +161,16 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                             }
                         }
                         let d = &d;
+                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], ..Scene::default() }, ..input };
                         poses.push(refiner.refine(&input, d));
-                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &[]) {
+                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &stereo_pts[k]) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
                                 seeds.push(p);
                             }
                         }
                     }
-                    Work::GtSeed(st) => {
+                    Work::GtSeed(st, _, _) => {
+                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], ..Scene::default() }, ..input };
                         poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
                             seeds.push(p);

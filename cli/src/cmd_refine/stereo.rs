@@ -1,0 +1,104 @@
+//! Stereo points for the refiner's stereo term: rectify a pair, match with SGM only in the
+//! regions of the tubes, triangulate, and keep, per region, the points whose left pixel lies in
+//! the region's mask (eroded) or box.
+//!
+//! The disparity window is centred on the seeds: with `f B` the rectified focal length times
+//! the baseline (pixels · metres), the search starts at `d_min = f B / (z_max + 0.5 m)` (`z_max`:
+//! the farthest seed's depth; 0 without seeds) and spans `num_disparities` pixels.
+
+use anyhow::{Context, Result};
+use nalgebra::{Point2, Point3};
+use tubeloc_core::{BinaryMask, CameraModel, Plane, Pose};
+use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
+
+/// A tube region in the left image (original pixels): COCO box `[x, y, w, h]` and optional
+/// mask of the left image's size.
+pub(crate) struct Region {
+    /// Box `[x, y, w, h]`, pixels.
+    pub bbox: [f64; 4],
+    /// Mask (left image size), or `None` to use the box.
+    pub mask: Option<BinaryMask>,
+    /// Depth of the seed's centre along the left optical axis, metres (if known).
+    pub seed_z: Option<f64>,
+}
+
+/// Mask eroded by `r` pixels (4-neighbourhood, applied `r` times).
+pub(crate) fn erode(m: &BinaryMask, r: usize) -> BinaryMask {
+    let mut cur = m.clone();
+    for _ in 0..r {
+        let prev = cur.clone();
+        cur = BinaryMask::from_fn(m.width, m.height, |x, y| {
+            prev.get(x, y)
+                && x > 0
+                && y > 0
+                && x + 1 < m.width
+                && y + 1 < m.height
+                && prev.get(x - 1, y)
+                && prev.get(x + 1, y)
+                && prev.get(x, y - 1)
+                && prev.get(x, y + 1)
+        });
+    }
+    cur
+}
+
+/// Stereo points (left camera frame, metres) per region: the pair (`left`/`right` images of
+/// cameras `lcam`/`rcam`, `t_left_right` mapping right-camera points into the left frame) is
+/// rectified, matched with SGM in the regions' boxes (32 px margin), triangulated and split by
+/// region (masks eroded by `erode_px` first to drop the boundary pixels where SGM fattens the
+/// foreground).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<Vec<Vec<Point3<f64>>>> {
+    let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
+    points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)
+}
+
+/// [`points_per_region`] with a rectification already made.
+pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<Vec<Vec<Point3<f64>>>> {
+    if regions.is_empty() {
+        return Ok(Vec::new());
+    }
+    let (rl, rr) = rect.rectify_pair(left, right)?;
+    // Regions: each box mapped into rectified left pixels through its corners.
+    let mut rois = Vec::new();
+    for d in regions {
+        let [x, y, w, h] = d.bbox;
+        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for (u, v) in [(x, y), (x + w, y), (x, y + h), (x + w, y + h)] {
+            if let Some(p) = rect.project_left(&Point3::from(lcam.unproject(&Point2::new(u, v)))) {
+                (x0, y0, x1, y1) = (x0.min(p.x), y0.min(p.y), x1.max(p.x), y1.max(p.y));
+            }
+        }
+        if x1 > x0 && y1 > y0 {
+            rois.push(Roi::new(x0.floor() as i64, y0.floor() as i64, (x1 - x0).ceil() as i64 + 1, (y1 - y0).ceil() as i64 + 1));
+        }
+    }
+    if rois.is_empty() {
+        return Ok(vec![Vec::new(); regions.len()]);
+    }
+    let geom = rect.geometry();
+    let fb = geom.f * geom.baseline;
+    let z_max = regions.iter().filter_map(|r| r.seed_z).filter(|z| z.is_finite() && *z > 0.0).fold(0.0, f64::max);
+    let min_disparity = if z_max > 0.0 { (fb / (z_max + 0.5)).floor() as i32 } else { 0 };
+    let params = SgmParams { num_disparities, min_disparity, ..SgmParams::default() };
+    let disp = disparity_regions(&rl, &rr, &params, &rois, 32).context("matching the regions")?;
+    let pts = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25));
+    let masks: Vec<Option<BinaryMask>> = regions.iter().map(|r| r.mask.as_ref().map(|m| erode(m, erode_px))).collect();
+    Ok(regions
+        .iter()
+        .zip(&masks)
+        .map(|(d, m)| {
+            pts.iter()
+                .filter_map(|p| {
+                    let u = lcam.project(&p.point)?;
+                    let [x, y, w, h] = d.bbox;
+                    let inside = match m {
+                        Some(m) => u.x >= -0.5 && u.y >= -0.5 && (u.x + 0.5) < m.width as f64 && (u.y + 0.5) < m.height as f64 && m.get((u.x + 0.5) as usize, (u.y + 0.5) as usize),
+                        None => u.x >= x && u.y >= y && u.x <= x + w && u.y <= y + h,
+                    };
+                    inside.then_some(p.point)
+                })
+                .collect()
+        })
+        .collect())
+}
