@@ -2,12 +2,14 @@
 //!
 //! 1. Foreground cells: `σ(fg) > fg_threshold`; centre peaks: 3x3 local maxima of `σ(heat)`
 //!    above `peak_threshold`.
-//! 2. Connected foreground components (8-connectivity). A component holding several peaks is
-//!    split: each cell goes to the peak nearest in the peak's axis frame, with the across-axis
+//! 2. Connected foreground components (8-connectivity). Within a component, a peak on a
+//!    stronger peak's axis line (across-axis distance below [`DecodeConfig::same_axis_cells`])
+//!    and within [`DecodeConfig::same_tube_fraction`] of its predicted half-length is dropped
+//!    (one tube, two maxima). A component still holding several peaks is split: each cell goes to the peak nearest in the peak's axis frame, with the across-axis
 //!    distance weighted [`DecodeConfig::across_weight`] times the along-axis one (tubes are
 //!    long and thin, so a cell belongs to the peak whose axis line passes near it).
 //! 3. Full-resolution mask: the foreground logit bilinearly upsampled (stride 4) and
-//!    thresholded at 0 inside the instance's cells, pixel `(x, y)` reading cell coordinate
+//!    thresholded at [`DecodeConfig::mask_logit`] inside the instance's cells, pixel `(x, y)` reading cell coordinate
 //!    `((x - 1.5) / 4, (y - 1.5) / 4)`.
 //! 4. Score = `max σ(heat)` of the instance's peak (0.5 × mean σ(fg) without one) × mean
 //!    `σ(fg)` over its cells. Axis seed: centre at the peak (sub-cell by a 3x3 weighted mean),
@@ -30,11 +32,17 @@ pub struct DecodeConfig {
     pub min_area: usize,
     /// Minimum score.
     pub min_score: f32,
+    /// Peaks closer than this (cells) to a stronger peak's axis line may be merged into it...
+    pub same_axis_cells: f32,
+    /// ...when they are within this fraction of its predicted half-length along the axis.
+    pub same_tube_fraction: f32,
+    /// Threshold on the upsampled foreground logit for mask pixels (0 = probability 0.5).
+    pub mask_logit: f32,
 }
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05 }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0 }
     }
 }
 
@@ -132,7 +140,28 @@ pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cf
     let mut groups: Vec<(Option<usize>, Vec<usize>)> = Vec::new();
     for cells in comps {
         let id = comp[cells[0]];
-        let mine: Vec<usize> = peaks.iter().copied().filter(|&p| comp[p] == id).collect();
+        let mut cand: Vec<usize> = peaks.iter().copied().filter(|&p| comp[p] == id).collect();
+        cand.sort_by(|&a, &b| heat[b].total_cmp(&heat[a]));
+        // Peak suppression along the axis: a weaker peak lying on a stronger one's axis line
+        // (across < `same_axis_cells`) within `same_tube_fraction` of its predicted half-length
+        // is the same tube.
+        let mut mine: Vec<usize> = Vec::new();
+        for &p in &cand {
+            let (x, y) = ((p % ow) as f32, (p / ow) as f32);
+            let dup = mine.iter().any(|&q| {
+                let (qx, qy) = ((q % ow) as f32, (q / ow) as f32);
+                let near: Vec<usize> = cells.iter().copied().filter(|&c| ((c % ow) as f32 - qx).abs() <= 2.0 && ((c / ow) as f32 - qy).abs() <= 2.0).collect();
+                let (ux, uy) = direction(&near);
+                let (dx, dy) = (x - qx, y - qy);
+                let along = (dx * ux + dy * uy).abs();
+                let across = (-dx * uy + dy * ux).abs();
+                let half_cells = out[4 * n + q].max(0.0) * LENGTH_SCALE / STRIDE as f32;
+                across < cfg.same_axis_cells && along < cfg.same_tube_fraction * half_cells
+            });
+            if !dup {
+                mine.push(p);
+            }
+        }
         if mine.len() <= 1 {
             groups.push((mine.first().copied(), cells));
             continue;
@@ -215,7 +244,7 @@ pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cf
                 }
                 let l = |a: usize, b: usize| out[b * ow + a];
                 let val = (l(u0, v0) * (1.0 - fu) + l(u1, v0) * fu) * (1.0 - fv) + (l(u0, v1) * (1.0 - fu) + l(u1, v1) * fu) * fv;
-                if val > 0.0 {
+                if val > cfg.mask_logit {
                     mask.data[y * width + x] = 1;
                     pix.push((x as f64, y as f64));
                 }
