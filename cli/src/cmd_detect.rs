@@ -50,7 +50,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
     let dets = match args.method {
         Method::Line2d => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
-            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images)?;
+            let cameras = match &args.dataset {
+                Some(d) => crate::cmd_detect_learned::dataset_cameras(d)?,
+                None => Default::default(),
+            };
+            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras)?;
             tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
             eprintln!("{} detections -> {}", dets.len(), args.out.display());
             return Ok(());

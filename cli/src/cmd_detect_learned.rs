@@ -31,6 +31,21 @@ pub fn default_model() -> PathBuf {
     candidates.into_iter().find(|p| p.exists()).unwrap_or(built)
 }
 
+/// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`), by id;
+/// images without one are left out.
+pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {
+    let ann = dataset.join("annotations.json");
+    let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+    let mut out = std::collections::BTreeMap::new();
+    for im in &ds.images {
+        if let Some(c) = im.extra.get("camera") {
+            let cam = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {}: camera", ann.display(), im.id))?;
+            out.insert(im.id, cam);
+        }
+    }
+    Ok(out)
+}
+
 /// Images to process: `(image_id, path)`.
 pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -> Result<Vec<(u64, PathBuf)>> {
     match (image, dataset) {

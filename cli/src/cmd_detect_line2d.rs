@@ -3,6 +3,7 @@
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_core::CameraModel;
 use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, VerifyParams};
@@ -59,8 +60,10 @@ pub struct Line2dOpts {
     pub no_verify: bool,
 }
 
-/// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries.
-pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)]) -> Result<Vec<serde_json::Value>> {
+/// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries. The coarse
+/// pose of a detection uses the image's own camera from `cameras` (a dataset's
+/// `images[].camera`: crops have their own principal points) when present, else `--camera`.
+pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>) -> Result<Vec<serde_json::Value>> {
     let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
     let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
@@ -74,7 +77,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)]) -> Result<Vec<se
     for (id, path) in images {
         let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let dets = det.detect(img.as_raw(), w, h, camera.as_ref()).with_context(|| format!("detecting in {}", path.display()))?;
+        let dets = det.detect(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref())).with_context(|| format!("detecting in {}", path.display()))?;
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }
