@@ -93,6 +93,18 @@ pub struct RefineArgs {
     /// under DIR/right/, images[].right_camera, images[].T_left_right).
     #[arg(long, requires = "dataset")]
     pub(crate) stereo: bool,
+    /// Stereo (dataset mode): after the fit, move each converged tube along its centre's viewing
+    /// ray to the best photometric agreement of the pair within ±this many millimetres
+    /// (`tubeloc_refine::photo`); 0 disables.
+    #[arg(long, default_value_t = 30.0)]
+    pub(crate) photo_range_mm: f64,
+    /// Photometric stage: move each end of the axis along its own ray (distance and tilt)
+    /// instead of only the centre's distance.
+    #[arg(long)]
+    pub(crate) photo_ends: bool,
+    /// Least ZNCC for the photometric depth to be applied.
+    #[arg(long, default_value_t = 0.5)]
+    pub(crate) photo_min_zncc: f64,
     /// Stereo: erode each detection mask by this many pixels before keeping its points (SGM
     /// fattens the foreground at the tube's outline; on the synthetic stereo set erosion made the
     /// points' bias worse, hence 0).

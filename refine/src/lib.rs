@@ -15,6 +15,7 @@ pub mod error;
 pub mod fit;
 pub mod jacobian;
 pub mod model;
+pub mod photo;
 pub mod robust;
 pub mod search;
 pub mod seed;

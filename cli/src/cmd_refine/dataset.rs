@@ -38,7 +38,7 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
 /// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
 /// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
 /// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
-fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<Vec<Vec<Point3<f64>>>> {
+fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(Vec<Vec<Point3<f64>>>, super::stereo::Rectified)> {
     let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
     let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
@@ -139,7 +139,12 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
             }
             let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
-            let stereo_pts = if args.stereo { stereo_of(args, dir, im, &camera, &gray, items)? } else { vec![Vec::new(); items.len()] };
+            let (stereo_pts, pair) = if args.stereo {
+                let (p, r) = stereo_of(args, dir, im, &camera, &gray, items)?;
+                (p, Some(r))
+            } else {
+                (vec![Vec::new(); items.len()], None)
+            };
             // Diagnostics: TUBELOC_DEBUG_STEREO_DIR=D writes each image's stereo points (left
             // camera frame, metres, one list per work item) to D/<image id>.json.
             if let Ok(dbg) = std::env::var("TUBELOC_DEBUG_STEREO_DIR") {
@@ -176,6 +181,11 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                             seeds.push(p);
                         }
                     }
+                }
+            }
+            if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
+                for p in poses.iter_mut() {
+                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_ends);
                 }
             }
             bar.inc(1);

@@ -8,7 +8,8 @@
 
 use anyhow::{Context, Result};
 use nalgebra::{Point2, Point3};
-use tubeloc_core::{BinaryMask, CameraModel, Plane, Pose};
+use tubeloc_core::{BinaryMask, CameraModel, Plane, Pose, TubeAxisPose};
+use tubeloc_refine::{AxisState, CylinderModel};
 use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
 
 /// A tube region in the left image (original pixels): COCO box `[x, y, w, h]` and optional
@@ -47,10 +48,62 @@ pub(crate) fn erode(m: &BinaryMask, r: usize) -> BinaryMask {
 /// rectified, matched with SGM in the regions' boxes (32 px margin), triangulated and split by
 /// region (masks eroded by `erode_px` first to drop the boundary pixels where SGM fattens the
 /// foreground).
+/// Also returns the rectification and the rectified pair (for [`photo_refine`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<Vec<Vec<Point3<f64>>>> {
+pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<(Vec<Vec<Point3<f64>>>, Rectified)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
-    points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)
+    let (rl, rr) = rect.rectify_pair(left, right)?;
+    let pts = points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)?;
+    let f = |p: &Plane<u8>| Plane::from_vec(p.width, p.height, p.data.iter().map(|&v| v as f32 / 255.0).collect());
+    Ok((pts, Rectified { left: f(&rl), right: f(&rr), rect }))
+}
+
+/// A rectified pair (intensities in [0, 1]) with its rectification.
+pub(crate) struct Rectified {
+    /// Rectified left image.
+    pub left: Plane<f32>,
+    /// Rectified right image.
+    pub right: Plane<f32>,
+    /// The rectification.
+    pub rect: StereoRectification,
+}
+
+/// Moves a converged pose along its centre's viewing ray to the photometric depth of
+/// [`tubeloc_refine::photo`] (searched within `±range_m`), or with `ends` each end along its
+/// own ray ([`tubeloc_refine::photo::photometric_ends`]: distance and tilt); returns the
+/// centre's change of distance (metres), `None` (pose unchanged) when the search gave no
+/// answer, a correlation below `min_zncc` or a shift at the edge of the range.
+pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool) -> Option<f64> {
+    if !pose.converged {
+        return None;
+    }
+    let r1 = pair.rect.r_left;
+    let st = AxisState { c: r1 * pose.centre, a: r1 * pose.end_direction };
+    let g = pair.rect.geometry();
+    let fb = g.f * g.baseline;
+    let moved = if ends {
+        let pe = tubeloc_refine::photo::photometric_ends(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m)?;
+        if pe.zncc < min_zncc || pe.shifts_m.0.abs() >= range_m || pe.shifts_m.1.abs() >= range_m {
+            return None;
+        }
+        pe.state
+    } else {
+        let pd = tubeloc_refine::photo::photometric_depth(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m)?;
+        if pd.zncc < min_zncc || pd.shift_m.abs() >= range_m {
+            return None;
+        }
+        tubeloc_refine::photo::shifted(&st, pd.shift_m)
+    };
+    let shift = moved.c.norm() - st.c.norm();
+    let (c, a) = (r1.transpose() * moved.c, r1.transpose() * moved.a);
+    let mut p = match TubeAxisPose::new(pose.image_id, pose.score, c, a, pose.end_confidence) {
+        Ok(p) => p,
+        Err(_) => return None,
+    };
+    p.covariance = pose.covariance;
+    p.residuals = pose.residuals.clone();
+    *pose = p;
+    Some(shift)
 }
 
 /// [`points_per_region`] with a rectification already made.
