@@ -70,32 +70,19 @@ fn front_depth(model: &CylinderModel, st: &AxisState, r: &Vector3<f64>) -> Optio
 /// undefined (flat images).
 pub fn photometric_depth(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoDepth> {
     let px = covered_pixels(model, camera, left, st)?;
-    let (w, n) = (left.width as f64, px.len() as f64);
-    let ml = px.iter().map(|p| p.2 as f64).sum::<f64>() / n;
-    let vl = px.iter().map(|p| (p.2 as f64 - ml).powi(2)).sum::<f64>();
-    if vl <= 1e-12 {
-        return None;
-    }
+    let w = left.width as f64;
     let dist = st.c.norm();
     // ZNCC for a centre shift `s_m` along the ray (scale (dist + s_m) / dist).
     let zncc = |s_m: f64| -> Option<f64> {
         let s = (dist + s_m) / dist;
-        let mut samples = Vec::with_capacity(px.len());
-        for &(x, y, _, z) in &px {
-            let d = fb / (s * z);
-            let xr = x as f64 - d;
-            if xr < 0.0 || xr > w - 1.0 {
-                return None;
+        let mut pairs = Vec::with_capacity(px.len());
+        for &(x, y, l, z) in &px {
+            let xr = x as f64 - fb / (s * z);
+            if xr >= 0.0 && xr <= w - 1.0 {
+                pairs.push((l as f64, right.sample_bilinear(xr as f32, y) as f64));
             }
-            samples.push(right.sample_bilinear(xr as f32, y) as f64);
         }
-        let mr = samples.iter().sum::<f64>() / n;
-        let (mut cov, mut vr) = (0.0, 0.0);
-        for (p, r) in px.iter().zip(&samples) {
-            cov += (p.2 as f64 - ml) * (r - mr);
-            vr += (r - mr) * (r - mr);
-        }
-        (vr > 1e-12).then(|| cov / (vl * vr).sqrt())
+        zncc_of(&pairs, px.len())
     };
     let scan = |lo: f64, hi: f64, step: f64| -> Option<(f64, f64)> {
         let k = ((hi - lo) / step).round() as i64;
@@ -143,32 +130,20 @@ pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plan
         (a.norm() > 1e-6 && qm.z > 0.0 && qp.z > 0.0).then(|| AxisState { c: 0.5 * (qm + qp), a: a.normalize() })
     };
     let pix = covered_pixels(model, camera, left, st)?;
-    let (w, n) = (left.width as f64, pix.len() as f64);
-    let ml = pix.iter().map(|p| p.2 as f64).sum::<f64>() / n;
-    let vl = pix.iter().map(|p| (p.2 as f64 - ml).powi(2)).sum::<f64>();
-    if vl <= 1e-12 {
-        return None;
-    }
-    let mut samples = Vec::with_capacity(pix.len());
+    let w = left.width as f64;
+    let mut pairs = Vec::with_capacity(pix.len());
     let mut score = |dm: f64, dp: f64| -> Option<f64> {
         let s = state_of(dm, dp)?;
-        samples.clear();
-        for &(x, y, _, z0) in &pix {
+        pairs.clear();
+        for &(x, y, l, z0) in &pix {
             let r = Vector3::new((x as f64 - camera.cx) / camera.fx, (y as f64 - camera.cy) / camera.fy, 1.0);
             let z = front_depth(model, &s, &r).unwrap_or(z0 * s.c.norm() / st.c.norm());
             let xr = x as f64 - fb / z;
-            if xr < 0.0 || xr > w - 1.0 {
-                return None;
+            if xr >= 0.0 && xr <= w - 1.0 {
+                pairs.push((l as f64, right.sample_bilinear(xr as f32, y) as f64));
             }
-            samples.push(right.sample_bilinear(xr as f32, y) as f64);
         }
-        let mr = samples.iter().sum::<f64>() / n;
-        let (mut cov, mut vr) = (0.0, 0.0);
-        for (p, r) in pix.iter().zip(&samples) {
-            cov += (p.2 as f64 - ml) * (r - mr);
-            vr += (r - mr) * (r - mr);
-        }
-        (vr > 1e-12).then(|| cov / (vl * vr).sqrt())
+        zncc_of(&pairs, pix.len())
     };
     let mut best: Option<(f64, f64, f64)> = None;
     let mut grid = |c: (f64, f64), r: f64, step: f64, best: &mut Option<(f64, f64, f64)>| {
@@ -221,6 +196,23 @@ fn covered_pixels(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>
         }
     }
     (px.len() >= 30).then_some(px)
+}
+
+/// ZNCC of `(left, right)` intensity pairs; `None` when fewer than half of the `total` covered
+/// pixels (or fewer than 30) fall inside the right image, or either side is flat.
+fn zncc_of(pairs: &[(f64, f64)], total: usize) -> Option<f64> {
+    if pairs.len() < 30 || 2 * pairs.len() < total {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let (ml, mr) = pairs.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n));
+    let (mut cov, mut vl, mut vr) = (0.0, 0.0, 0.0);
+    for &(l, r) in pairs {
+        cov += (l - ml) * (r - mr);
+        vl += (l - ml) * (l - ml);
+        vr += (r - mr) * (r - mr);
+    }
+    (vl > 1e-12 && vr > 1e-12).then(|| cov / (vl * vr).sqrt())
 }
 
 /// `st` moved by `shift_m` along its centre's viewing ray (the axis direction is unchanged).

@@ -143,6 +143,20 @@ pub fn random_truth(rng: &mut ChaCha8Rng, model: &CylinderModel, camera: &Camera
 
 /// Renders the scene. `rock`: optional occluding sphere (centre, radius), camera frame.
 pub fn render(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: Option<(Vector3<f64>, f64)>, seed: u64, noise: f64) -> Scene {
+    render_at(model, camera, truth, up, ground_d, rock, seed, noise, Vector3::zeros())
+}
+
+/// The right view of a rectified pair: the same scene (given in the left camera frame) seen by
+/// a camera at `(baseline, 0, 0)` with the left camera's orientation and intrinsics; the ground
+/// texture stays attached to the ground. The returned scene is in the right camera's frame.
+pub fn render_right(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, seed: u64, noise: f64, baseline: f64) -> Scene {
+    let t = Vector3::new(baseline, 0.0, 0.0);
+    let tr = Truth { centre: truth.centre - t, axis: truth.axis };
+    render_at(model, camera, tr, up, ground_d - up.dot(&t), None, seed, noise, t)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_at(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: Option<(Vector3<f64>, f64)>, seed: u64, noise: f64, texture_offset: Vector3<f64>) -> Scene {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let sun = (up * 0.8 + Vector3::new(0.5, 0.1, -0.3)).normalize();
     let mut img = vec![0f32; w * h];
@@ -175,7 +189,7 @@ pub fn render(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vec
                 if hit_tube(model, &shifted, &sun).is_some() {
                     lit = 0.35;
                 }
-                val = ground_albedo(&p, seed) * lit;
+                val = ground_albedo(&(p + texture_offset), seed) * lit;
             }
         }
         (val, best_t)
@@ -202,7 +216,7 @@ pub fn render(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vec
         img[y * w..(y + 1) * w].copy_from_slice(&r);
         depth[y * w..(y + 1) * w].copy_from_slice(&dr);
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed ^ texture_offset.x.to_bits());
     let nd = Normal::new(0.0, noise.max(1e-12)).unwrap();
     for v in &mut img {
         *v = (*v + nd.sample(&mut rng) as f32).clamp(0.0, 1.0);

@@ -1,0 +1,80 @@
+//! Photometric depth from a rendered rectified pair (tubeloc_refine::photo).
+
+mod common;
+
+use common::*;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use tubeloc_core::tube_pose::axis_angle;
+use tubeloc_refine::photo::{photometric_depth, photometric_ends, shifted};
+use tubeloc_refine::AxisState;
+
+const BASELINE: f64 = 0.06;
+
+/// A 512x288 crop of the test camera (fx ≈ 3440 px) and one tube 1.6 to 2.2 m away, both views.
+fn pair(seed: u64) -> (Scene, Scene) {
+    let model = default_model();
+    let cam = tubeloc_core::CameraModel::from_hfov(5472, 3648, 77.0).cropped(2480, 1680, 512, 288);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (1.6, 2.2));
+    let left = render(&model, &cam, truth, up, gd, None, seed, 0.01);
+    let right = render_right(&model, &cam, truth, up, gd, seed, 0.01, BASELINE);
+    (left, right)
+}
+
+/// Seeds whose tube's image direction is at least 30 degrees from the baseline (image x): a
+/// tube along the epipolar lines shows disparity only at its ends and section boundaries (the
+/// aperture problem), for block matching as for this search.
+fn good_seeds(from: u64, n: usize) -> Vec<(u64, Scene, Scene)> {
+    let mut out = Vec::new();
+    let mut seed = from;
+    while out.len() < n {
+        let (l, r) = pair(seed);
+        let (c, a) = (l.truth.centre, l.truth.axis);
+        let p0 = l.camera.project(&nalgebra::Point3::from(c - a * 0.05)).unwrap();
+        let p1 = l.camera.project(&nalgebra::Point3::from(c + a * 0.05)).unwrap();
+        let d = p1 - p0;
+        if d.y.abs() > d.norm() * 30f64.to_radians().sin() {
+            out.push((seed, l, r));
+        }
+        seed += 1;
+    }
+    out
+}
+
+#[test]
+fn photometric_depth_recovers_the_distance_along_the_ray() {
+    let model = default_model();
+    for (seed, l, r) in good_seeds(0, 3) {
+        let t = AxisState { c: l.truth.centre, a: l.truth.axis };
+        // Start 9 mm too far along the viewing ray (the image is unchanged by such a move).
+        let start = shifted(&t, 0.009);
+        let fb = l.camera.fx * BASELINE;
+        let pd = photometric_depth(&model, &l.camera, &l.image, &r.image, fb, &start, 0.03).expect("an answer");
+        let got = shifted(&start, pd.shift_m);
+        let err = (got.c - t.c).norm();
+        // 0.05 px of disparity at 2.2 m with f B ≈ 206 px m is 1.2 mm; allow 1.5 mm.
+        assert!(err < 1.5e-3, "seed {seed}: centre error {:.2} mm (zncc {:.3}, {} px)", err * 1e3, pd.zncc, pd.pixels);
+        assert!(pd.zncc > 0.8, "zncc {}", pd.zncc);
+    }
+}
+
+#[test]
+fn photometric_ends_recover_distance_and_tilt() {
+    let model = default_model();
+    for (seed, l, r) in good_seeds(100, 3) {
+        let t = AxisState { c: l.truth.centre, a: l.truth.axis };
+        // Move the two ends along their rays by +10 and -4 mm: same image line, tilted and farther.
+        let half = 0.5 * model.length;
+        let (pm, pp) = (t.c - t.a * half, t.c + t.a * half);
+        let (qm, qp) = (pm + pm.normalize() * 0.010, pp - pp.normalize() * 0.004);
+        let start = AxisState { c: 0.5 * (qm + qp), a: (qp - qm).normalize() };
+        assert!(axis_angle(&start.a, &t.a).to_degrees() > 2.0);
+        let fb = l.camera.fx * BASELINE;
+        let pe = photometric_ends(&model, &l.camera, &l.image, &r.image, fb, &start, 0.03).expect("an answer");
+        let (ce, ae) = ((pe.state.c - t.c).norm(), axis_angle(&pe.state.a, &t.a).to_degrees());
+        // Each end's depth within ~0.05 px of disparity (1.2 mm at 2.2 m, f B ≈ 206 px m): the
+        // centre within 1.5 mm, the axis within atan(2 · 1.2 / 150) ≈ 0.9 degrees; allow 1.
+        assert!(ce < 1.5e-3 && ae < 1.0, "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3})", ce * 1e3, pe.zncc);
+    }
+}
