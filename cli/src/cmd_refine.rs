@@ -98,10 +98,10 @@ pub struct RefineArgs {
     /// (`tubeloc_refine::photo`); 0 disables.
     #[arg(long, default_value_t = 30.0)]
     pub(crate) photo_range_mm: f64,
-    /// Photometric stage: move each end of the axis along its own ray (distance and tilt)
-    /// instead of only the centre's distance.
+    /// Photometric stage: move only the centre along its ray (distance) instead of each end of
+    /// the axis along its own ray (distance and tilt, the default).
     #[arg(long)]
-    pub(crate) photo_ends: bool,
+    pub(crate) photo_centre_only: bool,
     /// Least ZNCC for the photometric depth to be applied.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) photo_min_zncc: f64,

@@ -135,7 +135,15 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
             continue;
         }
         visible += 1;
-        let hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, polarity.get(i).copied().unwrap_or(0), cfg.rel_edge_strength);
+        let pol = polarity.get(i).copied().unwrap_or(0);
+        let mut hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, pol, cfg.rel_edge_strength);
+        if cfg.outermost_limb_edge && pol != 0 && hyps.len > 1 && matches!(s.kind, crate::contour::SampleKind::Limb { .. }) {
+            // Shading boundaries inside the tube have the limb's polarity too; the silhouette is
+            // the outermost of the edges (the normal points outward).
+            let k = (0..hyps.len).max_by(|&a, &b| hyps.hits[a].offset.total_cmp(&hyps.hits[b].offset)).unwrap_or(0);
+            hyps.hits[0] = hyps.hits[k];
+            hyps.len = 1;
+        }
         if hyps.len > 0 {
             out.push(Assoc { sample: *s, n, u0: u, hyps });
         }

@@ -97,6 +97,9 @@ pub struct RefineConfig {
     /// Fix each limb's edge polarity (tube brighter/darker than the ground) after the first
     /// iteration of each level.
     pub limb_polarity: bool,
+    /// Once a limb's polarity is fixed, associate each of its samples with the outermost edge of
+    /// that polarity only (shading boundaries inside the tube share the polarity).
+    pub outermost_limb_edge: bool,
     /// Ground prior: standard deviation of the centre height above the ground (expected
     /// height: the largest radius), metres.
     pub ground_sigma_m: f64,
@@ -142,6 +145,7 @@ impl Default for RefineConfig {
             end_score_scale: 0.02,
             end_override_confidence: 0.9,
             limb_polarity: true,
+            outermost_limb_edge: false,
             ground_sigma_m: 0.003,
             ground_height_known: true,
             seed_distance_sigma_frac: 0.0,

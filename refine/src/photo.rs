@@ -119,7 +119,7 @@ pub struct PhotoEnds {
 /// axis segment (edges fix it) while the distance and the tilt toward the camera (weak in one
 /// image) follow the stereo pair. The front depth `Z(u)` of every pixel covered by the input
 /// state is recomputed per hypothesis; a grid of 2 mm over `±range_m`, then 0.25 mm over
-/// ±2 mm around the best.
+/// ±2 mm and 0.05 mm over ±0.25 mm around the best.
 pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoEnds> {
     let half = 0.5 * model.length;
     let (pm, pp) = (st.c - st.a * half, st.c + st.a * half);
@@ -162,6 +162,8 @@ pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plan
     grid((0.0, 0.0), range_m, 2e-3, &mut best);
     let (dm, dp, _) = best?;
     grid((dm, dp), 2e-3, 2.5e-4, &mut best);
+    let (dm, dp, _) = best?;
+    grid((dm, dp), 2.5e-4, 5e-5, &mut best);
     let (dm, dp, v) = best?;
     Some(PhotoEnds { state: state_of(dm, dp)?, shifts_m: (dm, dp), zncc: v, pixels: pix.len() })
 }
