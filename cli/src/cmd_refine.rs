@@ -13,7 +13,15 @@
 //! (optionally one `--split`), each with the camera of its `images[].camera` and, with
 //! `--ground auto`, the ground plane of its `images[].T_world_cam`; seeds from `--detections`
 //! (matched by image id) or from the exact annotation poses (`--gt-seeds MM,DEG`); images in
-//! parallel; one JSON array of poses, each with its `image_id`.
+//! parallel; one JSON array of poses, each with its `image_id`. With `--stereo` (a
+//! `tubeloc synth stereo` folder) each image's right image (`images[].right_file_name` under
+//! `right/`) and pair geometry (`right_camera`, `T_left_right`) are read, the pair is rectified
+//! and matched with SGM in the tubes' regions (module [`stereo`]); the triangulated points in each
+//! detection's mask or box (for `--gt-seeds`: the annotation's mask, standing in for a
+//! segmenter's) feed the stereo term, and after the fit the photometric stage
+//! (`tubeloc_refine::photo`, `--photo-range-mm`) moves both ends of each converged axis along
+//! their viewing rays to the best ZNCC of the pair under the cylinder's own disparity field
+//! (SGM is biased on the ~15 px wide convex tubes; this stage is not).
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -93,7 +101,7 @@ pub struct RefineArgs {
     /// under DIR/right/, images[].right_camera, images[].T_left_right).
     #[arg(long, requires = "dataset")]
     pub(crate) stereo: bool,
-    /// Stereo (dataset mode): after the fit, move each converged tube along its centre's viewing
+    /// Stereo (--rig or --stereo): after the fit, move each converged tube along its centre's viewing
     /// ray to the best photometric agreement of the pair within ±this many millimetres
     /// (`tubeloc_refine::photo`); 0 disables.
     #[arg(long, default_value_t = 30.0)]
@@ -140,7 +148,7 @@ pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
 /// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
 /// `--stereo-erode`) or box (see [`stereo`]).
-fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, Vec<Vec<Point3<f64>>>)> {
+fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, Vec<Vec<Point3<f64>>>, stereo::Rectified)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
@@ -155,7 +163,8 @@ fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[T
         .collect();
     let per = stereo::points_rectified(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
         .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
-    Ok((lcam, per))
+    let pair = stereo::rectified_pair(rect, left, &right)?;
+    Ok((lcam, per, pair))
 }
 
 /// Draws the fitted contour of each pose into an RGB copy of the image.
@@ -216,17 +225,17 @@ pub fn run(args: RefineArgs) -> Result<()> {
         dets.retain(|d| d.image_id == id);
     }
     let gray = crate::cmd_stereo::load_gray(image_path)?;
-    let (camera, stereo) = match &args.rig {
+    let (camera, stereo, pair) = match &args.rig {
         Some(rig) => {
-            let (c, s) = stereo_points(&args, &gray, rig, &dets)?;
-            (c, s)
+            let (c, s, p) = stereo_points(&args, &gray, rig, &dets)?;
+            (c, s, Some(p))
         }
         None => {
             if args.right.is_some() {
                 bail!("--right needs --rig (the pair's calibration)");
             }
             let p = args.camera.as_ref().context("--camera is required without --rig")?;
-            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()])
+            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None)
         }
     };
     if gray.width != camera.width as usize || gray.height != camera.height as usize {
@@ -241,6 +250,11 @@ pub fn run(args: RefineArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
+        for p in poses.iter_mut() {
+            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, !args.photo_centre_only);
+        }
+    }
     for (i, p) in poses.iter().enumerate() {
         let c = p.centre * 1e3;
         let status = match &p.failure {

@@ -52,10 +52,15 @@ pub(crate) fn erode(m: &BinaryMask, r: usize) -> BinaryMask {
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<(Vec<Vec<Point3<f64>>>, Rectified)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
-    let (rl, rr) = rect.rectify_pair(left, right)?;
     let pts = points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)?;
+    Ok((pts, rectified_pair(rect, left, right)?))
+}
+
+/// The rectified pair of `left`/`right` (intensities in [0, 1]) under `rect`.
+pub(crate) fn rectified_pair(rect: StereoRectification, left: &Plane<u8>, right: &Plane<u8>) -> Result<Rectified> {
+    let (rl, rr) = rect.rectify_pair(left, right)?;
     let f = |p: &Plane<u8>| Plane::from_vec(p.width, p.height, p.data.iter().map(|&v| v as f32 / 255.0).collect());
-    Ok((pts, Rectified { left: f(&rl), right: f(&rr), rect }))
+    Ok(Rectified { left: f(&rl), right: f(&rr), rect })
 }
 
 /// A rectified pair (intensities in [0, 1]) with its rectification.
