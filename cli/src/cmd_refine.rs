@@ -113,6 +113,11 @@ pub struct RefineArgs {
     /// Least ZNCC for the photometric depth to be applied.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) photo_min_zncc: f64,
+    /// Dataset mode: mask-agreement term instead of image edges: the silhouette is fitted to the
+    /// boundary of each detection's mask (for --gt-seeds: the annotation's mask, i.e. a perfect
+    /// segmenter, an upper bound).
+    #[arg(long, requires = "dataset")]
+    pub(crate) mask_term: bool,
     /// Stereo: erode each detection mask by this many pixels before keeping its points (SGM
     /// fattens the foreground at the tube's outline; on the synthetic stereo set erosion made the
     /// points' bias worse, hence 0).
@@ -245,7 +250,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     let bar = indicatif::ProgressBar::new(dets.len() as u64);
     let mut poses = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
-        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: None, stereo_points: &stereo[i], ground: None } };
+        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: None, stereo_points: &stereo[i], ground: None, mask: None } };
         poses.push(refiner.refine(&input, d));
         bar.inc(1);
     }

@@ -42,6 +42,33 @@ pub struct Scene<'a> {
     /// Ground plane the tube rests on (camera frame): adds the centre-height and axis-parallel
     /// priors (`RefineConfig::ground_sigma_m`, `ground_tilt_sigma_deg`).
     pub ground: Option<GroundPlane>,
+    /// Mask-agreement mode: the detection's mask (full image) and the full-resolution camera.
+    /// When given, each silhouette sample is associated with the mask's boundary along its
+    /// normal (the last inside → outside transition within the search radius) instead of image
+    /// edges: the fit then makes the projected silhouette agree with the mask.
+    pub mask: Option<(&'a tubeloc_core::BinaryMask, &'a CameraModel)>,
+}
+
+/// Offset (level pixels along `n`, from the sample's level position) of the mask boundary seen
+/// from full-resolution pixel `uf` along the outward normal `n`: the outermost inside → outside
+/// transition within `radius_full` pixels, sampled every 0.25 px (nearest pixel).
+fn mask_boundary(mask: &tubeloc_core::BinaryMask, uf: &Point2<f64>, n: &Vector2<f64>, radius_full: f64, scale: f64) -> Option<f64> {
+    let at = |t: f64| -> bool {
+        let q = uf + n * t;
+        q.x >= -0.5 && q.y >= -0.5 && mask.get((q.x + 0.5) as usize, (q.y + 0.5) as usize)
+    };
+    let steps = (radius_full / 0.25).ceil() as i64;
+    let mut best = None;
+    let mut prev = at(-(steps as f64) * 0.25);
+    for k in -steps + 1..=steps {
+        let t = k as f64 * 0.25;
+        let cur = at(t);
+        if prev && !cur {
+            best = Some(t - 0.125);
+        }
+        prev = cur;
+    }
+    best.map(|t| t * scale)
 }
 
 /// Outcome of [`fit`].
@@ -135,6 +162,17 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
             continue;
         }
         visible += 1;
+        if let Some((mask, fcam)) = scene.mask {
+            let Some(uf) = fcam.project(&p.x) else { continue };
+            let scale = level.lv.scale;
+            if let Some(off) = mask_boundary(mask, &uf, &n, level.radius as f64 / scale, scale) {
+                let mut hyps = EdgeHits::default();
+                hyps.hits[0] = crate::edges::EdgeHit { offset: off, strength: -1.0 };
+                hyps.len = 1;
+                out.push(Assoc { sample: *s, n, u0: u, hyps });
+            }
+            continue;
+        }
         let pol = polarity.get(i).copied().unwrap_or(0);
         let mut hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, pol, cfg.rel_edge_strength);
         if cfg.outermost_limb_edge && pol != 0 && hyps.len > 1 && matches!(s.kind, crate::contour::SampleKind::Limb { .. }) {

@@ -35,7 +35,7 @@ fn run_batch(n: usize, seed: u64, stereo: bool, distorted: bool, ground: bool, p
         let sc = render(&model, &cam, truth, up, gd, None, seed * 1000 + i as u64, 0.01);
         let pts = if stereo { stereo_points(&model, &sc, 4, 0.25, 0.2, i as u64) } else { vec![] };
         let g = ground.then(|| tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d });
-        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: g, scene: FitScene { depth: None, stereo_points: &pts, ground: None } };
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: g, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
         let seed_state = perturb(&mut rng, &truth, pos_m, ang_deg);
         if std::env::var("REFINE_DEBUG").is_ok() {
             eprintln!("scene {i}: truth c {:?} a {:?}; seed c {:?} a {:?}", truth.centre.as_slice(), truth.axis.as_slice(), seed_state.c.as_slice(), seed_state.a.as_slice());
@@ -125,7 +125,7 @@ fn flipped_seed_gives_the_same_flip_free_axis_and_end() {
     let (sc, pts) = one_scene();
     let t = sc.truth;
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &pts, ground: None } };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
     let a = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None);
     let b = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: -t.axis }, end_known: true }, 0, 1.0, None);
     assert!(a.converged && b.converged, "{:?} {:?}", a.failure, b.failure);
@@ -218,7 +218,7 @@ fn partly_occluded_tube_converges_or_is_flagged() {
     converges_or_is_flagged("occluded", &sc, 50);
     // With the depth map the occluded contour samples are left out.
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: Some((&sc.depth, &sc.camera)), stereo_points: &[], ground: None } };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: Some((&sc.depth, &sc.camera)), stereo_points: &[], ground: None, mask: None } };
     let mut rng = ChaCha8Rng::seed_from_u64(50);
     let st = perturb(&mut rng, &sc.truth, 0.003, 2.0);
     let p = refiner.refine_seed(&input, &Seed { state: st, end_known: false }, 0, 1.0, None);

@@ -151,6 +151,18 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 let pts: Vec<Vec<[f64; 3]>> = stereo_pts.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
                 files::write_json(&std::path::Path::new(&dbg).join(format!("{}.json", im.id)), &pts)?;
             }
+            let masks: Vec<Option<tubeloc_core::BinaryMask>> = if args.mask_term {
+                let (h, w) = (camera.height, camera.width);
+                items
+                    .iter()
+                    .map(|it| match it {
+                        Work::Detection(d) => d.mask.as_ref().and_then(|m| m.to_mask().ok()),
+                        Work::GtSeed(_, _, seg) => seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()),
+                    })
+                    .collect()
+            } else {
+                vec![None; items.len()]
+            };
             let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene::default() };
             let mut poses = Vec::with_capacity(items.len());
             let mut seeds = Vec::new();
@@ -166,7 +178,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                             }
                         }
                         let d = &d;
-                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], ..Scene::default() }, ..input };
+                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine(&input, d));
                         if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &stereo_pts[k]) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
@@ -175,7 +187,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                         }
                     }
                     Work::GtSeed(st, _, _) => {
-                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], ..Scene::default() }, ..input };
+                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
                             seeds.push(p);
