@@ -258,3 +258,16 @@ pub fn med_p90(v: &mut [f64]) -> (f64, f64) {
     let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
     (q(0.5), q(0.9))
 }
+
+/// The tube's visible mask (pixel centres whose ray hits the tube first), like a perfect
+/// segmenter's output.
+pub fn tube_mask(model: &CylinderModel, scene: &Scene) -> tubeloc_core::BinaryMask {
+    let cam = &scene.camera;
+    tubeloc_core::BinaryMask::from_fn(cam.width as usize, cam.height as usize, |x, y| {
+        let d = cam.unproject(&Point2::new(x as f64, y as f64));
+        match hit_tube(model, &scene.truth, &d) {
+            Some((t, _, _)) => (t * d.z - scene.depth.get(x, y) as f64).abs() < 1e-6,
+            None => false,
+        }
+    })
+}
