@@ -72,7 +72,7 @@ pub struct BenchArgs {
     #[arg(long, value_enum, value_delimiter = ',')]
     pub skip: Vec<Part>,
     /// Scenes of the synthetic stereo set.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 4)]
     pub stereo_scenes: usize,
     /// Redo every stage even if recorded as done.
     #[arg(long)]
@@ -279,25 +279,41 @@ pub fn run(a: BenchArgs) -> Result<()> {
         }
     }
 
-    // 6. Stereo on a synthetic stereo set.
+    // 6. Stereo on a synthetic stereo set: seeds alone, mono and stereo refinement, from (a)
+    //    ground-truth seeds perturbed by 10 mm / 5 deg (the refiner alone) and (b) the learned
+    //    detector's detections (the whole chain).
     if !a.skip.contains(&Part::Stereo) {
         let sdir = out.join("stereo");
         let set = sdir.join("set");
-        st.run("stereo", &[sdir.join("eval_mono/pose_metrics.json"), sdir.join("eval_stereo/pose_metrics.json")], || {
-            crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--force"]))?;
+        let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+        st.run("stereo", &[sdir.join("gt_seeds/eval/pose_metrics.json"), sdir.join("learned/eval/pose_metrics.json")], || {
+            crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--seed", "3", "--force"]))?;
             let gt = set.join("annotations.json");
-            let dets = sdir.join("detections.json");
-            crate::run_words(&words(&["detect", "--method", "learned", "--dataset", &s(&set), "--out", &s(&dets)]))?;
-            for (mode, stereo) in [("mono", false), ("stereo", true)] {
-                let poses = sdir.join(format!("poses_{mode}.json"));
-                let mut w = words(&["refine", "--dataset", &s(&set), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses)]);
-                if stereo {
-                    w.push("--stereo".into());
+            let dets = sdir.join("learned_detections.json");
+            crate::run_words(&words(&["detect", "--method", "learned", "--model", &s(&model), "--dataset", &s(&set), "--out", &s(&dets)]))?;
+            let mut r = serde_json::Map::new();
+            for (name, seed_words) in [("gt_seeds", words(&["--gt-seeds", "10,5"])), ("learned", words(&["--detections", &s(&dets)]))] {
+                let dir = sdir.join(name);
+                std::fs::create_dir_all(&dir)?;
+                let seeds = dir.join("seeds.json");
+                let mut labels = vec![format!("coarse={}", s(&seeds))];
+                for (mode, stereo) in [("mono", false), ("stereo", true)] {
+                    let poses = dir.join(format!("poses_{mode}.json"));
+                    let mut w = words(&["refine", "--dataset", &s(&set), "--out", &s(&poses), "--seeds-out", &s(&seeds)]);
+                    w.extend(seed_words.iter().cloned());
+                    if stereo {
+                        w.push("--stereo".into());
+                    }
+                    let t = Instant::now();
+                    crate::run_words(&w)?;
+                    r.insert(format!("{name}/{mode}_seconds"), json!(t.elapsed().as_secs_f64()));
+                    labels.push(format!("{mode}={}", s(&poses)));
                 }
+                let mut w = words(&["eval", "--gt", &s(&gt), "--out", &s(&dir.join("eval")), "--poses"]);
+                w.extend(labels);
                 crate::run_words(&w)?;
-                crate::run_words(&words(&["eval", "--gt", &s(&gt), "--poses", &s(&poses), "--seeds", &s(&dets), "--out", &s(&sdir.join(format!("eval_{mode}")))]))?;
             }
-            Ok(Value::Null)
+            Ok(Value::Object(r))
         })?;
     }
 
@@ -399,10 +415,10 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &Benc
             }
         }
     }
-    for mode in ["mono", "stereo"] {
-        let p = out.join("stereo").join(format!("eval_{mode}/report.md"));
+    for (name, what) in [("gt_seeds", "exact poses perturbed by 10 mm / 5 deg as seeds"), ("learned", "learned detections as seeds")] {
+        let p = out.join("stereo").join(name).join("eval/report.md");
         if let Some(t) = crate::figures::pose_table(&p) {
-            let _ = writeln!(r, "### synthetic stereo set, {mode} refinement ([report with histograms](stereo/eval_{mode}/report.md))\n\n{t}");
+            let _ = writeln!(r, "### Synthetic stereo set (L20/R20, 1024 crops at half resolution), {what} ([report with histograms](stereo/{name}/eval/report.md))\n\n{t}");
         }
     }
     if let Some(Value::Object(t)) = st.result("tags") {
