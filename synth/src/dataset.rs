@@ -14,7 +14,7 @@ use crate::render::{render, RenderOptions, SurfaceKind};
 use crate::rig::{paper_rig, stop_pose, HEIGHTS_M, STOP_RADIUS_M};
 use crate::scene::{Scene, SceneConfig, TimeOfDay};
 use crate::terrain::TerrainKind;
-use crate::truth::{projected_rect, tube_truth};
+use crate::truth::{projected_rect, tube_truth, TubeTruth};
 use crate::tube_shape::TubeShape;
 use crate::SynthError;
 use nalgebra::Point3;
@@ -388,7 +388,14 @@ fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: 
         extra.insert("tags".into(), json!({"tube_index": m.tube_index, "tags": tags}));
     }
     let image = CocoImage { id: image_id, width: cam.width, height: cam.height, file_name, extra };
-    let anns = truth
+    let anns = scene_annotations(scene, &truth, image_id, &cam);
+    Ok((image, anns))
+}
+
+/// The COCO annotations of one rendered image: one per visible tube, with the scene's per-tube
+/// attributes `case`, `dust`, `carries_tags`; ids `image_id * 100 + k` (k from 1).
+pub fn scene_annotations(scene: &Scene, truth: &[TubeTruth], image_id: u64, cam: &CameraModel) -> Vec<CocoAnnotation> {
+    truth
         .iter()
         .enumerate()
         .map(|(j, t)| {
@@ -397,10 +404,9 @@ fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: 
             extra.insert("case".into(), json!(info.case));
             extra.insert("dust".into(), json!(info.dust));
             extra.insert("carries_tags".into(), json!(info.carries_tags));
-            annotation_from_truth(image_id * 100 + j as u64 + 1, image_id, &cam, t, extra)
+            annotation_from_truth(image_id * 100 + j as u64 + 1, image_id, cam, t, extra)
         })
-        .collect();
-    Ok((image, anns))
+        .collect()
 }
 
 /// A COCO annotation (category 1, "tube") from one tube's truth: compressed-RLE visible mask,

@@ -20,7 +20,7 @@
 //!
 //! Everything is written under `<out>.tmp-<pid>` and renamed at the end.
 
-use crate::dataset::{annotation_from_truth, encode_png, pose_json, tube_category, DatasetSpec, DatasetSummary};
+use crate::dataset::{encode_png, pose_json, tube_category, DatasetSpec, DatasetSummary};
 use crate::render::render;
 use crate::rig::{paper_rig, stop_pose, STOP_RADIUS_M};
 use crate::scene::{Scene, SceneConfig};
@@ -256,18 +256,7 @@ fn render_pair(spec: &StereoSetSpec, scene: &Scene, si: usize, k: usize, v: &Pai
     extra.insert("scale".into(), json!(base.scale));
     extra.insert("crop_origin".into(), json!([v.crop_x0, v.crop_y0]));
     let image = CocoImage { id: image_id, width: cam.width, height: cam.height, file_name, extra };
-    let anns = truth
-        .iter()
-        .enumerate()
-        .map(|(j, t)| {
-            let info = &scene.tube_info[t.tube];
-            let mut extra = Map::new();
-            extra.insert("case".into(), json!(info.case));
-            extra.insert("dust".into(), json!(info.dust));
-            extra.insert("carries_tags".into(), json!(info.carries_tags));
-            annotation_from_truth(image_id * 100 + j as u64 + 1, image_id, &cam, t, extra)
-        })
-        .collect();
+    let anns = crate::dataset::scene_annotations(scene, &truth, image_id, &cam);
     Ok((image, anns))
 }
 
