@@ -334,7 +334,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     }
 
     // 8. Report.
-    let report = write_report(&out, &st, &n_img, &a)?;
+    let report = write_report(&out, &st, &n_img)?;
     eprintln!("\nbench finished in {:.0} s (this run); report: {}", t0.elapsed().as_secs_f64(), report.display());
     Ok(())
 }
@@ -373,7 +373,7 @@ fn f3(x: f64) -> String {
 }
 
 /// Writes `<out>/report.md` from the stage results; returns its path.
-fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &BenchArgs) -> Result<PathBuf> {
+fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Result<PathBuf> {
     let mut r = String::new();
     let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
     let _ = writeln!(r, "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n", env!("CARGO_PKG_VERSION"), n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "));
@@ -432,7 +432,8 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, a: &Benc
     if let Some(f) = st.result("fullres") {
         let _ = writeln!(r, "\nFull resolution ({}x{}): `tubeloc locate` in a child process took {:.1} s with a peak RSS of {} MiB.", f["width"], f["height"], f["seconds"].as_f64().unwrap_or(0.0), f["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or("?".into()));
     }
-    let _ = writeln!(r, "\nMachine: {} logical CPUs. Command: `tubeloc bench --out {}{}`.", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1), a.out.display(), a.images_per_split.map(|n| format!(" --images-per-split {n}")).unwrap_or_default());
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    let _ = writeln!(r, "\nMachine: {} logical CPUs. Command: `tubeloc {}`.", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1), argv.join(" "));
     let p = out.join("report.md");
     files::write_atomic(&p, r.as_bytes())?;
     Ok(p)
