@@ -250,7 +250,7 @@ unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi:
     let nx = x_hi - x_lo + 1;
     let maps: [*const u8; 8] = std::array::from_fn(|o| resp.maps[o].as_ptr());
     let mut row = [0u16; FINE_LANES];
-    let mut score_row = |y: usize, best: &mut (u32, usize, usize)| {
+    let score_row = |y: usize, best: &mut (u32, usize, usize)| {
         let mut lo16 = _mm256_setzero_si256();
         let mut hi16 = _mm256_setzero_si256();
         for block in feats.chunks(63) {
@@ -270,13 +270,28 @@ unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi:
         let b = _mm256_permute2x128_si256(lo16, hi16, 0x31);
         _mm256_storeu_si256(row.as_mut_ptr() as *mut __m256i, a);
         _mm256_storeu_si256(row.as_mut_ptr().add(16) as *mut __m256i, b);
-        for (i, &v) in row[..nx].iter().enumerate() {
-            let cand = (v as u32, x_lo + i, y);
-            if cand.0 > best.0 || (cand.0 == best.0 && (cand.2, cand.1) < (best.2, best.1)) {
-                *best = cand;
-            }
-        }
+        keep_best(&row[..nx], x_lo, y, best);
     };
+    scan_rows(x_lo, y_lo, y_hi, row_step, score_row)
+}
+
+/// Keeps in `best` the higher of it and the scores `row[i]` at `(x0 + i, y)`; ties go to the
+/// smaller `(y, x)`, so the result does not depend on the scan order.
+#[inline(always)]
+fn keep_best(row: &[u16], x0: usize, y: usize, best: &mut (u32, usize, usize)) {
+    for (i, &v) in row.iter().enumerate() {
+        let cand = (v as u32, x0 + i, y);
+        if cand.0 > best.0 || (cand.0 == best.0 && (cand.2, cand.1) < (best.2, best.1)) {
+            *best = cand;
+        }
+    }
+}
+
+/// Scores rows `y_lo..=y_hi` (every `row_step`-th) through `score_row` and returns the best
+/// `(score, x, y)`; with `row_step = 2` the two skipped rows next to the best one are scored
+/// too.
+#[inline(always)]
+fn scan_rows(x_lo: usize, y_lo: usize, y_hi: usize, row_step: usize, mut score_row: impl FnMut(usize, &mut (u32, usize, usize))) -> (u32, usize, usize) {
     let mut best = (0u32, x_lo, y_lo);
     for y in (y_lo..=y_hi).step_by(row_step) {
         score_row(y, &mut best);
@@ -295,33 +310,16 @@ unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi:
 #[inline(always)]
 fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
     let mut row = [0u16; FINE_LANES];
-    let mut score_row = |y: usize, best: &mut (u32, usize, usize)| {
+    let score_row = |y: usize, best: &mut (u32, usize, usize)| {
         let mut x0 = x_lo;
         while x0 <= x_hi {
             let nx = (x_hi - x0 + 1).min(FINE_LANES);
             fine_lanes(resp, t, x0, y, &mut row);
-            for (i, &v) in row[..nx].iter().enumerate() {
-                let cand = (v as u32, x0 + i, y);
-                if cand.0 > best.0 || (cand.0 == best.0 && (cand.2, cand.1) < (best.2, best.1)) {
-                    *best = cand;
-                }
-            }
+            keep_best(&row[..nx], x0, y, best);
             x0 += FINE_LANES;
         }
     };
-    let mut best = (0u32, x_lo, y_lo);
-    for y in (y_lo..=y_hi).step_by(row_step) {
-        score_row(y, &mut best);
-    }
-    if row_step == 2 {
-        let by = best.2;
-        for y in [by.wrapping_sub(1), by + 1] {
-            if y >= y_lo && y <= y_hi && (y - y_lo) % 2 == 1 {
-                score_row(y, &mut best);
-            }
-        }
-    }
-    best
+    scan_rows(x_lo, y_lo, y_hi, row_step, score_row)
 }
 
 /// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid).
