@@ -204,20 +204,9 @@ fn plan_views(scene: &Scene, spec: &DatasetSpec, n: usize, seed: u64) -> Result<
         };
         let cam = rig.cameras[c].model.scaled(spec.scale);
         let t_world_cam = stop_pose(&Point3::origin(), STOP_RADIUS_M, height, stop, spec.stops, scene.stop_offset)? * rig.cameras[c].t_rig_cam;
-        let (w, h) = (cam.width as i64, cam.height as i64);
-        let mut fits: Vec<(i64, i64, i64, i64)> = (0..scene.objects.tubes.len())
-            .filter_map(|i| projected_rect(&scene.objects, i, &cam, &t_world_cam))
-            .filter(|&(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop)
-            .collect();
-        if fits.is_empty() {
+        let Some((x0, y0)) = crop_around_a_tube(scene, &cam, &t_world_cam, crop, &mut rng) else {
             continue;
-        }
-        fits.sort();
-        let (u0, v0, u1, v1) = fits[rng.random_range(0..fits.len())];
-        let xr = ((u1 - crop + 1).max(0), u0.min(w - crop));
-        let yr = ((v1 - crop + 1).max(0), v0.min(h - crop));
-        let x0 = rng.random_range(xr.0..=xr.1.max(xr.0));
-        let y0 = rng.random_range(yr.0..=yr.1.max(yr.0));
+        };
         views.push(View { stop, height, camera: c, crop_x0: x0 as u32, crop_y0: y0 as u32 });
     }
     Ok(views)
@@ -390,6 +379,27 @@ fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: 
     let image = CocoImage { id: image_id, width: cam.width, height: cam.height, file_name, extra };
     let anns = scene_annotations(scene, &truth, image_id, &cam);
     Ok((image, anns))
+}
+
+/// A `crop` x `crop` window of the image of `cam` at `t_world_cam` that holds one whole tube
+/// (a tube chosen at random among those whose projected box fits), placed at random around it:
+/// its top-left corner `(x0, y0)`; `None` when no tube fits.
+pub fn crop_around_a_tube(scene: &Scene, cam: &CameraModel, t_world_cam: &Pose, crop: i64, rng: &mut impl Rng) -> Option<(i64, i64)> {
+    let (w, h) = (cam.width as i64, cam.height as i64);
+    let mut fits: Vec<(i64, i64, i64, i64)> = (0..scene.objects.tubes.len())
+        .filter_map(|i| projected_rect(&scene.objects, i, cam, t_world_cam))
+        .filter(|&(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop)
+        .collect();
+    if fits.is_empty() {
+        return None;
+    }
+    fits.sort();
+    let (u0, v0, u1, v1) = fits[rng.random_range(0..fits.len())];
+    let xr = ((u1 - crop + 1).max(0), u0.min(w - crop));
+    let yr = ((v1 - crop + 1).max(0), v0.min(h - crop));
+    let x0 = rng.random_range(xr.0..=xr.1.max(xr.0));
+    let y0 = rng.random_range(yr.0..=yr.1.max(yr.0));
+    Some((x0, y0))
 }
 
 /// The COCO annotations of one rendered image: one per visible tube, with the scene's per-tube

@@ -24,11 +24,11 @@ use crate::dataset::{encode_png, pose_json, tube_category, DatasetSpec, DatasetS
 use crate::render::render;
 use crate::rig::{paper_rig, stop_pose, STOP_RADIUS_M};
 use crate::scene::{Scene, SceneConfig};
-use crate::truth::{projected_rect, tube_truth};
+use crate::truth::tube_truth;
 use crate::SynthError;
 use nalgebra::Point3;
 use rand::seq::SliceRandom;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
@@ -103,26 +103,16 @@ fn plan_pairs(scene: &Scene, spec: &DatasetSpec, left: &tubeloc_core::RigCamera,
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     all.shuffle(&mut rng);
     let cam = left.model.scaled(spec.scale);
-    let (w, h, crop) = (cam.width as i64, cam.height as i64, spec.crop as i64);
+    let crop = spec.crop as i64;
     let mut views = Vec::new();
     for (stop, height) in all.iter().cycle().take(n.max(1) * 4 + 16).copied() {
         if views.len() == n {
             break;
         }
         let t_world_cam = stop_pose(&Point3::origin(), STOP_RADIUS_M, height, stop, spec.stops, scene.stop_offset)? * left.t_rig_cam;
-        let mut fits: Vec<(i64, i64, i64, i64)> = (0..scene.objects.tubes.len())
-            .filter_map(|i| projected_rect(&scene.objects, i, &cam, &t_world_cam))
-            .filter(|&(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop)
-            .collect();
-        if fits.is_empty() {
+        let Some((x0, y0)) = crate::dataset::crop_around_a_tube(scene, &cam, &t_world_cam, crop, &mut rng) else {
             continue;
-        }
-        fits.sort();
-        let (u0, v0, u1, v1) = fits[rng.random_range(0..fits.len())];
-        let xr = ((u1 - crop + 1).max(0), u0.min(w - crop));
-        let yr = ((v1 - crop + 1).max(0), v0.min(h - crop));
-        let x0 = rng.random_range(xr.0..=xr.1.max(xr.0));
-        let y0 = rng.random_range(yr.0..=yr.1.max(yr.0));
+        };
         views.push(PairView { stop, height, crop_x0: x0 as u32, crop_y0: y0 as u32 });
     }
     if views.len() < n {
