@@ -66,11 +66,14 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 1. A with-tags CFA6 scene from the tiny preset, at quarter resolution.
     let (res, seed) = (a.resolution.to_string(), a.seed.to_string());
-    step("render a with-tags scene", words(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.25", "--resolution", &res, "--seed", &seed, "--force", "--out", &p(&dataset)]), &mut log)?;
+    step("render a with-tags scene", words(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.5", "--resolution", &res, "--seed", &seed, "--force", "--out", &p(&dataset)]), &mut log)?;
     let gt_path = dataset.join("annotations.json");
 
     // 2. The paper's ground truth: tube poses from the AprilTag pair on the tagged tube.
-    step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset)]), &mut log)?;
+    // A scene may show no tag pair (tags hidden or out of the crops): reported, not fatal.
+    if let Err(e) = step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset)]), &mut log) {
+        eprintln!("demo: no tag-pair ground truth: {e:#}");
+    }
     let tags = crate::figures::tag_pose_errors(&gt_path)?;
 
     let gt = CocoDataset::load(&gt_path)?;
@@ -137,7 +140,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
 fn build_report(a: &DemoArgs, log: &[(String, f64)], detectors: &[&str], tags: &serde_json::Value, out: &Path) -> String {
     let mut r = String::new();
-    let _ = writeln!(r, "# tubeloc demo\n\nScene: tiny preset, with-tags CFA6, seed {}, {} px crops at quarter resolution. Every number below was measured by this run.\n", a.seed, a.resolution);
+    let _ = writeln!(r, "# tubeloc demo\n\nScene: tiny preset, with-tags CFA6, seed {}, {} px crops at half resolution (the paper preset's scale). Every number below was measured by this run.\n", a.seed, a.resolution);
     let _ = writeln!(r, "## Detection (COCO, segm; PR curves in each `eval_*/report.md`)\n\n| detector | AP [.5] | AR [.5:.95] | report |\n|---|---|---|---|");
     for det in detectors {
         let m = crate::figures::ap50_ar(&out.join(format!("eval_{det}/metrics.json")));
