@@ -83,19 +83,26 @@ pub fn run(a: SynthArgs) -> Result<()> {
     }
 }
 
+/// A preset's dataset spec with the command line's overrides: scene count, crop side (px) and
+/// render scale.
+pub(crate) fn preset_spec(preset: &str, seed: u64, scenes: Option<usize>, crop: Option<u32>, scale: Option<f64>) -> Result<DatasetSpec> {
+    let mut spec = DatasetSpec::preset(preset, seed)?;
+    if let Some(n) = scenes {
+        spec = spec.with_scenes(n)?;
+    }
+    if let Some(r) = crop {
+        spec.crop = r;
+    }
+    if let Some(s) = scale {
+        spec.scale = s;
+    }
+    Ok(spec)
+}
+
 fn run_dataset(a: DatasetArgs) -> Result<()> {
     let Some(out) = a.out.clone() else { bail!("--out DIR is required") };
     let shard = parse_shard(&a.shard)?;
-    let mut spec = DatasetSpec::preset(&a.preset, a.seed)?;
-    if let Some(n) = a.scenes {
-        spec = spec.with_scenes(n)?;
-    }
-    if let Some(r) = a.resolution {
-        spec.crop = r;
-    }
-    if let Some(s) = a.scale {
-        spec.scale = s;
-    }
+    let mut spec = preset_spec(&a.preset, a.seed, a.scenes, a.resolution, a.scale)?;
     if let Some(p) = &a.tube_mesh {
         let mesh = TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?;
         spec.tube_shape = Arc::new(TubeShape::from_mesh(&mesh));

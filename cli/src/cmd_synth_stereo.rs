@@ -3,7 +3,6 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
-use tubeloc_synth::dataset::DatasetSpec;
 use tubeloc_synth::stereo_set::{write_stereo_set, StereoSetSpec};
 
 /// Arguments of `tubeloc synth stereo`.
@@ -41,16 +40,7 @@ pub struct SynthStereoArgs {
 /// Runs `tubeloc synth stereo`.
 pub fn run(a: SynthStereoArgs) -> Result<()> {
     let Some((l, r)) = a.pair.split_once(',') else { bail!("--pair {:?}: expected LEFT,RIGHT, e.g. L20,R20", a.pair) };
-    let mut base = DatasetSpec::preset(&a.preset, a.seed)?;
-    if let Some(n) = a.scenes {
-        base = base.with_scenes(n)?;
-    }
-    if let Some(px) = a.resolution {
-        base.crop = px;
-    }
-    if let Some(s) = a.scale {
-        base.scale = s;
-    }
+    let base = crate::cmd_synth::preset_spec(&a.preset, a.seed, a.scenes, a.resolution, a.scale)?;
     let spec = StereoSetSpec { base, pair: (l.trim().to_string(), r.trim().to_string()), pairs_per_scene: a.pairs_per_scene };
     let total = spec.base.scenes.len() * spec.pairs_per_scene;
     let bar = indicatif::ProgressBar::new(total as u64);

@@ -246,13 +246,19 @@ pub fn write_dataset(spec: &DatasetSpec, out: &Path, shard: (usize, usize), over
     if sn == 0 || si >= sn {
         return Err(SynthError::Invalid(format!("shard {si}/{sn}: need 0 <= I < N")));
     }
+    write_folder_atomically(out, overwrite, |tmp| write_into(spec, tmp, shard, progress))
+}
+
+/// Writes a dataset folder atomically: `fill` writes into `<out>.tmp-<pid>` and returns
+/// `(images, annotations)`; on success the folder is renamed to `out` (replacing an existing
+/// one only when `overwrite`), on failure it is removed, so `out` is never half-written.
+pub fn write_folder_atomically(out: &Path, overwrite: bool, fill: impl FnOnce(&Path) -> Result<(usize, usize), SynthError>) -> Result<DatasetSummary, SynthError> {
     if out.exists() && !overwrite {
         return Err(SynthError::Invalid(format!("{} already exists (remove it or pass --force)", out.display())));
     }
     let name = out.file_name().ok_or_else(|| SynthError::Invalid(format!("{} has no folder name", out.display())))?;
     let tmp = out.with_file_name(format!("{}.tmp-{}", name.to_string_lossy(), std::process::id()));
-    let result = write_into(spec, &tmp, shard, progress);
-    match result {
+    match fill(&tmp) {
         Ok((images, annotations)) => {
             if out.exists() {
                 std::fs::remove_dir_all(out).map_err(|e| tubeloc_core::CoreError::io(out, e))?;

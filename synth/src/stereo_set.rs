@@ -129,24 +129,7 @@ pub fn write_stereo_set(spec: &StereoSetSpec, out: &Path, overwrite: bool, progr
         return Err(SynthError::Invalid("pairs per scene must be at least 1".into()));
     }
     pair_geometry(&paper_rig(), &spec.pair.0, &spec.pair.1)?;
-    if out.exists() && !overwrite {
-        return Err(SynthError::Invalid(format!("{} already exists (remove it or pass --force)", out.display())));
-    }
-    let name = out.file_name().ok_or_else(|| SynthError::Invalid(format!("{} has no folder name", out.display())))?;
-    let tmp = out.with_file_name(format!("{}.tmp-{}", name.to_string_lossy(), std::process::id()));
-    match write_into(spec, &tmp, progress) {
-        Ok((images, annotations)) => {
-            if out.exists() {
-                std::fs::remove_dir_all(out).map_err(|e| tubeloc_core::CoreError::io(out, e))?;
-            }
-            std::fs::rename(&tmp, out).map_err(|e| tubeloc_core::CoreError::io(out, e))?;
-            Ok(DatasetSummary { out: out.to_path_buf(), images, annotations })
-        }
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            Err(e)
-        }
-    }
+    crate::dataset::write_folder_atomically(out, overwrite, |tmp| write_into(spec, tmp, progress))
 }
 
 fn write_into(spec: &StereoSetSpec, dir: &Path, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<(usize, usize), SynthError> {

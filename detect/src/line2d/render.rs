@@ -85,20 +85,24 @@ pub fn intersect_tube(sections: &[(f64, f64, f64)], o: &Vector3<f64>, d: &Vector
     best.is_finite().then_some(best)
 }
 
+/// The tube's sections as `(z0, z1, radius)` in the tube frame (metres, z along the axis).
+fn section_spans(tube: &TubeModel) -> Vec<(f64, f64, f64)> {
+    tube.sections
+        .iter()
+        .map(|s| {
+            let (z0, z1) = tube.section_z_in_tube_frame(s);
+            (z0, z1, s.radius)
+        })
+        .collect()
+}
+
 /// Renders the tube at `t_cam_tube` with pinhole intrinsics `k`.
 ///
 /// The box is the projection of the tube's bounding cylinder box, grown by one pixel, and
 /// clipped to `[0, clip.0) x [0, clip.1)` when `clip` is given. Returns an empty silhouette
 /// (width or height 0) when the tube is behind the camera or outside the clip region.
 pub fn render_silhouette(tube: &TubeModel, k: &Pinhole, t_cam_tube: &Pose, clip: Option<(usize, usize)>) -> Silhouette {
-    let sections: Vec<(f64, f64, f64)> = tube
-        .sections
-        .iter()
-        .map(|s| {
-            let (z0, z1) = tube.section_z_in_tube_frame(s);
-            (z0, z1, s.radius)
-        })
-        .collect();
+    let sections = section_spans(tube);
     let r = tube.max_radius();
     let h = tube.length / 2.0;
     let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
@@ -158,14 +162,7 @@ pub fn render_silhouette(tube: &TubeModel, k: &Pinhole, t_cam_tube: &Pose, clip:
 /// (`0.75 + 0.25 y/r` of the hit point's tube-frame `y`). For tests, benches and demos.
 pub fn draw_tube_rgb(rgb: &mut [u8], w: usize, h: usize, tube: &TubeModel, k: &Pinhole, t_cam_tube: &Pose) {
     let sil = render_silhouette(tube, k, t_cam_tube, Some((w, h)));
-    let sections: Vec<(f64, f64, f64)> = tube
-        .sections
-        .iter()
-        .map(|s| {
-            let (z0, z1) = tube.section_z_in_tube_frame(s);
-            (z0, z1, s.radius)
-        })
-        .collect();
+    let sections = section_spans(tube);
     let inv = t_cam_tube.inverse();
     let (o, rot) = (inv.translation(), inv.rotation());
     let r = tube.max_radius();
