@@ -135,29 +135,6 @@ fn up_direction(a: &LocateArgs) -> Result<Vector3<f64>> {
     }
 }
 
-/// Drops converged poses that describe a tube already located with a higher score: the centre
-/// lies within one tube radius of the kept pose's axis segment and the axes agree within 15°
-/// (several detections of one tube converge to the same pose). `poses` must be sorted best
-/// first; returns how many were dropped.
-fn merge_duplicates(poses: &mut Vec<TubeAxisPose>, tube: &tubeloc_core::TubeModel) -> usize {
-    let (half, radius) = (tube.length / 2.0, tube.max_radius());
-    let mut kept: Vec<TubeAxisPose> = Vec::with_capacity(poses.len());
-    let before = poses.len();
-    for p in poses.drain(..) {
-        let dup = p.converged
-            && kept.iter().filter(|k| k.converged).any(|k| {
-                let d = p.centre - k.centre;
-                let along = d.dot(&k.axis).clamp(-half, half);
-                (d - k.axis * along).norm() < radius && tubeloc_core::tube_pose::axis_angle(&p.axis, &k.axis) < 15f64.to_radians()
-            });
-        if !dup {
-            kept.push(p);
-        }
-    }
-    *poses = kept;
-    before - poses.len()
-}
-
 fn sidecar(out: &Path, suffix: &str) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "poses".into());
     out.with_file_name(format!("{stem}.{suffix}"))
@@ -242,7 +219,7 @@ pub fn run(a: LocateArgs) -> Result<usize> {
     // 3. One pose per physical tube, grasp frames, summary, output.
     let mut poses: Vec<TubeAxisPose> = files::read_json(&raw_poses)?;
     poses.sort_by(|x, y| y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score)));
-    let merged = merge_duplicates(&mut poses, &tubeloc_core::TubeModel::default());
+    let merged = tubeloc_refine::duplicates::merge_duplicates(&mut poses, &tubeloc_core::TubeModel::default());
     let tubes: Vec<LocatedTube> = poses
         .into_iter()
         .map(|pose| {

@@ -10,6 +10,7 @@
 //! covariance, residual statistics and a failure reason instead of NaN when the fit fails.
 
 pub mod contour;
+pub mod duplicates;
 pub mod edges;
 pub mod error;
 pub mod fit;
