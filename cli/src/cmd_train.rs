@@ -49,6 +49,15 @@ pub struct TrainArgs {
     /// model file (fresh optimizer moments); its architecture and preprocessing win.
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// Warm start: copy every tensor of this trained model whose name and shape the new model
+    /// has (e.g. to add the --fine-mask branch); its preprocessing and width win, and the step
+    /// count and schedule start from 0.
+    #[arg(long, conflicts_with = "resume")]
+    pub init: Option<PathBuf>,
+    /// Add the full-resolution mask branch (mask outlines at pixel precision instead of
+    /// bilinear stride-4 logits).
+    #[arg(long)]
+    pub fine_mask: bool,
     /// Input preprocessing: gray-box (paper), gray-box:R, or rgb.
     #[arg(long, default_value = "gray-box")]
     pub preprocess: String,
@@ -124,9 +133,14 @@ pub fn run(args: TrainArgs) -> Result<()> {
     if dirs.is_empty() {
         bail!("nothing to train on: give --train DATASET and/or --generate N");
     }
-    let pre = match &args.resume {
-        Some(p) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?.meta.preprocess,
-        None => pre,
+    let init = match &args.init {
+        Some(p) => Some(LearnedModel::load(p).with_context(|| format!("reading the --init model {}", p.display()))?),
+        None => None,
+    };
+    let pre = match (&args.resume, &init) {
+        (Some(p), _) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?.meta.preprocess,
+        (None, Some(m)) => m.meta.preprocess,
+        (None, None) => pre,
     };
     let mut images = Vec::new();
     for d in &dirs {
@@ -158,7 +172,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
             eprintln!("resuming at step {} ({})", t.model.meta.steps, if had_opt { "with optimizer state" } else { "no optimizer state found: fresh moments" });
             t
         }
-        None => Trainer::new(LearnedModel::new(pre, args.width, args.seed)?, cfg)?,
+        None => {
+            let width = init.as_ref().map_or(args.width, |m| m.meta.net.width);
+            let mut model = LearnedModel::with_fine_mask(pre, width, args.fine_mask, args.seed)?;
+            if let (Some(m), Some(p)) = (&init, &args.init) {
+                let n = model.init_from(m)?;
+                eprintln!("warm start: {n} tensors from {} ({} steps)", p.display(), m.meta.steps);
+            }
+            Trainer::new(model, cfg)?
+        }
     };
     let start = trainer.model.meta.steps;
     let ckpt = PathBuf::from(format!("{}.ckpt", args.out.display()));
@@ -189,7 +211,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
     }
     pb.finish();
     let ap = validate(&trainer)?;
-    trainer.model.meta.notes = format!("steps {} seed {} val AP50 {ap:.4}", trainer.model.meta.steps, args.seed);
+    let warm = match (&init, &args.init) {
+        (Some(m), Some(p)) => format!(" warm start from {} ({} steps)", p.display(), m.meta.steps),
+        _ => String::new(),
+    };
+    trainer.model.meta.notes = format!("steps {} seed {} val AP50 {ap:.4}{warm}", trainer.model.meta.steps, args.seed);
     trainer.model.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)", args.out.display(), trainer.model.meta.steps, t0.elapsed().as_secs_f64());
     Ok(())

@@ -14,7 +14,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
     let d = DecodeConfig::default();
     for img in imgs.iter().take(3) {
-        let (out, ow, oh) = model.predict_planes(&img.input, img.width, img.height)?;
+        let pred = model.predict(&img.input, img.width, img.height)?;
+        let (out, ow, oh) = (&pred.planes, pred.out_w, pred.out_h);
         let n = ow * oh;
         let sig = |v: f32| 1.0 / (1.0 + (-v).exp());
         let fg = out[..n].iter().filter(|&&v| v > 0.0).count();
@@ -23,7 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let gt = img.labels.iter().filter(|&&l| l != 0).count() / 16;
         let ngt = img.labels.iter().copied().max().unwrap_or(0);
         let half: f32 = (0..n).filter(|&c| out[c] > 0.0).map(|c| out[4 * n + c]).sum::<f32>() / fg.max(1) as f32;
-        println!("fg cells {fg} (gt ~{gt}), heat>0.2 cells {heat_hi}, heat max {hmax:.3}, mean half-len {:.1} px, gt tubes {ngt}, detections {}", half * 64.0, tubeloc_detect::learned::decode(&out, ow, oh, img.width, img.height, &d).len());
+        println!("fg cells {fg} (gt ~{gt}), heat>0.2 cells {heat_hi}, heat max {hmax:.3}, mean half-len {:.1} px, gt tubes {ngt}, detections {}", half * 64.0, tubeloc_detect::learned::decode(&pred, &d).len());
     }
     let variants = [
         ("default", d),

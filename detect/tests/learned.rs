@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
 use tubeloc_detect::learned::net::{HEADS, LENGTH_SCALE};
 use tubeloc_detect::learned::train::make_batch;
-use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer};
+use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Prediction, Preprocess, TrainConfig, Trainer};
 
 /// A textured image with bright bars ("tubes") at random places and angles, plus their masks.
 fn bar_image(size: usize, bars: usize, seed: u64) -> (Vec<u8>, Vec<Vec<u8>>) {
@@ -91,11 +91,11 @@ fn same_seed_gives_same_weights_and_save_load_gives_identical_outputs() {
     assert_eq!(loaded.meta, a.meta);
     let (rgb, _) = bar_image(100, 1, 5);
     let input = pre.apply(&rgb, 100, 100);
-    let (o1, w1, h1) = a.predict_planes(&input, 100, 100).unwrap();
-    let (o2, w2, h2) = loaded.predict_planes(&input, 100, 100).unwrap();
-    assert_eq!((w1, h1), (25, 25));
-    assert_eq!((w1, h1), (w2, h2));
-    assert!(o1.iter().zip(&o2).all(|(x, y)| x.to_bits() == y.to_bits()));
+    let p1 = a.predict(&input, 100, 100).unwrap();
+    let p2 = loaded.predict(&input, 100, 100).unwrap();
+    assert_eq!((p1.out_w, p1.out_h), (25, 25));
+    assert_eq!((p1.out_w, p1.out_h), (p2.out_w, p2.out_h));
+    assert!(p1.planes.iter().zip(&p2.planes).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
 
 #[test]
@@ -176,7 +176,8 @@ fn decoding_splits_touching_tubes_and_recovers_axes() {
     put(20.0, 24.0, 0.0, 10.0, 1.0);
     // A diagonal bar far away.
     put(45.0, 45.0, std::f32::consts::FRAC_PI_4, 8.0, 1.0);
-    let inst = decode(&out, ow, oh, 256, 256, &DecodeConfig::default());
+    let pred = Prediction { planes: out, out_w: ow, out_h: oh, width: 256, height: 256, fine: None };
+    let inst = decode(&pred, &DecodeConfig::default());
     assert_eq!(inst.len(), 3, "{:?}", inst.iter().map(|i| i.axis).collect::<Vec<_>>());
     let diag = inst.iter().find(|i| i.axis.centre_px[0] > 150.0).unwrap();
     // Cell 45 -> pixel 45 * 4 + 1.5 = 181.5.
@@ -235,4 +236,73 @@ fn resumed_training_continues_exactly() {
         fresh.step(&images).unwrap();
     }
     assert_ne!(weights(&fresh), weights(&straight));
+}
+
+#[test]
+fn fine_mask_branch_warm_starts_trains_and_round_trips() {
+    let pre = Preprocess::default();
+    let plain = LearnedModel::new(pre, 8, 3).unwrap();
+    let mut fine = LearnedModel::with_fine_mask(pre, 8, true, 22).unwrap();
+    // Every tensor of the plain model is copied; the stride-4 heads then agree bit for bit.
+    let n_plain = safetensors::SafeTensors::deserialize(&plain.to_bytes().unwrap()).unwrap().tensors().len();
+    assert_eq!(fine.init_from(&plain).unwrap(), n_plain);
+    let (rgb, _) = bar_image(96, 1, 4);
+    let input = pre.apply(&rgb, 96, 96);
+    let (pp, pf) = (plain.predict(&input, 96, 96).unwrap(), fine.predict(&input, 96, 96).unwrap());
+    assert!(pp.fine.is_none());
+    assert!(pp.planes.iter().zip(&pf.planes).all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert_eq!(pf.fine.as_ref().map(Vec::len), Some(96 * 96));
+
+    // Training lowers the loss, which now includes the full-resolution mask term.
+    let images = tiny_set(pre);
+    let aug = AugmentConfig { crop: 128, ..Default::default() };
+    let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 5, total_steps: 60, seed: 7, augment: aug, ..Default::default() };
+    let mut trainer = Trainer::new(fine, cfg).unwrap();
+    let held = make_batch(&images, &aug, 8, 12345, 0).unwrap();
+    let before = trainer.eval_loss(&held).unwrap();
+    for _ in 0..60 {
+        assert!(trainer.step(&images).unwrap().is_finite());
+    }
+    let after = trainer.eval_loss(&held).unwrap();
+    assert!(after < 0.7 * before, "loss {before} -> {after}");
+
+    // Save and load keep the branch and give identical full-resolution logits.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("fine.safetensors");
+    trainer.model.save(&path).unwrap();
+    let loaded = LearnedModel::load(&path).unwrap();
+    assert!(loaded.meta.net.fine_mask);
+    let (a, b) = (trainer.model.predict(&input, 96, 96).unwrap(), loaded.predict(&input, 96, 96).unwrap());
+    assert!(a.fine.unwrap().iter().zip(&b.fine.unwrap()).all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+#[test]
+fn decoding_with_fine_logits_follows_them_to_the_pixel() {
+    // One horizontal tube: foreground cells in row 30, columns 20..=39 (pixels 80..159 x
+    // 120..123), its centre peak at cell (30, 30); the full-resolution logits mark pixel rows
+    // 121..=126 (half of them in the background cell row 31) and columns 82..=157.
+    let (ow, oh) = (64, 64);
+    let n = ow * oh;
+    let mut planes = vec![-4.0f32; HEADS * n];
+    for x in 20..40 {
+        let c = 30 * ow + x;
+        planes[c] = 4.0;
+        planes[2 * n + c] = 1.0;
+        planes[3 * n + c] = 0.0;
+        planes[4 * n + c] = 40.0 / LENGTH_SCALE;
+    }
+    planes[n + 30 * ow + 30] = 3.0;
+    let mut fine = vec![-5.0f32; 256 * 256];
+    for y in 121..=126 {
+        for x in 82..=157 {
+            fine[y * 256 + x] = 5.0;
+        }
+    }
+    let pred = Prediction { planes, out_w: ow, out_h: oh, width: 256, height: 256, fine: Some(fine.clone()) };
+    let inst = decode(&pred, &DecodeConfig::default());
+    assert_eq!(inst.len(), 1);
+    let m = &inst[0].mask.data;
+    assert!(m.iter().zip(&fine).all(|(&a, &f)| (a != 0) == (f > 0.0)), "mask differs from the fine logits");
+    assert_eq!(inst[0].bbox, [82.0, 121.0, 76.0, 6.0]);
+    assert!((inst[0].axis.width_px - 6.0).abs() < 1e-9, "{:?}", inst[0].axis);
 }

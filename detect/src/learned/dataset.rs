@@ -48,8 +48,7 @@ pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Resul
 
 /// Runs the model on a preprocessed training image.
 pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
-    let (out, ow, oh) = model.predict_planes(&img.input, img.width, img.height)?;
-    Ok(decode(&out, ow, oh, img.width, img.height, cfg))
+    Ok(decode(&model.predict(&img.input, img.width, img.height)?, cfg))
 }
 
 /// Mask AP at IoU 0.5 over images (all detections pooled, sorted by score, greedy matching to

@@ -10,12 +10,16 @@
 //!    long and thin, so a cell belongs to the peak whose axis line passes near it).
 //! 3. Full-resolution mask: the foreground logit bilinearly upsampled (stride 4) and
 //!    thresholded at [`DecodeConfig::mask_logit`] inside the instance's cells, pixel `(x, y)` reading cell coordinate
-//!    `((x - 1.5) / 4, (y - 1.5) / 4)`.
+//!    `((x - 1.5) / 4, (y - 1.5) / 4)`. With the fine mask branch the full-resolution logit is
+//!    thresholded instead, inside the instance's cells grown by one cell (a background cell
+//!    joins the neighbouring instance cell of highest foreground), since a tube's outline
+//!    runs through cells that are mostly background.
 //! 4. Score = `max σ(heat)` of the instance's peak (0.5 × mean σ(fg) without one) × mean
 //!    `σ(fg)` over its cells. Axis seed: centre at the peak (sub-cell by a 3x3 weighted mean),
 //!    direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
 //!    predicted half-length, width from the mask's extent across the axis.
 
+use super::model::Prediction;
 use super::net::{HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
 
@@ -63,10 +67,10 @@ fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
-/// Decodes raw outputs (`HEADS` planes of `ow x oh`, from
-/// [`super::LearnedModel::predict_planes`]) of a `width x height` image into instances, sorted
-/// by decreasing score.
-pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
+/// Decodes the network outputs of one image ([`super::LearnedModel::predict`]) into
+/// instances, sorted by decreasing score.
+pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
+    let (out, ow, oh, width, height) = (&pred.planes[..], pred.out_w, pred.out_h, pred.width, pred.height);
     let n = ow * oh;
     assert_eq!(out.len(), HEADS * n, "output plane size");
     let fg: Vec<f32> = out[..n].iter().map(|&v| sigmoid(v)).collect();
@@ -201,11 +205,14 @@ pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cf
     }
     let mut result = Vec::new();
     let mut cell_owner = vec![u32::MAX; n];
-    for (gi, (peak, cells)) in groups.iter().enumerate() {
+    for (gi, (_, cells)) in groups.iter().enumerate() {
         for &c in cells {
             cell_owner[c] = gi as u32;
         }
-        let _ = peak;
+    }
+    let grow = pred.fine.is_some() as usize;
+    if grow == 1 {
+        cell_owner = grown_owner(&cell_owner, &fg, ow, oh);
     }
     for (gi, (peak, cells)) in groups.iter().enumerate() {
         let mean_fg = cells.iter().map(|&c| fg[c]).sum::<f32>() / cells.len() as f32;
@@ -223,10 +230,10 @@ pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cf
             x1 = x1.max(x);
             y1 = y1.max(y);
         }
-        let px0 = (x0 * STRIDE).saturating_sub(STRIDE);
-        let py0 = (y0 * STRIDE).saturating_sub(STRIDE);
-        let px1 = ((x1 + 2) * STRIDE).min(width);
-        let py1 = ((y1 + 2) * STRIDE).min(height);
+        let px0 = (x0 * STRIDE).saturating_sub(STRIDE * (1 + grow));
+        let py0 = (y0 * STRIDE).saturating_sub(STRIDE * (1 + grow));
+        let px1 = ((x1 + 2 + grow) * STRIDE).min(width);
+        let py1 = ((y1 + 2 + grow) * STRIDE).min(height);
         let mut mask = Plane::<u8>::new(width, height);
         let mut pix = Vec::new();
         for y in py0..py1 {
@@ -243,7 +250,10 @@ pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cf
                     continue;
                 }
                 let l = |a: usize, b: usize| out[b * ow + a];
-                let val = (l(u0, v0) * (1.0 - fu) + l(u1, v0) * fu) * (1.0 - fv) + (l(u0, v1) * (1.0 - fu) + l(u1, v1) * fu) * fv;
+                let val = match &pred.fine {
+                    Some(f) => f[y * width + x],
+                    None => (l(u0, v0) * (1.0 - fu) + l(u1, v0) * fu) * (1.0 - fv) + (l(u0, v1) * (1.0 - fu) + l(u1, v1) * fu) * fv,
+                };
                 if val > cfg.mask_logit {
                     mask.data[y * width + x] = 1;
                     pix.push((x as f64, y as f64));
@@ -290,4 +300,28 @@ pub fn decode(out: &[f32], ow: usize, oh: usize, width: usize, height: usize, cf
     }
     result.sort_by(|a, b| b.score.total_cmp(&a.score));
     result
+}
+
+/// Instance ownership grown by one cell: an unowned cell takes the owner of its 8-neighbour
+/// of highest foreground probability among the owned ones.
+fn grown_owner(owner: &[u32], fg: &[f32], ow: usize, oh: usize) -> Vec<u32> {
+    let mut grown = owner.to_vec();
+    for y in 0..oh {
+        for x in 0..ow {
+            if owner[y * ow + x] != u32::MAX {
+                continue;
+            }
+            let mut best = (f32::MIN, u32::MAX);
+            for yy in y.saturating_sub(1)..(y + 2).min(oh) {
+                for xx in x.saturating_sub(1)..(x + 2).min(ow) {
+                    let c = yy * ow + xx;
+                    if owner[c] != u32::MAX && fg[c] > best.0 {
+                        best = (fg[c], owner[c]);
+                    }
+                }
+            }
+            grown[y * ow + x] = best.1;
+        }
+    }
+    grown
 }

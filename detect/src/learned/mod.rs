@@ -22,8 +22,8 @@ pub mod train;
 pub use augment::{AugmentConfig, TrainImage};
 pub use decode::{decode, DecodeConfig, LearnedInstance};
 pub use error::LearnedError;
-pub use model::{LearnedModel, ModelMeta, FORMAT_VERSION};
-pub use net::NetConfig;
+pub use model::{LearnedModel, ModelMeta, Prediction, FORMAT_VERSION};
+pub use net::{NetConfig, NetOutput};
 pub use preprocess::Preprocess;
 pub use train::{TrainConfig, Trainer};
 
@@ -33,6 +33,5 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
         return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
     let input = model.meta.preprocess.apply(rgb, width, height);
-    let (out, ow, oh) = model.predict_planes(&input, width, height)?;
-    Ok(decode(&out, ow, oh, width, height, cfg))
+    Ok(decode(&model.predict(&input, width, height)?, cfg))
 }

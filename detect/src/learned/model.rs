@@ -7,7 +7,7 @@
 //! [`LearnedError::BadModel`] naming the file.
 
 use super::error::LearnedError;
-use super::net::{NetConfig, TubeNet, HEADS, STRIDE};
+use super::net::{NetConfig, NetOutput, TubeNet, HEADS, STRIDE};
 use super::preprocess::Preprocess;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
@@ -49,7 +49,13 @@ impl LearnedModel {
     /// `ChaCha8Rng::seed_from_u64(seed)` in parameter-name order, zero biases, and head biases
     /// set to the foreground/centre priors (`-2.2`, i.e. p ≈ 0.1).
     pub fn new(preprocess: Preprocess, width: usize, seed: u64) -> Result<Self, LearnedError> {
-        let net_cfg = NetConfig { in_channels: preprocess.channels(), width };
+        Self::with_fine_mask(preprocess, width, false, seed)
+    }
+
+    /// As [`LearnedModel::new`], with or without the full-resolution mask branch
+    /// ([`NetConfig::fine_mask`]; its output bias also starts at the `-2.2` prior).
+    pub fn with_fine_mask(preprocess: Preprocess, width: usize, fine_mask: bool, seed: u64) -> Result<Self, LearnedError> {
+        let net_cfg = NetConfig { in_channels: preprocess.channels(), width, fine_mask };
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
         let net = TubeNet::new(vb, &net_cfg)?;
@@ -60,10 +66,12 @@ impl LearnedModel {
             let vals: Vec<f32> = if name.ends_with(".weight") {
                 let fan_in: usize = shape[1..].iter().product();
                 let normal = Normal::new(0.0f32, (2.0 / fan_in as f32).sqrt()).map_err(|e| LearnedError::Invalid(e.to_string()))?;
-                let gain = if name.starts_with("head") { 0.1 } else { 1.0 };
+                let gain = if name.starts_with("head") || name.starts_with("fine_out") { 0.1 } else { 1.0 };
                 (0..n).map(|_| gain * normal.sample(&mut rng)).collect()
             } else if name == "head.bias" {
                 (0..n).map(|i| if i < 2 { -2.2 } else { 0.0 }).collect()
+            } else if name == "fine_out.bias" {
+                vec![-2.2; n]
             } else {
                 vec![0.0; n]
             };
@@ -72,16 +80,30 @@ impl LearnedModel {
         Ok(LearnedModel { varmap, net, meta: ModelMeta { net: net_cfg, preprocess, steps: 0, notes: String::new() } })
     }
 
-    /// Raw network outputs for a batch `(B, C, H, W)` (H, W multiples of 32): `(B, 5, H/4, W/4)`.
-    pub fn forward(&self, x: &Tensor) -> Result<Tensor, LearnedError> {
+    /// Raw network outputs for a batch `(B, C, H, W)` (H, W multiples of 32): the stride-4
+    /// heads `(B, 5, H/4, W/4)` and, with the fine branch, `(B, 1, H, W)` mask logits.
+    pub fn forward(&self, x: &Tensor) -> Result<NetOutput, LearnedError> {
         Ok(self.net.forward(x)?)
+    }
+
+    /// Copies every tensor of `other` whose name and shape this model also has (a warm start,
+    /// e.g. adding the fine mask branch to a trained model); returns how many were copied.
+    pub fn init_from(&mut self, other: &LearnedModel) -> Result<usize, LearnedError> {
+        let theirs: HashMap<String, candle_core::Var> = sorted_vars(&other.varmap).into_iter().collect();
+        let mut copied = 0;
+        for (name, var) in sorted_vars(&self.varmap) {
+            if let Some(t) = theirs.get(&name).filter(|t| t.dims() == var.dims()) {
+                var.set(t.as_tensor())?;
+                copied += 1;
+            }
+        }
+        Ok(copied)
     }
 
     /// Runs the network on one preprocessed image (`channels * width * height` values,
     /// channel-major) of any size: pads to a multiple of 32 with zeros (the normalized mean
-    /// gray), returns the `HEADS` output planes at stride 4 as `(values, out_w, out_h)` with
-    /// `values[c * out_w * out_h + y * out_w + x]`, cropped to `ceil(width / 4)` x `ceil(height / 4)`.
-    pub fn predict_planes(&self, input: &[f32], width: usize, height: usize) -> Result<(Vec<f32>, usize, usize), LearnedError> {
+    /// gray) and crops the outputs back (see [`Prediction`]).
+    pub fn predict(&self, input: &[f32], width: usize, height: usize) -> Result<Prediction, LearnedError> {
         let c = self.meta.net.in_channels;
         if width == 0 || height == 0 || input.len() != c * width * height {
             return Err(LearnedError::Invalid(format!("input has {} values, expected {c} x {width} x {height}", input.len())));
@@ -98,15 +120,26 @@ impl LearnedModel {
         let x = Tensor::from_vec(padded, (1, c, ph, pw), &Device::Cpu)?;
         let out = self.net.forward(&x)?;
         let (ow, oh) = (pw / STRIDE, ph / STRIDE);
-        let all: Vec<f32> = out.flatten_all()?.to_vec1()?;
+        let all: Vec<f32> = out.coarse.flatten_all()?.to_vec1()?;
         let (cw, chh) = (width.div_ceil(STRIDE), height.div_ceil(STRIDE));
-        let mut res = vec![0f32; HEADS * cw * chh];
+        let mut planes = vec![0f32; HEADS * cw * chh];
         for k in 0..HEADS {
             for y in 0..chh {
-                res[k * cw * chh + y * cw..][..cw].copy_from_slice(&all[k * ow * oh + y * ow..][..cw]);
+                planes[k * cw * chh + y * cw..][..cw].copy_from_slice(&all[k * ow * oh + y * ow..][..cw]);
             }
         }
-        Ok((res, cw, chh))
+        let fine = match out.fine {
+            Some(f) => {
+                let f: Vec<f32> = f.flatten_all()?.to_vec1()?;
+                let mut m = vec![0f32; width * height];
+                for y in 0..height {
+                    m[y * width..][..width].copy_from_slice(&f[y * pw..][..width]);
+                }
+                Some(m)
+            }
+            None => None,
+        };
+        Ok(Prediction { planes, out_w: cw, out_h: chh, width, height, fine })
     }
 
     /// Serializes weights and metadata (see the module doc) to bytes.
@@ -175,7 +208,7 @@ impl LearnedModel {
         if meta.net.in_channels != meta.preprocess.channels() || meta.net.width == 0 || meta.net.width > 256 {
             return Err(bad(format!("inconsistent architecture {:?} for preprocessing {:?}", meta.net, meta.preprocess)));
         }
-        let mut model = LearnedModel::new(meta.preprocess, meta.net.width, 0)?;
+        let mut model = LearnedModel::with_fine_mask(meta.preprocess, meta.net.width, meta.net.fine_mask, 0)?;
         model.meta = meta;
         let vars = sorted_vars(&model.varmap);
         if vars.len() != tensors.len() {
@@ -190,6 +223,25 @@ impl LearnedModel {
         }
         Ok(model)
     }
+}
+
+/// Network outputs for one image, cropped to it.
+#[derive(Clone, Debug)]
+pub struct Prediction {
+    /// The `HEADS` stride-4 planes, `planes[c * out_w * out_h + y * out_w + x]` (cell `(x, y)`
+    /// covers pixels `4x..4x+3` x `4y..4y+3`).
+    pub planes: Vec<f32>,
+    /// Plane width, `ceil(width / 4)`.
+    pub out_w: usize,
+    /// Plane height, `ceil(height / 4)`.
+    pub out_h: usize,
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// Full-resolution mask logits (`width * height`, row-major) when the model has the fine
+    /// branch.
+    pub fine: Option<Vec<f32>>,
 }
 
 pub(crate) fn sorted_vars(varmap: &VarMap) -> Vec<(String, candle_core::Var)> {

@@ -16,6 +16,13 @@
 //! | 2, 3 | `cos 2θ`, `sin 2θ` of the axis angle θ (image frame, x right, y down) | on tube cells |
 //! | 4 | half-length of the tube / [`LENGTH_SCALE`] pixels | on tube cells |
 //!
+//! 5. Optional full-resolution mask branch ([`NetConfig::fine_mask`]): the input image at full
+//!    resolution, 2x2 space-to-depth (`4C` channels at stride 2), a 3x3 convolution + ReLU to `w`
+//!    channels, plus the stride-4 decoder feature upsampled 2x, a 1x1 convolution + ReLU and a
+//!    1x1 convolution to 4 channels, which depth-to-space turns into one mask logit per image
+//!    pixel (channel `2 dy + dx` is pixel `(2x + dx, 2y + dy)`). Tubes are 10-20 pixels wide,
+//!    so stride-4 mask logits leave their outlines 1-3 pixels off; this branch places them.
+//!
 //! The receptive field is about 300 image pixels, the length of a tube in the 1024x1024
 //! crops. All convolutions are [`super::layers::Conv`] (one matrix product each), which is
 //! several times faster than candle's CPU `conv2d` for these thin layers.
@@ -39,11 +46,14 @@ pub struct NetConfig {
     pub in_channels: usize,
     /// Base width `w` (channels at stride 4).
     pub width: usize,
+    /// Whether the full-resolution mask branch exists (absent in files written before it).
+    #[serde(default)]
+    pub fine_mask: bool,
 }
 
 impl Default for NetConfig {
     fn default() -> Self {
-        NetConfig { in_channels: 1, width: 12 }
+        NetConfig { in_channels: 1, width: 12, fine_mask: false }
     }
 }
 
@@ -52,6 +62,21 @@ pub struct TubeNet {
     enc: Vec<(Conv, Conv)>,
     dec: Vec<Conv>,
     head: Conv,
+    fine: Option<(Conv, Conv, Conv)>,
+}
+
+/// Raw outputs of [`TubeNet::forward`].
+pub struct NetOutput {
+    /// `(B, HEADS, H/4, W/4)`: the stride-4 heads of the module doc.
+    pub coarse: Tensor,
+    /// `(B, 1, H, W)`: full-resolution mask logits, with [`NetConfig::fine_mask`].
+    pub fine: Option<Tensor>,
+}
+
+/// `(B, C, H, W)` → channels-last `(B, H/2, W/2, 4C)`, channel `(2 dy + dx) C + c`.
+fn space_to_depth(x: &Tensor) -> Result<Tensor> {
+    let (b, c, h, w) = x.dims4()?;
+    x.reshape((b, c, h / 2, 2, w / 2, 2))?.permute((0, 2, 4, 3, 5, 1))?.reshape((b, h / 2, w / 2, 4 * c))
 }
 
 impl TubeNet {
@@ -59,7 +84,8 @@ impl TubeNet {
     pub const ALIGN: usize = 32;
 
     /// Builds the layers; parameter names are `enc{level}{a|b}`, `dec{i}`, `head` (`.weight`,
-    /// `.bias`), `dec0` at stride 16 and `dec2` at stride 4.
+    /// `.bias`), `dec0` at stride 16 and `dec2` at stride 4; the fine branch's are `fine_in`,
+    /// `fine_mid`, `fine_out`.
     pub fn new(vb: VarBuilder, cfg: &NetConfig) -> Result<Self> {
         let w = cfg.width;
         let widths = [w, 2 * w, 4 * w, 4 * w];
@@ -75,20 +101,19 @@ impl TubeNet {
             Conv::new(vb.pp("dec2"), w, w, 3)?,
         ];
         let head = Conv::new(vb.pp("head"), w, HEADS, 1)?;
-        Ok(TubeNet { enc, dec, head })
+        let fine = if cfg.fine_mask {
+            Some((Conv::new(vb.pp("fine_in"), 4 * cfg.in_channels, w, 3)?, Conv::new(vb.pp("fine_mid"), w, w, 1)?, Conv::new(vb.pp("fine_out"), w, 4, 1)?))
+        } else {
+            None
+        };
+        Ok(TubeNet { enc, dec, head, fine })
     }
 
-    /// `x`: `(B, C, H, W)` normalized input at image resolution; returns `(B, HEADS, H/4, W/4)`
-    /// raw outputs.
-    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let (b, c, h, w) = x.dims4()?;
-        let x = x.avg_pool2d(2)?;
-        let (h, w) = (h / 2, w / 2);
-        // Space-to-depth into channels-last features (B, H/4, W/4, 4C).
-        let mut f = x
-            .reshape((b, c, h / 2, 2, w / 2, 2))?
-            .permute((0, 2, 4, 3, 5, 1))?
-            .reshape((b, h / 2, w / 2, 4 * c))?;
+    /// `x`: `(B, C, H, W)` normalized input at image resolution; returns the raw outputs.
+    pub fn forward(&self, x: &Tensor) -> Result<NetOutput> {
+        let (b, _, h, w) = x.dims4()?;
+        // Half resolution, then space-to-depth into channels-last features (B, H/4, W/4, 4C).
+        let mut f = space_to_depth(&x.avg_pool2d(2)?)?;
         let mut feats = Vec::with_capacity(self.enc.len());
         for (l, (ca, cb)) in self.enc.iter().enumerate() {
             if l > 0 {
@@ -100,6 +125,16 @@ impl TubeNet {
         for (d, skip) in self.dec.iter().zip(feats[..3].iter().rev()) {
             f = d.forward(&(upsample2(&f)? + skip)?)?.relu()?;
         }
-        self.head.forward(&f)?.permute((0, 3, 1, 2))?.contiguous()
+        let coarse = self.head.forward(&f)?.permute((0, 3, 1, 2))?.contiguous()?;
+        let fine = match &self.fine {
+            Some((cin, cmid, cout)) => {
+                let g = (cin.forward(&space_to_depth(x)?)?.relu()? + upsample2(&f)?)?;
+                let g = cout.forward(&cmid.forward(&g)?.relu()?)?;
+                // Depth-to-space: (B, H/2, W/2, 2, 2) -> (B, H/2, 2, W/2, 2) -> (B, 1, H, W).
+                Some(g.reshape((b, h / 2, w / 2, 2, 2))?.permute((0, 1, 3, 2, 4))?.reshape((b, 1, h, w))?)
+            }
+            None => None,
+        };
+        Ok(NetOutput { coarse, fine })
     }
 }

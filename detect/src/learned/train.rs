@@ -6,7 +6,9 @@
 //! `L = mean((1 + 4 t₀) b(o₀, t₀)) + Σ (1 + 20 t₁) b(o₁, t₁) / Σ (1 + 20 t₁)
 //!      + Σ w (|o₂ - t₂| + |o₃ - t₃|) / (Σ w + 1) + Σ w |o₄ - t₄| / (Σ w + 1)`
 //!
-//! where `w` marks instance cells. Learning rate: linear warm-up over the first
+//! where `w` marks instance cells. A model with the full-resolution mask branch adds
+//! `mean((1 + 4 m) b(f, m))` for its logits `f` and the binary tube mask `m` of the crop.
+//! Learning rate: linear warm-up over the first
 //! `warmup` steps, then cosine decay to 5% of `lr` at `total_steps`.
 //!
 //! Checkpoints ([`Trainer::save_checkpoint`]) hold the weights with the step count and, beside
@@ -17,7 +19,7 @@ use super::augment::{sample_crop, AugmentConfig, TrainImage};
 use super::error::LearnedError;
 use super::model::LearnedModel;
 use super::optim::AdamW;
-use super::net::{HEADS, STRIDE};
+use super::net::{NetOutput, HEADS, STRIDE};
 use super::targets::make_targets;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
@@ -63,6 +65,8 @@ pub struct Batch {
     pub target: Tensor,
     /// `(B, 1, S/4, S/4)` instance-cell weights.
     pub weight: Tensor,
+    /// `(B, 1, S, S)` binary tube mask (1 on any instance's pixels).
+    pub mask: Tensor,
 }
 
 /// Builds a batch of `n` crops, crop `b` drawn with `ChaCha8Rng::seed_from_u64(seed ^ step·1000003 ^ b)`
@@ -84,21 +88,25 @@ pub fn make_batch(images: &[TrainImage], aug: &AugmentConfig, n: usize, seed: u6
             let img = &images[rand::Rng::random_range(&mut rng, 0..images.len())];
             let (input, labels) = sample_crop(img, aug, &mut rng);
             let t = make_targets(&labels, s);
-            (input, t)
+            let m: Vec<f32> = labels.iter().map(|&l| (l != 0) as u8 as f32).collect();
+            (input, t, m)
         })
         .collect();
     let mut input = Vec::with_capacity(n * ch * s * s);
     let mut target = Vec::with_capacity(n * HEADS * o * o);
     let mut weight = Vec::with_capacity(n * o * o);
-    for (i, t) in crops {
+    let mut mask = Vec::with_capacity(n * s * s);
+    for (i, t, m) in crops {
         input.extend_from_slice(&i);
         target.extend_from_slice(&t.values);
         weight.extend_from_slice(&t.weight);
+        mask.extend_from_slice(&m);
     }
     Ok(Batch {
         input: Tensor::from_vec(input, (n, ch, s, s), &Device::Cpu)?,
         target: Tensor::from_vec(target, (n, HEADS, o, o), &Device::Cpu)?,
         weight: Tensor::from_vec(weight, (n, 1, o, o), &Device::Cpu)?,
+        mask: Tensor::from_vec(mask, (n, 1, s, s), &Device::Cpu)?,
     })
 }
 
@@ -110,7 +118,8 @@ fn bce_logits(x: &Tensor, t: &Tensor) -> candle_core::Result<Tensor> {
 }
 
 /// The multi-task loss of the module doc (a scalar tensor).
-pub fn loss(out: &Tensor, batch: &Batch) -> Result<Tensor, LearnedError> {
+pub fn loss(net_out: &NetOutput, batch: &Batch) -> Result<Tensor, LearnedError> {
+    let out = &net_out.coarse;
     let o = |k: usize, len: usize| out.narrow(1, k, len);
     let t = |k: usize, len: usize| batch.target.narrow(1, k, len);
     let (o0, t0) = (o(0, 1)?, t(0, 1)?);
@@ -121,7 +130,11 @@ pub fn loss(out: &Tensor, batch: &Batch) -> Result<Tensor, LearnedError> {
     let wsum = batch.weight.sum_all()?.to_scalar::<f32>()? as f64 + 1.0;
     let l_dir = ((o(2, 2)? - t(2, 2)?)?.abs()?.broadcast_mul(&batch.weight)?.sum_all()? / wsum)?;
     let l_len = ((o(4, 1)? - t(4, 1)?)?.abs()?.broadcast_mul(&batch.weight)?.sum_all()? / wsum)?;
-    Ok((((l_fg + l_heat)? + l_dir)? + l_len)?)
+    let total = (((l_fg + l_heat)? + l_dir)? + l_len)?;
+    Ok(match &net_out.fine {
+        Some(f) => (total + (bce_logits(f, &batch.mask)? * batch.mask.affine(4.0, 1.0)?)?.mean_all()?)?,
+        None => total,
+    })
 }
 
 /// Trains a [`LearnedModel`] in place.
