@@ -357,6 +357,77 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
     (h, g, wrr, wsum)
 }
 
+/// Whether the fit runs in mono mode (`RefineConfig::mono_keep_depth` with neither stereo
+/// points nor a mask).
+fn mono_mode(cfg: &RefineConfig, scene: &Scene) -> bool {
+    cfg.mono_keep_depth && scene.stereo_points.is_empty() && scene.mask.is_none()
+}
+
+/// Columns of the mono subspace of the 5-parameter step `(δc, δ1, δ2)` at `st` for the axis
+/// tangent basis `(u1, u2)`: the centre across its viewing ray `ĉ` (two columns), the axis
+/// turned about the ray (`ĉ × a`), and with `tilt` the axis tilted toward the camera
+/// (`a × (ĉ × a)`). The distance along the ray is left out.
+fn mono_basis(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>, tilt: bool) -> Option<Vec<Vector5<f64>>> {
+    let ch = st.c.try_normalize(1e-12)?;
+    let w1 = ch.cross(&st.a).try_normalize(1e-9)?;
+    let l1 = (st.a - ch * st.a.dot(&ch)).try_normalize(1e-9)?;
+    let l2 = ch.cross(&l1);
+    let mut b = vec![Vector5::new(l1.x, l1.y, l1.z, 0.0, 0.0), Vector5::new(l2.x, l2.y, l2.z, 0.0, 0.0), Vector5::new(0.0, 0.0, 0.0, w1.dot(u1), w1.dot(u2))];
+    if tilt {
+        let w2 = st.a.cross(&w1);
+        b.push(Vector5::new(0.0, 0.0, 0.0, w2.dot(u1), w2.dot(u2)));
+    }
+    Some(b)
+}
+
+/// Damped step of the normal equations `(H, g)` restricted to the columns `basis` (all five
+/// parameters when `None`): `(BᵀHB + λ diag) p = -Bᵀg`, `δ = B p`.
+fn damped_step(h: &Matrix5<f64>, g: &Vector5<f64>, lambda: f64, basis: Option<&[Vector5<f64>]>) -> Option<Vector5<f64>> {
+    match basis {
+        None => {
+            let mut hd = *h;
+            for k in 0..5 {
+                hd[(k, k)] += lambda * h[(k, k)].max(1e-12);
+            }
+            Some(hd.cholesky()?.solve(&(-g)))
+        }
+        Some(b) => {
+            let k = b.len();
+            let bm = nalgebra::DMatrix::from_fn(5, k, |i, j| b[j][i]);
+            let mut hr = bm.transpose() * h * &bm;
+            for i in 0..k {
+                hr[(i, i)] += lambda * hr[(i, i)].max(1e-12);
+            }
+            let gr = bm.transpose() * g;
+            let p = hr.cholesky()?.solve(&(-gr));
+            let d = bm * p;
+            Some(Vector5::new(d[0], d[1], d[2], d[3], d[4]))
+        }
+    }
+}
+
+/// Mono depth from the ground: moves the centre along its viewing ray by the
+/// inverse-variance weighted combination of the seed's distance (σ = `mono_depth_sigma_frac`
+/// of it) and the distance that puts the tube's lowest point on the ground (σ =
+/// `ground_sigma_m` when the ground height is known, else `ground_relief_sigma_m`; the height
+/// changes by `n·ĉ` per metre along the ray).
+fn mono_ground_depth(model: &CylinderModel, cfg: &RefineConfig, scene: &Scene, st: AxisState, seed_dist: f64) -> AxisState {
+    let Some(g) = &scene.ground else { return st };
+    let sigma_g = if cfg.ground_height_known { cfg.ground_sigma_m } else { cfg.ground_relief_sigma_m };
+    let Some(ch) = st.c.try_normalize(1e-12) else { return st };
+    let k = g.normal.dot(&ch);
+    if !(sigma_g > 0.0) || k.abs() < 0.05 {
+        return st;
+    }
+    // Lowest surface point above the ground for a tube of radius r_max tilted by the axis.
+    let height = g.normal.dot(&st.c) - g.offset - model.max_radius() * (1.0 - g.normal.dot(&st.a).powi(2)).max(0.0).sqrt() - 0.5 * model.length * g.normal.dot(&st.a).abs();
+    let s_ground = -height / k;
+    let var_g = (sigma_g / k).powi(2);
+    let var_s = (cfg.mono_depth_sigma_frac * seed_dist).powi(2);
+    let s = s_ground * var_s / (var_s + var_g);
+    AxisState { c: st.c + ch * s, a: st.a }
+}
+
 /// Fits the model starting from `seed` over `levels` (coarsest last in the slice order given by
 /// [`crate::edges::build_pyramid`]: index 0 is full resolution). `first_level` is the coarsest
 /// index used; iterations run from it down to 0.
@@ -419,16 +490,12 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             let (u1, u2) = tangent_basis(&ax);
             let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, seed.c.norm(), &mut jbuf);
             let mut accepted = None;
+            let basis = if mono_mode(cfg, scene) { mono_basis(&st, &u1, &u2, scene.ground.is_some()) } else { None };
             for _ in 0..6 {
-                let mut hd = h;
-                for k in 0..5 {
-                    hd[(k, k)] += lambda * h[(k, k)].max(1e-12);
-                }
-                let Some(ch) = hd.cholesky() else {
+                let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref()) else {
                     lambda *= 10.0;
                     continue;
                 };
-                let mut d = ch.solve(&(-g));
                 // Trust region: no contour sample may move more than `max_step_px` level pixels,
                 // so that samples do not jump between edge hypotheses within one step.
                 let motion = max_motion(&jbuf, &d);
@@ -470,6 +537,9 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
         if moved > cfg.max_centre_shift_frac * seed.c.norm() || axis_angle(&st.a, &seed.a) > cfg.max_axis_change_deg.to_radians() {
             return fail(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees()), iterations);
         }
+    }
+    if mono_mode(cfg, scene) {
+        st = mono_ground_depth(model, cfg, scene, st, seed.c.norm());
     }
     finish(model, cfg, &levels[0], scene, st, seed.c.norm(), iterations)
 }

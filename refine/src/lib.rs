@@ -113,6 +113,20 @@ pub struct RefineConfig {
     pub seed_distance_sigma_frac: f64,
     /// Ground prior: standard deviation of the axis elevation above the ground plane, degrees.
     pub ground_tilt_sigma_deg: f64,
+    /// Mono (no stereo points, no mask): keep the seed's distance along the centre's viewing
+    /// ray and fit only what one image determines well: the centre across the ray, the axis
+    /// turn about the ray, and (with a ground plane) the axis tilt toward the camera. The
+    /// distance from the limbs' separation is ill-conditioned (0.1 px of width on a 12 px wide
+    /// tube is ~1% of the distance) and biased by shading at the limbs; see [`fit`].
+    pub mono_keep_depth: bool,
+    /// Mono with a ground plane: uncertainty of the seed's distance as a fraction of it, which
+    /// weighs the seed distance against the ground height when the centre is finally moved
+    /// along its ray ([`fit`]).
+    pub mono_depth_sigma_frac: f64,
+    /// Ground whose height is not known exactly (`ground_height_known = false`, e.g. world
+    /// z = 0 over terrain with relief): standard deviation of the tube's height above it,
+    /// metres (mono depth prior); 0 ignores the height.
+    pub ground_relief_sigma_m: f64,
 }
 
 impl Default for RefineConfig {
@@ -151,6 +165,9 @@ impl Default for RefineConfig {
             ground_height_known: true,
             seed_distance_sigma_frac: 0.0,
             ground_tilt_sigma_deg: 3.0,
+            mono_keep_depth: true,
+            mono_depth_sigma_frac: 0.01,
+            ground_relief_sigma_m: 0.03,
         }
     }
 }
@@ -176,7 +193,9 @@ impl RefineConfig {
             && (0.5..=1.0).contains(&self.end_override_confidence)
             && self.ground_sigma_m > 0.0
             && self.seed_distance_sigma_frac >= 0.0
-            && self.ground_tilt_sigma_deg > 0.0;
+            && self.ground_tilt_sigma_deg > 0.0
+            && self.mono_depth_sigma_frac > 0.0
+            && self.ground_relief_sigma_m >= 0.0;
         if ok {
             Ok(())
         } else {
