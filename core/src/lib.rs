@@ -10,6 +10,7 @@ pub mod detection;
 pub mod error;
 pub mod coco;
 pub mod files;
+pub mod geometry;
 pub mod mask;
 pub mod plane;
 pub mod pose;

@@ -19,13 +19,13 @@ enum Work {
     GtSeed(AxisState, [f64; 4], Option<Segmentation>),
 }
 
-/// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`:
-/// `n = R_world_camᵀ ẑ`, `n·X = -t_z`.
+/// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`
+/// ([`tubeloc_core::geometry::ground_plane_in_camera`]).
 fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
     let Some(v) = img.extra.get("T_world_cam") else { return Ok(None) };
     let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("image {}: T_world_cam", img.id))?;
-    let n = t.rotation().transpose() * nalgebra::Vector3::z();
-    Ok(Some(GroundPlane { normal: n.normalize(), offset: -t.translation().z / n.norm() }))
+    let (normal, offset) = tubeloc_core::geometry::ground_plane_in_camera(&t);
+    Ok(Some(GroundPlane { normal, offset }))
 }
 
 fn camera_of(img: &CocoImage) -> Result<CameraModel> {
