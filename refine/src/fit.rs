@@ -357,10 +357,13 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
     (h, g, wrr, wsum)
 }
 
-/// Whether the fit runs in mono mode (`RefineConfig::mono_keep_depth` with neither stereo
-/// points nor a mask).
-fn mono_mode(cfg: &RefineConfig, scene: &Scene) -> bool {
-    cfg.mono_keep_depth && scene.stereo_points.is_empty() && scene.mask.is_none()
+/// Whether the fit runs in mono keep-depth mode: `RefineConfig::mono_keep_depth`, neither
+/// stereo points nor a mask, and a tube so narrow that its width fixes the distance worse than
+/// the seed does: `mono_width_sigma_px / w < mono_depth_sigma_frac` fails, with
+/// `w = 2 r_body f / |c|` the body width in full-resolution pixels.
+fn mono_mode(cfg: &RefineConfig, scene: &Scene, model: &CylinderModel, seed: &AxisState, cam: &CameraModel) -> bool {
+    let w = 2.0 * model.body_radius() * 0.5 * (cam.fx + cam.fy) / seed.c.norm().max(1e-9);
+    cfg.mono_keep_depth && scene.stereo_points.is_empty() && scene.mask.is_none() && cfg.mono_width_sigma_px / w > cfg.mono_depth_sigma_frac
 }
 
 /// Columns of the mono subspace of the 5-parameter step `(δc, δ1, δ2)` at `st` for the axis
@@ -439,6 +442,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     let mut rtrial = Vec::new();
     let mut jbuf = Vec::new();
     let top = first_level.min(levels.len().saturating_sub(1));
+    let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,
         stats: ResidualStats { iterations, ..Default::default() },
@@ -490,7 +494,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             let (u1, u2) = tangent_basis(&ax);
             let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, seed.c.norm(), &mut jbuf);
             let mut accepted = None;
-            let basis = if mono_mode(cfg, scene) { mono_basis(&st, &u1, &u2, scene.ground.is_some()) } else { None };
+            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some()) } else { None };
             for _ in 0..6 {
                 let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref()) else {
                     lambda *= 10.0;
@@ -538,14 +542,17 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             return fail(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees()), iterations);
         }
     }
-    if mono_mode(cfg, scene) {
+    if mono {
         st = mono_ground_depth(model, cfg, scene, st, seed.c.norm());
     }
-    finish(model, cfg, &levels[0], scene, st, seed.c.norm(), iterations)
+    finish(model, cfg, &levels[0], scene, st, seed.c.norm(), iterations, mono)
 }
 
 /// Final statistics and covariance at the finest level.
-fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, seed_dist: f64, iterations: usize) -> FitResult {
+/// `mono`: keep-depth mode, where a tube cut by the image border keeps its seed's distance, so
+/// the in-image fraction is not checked.
+#[allow(clippy::too_many_arguments)]
+fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, seed_dist: f64, iterations: usize, mono: bool) -> FitResult {
     let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
     let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
     let polarity = vec![0i8; samples.len()];
@@ -599,7 +606,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let inlier_fraction = if visible > 0 { inl as f64 / visible as f64 } else { 0.0 };
     let failure = if visible < cfg.min_samples {
         Some((FailureReason::OutOfImage, format!("only {visible} contour samples visible at full resolution")))
-    } else if (visible as f64) < cfg.min_in_image_fraction * total as f64 {
+    } else if !mono && (visible as f64) < cfg.min_in_image_fraction * total as f64 {
         Some((FailureReason::OutOfImage, format!("only {visible} of {total} visible contour samples ({:.0}%) lie inside the image: depth is not constrained enough", 100.0 * visible as f64 / total.max(1) as f64)))
     } else if inlier_fraction < cfg.min_inlier_fraction {
         Some((FailureReason::EmptyTerrain, format!("only {inl} of {visible} contour samples ({:.0}%) lie on an image edge within {} px", 100.0 * inlier_fraction, cfg.inlier_px)))

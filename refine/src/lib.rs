@@ -118,7 +118,12 @@ pub struct RefineConfig {
     /// turn about the ray, and (with a ground plane) the axis tilt toward the camera. The
     /// distance from the limbs' separation is ill-conditioned (0.1 px of width on a 12 px wide
     /// tube is ~1% of the distance) and biased by shading at the limbs; see [`fit`].
+    /// Applied only to tubes narrow enough that the width fixes the distance worse than the
+    /// seed: `mono_width_sigma_px / body_width_px > mono_depth_sigma_frac`.
     pub mono_keep_depth: bool,
+    /// Systematic uncertainty of a mono limb-to-limb width, full-resolution pixels (shading at
+    /// the limbs biases edges by 0.25 px at the median on the paper preset).
+    pub mono_width_sigma_px: f64,
     /// Mono with a ground plane: uncertainty of the seed's distance as a fraction of it, which
     /// weighs the seed distance against the ground height when the centre is finally moved
     /// along its ray ([`fit`]).
@@ -166,6 +171,7 @@ impl Default for RefineConfig {
             seed_distance_sigma_frac: 0.0,
             ground_tilt_sigma_deg: 3.0,
             mono_keep_depth: true,
+            mono_width_sigma_px: 0.3,
             mono_depth_sigma_frac: 0.01,
             ground_relief_sigma_m: 0.03,
         }
@@ -195,6 +201,7 @@ impl RefineConfig {
             && self.seed_distance_sigma_frac >= 0.0
             && self.ground_tilt_sigma_deg > 0.0
             && self.mono_depth_sigma_frac > 0.0
+            && self.mono_width_sigma_px >= 0.0
             && self.ground_relief_sigma_m >= 0.0;
         if ok {
             Ok(())
