@@ -55,7 +55,7 @@ pub struct TrainArgs {
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
     /// Add the full-resolution mask branch (mask outlines at pixel precision instead of
-    /// bilinear stride-4 logits).
+    /// bilinear stride-4 logits); kept when the --init model has it.
     #[arg(long)]
     pub fine_mask: bool,
     /// Input preprocessing: gray-box (paper), gray-box:R, or rgb.
@@ -174,7 +174,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         None => {
             let width = init.as_ref().map_or(args.width, |m| m.meta.net.width);
-            let mut model = LearnedModel::with_fine_mask(pre, width, args.fine_mask, args.seed)?;
+            let fine_mask = args.fine_mask || init.as_ref().is_some_and(|m| m.meta.net.fine_mask);
+            let mut model = LearnedModel::with_fine_mask(pre, width, fine_mask, args.seed)?;
             if let (Some(m), Some(p)) = (&init, &args.init) {
                 let n = model.init_from(m)?;
                 eprintln!("warm start: {n} tensors from {} ({} steps)", p.display(), m.meta.steps);

@@ -25,7 +25,8 @@ fn bench(c: &mut Criterion) {
     let pre = Preprocess::default();
     let (rgb, mask) = synthetic_image(768);
     let img = TrainImage::new(768, 768, pre.apply(&rgb, 768, 768), &[mask]);
-    let model = LearnedModel::new(pre, 8, 1).unwrap();
+    // The shipped architecture: width 8 with the full-resolution mask branch.
+    let model = LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap();
     let cfg = TrainConfig { batch: 8, augment: AugmentConfig { crop: 384, ..Default::default() }, ..Default::default() };
     let mut trainer = Trainer::new(model, cfg).unwrap();
     let images = vec![img];

@@ -28,18 +28,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let variants = [
         ("default", d),
+        ("stride-4 masks", DecodeConfig { fine_mask: false, ..d }),
+        ("fine m1.6", DecodeConfig { mask_logit: 1.6, ..d }),
+        ("fine m2.2", DecodeConfig { mask_logit: 2.2, ..d }),
+        ("fine m3", DecodeConfig { mask_logit: 3.0, ..d }),
+        ("fine m2.2 fg.6", DecodeConfig { mask_logit: 2.2, fg_threshold: 0.6, ..d }),
+        ("fine m1.6 fg.6", DecodeConfig { mask_logit: 1.6, fg_threshold: 0.6, ..d }),
 
-        ("merge 2/4", DecodeConfig { same_tube_fraction: 2.0, same_axis_cells: 4.0, ..d }),
-        ("components", DecodeConfig { same_tube_fraction: 100.0, same_axis_cells: 100.0, ..d }),
-        ("comp fg0.6", DecodeConfig { same_tube_fraction: 100.0, same_axis_cells: 100.0, fg_threshold: 0.6, ..d }),
-        ("m1.5/3 fg0.6", DecodeConfig { same_tube_fraction: 1.5, same_axis_cells: 3.0, fg_threshold: 0.6, ..d }),
-        ("comp fg0.7 m0.85", DecodeConfig { same_tube_fraction: 100.0, same_axis_cells: 100.0, fg_threshold: 0.7, mask_logit: 0.85, ..d }),
-        ("comp fg0.8 m1.39", DecodeConfig { same_tube_fraction: 100.0, same_axis_cells: 100.0, fg_threshold: 0.8, mask_logit: 1.39, ..d }),
-        ("comp fg0.5 m0.85", DecodeConfig { same_tube_fraction: 100.0, same_axis_cells: 100.0, mask_logit: 0.85, ..d }),
-        ("m2/4 fg0.7 m0.85", DecodeConfig { same_tube_fraction: 2.0, same_axis_cells: 4.0, fg_threshold: 0.7, mask_logit: 0.85, ..d }),
-        ("peak 0.3", DecodeConfig { peak_threshold: 0.3, ..d }),
-        ("fg 0.4", DecodeConfig { fg_threshold: 0.4, ..d }),
-        ("across 2", DecodeConfig { across_weight: 2.0, ..d }),
     ];
     for (name, cfg) in variants {
         println!("{name:16} AP50 {:.4}", ap50(&model, &imgs, &cfg)?);

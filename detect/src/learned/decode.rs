@@ -42,11 +42,14 @@ pub struct DecodeConfig {
     pub same_tube_fraction: f32,
     /// Threshold on the upsampled foreground logit for mask pixels (0 = probability 0.5).
     pub mask_logit: f32,
+    /// Use the full-resolution mask logits when the model has them (`false`: the bilinear
+    /// stride-4 masks, for comparison).
+    pub fine_mask: bool,
 }
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0 }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0, fine_mask: true }
     }
 }
 
@@ -210,7 +213,8 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             cell_owner[c] = gi as u32;
         }
     }
-    let grow = pred.fine.is_some() as usize;
+    let fine = pred.fine.as_deref().filter(|_| cfg.fine_mask);
+    let grow = fine.is_some() as usize;
     if grow == 1 {
         cell_owner = grown_owner(&cell_owner, &fg, ow, oh);
     }
@@ -250,7 +254,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
                     continue;
                 }
                 let l = |a: usize, b: usize| out[b * ow + a];
-                let val = match &pred.fine {
+                let val = match fine {
                     Some(f) => f[y * width + x],
                     None => (l(u0, v0) * (1.0 - fu) + l(u1, v0) * fu) * (1.0 - fv) + (l(u0, v1) * (1.0 - fu) + l(u1, v1) * fu) * fv,
                 };

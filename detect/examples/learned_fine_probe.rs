@@ -1,0 +1,48 @@
+//! Probe: how well the full-resolution mask logits of a fine-mask model separate tube pixels
+//! from the background, against the bilinear stride-4 foreground logits.
+//! `cargo run --release -p tubeloc-detect --example learned_fine_probe -- MODEL DATASET_DIR [LIMIT]`
+use std::path::Path;
+use tubeloc_detect::learned::dataset::load_coco_dir;
+use tubeloc_detect::learned::LearnedModel;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let a: Vec<String> = std::env::args().collect();
+    if a.len() < 3 {
+        return Err("usage: learned_fine_probe MODEL DATASET_DIR [LIMIT]".into());
+    }
+    let model = LearnedModel::load(Path::new(&a[1]))?;
+    let limit = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(10);
+    let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
+    let ts = [-1.0f32, 0.0, 1.0, 1.6, 2.2, 3.0];
+    // Per threshold: (intersection, union) over tube-neighbourhood pixels, fine and coarse.
+    let mut acc = vec![[0usize; 4]; ts.len()];
+    for img in &imgs {
+        let p = model.predict(&img.input, img.width, img.height)?;
+        let Some(f) = &p.fine else { return Err("model has no fine branch".into()) };
+        let (w, ow) = (img.width, p.out_w);
+        for y in 0..img.height {
+            for x in 0..w {
+                // Only pixels within 8 px of a tube pixel (the instance neighbourhood).
+                let near = (y.saturating_sub(8)..(y + 9).min(img.height)).step_by(4).any(|yy| (x.saturating_sub(8)..(x + 9).min(w)).step_by(4).any(|xx| img.labels[yy * w + xx] != 0));
+                if !near {
+                    continue;
+                }
+                let gt = img.labels[y * w + x] != 0;
+                let c = (y / 4).min(p.out_h - 1) * ow + (x / 4).min(ow - 1);
+                for (k, &t) in ts.iter().enumerate() {
+                    let fi = f[y * w + x] > t;
+                    let co = p.planes[c] > t;
+                    acc[k][0] += (fi && gt) as usize;
+                    acc[k][1] += (fi || gt) as usize;
+                    acc[k][2] += (co && gt) as usize;
+                    acc[k][3] += (co || gt) as usize;
+                }
+            }
+        }
+    }
+    for (k, t) in ts.iter().enumerate() {
+        let r = acc[k];
+        println!("logit > {t:5.1}: fine IoU {:.3}  stride-4 (nearest) IoU {:.3}", r[0] as f64 / r[1].max(1) as f64, r[2] as f64 / r[3].max(1) as f64);
+    }
+    Ok(())
+}
