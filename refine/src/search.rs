@@ -182,7 +182,8 @@ pub fn coarse_search(model: &CylinderModel, lv: &GradientLevel, seed: &AxisState
             continue;
         }
         let (score, dx, dy) = best_shift(lv, &taps(&pts), spec);
-        if let Some(moved) = shifted(&st, lv, Vector2::new(dx as f64, dy as f64), ground) {
+        // Over a ground of unknown height the seed's depth is the better guess than its height.
+        if let Some(moved) = shifted(&st, lv, Vector2::new(dx as f64, dy as f64), ground.filter(|_| height_known)) {
             out.push(Hypothesis { state: moved, score });
         }
     }
