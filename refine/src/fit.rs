@@ -93,6 +93,9 @@ pub struct FitResult {
 /// hypothesis nearest to the current projection (a multi-hypothesis, ICP-like association).
 struct Assoc {
     sample: ContourSample,
+    /// Residual scale: `sqrt(end_limb_weight)` for limbs of sections other than the body during
+    /// the fit, else 1.
+    scale: f64,
     n: Vector2<f64>,
     u0: Point2<f64>,
     hyps: EdgeHits,
@@ -142,7 +145,10 @@ fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vect
 /// Associates visible samples with image edges at `level`. Returns the associations, the
 /// number of visible samples inside the image, and the number of visible samples wherever
 /// they project (inside the image or not).
-fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8]) -> (Vec<Assoc>, usize, usize) {
+/// `end_limb_scale` scales the residuals of the limbs of sections other than the body (see
+/// `RefineConfig::end_limb_weight`); with 0 they are left out.
+#[allow(clippy::too_many_arguments)]
+fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8], end_limb_scale: f64) -> (Vec<Assoc>, usize, usize) {
     let mut out = Vec::with_capacity(samples.len());
     let mut total = 0;
     let Some(f) = st.frame() else { return (out, 0, total) };
@@ -154,6 +160,11 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
             continue;
         }
         let Some((u, n)) = project_with_normal(cam, &p) else { continue };
+        let is_limb = matches!(s.kind, crate::contour::SampleKind::Limb { .. });
+        let scale = if is_limb && model.sections[s.section].r != model.body_radius() { end_limb_scale } else { 1.0 };
+        if scale == 0.0 {
+            continue;
+        }
         if !is_visible(model, st, &p.x, &p.out, scene) {
             continue;
         }
@@ -169,7 +180,7 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
                 let mut hyps = EdgeHits::default();
                 hyps.hits[0] = crate::edges::EdgeHit { offset: off, strength: -1.0 };
                 hyps.len = 1;
-                out.push(Assoc { sample: *s, n, u0: u, hyps });
+                out.push(Assoc { sample: *s, scale, n, u0: u, hyps });
             }
             continue;
         }
@@ -183,7 +194,7 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
             hyps.len = 1;
         }
         if hyps.len > 0 {
-            out.push(Assoc { sample: *s, n, u0: u, hyps });
+            out.push(Assoc { sample: *s, scale, n, u0: u, hyps });
         }
     }
     (out, visible, total)
@@ -232,7 +243,7 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
     out.clear();
     let f = st.frame();
     for a in assoc {
-        let r = f.and_then(|f| a.sample.eval(model, &f)).and_then(|p| cam.project(&p.x)).map(|u| a.residual(&u) / sigma_px);
+        let r = f.and_then(|f| a.sample.eval(model, &f)).and_then(|p| cam.project(&p.x)).map(|u| a.scale * a.residual(&u) / sigma_px);
         out.push(r);
     }
     let half = 0.5 * model.length;
@@ -330,7 +341,7 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         }
         let j: Vector5<f64> = if i < n_img {
             let Some(ji) = &jac[i] else { continue };
-            (ji.transpose() * assoc[i].n) / sigma_px
+            (ji.transpose() * assoc[i].n) * (assoc[i].scale / sigma_px)
         } else if i < n_img + n_st {
             Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
@@ -472,7 +483,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             iterations += 1;
             let fresh = it <= 1 || drift > cfg.reassociate_px;
             if fresh {
-                let (a, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+                let (a, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity, cfg.end_limb_weight.sqrt());
                 assoc = a;
                 drift = 0.0;
                 if cfg.limb_polarity && it == 0 {
@@ -556,7 +567,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
     let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
     let polarity = vec![0i8; samples.len()];
-    let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity);
+    let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity, 1.0);
     let mut r = Vec::new();
     residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed_dist, &mut r);
     let n_img = assoc.len();
