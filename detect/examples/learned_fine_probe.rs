@@ -16,9 +16,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let ts = [-1.0f32, 0.0, 1.0, 1.6, 2.2, 3.0];
     // Per threshold: (intersection, union) over tube-neighbourhood pixels, fine and coarse.
     let mut acc = vec![[0usize; 4]; ts.len()];
-    for img in &imgs {
+    for (i, img) in imgs.iter().enumerate() {
         let p = model.predict(&img.input, img.width, img.height)?;
         let Some(f) = &p.fine else { return Err("model has no fine branch".into()) };
+        if let Ok(dir) = std::env::var("FINE_PROBE_DUMP") {
+            // Raw little-endian f32 planes for inspection: fine logits, input, labels.
+            let dump = |name: &str, v: &mut dyn Iterator<Item = f32>| std::fs::write(format!("{dir}/{i}_{name}.f32"), v.flat_map(f32::to_le_bytes).collect::<Vec<u8>>());
+            dump("fine", &mut f.iter().copied())?;
+            dump("input", &mut img.input.iter().copied())?;
+            dump("labels", &mut img.labels.iter().map(|&l| l as f32))?;
+            dump("coarse", &mut p.planes[..p.out_w * p.out_h].iter().copied())?;
+        }
         let (w, ow) = (img.width, p.out_w);
         for y in 0..img.height {
             for x in 0..w {

@@ -20,7 +20,7 @@
 //!    predicted half-length, width from the mask's extent across the axis.
 
 use super::model::Prediction;
-use super::net::{HEADS, LENGTH_SCALE, STRIDE};
+use super::net::{upsample4_bilinear, HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
 
 /// Thresholds of the decoder.
@@ -215,6 +215,14 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
     }
     let fine = pred.fine.as_deref().filter(|_| cfg.fine_mask);
     let grow = fine.is_some() as usize;
+    let coarse_up;
+    let logits: &[f32] = match fine {
+        Some(f) => f,
+        None => {
+            coarse_up = upsample4_bilinear(&out[..n], ow, oh, width, height);
+            &coarse_up
+        }
+    };
     if grow == 1 {
         cell_owner = grown_owner(&cell_owner, &fg, ow, oh);
     }
@@ -242,22 +250,14 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
         let mut pix = Vec::new();
         for y in py0..py1 {
             let v = ((y as f32 - 1.5) / STRIDE as f32).clamp(0.0, (oh - 1) as f32);
-            let (v0, fv) = (v.floor() as usize, v - v.floor());
-            let v1 = (v0 + 1).min(oh - 1);
             for x in px0..px1 {
                 let u = ((x as f32 - 1.5) / STRIDE as f32).clamp(0.0, (ow - 1) as f32);
-                let (u0, fu) = (u.floor() as usize, u - u.floor());
-                let u1 = (u0 + 1).min(ow - 1);
                 // Owner: nearest cell.
                 let nc = (v.round() as usize).min(oh - 1) * ow + (u.round() as usize).min(ow - 1);
                 if cell_owner[nc] != gi as u32 {
                     continue;
                 }
-                let l = |a: usize, b: usize| out[b * ow + a];
-                let val = match fine {
-                    Some(f) => f[y * width + x],
-                    None => (l(u0, v0) * (1.0 - fu) + l(u1, v0) * fu) * (1.0 - fv) + (l(u0, v1) * (1.0 - fu) + l(u1, v1) * fu) * fv,
-                };
+                let val = logits[y * width + x];
                 if val > cfg.mask_logit {
                     mask.data[y * width + x] = 1;
                     pix.push((x as f64, y as f64));

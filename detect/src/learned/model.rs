@@ -53,7 +53,8 @@ impl LearnedModel {
     }
 
     /// As [`LearnedModel::new`], with or without the full-resolution mask branch
-    /// ([`NetConfig::fine_mask`]; its output bias also starts at the `-2.2` prior).
+    /// ([`NetConfig::fine_mask`]; its output layer starts with small weights, so its
+    /// correction starts near 0).
     pub fn with_fine_mask(preprocess: Preprocess, width: usize, fine_mask: bool, seed: u64) -> Result<Self, LearnedError> {
         let net_cfg = NetConfig { in_channels: preprocess.channels(), width, fine_mask };
         let varmap = VarMap::new();
@@ -70,8 +71,6 @@ impl LearnedModel {
                 (0..n).map(|_| gain * normal.sample(&mut rng)).collect()
             } else if name == "head.bias" {
                 (0..n).map(|i| if i < 2 { -2.2 } else { 0.0 }).collect()
-            } else if name == "fine_out.bias" {
-                vec![-2.2; n]
             } else {
                 vec![0.0; n]
             };

@@ -17,11 +17,15 @@
 //! | 4 | half-length of the tube / [`LENGTH_SCALE`] pixels | on tube cells |
 //!
 //! 5. Optional full-resolution mask branch ([`NetConfig::fine_mask`]): the input image at full
-//!    resolution, 2x2 space-to-depth (`4C` channels at stride 2), a 3x3 convolution + ReLU to `w`
-//!    channels, plus the stride-4 decoder feature upsampled 2x, a 1x1 convolution + ReLU and a
-//!    1x1 convolution to 4 channels, which depth-to-space turns into one mask logit per image
-//!    pixel (channel `2 dy + dx` is pixel `(2x + dx, 2y + dy)`). Tubes are 10-20 pixels wide,
-//!    so stride-4 mask logits leave their outlines 1-3 pixels off; this branch places them.
+//!    resolution, 2x2 space-to-depth (`4C` channels at stride 2) and a 3x3 convolution to
+//!    [`FINE_WIDTH`] channels, plus the stride-4 decoder feature through a 1x1 convolution to
+//!    the same width, upsampled 2x; ReLU, a 1x1 convolution + ReLU and a 1x1 convolution to 4
+//!    channels, which depth-to-space turns into one value per image pixel (channel `2 dy + dx`
+//!    is pixel `(2x + dx, 2y + dy)`). That value is a *correction*: the mask logit is
+//!    `fine = correction + bilinear↑4(o₀)`, with the foreground logit `o₀` of the stride-4 head
+//!    bilinearly upsampled (cell `i` centred on pixel `4i + 1.5`) and detached from the graph.
+//!    Tubes are 10-20 pixels wide, so stride-4 mask logits leave their outlines 1-3 pixels
+//!    off; the branch only has to learn where the image's edges move them.
 //!
 //! The receptive field is about 300 image pixels, the length of a tube in the 1024x1024
 //! crops. All convolutions are [`super::layers::Conv`] (one matrix product each), which is
@@ -36,6 +40,8 @@ use serde::{Deserialize, Serialize};
 pub const HEADS: usize = 5;
 /// Output stride in image pixels.
 pub const STRIDE: usize = 4;
+/// Channels of the full-resolution mask branch.
+pub const FINE_WIDTH: usize = 16;
 /// Half-lengths are regressed in units of this many pixels.
 pub const LENGTH_SCALE: f32 = 64.0;
 
@@ -62,7 +68,7 @@ pub struct TubeNet {
     enc: Vec<(Conv, Conv)>,
     dec: Vec<Conv>,
     head: Conv,
-    fine: Option<(Conv, Conv, Conv)>,
+    fine: Option<[Conv; 4]>,
 }
 
 /// Raw outputs of [`TubeNet::forward`].
@@ -71,6 +77,25 @@ pub struct NetOutput {
     pub coarse: Tensor,
     /// `(B, 1, H, W)`: full-resolution mask logits, with [`NetConfig::fine_mask`].
     pub fine: Option<Tensor>,
+}
+
+/// Bilinear upsampling of a stride-4 plane (`ow x oh`, cell `i` centred on pixel `4i + 1.5`)
+/// to `width x height` pixels, clamped at the borders:
+/// `v(x) = (1 - t) p[⌊u⌋] + t p[⌊u⌋ + 1]` with `u = (x - 1.5) / 4`, `t = u - ⌊u⌋`, per axis.
+pub fn upsample4_bilinear(plane: &[f32], ow: usize, oh: usize, width: usize, height: usize) -> Vec<f32> {
+    let taps = |x: usize, n: usize| {
+        let u = ((x as f32 - 1.5) / STRIDE as f32).clamp(0.0, (n - 1) as f32);
+        let i = u.floor() as usize;
+        (i, (i + 1).min(n - 1), u - i as f32)
+    };
+    let xt: Vec<(usize, usize, f32)> = (0..width).map(|x| taps(x, ow)).collect();
+    let mut out = Vec::with_capacity(width * height);
+    for y in 0..height {
+        let (v0, v1, fv) = taps(y, oh);
+        let (r0, r1) = (&plane[v0 * ow..][..ow], &plane[v1 * ow..][..ow]);
+        out.extend(xt.iter().map(|&(u0, u1, fu)| (r0[u0] * (1.0 - fu) + r0[u1] * fu) * (1.0 - fv) + (r1[u0] * (1.0 - fu) + r1[u1] * fu) * fv));
+    }
+    out
 }
 
 /// `(B, C, H, W)` → channels-last `(B, H/2, W/2, 4C)`, channel `(2 dy + dx) C + c`.
@@ -85,7 +110,7 @@ impl TubeNet {
 
     /// Builds the layers; parameter names are `enc{level}{a|b}`, `dec{i}`, `head` (`.weight`,
     /// `.bias`), `dec0` at stride 16 and `dec2` at stride 4; the fine branch's are `fine_in`,
-    /// `fine_mid`, `fine_out`.
+    /// `fine_proj`, `fine_mid`, `fine_out`.
     pub fn new(vb: VarBuilder, cfg: &NetConfig) -> Result<Self> {
         let w = cfg.width;
         let widths = [w, 2 * w, 4 * w, 4 * w];
@@ -102,7 +127,13 @@ impl TubeNet {
         ];
         let head = Conv::new(vb.pp("head"), w, HEADS, 1)?;
         let fine = if cfg.fine_mask {
-            Some((Conv::new(vb.pp("fine_in"), 4 * cfg.in_channels, w, 3)?, Conv::new(vb.pp("fine_mid"), w, w, 1)?, Conv::new(vb.pp("fine_out"), w, 4, 1)?))
+            let f = FINE_WIDTH;
+            Some([
+                Conv::new(vb.pp("fine_in"), 4 * cfg.in_channels, f, 3)?,
+                Conv::new(vb.pp("fine_proj"), w, f, 1)?,
+                Conv::new(vb.pp("fine_mid"), f, f, 1)?,
+                Conv::new(vb.pp("fine_out"), f, 4, 1)?,
+            ])
         } else {
             None
         };
@@ -127,14 +158,38 @@ impl TubeNet {
         }
         let coarse = self.head.forward(&f)?.permute((0, 3, 1, 2))?.contiguous()?;
         let fine = match &self.fine {
-            Some((cin, cmid, cout)) => {
-                let g = (cin.forward(&space_to_depth(x)?)?.relu()? + upsample2(&f)?)?;
+            Some([cin, cproj, cmid, cout]) => {
+                let g = (cin.forward(&space_to_depth(x)?)? + upsample2(&cproj.forward(&f)?)?)?.relu()?;
                 let g = cout.forward(&cmid.forward(&g)?.relu()?)?;
                 // Depth-to-space: (B, H/2, W/2, 2, 2) -> (B, H/2, 2, W/2, 2) -> (B, 1, H, W).
-                Some(g.reshape((b, h / 2, w / 2, 2, 2))?.permute((0, 1, 3, 2, 4))?.reshape((b, 1, h, w))?)
+                let correction = g.reshape((b, h / 2, w / 2, 2, 2))?.permute((0, 1, 3, 2, 4))?.reshape((b, 1, h, w))?;
+                let fg: Vec<f32> = coarse.narrow(1, 0, 1)?.flatten_all()?.to_vec1()?;
+                let (ow, oh) = (w / STRIDE, h / STRIDE);
+                let base: Vec<f32> = fg.chunks_exact(ow * oh).flat_map(|p| upsample4_bilinear(p, ow, oh, w, h)).collect();
+                Some((correction + Tensor::from_vec(base, (b, 1, h, w), x.device())?)?)
             }
             None => None,
         };
         Ok(NetOutput { coarse, fine })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_upsampling_reproduces_a_ramp_and_clamps_at_the_border() {
+        // p[i] = i along x, 10 j along y: interior pixels read (x - 1.5) / 4 + 10 (y - 1.5) / 4.
+        let (ow, oh) = (5, 3);
+        let plane: Vec<f32> = (0..oh).flat_map(|j| (0..ow).map(move |i| i as f32 + 10.0 * j as f32)).collect();
+        let up = upsample4_bilinear(&plane, ow, oh, 20, 12);
+        for y in 0..12 {
+            for x in 0..20 {
+                let u = ((x as f32 - 1.5) / 4.0).clamp(0.0, 4.0);
+                let v = ((y as f32 - 1.5) / 4.0).clamp(0.0, 2.0);
+                assert!((up[y * 20 + x] - (u + 10.0 * v)).abs() < 1e-5, "({x}, {y}): {}", up[y * 20 + x]);
+            }
+        }
     }
 }

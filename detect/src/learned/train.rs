@@ -7,7 +7,8 @@
 //!      + Σ w (|o₂ - t₂| + |o₃ - t₃|) / (Σ w + 1) + Σ w |o₄ - t₄| / (Σ w + 1)`
 //!
 //! where `w` marks instance cells. A model with the full-resolution mask branch adds
-//! `mean((1 + 4 m) b(f, m))` for its logits `f` and the binary tube mask `m` of the crop.
+//! `mean(b(f, m))` for its logits `f` and the binary tube mask `m` of the crop (unweighted, so
+//! that logit 0 is the calibrated threshold).
 //! Learning rate: linear warm-up over the first
 //! `warmup` steps, then cosine decay to 5% of `lr` at `total_steps`.
 //!
@@ -132,7 +133,7 @@ pub fn loss(net_out: &NetOutput, batch: &Batch) -> Result<Tensor, LearnedError> 
     let l_len = ((o(4, 1)? - t(4, 1)?)?.abs()?.broadcast_mul(&batch.weight)?.sum_all()? / wsum)?;
     let total = (((l_fg + l_heat)? + l_dir)? + l_len)?;
     Ok(match &net_out.fine {
-        Some(f) => (total + (bce_logits(f, &batch.mask)? * batch.mask.affine(4.0, 1.0)?)?.mean_all()?)?,
+        Some(f) => (total + bce_logits(f, &batch.mask)?.mean_all()?)?,
         None => total,
     })
 }
