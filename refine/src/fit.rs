@@ -236,10 +236,24 @@ fn limb_polarity(samples: &[ContourSample], assoc: &[Assoc]) -> Vec<i8> {
     samples.iter().map(|s| key(s).map_or(0, |k| sign[k])).collect()
 }
 
+/// The seed's terms of the priors: its distance (`RefineConfig::seed_distance_sigma_frac`)
+/// and, in mono mode without a ground plane, its axis tilt toward the camera
+/// (`RefineConfig::mono_tilt_sigma_deg`): `(a·ĉ₀ - a₀·ĉ₀) / sin σ` with `ĉ₀` the seed's
+/// viewing ray.
+#[derive(Clone, Copy, Debug)]
+struct SeedPrior {
+    dist: f64,
+    ray: Vector3<f64>,
+    tilt: f64,
+    /// `sin σ` of the tilt prior, when it is used.
+    tilt_sin_sigma: Option<f64>,
+}
+
 /// Residuals (normalized) of the associations and stereo points at state `st`; missing
 /// projections give `None` entries (skipped).
 #[allow(clippy::too_many_arguments)]
-fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, seed_dist: f64, out: &mut Vec<Option<f64>>) {
+fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
+    let seed_dist = sp.dist;
     out.clear();
     let f = st.frame();
     for a in assoc {
@@ -264,6 +278,9 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
     }
     if cfg.seed_distance_sigma_frac > 0.0 {
         out.push(Some((st.c.norm() - seed_dist) / (cfg.seed_distance_sigma_frac * seed_dist)));
+    }
+    if let Some(ss) = sp.tilt_sin_sigma {
+        out.push(Some((st.a.dot(&sp.ray) - sp.tilt) / ss));
     }
 }
 
@@ -316,7 +333,8 @@ fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
 /// Jacobians of [`crate::jacobian`]; fills `jac` with the image Jacobian of each association
 /// and returns `Σ w r²` and `Σ w`.
 #[allow(clippy::too_many_arguments)]
-fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), seed_dist: f64, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), sp: &SeedPrior, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+    let seed_dist = sp.dist;
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
@@ -346,14 +364,24 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
             Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
             // Priors in the order of `residuals`: ground height, ground tilt, seed distance.
-            let k = i - n_img - n_st;
+            // Priors in the order of `residuals`: ground height and tilt, seed distance, seed
+            // tilt.
+            let mut k = i - n_img - n_st;
             match (&scene.ground, k) {
                 (Some(gp), 0) => Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
                 (Some(gp), 1) => Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians(),
                 _ => {
-                    let d = st.c.norm();
-                    let ch = st.c / d.max(1e-12);
-                    Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * seed_dist)
+                    if scene.ground.is_some() {
+                        k -= 2;
+                    }
+                    if cfg.seed_distance_sigma_frac > 0.0 && k == 0 {
+                        let d = st.c.norm();
+                        let ch = st.c / d.max(1e-12);
+                        Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * seed_dist)
+                    } else {
+                        let ss = sp.tilt_sin_sigma.unwrap_or(1.0);
+                        Vector5::new(0.0, 0.0, 0.0, sp.ray.dot(u.0), sp.ray.dot(u.1)) / ss
+                    }
                 }
             }
         };
@@ -454,6 +482,9 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     let mut jbuf = Vec::new();
     let top = first_level.min(levels.len().saturating_sub(1));
     let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
+    let ray = seed.c.try_normalize(1e-12).unwrap_or(Vector3::z());
+    let tilt_prior = mono && scene.ground.is_none() && cfg.mono_tilt_sigma_deg > 0.0;
+    let sp = SeedPrior { dist: seed.c.norm(), ray, tilt: seed.a.dot(&ray), tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()) };
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,
         stats: ResidualStats { iterations, ..Default::default() },
@@ -497,15 +528,15 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 }
             }
             let n_img = assoc.len();
-            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed.c.norm(), &mut rbuf);
+            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &sp, &mut rbuf);
             let n_st = scene.stereo_points.len();
             let c = thresholds(&rbuf, n_img, n_st, &mut scratch, level.sigma_px, level.radius);
             let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
             let ax = st.a;
             let (u1, u2) = tangent_basis(&ax);
-            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, seed.c.norm(), &mut jbuf);
+            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &sp, &mut jbuf);
             let mut accepted = None;
-            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some()) } else { None };
+            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some() || tilt_prior) } else { None };
             for _ in 0..6 {
                 let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref()) else {
                     lambda *= 10.0;
@@ -519,7 +550,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
                 }
                 let delta = [d[0], d[1], d[2], d[3], d[4]];
                 let trial = st.updated(&delta, &u1, &u2);
-                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed.c.norm(), &mut rtrial);
+                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &sp, &mut rtrial);
                 let cost = robust_cost(&rtrial, c.0, c.1, n_img, n_st);
                 if cost.is_finite() && cost <= cost0 {
                     lambda = (lambda / 3.0).max(1e-7);
@@ -554,22 +585,22 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
         }
     }
     if mono {
-        st = mono_ground_depth(model, cfg, scene, st, seed.c.norm());
+        st = mono_ground_depth(model, cfg, scene, st, sp.dist);
     }
-    finish(model, cfg, &levels[0], scene, st, seed.c.norm(), iterations, mono)
+    finish(model, cfg, &levels[0], scene, st, &sp, iterations, mono)
 }
 
 /// Final statistics and covariance at the finest level.
 /// `mono`: keep-depth mode, where a tube cut by the image border keeps its seed's distance, so
 /// the in-image fraction is not checked.
 #[allow(clippy::too_many_arguments)]
-fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, seed_dist: f64, iterations: usize, mono: bool) -> FitResult {
+fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, sp: &SeedPrior, iterations: usize, mono: bool) -> FitResult {
     let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
     let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
     let polarity = vec![0i8; samples.len()];
     let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity, 1.0);
     let mut r = Vec::new();
-    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, seed_dist, &mut r);
+    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, sp, &mut r);
     let n_img = assoc.len();
     let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
     let tau = cfg.inlier_px / to_px;
@@ -601,7 +632,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
     let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
-    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, seed_dist, &mut Vec::new());
+    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, sp, &mut Vec::new());
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {
