@@ -42,8 +42,8 @@ fn p(path: &Path) -> String {
 /// The ground plane `n·X = d` (camera frame, n up) of the world plane z = 0 seen from a camera
 /// at `T_world_cam`: `n = R_world_camᵀ ẑ`, `d = -t_z`, as "nx,ny,nz,d".
 fn ground_of(t_world_cam: &Pose) -> String {
-    let n = t_world_cam.rotation().transpose() * nalgebra::Vector3::z();
-    format!("{},{},{},{}", n.x, n.y, n.z, -t_world_cam.translation().z)
+    let (n, d) = tubeloc_core::geometry::ground_plane_in_camera(t_world_cam);
+    format!("{},{},{},{d}", n.x, n.y, n.z)
 }
 
 /// Runs `tubeloc demo`.

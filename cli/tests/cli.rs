@@ -96,11 +96,10 @@ fn locate_errors_name_the_file_and_the_problem() {
 fn locate_finds_tubes_on_a_rendered_scene_with_grasp_frames() {
     let s = Scene::new("1", "512");
     let out = s.path("out/poses.json");
-    // The mast pose is known, so is the ground plane z_world = 0 in the camera frame:
-    // n = R_world_cam^T e_z, n.X = -t_z.
-    let t = &s.gt["images"][0]["T_world_cam"];
-    let n = [t["rotation"][2][0].as_f64().unwrap(), t["rotation"][2][1].as_f64().unwrap(), t["rotation"][2][2].as_f64().unwrap()];
-    let ground = format!("{},{},{},{}", n[0], n[1], n[2], -t["translation"][2].as_f64().unwrap());
+    // The mast pose is known, so is the ground plane z_world = 0 in the camera frame.
+    let t: tubeloc_core::Pose = serde_json::from_value(s.gt["images"][0]["T_world_cam"].clone()).unwrap();
+    let (n, d) = tubeloc_core::geometry::ground_plane_in_camera(&t);
+    let ground = format!("{},{},{},{d}", n.x, n.y, n.z);
     let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "line2d", "--templates", p(&s.path("lib.tlt")), "--ground", &ground, "--out", p(&out)]);
     let code = o.status.code();
     assert!(code == Some(0) || code == Some(3), "{}", stderr(&o));
