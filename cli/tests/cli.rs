@@ -98,8 +98,9 @@ fn locate_finds_tubes_on_a_rendered_scene_with_grasp_frames() {
     let out = s.path("out/poses.json");
     // The mast pose is known, so is the ground plane z_world = 0 in the camera frame.
     let t: tubeloc_core::Pose = serde_json::from_value(s.gt["images"][0]["T_world_cam"].clone()).unwrap();
-    let (n, d) = tubeloc_core::geometry::ground_plane_in_camera(&t);
-    let ground = format!("{},{},{},{d}", n.x, n.y, n.z);
+    let (normal, d) = tubeloc_core::geometry::ground_plane_in_camera(&t);
+    let n = [normal.x, normal.y, normal.z];
+    let ground = format!("{},{},{},{d}", n[0], n[1], n[2]);
     let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "line2d", "--templates", p(&s.path("lib.tlt")), "--ground", &ground, "--out", p(&out)]);
     let code = o.status.code();
     assert!(code == Some(0) || code == Some(3), "{}", stderr(&o));
