@@ -136,6 +136,13 @@ pub struct RefineConfig {
     /// weighs the seed distance against the ground height when the centre is finally moved
     /// along its ray ([`fit`]).
     pub mono_depth_sigma_frac: f64,
+    /// [`Refiner::refine`] (detector seeds): `mono_depth_sigma_frac` used instead of the
+    /// configured one (Line2D template distances are off by ~1 % at the median on the paper
+    /// preset, and the keep-depth mode also keeps a template's tilt).
+    pub detection_depth_sigma_frac: f64,
+    /// [`Refiner::refine`] (detector seeds): `end_limb_weight` used instead of the configured
+    /// one (the end sections' limbs tell a flipped template's ends apart).
+    pub detection_end_limb_weight: f64,
     /// Mono keep-depth mode without a ground plane: the axis tilt toward the camera is fitted
     /// too (the foreshortened length fixes it where the tube is tilted), with this prior on its
     /// change from the seed's, degrees; 0 keeps the seed's tilt (the default: on a paper-preset
@@ -190,6 +197,8 @@ impl Default for RefineConfig {
             mono_keep_depth: true,
             mono_width_sigma_px: 0.3,
             mono_depth_sigma_frac: 0.01,
+            detection_depth_sigma_frac: 0.03,
+            detection_end_limb_weight: 1.0,
             mono_tilt_sigma_deg: 0.0,
             ground_relief_sigma_m: 0.0,
         }
@@ -219,6 +228,8 @@ impl RefineConfig {
             && self.seed_distance_sigma_frac >= 0.0
             && self.ground_tilt_sigma_deg > 0.0
             && self.mono_depth_sigma_frac > 0.0
+            && self.detection_depth_sigma_frac > 0.0
+            && self.detection_end_limb_weight >= 0.0
             && self.end_limb_weight >= 0.0
             && self.mono_tilt_sigma_deg >= 0.0
             && self.mono_width_sigma_px >= 0.0
@@ -266,7 +277,13 @@ impl Refiner {
     /// seed).
     pub fn refine(&self, input: &RefineInput, det: &TubeDetection) -> TubeAxisPose {
         match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
-            Ok(seed) => self.refine_seed(input, &seed, det.image_id, det.score, Some(det.bbox)),
+            Ok(seed) => {
+                // Detector seeds carry a coarse distance (template scale, mask width): the
+                // mono keep-depth mode and the end-limb exclusion are tuned for good seeds.
+                let cfg = RefineConfig { mono_depth_sigma_frac: self.config.detection_depth_sigma_frac, end_limb_weight: self.config.detection_end_limb_weight, ..self.config.clone() };
+                let r = Refiner { model: self.model.clone(), config: cfg };
+                r.refine_seed(input, &seed, det.image_id, det.score, Some(det.bbox))
+            }
             Err(e) => failed(det.image_id, det.score, None, FailureReason::BadSeed, e.to_string()),
         }
     }
