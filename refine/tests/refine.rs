@@ -125,6 +125,16 @@ fn mono_narrow_tubes_improve_on_their_seeds() {
     assert!(am < sam && a9 < 5.5, "axis error median {am} p90 {a9} vs seeds {sam}");
 }
 
+/// Exact seeds on narrow tubes stay put (issue 8: a fit from the truth must not walk away).
+#[test]
+fn mono_narrow_tubes_exact_seeds_stay_put() {
+    let mut e = run_batch_at((2.0, 3.0), 8, 23, false, false, false, 0.0, 0.0);
+    let (pm, p9, am, a9) = report("mono narrow exact", &mut e);
+    assert_eq!(e.failed, 0, "no tube lost");
+    assert!(pm < 0.001 && p9 < 0.002, "position error median {pm} p90 {p9}");
+    assert!(am < 0.2 && a9 < 0.5, "axis error median {am} p90 {a9}");
+}
+
 #[test]
 fn stereo_perturbed_seeds_converge_back() {
     let pos = std::env::var("PERTURB_MM").ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
