@@ -458,7 +458,7 @@ fn mono_ground_depth(model: &CylinderModel, cfg: &RefineConfig, scene: &Scene, s
     let sigma_g = if cfg.ground_height_known { cfg.ground_sigma_m } else { cfg.ground_relief_sigma_m };
     let Some(ch) = st.c.try_normalize(1e-12) else { return st };
     let k = g.normal.dot(&ch);
-    if !(sigma_g > 0.0) || k.abs() < 0.05 {
+    if sigma_g <= 0.0 || k.abs() < 0.05 {
         return st;
     }
     // Lowest surface point above the ground for a tube of radius r_max tilted by the axis.
