@@ -493,16 +493,21 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
         score: 1.0,
         failure: Some((reason, msg)),
     };
-    for li in (0..=top).rev() {
+    // Stages (level, search radius): the coarsest level with the wide search, the finer ones
+    // with the fine search; when the coarsest level is full resolution (narrow tubes), it is
+    // run again with the fine search (fewer shading and texture edges within reach).
+    let fine = cfg.fine_search_radius_px.min(cfg.search_radius_px);
+    let mut stages: Vec<(usize, usize)> = (0..=top).rev().map(|li| (li, if li == top { cfg.search_radius_px } else { fine })).collect();
+    if top == 0 && cfg.fine_polish && fine < cfg.search_radius_px {
+        stages.push((0, fine));
+    }
+    for (si, &(li, radius)) in stages.iter().enumerate() {
         let lv = &levels[li];
-        let level = Level {
-            lv,
-            radius: if li == top { cfg.search_radius_px } else { cfg.fine_search_radius_px.min(cfg.search_radius_px) },
-            sigma_px: cfg.edge_sigma_px,
-        };
+        let level = Level { lv, radius, sigma_px: cfg.edge_sigma_px };
+        let first_stage = si == 0;
         let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
         let mut polarity = vec![0i8; samples.len()];
-        let max_it = if li == top { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
+        let max_it = if first_stage { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
         let mut lambda = 1e-3;
         // Edge associations are refreshed when the contour has moved more than
         // `reassociate_px` since the last search (and on the first two iterations, before and
