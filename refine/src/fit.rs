@@ -483,7 +483,9 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     let top = first_level.min(levels.len().saturating_sub(1));
     let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
     let ray = seed.c.try_normalize(1e-12).unwrap_or(Vector3::z());
-    let tilt_prior = mono && scene.ground.is_none() && cfg.mono_tilt_sigma_deg > 0.0;
+    // The foreshortened length fixes the tilt θ to ~(δL/L)/tan θ: only for axes clearly out of
+    // the image plane.
+    let tilt_prior = mono && scene.ground.is_none() && cfg.mono_tilt_sigma_deg > 0.0 && seed.a.dot(&ray).abs() >= cfg.mono_tilt_min_deg.to_radians().sin();
     let sp = SeedPrior { dist: seed.c.norm(), ray, tilt: seed.a.dot(&ray), tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()) };
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,

@@ -154,6 +154,9 @@ pub struct RefineConfig {
     /// subset with 10 mm / 5 degree seeds, 2 degrees took the axis error median from 3.9 to
     /// 2.4 degrees but its p90 from 5.2 to 7.5, the length being foreshortened either way).
     pub mono_tilt_sigma_deg: f64,
+    /// The mono tilt fit (`mono_tilt_sigma_deg > 0`) applies only to seeds whose axis leaves
+    /// the image plane by at least this angle, degrees.
+    pub mono_tilt_min_deg: f64,
     /// Ground whose height is not known exactly (`ground_height_known = false`, e.g. world
     /// z = 0 over terrain with relief): standard deviation of the tube's height above it,
     /// metres (mono depth prior); 0 ignores the height (the default: on the paper preset's
@@ -206,6 +209,7 @@ impl Default for RefineConfig {
             detection_depth_sigma_frac: 0.03,
             detection_end_limb_weight: 1.0,
             mono_tilt_sigma_deg: 0.0,
+            mono_tilt_min_deg: 0.0,
             ground_relief_sigma_m: 0.0,
         }
     }
@@ -238,6 +242,7 @@ impl RefineConfig {
             && self.detection_end_limb_weight >= 0.0
             && self.end_limb_weight >= 0.0
             && self.mono_tilt_sigma_deg >= 0.0
+            && (0.0..=90.0).contains(&self.mono_tilt_min_deg)
             && self.mono_width_sigma_px >= 0.0
             && self.ground_relief_sigma_m >= 0.0;
         if ok {
