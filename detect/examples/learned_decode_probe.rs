@@ -29,11 +29,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let variants = [
         ("default", d),
         ("stride-4 masks", DecodeConfig { fine_mask: false, ..d }),
-        ("fine m1.6", DecodeConfig { mask_logit: 1.6, ..d }),
-        ("fine m2.2", DecodeConfig { mask_logit: 2.2, ..d }),
-        ("fine m3", DecodeConfig { mask_logit: 3.0, ..d }),
-        ("fine m2.2 fg.6", DecodeConfig { mask_logit: 2.2, fg_threshold: 0.6, ..d }),
-        ("fine m1.6 fg.6", DecodeConfig { mask_logit: 1.6, fg_threshold: 0.6, ..d }),
+        ("mask logit -0.5", DecodeConfig { mask_logit: -0.5, ..d }),
+        ("mask logit -1", DecodeConfig { mask_logit: -1.0, ..d }),
+        ("mask logit 0.5", DecodeConfig { mask_logit: 0.5, ..d }),
+        ("fg 0.4", DecodeConfig { fg_threshold: 0.4, ..d }),
+        ("fg 0.6", DecodeConfig { fg_threshold: 0.6, ..d }),
+        ("peak 0.3", DecodeConfig { peak_threshold: 0.3, ..d }),
 
     ];
     for (name, cfg) in variants {

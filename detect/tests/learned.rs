@@ -5,7 +5,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::HashMap;
 use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
-use tubeloc_detect::learned::net::{HEADS, LENGTH_SCALE};
+use tubeloc_detect::learned::net::{upsample4_bilinear, HEADS, LENGTH_SCALE};
 use tubeloc_detect::learned::train::make_batch;
 use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Prediction, Preprocess, TrainConfig, Trainer};
 
@@ -305,4 +305,41 @@ fn decoding_with_fine_logits_follows_them_to_the_pixel() {
     assert!(m.iter().zip(&fine).all(|(&a, &f)| (a != 0) == (f > 0.0)), "mask differs from the fine logits");
     assert_eq!(inst[0].bbox, [82.0, 121.0, 76.0, 6.0]);
     assert!((inst[0].axis.width_px - 6.0).abs() < 1e-9, "{:?}", inst[0].axis);
+}
+
+#[test]
+fn fine_mask_branch_learns_pixel_outlines_that_stride_4_logits_miss() {
+    // Bars 5-8 px wide: bilinear stride-4 logits round their outlines; the full-resolution
+    // branch, trained briefly on the same images, must place them closer to the truth.
+    let pre = Preprocess::default();
+    let s = 256;
+    let images: Vec<TrainImage> = (0..8)
+        .map(|i| {
+            let (rgb, masks) = bar_image(s, 4, 200 + i);
+            TrainImage::new(s, s, pre.apply(&rgb, s, s), &masks)
+        })
+        .collect();
+    let aug = AugmentConfig { crop: 128, ..Default::default() };
+    let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 20, total_steps: 300, seed: 1, augment: aug, ..Default::default() };
+    let mut t = Trainer::new(LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap(), cfg).unwrap();
+    for _ in 0..300 {
+        t.step(&images).unwrap();
+    }
+    let (mut fine_iu, mut coarse_iu) = ([0usize; 2], [0usize; 2]);
+    for i in 0..4 {
+        let (rgb, masks) = bar_image(s, 4, 300 + i);
+        let p = t.model.predict(&pre.apply(&rgb, s, s), s, s).unwrap();
+        let fine = p.fine.unwrap();
+        let coarse = upsample4_bilinear(&p.planes[..p.out_w * p.out_h], p.out_w, p.out_h, s, s);
+        for q in 0..s * s {
+            let gt = masks.iter().any(|m| m[q] != 0);
+            for (iu, v) in [(&mut fine_iu, fine[q]), (&mut coarse_iu, coarse[q])] {
+                iu[0] += (v > 0.0 && gt) as usize;
+                iu[1] += (v > 0.0 || gt) as usize;
+            }
+        }
+    }
+    let iou = |iu: [usize; 2]| iu[0] as f64 / iu[1].max(1) as f64;
+    let (f, c) = (iou(fine_iu), iou(coarse_iu));
+    assert!(f > 0.8 && f > c + 0.05, "pixel IoU: fine {f:.3}, stride-4 {c:.3}");
 }
