@@ -4,7 +4,9 @@
 //! Level 0 is the crop of the input image; level `k+1` averages 2x2 blocks of level `k` (pixel
 //! centres stay consistent with [`CameraModel::scaled`]). Each level is smoothed with the
 //! binomial kernel `[1 4 6 4 1]/16` (σ ≈ 1 px) and differentiated with central differences,
-//! giving `(∂I/∂x, ∂I/∂y)` in intensity units per level pixel.
+//! giving `(∂I/∂x, ∂I/∂y)` in intensity units per level pixel. Level 0 may be left unsmoothed
+//! ([`build_pyramid_with`]): on a 10-16 px wide tube the smoothing merges the shading ramp
+//! inside a limb with the limb's step and moves the gradient maximum inward.
 
 use nalgebra::{Point2, Vector2};
 use tubeloc_core::{CameraModel, Plane};
@@ -20,9 +22,20 @@ pub struct GradientLevel {
     pub height: usize,
     /// Scale of this level relative to full resolution (1, 0.5, 0.25, ...).
     pub scale: f64,
-    /// `(∂I/∂x, ∂I/∂y)` of the smoothed level (intensity per level pixel), interleaved,
+    /// `(∂I/∂x, ∂I/∂y)` of the level, smoothed unless built unsmoothed (intensity per level
+    /// pixel), interleaved,
     /// row-major (`grad[y * width + x]`), for one memory access per bilinear tap.
     pub grad: Vec<[f32; 2]>,
+    /// For an unsmoothed level ([`build_pyramid_with`]), the same level smoothed: a fit's
+    /// acceptance (inlier fraction) and residual statistics are taken on it.
+    pub smoothed: Option<Box<GradientLevel>>,
+}
+
+impl GradientLevel {
+    /// The smoothed version of this level (itself when it is smoothed).
+    pub fn smooth(&self) -> &GradientLevel {
+        self.smoothed.as_deref().unwrap_or(self)
+    }
 }
 
 /// The crop rectangle `(x0, y0, w, h)` of `bbox` grown by `margin` pixels, clamped to the image.
@@ -121,6 +134,13 @@ fn gradients(p: &Plane<f32>) -> Vec<[f32; 2]> {
 /// Builds `levels` gradient levels for the crop `(x0, y0, w, h)` of `image` seen by `camera`.
 /// Stops early when a level would be smaller than 16 pixels on a side.
 pub fn build_pyramid(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usize, usize, usize), levels: usize) -> Vec<GradientLevel> {
+    build_pyramid_with(image, camera, rect, levels, true)
+}
+
+/// [`build_pyramid`] with the smoothing of level 0 (full resolution) optional: `blur_level0 =
+/// false` differentiates it unsmoothed for the fit and keeps the smoothed one in
+/// [`GradientLevel::smoothed`] (the coarser levels are smoothed either way).
+pub fn build_pyramid_with(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usize, usize, usize), levels: usize, blur_level0: bool) -> Vec<GradientLevel> {
     let (x0, y0, w, h) = rect;
     let mut cur = crop(image, x0, y0, w, h);
     let mut cam = camera.cropped(x0 as u32, y0 as u32, w as u32, h as u32);
@@ -137,8 +157,12 @@ pub fn build_pyramid(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usi
             cam.height = cur.height as u32;
             scale *= 0.5;
         }
-        let grad = gradients(&blur(&cur));
-        out.push(GradientLevel { camera: cam.clone(), width: cur.width, height: cur.height, scale, grad });
+        let smooth = GradientLevel { camera: cam.clone(), width: cur.width, height: cur.height, scale, grad: gradients(&blur(&cur)), smoothed: None };
+        if k == 0 && !blur_level0 {
+            out.push(GradientLevel { grad: gradients(&cur), smoothed: Some(Box::new(smooth.clone())), ..smooth });
+        } else {
+            out.push(smooth);
+        }
     }
     out
 }

@@ -594,7 +594,13 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     if mono {
         st = mono_ground_depth(model, cfg, scene, st, sp.dist);
     }
-    finish(model, cfg, &levels[0], scene, st, &sp, iterations, mono)
+    // Acceptance and statistics on the smoothed level (texture and noise make more edges in the
+    // unsmoothed one), the score that ranks hypotheses and ends on the level fitted.
+    let mut r = finish(model, cfg, levels[0].smooth(), scene, st, &sp, iterations, mono);
+    if levels[0].smoothed.is_some() {
+        r.score = finish(model, cfg, &levels[0], scene, st, &sp, iterations, mono).score;
+    }
+    r
 }
 
 /// Final statistics and covariance at the finest level.
