@@ -25,8 +25,8 @@ fn bench(c: &mut Criterion) {
     let pre = Preprocess::default();
     let (rgb, mask) = synthetic_image(768);
     let img = TrainImage::new(768, 768, pre.apply(&rgb, 768, 768), &[mask]);
-    // The shipped architecture: width 8 with the full-resolution mask branch.
-    let model = LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap();
+    // The shipped architecture: width 8, stride-4 heads.
+    let model = LearnedModel::new(pre, 8, 1).unwrap();
     let cfg = TrainConfig { batch: 8, augment: AugmentConfig { crop: 384, ..Default::default() }, ..Default::default() };
     let mut trainer = Trainer::new(model, cfg).unwrap();
     let images = vec![img];
@@ -36,6 +36,9 @@ fn bench(c: &mut Criterion) {
     let (rgb, _) = synthetic_image(1024);
     let model = &trainer.model;
     g.bench_function("detect_rgb_1024x1024", |b| b.iter(|| detect_rgb(model, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap()));
+    // With the optional full-resolution mask branch (`tubeloc train --fine-mask`).
+    let fine = LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap();
+    g.bench_function("detect_rgb_1024x1024_fine_mask", |b| b.iter(|| detect_rgb(&fine, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap()));
     g.finish();
 }
 
