@@ -82,6 +82,9 @@ pub struct RefineConfig {
     pub seed_search_rotation_deg: f64,
     /// Most fits tried (seed-search hypotheses and the seed) until one succeeds.
     pub max_hypotheses: usize,
+    /// With stereo points: after the fit, re-place the tube in the image from the edges alone
+    /// with its distance and tilt kept (the mono keep-depth mode of [`fit`], forced).
+    pub stereo_edge_polish: bool,
     /// Weight of the limb residuals of the sections other than the body (foot flange, seal
     /// section) relative to the body's. Their limb edges are biased by shading (0.5 px inside
     /// at the median, single tubes 3 px, against 0.25 px for the body on the paper preset) and
@@ -192,6 +195,7 @@ impl Default for RefineConfig {
             seed_search_radius_px: 16,
             seed_search_rotation_deg: 7.5,
             max_hypotheses: 3,
+            stereo_edge_polish: true,
             end_limb_weight: 0.0,
             seed_score_margin: 0.0,
             max_levels: 4,
@@ -355,6 +359,18 @@ impl Refiner {
         } else {
             (a, if seed.end_known { 0.6 } else { 0.5 })
         };
+        let mut best = best;
+        if self.config.stereo_edge_polish && !scene.stereo_points.is_empty() && scene.mask.is_none() && best.failure.is_none() {
+            // Stereo points fix the distance and tilt but, biased at the tube's outline, also
+            // pull it across the image; the edges alone then place it in the image with the
+            // distance and tilt kept (the mono keep-depth mode, forced).
+            let cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
+            let mono_scene = Scene { stereo_points: &[], ground: None, ..scene };
+            let polished = fit::fit(&self.model, &cfg, &pyr, 0, &mono_scene, best.state);
+            if polished.failure.is_none() {
+                best.state = polished.state;
+            }
+        }
         to_pose(image_id, score, &best, conf)
     }
 
