@@ -107,7 +107,8 @@ pub struct RefineArgs {
     #[arg(long, default_value_t = 30.0)]
     pub(crate) photo_range_mm: f64,
     /// Photometric stage: move only the centre along its ray (distance) instead of each end of
-    /// the axis along its own ray (distance and tilt, the default).
+    /// the axis along its own ray (distance and tilt, the default without a ground plane; with
+    /// `--ground` the ground's tilt prior fixes the tilt better and only the centre moves).
     #[arg(long)]
     pub(crate) photo_centre_only: bool,
     /// Least ZNCC for the photometric depth to be applied.
@@ -257,7 +258,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
         for p in poses.iter_mut() {
-            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, !args.photo_centre_only);
+            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, !args.photo_centre_only && ground.is_none());
         }
     }
     for (i, p) in poses.iter().enumerate() {

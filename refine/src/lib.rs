@@ -365,7 +365,7 @@ impl Refiner {
             // pull it across the image; the edges alone then place it in the image with the
             // distance and tilt kept (the mono keep-depth mode, forced).
             let cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
-            let mono_scene = Scene { stereo_points: &[], ground: None, ..scene };
+            let mono_scene = Scene { stereo_points: &[], ..scene };
             let polished = fit::fit(&self.model, &cfg, &pyr, 0, &mono_scene, best.state);
             if polished.failure.is_none() {
                 best.state = polished.state;
