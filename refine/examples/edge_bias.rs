@@ -4,12 +4,13 @@
 //! edge, the outermost edge of the limb's polarity, and of the annotation mask's boundary.
 //! Environment `PROFILE=<annotation id>` also prints that tube's body-limb intensity profiles
 //! (-6..+6 px along the outward normal, 0.5 px steps, grey levels).
+//! Level 0 is differentiated unsmoothed (the refiner's default) unless `BLUR0=1` is set.
 //! Usage: cargo run --release -p tubeloc-refine --example edge_bias -- DIR [MAX_IMAGES] [MIN_VIS]
 
 use nalgebra::{Point2, Vector3};
 use tubeloc_core::{CocoDataset, Plane, Pose, TubeModel};
 use tubeloc_refine::contour::{build_samples, project_with_normal, SampleKind};
-use tubeloc_refine::edges::{build_pyramid, roi};
+use tubeloc_refine::edges::{build_pyramid_with, roi};
 use tubeloc_refine::{AxisState, CylinderModel};
 
 fn median(v: &mut [f64]) -> f64 {
@@ -44,7 +45,7 @@ fn main() {
             let f = st.frame().unwrap();
             let mask = a.segmentation.as_ref().and_then(|s| s.to_rle(cam.height, cam.width).ok()).and_then(|r| r.to_mask().ok());
             let Some(rect) = roi(a.bbox, 20.0, cam.width as usize, cam.height as usize) else { continue };
-            let pyr = build_pyramid(&plane, &cam, rect, 1);
+            let pyr = build_pyramid_with(&plane, &cam, rect, 1, std::env::var("BLUR0").is_ok());
             let lv = &pyr[0];
             let mut per: Vec<Vec<f64>> = vec![Vec::new(); 9];
             for s in build_samples(&model, &st, &lv.camera, 2.0) {
