@@ -327,6 +327,23 @@ pub fn run(a: BenchArgs) -> Result<()> {
         })?;
     }
 
+    // 6c. The with-tags split's refined poses against the tag-pair ground truth (the paper's
+    // pose protocol), beside the same poses against the exact ones in step 5.
+    if !a.skip.contains(&Part::Tags) && !a.skip.contains(&Part::Poses) {
+        let tag_gt = out.join("tags").join("annotations.json");
+        for det in ["line2d", "learned"] {
+            let dir = out.join("poses").join(det).join("with-tags");
+            let (poses, seeds) = (dir.join("poses.json"), dir.join("seeds.json"));
+            if !(tag_gt.exists() && poses.exists() && seeds.exists()) {
+                continue;
+            }
+            st.run(&format!("poses/{det}/with-tags/tag-truth"), &[dir.join("eval_tag_truth/pose_metrics.json")], || {
+                crate::run_words(&words(&["eval", "--gt", &s(&tag_gt), "--truth-field", "T_cam_tube_tags", "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval_tag_truth"))]))?;
+                Ok(json!({}))
+            })?;
+        }
+    }
+
     // 7. Full resolution, in a child process so that its peak memory is its own.
     if !a.skip.contains(&Part::Fullres) {
         let fdir = out.join("fullres");
@@ -413,6 +430,12 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
             if let Some(t) = crate::figures::pose_table(&p) {
                 let _ = writeln!(r, "### {det} detections on {sp}: coarse seeds and mono refinement ([report with histograms](poses/{det}/{sp}/eval/report.md))\n\n{t}");
             }
+        }
+    }
+    for det in ["line2d", "learned"] {
+        let p = out.join("poses").join(det).join("with-tags/eval_tag_truth/report.md");
+        if let Some(t) = crate::figures::pose_table(&p) {
+            let _ = writeln!(r, "### {det} detections on with-tags, against the tag-pair ground truth (`T_cam_tube_tags`, the paper's protocol) ([report with histograms](poses/{det}/with-tags/eval_tag_truth/report.md))\n\n{t}");
         }
     }
     for (name, what) in [("gt_seeds", "exact poses perturbed by 10 mm / 5 deg as seeds"), ("learned", "learned detections as seeds")] {

@@ -31,6 +31,11 @@ pub struct EvalArgs {
     /// Pose evaluation: gate of the greedy matching on the centre distance, millimetres.
     #[arg(long, default_value_t = 50.0)]
     match_mm: f64,
+    /// Pose evaluation: the annotation field holding the true pose: `T_cam_tube` (the exact
+    /// pose of a rendered dataset) or `T_cam_tube_tags` (the tag-pair ground truth written by
+    /// `tubeloc calib groundtruth`, the paper's protocol).
+    #[arg(long, default_value = "T_cam_tube")]
+    truth_field: String,
     /// IoU type: segm (mask IoU) or bbox (box IoU).
     #[arg(long, default_value = "segm")]
     iou_type: IouType,
@@ -46,7 +51,7 @@ pub struct EvalArgs {
 /// Runs the evaluation, prints the summary (and breakdown table), writes the JSON files.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !args.poses.is_empty() {
-        return poses::run(&args.gt, &args.poses, args.min_visible, args.match_mm, args.out.as_deref());
+        return poses::run(&args.gt, &args.poses, &args.truth_field, args.min_visible, args.match_mm, args.out.as_deref());
     }
     let gt = CocoDataset::load(&args.gt).with_context(|| format!("loading ground truth {}", args.gt.display()))?;
     let mut dt = Vec::new();

@@ -180,6 +180,21 @@ fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
         posed += 1;
     }
     assert!(posed >= 1, "no tag pose added: {}", String::from_utf8_lossy(&o.stdout));
+
+    // Refined poses scored against the tag-pair truth (the paper's protocol): only the tagged
+    // tubes are truths, and exact seeds refine to within the tag pair's own error.
+    let poses = dir.path().join("poses.json");
+    ok(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--out", p(&poses)]);
+    let ev = dir.path().join("eval_tags");
+    ok(&["eval", "--gt", p(&ds.join("annotations.json")), "--truth-field", "T_cam_tube_tags", "--min-visible", "0", "--poses", &format!("refined={}", p(&poses)), "--out", p(&ev)]);
+    let m: Value = serde_json::from_str(&std::fs::read_to_string(ev.join("pose_metrics.json")).unwrap()).unwrap();
+    assert_eq!(m["truth_field"], "T_cam_tube_tags");
+    let r = &m["poses"][0];
+    assert_eq!(r["n_truths"].as_u64().unwrap(), posed as u64, "{r}");
+    assert!(r["n_matched"].as_u64().unwrap() >= 1, "{r}");
+    let o = tubeloc(&["eval", "--gt", p(&ds.join("annotations.json")), "--truth-field", "T_cam_tube_laser", "--poses", p(&poses)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no annotation with T_cam_tube_laser"), "{}", stderr(&o));
 }
 
 #[test]

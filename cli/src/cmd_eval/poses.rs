@@ -1,6 +1,7 @@
-//! `tubeloc eval --poses`: refined tube poses against the exact poses of a COCO dataset.
+//! `tubeloc eval --poses`: refined tube poses against the true poses of a COCO dataset.
 //!
-//! Truths are the annotations with a `T_cam_tube` whose `visible_fraction` is at least the
+//! Truths are the annotations with a pose in the truth field (`T_cam_tube`, the exact pose, or
+//! `T_cam_tube_tags`, the tag-pair ground truth) whose `visible_fraction` is at least the
 //! given minimum; estimates are the converged poses. Matching is greedy by score on the centre
 //! distance (gated); errors per matched pair are the axis angle, the centre's perpendicular
 //! distance to the true axis and its along-axis offset, the end direction, and the BOP MSSD /
@@ -35,19 +36,19 @@ fn med_p90(s: &Summary) -> String {
 }
 
 /// Runs the pose evaluation of each poses file against `gt_path`.
-pub fn run(gt_path: &Path, poses: &[String], min_visible: f64, match_mm: f64, out: Option<&Path>) -> Result<()> {
+pub fn run(gt_path: &Path, poses: &[String], truth_field: &str, min_visible: f64, match_mm: f64, out: Option<&Path>) -> Result<()> {
     let gt = CocoDataset::load(gt_path).with_context(|| format!("loading ground truth {}", gt_path.display()))?;
     let mut truths = Vec::new();
     for a in &gt.annotations {
         let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
-        let Some(v) = a.extra.get("T_cam_tube") else { continue };
+        let Some(v) = a.extra.get(truth_field) else { continue };
         if vis >= min_visible {
-            let pose: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", gt_path.display(), a.id))?;
+            let pose: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: {truth_field}", gt_path.display(), a.id))?;
             truths.push(TubeTruth { image_id: a.image_id, pose });
         }
     }
     if truths.is_empty() {
-        bail!("{}: no annotation with T_cam_tube and visible_fraction >= {min_visible}", gt_path.display());
+        bail!("{}: no annotation with {truth_field} and visible_fraction >= {min_visible}", gt_path.display());
     }
     let mut cameras = BTreeMap::new();
     for im in &gt.images {
@@ -59,7 +60,7 @@ pub fn run(gt_path: &Path, poses: &[String], min_visible: f64, match_mm: f64, ou
     let model = ModelPoints::from_tube(&TubeModel::default(), 0.002).context("sampling the tube model")?;
     let config = PoseEvalConfig { cameras, ..Default::default() };
     let mut evals: Vec<(String, PoseEvaluation)> = Vec::new();
-    println!("{} truths (visible_fraction >= {min_visible}); matching: nearest centre within {match_mm} mm", truths.len());
+    println!("{} truths ({truth_field}, visible_fraction >= {min_visible}); matching: nearest centre within {match_mm} mm", truths.len());
     println!("| poses | converged / all | matched | axis deg med / p90 | perp mm med / p90 | |along| mm med / p90 | centre mm med / p90 | ends right | AR MSSD | AR MSPD |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for spec in poses {
@@ -96,12 +97,12 @@ pub fn run(gt_path: &Path, poses: &[String], min_visible: f64, match_mm: f64, ou
             })
             .collect();
         let p = out.join("pose_metrics.json");
-        write_json(&p, &serde_json::json!({ "gt": gt_path, "min_visible": min_visible, "match_mm": match_mm, "poses": metrics })).with_context(|| format!("writing {}", p.display()))?;
+        write_json(&p, &serde_json::json!({ "gt": gt_path, "truth_field": truth_field, "min_visible": min_visible, "match_mm": match_mm, "poses": metrics })).with_context(|| format!("writing {}", p.display()))?;
         let report = tubeloc_eval::report::EvalReport {
             title: "Tube pose evaluation".into(),
             inputs: std::iter::once(("ground truth".to_string(), gt_path.display().to_string()))
                 .chain(poses.iter().map(|s| ("poses".to_string(), s.clone())))
-                .chain(std::iter::once(("truths".to_string(), format!("visible_fraction >= {min_visible}"))))
+                .chain(std::iter::once(("truths".to_string(), format!("`{truth_field}`, visible_fraction >= {min_visible}"))))
                 .collect(),
             poses: evals,
             ..Default::default()
