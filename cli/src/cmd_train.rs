@@ -58,6 +58,9 @@ pub struct TrainArgs {
     /// bilinear stride-4 logits); kept when the --init model has it.
     #[arg(long)]
     pub fine_mask: bool,
+    /// Train only the fine mask branch; the other layers keep the --init model's weights.
+    #[arg(long, requires = "init")]
+    pub freeze_coarse: bool,
     /// Input preprocessing: gray-box (paper), gray-box:R, or rgb.
     #[arg(long, default_value = "gray-box")]
     pub preprocess: String,
@@ -179,6 +182,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
             if let (Some(m), Some(p)) = (&init, &args.init) {
                 let n = model.init_from(m)?;
                 eprintln!("warm start: {n} tensors from {} ({} steps)", p.display(), m.meta.steps);
+            }
+            if args.freeze_coarse {
+                if !model.meta.net.fine_mask {
+                    bail!("--freeze-coarse trains only the fine mask branch: add --fine-mask");
+                }
+                model.freeze_coarse(true);
             }
             Trainer::new(model, cfg)?
         }

@@ -277,6 +277,33 @@ fn fine_mask_branch_warm_starts_trains_and_round_trips() {
 }
 
 #[test]
+fn freezing_the_coarse_layers_trains_only_the_fine_branch() {
+    let pre = Preprocess::default();
+    let mut model = LearnedModel::with_fine_mask(pre, 4, true, 5).unwrap();
+    model.freeze_coarse(true);
+    let tensors = |m: &LearnedModel| {
+        let st = m.to_bytes().unwrap();
+        let st = safetensors::SafeTensors::deserialize(&st).unwrap();
+        st.tensors().into_iter().map(|(n, t)| (n, t.data().to_vec())).collect::<HashMap<String, Vec<u8>>>()
+    };
+    let before = tensors(&model);
+    let cfg = TrainConfig { batch: 2, lr: 3e-3, warmup: 1, total_steps: 3, seed: 2, augment: AugmentConfig { crop: 64, ..Default::default() }, ..Default::default() };
+    let mut t = Trainer::new(model, cfg).unwrap();
+    let images = tiny_set(pre);
+    for _ in 0..3 {
+        t.step(&images).unwrap();
+    }
+    let after = tensors(&t.model);
+    for (name, v) in &before {
+        if name.starts_with("fine_") {
+            assert_ne!(&after[name], v, "{name} did not change");
+        } else {
+            assert_eq!(&after[name], v, "{name} changed although frozen");
+        }
+    }
+}
+
+#[test]
 fn decoding_with_fine_logits_follows_them_to_the_pixel() {
     // One horizontal tube: foreground cells in row 30, columns 20..=39 (pixels 80..159 x
     // 120..123), its centre peak at cell (30, 30); the full-resolution logits mark pixel rows

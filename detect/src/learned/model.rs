@@ -85,6 +85,11 @@ impl LearnedModel {
         Ok(self.net.forward(x)?)
     }
 
+    /// Trains only the fine mask branch from now on (see [`TubeNet::set_freeze_coarse`]).
+    pub fn freeze_coarse(&mut self, on: bool) {
+        self.net.set_freeze_coarse(on);
+    }
+
     /// Copies every tensor of `other` whose name and shape this model also has (a warm start,
     /// e.g. adding the fine mask branch to a trained model); returns how many were copied.
     pub fn init_from(&mut self, other: &LearnedModel) -> Result<usize, LearnedError> {

@@ -69,6 +69,9 @@ pub struct TubeNet {
     dec: Vec<Conv>,
     head: Conv,
     fine: Option<[Conv; 4]>,
+    /// Train only the fine branch: the stride-4 outputs and features are detached, so no
+    /// gradient reaches the other layers (see [`TubeNet::set_freeze_coarse`]).
+    freeze_coarse: bool,
 }
 
 /// Raw outputs of [`TubeNet::forward`].
@@ -137,7 +140,13 @@ impl TubeNet {
         } else {
             None
         };
-        Ok(TubeNet { enc, dec, head, fine })
+        Ok(TubeNet { enc, dec, head, fine, freeze_coarse: false })
+    }
+
+    /// With `on`, gradients of the loss reach only the fine mask branch (the stride-4 layers
+    /// keep their weights: warm-starting the branch on a trained model).
+    pub fn set_freeze_coarse(&mut self, on: bool) {
+        self.freeze_coarse = on;
     }
 
     /// `x`: `(B, C, H, W)` normalized input at image resolution; returns the raw outputs.
@@ -156,7 +165,10 @@ impl TubeNet {
         for (d, skip) in self.dec.iter().zip(feats[..3].iter().rev()) {
             f = d.forward(&(upsample2(&f)? + skip)?)?.relu()?;
         }
-        let coarse = self.head.forward(&f)?.permute((0, 3, 1, 2))?.contiguous()?;
+        let mut coarse = self.head.forward(&f)?.permute((0, 3, 1, 2))?.contiguous()?;
+        if self.freeze_coarse {
+            (f, coarse) = (f.detach(), coarse.detach());
+        }
         let fine = match &self.fine {
             Some([cin, cproj, cmid, cout]) => {
                 let g = (cin.forward(&space_to_depth(x)?)? + upsample2(&cproj.forward(&f)?)?)?.relu()?;
