@@ -409,7 +409,7 @@ fn mono_mode(cfg: &RefineConfig, scene: &Scene, model: &CylinderModel, seed: &Ax
 /// tangent basis `(u1, u2)`: the centre across its viewing ray `ĉ` (two columns), the axis
 /// turned about the ray (`ĉ × a`), and with `tilt` the axis tilted toward the camera
 /// (`a × (ĉ × a)`). The distance along the ray is left out.
-fn mono_basis(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>, tilt: bool) -> Option<Vec<Vector5<f64>>> {
+fn mono_basis(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>, tilt: bool, depth: bool) -> Option<Vec<Vector5<f64>>> {
     let ch = st.c.try_normalize(1e-12)?;
     let w1 = ch.cross(&st.a).try_normalize(1e-9)?;
     let l1 = (st.a - ch * st.a.dot(&ch)).try_normalize(1e-9)?;
@@ -419,12 +419,42 @@ fn mono_basis(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>, tilt: bool) 
         let w2 = st.a.cross(&w1);
         b.push(Vector5::new(0.0, 0.0, 0.0, w2.dot(u1), w2.dot(u2)));
     }
+    if depth {
+        b.push(Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0));
+    }
     Some(b)
+}
+
+/// The limb samples' share of the normal equations (image rows of limbs only, same weights as
+/// [`normal_equations`], whose `jac` it reuses): removed from the distance column in the mono
+/// length-depth mode.
+fn limb_normal_equations(assoc: &[Assoc], jac: &[Option<Matrix2x5<f64>>], r0: &[Option<f64>], c_img: f64, sigma_px: f64) -> (Matrix5<f64>, Vector5<f64>) {
+    let mut h = Matrix5::zeros();
+    let mut g = Vector5::zeros();
+    for (i, a) in assoc.iter().enumerate() {
+        if !matches!(a.sample.kind, crate::contour::SampleKind::Limb { .. }) {
+            continue;
+        }
+        let (Some(r), Some(Some(ji))) = (r0.get(i).copied().flatten(), jac.get(i)) else { continue };
+        let w = tukey_weight(r, c_img);
+        if w <= 0.0 {
+            continue;
+        }
+        let j: Vector5<f64> = (ji.transpose() * a.n) * (a.scale / sigma_px);
+        if j.iter().all(|v| v.is_finite()) {
+            h += j * j.transpose() * w;
+            g += j * (w * r);
+        }
+    }
+    (h, g)
 }
 
 /// Damped step of the normal equations `(H, g)` restricted to the columns `basis` (all five
 /// parameters when `None`): `(BᵀHB + λ diag) p = -Bᵀg`, `δ = B p`.
-fn damped_step(h: &Matrix5<f64>, g: &Vector5<f64>, lambda: f64, basis: Option<&[Vector5<f64>]>) -> Option<Vector5<f64>> {
+/// With `no_depth = Some((h_l, g_l))` the last basis column (the distance along the ray) gets
+/// no information from the part `(h_l, g_l)` (the limbs): its row and column of `Bᵀh_lB` and
+/// entry of `Bᵀg_l` are removed.
+fn damped_step(h: &Matrix5<f64>, g: &Vector5<f64>, lambda: f64, basis: Option<&[Vector5<f64>]>, no_depth: Option<&(Matrix5<f64>, Vector5<f64>)>) -> Option<Vector5<f64>> {
     match basis {
         None => {
             let mut hd = *h;
@@ -437,10 +467,22 @@ fn damped_step(h: &Matrix5<f64>, g: &Vector5<f64>, lambda: f64, basis: Option<&[
             let k = b.len();
             let bm = nalgebra::DMatrix::from_fn(5, k, |i, j| b[j][i]);
             let mut hr = bm.transpose() * h * &bm;
+            let mut gr = bm.transpose() * g;
+            if let Some((hl, gl)) = no_depth {
+                let hlr = bm.transpose() * hl * &bm;
+                let glr = bm.transpose() * gl;
+                let d = k - 1;
+                for i in 0..k {
+                    hr[(d, i)] -= hlr[(d, i)];
+                    if i != d {
+                        hr[(i, d)] -= hlr[(i, d)];
+                    }
+                }
+                gr[d] -= glr[d];
+            }
             for i in 0..k {
                 hr[(i, i)] += lambda * hr[(i, i)].max(1e-12);
             }
-            let gr = bm.transpose() * g;
             let p = hr.cholesky()?.solve(&(-gr));
             let d = bm * p;
             Some(Vector5::new(d[0], d[1], d[2], d[3], d[4]))
@@ -486,6 +528,9 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     // The foreshortened length fixes the tilt θ to ~(δL/L)/tan θ: only for axes clearly out of
     // the image plane.
     let tilt_prior = mono && scene.ground.is_none() && cfg.mono_tilt_sigma_deg > 0.0 && seed.a.dot(&ray).abs() >= cfg.mono_tilt_min_deg.to_radians().sin();
+    // Mono with a ground plane (tilt fixed by it): the distance along the ray from the
+    // foreshortened length (rims) alone, the limbs' separation being biased by shading.
+    let length_depth = mono && cfg.mono_length_depth && scene.ground.is_some();
     let sp = SeedPrior { dist: seed.c.norm(), ray, tilt: seed.a.dot(&ray), tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()) };
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,
@@ -543,9 +588,10 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             let (u1, u2) = tangent_basis(&ax);
             let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &sp, &mut jbuf);
             let mut accepted = None;
-            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some() || tilt_prior) } else { None };
+            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some() || tilt_prior, length_depth) } else { None };
+            let limb_part = length_depth.then(|| limb_normal_equations(&assoc, &jbuf, &rbuf, c.0, level.sigma_px));
             for _ in 0..6 {
-                let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref()) else {
+                let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref(), limb_part.as_ref()) else {
                     lambda *= 10.0;
                     continue;
                 };

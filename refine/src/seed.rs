@@ -174,6 +174,20 @@ mod tests {
     }
 
     #[test]
+    fn mask_centre_is_moved_along_the_axis_onto_the_box_centre() {
+        let d = nalgebra::Vector2::new(3.0, 4.0);
+        // Box centre (110, 60); the centre (100, 50) moves along (0.6, 0.8) by 14 px.
+        let c = recentred_along_axis(&Point2::new(100.0, 50.0), &d, &[90.0, 40.0, 40.0, 40.0]);
+        assert!((c - Point2::new(108.4, 61.2)).norm() < 1e-9, "{c}");
+        // Off-axis displacement of the box is ignored: the axis line is kept.
+        let c = recentred_along_axis(&Point2::new(100.0, 50.0), &d, &[72.0, 36.0, 40.0, 40.0]);
+        assert!((c - Point2::new(100.0, 50.0)).norm() < 1e-9, "{c}");
+        // Degenerate boxes leave the centre alone.
+        assert_eq!(recentred_along_axis(&Point2::new(1.0, 2.0), &d, &[0.0, 0.0, 0.0, 5.0]), Point2::new(1.0, 2.0));
+        assert_eq!(recentred_along_axis(&Point2::new(1.0, 2.0), &d, &[f64::NAN, 0.0, 4.0, 5.0]), Point2::new(1.0, 2.0));
+    }
+
+    #[test]
     fn perturbation_has_the_requested_size_and_is_reproducible() {
         let st = AxisState { c: Vector3::new(0.1, 0.2, 1.5), a: Vector3::new(1.0, 0.5, -0.2).normalize() };
         for k in 0..20 {
