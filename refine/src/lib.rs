@@ -16,6 +16,7 @@ pub mod error;
 pub mod fit;
 pub mod jacobian;
 pub mod model;
+mod mono;
 pub mod photo;
 pub mod robust;
 pub mod search;
