@@ -217,6 +217,15 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
     Refiner::new(&tube, config).context("building the refiner")
 }
 
+impl RefineArgs {
+    /// Whether the photometric stage moves each end along its own ray (distance and tilt)
+    /// rather than the centre alone: not with `--photo-centre-only`, and not with a ground
+    /// plane, whose tilt prior fixes the tilt better.
+    pub(crate) fn photo_moves_ends(&self, has_ground: bool) -> bool {
+        !self.photo_centre_only && !has_ground
+    }
+}
+
 /// Runs `tubeloc refine`.
 pub fn run(args: RefineArgs) -> Result<()> {
     if args.dataset.is_some() {
@@ -258,7 +267,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
         for p in poses.iter_mut() {
-            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, !args.photo_centre_only && ground.is_none());
+            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()));
         }
     }
     for (i, p) in poses.iter().enumerate() {

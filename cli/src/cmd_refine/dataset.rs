@@ -197,8 +197,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
                 for p in poses.iter_mut() {
-                    // With a ground plane its tilt prior fixes the tilt: only the distance moves.
-                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, !args.photo_centre_only && ground.is_none());
+                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()));
                 }
             }
             bar.inc(1);

@@ -20,7 +20,7 @@
 //!    predicted half-length, width from the mask's extent across the axis.
 
 use super::model::Prediction;
-use super::net::{upsample4_bilinear, HEADS, LENGTH_SCALE, STRIDE};
+use super::net::{bilinear4_at, HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
 
 /// Thresholds of the decoder.
@@ -215,14 +215,6 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
     }
     let fine = pred.fine.as_deref().filter(|_| cfg.fine_mask);
     let grow = fine.is_some() as usize;
-    let coarse_up;
-    let logits: &[f32] = match fine {
-        Some(f) => f,
-        None => {
-            coarse_up = upsample4_bilinear(&out[..n], ow, oh, width, height);
-            &coarse_up
-        }
-    };
     if grow == 1 {
         cell_owner = grown_owner(&cell_owner, &fg, ow, oh);
     }
@@ -257,7 +249,10 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
                 if cell_owner[nc] != gi as u32 {
                     continue;
                 }
-                let val = logits[y * width + x];
+                let val = match fine {
+                    Some(f) => f[y * width + x],
+                    None => bilinear4_at(&out[..n], ow, oh, x, y),
+                };
                 if val > cfg.mask_logit {
                     mask.data[y * width + x] = 1;
                     pix.push((x as f64, y as f64));

@@ -86,19 +86,24 @@ pub struct NetOutput {
 /// to `width x height` pixels, clamped at the borders:
 /// `v(x) = (1 - t) p[⌊u⌋] + t p[⌊u⌋ + 1]` with `u = (x - 1.5) / 4`, `t = u - ⌊u⌋`, per axis.
 pub fn upsample4_bilinear(plane: &[f32], ow: usize, oh: usize, width: usize, height: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(width * height);
+    for y in 0..height {
+        out.extend((0..width).map(|x| bilinear4_at(plane, ow, oh, x, y)));
+    }
+    out
+}
+
+/// One pixel `(x, y)` of [`upsample4_bilinear`] (for reading a few pixels without the plane).
+#[inline]
+pub fn bilinear4_at(plane: &[f32], ow: usize, oh: usize, x: usize, y: usize) -> f32 {
     let taps = |x: usize, n: usize| {
         let u = ((x as f32 - 1.5) / STRIDE as f32).clamp(0.0, (n - 1) as f32);
         let i = u.floor() as usize;
         (i, (i + 1).min(n - 1), u - i as f32)
     };
-    let xt: Vec<(usize, usize, f32)> = (0..width).map(|x| taps(x, ow)).collect();
-    let mut out = Vec::with_capacity(width * height);
-    for y in 0..height {
-        let (v0, v1, fv) = taps(y, oh);
-        let (r0, r1) = (&plane[v0 * ow..][..ow], &plane[v1 * ow..][..ow]);
-        out.extend(xt.iter().map(|&(u0, u1, fu)| (r0[u0] * (1.0 - fu) + r0[u1] * fu) * (1.0 - fv) + (r1[u0] * (1.0 - fu) + r1[u1] * fu) * fv));
-    }
-    out
+    let ((u0, u1, fu), (v0, v1, fv)) = (taps(x, ow), taps(y, oh));
+    let (r0, r1) = (&plane[v0 * ow..][..ow], &plane[v1 * ow..][..ow]);
+    (r0[u0] * (1.0 - fu) + r0[u1] * fu) * (1.0 - fv) + (r1[u0] * (1.0 - fu) + r1[u1] * fu) * fv
 }
 
 /// `(B, C, H, W)` → channels-last `(B, H/2, W/2, 4C)`, channel `(2 dy + dx) C + c`.
