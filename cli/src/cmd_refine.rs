@@ -21,7 +21,10 @@
 //! segmenter's) feed the stereo term, and after the fit the photometric stage
 //! (`tubeloc_refine::photo`, `--photo-range-mm`) moves both ends of each converged axis along
 //! their viewing rays to the best ZNCC of the pair under the cylinder's own disparity field
-//! (SGM is biased on the ~15 px wide convex tubes; this stage is not).
+//! (SGM is biased on the ~15 px wide convex tubes; this stage is not). The SGM depth also
+//! marks scene occlusion (unless `--no-scene-occlusion`): contour points and photometric
+//! pixels whose scene depth lies clearly in front of the cylinder (a rock, a sand mound over
+//! the tube) are left out.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -111,6 +114,12 @@ pub struct RefineArgs {
     /// `--ground` the ground's tilt prior fixes the tilt better and only the centre moves).
     #[arg(long)]
     pub(crate) photo_centre_only: bool,
+    /// Stereo: turn off the scene-occlusion test (on by default: contour points whose SGM
+    /// scene depth lies more than `CylinderModel::occlusion_margin` in front of the cylinder,
+    /// i.e. rocks or sand over the tube, are left out of the edge fit
+    /// (`tubeloc_refine::Scene::depth`), and so are such pixels in the photometric stage).
+    #[arg(long = "no-scene-occlusion", action = clap::ArgAction::SetFalse)]
+    pub(crate) scene_occlusion: bool,
     /// Least ZNCC for the photometric depth to be applied.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) photo_min_zncc: f64,
@@ -154,7 +163,7 @@ pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
 /// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
 /// `--stereo-erode`) or box (see [`stereo`]).
-fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, Vec<Vec<Point3<f64>>>, stereo::Rectified)> {
+fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, stereo::StereoRegions, stereo::Rectified)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
@@ -169,7 +178,8 @@ fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[T
         .collect();
     let per = stereo::points_rectified(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
         .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
-    let pair = stereo::rectified_pair(rect, left, &right)?;
+    let mut pair = stereo::rectified_pair(rect, left, &right)?;
+    pair.disparity = Some(per.disparity.clone());
     Ok((lcam, per, pair))
 }
 
@@ -240,17 +250,17 @@ pub fn run(args: RefineArgs) -> Result<()> {
         dets.retain(|d| d.image_id == id);
     }
     let gray = crate::cmd_stereo::load_gray(image_path)?;
-    let (camera, stereo, pair) = match &args.rig {
+    let (camera, stereo, depth, pair) = match &args.rig {
         Some(rig) => {
             let (c, s, p) = stereo_points(&args, &gray, rig, &dets)?;
-            (c, s, Some(p))
+            (c, s.points, Some(s.depth), Some(p))
         }
         None => {
             if args.right.is_some() {
                 bail!("--right needs --rig (the pair's calibration)");
             }
             let p = args.camera.as_ref().context("--camera is required without --rig")?;
-            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None)
+            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None, None)
         }
     };
     if gray.width != camera.width as usize || gray.height != camera.height as usize {
@@ -260,14 +270,14 @@ pub fn run(args: RefineArgs) -> Result<()> {
     let bar = indicatif::ProgressBar::new(dets.len() as u64);
     let mut poses = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
-        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: None, stereo_points: &stereo[i], ground: None, mask: None } };
+        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None } };
         poses.push(refiner.refine(&input, d));
         bar.inc(1);
     }
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
         for p in poses.iter_mut() {
-            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()));
+            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion);
         }
     }
     for (i, p) in poses.iter().enumerate() {

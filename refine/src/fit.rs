@@ -134,7 +134,7 @@ fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vect
             let (ix, iy) = (u.x.round(), u.y.round());
             if ix >= 0.0 && iy >= 0.0 && (ix as usize) < depth.width && (iy as usize) < depth.height {
                 let z = depth.get(ix as usize, iy as usize) as f64;
-                if z.is_finite() && z > 0.0 && z < x.z - 0.004 - 0.5 * model.max_radius() {
+                if z.is_finite() && z > 0.0 && z < x.z - model.occlusion_margin() {
                     return false;
                 }
             }

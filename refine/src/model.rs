@@ -66,6 +66,13 @@ impl CylinderModel {
         self.sections.iter().map(|s| s.r).fold(0.0, f64::max)
     }
 
+    /// Scene occlusion margin, metres: a scene depth (stereo) more than this in front of a
+    /// point of the tube's surface hides it (`4 mm + r_max / 2`: stereo noise plus the
+    /// surface's own depth change within a pixel of a limb).
+    pub fn occlusion_margin(&self) -> f64 {
+        0.004 + 0.5 * self.max_radius()
+    }
+
     /// Radius of the longest section (the body), metres.
     pub fn body_radius(&self) -> f64 {
         self.sections.iter().max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0))).map(|s| s.r).unwrap_or(0.0)

@@ -69,7 +69,25 @@ fn front_depth(model: &CylinderModel, st: &AxisState, r: &Vector3<f64>) -> Optio
 /// `f · B` in pixel metres. `None` when fewer than 30 pixels are covered or the correlation is
 /// undefined (flat images).
 pub fn photometric_depth(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoDepth> {
-    let px = covered_pixels(model, camera, left, st)?;
+    photometric_depth_visible(model, camera, left, right, fb, st, range_m, None)
+}
+
+/// Scene occluders for the photometric stage: a disparity map of the rectified left image
+/// (pixels; NaN or ≤ 0 where unknown, e.g. SGM). A covered pixel whose scene depth
+/// `f B / d(u)` lies more than `margin_m` in front of the cylinder's front depth `Z(u)` shows
+/// an occluder (rock, sand), not the tube, and is left out of the correlation.
+#[derive(Clone, Copy, Debug)]
+pub struct Occluders<'a> {
+    /// Disparity of the rectified left image, pixels.
+    pub disparity: &'a Plane<f32>,
+    /// Least depth in front of the tube's surface for a pixel to count as occluded, metres.
+    pub margin_m: f64,
+}
+
+/// [`photometric_depth`] leaving out the pixels hidden by `occluders`.
+#[allow(clippy::too_many_arguments)]
+pub fn photometric_depth_visible(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64, occluders: Option<&Occluders>) -> Option<PhotoDepth> {
+    let px = covered_pixels(model, camera, left, st, fb, occluders)?;
     let w = left.width as f64;
     let dist = st.c.norm();
     // ZNCC for a centre shift `s_m` along the ray (scale (dist + s_m) / dist).
@@ -121,6 +139,12 @@ pub struct PhotoEnds {
 /// state is recomputed per hypothesis; a grid of 2 mm over `±range_m`, then 0.25 mm over
 /// ±2 mm and 0.05 mm over ±0.25 mm around the best.
 pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoEnds> {
+    photometric_ends_visible(model, camera, left, right, fb, st, range_m, None)
+}
+
+/// [`photometric_ends`] leaving out the pixels hidden by `occluders`.
+#[allow(clippy::too_many_arguments)]
+pub fn photometric_ends_visible(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64, occluders: Option<&Occluders>) -> Option<PhotoEnds> {
     let half = 0.5 * model.length;
     let (pm, pp) = (st.c - st.a * half, st.c + st.a * half);
     let (rm, rp) = (pm.normalize(), pp.normalize());
@@ -129,7 +153,7 @@ pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plan
         let a = qp - qm;
         (a.norm() > 1e-6 && qm.z > 0.0 && qp.z > 0.0).then(|| AxisState { c: 0.5 * (qm + qp), a: a.normalize() })
     };
-    let pix = covered_pixels(model, camera, left, st)?;
+    let pix = covered_pixels(model, camera, left, st, fb, occluders)?;
     let w = left.width as f64;
     let mut pairs = Vec::with_capacity(pix.len());
     let mut score = |dm: f64, dp: f64| -> Option<f64> {
@@ -168,9 +192,9 @@ pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plan
     Some(PhotoEnds { state: state_of(dm, dp)?, shifts_m: (dm, dp), zncc: v, pixels: pix.len() })
 }
 
-/// Pixels covered by the tube's lateral surface at `st`, each `(x, y, left intensity, front
-/// depth)`; `None` when fewer than 30.
-fn covered_pixels(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, st: &AxisState) -> Option<Vec<(f32, f32, f32, f64)>> {
+/// Pixels covered by the tube's lateral surface at `st` and not hidden by `occluders`, each
+/// `(x, y, left intensity, front depth)`; `None` when fewer than 30.
+fn covered_pixels(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, st: &AxisState, fb: f64, occluders: Option<&Occluders>) -> Option<Vec<(f32, f32, f32, f64)>> {
     let half = 0.5 * model.length;
     let rmax = model.max_radius();
     let f = st.frame()?;
@@ -193,7 +217,13 @@ fn covered_pixels(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>
         for x in xa as usize..=xb as usize {
             let r = Vector3::new((x as f64 - camera.cx) / camera.fx, (y as f64 - camera.cy) / camera.fy, 1.0);
             if let Some(z) = front_depth(model, st, &r) {
-                px.push((x as f32, y as f32, left.get(x, y), z));
+                let hidden = occluders.is_some_and(|o| {
+                    let d = if x < o.disparity.width && y < o.disparity.height { o.disparity.get(x, y) as f64 } else { f64::NAN };
+                    d.is_finite() && d > 0.0 && fb / d < z - o.margin_m
+                });
+                if !hidden {
+                    px.push((x as f32, y as f32, left.get(x, y), z));
+                }
             }
         }
     }

@@ -6,7 +6,7 @@ use common::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tubeloc_core::tube_pose::axis_angle;
-use tubeloc_refine::photo::{photometric_depth, photometric_ends, shifted};
+use tubeloc_refine::photo::{photometric_depth, photometric_ends, photometric_ends_visible, shifted, Occluders};
 use tubeloc_refine::AxisState;
 
 const BASELINE: f64 = 0.06;
@@ -76,5 +76,46 @@ fn photometric_ends_recover_distance_and_tilt() {
         // Each end's depth within ~0.05 px of disparity (1.2 mm at 2.2 m, f B ≈ 206 px m): the
         // centre within 1.5 mm, the axis within atan(2 · 1.2 / 150) ≈ 0.9 degrees; allow 1.
         assert!(ce < 1.5e-3 && ae < 1.0, "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3})", ce * 1e3, pe.zncc);
+    }
+}
+
+#[test]
+fn photometric_ends_leave_out_pixels_hidden_by_a_rock() {
+    let model = default_model();
+    let cam = tubeloc_core::CameraModel::from_hfov(5472, 3648, 77.0).cropped(2480, 1680, 512, 288);
+    let mut checked = 0;
+    let mut seed = 300;
+    while checked < 2 {
+        seed += 1;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (t, up, gd) = random_truth(&mut rng, &model, &cam, (1.6, 2.2));
+        let (c, a) = (t.centre, t.axis);
+        let p0 = cam.project(&nalgebra::Point3::from(c - a * 0.05)).unwrap();
+        let p1 = cam.project(&nalgebra::Point3::from(c + a * 0.05)).unwrap();
+        let d = p1 - p0;
+        if d.y.abs() < d.norm() * 30f64.to_radians().sin() {
+            continue;
+        }
+        // A rock 60 mm in front of the seal end's outer third, hiding about a quarter of the tube.
+        let half = 0.5 * model.length;
+        let end = c + a * (0.8 * half);
+        let rock = (end - end.normalize() * 0.06, 0.03);
+        let l = render(&model, &cam, t, up, gd, Some(rock), seed, 0.01);
+        let r = render_right_rock(&model, &cam, t, up, gd, rock, seed, 0.01, BASELINE);
+        let fb = cam.fx * BASELINE;
+        // Scene disparity of the left image (exact here; SGM in the CLI).
+        let disparity = tubeloc_core::Plane::from_vec(l.depth.width, l.depth.height, l.depth.data.iter().map(|&z| if z.is_finite() && z > 0.0 { (fb / z as f64) as f32 } else { f32::NAN }).collect());
+        let occ = Occluders { disparity: &disparity, margin_m: model.occlusion_margin() };
+        let truth = AxisState { c, a };
+        let (pm, pp) = (c - a * half, c + a * half);
+        let (qm, qp) = (pm + pm.normalize() * 0.008, pp - pp.normalize() * 0.006);
+        let start = AxisState { c: 0.5 * (qm + qp), a: (qp - qm).normalize() };
+        let pe = photometric_ends_visible(&model, &cam, &l.image, &r.image, fb, &start, 0.03, Some(&occ)).expect("an answer");
+        let all = photometric_ends(&model, &cam, &l.image, &r.image, fb, &start, 0.03).expect("an answer");
+        assert!(pe.pixels < all.pixels * 9 / 10, "seed {seed}: the rock hides {} of {} pixels", all.pixels - pe.pixels, all.pixels);
+        let (ce, ae) = ((pe.state.c - truth.c).norm(), axis_angle(&pe.state.a, &truth.a).to_degrees());
+        assert!(ce < 2.0e-3 && ae < 1.5, "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3}); all pixels: {:.2} mm, {:.2} deg", ce * 1e3, pe.zncc, (all.state.c - truth.c).norm() * 1e3, axis_angle(&all.state.a, &truth.a).to_degrees());
+        eprintln!("seed {seed}: visible pixels {:.2} mm {ae:.2} deg; all pixels {:.2} mm {:.2} deg", ce * 1e3, (all.state.c - truth.c).norm() * 1e3, axis_angle(&all.state.a, &truth.a).to_degrees());
+        checked += 1;
     }
 }

@@ -6,7 +6,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use nalgebra::Point3;
 use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seed::perturbed;
 use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
@@ -38,7 +37,7 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
 /// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
 /// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
 /// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
-fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(Vec<Vec<Point3<f64>>>, super::stereo::Rectified)> {
+fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(super::stereo::StereoRegions, super::stereo::Rectified)> {
     let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
     let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
@@ -139,17 +138,24 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
             }
             let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
-            let (stereo_pts, pair) = if args.stereo {
-                let (p, r) = stereo_of(args, dir, im, &camera, &gray, items)?;
-                (p, Some(r))
+            let (stereo_pts, depth, pair) = if args.stereo {
+                let (s, r) = stereo_of(args, dir, im, &camera, &gray, items)?;
+                (s.points, Some(s.depth), Some(r))
             } else {
-                (vec![Vec::new(); items.len()], None)
+                (vec![Vec::new(); items.len()], None, None)
             };
+            let depth = depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera));
             // Diagnostics: TUBELOC_DEBUG_STEREO_DIR=D writes each image's stereo points (left
-            // camera frame, metres, one list per work item) to D/<image id>.json.
+            // camera frame, metres, one list per work item) to D/<image id>.json and, with
+            // the scene-occlusion test on, its scene depth map to D/<image id>_depth_f32.bin.
             if let Ok(dbg) = std::env::var("TUBELOC_DEBUG_STEREO_DIR") {
                 let pts: Vec<Vec<[f64; 3]>> = stereo_pts.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
                 files::write_json(&std::path::Path::new(&dbg).join(format!("{}.json", im.id)), &pts)?;
+                if let Some((d, _)) = depth {
+                    // The scene depth map as raw little-endian f32 (width x height, NaN unknown).
+                    let bytes: Vec<u8> = d.data.iter().flat_map(|v| v.to_le_bytes()).collect();
+                    files::write_atomic(&std::path::Path::new(&dbg).join(format!("{}_depth_f32.bin", im.id)), &bytes)?;
+                }
             }
             let masks: Vec<Option<tubeloc_core::BinaryMask>> = if args.mask_term {
                 let (h, w) = (camera.height, camera.width);
@@ -178,7 +184,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                             }
                         }
                         let d = &d;
-                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine(&input, d));
                         if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &stereo_pts[k]) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
@@ -187,7 +193,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                         }
                     }
                     Work::GtSeed(st, _, _) => {
-                        let input = RefineInput { scene: Scene { stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
                             seeds.push(p);
@@ -197,7 +203,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
                 for p in poses.iter_mut() {
-                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()));
+                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion);
                 }
             }
             bar.inc(1);

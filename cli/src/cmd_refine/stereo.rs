@@ -50,17 +50,52 @@ pub(crate) fn erode(m: &BinaryMask, r: usize) -> BinaryMask {
 /// foreground).
 /// Also returns the rectification and the rectified pair (for [`photo_refine`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<(Vec<Vec<Point3<f64>>>, Rectified)> {
+pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, Rectified)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
-    let pts = points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)?;
-    Ok((pts, rectified_pair(rect, left, right)?))
+    let sr = points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)?;
+    let mut pair = rectified_pair(rect, left, right)?;
+    pair.disparity = Some(sr.disparity.clone());
+    Ok((sr, pair))
+}
+
+/// What SGM gives the refiner: the points of each region (left camera frame, metres), the
+/// scene depth map of the left image and the rectified disparity map.
+pub(crate) struct StereoRegions {
+    /// Points per region (left camera frame, metres).
+    pub points: Vec<Vec<Point3<f64>>>,
+    /// Depth `Z` (metres, left camera frame) per left-image pixel where SGM matched (NaN
+    /// elsewhere): every triangulated point splatted onto its nearest left pixel, the nearest
+    /// point kept. The refiner's scene-occlusion test ([`tubeloc_refine::Scene::depth`]).
+    pub depth: Plane<f32>,
+    /// Disparity of the rectified left image (NaN where not matched), pixels.
+    pub disparity: Plane<f32>,
+}
+
+/// Splats points (left camera frame) into a depth map of the left image (nearest pixel, the
+/// nearest point wins; NaN where none falls).
+fn depth_map(lcam: &CameraModel, pts: &[tubeloc_stereo::StereoPoint]) -> Plane<f32> {
+    let (w, h) = (lcam.width as usize, lcam.height as usize);
+    let mut depth = Plane::filled(w, h, f32::NAN);
+    for p in pts {
+        let Some(u) = lcam.project(&p.point) else { continue };
+        let (x, y) = (u.x.round(), u.y.round());
+        if x < 0.0 || y < 0.0 || x >= w as f64 || y >= h as f64 {
+            continue;
+        }
+        let z = p.point.z as f32;
+        let cur = &mut depth.data[y as usize * w + x as usize];
+        if !(cur.is_finite() && *cur <= z) {
+            *cur = z;
+        }
+    }
+    depth
 }
 
 /// The rectified pair of `left`/`right` (intensities in [0, 1]) under `rect`.
 pub(crate) fn rectified_pair(rect: StereoRectification, left: &Plane<u8>, right: &Plane<u8>) -> Result<Rectified> {
     let (rl, rr) = rect.rectify_pair(left, right)?;
     let f = |p: &Plane<u8>| Plane::from_vec(p.width, p.height, p.data.iter().map(|&v| v as f32 / 255.0).collect());
-    Ok(Rectified { left: f(&rl), right: f(&rr), rect })
+    Ok(Rectified { left: f(&rl), right: f(&rr), rect, disparity: None })
 }
 
 /// A rectified pair (intensities in [0, 1]) with its rectification.
@@ -71,6 +106,9 @@ pub(crate) struct Rectified {
     pub right: Plane<f32>,
     /// The rectification.
     pub rect: StereoRectification,
+    /// SGM disparity of the rectified left image (NaN where not matched), for the photometric
+    /// stage's occlusion test.
+    pub disparity: Option<Plane<f32>>,
 }
 
 /// Moves a converged pose along its centre's viewing ray to the photometric depth of
@@ -78,7 +116,7 @@ pub(crate) struct Rectified {
 /// own ray ([`tubeloc_refine::photo::photometric_ends`]: distance and tilt); returns the
 /// centre's change of distance (metres), `None` (pose unchanged) when the search gave no
 /// answer, a correlation below `min_zncc` or a shift at the edge of the range.
-pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool) -> Option<f64> {
+pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool, occlusion: bool) -> Option<f64> {
     if !pose.converged {
         return None;
     }
@@ -86,14 +124,19 @@ pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair:
     let st = AxisState { c: r1 * pose.centre, a: r1 * pose.end_direction };
     let g = pair.rect.geometry();
     let fb = g.f * g.baseline;
+    let occ = pair.disparity.as_ref().filter(|_| occlusion).map(|d| tubeloc_refine::photo::Occluders { disparity: d, margin_m: model.occlusion_margin() });
     let moved = if ends {
-        let pe = tubeloc_refine::photo::photometric_ends(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m)?;
+        let pe = tubeloc_refine::photo::photometric_ends_visible(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())?;
+        // Diagnostics: TUBELOC_DEBUG_PHOTO=1 prints each photometric result.
+        if std::env::var_os("TUBELOC_DEBUG_PHOTO").is_some() {
+            eprintln!("photo image {} centre {:.4} {:.4} {:.4}: shifts {:.2} {:.2} mm zncc {:.3} pixels {}", pose.image_id, pose.centre.x, pose.centre.y, pose.centre.z, pe.shifts_m.0 * 1e3, pe.shifts_m.1 * 1e3, pe.zncc, pe.pixels);
+        }
         if pe.zncc < min_zncc || pe.shifts_m.0.abs() >= range_m || pe.shifts_m.1.abs() >= range_m {
             return None;
         }
         pe.state
     } else {
-        let pd = tubeloc_refine::photo::photometric_depth(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m)?;
+        let pd = tubeloc_refine::photo::photometric_depth_visible(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())?;
         if pd.zncc < min_zncc || pd.shift_m.abs() >= range_m {
             return None;
         }
@@ -112,9 +155,14 @@ pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair:
 }
 
 /// [`points_per_region`] with a rectification already made.
-pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<Vec<Vec<Point3<f64>>>> {
+pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[Region], num_disparities: usize, erode_px: usize) -> Result<StereoRegions> {
+    let empty = |n: usize| StereoRegions {
+        points: vec![Vec::new(); n],
+        depth: Plane::filled(lcam.width as usize, lcam.height as usize, f32::NAN),
+        disparity: Plane::filled(rect.rectified.width as usize, rect.rectified.height as usize, f32::NAN),
+    };
     if regions.is_empty() {
-        return Ok(Vec::new());
+        return Ok(empty(0));
     }
     let (rl, rr) = rect.rectify_pair(left, right)?;
     // Regions: each box mapped into rectified left pixels through its corners.
@@ -132,7 +180,7 @@ pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, l
         }
     }
     if rois.is_empty() {
-        return Ok(vec![Vec::new(); regions.len()]);
+        return Ok(empty(regions.len()));
     }
     let geom = rect.geometry();
     let fb = geom.f * geom.baseline;
@@ -141,8 +189,9 @@ pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, l
     let params = SgmParams { num_disparities, min_disparity, ..SgmParams::default() };
     let disp = disparity_regions(&rl, &rr, &params, &rois, 32).context("matching the regions")?;
     let pts = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25));
+    let depth = depth_map(lcam, &pts);
     let masks: Vec<Option<BinaryMask>> = regions.iter().map(|r| r.mask.as_ref().map(|m| erode(m, erode_px))).collect();
-    Ok(regions
+    let points = regions
         .iter()
         .zip(&masks)
         .map(|(d, m)| {
@@ -158,5 +207,6 @@ pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, l
                 })
                 .collect()
         })
-        .collect())
+        .collect();
+    Ok(StereoRegions { points, depth, disparity: disp })
 }

@@ -155,6 +155,14 @@ pub fn render_right(model: &CylinderModel, camera: &CameraModel, truth: Truth, u
     render_at(model, camera, tr, up, ground_d - up.dot(&t), None, seed, noise, t)
 }
 
+/// [`render_right`] with an occluding sphere `rock` (centre, radius; left camera frame).
+#[allow(clippy::too_many_arguments, dead_code)]
+pub fn render_right_rock(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: (Vector3<f64>, f64), seed: u64, noise: f64, baseline: f64) -> Scene {
+    let t = Vector3::new(baseline, 0.0, 0.0);
+    let tr = Truth { centre: truth.centre - t, axis: truth.axis };
+    render_at(model, camera, tr, up, ground_d - up.dot(&t), Some((rock.0 - t, rock.1)), seed, noise, t)
+}
+
 #[allow(clippy::too_many_arguments)]
 fn render_at(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: Option<(Vector3<f64>, f64)>, seed: u64, noise: f64, texture_offset: Vector3<f64>) -> Scene {
     let (w, h) = (camera.width as usize, camera.height as usize);
