@@ -195,8 +195,14 @@ pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, l
         .iter()
         .zip(&masks)
         .map(|(d, m)| {
+            // Rectified left columns whose match (at about the seed's disparity) lies left of the
+            // right image cannot be matched: SGM picks a wrong, smaller disparity there.
+            let min_x = d.seed_z.filter(|z| z.is_finite() && *z > 0.0).map_or(f64::NEG_INFINITY, |z| 1.05 * fb / z + 2.0);
             pts.iter()
                 .filter_map(|p| {
+                    if (p.pixel[0] as f64) < min_x {
+                        return None;
+                    }
                     let u = lcam.project(&p.point)?;
                     let [x, y, w, h] = d.bbox;
                     let inside = match m {
