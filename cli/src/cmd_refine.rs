@@ -24,7 +24,8 @@
 //! (SGM is biased on the ~15 px wide convex tubes; this stage is not). The SGM depth also
 //! marks scene occlusion (unless `--no-scene-occlusion`): contour points and photometric
 //! pixels whose scene depth lies clearly in front of the cylinder (a rock, a sand mound over
-//! the tube) are left out.
+//! the tube) are left out. Last, the axis direction is re-fitted to the rims (end outlines,
+//! section boundaries) in both views about the photometric centre (`--rim-max-epipolar-deg`).
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -120,6 +121,13 @@ pub struct RefineArgs {
     /// (`tubeloc_refine::Scene::depth`), and so are such pixels in the photometric stage).
     #[arg(long = "no-scene-occlusion", action = clap::ArgAction::SetFalse)]
     pub(crate) scene_occlusion: bool,
+    /// Stereo: after the photometric stage, take the axis direction from the rims (end
+    /// outlines) fitted in both views (`tubeloc_refine::rims`), about the photometric centre,
+    /// for axes whose image direction lies within this angle of the epipolar lines, degrees
+    /// (90: all, the default; 0: never). The photometric search barely sees the tilt of a tube
+    /// along the rows; the rims cross them.
+    #[arg(long, default_value_t = 90.0)]
+    pub(crate) rim_max_epipolar_deg: f64,
     /// Least ZNCC for the photometric depth to be applied.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) photo_min_zncc: f64,
@@ -277,7 +285,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
         for p in poses.iter_mut() {
-            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion);
+            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion, args.rim_max_epipolar_deg);
         }
     }
     for (i, p) in poses.iter().enumerate() {

@@ -18,6 +18,7 @@ pub mod jacobian;
 pub mod model;
 mod mono;
 pub mod photo;
+pub mod rims;
 pub mod robust;
 pub mod search;
 pub mod seed;

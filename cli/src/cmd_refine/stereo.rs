@@ -116,7 +116,8 @@ pub(crate) struct Rectified {
 /// own ray ([`tubeloc_refine::photo::photometric_ends`]: distance and tilt); returns the
 /// centre's change of distance (metres), `None` (pose unchanged) when the search gave no
 /// answer, a correlation below `min_zncc` or a shift at the edge of the range.
-pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool, occlusion: bool) -> Option<f64> {
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool, occlusion: bool, rim_max_epipolar_deg: f64) -> Option<f64> {
     if !pose.converged {
         return None;
     }
@@ -125,22 +126,33 @@ pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair:
     let g = pair.rect.geometry();
     let fb = g.f * g.baseline;
     let occ = pair.disparity.as_ref().filter(|_| occlusion).map(|d| tubeloc_refine::photo::Occluders { disparity: d, margin_m: model.occlusion_margin() });
-    let moved = if ends {
-        let pe = tubeloc_refine::photo::photometric_ends_visible(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())?;
-        // Diagnostics: TUBELOC_DEBUG_PHOTO=1 prints each photometric result.
-        if std::env::var_os("TUBELOC_DEBUG_PHOTO").is_some() {
-            eprintln!("photo image {} centre {:.4} {:.4} {:.4}: shifts {:.2} {:.2} mm zncc {:.3} pixels {}", pose.image_id, pose.centre.x, pose.centre.y, pose.centre.z, pe.shifts_m.0 * 1e3, pe.shifts_m.1 * 1e3, pe.zncc, pe.pixels);
-        }
-        if pe.zncc < min_zncc || pe.shifts_m.0.abs() >= range_m || pe.shifts_m.1.abs() >= range_m {
-            return None;
-        }
-        pe.state
+    let debug = std::env::var_os("TUBELOC_DEBUG_PHOTO").is_some();
+    let photo = if ends {
+        tubeloc_refine::photo::photometric_ends_visible(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref()).and_then(|pe| {
+            // Diagnostics: TUBELOC_DEBUG_PHOTO=1 prints each photometric result.
+            if debug {
+                eprintln!("photo image {} centre {:.4} {:.4} {:.4}: shifts {:.2} {:.2} mm zncc {:.3} pixels {}", pose.image_id, pose.centre.x, pose.centre.y, pose.centre.z, pe.shifts_m.0 * 1e3, pe.shifts_m.1 * 1e3, pe.zncc, pe.pixels);
+            }
+            (pe.zncc >= min_zncc && pe.shifts_m.0.abs() < range_m && pe.shifts_m.1.abs() < range_m).then_some(pe.state)
+        })
     } else {
-        let pd = tubeloc_refine::photo::photometric_depth_visible(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())?;
-        if pd.zncc < min_zncc || pd.shift_m.abs() >= range_m {
-            return None;
-        }
-        tubeloc_refine::photo::shifted(&st, pd.shift_m)
+        tubeloc_refine::photo::photometric_depth_visible(model, &pair.rect.rectified, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())
+            .and_then(|pd| (pd.zncc >= min_zncc && pd.shift_m.abs() < range_m).then(|| tubeloc_refine::photo::shifted(&st, pd.shift_m)))
+    };
+    // The axis direction from the rims in both views (`tubeloc_refine::rims`) about the
+    // photometric centre (whose distance, from all covered pixels, is better than the rims'),
+    // for axes within `rim_max_epipolar_deg` of the rows.
+    let base = photo.unwrap_or(st);
+    let dir = nalgebra::Vector2::new(base.a.x - base.a.z * base.c.x / base.c.z, base.a.y - base.a.z * base.c.y / base.c.z);
+    let psi = dir.y.abs().atan2(dir.x.abs()).to_degrees();
+    let rims = if psi < rim_max_epipolar_deg { tubeloc_refine::rims::rim_ends(model, &pair.rect.rectified, &pair.left, &pair.right, g.baseline, &base, range_m, 6) } else { None };
+    if let (true, Some(r)) = (debug, &rims) {
+        eprintln!("rims image {} psi {psi:.1}: shifts {:.2} {:.2} {:.2} mm samples {:?} rms {:.2}", pose.image_id, r.shifts_m.0 * 1e3, r.shifts_m.1 * 1e3, r.shifts_m.2 * 1e3, r.samples, r.rms_px);
+    }
+    let moved = match (photo, rims) {
+        (_, Some(r)) => AxisState { c: base.c, a: r.state.a },
+        (Some(p), None) => p,
+        (None, None) => return None,
     };
     let shift = moved.c.norm() - st.c.norm();
     let (c, a) = (r1.transpose() * moved.c, r1.transpose() * moved.a);
