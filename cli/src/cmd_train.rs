@@ -73,6 +73,10 @@ pub struct TrainArgs {
     /// Crop side, pixels (multiple of 32).
     #[arg(long, default_value_t = 256)]
     pub crop: usize,
+    /// Keep training crops upright (no 90-degree turns; left-right mirror only), so that the
+    /// network can learn that a tube's contact shadow lies on its far (image-up) side.
+    #[arg(long)]
+    pub upright: bool,
     /// Peak learning rate.
     #[arg(long, default_value_t = 2e-3)]
     pub lr: f64,
@@ -166,7 +170,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lr: args.lr,
         total_steps: total,
         seed: args.seed,
-        augment: AugmentConfig { crop: args.crop, ..Default::default() },
+        augment: AugmentConfig { crop: args.crop, upright: args.upright, ..Default::default() },
         ..Default::default()
     };
     let mut trainer = match &args.resume {

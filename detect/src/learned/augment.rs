@@ -1,5 +1,5 @@
-//! Training images and augmentation: random crops with flips, rotations by 90° plus a small
-//! angle, brightness/contrast and Gaussian noise.
+//! Training images and augmentation: random crops with flips, rotations by 90° (unless
+//! [`AugmentConfig::upright`]) plus a small angle, brightness/contrast and Gaussian noise.
 //!
 //! A crop of size `S` around centre `c` with angle `θ` and optional mirror samples the source
 //! at `c + R(θ) · (±(x - S/2 + ½), y - S/2 + ½)` for output pixel `(x, y)`: bilinear for the
@@ -61,11 +61,15 @@ pub struct AugmentConfig {
     pub offset: f32,
     /// Maximum Gaussian noise sigma, normalized units.
     pub noise: f32,
+    /// Keep crops upright: no turns by multiples of 90° (the mirror stays left-right). In
+    /// rover images the image's up is the scene's far side, where a tube's contact shadow
+    /// shows; turned crops hide that cue from the network.
+    pub upright: bool,
 }
 
 impl Default for AugmentConfig {
     fn default() -> Self {
-        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15 }
+        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false }
     }
 }
 
@@ -82,7 +86,9 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
     };
     cx = cx.clamp(0.0, w as f64 - 1.0);
     cy = cy.clamp(0.0, h as f64 - 1.0);
-    let theta = rng.random_range(0..4) as f64 * std::f64::consts::FRAC_PI_2 + rng.random_range(-cfg.max_angle_deg..=cfg.max_angle_deg).to_radians();
+    let quarter = rng.random_range(0..4);
+    let quarter = if cfg.upright { 0 } else { quarter };
+    let theta = quarter as f64 * std::f64::consts::FRAC_PI_2 + rng.random_range(-cfg.max_angle_deg..=cfg.max_angle_deg).to_radians();
     let mirror = if rng.random_bool(0.5) { -1.0 } else { 1.0 };
     let (c, sn) = (theta.cos() as f32, theta.sin() as f32);
     let ch = img.channels();
@@ -120,4 +126,36 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
         *v = *v * gain + offset + if sigma > 0.0 { normal.sample(rng) } else { 0.0 };
     }
     (input, labels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// Fraction of 200 crops whose top row is brighter than their bottom row, on an image whose
+    /// value grows downward (value = row index).
+    fn upside_down_fraction(upright: bool) -> f64 {
+        let (w, h) = (200, 200);
+        let input: Vec<f32> = (0..w * h).map(|i| (i / w) as f32).collect();
+        let img = TrainImage::new(w, h, input, &[]);
+        let cfg = AugmentConfig { crop: 64, noise: 0.0, gain: 0.0, offset: 0.0, upright, ..Default::default() };
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let flipped = (0..200)
+            .filter(|_| {
+                let (crop, _) = sample_crop(&img, &cfg, &mut rng);
+                crop[..64].iter().sum::<f32>() > crop[63 * 64..].iter().sum::<f32>()
+            })
+            .count();
+        flipped as f64 / 200.0
+    }
+
+    #[test]
+    fn upright_crops_keep_the_image_up_and_turned_crops_do_not() {
+        assert_eq!(upside_down_fraction(true), 0.0);
+        // Turns by 0, 90, 180, 270 degrees: all 180-degree crops and about half of the
+        // quarter-turned ones (whose rows are source columns) end upside down, ~1/2 in all.
+        let f = upside_down_fraction(false);
+        assert!((0.35..0.65).contains(&f), "{f}");
+    }
 }

@@ -51,11 +51,37 @@ pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) 
     Ok(decode(&model.predict(&img.input, img.width, img.height)?, cfg))
 }
 
-/// Mask AP at IoU 0.5 over images (all detections pooled, sorted by score, greedy matching to
-/// the unmatched ground truth of highest IoU, precision made monotone and sampled at 101
+/// Mask quality of a model on labelled images (see [`mask_scores`]).
+#[derive(Clone, Debug)]
+pub struct MaskScores {
+    /// Mask AP at IoU 0.50, 0.55, ..., 0.95.
+    pub ap: [f64; 10],
+    /// IoU of each detection matched at IoU 0.5, sorted ascending.
+    pub matched_iou: Vec<f64>,
+    /// Ground-truth tubes with at least one pixel.
+    pub total_gt: usize,
+}
+
+impl MaskScores {
+    /// Mean AP over the ten IoU thresholds (COCO's AP).
+    pub fn ap_mean(&self) -> f64 {
+        self.ap.iter().sum::<f64>() / 10.0
+    }
+
+    /// Median IoU of the detections matched at IoU 0.5 (0 when none).
+    pub fn median_matched_iou(&self) -> f64 {
+        self.matched_iou.get(self.matched_iou.len() / 2).copied().unwrap_or(0.0)
+    }
+}
+
+/// Mask AP over images at the ten COCO IoU thresholds (all detections pooled, sorted by score;
+/// per image and threshold, each detection in score order takes the unmatched ground truth of
+/// highest IoU if that IoU reaches the threshold; precision made monotone and sampled at 101
 /// recall points as COCO does). A quick validation figure; `tubeloc eval` gives the full one.
-pub fn ap50(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<f64, LearnedError> {
-    let per: Vec<(Vec<(f64, bool)>, usize)> = images
+pub fn mask_scores(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<MaskScores, LearnedError> {
+    // Per image: the largest label, the number of tubes present, and per detection its score
+    // and its IoU with every tube present.
+    let per: Vec<(usize, usize, Vec<(f64, Vec<(usize, f64)>)>)> = images
         .iter()
         .map(|img| {
             let dets = detect_image(model, img, cfg)?;
@@ -65,34 +91,52 @@ pub fn ap50(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> 
                 gt_area[l as usize] += 1;
             }
             let present: Vec<usize> = (1..=ngt).filter(|&k| gt_area[k] > 0).collect();
-            let mut used = vec![false; ngt + 1];
-            let mut out = Vec::new();
-            for d in &dets {
-                let mut inter = vec![0usize; ngt + 1];
-                let mut area = 0usize;
-                for (m, &l) in d.mask.data.iter().zip(&img.labels) {
-                    if *m != 0 {
-                        area += 1;
-                        inter[l as usize] += 1;
+            let ious = dets
+                .iter()
+                .map(|d| {
+                    let mut inter = vec![0usize; ngt + 1];
+                    let mut area = 0usize;
+                    for (m, &l) in d.mask.data.iter().zip(&img.labels) {
+                        if *m != 0 {
+                            area += 1;
+                            inter[l as usize] += 1;
+                        }
                     }
-                }
-                let best = present
-                    .iter()
-                    .filter(|&&k| !used[k])
-                    .map(|&k| (k, inter[k] as f64 / (area + gt_area[k] - inter[k]) as f64))
-                    .max_by(|a, b| a.1.total_cmp(&b.1));
-                let tp = matches!(best, Some((_, iou)) if iou >= 0.5);
-                if let (true, Some((k, _))) = (tp, best) {
-                    used[k] = true;
-                }
-                out.push((d.score, tp));
-            }
-            Ok((out, present.len()))
+                    (d.score, present.iter().map(|&k| (k, inter[k] as f64 / (area + gt_area[k] - inter[k]) as f64)).collect())
+                })
+                .collect();
+            Ok((ngt, present.len(), ious))
         })
         .collect::<Result<_, LearnedError>>()?;
-    let total_gt: usize = per.iter().map(|p| p.1).sum();
-    let mut all: Vec<(f64, bool)> = per.into_iter().flat_map(|p| p.0).collect();
-    Ok(average_precision(&mut all, total_gt))
+    let total_gt = per.iter().map(|p| p.1).sum();
+    let mut ap = [0.0; 10];
+    let mut matched_iou = Vec::new();
+    for (t, ap_t) in ap.iter_mut().enumerate() {
+        let thr = 0.5 + 0.05 * t as f64;
+        let mut all = Vec::new();
+        for (ngt, _, ious) in &per {
+            let mut used = vec![false; ngt + 1];
+            for (score, cand) in ious {
+                let best = cand.iter().filter(|(k, _)| !used[*k]).copied().max_by(|a, b| a.1.total_cmp(&b.1));
+                let hit = matches!(best, Some((_, iou)) if iou >= thr);
+                if let (true, Some((k, iou))) = (hit, best) {
+                    used[k] = true;
+                    if t == 0 {
+                        matched_iou.push(iou);
+                    }
+                }
+                all.push((*score, hit));
+            }
+        }
+        *ap_t = average_precision(&mut all, total_gt);
+    }
+    matched_iou.sort_by(f64::total_cmp);
+    Ok(MaskScores { ap, matched_iou, total_gt })
+}
+
+/// Mask AP at IoU 0.5 ([`mask_scores`]).
+pub fn ap50(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<f64, LearnedError> {
+    Ok(mask_scores(model, images, cfg)?.ap[0])
 }
 
 /// COCO-style 101-point interpolated AP of scored hits (`true` = true positive).

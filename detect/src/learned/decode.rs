@@ -40,7 +40,9 @@ pub struct DecodeConfig {
     pub same_axis_cells: f32,
     /// ...when they are within this fraction of its predicted half-length along the axis.
     pub same_tube_fraction: f32,
-    /// Threshold on the upsampled foreground logit for mask pixels (0 = probability 0.5).
+    /// Threshold on the upsampled foreground logit for mask pixels (0 = probability 0.5). The
+    /// default 0.5 (probability 0.62) was chosen on generated validation scenes: it trims the
+    /// masks' one-pixel fringe of background (AP 0.166 -> 0.186 there, AP50 unchanged).
     pub mask_logit: f32,
     /// Use the full-resolution mask logits when the model has them (`false`: the bilinear
     /// stride-4 masks, for comparison).
@@ -49,7 +51,7 @@ pub struct DecodeConfig {
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0, fine_mask: true }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.5, fine_mask: true }
     }
 }
 
