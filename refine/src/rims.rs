@@ -67,6 +67,14 @@ fn view(model: &CylinderModel, camera: &CameraModel, image: &Plane<f32>, st: &Ax
 /// edges or the fit leaves the range.
 #[allow(clippy::too_many_arguments)]
 pub fn rim_ends(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, baseline_m: f64, st: &AxisState, range_m: f64, min_samples: usize) -> Option<RimEnds> {
+    rim_ends_with_prior(model, camera, left, right, baseline_m, st, range_m, min_samples, f64::INFINITY)
+}
+
+/// [`rim_ends`] with a prior on `τ`: standard deviation `tau_sigma_m` (metres) about 0, i.e.
+/// about the input's tilt (e.g. one fitted under a ground plane's tilt prior: `σ_τ ≈ (L/2) σ_θ`);
+/// the rim residuals count with a nominal 0.5 px noise against it.
+#[allow(clippy::too_many_arguments)]
+pub fn rim_ends_with_prior(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, baseline_m: f64, st: &AxisState, range_m: f64, min_samples: usize, tau_sigma_m: f64) -> Option<RimEnds> {
     let views = [view(model, camera, left, st, Vector3::zeros())?, view(model, camera, right, st, Vector3::new(baseline_m, 0.0, 0.0))?];
     let half = 0.5 * model.length;
     let (pm, pp) = (st.c - st.a * half, st.c + st.a * half);
@@ -149,7 +157,13 @@ pub fn rim_ends(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, 
         for k in 0..2 {
             a[(k, k)] += 1e-3 * jtj[(k, k)] + 1e-2;
         }
-        let step = a.lu().solve(&(-jtr))?;
+        let mut g = jtr;
+        if tau_sigma_m.is_finite() && tau_sigma_m > 0.0 {
+            let wp = (0.5 / tau_sigma_m).powi(2);
+            a[(0, 0)] += wp;
+            g[0] += wp * p.x;
+        }
+        let step = a.lu().solve(&(-g))?;
         let step = step.map(|v| v.clamp(-0.005, 0.005));
         p += step;
         if p.x.abs() > range_m || p.y.abs() > range_m {

@@ -203,7 +203,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
                 for p in poses.iter_mut() {
-                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion, args.rim_max_epipolar_deg);
+                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion, args.rim_max_epipolar_deg, ground.is_some().then_some(refiner.config.ground_tilt_sigma_deg));
                 }
             }
             bar.inc(1);

@@ -115,9 +115,14 @@ pub(crate) struct Rectified {
 /// [`tubeloc_refine::photo`] (searched within `±range_m`), or with `ends` each end along its
 /// own ray ([`tubeloc_refine::photo::photometric_ends`]: distance and tilt); returns the
 /// centre's change of distance (metres), `None` (pose unchanged) when the search gave no
-/// answer, a correlation below `min_zncc` or a shift at the edge of the range.
+/// answer, a correlation below `min_zncc` or a shift at the edge of the range. `occlusion`
+/// leaves out pixels hidden by the scene (SGM disparity, [`Rectified::disparity`]). Then, for
+/// axes within `rim_max_epipolar_deg` of the rows, the axis direction is taken from the rims in
+/// both views ([`tubeloc_refine::rims`]) about the photometric centre, with a prior of
+/// `rim_tilt_prior_deg` (degrees) on the tilt change when given (a ground plane's tilt prior);
+/// the rims alone also apply when the photometric search gave no answer.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool, occlusion: bool, rim_max_epipolar_deg: f64) -> Option<f64> {
+pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Rectified, range_m: f64, min_zncc: f64, ends: bool, occlusion: bool, rim_max_epipolar_deg: f64, rim_tilt_prior_deg: Option<f64>) -> Option<f64> {
     if !pose.converged {
         return None;
     }
@@ -145,7 +150,10 @@ pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair:
     let base = photo.unwrap_or(st);
     let dir = nalgebra::Vector2::new(base.a.x - base.a.z * base.c.x / base.c.z, base.a.y - base.a.z * base.c.y / base.c.z);
     let psi = dir.y.abs().atan2(dir.x.abs()).to_degrees();
-    let rims = if psi < rim_max_epipolar_deg { tubeloc_refine::rims::rim_ends(model, &pair.rect.rectified, &pair.left, &pair.right, g.baseline, &base, range_m, 6) } else { None };
+    // With a ground plane, the rims weigh against the tilt fitted under the ground's tilt prior
+    // (`rim_tilt_prior_deg`, its standard deviation: σ_τ = (L/2) σ_θ).
+    let tau_sigma = rim_tilt_prior_deg.map_or(f64::INFINITY, |d| 0.5 * model.length * d.to_radians());
+    let rims = if psi < rim_max_epipolar_deg { tubeloc_refine::rims::rim_ends_with_prior(model, &pair.rect.rectified, &pair.left, &pair.right, g.baseline, &base, range_m, 6, tau_sigma) } else { None };
     if let (true, Some(r)) = (debug, &rims) {
         eprintln!("rims image {} psi {psi:.1}: shifts {:.2} {:.2} {:.2} mm samples {:?} rms {:.2}", pose.image_id, r.shifts_m.0 * 1e3, r.shifts_m.1 * 1e3, r.shifts_m.2 * 1e3, r.samples, r.rms_px);
     }
