@@ -155,7 +155,7 @@ pub(crate) fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair:
     let tau_sigma = rim_tilt_prior_deg.map_or(f64::INFINITY, |d| 0.5 * model.length * d.to_radians());
     let rims = if psi < rim_max_epipolar_deg { tubeloc_refine::rims::rim_ends_with_prior(model, &pair.rect.rectified, &pair.left, &pair.right, g.baseline, &base, range_m, 6, tau_sigma) } else { None };
     if let (true, Some(r)) = (debug, &rims) {
-        eprintln!("rims image {} psi {psi:.1}: shifts {:.2} {:.2} {:.2} mm samples {:?} rms {:.2}", pose.image_id, r.shifts_m.0 * 1e3, r.shifts_m.1 * 1e3, r.shifts_m.2 * 1e3, r.samples, r.rms_px);
+        eprintln!("rims image {} centre {:.4} psi {psi:.1}: shifts {:.2} {:.2} {:.2} mm samples {:?} rms {:.2}", pose.image_id, pose.centre.x, r.shifts_m.0 * 1e3, r.shifts_m.1 * 1e3, r.shifts_m.2 * 1e3, r.samples, r.rms_px);
     }
     let moved = match (photo, rims) {
         (_, Some(r)) => AxisState { c: base.c, a: r.state.a },
