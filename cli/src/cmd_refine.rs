@@ -32,6 +32,7 @@ use clap::Args;
 use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
+use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
 
 mod dataset;
@@ -171,14 +172,14 @@ pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
 /// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
 /// `--stereo-erode`) or box (see [`stereo`]).
-fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, stereo::StereoRegions, stereo::Rectified)> {
+fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, stereo::StereoRegions, RectifiedPair)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
     let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
-    let regions: Vec<stereo::Region> = dets
+    let regions: Vec<StereoRegion> = dets
         .iter()
-        .map(|d| stereo::Region {
+        .map(|d| StereoRegion {
             bbox: d.bbox,
             mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()),
             seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z),
@@ -186,7 +187,7 @@ fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[T
         .collect();
     let per = stereo::points_rectified(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
         .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
-    let mut pair = stereo::rectified_pair(rect, left, &right)?;
+    let mut pair = stereo::rectified_pair(&rect, left, &right)?;
     pair.disparity = Some(per.disparity.clone());
     Ok((lcam, per, pair))
 }
@@ -242,6 +243,19 @@ impl RefineArgs {
     pub(crate) fn photo_moves_ends(&self, has_ground: bool) -> bool {
         !self.photo_centre_only && !has_ground
     }
+
+    /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]); with a ground
+    /// plane the rims' tilt change has the ground tilt prior's deviation.
+    pub(crate) fn photo_stage(&self, has_ground: bool, refiner: &Refiner) -> PhotoStage {
+        PhotoStage {
+            range_m: self.photo_range_mm * 1e-3,
+            min_zncc: self.photo_min_zncc,
+            ends: self.photo_moves_ends(has_ground),
+            occlusion: self.scene_occlusion,
+            rim_max_epipolar_deg: self.rim_max_epipolar_deg,
+            rim_tilt_prior_deg: has_ground.then_some(refiner.config.ground_tilt_sigma_deg),
+        }
+    }
 }
 
 /// Runs `tubeloc refine`.
@@ -284,8 +298,9 @@ pub fn run(args: RefineArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
+        let stage = args.photo_stage(ground.is_some(), &refiner);
         for p in poses.iter_mut() {
-            stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion, args.rim_max_epipolar_deg, ground.is_some().then_some(refiner.config.ground_tilt_sigma_deg));
+            stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
         }
     }
     for (i, p) in poses.iter().enumerate() {

@@ -21,6 +21,7 @@ pub mod photo;
 pub mod rims;
 pub mod robust;
 pub mod search;
+pub mod stereo_stage;
 pub mod seed;
 
 pub use contour::AxisState;

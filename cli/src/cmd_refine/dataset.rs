@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seed::perturbed;
+use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
 use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
 
 /// What to refine in one image: detections, or seeds made from exact poses.
@@ -37,7 +38,7 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
 /// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
 /// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
 /// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
-fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(super::stereo::StereoRegions, super::stereo::Rectified)> {
+fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(super::stereo::StereoRegions, RectifiedPair)> {
     let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
     let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
@@ -45,11 +46,11 @@ fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &
     let rpath = dir.join("right").join(rname);
     let right = crate::cmd_stereo::load_gray(&rpath)?;
     let (h, w) = (camera.height, camera.width);
-    let regions: Vec<super::stereo::Region> = items
+    let regions: Vec<StereoRegion> = items
         .iter()
         .map(|it| match it {
-            Work::Detection(d) => super::stereo::Region { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) },
-            Work::GtSeed(st, bbox, seg) => super::stereo::Region { bbox: *bbox, mask: seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()), seed_z: Some(st.c.z) },
+            Work::Detection(d) => StereoRegion { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) },
+            Work::GtSeed(st, bbox, seg) => StereoRegion { bbox: *bbox, mask: seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()), seed_z: Some(st.c.z) },
         })
         .collect();
     super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode).with_context(|| format!("stereo for {}", rpath.display()))
@@ -202,8 +203,9 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 }
             }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
+                let stage = args.photo_stage(ground.is_some(), &refiner);
                 for p in poses.iter_mut() {
-                    super::stereo::photo_refine(p, &refiner.model, pair, args.photo_range_mm * 1e-3, args.photo_min_zncc, args.photo_moves_ends(ground.is_some()), args.scene_occlusion, args.rim_max_epipolar_deg, ground.is_some().then_some(refiner.config.ground_tilt_sigma_deg));
+                    tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
                 }
             }
             bar.inc(1);
