@@ -47,11 +47,19 @@ pub struct DecodeConfig {
     /// Use the full-resolution mask logits when the model has them (`false`: the bilinear
     /// stride-4 masks, for comparison).
     pub fine_mask: bool,
+    /// Axis completion: pixels inside the instance's predicted axis segment (centre at the peak,
+    /// the predicted length along the network direction, the mask's own width across it) whose
+    /// logit exceeds this value join the mask (`f32::INFINITY` switches it off). It recovers
+    /// the dark upper section of a tube, whose foreground logit is often weak.
+    pub extend_logit: f32,
+    /// Exponent `a` of the length agreement in the score, `score *= (min(Lm, Lp) / max(Lm, Lp))^a`
+    /// with `Lm` the mask's extent along the axis and `Lp` the predicted length (0 = off).
+    pub length_weight: f32,
 }
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.5, fine_mask: true }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.5, fine_mask: true, extend_logit: f32::INFINITY, length_weight: 0.0 }
     }
 }
 
@@ -264,18 +272,12 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
         if pix.len() < cfg.min_area {
             continue;
         }
-        let Some(mut axis) = AxisSeed::from_pixels(pix.iter().copied()) else { continue };
-        let (bx0, by0, bx1, by1) = pix.iter().fold((f64::MAX, f64::MAX, f64::MIN, f64::MIN), |a, &(x, y)| (a.0.min(x), a.1.min(y), a.2.max(x), a.3.max(y)));
-        let bbox = [bx0, by0, bx1 - bx0 + 1.0, by1 - by0 + 1.0];
         // Network direction and length; centre at the peak when there is one.
         let (dx, dy) = direction(cells);
         let dir = if dx.abs() >= dy.abs() && dx < 0.0 || dy.abs() > dx.abs() && dy < 0.0 { (-dx, -dy) } else { (dx, dy) };
-        axis.direction_px = [dir.0 as f64, dir.1 as f64];
         let half = cells.iter().map(|&c| fg[c] * out[4 * n + c]).sum::<f32>() / cells.iter().map(|&c| fg[c]).sum::<f32>().max(1e-6);
-        if half > 0.0 {
-            axis.length_px = (2.0 * half * LENGTH_SCALE) as f64;
-        }
-        if let Some(p) = peak {
+        let pred_len = (half > 0.0).then(|| (2.0 * half * LENGTH_SCALE) as f64);
+        let peak_centre = peak.map(|p| {
             let (px, py) = ((p % ow) as isize, (p / ow) as isize);
             let (mut sw, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
             for dy in -1..=1 {
@@ -289,15 +291,49 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
                     }
                 }
             }
-            axis.centre_px = [(sx / sw * STRIDE as f32 + 1.5) as f64, (sy / sw * STRIDE as f32 + 1.5) as f64];
+            [(sx / sw * STRIDE as f32 + 1.5) as f64, (sy / sw * STRIDE as f32 + 1.5) as f64]
+        });
+        let u = [dir.0 as f64, dir.1 as f64];
+        if let (true, Some(c), Some(len)) = (cfg.extend_logit.is_finite(), peak_centre, pred_len) {
+            let logit = |x: usize, y: usize| match fine {
+                Some(f) => f[y * width + x],
+                None => bilinear4_at(&out[..n], ow, oh, x, y),
+            };
+            let free = |x: usize, y: usize| {
+                let v = ((y as f32 - 1.5) / STRIDE as f32).clamp(0.0, (oh - 1) as f32);
+                let uu = ((x as f32 - 1.5) / STRIDE as f32).clamp(0.0, (ow - 1) as f32);
+                let o = cell_owner[(v.round() as usize).min(oh - 1) * ow + (uu.round() as usize).min(ow - 1)];
+                o == gi as u32 || o == u32::MAX
+            };
+            extend_along_axis(&mut mask, &mut pix, AxisBand { centre: c, dir: u, half_len: 0.5 * len }, cfg.extend_logit, logit, free);
+        }
+        let Some(mut axis) = AxisSeed::from_pixels(pix.iter().copied()) else { continue };
+        let (bx0, by0, bx1, by1) = pix.iter().fold((f64::MAX, f64::MAX, f64::MIN, f64::MIN), |a, &(x, y)| (a.0.min(x), a.1.min(y), a.2.max(x), a.3.max(y)));
+        let bbox = [bx0, by0, bx1 - bx0 + 1.0, by1 - by0 + 1.0];
+        axis.direction_px = u;
+        if let Some(len) = pred_len {
+            axis.length_px = len;
+        }
+        if let Some(c) = peak_centre {
+            axis.centre_px = c;
         }
         let perp = (-axis.direction_px[1], axis.direction_px[0]);
-        let (lo, hi) = pix.iter().fold((f64::MAX, f64::MIN), |a, &(x, y)| {
-            let t = (x - axis.centre_px[0]) * perp.0 + (y - axis.centre_px[1]) * perp.1;
-            (a.0.min(t), a.1.max(t))
+        let (lo, hi, alo, ahi) = pix.iter().fold((f64::MAX, f64::MIN, f64::MAX, f64::MIN), |a, &(x, y)| {
+            let (rx, ry) = (x - axis.centre_px[0], y - axis.centre_px[1]);
+            let t = rx * perp.0 + ry * perp.1;
+            let l = rx * u[0] + ry * u[1];
+            (a.0.min(t), a.1.max(t), a.2.min(l), a.3.max(l))
         });
         axis.width_px = (hi - lo + 1.0).max(1.0);
-        result.push(LearnedInstance { score: score as f64, mask, bbox, axis });
+        let mut score = score as f64;
+        if let (true, Some(lp)) = (cfg.length_weight > 0.0, pred_len) {
+            let lm = ahi - alo + 1.0;
+            score *= (lm.min(lp) / lm.max(lp).max(1e-9)).powf(cfg.length_weight as f64);
+            if score < cfg.min_score as f64 {
+                continue;
+            }
+        }
+        result.push(LearnedInstance { score, mask, bbox, axis });
     }
     result.sort_by(|a, b| b.score.total_cmp(&a.score));
     result
@@ -325,4 +361,49 @@ fn grown_owner(owner: &[u32], fg: &[f32], ow: usize, oh: usize) -> Vec<u32> {
         }
     }
     grown
+}
+
+/// An instance's predicted axis segment, pixels: `centre + t·dir`, `|t| <= half_len`.
+struct AxisBand {
+    centre: [f64; 2],
+    dir: [f64; 2],
+    half_len: f64,
+}
+
+/// Axis completion: the band of `band` whose across-axis span is the mask's own (median
+/// offset ± the 90th percentile of `|across - median|`, pixels); a pixel of the band not yet in
+/// the mask joins it when `free(x, y)` (no other instance owns it) and `logit(x, y) > thr`.
+fn extend_along_axis(mask: &mut Plane<u8>, pix: &mut Vec<(f64, f64)>, band: AxisBand, thr: f32, logit: impl Fn(usize, usize) -> f32, free: impl Fn(usize, usize) -> bool) {
+    let ([cx, cy], [ux, uy]) = (band.centre, band.dir);
+    let mut across: Vec<f64> = pix.iter().map(|&(x, y)| -(x - cx) * uy + (y - cy) * ux).collect();
+    if across.is_empty() {
+        return;
+    }
+    across.sort_by(f64::total_cmp);
+    let med = across[across.len() / 2];
+    let mut dev: Vec<f64> = across.iter().map(|a| (a - med).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    let bw = dev[(dev.len() * 9 / 10).min(dev.len() - 1)];
+    let (w, h) = (mask.width, mask.height);
+    let corners = [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)].map(|(s, t): (f64, f64)| {
+        let (l, a) = (s * band.half_len, med + t * bw);
+        (cx + l * ux - a * uy, cy + l * uy + a * ux)
+    });
+    let x0 = corners.iter().map(|c| c.0).fold(f64::MAX, f64::min).floor().max(0.0) as usize;
+    let y0 = corners.iter().map(|c| c.1).fold(f64::MAX, f64::min).floor().max(0.0) as usize;
+    let x1 = (corners.iter().map(|c| c.0).fold(f64::MIN, f64::max).ceil() + 1.0).clamp(0.0, w as f64) as usize;
+    let y1 = (corners.iter().map(|c| c.1).fold(f64::MIN, f64::max).ceil() + 1.0).clamp(0.0, h as f64) as usize;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let (rx, ry) = (x as f64 - cx, y as f64 - cy);
+            let (l, a) = (rx * ux + ry * uy, -rx * uy + ry * ux);
+            if l.abs() > band.half_len || (a - med).abs() > bw || mask.data[y * w + x] != 0 {
+                continue;
+            }
+            if free(x, y) && logit(x, y) > thr {
+                mask.data[y * w + x] = 1;
+                pix.push((x as f64, y as f64));
+            }
+        }
+    }
 }
