@@ -73,17 +73,54 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
     let preds = imgs.iter().map(|im| model.predict(&im.input, im.width, im.height)).collect::<Result<Vec<_>, _>>()?;
     let d = DecodeConfig::default();
-    let mut variants = vec![
+    let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..d };
+    let variants = vec![
         ("default".to_string(), d),
+        ("session-3 score (peak x fg)".into(), old),
+        ("old score x length^0.5".into(), DecodeConfig { length_weight: 0.5, ..old }),
+        ("mask logit^4 only".into(), DecodeConfig { length_weight: 0.0, fill_weight: 0.0, ..d }),
+        ("mask logit^4 length^0.5".into(), DecodeConfig { fill_weight: 0.0, ..d }),
+        ("mask logit^2".into(), DecodeConfig { mask_logit_weight: 2.0, ..d }),
+        ("length^1".into(), DecodeConfig { length_weight: 1.0, ..d }),
+        ("fill^2".into(), DecodeConfig { fill_weight: 2.0, ..d }),
         ("mask logit 0".into(), DecodeConfig { mask_logit: 0.0, ..d }),
+        ("mask logit 1".into(), DecodeConfig { mask_logit: 1.0, ..d }),
         ("fg 0.4".into(), DecodeConfig { fg_threshold: 0.4, ..d }),
+        ("peak 0.3".into(), DecodeConfig { peak_threshold: 0.3, ..d }),
     ];
-    for e in [-2.0f32, -1.0, 0.0] {
-        variants.push((format!("extend {e}"), DecodeConfig { extend_logit: e, ..d }));
-    }
-    for lw in [0.5f32, 1.0, 2.0] {
-        variants.push((format!("length^{lw}"), DecodeConfig { length_weight: lw, ..d }));
-        variants.push((format!("extend -1 length^{lw}"), DecodeConfig { length_weight: lw, extend_logit: -1.0, ..d }));
+    if let Ok(path) = std::env::var("PROBE_FEATURES") {
+        // Per detection: features of the instance and its best IoU with a tube (for choosing a score).
+        use std::fmt::Write as _;
+        let mut csv = String::from("image,score,area,lm,lp,width,fill,mean_logit,best_iou\n");
+        let cfg = old;
+        for (k, (img, pred)) in imgs.iter().zip(&preds).enumerate() {
+            let ngt = img.labels.iter().copied().max().unwrap_or(0) as usize;
+            let mut gt_area = vec![0usize; ngt + 1];
+            for &l in &img.labels {
+                gt_area[l as usize] += 1;
+            }
+            let n = pred.out_w * pred.out_h;
+            for det in decode(pred, &cfg) {
+                let (mut area, mut inter, mut sl) = (0usize, vec![0usize; ngt + 1], 0.0f64);
+                let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+                let u = det.axis.direction_px;
+                for (i, (&m, &l)) in det.mask.data.iter().zip(&img.labels).enumerate() {
+                    if m != 0 {
+                        let (x, y) = (i % img.width, i / img.width);
+                        area += 1;
+                        inter[l as usize] += 1;
+                        sl += tubeloc_detect::learned::net::bilinear4_at(&pred.planes[..n], pred.out_w, pred.out_h, x, y) as f64;
+                        let t = (x as f64 - det.axis.centre_px[0]) * u[0] + (y as f64 - det.axis.centre_px[1]) * u[1];
+                        lo = lo.min(t);
+                        hi = hi.max(t);
+                    }
+                }
+                let best = (1..=ngt).filter(|&g| gt_area[g] > 0).map(|g| inter[g] as f64 / (area + gt_area[g] - inter[g]) as f64).fold(0.0, f64::max);
+                let lm = hi - lo + 1.0;
+                let _ = writeln!(csv, "{k},{},{area},{lm},{},{},{},{},{best}", det.score, det.axis.length_px, det.axis.width_px, area as f64 / (lm * det.axis.width_px), sl / area as f64);
+            }
+        }
+        std::fs::write(&path, csv)?;
     }
     for (name, cfg) in &variants {
         let (ap, m, total) = scores(&imgs, &preds, cfg);

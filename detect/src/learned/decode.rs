@@ -47,19 +47,21 @@ pub struct DecodeConfig {
     /// Use the full-resolution mask logits when the model has them (`false`: the bilinear
     /// stride-4 masks, for comparison).
     pub fine_mask: bool,
-    /// Axis completion: pixels inside the instance's predicted axis segment (centre at the peak,
-    /// the predicted length along the network direction, the mask's own width across it) whose
-    /// logit exceeds this value join the mask (`f32::INFINITY` switches it off). It recovers
-    /// the dark upper section of a tube, whose foreground logit is often weak.
-    pub extend_logit: f32,
     /// Exponent `a` of the length agreement in the score, `score *= (min(Lm, Lp) / max(Lm, Lp))^a`
     /// with `Lm` the mask's extent along the axis and `Lp` the predicted length (0 = off).
     pub length_weight: f32,
+    /// Exponent `k` of the mask confidence `σ(mean logit over the mask's pixels)`. When > 0 it
+    /// replaces `peak × mean σ(fg)` as the base of the score (it ranks masks by how sure the
+    /// network is of their pixels, which predicts mask IoU better than the centre peak).
+    pub mask_logit_weight: f32,
+    /// Exponent `b` of the fill `area / (Lm × Wm)` (mask pixels over its extent along × across
+    /// the axis) in the score (0 = off): ragged or bent masks fill their box poorly.
+    pub fill_weight: f32,
 }
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.5, fine_mask: true, extend_logit: f32::INFINITY, length_weight: 0.0 }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.5, fine_mask: true, length_weight: 0.5, mask_logit_weight: 4.0, fill_weight: 1.0 }
     }
 }
 
@@ -250,6 +252,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
         let py1 = ((y1 + 2 + grow) * STRIDE).min(height);
         let mut mask = Plane::<u8>::new(width, height);
         let mut pix = Vec::new();
+        let mut logit_sum = 0.0f64;
         for y in py0..py1 {
             let v = ((y as f32 - 1.5) / STRIDE as f32).clamp(0.0, (oh - 1) as f32);
             for x in px0..px1 {
@@ -264,6 +267,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
                     None => bilinear4_at(&out[..n], ow, oh, x, y),
                 };
                 if val > cfg.mask_logit {
+                    logit_sum += val as f64;
                     mask.data[y * width + x] = 1;
                     pix.push((x as f64, y as f64));
                 }
@@ -294,19 +298,6 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             [(sx / sw * STRIDE as f32 + 1.5) as f64, (sy / sw * STRIDE as f32 + 1.5) as f64]
         });
         let u = [dir.0 as f64, dir.1 as f64];
-        if let (true, Some(c), Some(len)) = (cfg.extend_logit.is_finite(), peak_centre, pred_len) {
-            let logit = |x: usize, y: usize| match fine {
-                Some(f) => f[y * width + x],
-                None => bilinear4_at(&out[..n], ow, oh, x, y),
-            };
-            let free = |x: usize, y: usize| {
-                let v = ((y as f32 - 1.5) / STRIDE as f32).clamp(0.0, (oh - 1) as f32);
-                let uu = ((x as f32 - 1.5) / STRIDE as f32).clamp(0.0, (ow - 1) as f32);
-                let o = cell_owner[(v.round() as usize).min(oh - 1) * ow + (uu.round() as usize).min(ow - 1)];
-                o == gi as u32 || o == u32::MAX
-            };
-            extend_along_axis(&mut mask, &mut pix, AxisBand { centre: c, dir: u, half_len: 0.5 * len }, cfg.extend_logit, logit, free);
-        }
         let Some(mut axis) = AxisSeed::from_pixels(pix.iter().copied()) else { continue };
         let (bx0, by0, bx1, by1) = pix.iter().fold((f64::MAX, f64::MAX, f64::MIN, f64::MIN), |a, &(x, y)| (a.0.min(x), a.1.min(y), a.2.max(x), a.3.max(y)));
         let bbox = [bx0, by0, bx1 - bx0 + 1.0, by1 - by0 + 1.0];
@@ -325,13 +316,21 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             (a.0.min(t), a.1.max(t), a.2.min(l), a.3.max(l))
         });
         axis.width_px = (hi - lo + 1.0).max(1.0);
-        let mut score = score as f64;
+        let lm = ahi - alo + 1.0;
+        let mut score = if cfg.mask_logit_weight > 0.0 {
+            let mean_logit = logit_sum / pix.len() as f64;
+            (1.0 / (1.0 + (-mean_logit).exp())).powf(cfg.mask_logit_weight as f64)
+        } else {
+            score as f64
+        };
         if let (true, Some(lp)) = (cfg.length_weight > 0.0, pred_len) {
-            let lm = ahi - alo + 1.0;
             score *= (lm.min(lp) / lm.max(lp).max(1e-9)).powf(cfg.length_weight as f64);
-            if score < cfg.min_score as f64 {
-                continue;
-            }
+        }
+        if cfg.fill_weight > 0.0 {
+            score *= (pix.len() as f64 / (lm * axis.width_px)).min(1.0).powf(cfg.fill_weight as f64);
+        }
+        if score < cfg.min_score as f64 {
+            continue;
         }
         result.push(LearnedInstance { score, mask, bbox, axis });
     }
@@ -363,47 +362,59 @@ fn grown_owner(owner: &[u32], fg: &[f32], ow: usize, oh: usize) -> Vec<u32> {
     grown
 }
 
-/// An instance's predicted axis segment, pixels: `centre + t·dir`, `|t| <= half_len`.
-struct AxisBand {
-    centre: [f64; 2],
-    dir: [f64; 2],
-    half_len: f64,
-}
 
-/// Axis completion: the band of `band` whose across-axis span is the mask's own (median
-/// offset ± the 90th percentile of `|across - median|`, pixels); a pixel of the band not yet in
-/// the mask joins it when `free(x, y)` (no other instance owns it) and `logit(x, y) > thr`.
-fn extend_along_axis(mask: &mut Plane<u8>, pix: &mut Vec<(f64, f64)>, band: AxisBand, thr: f32, logit: impl Fn(usize, usize) -> f32, free: impl Fn(usize, usize) -> bool) {
-    let ([cx, cy], [ux, uy]) = (band.centre, band.dir);
-    let mut across: Vec<f64> = pix.iter().map(|&(x, y)| -(x - cx) * uy + (y - cy) * ux).collect();
-    if across.is_empty() {
-        return;
-    }
-    across.sort_by(f64::total_cmp);
-    let med = across[across.len() / 2];
-    let mut dev: Vec<f64> = across.iter().map(|a| (a - med).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    let bw = dev[(dev.len() * 9 / 10).min(dev.len() - 1)];
-    let (w, h) = (mask.width, mask.height);
-    let corners = [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)].map(|(s, t): (f64, f64)| {
-        let (l, a) = (s * band.half_len, med + t * bw);
-        (cx + l * ux - a * uy, cy + l * uy + a * ux)
-    });
-    let x0 = corners.iter().map(|c| c.0).fold(f64::MAX, f64::min).floor().max(0.0) as usize;
-    let y0 = corners.iter().map(|c| c.1).fold(f64::MAX, f64::min).floor().max(0.0) as usize;
-    let x1 = (corners.iter().map(|c| c.0).fold(f64::MIN, f64::max).ceil() + 1.0).clamp(0.0, w as f64) as usize;
-    let y1 = (corners.iter().map(|c| c.1).fold(f64::MIN, f64::max).ceil() + 1.0).clamp(0.0, h as f64) as usize;
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let (rx, ry) = (x as f64 - cx, y as f64 - cy);
-            let (l, a) = (rx * ux + ry * uy, -rx * uy + ry * ux);
-            if l.abs() > band.half_len || (a - med).abs() > bw || mask.data[y * w + x] != 0 {
-                continue;
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stride-4 outputs (64 x 64 cells, 256 x 256 pixels) with horizontal bars: each bar is
+    /// `(row, x0..x1 cells, fg logit, centre peak probability, predicted half-length in cells)`.
+    fn bars(spec: &[(usize, std::ops::Range<usize>, f32, f32, f32)]) -> Prediction {
+        let (ow, oh) = (64, 64);
+        let n = ow * oh;
+        let mut planes = vec![-6.0f32; HEADS * n];
+        for (row, xs, logit, peak, half) in spec {
+            for y in row - 1..=row + 1 {
+                for x in xs.clone() {
+                    let c = y * ow + x;
+                    planes[c] = *logit;
+                    planes[2 * n + c] = 1.0;
+                    planes[3 * n + c] = 0.0;
+                    planes[4 * n + c] = half * STRIDE as f32 / LENGTH_SCALE;
+                }
             }
-            if free(x, y) && logit(x, y) > thr {
-                mask.data[y * w + x] = 1;
-                pix.push((x as f64, y as f64));
-            }
+            let p = peak / (1.0 - peak);
+            planes[n + row * ow + (xs.start + xs.end) / 2] = p.ln();
         }
+        Prediction { planes, out_w: ow, out_h: oh, width: 256, height: 256, fine: None }
+    }
+
+    #[test]
+    fn score_ranks_a_mask_whose_length_disagrees_with_the_predicted_length_lower() {
+        // Two identical 20-cell bars (80 px); the second one's length head says 240 px.
+        let pred = bars(&[(10, 10..30, 4.0, 0.9, 10.0), (40, 10..30, 4.0, 0.9, 30.0)]);
+        let cfg = DecodeConfig::default();
+        let inst = decode(&pred, &cfg);
+        assert_eq!(inst.len(), 2);
+        assert!(inst[0].axis.centre_px[1] < 100.0, "the consistent bar ranks first: {:?}", inst[0].axis);
+        // Length agreement of the second: about 80 / 240, so its score is about (1/3)^0.5 of the first's.
+        let ratio = inst[1].score / inst[0].score;
+        assert!((ratio - (1.0f64 / 3.0).sqrt()).abs() < 0.05, "ratio {ratio}");
+        // Without the length term both score the same.
+        let flat = decode(&pred, &DecodeConfig { length_weight: 0.0, ..cfg });
+        assert!((flat[0].score - flat[1].score).abs() < 1e-9, "{} vs {}", flat[0].score, flat[1].score);
+    }
+
+    #[test]
+    fn mask_confidence_outranks_a_stronger_centre_peak() {
+        // Bar A: sure pixels (logit 4), weak peak 0.4; bar B: unsure pixels (logit 1), peak 0.95.
+        let pred = bars(&[(10, 10..30, 4.0, 0.4, 10.0), (40, 10..30, 1.0, 0.95, 10.0)]);
+        let inst = decode(&pred, &DecodeConfig::default());
+        assert_eq!(inst.len(), 2);
+        assert!(inst[0].axis.centre_px[1] < 100.0 && inst[0].score > inst[1].score, "{:?}", inst.iter().map(|i| (i.score, i.axis.centre_px)).collect::<Vec<_>>());
+        // The session-3 score (peak x mean fg) ranks them the other way round.
+        let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..DecodeConfig::default() };
+        let inst = decode(&pred, &old);
+        assert!(inst[0].axis.centre_px[1] > 100.0, "{:?}", inst.iter().map(|i| (i.score, i.axis.centre_px)).collect::<Vec<_>>());
     }
 }
