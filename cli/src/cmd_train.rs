@@ -229,7 +229,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         (Some(m), Some(p)) => format!(" warm start from {} ({} steps)", p.display(), m.meta.steps),
         _ => String::new(),
     };
-    trainer.model.meta.notes = format!("steps {} seed {} val AP50 {ap:.4}{warm}", trainer.model.meta.steps, args.seed);
+    let crops = if args.upright { " upright crops" } else { "" };
+    trainer.model.meta.notes = format!("steps {} seed {}{crops} val AP50 {ap:.4}{warm}", trainer.model.meta.steps, args.seed);
     trainer.model.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)", args.out.display(), trainer.model.meta.steps, t0.elapsed().as_secs_f64());
     Ok(())
