@@ -23,12 +23,14 @@ pub mod robust;
 pub mod search;
 pub mod stereo_stage;
 pub mod seed;
+pub mod seed_policy;
 
 pub use contour::AxisState;
 pub use error::RefineError;
 pub use fit::{FitResult, Scene};
 pub use model::CylinderModel;
 pub use seed::{seed_from_detection, GroundPlane, Seed};
+pub use seed_policy::{SeedKind, SeedSettings};
 
 use nalgebra::{Point2, Point3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -341,30 +343,17 @@ impl Refiner {
         Ok(Refiner { model: CylinderModel::new(tube)?, config })
     }
 
-    /// Refines one detection. Never returns NaN: failures come back with `converged = false`
+    /// Refines one detection, with the settings of its seed's kind ([`SeedKind::of`],
+    /// [`SeedSettings`]: template pose or mask/box seed). Never returns NaN: failures come back with `converged = false`
     /// and a [`tubeloc_core::RefineFailure`]; the pose is then the last finite estimate (or the
     /// seed).
     pub fn refine(&self, input: &RefineInput, det: &TubeDetection) -> TubeAxisPose {
         match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
             Ok(seed) => {
-                // Detector seeds carry a coarse distance (template scale, mask width): the
-                // mono keep-depth mode and the end-limb exclusion are tuned for good seeds.
-                let mut cfg = RefineConfig { mono_depth_sigma_frac: self.config.detection_depth_sigma_frac, end_limb_weight: self.config.detection_end_limb_weight, ..self.config.clone() };
-                if det.t_cam_tube.is_none() {
-                    // Mask / box seeds: a good image axis and a distance off by centimetres,
-                    // which the limbs' separation does not fix; keep it (and the ground's tilt).
-                    if cfg.mask_seed_keep_depth {
-                        cfg.mono_width_sigma_px = f64::INFINITY;
-                    }
-                    cfg.end_limb_weight = cfg.mask_seed_end_limb_weight;
-                    cfg.mono_length_depth = cfg.mask_seed_length_depth;
-                    if cfg.mask_seed_relief_sigma_m > 0.0 {
-                        cfg.ground_relief_sigma_m = cfg.mask_seed_relief_sigma_m;
-                    }
-                    if input.ground.is_some() || input.scene.ground.is_some() {
-                        cfg.ground_tilt_sigma_deg = cfg.mask_seed_tilt_sigma_deg;
-                    }
-                }
+                // Detector seeds are worse than explicit ones in kind-specific ways
+                // ([`seed_policy`]).
+                let has_ground = input.ground.is_some() || input.scene.ground.is_some();
+                let cfg = SeedSettings::new(&self.config, SeedKind::of(det), has_ground).config(&self.config);
                 let r = Refiner { model: self.model.clone(), config: cfg };
                 r.refine_seed(input, &seed, det.image_id, det.score, Some(det.bbox))
             }
