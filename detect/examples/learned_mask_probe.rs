@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 use std::path::Path;
 use tubeloc_detect::learned::dataset::{average_precision, load_coco_dir};
+use tubeloc_detect::learned::fragments::MergeConfig;
 use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Prediction, TrainImage};
 
 /// AP at IoU 0.50..0.95 (as `dataset::mask_scores`), matched IoUs at 0.5, number of tubes.
@@ -73,18 +74,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
     let preds = imgs.iter().map(|im| model.predict(&im.input, im.width, im.height)).collect::<Result<Vec<_>, _>>()?;
     let d = DecodeConfig::default();
-    let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..d };
+    // Session 3's decoder: score = peak x mean fg, fixed mask threshold 0.5.
+    let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, mask_logit: 0.5, mask_logit_rel: 0.0, ..d };
+    let merge = |max_angle_deg: f32, max_across: f32, max_gap: f32| DecodeConfig { merge: MergeConfig { max_angle_deg, max_across, max_gap, ..d.merge }, ..d };
     let variants = vec![
         ("default".to_string(), d),
-        ("session-3 score (peak x fg)".into(), old),
-        ("old score x length^0.5".into(), DecodeConfig { length_weight: 0.5, ..old }),
-        ("mask logit^4 only".into(), DecodeConfig { length_weight: 0.0, fill_weight: 0.0, ..d }),
-        ("mask logit^4 length^0.5".into(), DecodeConfig { fill_weight: 0.0, ..d }),
-        ("mask logit^2".into(), DecodeConfig { mask_logit_weight: 2.0, ..d }),
-        ("length^1".into(), DecodeConfig { length_weight: 1.0, ..d }),
-        ("fill^2".into(), DecodeConfig { fill_weight: 2.0, ..d }),
-        ("mask logit 0".into(), DecodeConfig { mask_logit: 0.0, ..d }),
-        ("mask logit 1".into(), DecodeConfig { mask_logit: 1.0, ..d }),
+        ("session-3 decoder".into(), old),
+        ("session-3 masks, new score".into(), DecodeConfig { mask_logit: 0.5, mask_logit_rel: 0.0, ..d }),
+        ("session-3 score, new masks".into(), DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..d }),
+        ("score: mask logit only".into(), DecodeConfig { length_weight: 0.0, fill_weight: 0.0, ..d }),
+        ("score: no fill".into(), DecodeConfig { fill_weight: 0.0, ..d }),
+        ("score: mask logit^2".into(), DecodeConfig { mask_logit_weight: 2.0, ..d }),
+        ("score: length^1".into(), DecodeConfig { length_weight: 1.0, ..d }),
+        ("score: fill^2".into(), DecodeConfig { fill_weight: 2.0, ..d }),
+        ("mask rel 0".into(), DecodeConfig { mask_logit_rel: 0.0, ..d }),
+        ("mask rel 0.4".into(), DecodeConfig { mask_logit_rel: 0.4, ..d }),
+        ("mask logit 0.5".into(), DecodeConfig { mask_logit: 0.5, ..d }),
+        ("mask logit -0.5".into(), DecodeConfig { mask_logit: -0.5, ..d }),
+        ("merge 15deg 1.5 across 4 gap".into(), merge(15.0, 1.5, 4.0)),
+        ("merge 20deg 2 across 8 gap".into(), merge(20.0, 2.0, 8.0)),
         ("fg 0.4".into(), DecodeConfig { fg_threshold: 0.4, ..d }),
         ("peak 0.3".into(), DecodeConfig { peak_threshold: 0.3, ..d }),
     ];
