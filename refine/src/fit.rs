@@ -6,12 +6,8 @@
 //! The residuals are then `r_i(θ) = n_i · (π(X_i(θ)) - e_i) / σ_px` (pixels along the normal,
 //! normalized by the nominal edge noise) and, for stereo points `P_j`,
 //! `s_j(θ) = (ρ_j - R(z_j)) / σ_s` with `z_j = (P_j - c)·a`, `ρ_j = |P_j - c - z_j a|`,
-//! and, with a ground plane `n·X = d` (tube resting on it), the two prior residuals
-//! `g_1 = (n·c - d - r_max) / σ_g` (centre height) and `g_2 = (n·a) / σ_t` (axis parallel to
-//! the ground), quadratic (not robust); `g_1` only when `RefineConfig::ground_height_known`.
-//! With `RefineConfig::seed_distance_sigma_frac = f > 0`, the prior `(|c| - |c_seed|) / (f |c_seed|)`
-//! keeps the distance of the centre near the seed's (mono depth from a narrow tube's width is
-//! weak: 0.1 px of width error on a 12 px wide tube is ~1% of the distance).
+//! and the quadratic (not robust) prior residuals of the `priors` module: with a ground plane,
+//! the centre height and the axis tilt; the seed distance; the mono seed tilt.
 //! After the first iteration of each level, the contrast polarity of each limb is fixed to the
 //! sign most of its samples found (tube brighter or darker than the ground along that limb), so
 //! that texture and shading edges of the other polarity are not associated.
@@ -28,6 +24,7 @@ use crate::seed::GroundPlane;
 use crate::RefineConfig;
 use crate::jacobian::{stereo_row, PerturbedFrames};
 use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
+use crate::priors::{self, SeedPrior};
 use nalgebra::{Matrix2x5, Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
 use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
 use tubeloc_core::{CameraModel, FailureReason, Plane, ResidualStats};
@@ -237,24 +234,10 @@ fn limb_polarity(samples: &[ContourSample], assoc: &[Assoc]) -> Vec<i8> {
     samples.iter().map(|s| key(s).map_or(0, |k| sign[k])).collect()
 }
 
-/// The seed's terms of the priors: its distance (`RefineConfig::seed_distance_sigma_frac`)
-/// and, in mono mode without a ground plane, its axis tilt toward the camera
-/// (`RefineConfig::mono_tilt_sigma_deg`): `(a·ĉ₀ - a₀·ĉ₀) / sin σ` with `ĉ₀` the seed's
-/// viewing ray.
-#[derive(Clone, Copy, Debug)]
-struct SeedPrior {
-    dist: f64,
-    ray: Vector3<f64>,
-    tilt: f64,
-    /// `sin σ` of the tilt prior, when it is used.
-    tilt_sin_sigma: Option<f64>,
-}
-
 /// Residuals (normalized) of the associations and stereo points at state `st`; missing
 /// projections give `None` entries (skipped).
 #[allow(clippy::too_many_arguments)]
 fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
-    let seed_dist = sp.dist;
     out.clear();
     let f = st.frame();
     for a in assoc {
@@ -273,16 +256,7 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
         let rz = model.radius_at(z.clamp(-half, half));
         out.push(Some((rho - rz) / cfg.stereo_sigma_m));
     }
-    if let Some(g) = &scene.ground {
-        out.push(cfg.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m));
-        out.push(Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()));
-    }
-    if cfg.seed_distance_sigma_frac > 0.0 {
-        out.push(Some((st.c.norm() - seed_dist) / (cfg.seed_distance_sigma_frac * seed_dist)));
-    }
-    if let Some(ss) = sp.tilt_sin_sigma {
-        out.push(Some((st.a.dot(&sp.ray) - sp.tilt) / ss));
-    }
+    priors::push_residuals(model, st, scene.ground.as_ref(), cfg, sp, out);
 }
 
 /// Threshold of residual `i`: image (`i < n_img`), stereo (`i < n_img + n_st`) or prior
@@ -335,7 +309,6 @@ fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
 /// and returns `Σ w r²` and `Σ w`.
 #[allow(clippy::too_many_arguments)]
 fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), sp: &SeedPrior, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
-    let seed_dist = sp.dist;
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
@@ -364,27 +337,7 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         } else if i < n_img + n_st {
             Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
-            // Priors in the order of `residuals`: ground height, ground tilt, seed distance.
-            // Priors in the order of `residuals`: ground height and tilt, seed distance, seed
-            // tilt.
-            let mut k = i - n_img - n_st;
-            match (&scene.ground, k) {
-                (Some(gp), 0) => Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
-                (Some(gp), 1) => Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians(),
-                _ => {
-                    if scene.ground.is_some() {
-                        k -= 2;
-                    }
-                    if cfg.seed_distance_sigma_frac > 0.0 && k == 0 {
-                        let d = st.c.norm();
-                        let ch = st.c / d.max(1e-12);
-                        Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * seed_dist)
-                    } else {
-                        let ss = sp.tilt_sin_sigma.unwrap_or(1.0);
-                        Vector5::new(0.0, 0.0, 0.0, sp.ray.dot(u.0), sp.ray.dot(u.1)) / ss
-                    }
-                }
-            }
+            priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), cfg, sp, u)
         };
         if !j.iter().all(|v| v.is_finite()) {
             continue;
@@ -433,14 +386,11 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     let mut jbuf = Vec::new();
     let top = first_level.min(levels.len().saturating_sub(1));
     let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
-    let ray = seed.c.try_normalize(1e-12).unwrap_or(Vector3::z());
-    // The foreshortened length fixes the tilt θ to ~(δL/L)/tan θ: only for axes clearly out of
-    // the image plane.
-    let tilt_prior = mono && scene.ground.is_none() && cfg.mono_tilt_sigma_deg > 0.0 && seed.a.dot(&ray).abs() >= cfg.mono_tilt_min_deg.to_radians().sin();
+    let sp = SeedPrior::new(cfg, &seed, mono, scene.ground.is_some());
+    let tilt_prior = sp.tilt_sin_sigma.is_some();
     // Mono with a ground plane (tilt fixed by it): the distance along the ray from the
     // foreshortened length (rims) alone, the limbs' separation being biased by shading.
     let length_depth = mono && cfg.mono_length_depth && scene.ground.is_some();
-    let sp = SeedPrior { dist: seed.c.norm(), ray, tilt: seed.a.dot(&ray), tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()) };
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,
         stats: ResidualStats { iterations, ..Default::default() },

@@ -17,6 +17,7 @@ pub mod fit;
 pub mod jacobian;
 pub mod model;
 mod mono;
+mod priors;
 pub mod photo;
 pub mod rims;
 pub mod robust;
