@@ -99,8 +99,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(path) = std::env::var("PROBE_FEATURES") {
         // Per detection: features of the instance and its best IoU with a tube (for choosing a score).
         use std::fmt::Write as _;
-        let mut csv = String::from("image,score,area,lm,lp,width,fill,mean_logit,best_iou\n");
-        let cfg = old;
+        let mut csv = String::from("image,score,area,lm,lp,width,fill,mean_logit,heat,best_iou\n");
+        let cfg = d;
         for (k, (img, pred)) in imgs.iter().zip(&preds).enumerate() {
             let ngt = img.labels.iter().copied().max().unwrap_or(0) as usize;
             let mut gt_area = vec![0usize; ngt + 1];
@@ -125,7 +125,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 let best = (1..=ngt).filter(|&g| gt_area[g] > 0).map(|g| inter[g] as f64 / (area + gt_area[g] - inter[g]) as f64).fold(0.0, f64::max);
                 let lm = hi - lo + 1.0;
-                let _ = writeln!(csv, "{k},{},{area},{lm},{},{},{},{},{best}", det.score, det.axis.length_px, det.axis.width_px, area as f64 / (lm * det.axis.width_px), sl / area as f64);
+                let (cu, cv) = (((det.axis.centre_px[0] - 1.5) / 4.0).round().clamp(0.0, (pred.out_w - 1) as f64) as usize, ((det.axis.centre_px[1] - 1.5) / 4.0).round().clamp(0.0, (pred.out_h - 1) as f64) as usize);
+                let heat = 1.0 / (1.0 + (-pred.planes[n + cv * pred.out_w + cu]).exp());
+                let _ = writeln!(csv, "{k},{},{area},{lm},{},{},{},{},{heat},{best}", det.score, det.axis.length_px, det.axis.width_px, area as f64 / (lm * det.axis.width_px), sl / area as f64);
             }
         }
         std::fs::write(&path, csv)?;

@@ -8,15 +8,20 @@
 //!    (one tube, two maxima). A component still holding several peaks is split: each cell goes to the peak nearest in the peak's axis frame, with the across-axis
 //!    distance weighted [`DecodeConfig::across_weight`] times the along-axis one (tubes are
 //!    long and thin, so a cell belongs to the peak whose axis line passes near it).
+//!    Optionally, groups from different components that are collinear fragments of one
+//!    tube are merged ([`super::fragments`], off by default).
 //! 3. Full-resolution mask: the foreground logit bilinearly upsampled (stride 4) and
-//!    thresholded at [`DecodeConfig::mask_logit`] inside the instance's cells, pixel `(x, y)` reading cell coordinate
-//!    `((x - 1.5) / 4, (y - 1.5) / 4)`. With the fine mask branch the full-resolution logit is
-//!    thresholded instead, inside the instance's cells grown by one cell (a background cell
-//!    joins the neighbouring instance cell of highest foreground), since a tube's outline
-//!    runs through cells that are mostly background.
-//! 4. Score = `max σ(heat)` of the instance's peak (0.5 × mean σ(fg) without one) × mean
-//!    `σ(fg)` over its cells. Axis seed: centre at the peak (sub-cell by a 3x3 weighted mean),
-//!    direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
+//!    thresholded at [`DecodeConfig::mask_logit`] inside the instance's cells, pixel `(x, y)`
+//!    reading cell coordinate `((x - 1.5) / 4, (y - 1.5) / 4)`; then pixels not above
+//!    [`DecodeConfig::mask_logit_rel`] × the instance's mean logit are dropped. With the fine
+//!    mask branch the full-resolution logit is thresholded instead, inside the instance's cells
+//!    grown by one cell (a background cell joins the neighbouring instance cell of highest
+//!    foreground), since a tube's outline runs through cells that are mostly background.
+//! 4. Score = `σ(mean logit over the mask)^k × (min(Lm, Lp) / max(Lm, Lp))^a × fill^b`, with
+//!    `Lm` the mask's extent along the axis, `Lp` the predicted length and fill = area /
+//!    (`Lm` × width) (with `k = 0`: `max σ(heat)` of the peak, or 0.5 × mean σ(fg) without one,
+//!    × mean σ(fg) over the cells). Axis seed: centre at the peak (sub-cell by a 3x3 weighted
+//!    mean), direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
 //!    predicted half-length, width from the mask's extent across the axis.
 
 use super::fragments::{merge_collinear, MergeConfig};
