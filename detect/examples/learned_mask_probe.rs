@@ -5,7 +5,6 @@
 use rayon::prelude::*;
 use std::path::Path;
 use tubeloc_detect::learned::dataset::{average_precision, load_coco_dir};
-use tubeloc_detect::learned::fragments::MergeConfig;
 use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Prediction, TrainImage};
 
 /// AP at IoU 0.50..0.95 (as `dataset::mask_scores`), matched IoUs at 0.5, number of tubes.
@@ -76,7 +75,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let d = DecodeConfig::default();
     // Session 3's decoder: score = peak x mean fg, fixed mask threshold 0.5.
     let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, mask_logit: 0.5, mask_logit_rel: 0.0, ..d };
-    let merge = |max_angle_deg: f32, max_across: f32, max_gap: f32| DecodeConfig { merge: MergeConfig { max_angle_deg, max_across, max_gap, ..d.merge }, ..d };
     let variants = vec![
         ("default".to_string(), d),
         ("session-3 decoder".into(), old),
@@ -91,8 +89,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("mask rel 0.4".into(), DecodeConfig { mask_logit_rel: 0.4, ..d }),
         ("mask logit 0.5".into(), DecodeConfig { mask_logit: 0.5, ..d }),
         ("mask logit -0.5".into(), DecodeConfig { mask_logit: -0.5, ..d }),
-        ("merge 15deg 1.5 across 4 gap".into(), merge(15.0, 1.5, 4.0)),
-        ("merge 20deg 2 across 8 gap".into(), merge(20.0, 2.0, 8.0)),
         ("fg 0.4".into(), DecodeConfig { fg_threshold: 0.4, ..d }),
         ("peak 0.3".into(), DecodeConfig { peak_threshold: 0.3, ..d }),
     ];

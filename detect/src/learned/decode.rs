@@ -8,8 +8,6 @@
 //!    (one tube, two maxima). A component still holding several peaks is split: each cell goes to the peak nearest in the peak's axis frame, with the across-axis
 //!    distance weighted [`DecodeConfig::across_weight`] times the along-axis one (tubes are
 //!    long and thin, so a cell belongs to the peak whose axis line passes near it).
-//!    Optionally, groups from different components that are collinear fragments of one
-//!    tube are merged ([`super::fragments`], off by default).
 //! 3. Full-resolution mask: the foreground logit bilinearly upsampled (stride 4) and
 //!    thresholded at [`DecodeConfig::mask_logit`] inside the instance's cells, pixel `(x, y)`
 //!    reading cell coordinate `((x - 1.5) / 4, (y - 1.5) / 4)`; then pixels not above
@@ -24,7 +22,6 @@
 //!    mean), direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
 //!    predicted half-length, width from the mask's extent across the axis.
 
-use super::fragments::{merge_collinear, MergeConfig};
 use super::model::Prediction;
 use super::net::{bilinear4_at, HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
@@ -67,14 +64,11 @@ pub struct DecodeConfig {
     /// Exponent `b` of the fill `area / (Lm × Wm)` (mask pixels over its extent along × across
     /// the axis) in the score (0 = off): ragged or bent masks fill their box poorly.
     pub fill_weight: f32,
-    /// Merging of collinear fragments from different components ([`super::fragments`]);
-    /// `max_angle_deg = 0` switches it off.
-    pub merge: MergeConfig,
 }
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0, mask_logit_rel: 0.3, fine_mask: true, length_weight: 0.5, mask_logit_weight: 4.0, fill_weight: 1.0, merge: MergeConfig { max_angle_deg: 0.0, max_across: 1.5, max_gap: 4.0, length_slack: 1.25 } }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0, mask_logit_rel: 0.3, fine_mask: true, length_weight: 0.5, mask_logit_weight: 4.0, fill_weight: 1.0 }
     }
 }
 
@@ -231,7 +225,6 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             }
         }
     }
-    let groups = merge_collinear(groups, &comp, &fg, &heat, out, ow, &cfg.merge);
     let mut result = Vec::new();
     let mut cell_owner = vec![u32::MAX; n];
     for (gi, (_, cells)) in groups.iter().enumerate() {

@@ -11,7 +11,6 @@ pub mod augment;
 pub mod dataset;
 pub mod decode;
 pub mod error;
-pub mod fragments;
 pub mod layers;
 pub mod model;
 pub mod net;
