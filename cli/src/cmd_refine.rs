@@ -177,18 +177,9 @@ fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[T
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
     let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
-    let regions: Vec<StereoRegion> = dets
-        .iter()
-        .map(|d| StereoRegion {
-            bbox: d.bbox,
-            mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()),
-            seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z),
-        })
-        .collect();
-    let per = stereo::points_rectified(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
+    let regions: Vec<StereoRegion> = dets.iter().map(stereo::region_of).collect();
+    let (per, pair) = stereo::match_regions(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
         .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
-    let mut pair = stereo::rectified_pair(&rect, left, &right)?;
-    pair.disparity = Some(per.disparity.clone());
     Ok((lcam, per, pair))
 }
 

@@ -8,10 +8,6 @@
 mod common;
 
 use common::*;
-use nalgebra::{Rotation3, Unit, Vector3};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use tubeloc_refine::{AxisState, RefineConfig, RefineInput, Refiner, Scene as FitScene, Seed};
 
 /// Nanoseconds this thread has spent on a CPU, if the kernel exposes it.
 fn thread_cpu_ns() -> Option<u64> {
@@ -20,23 +16,16 @@ fn thread_cpu_ns() -> Option<u64> {
 
 fn main() {
     let n: usize = std::env::args().nth(1).and_then(|v| v.parse().ok()).unwrap_or(200);
-    let model = default_model();
-    let cam = camera(false);
-    let mut rng = ChaCha8Rng::seed_from_u64(21);
-    let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (1.1, 1.3));
-    let sc = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
-    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let r = Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::new(0.3, -0.5, 0.8)), 2f64.to_radians());
-    let seed = Seed { state: AxisState { c: truth.centre + Vector3::new(0.003, -0.002, 0.003), a: r * truth.axis }, end_known: false };
-    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
-    let p = refiner.refine_seed(&input, &seed, 0, 1.0, None);
+    let ss = speed_scene();
+    let (refiner, seed, input) = (&ss.refiner, &ss.seed, ss.input());
+    let p = refiner.refine_seed(&input, seed, 0, 1.0, None);
     // The kernel's per-thread CPU clock ticks coarsely (a few ms), so the CPU time is taken
     // over the whole loop; the wall-clock median per tube is printed beside it.
     let mut wall = Vec::with_capacity(n);
     let c0 = thread_cpu_ns().unwrap_or(0);
     for _ in 0..n {
         let t0 = std::time::Instant::now();
-        let q = refiner.refine_seed(&input, &seed, 0, 1.0, None);
+        let q = refiner.refine_seed(&input, seed, 0, 1.0, None);
         wall.push(t0.elapsed().as_secs_f64() * 1e3);
         assert_eq!(q.centre, p.centre, "refinement is deterministic");
     }
@@ -46,7 +35,7 @@ fn main() {
         "converged {} ({} iterations, error {:.2} mm); over {n} runs: mean on-CPU time {cpu:.2} ms per tube, wall median {:.2} ms (p10 {:.2}, p90 {:.2})",
         p.converged,
         p.residuals.iterations,
-        (p.centre - truth.centre).norm() * 1e3,
+        (p.centre - ss.scene.truth.centre).norm() * 1e3,
         wall[n / 2],
         wall[n / 10],
         wall[n * 9 / 10]

@@ -50,6 +50,24 @@ impl AxisState {
         Some(AxisFrame { c: self.c, a: self.a, e1, e2: self.a.cross(&e1), d })
     }
 
+    /// Sixteen points around the tube of `model` at this state (camera frame, metres), whose
+    /// projections bound its image: eight on each end's circle of the largest radius,
+    /// `c ± (L/2) a + r_max (cos φ e1 + sin φ e2)`, `φ = k π/4` (the `-L/2` end first); `None`
+    /// when the axis frame is degenerate.
+    pub fn bounding_points(&self, model: &CylinderModel) -> Option<[Vector3<f64>; 16]> {
+        let half = 0.5 * model.length;
+        let rmax = model.max_radius();
+        let f = self.frame()?;
+        let mut out = [Vector3::zeros(); 16];
+        for (i, z) in [-half, half].into_iter().enumerate() {
+            for k in 0..8 {
+                let phi = k as f64 * std::f64::consts::FRAC_PI_4;
+                out[8 * i + k] = self.c + self.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * rmax;
+            }
+        }
+        Some(out)
+    }
+
 }
 
 /// Derived axis frame, see the module docs.

@@ -473,20 +473,10 @@ impl Refiner {
 
     /// Region of interest (crop rectangle) and coarsest pyramid level for a state.
     fn region(&self, cam: &CameraModel, st: &AxisState, bbox: Option<[f64; 4]>) -> Option<((usize, usize, usize, usize), usize)> {
-        let half = 0.5 * self.model.length;
-        let rmax = self.model.max_radius();
         let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-        let f = st.frame()?;
-        for z in [-half, half] {
-            for k in 0..8 {
-                let phi = k as f64 * std::f64::consts::FRAC_PI_4;
-                let p = st.c + st.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * rmax;
-                if let Some(u) = cam.project(&Point3::from(p)) {
-                    x0 = x0.min(u.x);
-                    y0 = y0.min(u.y);
-                    x1 = x1.max(u.x);
-                    y1 = y1.max(u.y);
-                }
+        for p in st.bounding_points(&self.model)? {
+            if let Some(u) = cam.project(&Point3::from(p)) {
+                (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
             }
         }
         if x0 > x1 {

@@ -195,17 +195,10 @@ pub fn photometric_ends_visible(model: &CylinderModel, camera: &CameraModel, lef
 /// Pixels covered by the tube's lateral surface at `st` and not hidden by `occluders`, each
 /// `(x, y, left intensity, front depth)`; `None` when fewer than 30.
 fn covered_pixels(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, st: &AxisState, fb: f64, occluders: Option<&Occluders>) -> Option<Vec<(f32, f32, f32, f64)>> {
-    let half = 0.5 * model.length;
-    let rmax = model.max_radius();
-    let f = st.frame()?;
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for z in [-half, half] {
-        for k in 0..8 {
-            let phi = k as f64 * std::f64::consts::FRAC_PI_4;
-            let p = st.c + st.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * rmax;
-            let u = camera.project(&nalgebra::Point3::from(p))?;
-            (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
-        }
+    for p in st.bounding_points(model)? {
+        let u = camera.project(&nalgebra::Point3::from(p))?;
+        (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
     }
     let (w, h) = (left.width as f64, left.height as f64);
     let (xa, ya, xb, yb) = (x0.floor().max(0.0), y0.floor().max(0.0), x1.ceil().min(w - 1.0), y1.ceil().min(h - 1.0));

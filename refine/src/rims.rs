@@ -43,17 +43,10 @@ struct View {
 }
 
 fn view(model: &CylinderModel, camera: &CameraModel, image: &Plane<f32>, st: &AxisState, origin: Vector3<f64>) -> Option<View> {
-    let half = 0.5 * model.length;
-    let rmax = model.max_radius();
-    let f = st.frame()?;
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for z in [-half, half] {
-        for k in 0..8 {
-            let phi = k as f64 * std::f64::consts::FRAC_PI_4;
-            let p = st.c + st.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * rmax - origin;
-            let u = camera.project(&nalgebra::Point3::from(p))?;
-            (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
-        }
+    for p in st.bounding_points(model)? {
+        let u = camera.project(&nalgebra::Point3::from(p - origin))?;
+        (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
     }
     let rect = roi([x0, y0, x1 - x0, y1 - y0], 16.0, image.width, image.height)?;
     let level = build_pyramid_with(image, camera, rect, 1, false).into_iter().next()?;

@@ -206,7 +206,7 @@ pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Recti
     let (c, a) = (r1.transpose() * moved.c, r1.transpose() * moved.a);
     let mut p = TubeAxisPose::new(pose.image_id, pose.score, c, a, pose.end_confidence).ok()?;
     p.covariance = pose.covariance;
-    p.residuals = pose.residuals.clone();
+    p.residuals = pose.residuals;
     *pose = p;
     Some(shift)
 }

@@ -11,10 +11,37 @@ use tubeloc_refine::AxisState;
 
 const BASELINE: f64 = 0.06;
 
+/// The 512x288 crop of the test camera (fx ≈ 3440 px) of these tests.
+fn crop_camera() -> tubeloc_core::CameraModel {
+    tubeloc_core::CameraModel::from_hfov(5472, 3648, 77.0).cropped(2480, 1680, 512, 288)
+}
+
+/// Sine of the angle between a tube's image direction and the image rows (the epipolar lines).
+fn row_sine(cam: &tubeloc_core::CameraModel, t: &Truth) -> f64 {
+    let (c, a) = (t.centre, t.axis);
+    let p0 = cam.project(&nalgebra::Point3::from(c - a * 0.05)).unwrap();
+    let p1 = cam.project(&nalgebra::Point3::from(c + a * 0.05)).unwrap();
+    let d = p1 - p0;
+    d.y.abs() / d.norm()
+}
+
+/// The tube (1.6 to 2.2 m away) of the first random seed after `*seed` whose [`row_sine`]
+/// `accept`s; `*seed` is left at that seed.
+fn next_truth(model: &tubeloc_refine::CylinderModel, cam: &tubeloc_core::CameraModel, seed: &mut u64, accept: impl Fn(f64) -> bool) -> (Truth, nalgebra::Vector3<f64>, f64) {
+    loop {
+        *seed += 1;
+        let mut rng = ChaCha8Rng::seed_from_u64(*seed);
+        let (t, up, gd) = random_truth(&mut rng, model, cam, (1.6, 2.2));
+        if accept(row_sine(cam, &t)) {
+            return (t, up, gd);
+        }
+    }
+}
+
 /// A 512x288 crop of the test camera (fx ≈ 3440 px) and one tube 1.6 to 2.2 m away, both views.
 fn pair(seed: u64) -> (Scene, Scene) {
     let model = default_model();
-    let cam = tubeloc_core::CameraModel::from_hfov(5472, 3648, 77.0).cropped(2480, 1680, 512, 288);
+    let cam = crop_camera();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (1.6, 2.2));
     let left = render(&model, &cam, truth, up, gd, None, seed, 0.01);
@@ -30,11 +57,7 @@ fn good_seeds(from: u64, n: usize) -> Vec<(u64, Scene, Scene)> {
     let mut seed = from;
     while out.len() < n {
         let (l, r) = pair(seed);
-        let (c, a) = (l.truth.centre, l.truth.axis);
-        let p0 = l.camera.project(&nalgebra::Point3::from(c - a * 0.05)).unwrap();
-        let p1 = l.camera.project(&nalgebra::Point3::from(c + a * 0.05)).unwrap();
-        let d = p1 - p0;
-        if d.y.abs() > d.norm() * 30f64.to_radians().sin() {
+        if row_sine(&l.camera, &l.truth) > 30f64.to_radians().sin() {
             out.push((seed, l, r));
         }
         seed += 1;
@@ -82,20 +105,11 @@ fn photometric_ends_recover_distance_and_tilt() {
 #[test]
 fn photometric_ends_leave_out_pixels_hidden_by_a_rock() {
     let model = default_model();
-    let cam = tubeloc_core::CameraModel::from_hfov(5472, 3648, 77.0).cropped(2480, 1680, 512, 288);
-    let mut checked = 0;
+    let cam = crop_camera();
     let mut seed = 300;
-    while checked < 2 {
-        seed += 1;
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let (t, up, gd) = random_truth(&mut rng, &model, &cam, (1.6, 2.2));
+    for _ in 0..2 {
+        let (t, up, gd) = next_truth(&model, &cam, &mut seed, |s| s >= 30f64.to_radians().sin());
         let (c, a) = (t.centre, t.axis);
-        let p0 = cam.project(&nalgebra::Point3::from(c - a * 0.05)).unwrap();
-        let p1 = cam.project(&nalgebra::Point3::from(c + a * 0.05)).unwrap();
-        let d = p1 - p0;
-        if d.y.abs() < d.norm() * 30f64.to_radians().sin() {
-            continue;
-        }
         // A rock 60 mm in front of the seal end's outer third, hiding about a quarter of the tube.
         let half = 0.5 * model.length;
         let end = c + a * (0.8 * half);
@@ -116,28 +130,18 @@ fn photometric_ends_leave_out_pixels_hidden_by_a_rock() {
         let (ce, ae) = ((pe.state.c - truth.c).norm(), axis_angle(&pe.state.a, &truth.a).to_degrees());
         assert!(ce < 2.0e-3 && ae < 1.5, "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3}); all pixels: {:.2} mm, {:.2} deg", ce * 1e3, pe.zncc, (all.state.c - truth.c).norm() * 1e3, axis_angle(&all.state.a, &truth.a).to_degrees());
         eprintln!("seed {seed}: visible pixels {:.2} mm {ae:.2} deg; all pixels {:.2} mm {:.2} deg", ce * 1e3, (all.state.c - truth.c).norm() * 1e3, axis_angle(&all.state.a, &truth.a).to_degrees());
-        checked += 1;
     }
 }
 
 #[test]
 fn rims_in_both_views_recover_the_tilt_of_a_tube_along_the_rows() {
     let model = default_model();
-    let cam = tubeloc_core::CameraModel::from_hfov(5472, 3648, 77.0).cropped(2480, 1680, 512, 288);
-    let mut checked = 0;
+    let cam = crop_camera();
     let mut seed = 500;
-    while checked < 3 {
-        seed += 1;
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let (t, up, gd) = random_truth(&mut rng, &model, &cam, (1.6, 2.2));
-        let (c, a) = (t.centre, t.axis);
-        let p0 = cam.project(&nalgebra::Point3::from(c - a * 0.05)).unwrap();
-        let p1 = cam.project(&nalgebra::Point3::from(c + a * 0.05)).unwrap();
-        let d = p1 - p0;
+    for _ in 0..3 {
         // Image direction within 20 degrees of the rows (the epipolar lines).
-        if d.y.abs() > d.norm() * 20f64.to_radians().sin() {
-            continue;
-        }
+        let (t, up, gd) = next_truth(&model, &cam, &mut seed, |s| s <= 20f64.to_radians().sin());
+        let (c, a) = (t.centre, t.axis);
         let l = render(&model, &cam, t, up, gd, None, seed, 0.01);
         let r = render_right(&model, &cam, t, up, gd, seed, 0.01, BASELINE);
         // Ends moved along their rays by +6 / -6 mm: the same left image line, tilted by ~4.5
@@ -154,6 +158,5 @@ fn rims_in_both_views_recover_the_tilt_of_a_tube_along_the_rows() {
         // degrees at worst.
         eprintln!("seed {seed}: axis {before:.2} -> {after:.2} deg shifts {:?} ({:?} samples, rms {:.2} px)", re.shifts_m, re.samples, re.rms_px);
         assert!(after < 1.2, "seed {seed}: axis {before:.2} -> {after:.2} deg ({:?} samples, rms {:.2} px)", re.samples, re.rms_px);
-        checked += 1;
     }
 }

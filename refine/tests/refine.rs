@@ -72,26 +72,33 @@ fn report(name: &str, e: &mut Errors) -> (f64, f64, f64, f64) {
     (pm, p9, am, a9)
 }
 
+/// Seed perturbation (metres, degrees): `PERTURB_MM` (default 3) and `PERTURB_DEG` (default 2).
+fn perturbation() -> (f64, f64) {
+    let env = |k: &str, default: f64| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(default);
+    (env("PERTURB_MM", 3.0) * 1e-3, env("PERTURB_DEG", 2.0))
+}
+
+/// Reports batch `name` and asserts at most `max_failed` failures and median position (metres)
+/// and axis (degrees) errors below the bounds.
+fn check_medians(name: &str, e: &mut Errors, max_failed: usize, pos_m: f64, axis_deg: f64) {
+    let (pm, _, am, _) = report(name, e);
+    assert!(e.failed <= max_failed, "{name}: {} failed", e.failed);
+    assert!(pm < pos_m, "{name}: median position error {pm}");
+    assert!(am < axis_deg, "{name}: median axis error {am}");
+}
+
 #[test]
 fn mono_perturbed_seeds_converge_back() {
-    let pos = std::env::var("PERTURB_MM").ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
-    let deg = std::env::var("PERTURB_DEG").ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(2.0);
+    let (pos, deg) = perturbation();
     let mut e = run_batch(8, 11, false, false, false, pos, deg);
-    let (pm, _, am, _) = report("mono", &mut e);
-    assert!(e.failed <= 2);
-    assert!(pm < 0.010, "median position error {pm}");
-    assert!(am < 2.0, "median axis error {am}");
+    check_medians("mono", &mut e, 2, 0.010, 2.0);
 }
 
 #[test]
 fn mono_with_ground_plane_perturbed_seeds_converge_back() {
-    let pos = std::env::var("PERTURB_MM").ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
-    let deg = std::env::var("PERTURB_DEG").ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(2.0);
+    let (pos, deg) = perturbation();
     let mut e = run_batch(8, 11, false, false, true, pos, deg);
-    let (pm, _, am, _) = report("mono+ground", &mut e);
-    assert!(e.failed <= 1);
-    assert!(pm < 0.008, "median position error {pm}");
-    assert!(am < 1.0, "median axis error {am}");
+    check_medians("mono+ground", &mut e, 1, 0.008, 1.0);
 }
 
 /// The basin: seeds off by 10 mm in each coordinate and 5 degrees (a Line2D template step),
@@ -99,10 +106,7 @@ fn mono_with_ground_plane_perturbed_seeds_converge_back() {
 #[test]
 fn mono_seeds_off_by_10mm_5deg_converge_back() {
     let mut e = run_batch(8, 13, false, false, false, 0.010, 5.0);
-    let (pm, _, am, _) = report("mono 10 mm / 5 deg", &mut e);
-    assert!(e.failed <= 1, "{} failed", e.failed);
-    assert!(pm < 0.010, "median position error {pm}");
-    assert!(am < 1.0, "median axis error {am}");
+    check_medians("mono 10 mm / 5 deg", &mut e, 1, 0.010, 1.0);
     let mut e = run_batch(8, 14, false, false, true, 0.010, 5.0);
     let (pm, p9, am, a9) = report("mono+ground 10 mm / 5 deg", &mut e);
     assert!(e.failed <= 1, "{} failed", e.failed);
@@ -137,12 +141,9 @@ fn mono_narrow_tubes_exact_seeds_stay_put() {
 
 #[test]
 fn stereo_perturbed_seeds_converge_back() {
-    let pos = std::env::var("PERTURB_MM").ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
+    let (pos, _) = perturbation();
     let mut e = run_batch(8, 12, true, true, false, pos, 2.0);
-    let (pm, _, am, _) = report("stereo", &mut e);
-    assert!(e.failed <= 2);
-    assert!(pm < 0.005, "median position error {pm}");
-    assert!(am < 1.0, "median axis error {am}");
+    check_medians("stereo", &mut e, 2, 0.005, 1.0);
 }
 
 /// One rendered scene with stereo points, for the flip and rejection tests.

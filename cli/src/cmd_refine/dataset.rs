@@ -49,7 +49,7 @@ fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &
     let regions: Vec<StereoRegion> = items
         .iter()
         .map(|it| match it {
-            Work::Detection(d) => StereoRegion { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) },
+            Work::Detection(d) => super::stereo::region_of(d),
             Work::GtSeed(st, bbox, seg) => StereoRegion { bbox: *bbox, mask: seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()), seed_z: Some(st.c.z) },
         })
         .collect();

@@ -8,21 +8,23 @@
 
 use anyhow::{Context, Result};
 use nalgebra::{Point2, Point3};
-use tubeloc_core::{CameraModel, Plane, Pose};
+use tubeloc_core::{CameraModel, Plane, Pose, TubeDetection};
 use tubeloc_refine::stereo_stage::{self, RectifiedPair, StereoRegion};
 use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
 
 /// Stereo points (left camera frame, metres) per region: the pair (`left`/`right` images of
 /// cameras `lcam`/`rcam`, `t_left_right` mapping right-camera points into the left frame) is
-/// rectified and matched ([`points_rectified`]); also returns the rectified pair with its SGM
-/// disparity.
+/// rectified and matched ([`match_regions`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, RectifiedPair)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
-    let sr = points_rectified(&rect, lcam, left, right, regions, num_disparities, erode_px)?;
-    let mut pair = rectified_pair(&rect, left, right)?;
-    pair.disparity = Some(sr.disparity.clone());
-    Ok((sr, pair))
+    match_regions(&rect, lcam, left, right, regions, num_disparities, erode_px)
+}
+
+/// The stereo region of a detection: its box, its mask (if it decodes) and its template pose's
+/// depth (if any).
+pub(crate) fn region_of(d: &TubeDetection) -> StereoRegion {
+    StereoRegion { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) }
 }
 
 /// What SGM gives the refiner: the points of each region (left camera frame, metres), the
@@ -38,16 +40,20 @@ pub(crate) struct StereoRegions {
     pub disparity: Plane<f32>,
 }
 
-/// The rectified pair of `left`/`right` (intensities in [0, 1]) under `rect`.
-pub(crate) fn rectified_pair(rect: &StereoRectification, left: &Plane<u8>, right: &Plane<u8>) -> Result<RectifiedPair> {
+/// The pair rectified under `rect`, matched with SGM in the regions' boxes mapped into the
+/// rectified left image (32 px margin), triangulated and split by region (masks eroded by
+/// `erode_px` first); also the rectified pair (intensities in [0, 1]) with its SGM disparity for
+/// the photometric stage.
+pub(crate) fn match_regions(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, RectifiedPair)> {
     let (rl, rr) = rect.rectify_pair(left, right)?;
-    Ok(RectifiedPair::from_u8(&rl, &rr, rect.rectified.clone(), rect.r_left, rect.baseline))
+    let sr = points_rectified(rect, lcam, &rl, &rr, regions, num_disparities, erode_px)?;
+    let mut pair = RectifiedPair::from_u8(&rl, &rr, rect.rectified.clone(), rect.r_left, rect.baseline);
+    pair.disparity = Some(sr.disparity.clone());
+    Ok((sr, pair))
 }
 
-/// [`points_per_region`] with a rectification already made: SGM in the regions' boxes mapped
-/// into the rectified left image (32 px margin), triangulated, split by region (masks eroded by
-/// `erode_px` first).
-pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<StereoRegions> {
+/// [`match_regions`]' points of the rectified pair `rl`/`rr`.
+fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u8>, rr: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<StereoRegions> {
     let empty = |n: usize| StereoRegions {
         points: vec![Vec::new(); n],
         depth: Plane::filled(lcam.width as usize, lcam.height as usize, f32::NAN),
@@ -56,7 +62,6 @@ pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, l
     if regions.is_empty() {
         return Ok(empty(0));
     }
-    let (rl, rr) = rect.rectify_pair(left, right)?;
     // Regions: each box mapped into rectified left pixels through its corners.
     let mut rois = Vec::new();
     for d in regions {
@@ -77,7 +82,7 @@ pub(crate) fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, l
     let geom = rect.geometry();
     let fb = geom.f * geom.baseline;
     let params = SgmParams { num_disparities, min_disparity: stereo_stage::min_disparity(regions, fb), ..SgmParams::default() };
-    let disp = disparity_regions(&rl, &rr, &params, &rois, 32).context("matching the regions")?;
+    let disp = disparity_regions(rl, rr, &params, &rois, 32).context("matching the regions")?;
     let pts: Vec<(f32, Point3<f64>)> = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25)).into_iter().map(|p| (p.pixel[0], p.point)).collect();
     let depth = stereo_stage::depth_map(lcam, pts.iter().map(|(_, p)| p));
     let points = stereo_stage::region_points(lcam, &pts, regions, fb, erode_px);

@@ -279,3 +279,34 @@ pub fn tube_mask(model: &CylinderModel, scene: &Scene) -> tubeloc_core::BinaryMa
         }
     })
 }
+
+/// The mono speed scene of `benches/refine.rs` and `examples/refine_speed.rs`: the renderer's
+/// scene with a tube at 1.1-1.3 m (random seed 21), the default refiner, and a seed 3 mm /
+/// 2 degrees off the truth.
+pub struct SpeedScene {
+    pub scene: Scene,
+    pub refiner: tubeloc_refine::Refiner,
+    pub seed: tubeloc_refine::Seed,
+}
+
+/// Builds the [`SpeedScene`].
+pub fn speed_scene() -> SpeedScene {
+    use nalgebra::{Rotation3, Unit};
+    use tubeloc_refine::{AxisState, RefineConfig, Refiner, Seed};
+    let model = default_model();
+    let cam = camera(false);
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (1.1, 1.3));
+    let scene = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
+    let refiner = Refiner::new(&TubeModel::default(), RefineConfig::default()).unwrap();
+    let r = Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::new(0.3, -0.5, 0.8)), 2f64.to_radians());
+    let seed = Seed { state: AxisState { c: truth.centre + Vector3::new(0.003, -0.002, 0.003), a: r * truth.axis }, end_known: false };
+    SpeedScene { scene, refiner, seed }
+}
+
+impl SpeedScene {
+    /// The refiner's input: the image alone (mono, no ground, no scene data).
+    pub fn input(&self) -> tubeloc_refine::RefineInput<'_> {
+        tubeloc_refine::RefineInput { image: &self.scene.image, camera: &self.scene.camera, ground: None, scene: tubeloc_refine::Scene::default() }
+    }
+}
