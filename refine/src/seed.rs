@@ -13,7 +13,7 @@ use crate::contour::AxisState;
 use crate::error::RefineError;
 use crate::model::CylinderModel;
 use nalgebra::{Point2, Point3, Vector3};
-use tubeloc_core::{CameraModel, TubeDetection};
+use tubeloc_core::{CameraModel, Pose, TubeDetection};
 
 /// The ground as a plane in the camera frame: points `X` with `normal · X = offset`, `normal`
 /// a unit vector pointing up (away from the ground, toward the sky), metres.
@@ -73,6 +73,22 @@ pub fn reanchored(state: &AxisState, from: &CameraModel, to: &CameraModel) -> Op
     let new_ray = to.unproject(&u);
     let r = nalgebra::Rotation3::rotation_between(&state.c, &new_ray)?;
     Some(AxisState { c: r * state.c, a: r * state.a })
+}
+
+/// The axis state of a tube pose `T_cam_tube`: centre = its translation, axis = its +z (toward
+/// the seal end) in the camera frame.
+pub fn axis_state_of(t: &Pose) -> AxisState {
+    AxisState { c: t.translation(), a: t.transform_vector(&Vector3::z()) }
+}
+
+/// [`reanchored`] for a full template pose `T_cam_tube` (camera `from` -> camera `to`): the
+/// same rotation about the camera centre applied to the tube's orientation. `None` when the
+/// centre does not project; the pose unchanged when the rotation is undefined (opposite rays).
+pub fn reanchored_pose(t: &Pose, from: &CameraModel, to: &CameraModel) -> Option<Pose> {
+    let st = axis_state_of(t);
+    let r = reanchored(&st, from, to)?;
+    let rot = nalgebra::Rotation3::rotation_between(&st.c, &r.c).unwrap_or_else(nalgebra::Rotation3::identity);
+    Some(Pose::from_parts(nalgebra::Rotation3::from_matrix_unchecked(rot.matrix() * t.rotation()), r.c))
 }
 
 /// The mask axis' centre moved along the axis to the foot of the perpendicular from the box
@@ -171,6 +187,20 @@ mod tests {
         assert!((r.c.norm() - st.c.norm()).abs() < 1e-12);
         // The axis keeps its angle to the viewing ray.
         assert!((r.a.dot(&r.c.normalize()) - st.a.dot(&st.c.normalize())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn reanchored_full_pose_turns_the_orientation_with_the_axis() {
+        let from = CameraModel::from_hfov(1024, 1024, 40.0);
+        let mut to = from.clone();
+        to.cx = -237.5;
+        let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.1);
+        let t = Pose::from_parts(rot, Vector3::new(0.2, -0.1, 2.5));
+        let p = reanchored_pose(&t, &from, &to).unwrap();
+        let (st, r) = (axis_state_of(&p), reanchored(&axis_state_of(&t), &from, &to).unwrap());
+        assert!((st.c - r.c).norm() < 1e-12 && (st.a - r.a).norm() < 1e-12);
+        // A rotation: the tube's x axis stays perpendicular to its axis.
+        assert!(p.transform_vector(&Vector3::x()).dot(&st.a).abs() < 1e-12);
     }
 
     #[test]

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
-use tubeloc_refine::seed::perturbed;
+use tubeloc_refine::seed::{axis_state_of, perturbed, reanchored_pose};
 use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
 use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
 
@@ -17,6 +17,17 @@ enum Work {
     /// Seed state from an annotation's exact pose, with the annotation's box and segmentation
     /// (the region of its stereo points, standing in for a segmenter's mask).
     GtSeed(AxisState, [f64; 4], Option<Segmentation>),
+}
+
+impl Work {
+    /// The item's mask (image `w x h`): the detection's, or the annotation's segmentation;
+    /// `None` when absent or not decodable.
+    fn mask(&self, h: u32, w: u32) -> Option<tubeloc_core::BinaryMask> {
+        match self {
+            Work::Detection(d) => d.mask.as_ref().and_then(|m| m.to_mask().ok()),
+            Work::GtSeed(_, _, seg) => seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()),
+        }
+    }
 }
 
 /// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`
@@ -50,7 +61,7 @@ fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &
         .iter()
         .map(|it| match it {
             Work::Detection(d) => super::stereo::region_of(d),
-            Work::GtSeed(st, bbox, seg) => StereoRegion { bbox: *bbox, mask: seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()), seed_z: Some(st.c.z) },
+            Work::GtSeed(st, bbox, _) => StereoRegion { bbox: *bbox, mask: it.mask(h, w), seed_z: Some(st.c.z) },
         })
         .collect();
     super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode).with_context(|| format!("stereo for {}", rpath.display()))
@@ -107,8 +118,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     continue;
                 }
                 let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", ann.display(), a.id))?;
-                let st = AxisState { c: t.translation(), a: t.transform_vector(&nalgebra::Vector3::z()) };
-                w.push(Work::GtSeed(perturbed(&st, pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
+                w.push(Work::GtSeed(perturbed(&axis_state_of(&t), pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
             }
         }
         _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
@@ -159,14 +169,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 }
             }
             let masks: Vec<Option<tubeloc_core::BinaryMask>> = if args.mask_term {
-                let (h, w) = (camera.height, camera.width);
-                items
-                    .iter()
-                    .map(|it| match it {
-                        Work::Detection(d) => d.mask.as_ref().and_then(|m| m.to_mask().ok()),
-                        Work::GtSeed(_, _, seg) => seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()),
-                    })
-                    .collect()
+                items.iter().map(|it| it.mask(camera.height, camera.width)).collect()
             } else {
                 vec![None; items.len()]
             };
@@ -178,10 +181,8 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     Work::Detection(d) => {
                         let mut d = d.clone();
                         if let (Some(from), Some(t)) = (&det_camera, &d.t_cam_tube) {
-                            let st = AxisState { c: t.translation(), a: t.transform_vector(&nalgebra::Vector3::z()) };
-                            if let Some(r) = tubeloc_refine::seed::reanchored(&st, from, &camera) {
-                                let rot = nalgebra::Rotation3::rotation_between(&st.c, &r.c).unwrap_or_else(nalgebra::Rotation3::identity);
-                                d.t_cam_tube = Some(Pose::from_parts(nalgebra::Rotation3::from_matrix_unchecked(rot.matrix() * t.rotation()), r.c));
+                            if let Some(t) = reanchored_pose(t, from, &camera) {
+                                d.t_cam_tube = Some(t);
                             }
                         }
                         let d = &d;
