@@ -79,12 +79,19 @@ impl MaskScores {
 /// highest IoU if that IoU reaches the threshold; precision made monotone and sampled at 101
 /// recall points as COCO does). A quick validation figure; `tubeloc eval` gives the full one.
 pub fn mask_scores(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<MaskScores, LearnedError> {
+    let dets = images.iter().map(|img| detect_image(model, img, cfg)).collect::<Result<Vec<_>, _>>()?;
+    Ok(score_detections(images, &dets))
+}
+
+/// [`mask_scores`] of detections already made: `dets[i]` are the instances of `images[i]`,
+/// in decreasing score order.
+pub fn score_detections(images: &[TrainImage], dets: &[Vec<LearnedInstance>]) -> MaskScores {
     // Per image: the largest label, the number of tubes present, and per detection its score
     // and its IoU with every tube present.
     let per: Vec<(usize, usize, Vec<(f64, Vec<(usize, f64)>)>)> = images
-        .iter()
-        .map(|img| {
-            let dets = detect_image(model, img, cfg)?;
+        .par_iter()
+        .zip(dets)
+        .map(|(img, dets)| {
             let ngt = img.labels.iter().copied().max().unwrap_or(0) as usize;
             let mut gt_area = vec![0usize; ngt + 1];
             for &l in &img.labels {
@@ -105,9 +112,9 @@ pub fn mask_scores(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConf
                     (d.score, present.iter().map(|&k| (k, inter[k] as f64 / (area + gt_area[k] - inter[k]) as f64)).collect())
                 })
                 .collect();
-            Ok((ngt, present.len(), ious))
+            (ngt, present.len(), ious)
         })
-        .collect::<Result<_, LearnedError>>()?;
+        .collect();
     let total_gt = per.iter().map(|p| p.1).sum();
     let mut ap = [0.0; 10];
     let mut matched_iou = Vec::new();
@@ -131,7 +138,7 @@ pub fn mask_scores(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConf
         *ap_t = average_precision(&mut all, total_gt);
     }
     matched_iou.sort_by(f64::total_cmp);
-    Ok(MaskScores { ap, matched_iou, total_gt })
+    MaskScores { ap, matched_iou, total_gt }
 }
 
 /// Mask AP at IoU 0.5 ([`mask_scores`]).
