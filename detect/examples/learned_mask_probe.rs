@@ -14,8 +14,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = LearnedModel::load(Path::new(&a[1]))?;
     let limit = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(40);
     let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
-    let preds = imgs.iter().map(|im| model.predict(&im.input, im.width, im.height)).collect::<Result<Vec<_>, _>>()?;
-    let d = DecodeConfig::default();
+    // PROBE_MIRROR=0: the plain prediction instead of the mirror-averaged default.
+    let d = DecodeConfig { mirror_average: std::env::var("PROBE_MIRROR").map_or(true, |v| v != "0"), ..DecodeConfig::default() };
+    let preds = imgs.iter().map(|im| model.predict_with(&im.input, im.width, im.height, &d)).collect::<Result<Vec<_>, _>>()?;
     // Session 3's decoder: score = peak x mean fg, fixed mask threshold 0.5.
     let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, mask_logit: 0.5, mask_logit_rel: 0.0, ..d };
     let variants = vec![

@@ -370,3 +370,36 @@ fn fine_mask_branch_learns_pixel_outlines_that_stride_4_logits_miss() {
     let (f, c) = (iou(fine_iu), iou(coarse_iu));
     assert!(f > 0.8 && f > c + 0.05, "pixel IoU: fine {f:.3}, stride-4 {c:.3}");
 }
+
+#[test]
+fn mirror_averaged_predictions_are_mirror_symmetric() {
+    // Averaging over the image and its mirror makes the outputs equivariant: the prediction of
+    // the mirrored image is the mirrored prediction (sin 2θ changes sign), even for an
+    // untrained network that is not.
+    let pre = Preprocess::GrayBox { radius: 1 };
+    let m = LearnedModel::new(pre, 4, 3).unwrap();
+    let (s, cw) = (96, 24);
+    let (rgb, _) = bar_image(s, 2, 9);
+    let input = pre.apply(&rgb, s, s);
+    let mirrored: Vec<f32> = input.chunks_exact(s).flat_map(|r| r.iter().rev().copied()).collect();
+    let (p, q) = (m.predict_mirror_averaged(&input, s, s).unwrap(), m.predict_mirror_averaged(&mirrored, s, s).unwrap());
+    let (plain_p, plain_q) = (m.predict(&input, s, s).unwrap(), m.predict(&mirrored, s, s).unwrap());
+    let n = cw * cw;
+    let gap = |a: &Prediction, b: &Prediction| {
+        let mut worst = 0f32;
+        for k in 0..HEADS {
+            let sign = if k == 3 { -1.0 } else { 1.0 };
+            for y in 0..cw {
+                for x in 0..cw {
+                    worst = worst.max((a.planes[k * n + y * cw + x] - sign * b.planes[k * n + y * cw + cw - 1 - x]).abs());
+                }
+            }
+        }
+        worst
+    };
+    assert!(gap(&p, &q) < 1e-4, "mirror-averaged outputs differ by {}", gap(&p, &q));
+    assert!(gap(&plain_p, &plain_q) > 1e-3, "the plain network is not symmetric by itself");
+    // Widths that are not a multiple of 4 get the plain prediction.
+    let odd = pre.apply(&rgb[..(s * 95 * 3)].iter().copied().collect::<Vec<_>>().chunks_exact(s * 3).flat_map(|r| r[..95 * 3].to_vec()).collect::<Vec<_>>(), 95, 95);
+    assert_eq!(m.predict_mirror_averaged(&odd, 95, 95).unwrap().planes, m.predict(&odd, 95, 95).unwrap().planes);
+}

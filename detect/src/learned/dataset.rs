@@ -48,7 +48,7 @@ pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Resul
 
 /// Runs the model on a preprocessed training image.
 pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
-    Ok(decode(&model.predict(&img.input, img.width, img.height)?, cfg))
+    Ok(decode(&model.predict_with(&img.input, img.width, img.height, cfg)?, cfg))
 }
 
 /// Mask quality of a model on labelled images (see [`mask_scores`]).

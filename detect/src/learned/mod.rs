@@ -33,5 +33,5 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
         return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
     let input = model.meta.preprocess.apply(rgb, width, height);
-    Ok(decode(&model.predict(&input, width, height)?, cfg))
+    Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg))
 }

@@ -6,6 +6,7 @@
 //! format, version, checksum, tensor names or shapes do not match is refused with a
 //! [`LearnedError::BadModel`] naming the file.
 
+use super::decode::DecodeConfig;
 use super::error::LearnedError;
 use super::net::{NetConfig, NetOutput, TubeNet, HEADS, STRIDE};
 use super::preprocess::Preprocess;
@@ -144,6 +145,48 @@ impl LearnedModel {
             None => None,
         };
         Ok(Prediction { planes, out_w: cw, out_h: chh, width, height, fine })
+    }
+
+    /// The prediction that `cfg` asks for: [`LearnedModel::predict_mirror_averaged`] with
+    /// [`DecodeConfig::mirror_average`], else [`LearnedModel::predict`].
+    pub fn predict_with(&self, input: &[f32], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Prediction, LearnedError> {
+        if cfg.mirror_average {
+            self.predict_mirror_averaged(input, width, height)
+        } else {
+            self.predict(input, width, height)
+        }
+    }
+
+    /// [`LearnedModel::predict`] averaged over the image and its left-right mirror
+    /// (test-time augmentation; the network was trained with mirrored crops). The mirror's
+    /// outputs are mirrored back (cell `i` of a `4 n` px wide image ↔ cell `n - 1 - i`) and the
+    /// axis channel `sin 2θ` changes sign (θ → π − θ); logits, `cos 2θ` and lengths are averaged
+    /// as they are. Images whose width is not a multiple of 4 get the plain prediction.
+    pub fn predict_mirror_averaged(&self, input: &[f32], width: usize, height: usize) -> Result<Prediction, LearnedError> {
+        let mut p = self.predict(input, width, height)?;
+        if width % STRIDE != 0 {
+            return Ok(p);
+        }
+        let mirrored: Vec<f32> = input.chunks_exact(width).flat_map(|row| row.iter().rev().copied()).collect();
+        let q = self.predict(&mirrored, width, height)?;
+        let (cw, n) = (p.out_w, p.out_w * p.out_h);
+        for k in 0..HEADS {
+            let sign = if k == 3 { -1.0 } else { 1.0 };
+            for y in 0..p.out_h {
+                let (a, b) = (&mut p.planes[k * n + y * cw..][..cw], &q.planes[k * n + y * cw..][..cw]);
+                for (i, v) in a.iter_mut().enumerate() {
+                    *v = 0.5 * (*v + sign * b[cw - 1 - i]);
+                }
+            }
+        }
+        if let (Some(f), Some(g)) = (p.fine.as_mut(), q.fine.as_ref()) {
+            for (a, b) in f.chunks_exact_mut(width).zip(g.chunks_exact(width)) {
+                for (i, v) in a.iter_mut().enumerate() {
+                    *v = 0.5 * (*v + b[width - 1 - i]);
+                }
+            }
+        }
+        Ok(p)
     }
 
     /// Serializes weights and metadata (see the module doc) to bytes.
