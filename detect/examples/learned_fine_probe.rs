@@ -1,18 +1,11 @@
 //! Probe: how well the full-resolution mask logits of a fine-mask model separate tube pixels
 //! from the background, against the bilinear stride-4 foreground logits.
 //! `cargo run --release -p tubeloc-detect --example learned_fine_probe -- MODEL DATASET_DIR [LIMIT]`
-use std::path::Path;
-use tubeloc_detect::learned::dataset::load_coco_dir;
-use tubeloc_detect::learned::LearnedModel;
+#[path = "common/probe_args.rs"]
+mod probe_args;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let a: Vec<String> = std::env::args().collect();
-    if a.len() < 3 {
-        return Err("usage: learned_fine_probe MODEL DATASET_DIR [LIMIT]".into());
-    }
-    let model = LearnedModel::load(Path::new(&a[1]))?;
-    let limit = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(10);
-    let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
+    let (model, imgs) = probe_args::model_and_images("learned_fine_probe", 10)?;
     let ts = [-1.0f32, 0.0, 1.0, 1.6, 2.2, 3.0];
     // Per threshold: (intersection, union) over tube-neighbourhood pixels, fine and coarse.
     let mut acc = vec![[0usize; 4]; ts.len()];

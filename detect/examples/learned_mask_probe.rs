@@ -2,18 +2,14 @@
 //! decoder settings (select them on a validation set, not on the test sets). The network runs
 //! once per image; each setting only re-decodes.
 //! `cargo run --release -p tubeloc-detect --example learned_mask_probe -- MODEL DATASET_DIR [LIMIT]`
-use std::path::Path;
-use tubeloc_detect::learned::dataset::{load_coco_dir, score_detections};
-use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel};
+#[path = "common/probe_args.rs"]
+mod probe_args;
+
+use tubeloc_detect::learned::dataset::score_detections;
+use tubeloc_detect::learned::{decode, DecodeConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let a: Vec<String> = std::env::args().collect();
-    if a.len() < 3 {
-        return Err("usage: learned_mask_probe MODEL DATASET_DIR [LIMIT]".into());
-    }
-    let model = LearnedModel::load(Path::new(&a[1]))?;
-    let limit = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(40);
-    let imgs = load_coco_dir(Path::new(&a[2]), model.meta.preprocess, Some(limit))?;
+    let (model, imgs) = probe_args::model_and_images("learned_mask_probe", 40)?;
     // PROBE_MIRROR=0: the plain prediction instead of the mirror-averaged default.
     let d = DecodeConfig { mirror_average: std::env::var("PROBE_MIRROR").map_or(true, |v| v != "0"), ..DecodeConfig::default() };
     let preds = imgs.iter().map(|im| model.predict_with(&im.input, im.width, im.height, &d)).collect::<Result<Vec<_>, _>>()?;
