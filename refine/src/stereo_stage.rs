@@ -80,6 +80,8 @@ pub fn depth_map<'a>(lcam: &CameraModel, points: impl IntoIterator<Item = &'a Po
 /// picks a wrong, smaller disparity there).
 pub fn region_points(lcam: &CameraModel, points: &[(f32, Point3<f64>)], regions: &[StereoRegion], fb: f64, erode_px: usize) -> Vec<Vec<Point3<f64>>> {
     let masks: Vec<Option<BinaryMask>> = regions.iter().map(|r| r.mask.as_ref().map(|m| erode(m, erode_px))).collect();
+    // Each point's left-image projection, once for all regions.
+    let projected: Vec<Option<nalgebra::Point2<f64>>> = points.iter().map(|(_, p)| lcam.project(p)).collect();
     regions
         .iter()
         .zip(&masks)
@@ -87,11 +89,12 @@ pub fn region_points(lcam: &CameraModel, points: &[(f32, Point3<f64>)], regions:
             let min_x = d.seed_z.filter(|z| z.is_finite() && *z > 0.0).map_or(f64::NEG_INFINITY, |z| 1.05 * fb / z + 2.0);
             points
                 .iter()
-                .filter_map(|(px, p)| {
+                .zip(&projected)
+                .filter_map(|((px, p), u)| {
                     if (*px as f64) < min_x {
                         return None;
                     }
-                    let u = lcam.project(p)?;
+                    let u = (*u)?;
                     let [x, y, w, h] = d.bbox;
                     let inside = match m {
                         Some(m) => u.x >= -0.5 && u.y >= -0.5 && (u.x + 0.5) < m.width as f64 && (u.y + 0.5) < m.height as f64 && m.get((u.x + 0.5) as usize, (u.y + 0.5) as usize),
