@@ -33,6 +33,7 @@ use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
+use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, MaskSnap};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
 
 mod dataset;
@@ -89,6 +90,18 @@ pub struct RefineArgs {
     /// Overlay PNG with the fitted contours.
     #[arg(long)]
     pub(crate) overlay: Option<PathBuf>,
+    /// Also write the detections with each mask snapped to its converged pose's silhouette
+    /// (`tubeloc_refine::silhouette`: silhouette ∩ mask dilated by --snap-dilate-px, where it
+    /// agrees with the mask); same format as --detections, in the order of --out. Detections
+    /// without a mask, a converged pose or agreement keep their mask.
+    #[arg(long)]
+    pub(crate) snapped_out: Option<PathBuf>,
+    /// --snapped-out: the silhouette is kept within this many pixels of the detector's mask.
+    #[arg(long, default_value_t = MaskSnap::default().dilate_px)]
+    pub(crate) snap_dilate_px: usize,
+    /// --snapped-out: least IoU of the snapped mask with the detector's for the snap to be used.
+    #[arg(long, default_value_t = MaskSnap::default().min_agreement)]
+    pub(crate) snap_min_agreement: f64,
     /// Right image of a stereo pair (needs --rig).
     #[arg(long)]
     pub(crate) right: Option<PathBuf>,
@@ -227,7 +240,39 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
     Refiner::new(&tube, config).context("building the refiner")
 }
 
+/// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
+/// and agrees with the mask; otherwise `det` unchanged. Returns whether it was snapped.
+pub(crate) fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
+    let Some(mask) = det.mask.as_ref().filter(|_| pose.converged).and_then(|m| m.to_mask().ok()) else { return false };
+    let silhouette = silhouette_mask(&refiner.model, pose, camera);
+    match snap_mask(&mask, &silhouette, snap) {
+        Some(m) => {
+            det.bbox = m.bbox();
+            det.mask = Some(tubeloc_core::Rle::from_mask(&m));
+            true
+        }
+        None => false,
+    }
+}
+
 impl RefineArgs {
+    /// The mask snap of `--snapped-out`.
+    pub(crate) fn mask_snap(&self) -> Result<MaskSnap> {
+        if !(0.0..=1.0).contains(&self.snap_min_agreement) {
+            bail!("--snap-min-agreement {}: expected a value in [0, 1]", self.snap_min_agreement);
+        }
+        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement })
+    }
+
+    /// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks
+    /// were snapped.
+    pub(crate) fn write_snapped(&self, snapped: &[(TubeDetection, bool)]) -> Result<()> {
+        let Some(path) = &self.snapped_out else { return Ok(()) };
+        let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
+        files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
+        Ok(())
+    }
     /// Whether the photometric stage moves each end along its own ray (distance and tilt)
     /// rather than the centre alone: not with `--photo-centre-only`, and not with a ground
     /// plane, whose tilt prior fixes the tilt better.
@@ -255,6 +300,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
         return dataset::run(&args);
     }
     let refiner = refiner_of(&args)?;
+    let snap = args.mask_snap()?;
     let ground = args.ground.as_deref().map(parse_ground).transpose()?;
     let det_path = args.detections.as_ref().context("--detections is required without --dataset")?;
     let image_path = args.image.as_ref().context("--image is required without --dataset")?;
@@ -306,6 +352,18 @@ pub fn run(args: RefineArgs) -> Result<()> {
         );
     }
     files::write_json(&args.out, &poses).with_context(|| format!("writing {}", args.out.display()))?;
+    if args.snapped_out.is_some() {
+        let snapped: Vec<(TubeDetection, bool)> = dets
+            .iter()
+            .zip(&poses)
+            .map(|(d, p)| {
+                let mut d = d.clone();
+                let s = snapped_detection(&mut d, p, &refiner, &camera, &snap);
+                (d, s)
+            })
+            .collect();
+        args.write_snapped(&snapped)?;
+    }
     if let Some(o) = &args.overlay {
         overlay(o, &gray, &refiner, &camera, &poses).with_context(|| format!("writing {}", o.display()))?;
     }

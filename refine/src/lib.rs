@@ -25,6 +25,7 @@ pub mod search;
 pub mod stereo_stage;
 pub mod seed;
 pub mod seed_policy;
+pub mod silhouette;
 
 pub use contour::AxisState;
 pub use error::RefineError;

@@ -81,6 +81,10 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     let ann = dir.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
     let mut refiner = refiner_of(args)?;
+    let snap = args.mask_snap()?;
+    if args.snapped_out.is_some() && args.detections.is_none() {
+        bail!("--snapped-out needs --detections (the masks to snap)");
+    }
     let auto_ground = args.ground.as_deref() == Some("auto");
     if auto_ground {
         // World z = 0 of the tripod pose is the nominal ground, but the terrain has relief:
@@ -130,13 +134,13 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     let fixed_ground = if auto_ground { None } else { args.ground.as_deref().map(parse_ground).transpose()? };
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}").expect("template"));
-    let per_image: Vec<(Vec<TubeAxisPose>, Vec<TubeAxisPose>)> = images
+    let per_image: Vec<(Vec<TubeAxisPose>, Vec<TubeAxisPose>, Vec<(TubeDetection, bool)>)> = images
         .par_iter()
         .map(|im| -> Result<_> {
             let items = &work[&im.id];
             if items.is_empty() {
                 bar.inc(1);
-                return Ok((Vec::new(), Vec::new()));
+                return Ok((Vec::new(), Vec::new(), Vec::new()));
             }
             let camera = camera_of(im)?;
             let ground = if auto_ground { ground_of(im)? } else { fixed_ground };
@@ -209,15 +213,31 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
                 }
             }
+            let snapped = match args.snapped_out {
+                Some(_) => items
+                    .iter()
+                    .zip(&poses)
+                    .filter_map(|(w, p)| match w {
+                        Work::Detection(d) => {
+                            let mut d = d.clone();
+                            let s = super::snapped_detection(&mut d, p, &refiner, &camera, &snap);
+                            Some((d, s))
+                        }
+                        Work::GtSeed(..) => None,
+                    })
+                    .collect(),
+                None => Vec::new(),
+            };
             bar.inc(1);
-            Ok((poses, seeds))
+            Ok((poses, seeds, snapped))
         })
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
-    let (mut poses, mut seeds) = (Vec::new(), Vec::new());
-    for (p, s) in per_image {
+    let (mut poses, mut seeds, mut snapped) = (Vec::new(), Vec::new(), Vec::new());
+    for (p, s, m) in per_image {
         poses.extend(p);
         seeds.extend(s);
+        snapped.extend(m);
     }
     let mut reasons: BTreeMap<String, usize> = BTreeMap::new();
     for p in &poses {
@@ -229,6 +249,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     if let Some(s) = &args.seeds_out {
         files::write_json(s, &seeds).with_context(|| format!("writing {}", s.display()))?;
     }
+    args.write_snapped(&snapped)?;
     let out: PathBuf = args.out.clone();
     eprintln!(
         "{} images, {} poses ({} converged; failures {:?}) -> {}",
