@@ -265,15 +265,28 @@ pub fn run(a: BenchArgs) -> Result<()> {
                     continue;
                 }
                 let dir = out.join("poses").join(det).join(sp);
-                st.run(&format!("poses/{det}/{sp}"), &[dir.join("eval/pose_metrics.json")], || {
+                // Learned masks are also snapped to the refined poses' silhouettes and scored.
+                let snap = det == "learned";
+                let mut outputs = vec![dir.join("eval/pose_metrics.json")];
+                if snap {
+                    outputs.push(dir.join("snapped_eval/metrics.json"));
+                }
+                st.run(&format!("poses/{det}/{sp}"), &outputs, || {
                     std::fs::create_dir_all(&dir)?;
-                    let (poses, seeds) = (dir.join("poses.json"), dir.join("seeds.json"));
+                    let (poses, seeds, snapped) = (dir.join("poses.json"), dir.join("seeds.json"), dir.join("snapped.json"));
                     let t = Instant::now();
-                    crate::run_words(&words(&["refine", "--dataset", &s(&split_dir(sp)), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses), "--seeds-out", &s(&seeds)]))?;
+                    let mut w = words(&["refine", "--dataset", &s(&split_dir(sp)), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses), "--seeds-out", &s(&seeds)]);
+                    if snap {
+                        w.extend(words(&["--snapped-out", &s(&snapped)]));
+                    }
+                    crate::run_words(&w)?;
                     let secs = t.elapsed().as_secs_f64();
                     crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval"))]))?;
+                    if snap {
+                        crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--dt", &s(&snapped), "--out", &s(&dir.join("snapped_eval")), "--by", "terrain", "time", "height_m", "occlusion"]))?;
+                    }
                     let n: Vec<Value> = files::read_json(&poses)?;
-                    Ok(json!({"refine_seconds": secs, "poses": n.len()}))
+                    Ok(json!({"refine_seconds": secs, "poses": n.len(), "ms_per_image": secs * 1e3 / n_img[sp].max(1) as f64}))
                 })?;
             }
         }
@@ -394,15 +407,19 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
     let mut r = String::new();
     let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
     let _ = writeln!(r, "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n", env!("CARGO_PKG_VERSION"), n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "));
-    let table = |r: &mut String, det: &str, paper_of: &dyn Fn(usize) -> (f64, f64), title: &str| {
+    // One table row per split: `stages(sp)` names the stages whose `ms_per_image` add up to
+    // the row's time, `eval_dir(sp)` the evaluation folder (relative to `out`).
+    let table = |r: &mut String, stages: &dyn Fn(&str) -> Vec<String>, eval_dir: &dyn Fn(&str) -> String, paper_of: &dyn Fn(usize) -> (f64, f64), title: &str| {
         let _ = writeln!(r, "## {title}\n\n| test split | AP [.5] ours | AR [.5:.95] ours | AP [.5] paper | AR paper | ms / image | details |\n|---|---|---|---|---|---|---|");
         for (i, (sp, ..)) in SPLITS.iter().enumerate() {
-            let m = out.join(det).join(sp).join("eval/metrics.json");
+            let rel = eval_dir(sp);
+            let m = out.join(&rel).join("metrics.json");
             let (p_ap, p_ar) = paper_of(i);
             match crate::figures::ap50_ar(&m) {
                 Some((ap, ar)) => {
-                    let ms = st.result(&format!("{det}/{sp}")).and_then(|v| v["ms_per_image"].as_f64()).map(|x| format!("{x:.0}")).unwrap_or_default();
-                    let _ = writeln!(r, "| {sp} | {} | {} | {} | {} | {ms} | [report]({det}/{sp}/eval/report.md) |", f3(ap), f3(ar), f3(p_ap), f3(p_ar));
+                    let ms: Option<f64> = stages(sp).iter().map(|k| st.result(k).and_then(|v| v["ms_per_image"].as_f64())).sum();
+                    let ms = ms.map(|x| format!("{x:.0}")).unwrap_or_default();
+                    let _ = writeln!(r, "| {sp} | {} | {} | {} | {} | {ms} | [report]({rel}/report.md) |", f3(ap), f3(ar), f3(p_ap), f3(p_ar));
                 }
                 None => {
                     let _ = writeln!(r, "| {sp} | not run | | {} | {} | | |", f3(p_ap), f3(p_ar));
@@ -411,12 +428,19 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         }
         r.push('\n');
     };
-    table(&mut r, "line2d", &|i| SPLITS[i].1, "Table I: Line2D");
+    table(&mut r, &|sp| vec![format!("line2d/{sp}")], &|sp| format!("line2d/{sp}/eval"), &|i| SPLITS[i].1, "Table I: Line2D");
     let protocol = st.result("learned/no-tags").and_then(|v| v["protocol"].as_str().map(String::from)).unwrap_or_else(|| "not run".into());
-    table(&mut r, "learned", &|i| SPLITS[i].2, &format!("Table II: learned segmenter ({protocol}; the paper's Mask R-CNN was trained on the other split)"));
-    for det in ["line2d", "learned"] {
+    table(&mut r, &|sp| vec![format!("learned/{sp}")], &|sp| format!("learned/{sp}/eval"), &|i| SPLITS[i].2, &format!("Table II: learned segmenter ({protocol}; the paper's Mask R-CNN was trained on the other split)"));
+    table(
+        &mut r,
+        &|sp| vec![format!("learned/{sp}"), format!("poses/learned/{sp}")],
+        &|sp| format!("poses/learned/{sp}/snapped_eval"),
+        &|i| SPLITS[i].2,
+        "Table II (b): the learned masks snapped to their mono-refined poses' silhouettes (`tubeloc refine --snapped-out`; time: detection + refinement)",
+    );
+    for (det, rel) in [("line2d", "line2d/{sp}/eval"), ("learned", "learned/{sp}/eval"), ("learned, snapped", "poses/learned/{sp}/snapped_eval")] {
         for (sp, ..) in SPLITS {
-            let dir = out.join(det).join(sp).join("eval");
+            let dir = out.join(rel.replace("{sp}", sp));
             if let Ok(md) = std::fs::read_to_string(dir.join("breakdown.md")) {
                 let _ = writeln!(r, "### {det} on {sp}: breakdown (AP50 / AP / AR100 per value)\n\n{md}\n");
             }

@@ -215,3 +215,68 @@ fn demo_runs_the_whole_pipeline_and_reports_measured_figures() {
     let pos: f64 = row.split('|').nth(3).unwrap().trim().parse().unwrap();
     assert!(pos < 10.0, "tag-pair position error {pos} mm");
 }
+
+#[test]
+fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
+    use tubeloc_core::{BinaryMask, CocoDataset, Rle, Segmentation};
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("dataset");
+    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.5", "--resolution", "512", "--seed", "5", "--out", p(&ds)]);
+    let gt = CocoDataset::load(&ds.join("annotations.json")).unwrap();
+    let size = |id: u64| gt.images.iter().find(|im| im.id == id).map(|im| (im.height, im.width)).unwrap();
+    // A coarse segmenter: each well visible tube's mask moved 3 px down and fattened by 2 px.
+    let mut truth = Vec::new();
+    let mut coarse = Vec::new();
+    for a in &gt.annotations {
+        if a.extra.get("visible_fraction").and_then(Value::as_f64).unwrap_or(0.0) < 0.8 {
+            continue;
+        }
+        let (h, w) = size(a.image_id);
+        let m = a.segmentation.as_ref().unwrap().to_rle(h, w).unwrap().to_mask().unwrap();
+        let shifted = BinaryMask::from_fn(m.width, m.height, |x, y| y >= 3 && m.get(x, y - 3));
+        let fat = tubeloc_refine::silhouette::dilate(&shifted, 2);
+        coarse.push(serde_json::json!({"image_id": a.image_id, "category_id": 1, "score": 0.9, "segmentation": Segmentation::from_rle(&Rle::from_mask(&fat))}));
+        truth.push(m);
+    }
+    assert!(truth.len() >= 2, "tiny scene has {} well visible tubes", truth.len());
+    let (results, dets, poses, snapped) = (dir.path().join("coarse.json"), dir.path().join("dets.json"), dir.path().join("poses.json"), dir.path().join("snapped.json"));
+    std::fs::write(&results, serde_json::to_string(&coarse).unwrap()).unwrap();
+    ok(&["detect", "--method", "external", "--results", p(&results), "--dataset", p(&ds), "--out", p(&dets)]);
+    let o = ok(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--ground", "auto", "--out", p(&poses), "--snapped-out", p(&snapped)]);
+    assert!(stderr(&o).contains("masks snapped to their poses"), "{}", stderr(&o));
+    let read = |path: &Path| tubeloc_core::detection::read_coco_results(path).unwrap();
+    let (before, after) = (read(&dets), read(&snapped));
+    assert_eq!(before.len(), after.len());
+    // Each output keeps its detection's image and score; masks are compared with the truth
+    // they came from (same order within an image).
+    let iou = |d: &tubeloc_core::TubeDetection, t: &BinaryMask| {
+        let m = d.mask.as_ref().unwrap().to_mask().unwrap();
+        tubeloc_refine::silhouette::mask_iou(&m, t)
+    };
+    let mut k_of_image: std::collections::BTreeMap<u64, Vec<usize>> = Default::default();
+    for (k, c) in coarse.iter().enumerate() {
+        k_of_image.entry(c["image_id"].as_u64().unwrap()).or_default().push(k);
+    }
+    let (mut sum_before, mut sum_after, mut n) = (0.0, 0.0, 0);
+    let mut seen: std::collections::BTreeMap<u64, usize> = Default::default();
+    for (b, a) in before.iter().zip(&after) {
+        assert_eq!((b.image_id, b.score), (a.image_id, a.score));
+        let j = seen.entry(b.image_id).or_default();
+        let t = &truth[k_of_image[&b.image_id][*j]];
+        *j += 1;
+        sum_before += iou(b, t);
+        sum_after += iou(a, t);
+        n += 1;
+    }
+    let (mb, ma) = (sum_before / n as f64, sum_after / n as f64);
+    assert!(mb < 0.8, "coarse masks' mean IoU {mb:.3}");
+    assert!(ma > 0.9 && ma > mb + 0.1, "snapped masks' mean IoU {ma:.3}, coarse {mb:.3}");
+
+    // Bad settings and a mode without masks are refused before any work.
+    let o = tubeloc(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--out", p(&poses), "--snapped-out", p(&snapped), "--snap-min-agreement", "2"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--snap-min-agreement 2"), "{}", stderr(&o));
+    let o = tubeloc(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--out", p(&poses), "--snapped-out", p(&snapped)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--snapped-out needs --detections"), "{}", stderr(&o));
+}
