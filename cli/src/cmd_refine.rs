@@ -241,9 +241,9 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
 }
 
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
-/// and agrees with the mask; otherwise `det` unchanged. Returns whether it was snapped.
+/// (and is the fit's, not a kept seed) and agrees with the mask; otherwise `det` unchanged. Returns whether it was snapped.
 pub(crate) fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
-    let Some(mask) = det.mask.as_ref().filter(|_| pose.converged).and_then(|m| m.to_mask().ok()) else { return false };
+    let Some(mask) = det.mask.as_ref().filter(|_| pose.converged && pose.seed_kept.is_none()).and_then(|m| m.to_mask().ok()) else { return false };
     let silhouette = silhouette_mask(&refiner.model, pose, camera);
     match snap_mask(&mask, &silhouette, snap) {
         Some(m) => {

@@ -89,6 +89,11 @@ pub struct TubeAxisPose {
     /// Why the fit failed; `None` when `converged`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub failure: Option<RefineFailure>,
+    /// Set when the centre and axis are the detector's seed rather than the fit, and why (the
+    /// fitted silhouette disagreed with the detector's mask). The end decision is the fit's;
+    /// the covariance is the fit's widened by the fit-to-seed difference.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_kept: Option<String>,
 }
 
 /// The canonical sign of an undirected axis: the first component (x, y, z order) with magnitude
@@ -145,6 +150,7 @@ impl TubeAxisPose {
             residuals: ResidualStats::default(),
             converged: true,
             failure: None,
+            seed_kept: None,
         })
     }
 

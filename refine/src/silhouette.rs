@@ -105,13 +105,21 @@ pub fn mask_iou(a: &BinaryMask, b: &BinaryMask) -> f64 {
 /// `silhouette ∩ dilate(mask, snap.dilate_px)`, or `None` when that disagrees with the mask
 /// (`IoU < snap.min_agreement`), the sizes differ, or it is empty.
 pub fn snap_mask(mask: &BinaryMask, silhouette: &BinaryMask, snap: &MaskSnap) -> Option<BinaryMask> {
+    let (snapped, agreement) = snap_candidate(mask, silhouette, snap.dilate_px)?;
+    (snapped.area() > 0 && agreement >= snap.min_agreement).then_some(snapped)
+}
+
+/// `silhouette ∩ dilate(mask, dilate_px)` and its IoU with `mask` (the agreement that
+/// [`snap_mask`] tests); `None` when the sizes differ.
+pub fn snap_candidate(mask: &BinaryMask, silhouette: &BinaryMask, dilate_px: usize) -> Option<(BinaryMask, f64)> {
     if mask.width != silhouette.width || mask.height != silhouette.height {
         return None;
     }
-    let near = dilate(mask, snap.dilate_px);
+    let near = dilate(mask, dilate_px);
     let data: Vec<u8> = silhouette.data.iter().zip(&near.data).map(|(&s, &n)| (s != 0 && n != 0) as u8).collect();
     let snapped = BinaryMask { width: mask.width, height: mask.height, data };
-    (snapped.area() > 0 && mask_iou(&snapped, mask) >= snap.min_agreement).then_some(snapped)
+    let agreement = mask_iou(&snapped, mask);
+    Some((snapped, agreement))
 }
 
 #[cfg(test)]

@@ -302,3 +302,49 @@ fn mask_agreement_seeds_off_by_10mm_5deg_converge_back() {
     assert!(pm < 0.003, "median position error {pm}");
     assert!(am < 0.5, "median axis error {am}");
 }
+
+/// A mask seed whose fit lands on a tube the mask does not cover (the mask lies 0.6 tube
+/// widths beside the rendered tube): the fitted silhouette disagrees with the mask, so the seed's centre and
+/// axis are kept and flagged; with the check off (`mask_seed_min_agreement = 0`) the fit is
+/// returned as is.
+#[test]
+fn mask_seed_whose_fit_disagrees_with_its_mask_keeps_the_seed() {
+    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    let (sc, _) = one_scene();
+    let model = default_model();
+    let truth_mask = tube_mask(&model, &sc);
+    // Image direction of the axis, and the unit normal to it.
+    let cam = &sc.camera;
+    let p0 = cam.project(&nalgebra::Point3::from(sc.truth.centre)).unwrap();
+    let p1 = cam.project(&nalgebra::Point3::from(sc.truth.centre + sc.truth.axis * 0.05)).unwrap();
+    let d = (p1 - p0).normalize();
+    let width = AxisSeed::from_pixels((0..truth_mask.height).flat_map(|y| (0..truth_mask.width).map(move |x| (x, y))).filter(|&(x, y)| truth_mask.get(x, y)).map(|(x, y)| (x as f64, y as f64))).unwrap().width_px;
+    let (nx, ny) = (-d.y * 0.6 * width, d.x * 0.6 * width);
+    let shifted = tubeloc_core::BinaryMask::from_fn(truth_mask.width, truth_mask.height, |x, y| {
+        let (sx, sy) = ((x as f64 - nx).round(), (y as f64 - ny).round());
+        sx >= 0.0 && sy >= 0.0 && (sx as usize) < truth_mask.width && (sy as usize) < truth_mask.height && truth_mask.get(sx as usize, sy as usize)
+    });
+    let pixels: Vec<(f64, f64)> = (0..shifted.height).flat_map(|y| (0..shifted.width).map(move |x| (x, y))).filter(|&(x, y)| shifted.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
+    let mut det = TubeDetection::new(0, 0.9, shifted.bbox(), DetectionSource::Learned);
+    det.axis_seed = AxisSeed::from_pixels(pixels.iter().copied());
+    det.mask = Some(Rle::from_mask(&shifted));
+    let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
+    let input = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene::default() };
+    let seed = tubeloc_refine::seed_from_detection(&det, cam, &model, Some(&g), &[]).unwrap();
+
+    let off = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_seed_min_agreement: 0.0, ..RefineConfig::default() }).unwrap();
+    let fit = off.refine(&input, &det);
+    assert!(fit.converged && fit.seed_kept.is_none(), "{:?}", fit.failure);
+    assert!((fit.centre - seed.state.c).norm() > 0.005, "the fit stayed at the seed; the test needs it to move to the tube");
+
+    let on = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let kept = on.refine(&input, &det);
+    assert!(kept.converged, "{:?}", kept.failure);
+    let why = kept.seed_kept.as_deref().expect("seed kept");
+    assert!(why.contains("IoU"), "{why}");
+    assert!((kept.centre - seed.state.c).norm() < 1e-12);
+    assert!(axis_angle(&kept.axis, &seed.state.a) < 1e-9);
+    // The covariance says the position is uncertain by at least the fit-to-seed difference.
+    let var: f64 = (0..3).map(|i| kept.covariance[i][i]).sum();
+    assert!(var.sqrt() >= 0.99 * (fit.centre - seed.state.c).norm(), "covariance {var}");
+}
