@@ -24,6 +24,7 @@ pub mod robust;
 pub mod search;
 pub mod stereo_stage;
 pub mod seed;
+pub mod seal_end;
 pub mod seed_policy;
 pub mod silhouette;
 
@@ -36,7 +37,8 @@ pub use seed_policy::{SeedKind, SeedSettings};
 
 use nalgebra::{Point2, Point3, Vector3};
 use serde::{Deserialize, Serialize};
-use tubeloc_core::{CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
+use seal_end::ColourImage;
+use tubeloc_core::{BinaryMask, CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
 
 /// Tuning of the refiner. Pixel values are in pixels of the level they apply to unless noted.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -337,6 +339,13 @@ pub struct RefineInput<'a> {
     pub scene: Scene<'a>,
 }
 
+/// The colour image and the detection's mask for the colour end decision ([`seal_end`]).
+#[derive(Clone, Copy)]
+struct EndColour<'a> {
+    image: &'a ColourImage<'a>,
+    visible: Option<&'a BinaryMask>,
+}
+
 /// The pose refiner: a tube model and a configuration.
 #[derive(Clone, Debug)]
 pub struct Refiner {
@@ -358,6 +367,13 @@ impl Refiner {
     /// and a [`tubeloc_core::RefineFailure`]; the pose is then the last finite estimate (or the
     /// seed).
     pub fn refine(&self, input: &RefineInput, det: &TubeDetection) -> TubeAxisPose {
+        self.refine_with_colour(input, det, None)
+    }
+
+    /// [`Refiner::refine`] with the image's colours: where the fit shows enough of the seal
+    /// section and the body (kept to the detection's mask), their colours decide which end is
+    /// the seal end ([`seal_end`]) instead of the edges, and set `end_confidence`.
+    pub fn refine_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> TubeAxisPose {
         match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
             Ok(seed) => {
                 // Detector seeds are worse than explicit ones in kind-specific ways
@@ -365,7 +381,9 @@ impl Refiner {
                 let has_ground = input.ground.is_some() || input.scene.ground.is_some();
                 let cfg = SeedSettings::new(&self.config, SeedKind::of(det), has_ground).config(&self.config);
                 let r = Refiner { model: self.model.clone(), config: cfg };
-                let pose = r.refine_seed(input, &seed, det.image_id, det.score, Some(det.bbox));
+                let mask = colour.and(det.mask.as_ref()).and_then(|m| m.to_mask().ok());
+                let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
+                let pose = r.refine_seed_inner(input, &seed, det.image_id, det.score, Some(det.bbox), ends);
                 self.checked_against_mask(pose, &seed, det, input.camera)
             }
             Err(e) => failed(det.image_id, det.score, None, FailureReason::BadSeed, e.to_string()),
@@ -408,6 +426,11 @@ impl Refiner {
     /// Refines from an explicit seed. `bbox` (COCO `[x, y, w, h]`) widens the region of
     /// interest when given.
     pub fn refine_seed(&self, input: &RefineInput, seed: &Seed, image_id: u64, score: f64, bbox: Option<[f64; 4]>) -> TubeAxisPose {
+        self.refine_seed_inner(input, seed, image_id, score, bbox, None)
+    }
+
+    /// [`Refiner::refine_seed`], with the colour end decision when `ends` is given.
+    fn refine_seed_inner(&self, input: &RefineInput, seed: &Seed, image_id: u64, score: f64, bbox: Option<[f64; 4]>, ends: Option<EndColour>) -> TubeAxisPose {
         let cam = input.camera;
         if input.image.width != cam.width as usize || input.image.height != cam.height as usize {
             let msg = format!("image is {}x{} but the camera is {}x{}", input.image.width, input.image.height, cam.width, cam.height);
@@ -434,7 +457,25 @@ impl Refiner {
                 a = b;
             }
         }
-        let (best, conf) = if self.config.decide_end && a.failure.is_none() {
+        let colour_evidence = ends.and_then(|e| {
+            let pose = to_pose(image_id, score, &a, 0.5);
+            (a.failure.is_none()).then(|| seal_end::seal_end_evidence(&self.model, &pose, cam, e.image, e.visible)).flatten()
+        });
+        let (best, conf) = if let (true, Some(ev)) = (self.config.decide_end, colour_evidence) {
+            // The colours decide; the flipped hypothesis is fitted (its sections placed) when
+            // they favour it, else `a` is simply turned end to end.
+            let p = seal_end::end_confidence(&ev);
+            if ev.contrast >= 0.0 {
+                (a, p)
+            } else {
+                let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &scene, AxisState { c: a.state.c, a: -a.state.a });
+                if b.failure.is_none() {
+                    (b, p)
+                } else {
+                    (FitResult { state: AxisState { c: a.state.c, a: -a.state.a }, ..a }, p)
+                }
+            }
+        } else if self.config.decide_end && a.failure.is_none() {
             let flipped = AxisState { c: a.state.c, a: -a.state.a };
             let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &scene, flipped);
             let dscore = if b.failure.is_none() { b.score - a.score } else { 1.0 };

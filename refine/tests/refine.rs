@@ -348,3 +348,56 @@ fn mask_seed_whose_fit_disagrees_with_its_mask_keeps_the_seed() {
     let var: f64 = (0..3).map(|i| kept.covariance[i][i]).sum();
     assert!(var.sqrt() >= 0.99 * (fit.centre - seed.state.c).norm(), "covariance {var}");
 }
+
+/// The colour end decision: a template seed that points the wrong way round (seal end
+/// claimed at the foot) on an image where the seal section is gold and the body white comes
+/// back with the true seal end and a high confidence; painted the other way round (gold at the
+/// foot), the colours, not the edges, decide the end.
+#[test]
+fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
+    use tubeloc_core::{DetectionSource, Pose, TubeDetection};
+    use tubeloc_refine::seal_end::ColourImage;
+    let (sc, _) = one_scene();
+    let model = default_model();
+    let t = sc.truth;
+    let (w, h) = (sc.camera.width as usize, sc.camera.height as usize);
+    let seal_z0 = model.sections.last().unwrap().z0;
+    let mask = tube_mask(&model, &sc);
+    // Colour the grey rendering: tube pixels of the gold part gold, of the rest white-ish,
+    // scaled by the rendered shading; the ground sand-coloured.
+    let paint = |gold_at_seal: bool| -> Vec<u8> {
+        let mut rgb = Vec::with_capacity(w * h * 3);
+        for y in 0..h {
+            for x in 0..w {
+                let v = sc.image.get(x, y).clamp(0.0, 1.0);
+                let r = sc.camera.unproject(&nalgebra::Point2::new(x as f64, y as f64));
+                let z = (r.dot(&t.axis) * r.dot(&t.centre) - r.dot(&r) * t.centre.dot(&t.axis)) / (r.dot(&r) - r.dot(&t.axis).powi(2));
+                let gold = if gold_at_seal { z >= seal_z0 } else { z <= -seal_z0 };
+                let tint: [f32; 3] = match (mask.get(x, y), gold) {
+                    (false, _) => [1.0, 0.85, 0.7],
+                    (true, true) => [1.0, 0.8, 0.3],
+                    (true, false) => [1.0, 1.0, 0.98],
+                };
+                rgb.extend(tint.iter().map(|k| (255.0 * v * k) as u8));
+            }
+        }
+        rgb
+    };
+    // A template pose with the ends swapped (a half turn about x turns +z around).
+    let flip = nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+    let true_rot = nalgebra::Rotation3::rotation_between(&Vector3::z(), &t.axis).unwrap();
+    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Line2d);
+    det.t_cam_tube = Some(Pose::from_parts(true_rot * flip, t.centre));
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
+    for gold_at_seal in [true, false] {
+        let rgb = paint(gold_at_seal);
+        let colour = ColourImage { width: w, height: h, rgb: &rgb };
+        let p = refiner.refine_with_colour(&input, &det, Some(&colour));
+        assert!(p.converged, "{:?}", p.failure);
+        let expected = if gold_at_seal { 1.0 } else { -1.0 };
+        assert!(p.end_direction.dot(&t.axis) * expected > 0.99, "gold at the seal: {gold_at_seal}; end {:?}, truth {:?}", p.end_direction, t.axis);
+        assert!(p.end_confidence > 0.9, "end confidence {}", p.end_confidence);
+        assert!(axis_angle(&p.axis, &t.axis).to_degrees() < 1.5 && (p.centre - t.centre).norm() < 0.02, "axis {:.2} deg, centre {:.1} mm", axis_angle(&p.axis, &t.axis).to_degrees(), (p.centre - t.centre).norm() * 1e3);
+    }
+}
