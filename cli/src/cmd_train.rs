@@ -54,6 +54,11 @@ pub struct TrainArgs {
     /// count and schedule start from 0.
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
+    /// With --init of a gray-box model: train an RGB model (`--preprocess rgb`) started from it,
+    /// its input convolution applied to the luma of the three channels
+    /// (`LearnedModel::init_from_gray`).
+    #[arg(long, requires = "init")]
+    pub init_rgb: bool,
     /// Add the full-resolution mask branch (mask outlines at pixel precision instead of
     /// bilinear stride-4 logits); kept when the --init model has it.
     #[arg(long)]
@@ -146,6 +151,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     };
     let pre = match (&args.resume, &init) {
         (Some(p), _) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?.meta.preprocess,
+        (None, Some(_)) if args.init_rgb => Preprocess::Rgb,
         (None, Some(m)) => m.meta.preprocess,
         (None, None) => pre,
     };
@@ -183,7 +189,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
             let width = init.as_ref().map_or(args.width, |m| m.meta.net.width);
             let fine_mask = args.fine_mask || init.as_ref().is_some_and(|m| m.meta.net.fine_mask);
             let mut model = LearnedModel::with_fine_mask(pre, width, fine_mask, args.seed)?;
-            if let (Some(m), Some(p)) = (&init, &args.init) {
+            if let (Some(m), Some(p), true) = (&init, &args.init, args.init_rgb) {
+                let n = model.init_from_gray(m).with_context(|| format!("--init-rgb from {}", p.display()))?;
+                eprintln!("warm start (gray -> rgb): {n} tensors from {} ({} steps)", p.display(), m.meta.steps);
+            } else if let (Some(m), Some(p)) = (&init, &args.init) {
                 let n = model.init_from(m)?;
                 eprintln!("warm start: {n} tensors from {} ({} steps)", p.display(), m.meta.steps);
             }

@@ -403,3 +403,27 @@ fn mirror_averaged_predictions_are_mirror_symmetric() {
     let odd = pre.apply(&rgb[..(s * 95 * 3)].iter().copied().collect::<Vec<_>>().chunks_exact(s * 3).flat_map(|r| r[..95 * 3].to_vec()).collect::<Vec<_>>(), 95, 95);
     assert_eq!(m.predict_mirror_averaged(&odd, 95, 95).unwrap().planes, m.predict(&odd, 95, 95).unwrap().planes);
 }
+
+/// An RGB model warm-started from a gray model computes what the gray model computes on the
+/// image's luma (here without a box filter, radius 0, so the two inputs agree exactly).
+#[test]
+fn rgb_model_started_from_a_gray_model_matches_it_on_the_luma() {
+    let gray = LearnedModel::new(Preprocess::GrayBox { radius: 0 }, 4, 3).unwrap();
+    let mut rgb = LearnedModel::new(Preprocess::Rgb, 4, 9).unwrap();
+    let n = rgb.init_from_gray(&gray).unwrap();
+    assert!(n >= 10, "only {n} tensors set");
+    let (w, h) = (64usize, 64usize);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let pixels: Vec<u8> = (0..w * h * 3).map(|_| rng.random_range(0..=255u8)).collect();
+    let pg = gray.predict(&Preprocess::GrayBox { radius: 0 }.apply(&pixels, w, h), w, h).unwrap();
+    let pr = rgb.predict(&Preprocess::Rgb.apply(&pixels, w, h), w, h).unwrap();
+    let worst = pg.planes.iter().zip(&pr.planes).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(worst < 1e-3, "largest output difference {worst}");
+    // A fresh RGB model differs: the equality above comes from the warm start.
+    let fresh = LearnedModel::new(Preprocess::Rgb, 4, 9).unwrap();
+    let pf = fresh.predict(&Preprocess::Rgb.apply(&pixels, w, h), w, h).unwrap();
+    assert!(pg.planes.iter().zip(&pf.planes).any(|(a, b)| (a - b).abs() > 1e-2));
+    // Mismatched kinds are refused.
+    let mut g2 = LearnedModel::new(Preprocess::GrayBox { radius: 1 }, 4, 1).unwrap();
+    assert!(g2.init_from_gray(&gray).is_err());
+}

@@ -105,6 +105,50 @@ impl LearnedModel {
         Ok(copied)
     }
 
+    /// Warm start of an RGB model from a gray-box one: every tensor of the same name and shape
+    /// is copied, and the input convolutions (`enc0a`, and `fine_in` when both have the fine
+    /// branch), which see the `4C` space-to-depth channels `(2 dy + dx) C + c`, get the gray
+    /// model's weight for cell `(dy, dx)` times the luma coefficient of channel `c`
+    /// (0.299, 0.587, 0.114). Both normalize as `(v - 0.5) / 0.25` and the coefficients sum to
+    /// 1, so the new model computes what the old one did on the luma of the image, without its
+    /// box filter. Returns how many tensors were set.
+    pub fn init_from_gray(&mut self, gray: &LearnedModel) -> Result<usize, LearnedError> {
+        if self.meta.preprocess != Preprocess::Rgb || !matches!(gray.meta.preprocess, Preprocess::GrayBox { .. }) || self.meta.net.width != gray.meta.net.width {
+            return Err(LearnedError::Invalid(format!(
+                "init from gray: needs an rgb model and a gray-box model of the same width (have {:?} width {}, {:?} width {})",
+                self.meta.preprocess, self.meta.net.width, gray.meta.preprocess, gray.meta.net.width
+            )));
+        }
+        let mut set = self.init_from(gray)?;
+        let theirs: HashMap<String, candle_core::Var> = sorted_vars(&gray.varmap).into_iter().collect();
+        const LUMA: [f32; 3] = [0.299, 0.587, 0.114];
+        for (name, var) in sorted_vars(&self.varmap) {
+            if !(name == "enc0a.weight" || name == "fine_in.weight") {
+                continue;
+            }
+            let Some(g) = theirs.get(&name) else { continue };
+            let (cout, cin_g, kh, kw) = g.as_tensor().dims4()?;
+            if var.dims() != [cout, 3 * cin_g, kh, kw] {
+                continue;
+            }
+            let gv: Vec<f32> = g.as_tensor().flatten_all()?.to_vec1()?;
+            let mut out = vec![0f32; cout * 3 * cin_g * kh * kw];
+            let k2 = kh * kw;
+            for o in 0..cout {
+                for q in 0..cin_g {
+                    for (c, l) in LUMA.iter().enumerate() {
+                        for t in 0..k2 {
+                            out[((o * 3 * cin_g) + q * 3 + c) * k2 + t] = l * gv[(o * cin_g + q) * k2 + t];
+                        }
+                    }
+                }
+            }
+            var.set(&candle_core::Tensor::from_vec(out, (cout, 3 * cin_g, kh, kw), &candle_core::Device::Cpu)?)?;
+            set += 1;
+        }
+        Ok(set)
+    }
+
     /// Runs the network on one preprocessed image (`channels * width * height` values,
     /// channel-major) of any size: pads to a multiple of 32 with zeros (the normalized mean
     /// gray) and crops the outputs back (see [`Prediction`]).
