@@ -142,6 +142,11 @@ pub struct RefineArgs {
     /// along the rows; the rims cross them.
     #[arg(long, default_value_t = 90.0)]
     pub(crate) rim_max_epipolar_deg: f64,
+    /// Stereo: turn off the last stage, the fit of the whole contour (limbs and rims) in both
+    /// rectified views over all five pose parameters (`tubeloc_refine::two_view`; with the
+    /// ground's tilt prior when a ground plane is given). On by default.
+    #[arg(long = "no-two-view", action = clap::ArgAction::SetFalse)]
+    pub(crate) two_view: bool,
     /// Least ZNCC for the photometric depth to be applied.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) photo_min_zncc: f64,
@@ -282,8 +287,11 @@ impl RefineArgs {
 
     /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]); with a ground
     /// plane the rims' tilt change has the ground tilt prior's deviation.
-    pub(crate) fn photo_stage(&self, has_ground: bool, refiner: &Refiner) -> PhotoStage {
+    pub(crate) fn photo_stage(&self, ground: Option<&GroundPlane>, refiner: &Refiner) -> PhotoStage {
+        let has_ground = ground.is_some();
         PhotoStage {
+            two_view: self.two_view.then(two_view_config),
+            ground: ground.map(|g| (g.normal, refiner.config.ground_tilt_sigma_deg)),
             range_m: self.photo_range_mm * 1e-3,
             min_zncc: self.photo_min_zncc,
             ends: self.photo_moves_ends(has_ground),
@@ -292,6 +300,36 @@ impl RefineArgs {
             rim_tilt_prior_deg: has_ground.then_some(refiner.config.ground_tilt_sigma_deg),
         }
     }
+}
+
+/// The two-view fit's settings: the defaults, with `TUBELOC_TWO_VIEW` = a JSON object of
+/// `TwoViewConfig` fields overriding some (experiments).
+fn two_view_config() -> tubeloc_refine::two_view::TwoViewConfig {
+    let mut c = tubeloc_refine::two_view::TwoViewConfig::default();
+    if let Ok(js) = std::env::var("TUBELOC_TWO_VIEW") {
+        if let Ok(v) = serde_json::from_str::<std::collections::HashMap<String, f64>>(&js) {
+            for (k, x) in v {
+                match k.as_str() {
+                    "spacing_px" => c.spacing_px = x,
+                    "tukey_px" => c.tukey_px = x,
+                    "noise_px" => c.noise_px = x,
+                    "iterations" => c.iterations = x as usize,
+                    "min_samples" => c.min_samples = x as usize,
+                    "end_limb_weight" => c.end_limb_weight = x,
+                    "start_sigma_m" => c.start_sigma_m = x,
+                    "start_sigma_rad" => c.start_sigma_rad = x,
+                    "max_move_m" => c.max_move_m = x,
+                    "max_turn_deg" => c.max_turn_deg = x,
+                    "limb_offsets" => c.limb_offsets = x != 0.0,
+                    "limb_offset_sigma_px" => c.limb_offset_sigma_px = x,
+                    "distance_sigma_m" => c.distance_sigma_m = x,
+                    "centroid_edges" => c.centroid_edges = x != 0.0,
+                    _ => eprintln!("TUBELOC_TWO_VIEW: unknown field {k}"),
+                }
+            }
+        }
+    }
+    c
 }
 
 /// Runs `tubeloc refine`.
@@ -335,7 +373,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
-        let stage = args.photo_stage(ground.is_some(), &refiner);
+        let stage = args.photo_stage(ground.as_ref(), &refiner);
         for p in poses.iter_mut() {
             stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
         }

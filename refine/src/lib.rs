@@ -27,6 +27,7 @@ pub mod seed;
 pub mod seal_end;
 pub mod seed_policy;
 pub mod silhouette;
+pub mod two_view;
 
 pub use contour::AxisState;
 pub use error::RefineError;

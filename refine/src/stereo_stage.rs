@@ -5,8 +5,9 @@
 //! - after the fit, the photometric / rims stage ([`photo_refine`]) on a [`RectifiedPair`].
 
 use crate::photo::{self, Occluders};
+use crate::two_view::{self, TwoViewConfig};
 use crate::{rims, AxisState, CylinderModel};
-use nalgebra::{Matrix3, Point3, Vector2};
+use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 use tubeloc_core::{BinaryMask, CameraModel, Plane, TubeAxisPose};
 
 /// A tube region in the left image (original pixels): COCO box and optional mask.
@@ -155,6 +156,12 @@ pub struct PhotoStage {
     /// Standard deviation of a prior on the rims' tilt change, degrees (a ground plane's tilt
     /// prior), or `None`.
     pub rim_tilt_prior_deg: Option<f64>,
+    /// Last, fit the whole contour in both views over all five pose parameters
+    /// ([`two_view::fit_two_view`]) with these settings, or `None`.
+    pub two_view: Option<TwoViewConfig>,
+    /// Ground plane's unit upward normal in the original left camera frame and the tilt
+    /// prior's standard deviation (degrees), for the two-view fit.
+    pub ground: Option<(Vector3<f64>, f64)>,
 }
 
 /// Moves a converged pose along its centre's viewing ray to the photometric depth of
@@ -165,7 +172,9 @@ pub struct PhotoStage {
 /// scene. Then, for axes within `rim_max_epipolar_deg` of the rows, the axis direction is taken
 /// from the rims in both views ([`rims`]) about the photometric centre, with a prior of
 /// `rim_tilt_prior_deg` on the tilt change when given; the rims alone also apply when the
-/// photometric search gave no answer. `TUBELOC_DEBUG_PHOTO=1` prints each result.
+/// photometric search gave no answer. Last, with `two_view`, the whole contour is fitted in
+/// both views from that result ([`two_view::fit_two_view`], with the ground's tilt prior
+/// `ground`), and replaces it when the fit succeeds. `TUBELOC_DEBUG_PHOTO=1` prints each result.
 pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &RectifiedPair, cfg: &PhotoStage) -> Option<f64> {
     if !pose.converged {
         return None;
@@ -201,10 +210,19 @@ pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Recti
         eprintln!("rims image {} centre {:.4} psi {psi:.1}: shifts {:.2} {:.2} {:.2} mm samples {:?} rms {:.2}", pose.image_id, pose.centre.x, r.shifts_m.0 * 1e3, r.shifts_m.1 * 1e3, r.shifts_m.2 * 1e3, r.samples, r.rms_px);
     }
     let moved = match (photo, rims) {
-        (_, Some(r)) => AxisState { c: base.c, a: r.state.a },
-        (Some(p), None) => p,
-        (None, None) => return None,
+        (_, Some(r)) => Some(AxisState { c: base.c, a: r.state.a }),
+        (Some(p), None) => Some(p),
+        (None, None) => None,
     };
+    // The whole contour in both views, from the stages' result (or the fit's).
+    let tv = cfg.two_view.as_ref().and_then(|tc| {
+        let ground = cfg.ground.map(|(n, deg)| (r1 * n, deg.to_radians()));
+        two_view::fit_two_view(model, &pair.camera, &pair.left, &pair.right, pair.baseline, &moved.unwrap_or(st), occ.as_ref(), ground, tc)
+    });
+    if let (true, Some(t)) = (debug, &tv) {
+        eprintln!("two-view image {} centre {:.4}: moved {:.2} mm turned {:.2} deg samples {:?} rms {:.2} limb offsets {:.2} {:.2} px it {}", pose.image_id, pose.centre.x, t.moved_m * 1e3, t.turned_deg, t.samples, t.rms_px, t.limb_offsets_px.0, t.limb_offsets_px.1, t.iterations);
+    }
+    let Some(moved) = tv.map(|t| t.state).or(moved) else { return None };
     let shift = moved.c.norm() - st.c.norm();
     let (c, a) = (r1.transpose() * moved.c, r1.transpose() * moved.a);
     let mut p = TubeAxisPose::new(pose.image_id, pose.score, c, a, pose.end_confidence).ok()?;

@@ -208,7 +208,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 }
             }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
-                let stage = args.photo_stage(ground.is_some(), &refiner);
+                let stage = args.photo_stage(ground.as_ref(), &refiner);
                 for p in poses.iter_mut() {
                     tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
                 }
