@@ -222,7 +222,7 @@ pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Recti
     if let (true, Some(t)) = (debug, &tv) {
         eprintln!("two-view image {} centre {:.4}: moved {:.2} mm turned {:.2} deg samples {:?} rms {:.2} limb offsets {:.2} {:.2} px it {}", pose.image_id, pose.centre.x, t.moved_m * 1e3, t.turned_deg, t.samples, t.rms_px, t.limb_offsets_px.0, t.limb_offsets_px.1, t.iterations);
     }
-    let Some(moved) = tv.map(|t| t.state).or(moved) else { return None };
+    let moved = tv.map(|t| t.state).or(moved)?;
     let shift = moved.c.norm() - st.c.norm();
     let (c, a) = (r1.transpose() * moved.c, r1.transpose() * moved.a);
     let mut p = TubeAxisPose::new(pose.image_id, pose.score, c, a, pose.end_confidence).ok()?;
