@@ -36,6 +36,7 @@ use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion
 use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, MaskSnap};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
 
+mod colour;
 mod dataset;
 mod stereo;
 
@@ -96,6 +97,11 @@ pub struct RefineArgs {
     /// without a mask, a converged pose or agreement keep their mask.
     #[arg(long)]
     pub(crate) snapped_out: Option<PathBuf>,
+    /// Decide which end is the seal end from the image's edges only. By default the tube's
+    /// colours decide where the fitted pose shows enough of the gold seal section and the white
+    /// body (`tubeloc_refine::seal_end`; grey images: the seal is the darker section).
+    #[arg(long)]
+    pub(crate) no_colour_ends: bool,
     /// --snapped-out: the silhouette is kept within this many pixels of the detector's mask.
     #[arg(long, default_value_t = MaskSnap::default().dilate_px)]
     pub(crate) snap_dilate_px: usize,
@@ -346,7 +352,9 @@ pub fn run(args: RefineArgs) -> Result<()> {
     if let Some(id) = args.image_id {
         dets.retain(|d| d.image_id == id);
     }
-    let gray = crate::cmd_stereo::load_gray(image_path)?;
+    let loaded = colour::load(image_path)?;
+    let colour = loaded.colour(!args.no_colour_ends);
+    let gray = &loaded.gray;
     let (camera, stereo, depth, pair) = match &args.rig {
         Some(rig) => {
             let (c, s, p) = stereo_points(&args, &gray, rig, &dets)?;
@@ -368,7 +376,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     let mut poses = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
         let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None } };
-        poses.push(refiner.refine(&input, d));
+        poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
         bar.inc(1);
     }
     bar.finish_and_clear();

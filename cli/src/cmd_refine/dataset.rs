@@ -148,7 +148,9 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 let p = dir.join(&im.file_name);
                 if p.exists() { p } else { dir.join("images").join(&im.file_name) }
             };
-            let gray = crate::cmd_stereo::load_gray(&path)?;
+            let loaded = super::colour::load(&path)?;
+            let colour = loaded.colour(!args.no_colour_ends);
+            let gray = &loaded.gray;
             if gray.width != camera.width as usize || gray.height != camera.height as usize {
                 bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
             }
@@ -191,7 +193,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                         }
                         let d = &d;
                         let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
-                        poses.push(refiner.refine(&input, d));
+                        poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
                         if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &stereo_pts[k]) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
                                 seeds.push(p);
