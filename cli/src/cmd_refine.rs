@@ -153,6 +153,13 @@ pub struct RefineArgs {
     /// ground's tilt prior when a ground plane is given). On by default.
     #[arg(long = "no-two-view", action = clap::ArgAction::SetFalse)]
     pub(crate) two_view: bool,
+    /// Settings of the two-view fit: JSON of `TwoViewConfig` fields (missing fields keep their
+    /// defaults; for experiments).
+    #[arg(long)]
+    pub(crate) two_view_config: Option<PathBuf>,
+    /// The two-view settings read from --two-view-config (filled in by `run`).
+    #[arg(skip)]
+    pub(crate) two_view_settings: tubeloc_refine::two_view::TwoViewConfig,
     /// Least ZNCC for the photometric depth to be applied.
     #[arg(long, default_value_t = 0.5)]
     pub(crate) photo_min_zncc: f64,
@@ -296,7 +303,7 @@ impl RefineArgs {
     pub(crate) fn photo_stage(&self, ground: Option<&GroundPlane>, refiner: &Refiner) -> PhotoStage {
         let has_ground = ground.is_some();
         PhotoStage {
-            two_view: self.two_view.then(two_view_config),
+            two_view: self.two_view.then_some(self.two_view_settings),
             ground: ground.map(|g| (g.normal, refiner.config.ground_tilt_sigma_deg)),
             range_m: self.photo_range_mm * 1e-3,
             min_zncc: self.photo_min_zncc,
@@ -308,38 +315,11 @@ impl RefineArgs {
     }
 }
 
-/// The two-view fit's settings: the defaults, with `TUBELOC_TWO_VIEW` = a JSON object of
-/// `TwoViewConfig` fields overriding some (experiments).
-fn two_view_config() -> tubeloc_refine::two_view::TwoViewConfig {
-    let mut c = tubeloc_refine::two_view::TwoViewConfig::default();
-    if let Ok(js) = std::env::var("TUBELOC_TWO_VIEW") {
-        if let Ok(v) = serde_json::from_str::<std::collections::HashMap<String, f64>>(&js) {
-            for (k, x) in v {
-                match k.as_str() {
-                    "spacing_px" => c.spacing_px = x,
-                    "tukey_px" => c.tukey_px = x,
-                    "noise_px" => c.noise_px = x,
-                    "iterations" => c.iterations = x as usize,
-                    "min_samples" => c.min_samples = x as usize,
-                    "end_limb_weight" => c.end_limb_weight = x,
-                    "start_sigma_m" => c.start_sigma_m = x,
-                    "start_sigma_rad" => c.start_sigma_rad = x,
-                    "max_move_m" => c.max_move_m = x,
-                    "max_turn_deg" => c.max_turn_deg = x,
-                    "limb_offsets" => c.limb_offsets = x != 0.0,
-                    "limb_offset_sigma_px" => c.limb_offset_sigma_px = x,
-                    "distance_sigma_m" => c.distance_sigma_m = x,
-                    "centroid_edges" => c.centroid_edges = x != 0.0,
-                    _ => eprintln!("TUBELOC_TWO_VIEW: unknown field {k}"),
-                }
-            }
-        }
-    }
-    c
-}
-
 /// Runs `tubeloc refine`.
-pub fn run(args: RefineArgs) -> Result<()> {
+pub fn run(mut args: RefineArgs) -> Result<()> {
+    if let Some(p) = &args.two_view_config {
+        args.two_view_settings = files::read_json(p).with_context(|| format!("two-view config {}", p.display()))?;
+    }
     if args.dataset.is_some() {
         return dataset::run(&args);
     }

@@ -3,7 +3,7 @@
 # without and with the ground prior, on a set rendered by stereo_eval.sh (W/st), seeds = exact
 # poses moved by 10 mm / 5 degrees; tubes at least half visible (tubeloc eval --min-visible).
 # Usage: refine/scripts/two_view_eval.sh W   (tubeloc built in release on PATH or in $TUBELOC;
-# TUBELOC_TWO_VIEW='{"field": value}' overrides TwoViewConfig fields for experiments)
+# --two-view-config FILE (JSON of TwoViewConfig fields) changes the fit's settings for experiments)
 set -euo pipefail
 W=${1:?usage: two_view_eval.sh W}
 T=${TUBELOC:-tubeloc}

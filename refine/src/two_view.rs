@@ -44,8 +44,9 @@ type V7 = SVector<f64, 7>;
 type M7 = SMatrix<f64, 7, 7>;
 use tubeloc_core::{CameraModel, Plane};
 
-/// Settings of [`fit_two_view`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Settings of [`fit_two_view`] (JSON: missing fields keep their defaults).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct TwoViewConfig {
     /// Spacing of the contour samples, full-resolution pixels.
     pub spacing_px: f64,
