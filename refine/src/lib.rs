@@ -382,10 +382,13 @@ impl Refiner {
                 let has_ground = input.ground.is_some() || input.scene.ground.is_some();
                 let cfg = SeedSettings::new(&self.config, SeedKind::of(det), has_ground).config(&self.config);
                 let r = Refiner { model: self.model.clone(), config: cfg };
-                let mask = colour.and(det.mask.as_ref()).and_then(|m| m.to_mask().ok());
+                let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
                 let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
                 let pose = r.refine_seed_inner(input, &seed, det.image_id, det.score, Some(det.bbox), ends);
-                self.checked_against_mask(pose, &seed, det, input.camera)
+                match (&mask, det.t_cam_tube.is_none()) {
+                    (Some(m), true) => self.checked_against_mask(pose, &seed, m, input.camera),
+                    _ => pose,
+                }
             }
             Err(e) => failed(det.image_id, det.score, None, FailureReason::BadSeed, e.to_string()),
         }
@@ -396,14 +399,13 @@ impl Refiner {
     /// [`silhouette::snap_mask`]) went to the wrong edges: the seed's centre and axis are
     /// returned instead, with the fit's end decision, the covariance widened by the squared
     /// fit-to-seed differences, and [`TubeAxisPose::seed_kept`] saying why.
-    fn checked_against_mask(&self, mut pose: TubeAxisPose, seed: &Seed, det: &TubeDetection, camera: &CameraModel) -> TubeAxisPose {
+    fn checked_against_mask(&self, mut pose: TubeAxisPose, seed: &Seed, mask: &BinaryMask, camera: &CameraModel) -> TubeAxisPose {
         let tau = self.config.mask_seed_min_agreement;
-        if !(pose.converged && tau > 0.0 && det.t_cam_tube.is_none()) {
+        if !(pose.converged && tau > 0.0) {
             return pose;
         }
-        let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return pose };
         let sil = silhouette::silhouette_mask(&self.model, &pose, camera);
-        let Some((_, iou)) = silhouette::snap_candidate(&mask, &sil, silhouette::MaskSnap::default().dilate_px) else { return pose };
+        let Some((_, iou)) = silhouette::snap_candidate(mask, &sil, silhouette::MaskSnap::default().dilate_px) else { return pose };
         if iou >= tau {
             return pose;
         }
