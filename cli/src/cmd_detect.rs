@@ -34,6 +34,10 @@ pub struct DetectArgs {
     /// Learned model weights (safetensors).
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// Learned decoder settings: JSON of `DecodeConfig` fields (thresholds, instance score,
+    /// mirror averaging); missing fields keep their defaults.
+    #[arg(long)]
+    pub decode_config: Option<PathBuf>,
     /// External COCO results to pass through (`--method external`).
     #[arg(long)]
     pub results: Option<PathBuf>,
@@ -62,7 +66,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
         Method::Learned => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
             let model = args.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
-            crate::cmd_detect_learned::run_learned(&model, &images, &Default::default())?
+            let cfg = match &args.decode_config {
+                Some(p) => tubeloc_core::files::read_json(p).with_context(|| format!("decoder config {}", p.display()))?,
+                None => Default::default(),
+            };
+            crate::cmd_detect_learned::run_learned(&model, &images, &cfg)?
         }
         Method::External => {
             let results = args.results.as_deref().context("--method external needs --results FILE")?;

@@ -280,3 +280,15 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("--snapped-out needs --detections"), "{}", stderr(&o));
 }
+
+#[test]
+fn detect_decoder_config_is_read_and_bad_fields_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("decode.json");
+    std::fs::write(&bad, r#"{"mask_logit_rel": 0.4, "mask_threshold_typo": 1}"#).unwrap();
+    let o = tubeloc(&["detect", "--method", "learned", "--image", "absent.png", "--decode-config", p(&bad), "--out", p(&dir.path().join("d.json"))]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("decode.json") && e.contains("unknown field `mask_threshold_typo`"), "{e}");
+    assert!(!dir.path().join("d.json").exists(), "no output on error");
+}

@@ -26,8 +26,9 @@ use super::model::Prediction;
 use super::net::{bilinear4_at, HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
 
-/// Thresholds of the decoder.
-#[derive(Clone, Copy, Debug)]
+/// Thresholds of the decoder (JSON: missing fields keep their defaults).
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct DecodeConfig {
     /// Foreground probability threshold for cells.
     pub fg_threshold: f32,
