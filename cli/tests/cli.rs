@@ -234,7 +234,7 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
         let (h, w) = size(a.image_id);
         let m = a.segmentation.as_ref().unwrap().to_rle(h, w).unwrap().to_mask().unwrap();
         let shifted = BinaryMask::from_fn(m.width, m.height, |x, y| y >= 3 && m.get(x, y - 3));
-        let fat = tubeloc_refine::silhouette::dilate(&shifted, 2);
+        let fat = shifted.dilated(2);
         coarse.push(serde_json::json!({"image_id": a.image_id, "category_id": 1, "score": 0.9, "segmentation": Segmentation::from_rle(&Rle::from_mask(&fat))}));
         truth.push(m);
     }

@@ -56,6 +56,49 @@ impl BinaryMask {
         }
     }
 
+    /// The mask dilated by `r` pixels in 4-neighbour steps (an L1 diamond of radius `r`).
+    /// Only the set pixels' bounding box grown by `r` is processed.
+    pub fn dilated(&self, r: usize) -> BinaryMask {
+        self.morphed(r, true)
+    }
+
+    /// The mask eroded by `r` pixels in 4-neighbour steps; pixels on the image border are
+    /// cleared at each step. Only the set pixels' bounding box is processed.
+    pub fn eroded(&self, r: usize) -> BinaryMask {
+        self.morphed(r, false)
+    }
+
+    /// `r` steps of 4-neighbour dilation (`grow`) or erosion, within the set pixels' bounding
+    /// box grown by `r + 1` (nothing outside it can change, and it holds no set pixel).
+    fn morphed(&self, r: usize, grow: bool) -> BinaryMask {
+        let mut out = self.clone();
+        let [bx, by, bw, bh] = self.bbox();
+        if r == 0 || bw == 0.0 {
+            return out;
+        }
+        let (w, h) = (self.width, self.height);
+        let x0 = (bx as usize).saturating_sub(r + 1);
+        let y0 = (by as usize).saturating_sub(r + 1);
+        let x1 = (bx as usize + bw as usize + r + 1).min(w);
+        let y1 = (by as usize + bh as usize + r + 1).min(h);
+        let mut prev = out.clone();
+        for _ in 0..r {
+            std::mem::swap(&mut prev, &mut out);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let n = [x > 0 && prev.get(x - 1, y), prev.get(x + 1, y), y > 0 && prev.get(x, y - 1), prev.get(x, y + 1)];
+                    let v = if grow {
+                        prev.get(x, y) || n.iter().any(|&b| b)
+                    } else {
+                        prev.get(x, y) && x > 0 && y > 0 && x + 1 < w && y + 1 < h && n.iter().all(|&b| b)
+                    };
+                    out.data[y * w + x] = v as u8;
+                }
+            }
+        }
+        out
+    }
+
     /// Number of set pixels.
     pub fn area(&self) -> u64 {
         self.data.iter().filter(|&&v| v != 0).count() as u64

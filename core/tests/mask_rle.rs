@@ -182,3 +182,62 @@ fn round_trip_random_masks() {
         assert_eq!(Rle::merge(&[rle.clone(), rle.clone()], true).unwrap(), rle);
     }
 }
+
+/// Reference morphology over the whole image, one 4-neighbour step at a time.
+fn morph_reference(m: &BinaryMask, r: usize, grow: bool) -> BinaryMask {
+    let (w, h) = (m.width, m.height);
+    let mut cur = m.clone();
+    for _ in 0..r {
+        let p = cur.clone();
+        cur = BinaryMask::from_fn(w, h, |x, y| {
+            let n = [x > 0 && p.get(x - 1, y), p.get(x + 1, y), y > 0 && p.get(x, y - 1), p.get(x, y + 1)];
+            if grow {
+                p.get(x, y) || n.iter().any(|&b| b)
+            } else {
+                p.get(x, y) && x > 0 && y > 0 && x + 1 < w && y + 1 < h && n.iter().all(|&b| b)
+            }
+        });
+    }
+    cur
+}
+
+#[test]
+fn erosion_clears_a_pixel_ring() {
+    let m = BinaryMask::from_fn(10, 10, |x, y| (2..8).contains(&x) && (2..8).contains(&y));
+    let e = m.eroded(1);
+    assert_eq!(m.area(), 36);
+    assert_eq!(e.area(), 16);
+    assert!(e.get(3, 3) && !e.get(2, 3));
+}
+
+#[test]
+fn dilation_grows_a_pixel_into_a_diamond() {
+    let m = BinaryMask::from_fn(11, 11, |x, y| x == 5 && y == 5);
+    let d = m.dilated(2);
+    assert_eq!(d.area(), 13, "L1 diamond of radius 2");
+    assert!(d.get(5, 3) && d.get(4, 4) && !d.get(3, 3));
+}
+
+/// The bounding-box windowed morphology equals the whole-image reference, blobs at the image
+/// border and scattered pixels included.
+#[test]
+fn windowed_morphology_matches_the_whole_image_reference() {
+    use std::num::Wrapping;
+    let mut s = Wrapping(0x2545f4914f6cdd1du64);
+    let mut next = move |n: usize| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s.0 % n as u64) as usize
+    };
+    for _ in 0..40 {
+        let (w, h) = (1 + next(39), 1 + next(39));
+        let (cx, cy, rad) = (next(w) as f64, next(h) as f64, 0.5 + next(8) as f64);
+        let sparse = next(5) + 7;
+        let m = BinaryMask::from_fn(w, h, |x, y| (x as f64 - cx).hypot(y as f64 - cy) < rad || (x * 7 + y * 3) % (sparse * 3) == 0);
+        for r in 0..5 {
+            assert_eq!(m.dilated(r), morph_reference(&m, r, true), "dilate r {r} on {w}x{h}");
+            assert_eq!(m.eroded(r), morph_reference(&m, r, false), "erode r {r} on {w}x{h}");
+        }
+    }
+}

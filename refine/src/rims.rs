@@ -36,13 +36,16 @@ pub struct RimEnds {
     pub rms_px: f64,
 }
 
-/// One view: its gradient level and the camera centre in the rectified left frame.
-struct View {
-    level: GradientLevel,
-    origin: Vector3<f64>,
+/// One view of a rectified pair: its gradient level (unsmoothed full resolution, cropped to
+/// the tube's projection plus 16 px) and its camera centre in the rectified left frame.
+pub(crate) struct View {
+    pub(crate) level: GradientLevel,
+    pub(crate) origin: Vector3<f64>,
 }
 
-fn view(model: &CylinderModel, camera: &CameraModel, image: &Plane<f32>, st: &AxisState, origin: Vector3<f64>) -> Option<View> {
+/// The [`View`] of `image` (camera centre `origin`) for the tube at `st`; `None` when the tube
+/// does not project into the image.
+pub(crate) fn view(model: &CylinderModel, camera: &CameraModel, image: &Plane<f32>, st: &AxisState, origin: Vector3<f64>) -> Option<View> {
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     for p in st.bounding_points(model)? {
         let u = camera.project(&nalgebra::Point3::from(p - origin))?;

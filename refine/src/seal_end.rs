@@ -19,7 +19,7 @@
 //! one and the difference of mean grey levels, body minus seal, is used instead.
 
 use crate::model::CylinderModel;
-use crate::silhouette::{dilate, silhouette_mask};
+use crate::silhouette::silhouette_mask;
 use nalgebra::Point2;
 use tubeloc_core::{BinaryMask, CameraModel, TubeAxisPose};
 
@@ -72,7 +72,7 @@ pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &Ca
     }
     let sil = silhouette_mask(model, pose, camera);
     let near = match visible {
-        Some(m) if m.width == w && m.height == h => Some(dilate(m, 2)),
+        Some(m) if m.width == w && m.height == h => Some(m.dilated(2)),
         _ => None,
     };
     let (c, a) = (pose.centre, pose.end_direction);

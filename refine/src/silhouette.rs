@@ -19,7 +19,8 @@ use tubeloc_core::{BinaryMask, CameraModel, TubeAxisPose};
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct MaskSnap {
-    /// The silhouette is kept only within this many pixels (L1, 4-neighbour steps) of the
+    /// The silhouette is kept only within this many pixels (L1, 4-neighbour steps,
+    /// [`BinaryMask::dilated`]) of the
     /// segmenter's mask: the segmenter decides which parts of the tube are visible.
     pub dilate_px: usize,
     /// Least IoU between the snapped mask and the segmenter's for the snap to be used; below
@@ -71,22 +72,6 @@ pub fn silhouette_mask(model: &CylinderModel, pose: &TubeAxisPose, camera: &Came
     mask
 }
 
-/// `mask` dilated by `r` pixels in 4-neighbour steps (an L1 diamond of radius `r`).
-pub fn dilate(mask: &BinaryMask, r: usize) -> BinaryMask {
-    let mut cur = mask.clone();
-    for _ in 0..r {
-        let prev = cur.clone();
-        cur = BinaryMask::from_fn(mask.width, mask.height, |x, y| {
-            prev.get(x, y)
-                || (x > 0 && prev.get(x - 1, y))
-                || (x + 1 < mask.width && prev.get(x + 1, y))
-                || (y > 0 && prev.get(x, y - 1))
-                || (y + 1 < mask.height && prev.get(x, y + 1))
-        });
-    }
-    cur
-}
-
 /// Intersection over union of two masks of the same size (0 when both are empty).
 pub fn mask_iou(a: &BinaryMask, b: &BinaryMask) -> f64 {
     let (mut inter, mut union) = (0u64, 0u64);
@@ -115,7 +100,7 @@ pub fn snap_candidate(mask: &BinaryMask, silhouette: &BinaryMask, dilate_px: usi
     if mask.width != silhouette.width || mask.height != silhouette.height {
         return None;
     }
-    let near = dilate(mask, dilate_px);
+    let near = mask.dilated(dilate_px);
     let data: Vec<u8> = silhouette.data.iter().zip(&near.data).map(|(&s, &n)| (s != 0 && n != 0) as u8).collect();
     let snapped = BinaryMask { width: mask.width, height: mask.height, data };
     let agreement = mask_iou(&snapped, mask);
@@ -164,7 +149,7 @@ mod tests {
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
         let sil = silhouette_mask(&model, &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::new(1.0, 0.3, 0.0)), &cam);
         // A segmenter's mask 2 px off across the tube, 2 px too fat.
-        let coarse = dilate(&BinaryMask::from_fn(sil.width, sil.height, |x, y| y >= 2 && sil.get(x, y - 2)), 2);
+        let coarse = BinaryMask::from_fn(sil.width, sil.height, |x, y| y >= 2 && sil.get(x, y - 2)).dilated(2);
         let before = mask_iou(&coarse, &sil);
         let snapped = snap_mask(&coarse, &sil, &MaskSnap::default()).expect("agrees");
         assert!(before < 0.8, "coarse IoU {before}");

@@ -21,25 +21,6 @@ pub struct StereoRegion {
     pub seed_z: Option<f64>,
 }
 
-/// Mask eroded by `r` pixels (4-neighbourhood, applied `r` times; border pixels are cleared).
-pub fn erode(m: &BinaryMask, r: usize) -> BinaryMask {
-    let mut cur = m.clone();
-    for _ in 0..r {
-        let prev = cur.clone();
-        cur = BinaryMask::from_fn(m.width, m.height, |x, y| {
-            prev.get(x, y)
-                && x > 0
-                && y > 0
-                && x + 1 < m.width
-                && y + 1 < m.height
-                && prev.get(x - 1, y)
-                && prev.get(x + 1, y)
-                && prev.get(x, y - 1)
-                && prev.get(x, y + 1)
-        });
-    }
-    cur
-}
 
 /// Start of the disparity window, pixels: `floor(f B / (z_max + 0.5 m))` with `f B` the
 /// rectified focal length times the baseline (pixels · metres) and `z_max` the farthest seed's
@@ -80,7 +61,7 @@ pub fn depth_map<'a>(lcam: &CameraModel, points: impl IntoIterator<Item = &'a Po
 /// match at about the seed's disparity falls left of the right image cannot be matched (SGM
 /// picks a wrong, smaller disparity there).
 pub fn region_points(lcam: &CameraModel, points: &[(f32, Point3<f64>)], regions: &[StereoRegion], fb: f64, erode_px: usize) -> Vec<Vec<Point3<f64>>> {
-    let masks: Vec<Option<BinaryMask>> = regions.iter().map(|r| r.mask.as_ref().map(|m| erode(m, erode_px))).collect();
+    let masks: Vec<Option<BinaryMask>> = regions.iter().map(|r| r.mask.as_ref().map(|m| m.eroded(erode_px))).collect();
     // Each point's left-image projection, once for all regions.
     let projected: Vec<Option<nalgebra::Point2<f64>>> = points.iter().map(|(_, p)| lcam.project(p)).collect();
     regions
@@ -238,16 +219,6 @@ mod tests {
 
     fn cam() -> CameraModel {
         CameraModel { width: 100, height: 100, fx: 100.0, fy: 100.0, cx: 50.0, cy: 50.0, distortion: Default::default() }
-    }
-
-    #[test]
-    fn erode_clears_a_pixel_ring() {
-        let m = BinaryMask::from_fn(10, 10, |x, y| (2..8).contains(&x) && (2..8).contains(&y));
-        let e = erode(&m, 1);
-        let count = |m: &BinaryMask| (0..10).flat_map(|y| (0..10).map(move |x| (x, y))).filter(|&(x, y)| m.get(x, y)).count();
-        assert_eq!(count(&m), 36);
-        assert_eq!(count(&e), 16);
-        assert!(e.get(3, 3) && !e.get(2, 3));
     }
 
     #[test]

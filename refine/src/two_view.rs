@@ -32,9 +32,10 @@
 //! hold the tilt where it is; the photometric stage sees it better.
 
 use crate::contour::{build_samples, project_with_normal, AxisState, ContourSample, SampleKind};
-use crate::edges::{build_pyramid_with, roi, EdgeHit, GradientLevel};
+use crate::edges::{EdgeHit, GradientLevel};
 use crate::model::CylinderModel;
 use crate::photo::Occluders;
+use crate::rims::view;
 use crate::robust::tukey_weight;
 use nalgebra::{Point3, SMatrix, SVector, Vector3, Vector5};
 
@@ -124,23 +125,6 @@ pub struct TwoViewFit {
     pub iterations: usize,
 }
 
-/// One view: its gradient level (unsmoothed full resolution) and its camera centre in the
-/// rectified left frame.
-struct View {
-    level: GradientLevel,
-    origin: Vector3<f64>,
-}
-
-fn view(model: &CylinderModel, camera: &CameraModel, image: &Plane<f32>, st: &AxisState, origin: Vector3<f64>) -> Option<View> {
-    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for p in st.bounding_points(model)? {
-        let u = camera.project(&Point3::from(p - origin))?;
-        (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
-    }
-    let rect = roi([x0, y0, x1 - x0, y1 - y0], 16.0, image.width, image.height)?;
-    let level = build_pyramid_with(image, camera, rect, 1, false).into_iter().next()?;
-    Some(View { level, origin })
-}
 
 /// Sub-pixel edge offset along `n` from `u` near the search's `offset`: the centroid of
 /// `|∇I · n| − ½ max` (where positive) sampled every 0.25 px over ±1.5 px about the
