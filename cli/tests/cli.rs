@@ -292,3 +292,16 @@ fn detect_decoder_config_is_read_and_bad_fields_are_refused() {
     assert!(e.contains("decode.json") && e.contains("unknown field `mask_threshold_typo`"), "{e}");
     assert!(!dir.path().join("d.json").exists(), "no output on error");
 }
+
+#[test]
+fn refine_two_view_config_bad_fields_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("two_view.json");
+    std::fs::write(&bad, r#"{"max_iterations_typo": 3}"#).unwrap();
+    let out = dir.path().join("poses.json");
+    let o = tubeloc(&["refine", "--image", "absent.png", "--detections", "absent.json", "--two-view-config", p(&bad), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("two_view.json") && e.contains("unknown field `max_iterations_typo`"), "{e}");
+    assert!(!out.exists(), "no output on error");
+}
