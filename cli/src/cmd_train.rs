@@ -82,6 +82,10 @@ pub struct TrainArgs {
     /// network can learn that a tube's contact shadow lies on its far (image-up) side.
     #[arg(long)]
     pub upright: bool,
+    /// Probability that a training crop gets random occluders (1 to 3 rectangles of flat
+    /// or block-patterned fill whose pixels become background; 0 = off).
+    #[arg(long, default_value_t = 0.0)]
+    pub occluders: f64,
     /// Peak learning rate.
     #[arg(long, default_value_t = 2e-3)]
     pub lr: f64,
@@ -136,6 +140,9 @@ fn generated_set(n: usize, seed: u64, crop: u32, dir: &std::path::Path) -> Resul
 /// Runs `tubeloc train`.
 pub fn run(args: TrainArgs) -> Result<()> {
     let pre = Preprocess::parse(&args.preprocess).with_context(|| format!("unknown --preprocess {:?} (gray-box, gray-box:R, rgb)", args.preprocess))?;
+    if !(0.0..=1.0).contains(&args.occluders) {
+        bail!("--occluders {} is not a probability (0 to 1)", args.occluders);
+    }
     let mut dirs = args.train.clone();
     if let Some(n) = args.generate {
         let dir = args.gen_dir.clone().unwrap_or_else(|| PathBuf::from(format!("{}.gen", args.out.display())));
@@ -176,7 +183,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lr: args.lr,
         total_steps: total,
         seed: args.seed,
-        augment: AugmentConfig { crop: args.crop, upright: args.upright, ..Default::default() },
+        augment: AugmentConfig { crop: args.crop, upright: args.upright, occluders: args.occluders, ..Default::default() },
         ..Default::default()
     };
     let mut trainer = match &args.resume {
@@ -239,6 +246,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         _ => String::new(),
     };
     let crops = if args.upright { " upright crops" } else { "" };
+    let crops = if args.occluders > 0.0 { format!("{crops} occluders {}", args.occluders) } else { crops.to_string() };
     trainer.model.meta.notes = format!("steps {} seed {}{crops} val AP50 {ap:.4}{warm}", trainer.model.meta.steps, args.seed);
     trainer.model.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)", args.out.display(), trainer.model.meta.steps, t0.elapsed().as_secs_f64());

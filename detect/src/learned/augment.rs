@@ -1,5 +1,6 @@
 //! Training images and augmentation: random crops with flips, rotations by 90° (unless
-//! [`AugmentConfig::upright`]) plus a small angle, brightness/contrast and Gaussian noise.
+//! [`AugmentConfig::upright`]) plus a small angle, brightness/contrast and Gaussian noise, and
+//! optional occluders ([`AugmentConfig::occluders`]: random erasing, Zhong et al. 2017).
 //!
 //! A crop of size `S` around centre `c` with angle `θ` and optional mirror samples the source
 //! at `c + R(θ) · (±(x - S/2 + ½), y - S/2 + ½)` for output pixel `(x, y)`: bilinear for the
@@ -65,11 +66,16 @@ pub struct AugmentConfig {
     /// rover images the image's up is the scene's far side, where a tube's contact shadow
     /// shows; turned crops hide that cue from the network.
     pub upright: bool,
+    /// Probability that a crop gets 1 to 3 occluders: axis-aligned rectangles, sides 8 px to
+    /// `crop / 6`, filled with a flat level or a random two-level block pattern, whose pixels
+    /// become background in the labels (random erasing; 0 = off). They stand for things the
+    /// training scenes do not show: other objects beside and over the tubes.
+    pub occluders: f64,
 }
 
 impl Default for AugmentConfig {
     fn default() -> Self {
-        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false }
+        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false, occluders: 0.0 }
     }
 }
 
@@ -125,7 +131,38 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
     for v in input.iter_mut() {
         *v = *v * gain + offset + if sigma > 0.0 { normal.sample(rng) } else { 0.0 };
     }
+    if cfg.occluders > 0.0 && rng.random_bool(cfg.occluders) {
+        for _ in 0..rng.random_range(1..=3) {
+            add_occluder(&mut input, &mut labels, s, ch, rng);
+        }
+    }
     (input, labels)
+}
+
+/// Paints one occluder into an `s x s` crop of `channels` planes: a rectangle (sides 8 px to
+/// `s / 6`) filled with a flat level per channel or, half the time, a pattern of square blocks
+/// (4 to 8 px) at two levels; its labels become 0. Levels are drawn in `[-2, 2]` normalized
+/// units (the range of sand, shadow and white paint).
+fn add_occluder(input: &mut [f32], labels: &mut [u16], s: usize, channels: usize, rng: &mut ChaCha8Rng) {
+    let max_side = (s / 6).max(9);
+    let (w, h) = (rng.random_range(8..max_side), rng.random_range(8..max_side));
+    let (x0, y0) = (rng.random_range(0..s.saturating_sub(w).max(1)), rng.random_range(0..s.saturating_sub(h).max(1)));
+    let levels: [Vec<f32>; 2] = [(0..channels).map(|_| rng.random_range(-2.0f32..2.0)).collect(), (0..channels).map(|_| rng.random_range(-2.0f32..2.0)).collect()];
+    let block = if rng.random_bool(0.5) { rng.random_range(4..=8) } else { 0 };
+    // One random bit per block, drawn up front so the pattern does not depend on the order of
+    // the pixel loop.
+    let (bw, bh) = if block > 0 { (w.div_ceil(block), h.div_ceil(block)) } else { (1, 1) };
+    let bits: Vec<bool> = (0..bw * bh).map(|_| block > 0 && rng.random_bool(0.5)).collect();
+    for y in y0..(y0 + h).min(s) {
+        for x in x0..(x0 + w).min(s) {
+            let bit = if block > 0 { bits[((y - y0) / block) * bw + (x - x0) / block] } else { false };
+            let level = &levels[bit as usize];
+            for (k, &v) in level.iter().enumerate() {
+                input[k * s * s + y * s + x] = v;
+            }
+            labels[y * s + x] = 0;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -157,5 +194,22 @@ mod tests {
         // quarter-turned ones (whose rows are source columns) end upside down, ~1/2 in all.
         let f = upside_down_fraction(false);
         assert!((0.35..0.65).contains(&f), "{f}");
+    }
+
+    #[test]
+    fn occluders_erase_the_labels_they_cover_and_nothing_else() {
+        let (w, h) = (120, 120);
+        let input: Vec<f32> = (0..w * h).map(|i| (i % w) as f32 * 0.01).collect();
+        let img = TrainImage::new(w, h, input, &[vec![1u8; w * h]]);
+        let plain = AugmentConfig { crop: 64, noise: 0.0, gain: 0.0, offset: 0.0, ..Default::default() };
+        let occluded = AugmentConfig { occluders: 1.0, ..plain };
+        for seed in 0..20 {
+            let (a, la) = sample_crop(&img, &plain, &mut ChaCha8Rng::seed_from_u64(seed));
+            let (b, lb) = sample_crop(&img, &occluded, &mut ChaCha8Rng::seed_from_u64(seed));
+            let changed: Vec<usize> = (0..64 * 64).filter(|&i| a[i] != b[i] || la[i] != lb[i]).collect();
+            // At least one 8x8 occluder, and every changed pixel is background in the labels.
+            assert!(changed.len() >= 64, "seed {seed}: {} pixels changed", changed.len());
+            assert!(changed.iter().all(|&i| lb[i] == 0 && (-2.0..2.0).contains(&b[i])), "seed {seed}");
+        }
     }
 }
