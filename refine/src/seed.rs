@@ -4,10 +4,13 @@
 //!   template flips happen, so the end is re-decided from the image).
 //! - Learned mask / axis seed (or the box alone): the axis is the image line through
 //!   `centre_px` along `direction_px`; its 3D placement comes from, in order of preference,
-//!   a ground plane (the axis lies `max_radius` above it, inside the plane through the camera
-//!   centre and the image line), stereo points (median depth of the region plus the radius), or
-//!   the tube's known size (`Z = f · 2 r_max / width_px` for masks, `Z = f · L / length_px`
-//!   for boxes), with the axis perpendicular to the viewing ray.
+//!   stereo points (median depth of the region plus the radius), a ground plane (the axis lies
+//!   `max_radius` above it), or the tube's known size (`Z = f · 2 r_max / width_px` for masks,
+//!   `Z = f · L / length_px` for boxes). The axis lies in the plane through the camera centre
+//!   and the image line, parallel to the ground plane when there is one, else perpendicular to
+//!   the viewing ray. Stereo depth wins over the ground's: the plane is the rig's nominal
+//!   ground, and terrain relief of a few centimetres would put the seed under the measured
+//!   surface, where the scene-occlusion test hides its whole contour.
 
 use crate::contour::AxisState;
 use crate::error::RefineError;
@@ -130,25 +133,27 @@ pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &Cy
     }
     let m = m.normalize();
     let f = 0.5 * (camera.fx + camera.fy);
+    // Axis direction: parallel to the ground plane when there is one (inside the plane through
+    // the camera centre and the image line), else perpendicular to the viewing ray.
+    let ground_axis = ground.map(|g| (g, m.cross(&g.normal))).filter(|(_, a)| a.norm() > 1e-3);
+    let axis = ground_axis.map_or_else(|| r0.cross(&m).normalize(), |(_, a)| a.normalize());
     let mut state = None;
-    if let Some(g) = ground {
-        let h = model.max_radius();
-        let a = m.cross(&g.normal);
-        let den = g.normal.dot(&r0);
-        if a.norm() > 1e-3 && den.abs() > 1e-6 {
-            let t = (g.offset + h) / den;
-            if t > 0.0 {
-                state = Some(AxisState { c: r0 * t, a: a.normalize() });
-            }
-        }
-    }
-    if state.is_none() && !stereo.is_empty() {
+    if !stereo.is_empty() {
         let mut z: Vec<f64> = stereo.iter().map(|p| p.z).filter(|z| z.is_finite() && *z > 0.0).collect();
         if !z.is_empty() {
             let mid = z.len() / 2;
             let (_, zm, _) = z.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
             let zc = *zm + model.body_radius();
-            state = Some(AxisState { c: r0 * (zc / r0.z), a: r0.cross(&m).normalize() });
+            state = Some(AxisState { c: r0 * (zc / r0.z), a: axis });
+        }
+    }
+    if let (None, Some((g, _))) = (state, ground_axis) {
+        let den = g.normal.dot(&r0);
+        if den.abs() > 1e-6 {
+            let t = (g.offset + model.max_radius()) / den;
+            if t > 0.0 {
+                state = Some(AxisState { c: r0 * t, a: axis });
+            }
         }
     }
     let mut state = match state {
@@ -201,6 +206,33 @@ mod tests {
         assert!((st.c - r.c).norm() < 1e-12 && (st.a - r.a).norm() < 1e-12);
         // A rotation: the tube's x axis stays perpendicular to its axis.
         assert!(p.transform_vector(&Vector3::x()).dot(&st.a).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mask_seed_takes_its_depth_from_stereo_and_its_tilt_from_the_ground() {
+        // Camera 1 m above the nominal ground, pitched down 45 degrees; the tube lies on a dune
+        // 5 cm above that ground, along the camera's x axis.
+        let cam = CameraModel::from_hfov(640, 480, 60.0);
+        let model = CylinderModel::plain(0.15, 0.01).unwrap();
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let up = Vector3::new(0.0, -h, -h);
+        let ground = GroundPlane::from_point_normal(&(-up), &up);
+        let r0 = cam.unproject(&Point2::new(320.0, 300.0));
+        let t = (ground.offset + 0.05 + model.max_radius()) / up.dot(&r0);
+        let (centre, axis) = (r0 * t, Vector3::x());
+        let (p0, p1) = (cam.project(&Point3::from(centre - axis * 0.075)).unwrap(), cam.project(&Point3::from(centre + axis * 0.075)).unwrap());
+        let mut det = TubeDetection::new(1, 0.9, [p0.x, 300.0 - 5.0, p1.x - p0.x, 10.0], tubeloc_core::DetectionSource::Learned);
+        det.axis_seed = Some(tubeloc_core::AxisSeed { centre_px: [320.0, 300.0], direction_px: [1.0, 0.0], length_px: p1.x - p0.x, width_px: 10.0 });
+        // Stereo points on the tube's near surface along the viewing ray of its centre.
+        let near = centre.z - model.body_radius();
+        let stereo: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.04 + 0.01 * k as f64, centre.y, near)).collect();
+        let seed = seed_from_detection(&det, &cam, &model, Some(&ground), &stereo).unwrap();
+        assert!((seed.state.c - centre).norm() < 1e-3, "stereo depth: centre off by {:.4} m", (seed.state.c - centre).norm());
+        assert!(seed.state.a.dot(&up).abs() < 1e-9 && seed.state.a.x.abs() > 1.0 - 1e-9, "ground tilt: axis {}", seed.state.a);
+        // The ground alone puts the seed on the nominal plane, 5 cm below the dune, along the ray.
+        let seed = seed_from_detection(&det, &cam, &model, Some(&ground), &[]).unwrap();
+        assert!((up.dot(&seed.state.c) - (ground.offset + model.max_radius())).abs() < 1e-9);
+        assert!((seed.state.c - centre).norm() > 0.05);
     }
 
     #[test]
