@@ -308,14 +308,20 @@ pub fn run(a: BenchArgs) -> Result<()> {
             for (name, seed_words) in [("gt_seeds", words(&["--gt-seeds", "10,5"])), ("learned", words(&["--detections", &s(&dets)]))] {
                 let dir = sdir.join(name);
                 std::fs::create_dir_all(&dir)?;
-                let seeds = dir.join("seeds.json");
-                let mut labels = vec![format!("coarse={}", s(&seeds))];
-                for (mode, stereo) in [("mono", false), ("stereo", true)] {
+                let seeds_of = |ground: bool| dir.join(if ground { "seeds_ground.json" } else { "seeds.json" });
+                let mut labels = vec![format!("coarse={}", s(&seeds_of(false))), format!("coarse_ground={}", s(&seeds_of(true)))];
+                // With and without the ground plane of the rig's pose (`--ground auto`): a rover
+                // knows its cameras' height and tilt, and mono seeds need it for their tilt.
+                for (mode, stereo, ground) in [("mono", false, false), ("stereo", true, false), ("mono_ground", false, true), ("stereo_ground", true, true)] {
                     let poses = dir.join(format!("poses_{mode}.json"));
-                    let mut w = words(&["refine", "--dataset", &s(&set), "--out", &s(&poses), "--seeds-out", &s(&seeds)]);
+                    let mut w = words(&["refine", "--dataset", &s(&set), "--out", &s(&poses)]);
                     w.extend(seed_words.iter().cloned());
                     if stereo {
-                        w.push("--stereo".into());
+                        // The stereo runs' seeds (depth from the stereo points) are the coarse rows.
+                        w.extend(words(&["--stereo", "--seeds-out", &s(&seeds_of(ground))]));
+                    }
+                    if ground {
+                        w.extend(words(&["--ground", "auto"]));
                     }
                     let t = Instant::now();
                     crate::run_words(&w)?;
@@ -467,6 +473,9 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         if let Some(t) = crate::figures::pose_table(&p) {
             let _ = writeln!(r, "### Synthetic stereo set (L20/R20, 1024 crops at half resolution), {what} ([report with histograms](stereo/{name}/eval/report.md))\n\n{t}");
         }
+    }
+    if st.result("stereo").is_some() {
+        let _ = writeln!(r, "Rows: `coarse` / `coarse_ground` are the seeds of the stereo runs without / with the ground plane of the rig's pose (`--ground auto`; detections' seeds take their depth from the stereo points, their tilt from the ground); `mono` / `stereo` refine without it, `mono_ground` / `stereo_ground` with it. A pose counts where its centre lies within 50 mm of a truth (matched counts in the linked reports).\n");
     }
     if let Some(Value::Object(t)) = st.result("tags") {
         let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n");
