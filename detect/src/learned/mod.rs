@@ -5,7 +5,7 @@
 //! [`net::TubeNet`] (stride-4 foreground, centre heatmap, axis angle, half-length) →
 //! [`decode`] (instances with mask, score and [`tubeloc_core::AxisSeed`]). Training:
 //! [`augment`] crops, [`targets`], [`train::Trainer`]; weights: [`model::LearnedModel`]
-//! (safetensors with format version and checksum).
+//! (safetensors with format version and checksum); [`soup`] averages fine-tuned models.
 
 pub mod augment;
 pub mod dataset;
@@ -16,6 +16,7 @@ pub mod model;
 pub mod net;
 pub mod optim;
 pub mod preprocess;
+pub mod soup;
 pub mod targets;
 pub mod train;
 
@@ -25,13 +26,27 @@ pub use error::LearnedError;
 pub use model::{LearnedModel, ModelMeta, Prediction, FORMAT_VERSION};
 pub use net::{NetConfig, NetOutput};
 pub use preprocess::Preprocess;
+pub use soup::weight_average;
 pub use train::{TrainConfig, Trainer};
 
 /// Detects tubes in an interleaved RGB8 image (`width * height * 3` bytes).
-pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+pub fn detect_rgb(
+    model: &LearnedModel,
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+    cfg: &DecodeConfig,
+) -> Result<Vec<LearnedInstance>, LearnedError> {
     if rgb.len() != width * height * 3 {
-        return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
+        return Err(LearnedError::Invalid(format!(
+            "RGB buffer has {} bytes, expected {}",
+            rgb.len(),
+            width * height * 3
+        )));
     }
     let input = model.meta.preprocess.apply(rgb, width, height);
-    Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg))
+    Ok(decode(
+        &model.predict_with(&input, width, height, cfg)?,
+        cfg,
+    ))
 }
