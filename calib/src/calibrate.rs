@@ -15,10 +15,7 @@
 //! `rms_coord_px = sqrt(Σ|r|²/(2N))`, which estimates the per-coordinate corner noise.
 
 use crate::error::CalibError;
-use crate::geometry::{
-    average_poses, check_spread, homography, intrinsics_vec, model_from_vec, pose_from_homography,
-    pose_from_vec, pose_vec, project_cam, zhang_intrinsics,
-};
+use crate::geometry::{average_poses, check_spread, homography, intrinsics_vec, model_from_vec, pose_from_homography, pose_from_vec, pose_vec, project_cam, zhang_intrinsics};
 use crate::lm::{BlockKind, Problem};
 use nalgebra::{Point2, Point3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -78,13 +75,7 @@ pub struct CalibrationOptions {
 
 impl Default for CalibrationOptions {
     fn default() -> Self {
-        CalibrationOptions {
-            min_views: 3,
-            outlier_sigmas: 5.0,
-            outlier_rounds: 3,
-            max_iterations: 100,
-            fix_k3: false,
-        }
+        CalibrationOptions { min_views: 3, outlier_sigmas: 5.0, outlier_rounds: 3, max_iterations: 100, fix_k3: false }
     }
 }
 
@@ -143,8 +134,7 @@ pub struct RigCalibration {
 }
 
 fn transform(pose: &[f64], x: &Vector3<f64>) -> Vector3<f64> {
-    Rotation3::new(Vector3::new(pose[0], pose[1], pose[2])) * x
-        + Vector3::new(pose[3], pose[4], pose[5])
+    Rotation3::new(Vector3::new(pose[0], pose[1], pose[2])) * x + Vector3::new(pose[3], pose[4], pose[5])
 }
 
 /// Builds and solves one adjustment. `ext[c]` is `T_cam_ref` (None: identity, fixed);
@@ -159,35 +149,20 @@ struct Adjustment {
     std: Vec<[f64; 9]>,
 }
 
-fn adjust(
-    input: &CalibrationInput,
-    obs_idx: &[usize],
-    adj: &mut Adjustment,
-    opts: &CalibrationOptions,
-    cams: &[usize],
-) -> Result<(), CalibError> {
+fn adjust(input: &CalibrationInput, obs_idx: &[usize], adj: &mut Adjustment, opts: &CalibrationOptions, cams: &[usize]) -> Result<(), CalibError> {
     for round in 0..=opts.outlier_rounds {
         let mut p = Problem::new();
         let mut intr_b = BTreeMap::new();
         let mut ext_b = BTreeMap::new();
         for &c in cams {
-            intr_b.insert(
-                c,
-                p.add_block(adj.intr[c].to_vec(), BlockKind::Euclidean, false),
-            );
-            ext_b.insert(
-                c,
-                p.add_block(adj.ext[c].to_vec(), BlockKind::Pose, c == cams[0]),
-            );
+            intr_b.insert(c, p.add_block(adj.intr[c].to_vec(), BlockKind::Euclidean, false));
+            ext_b.insert(c, p.add_block(adj.ext[c].to_vec(), BlockKind::Pose, c == cams[0]));
         }
         let mut pose_b = BTreeMap::new();
         for &o in obs_idx {
             let v = input.observations[o].view;
             if !pose_b.contains_key(&v) {
-                pose_b.insert(
-                    v,
-                    p.add_block(adj.poses[&v].to_vec(), BlockKind::Pose, false),
-                );
+                pose_b.insert(v, p.add_block(adj.poses[&v].to_vec(), BlockKind::Pose, false));
             }
         }
         for &o in obs_idx {
@@ -218,7 +193,7 @@ fn adjust(
                         }
                     }),
                 );
-            }
+                    }
         }
         let sol = p.solve(opts.max_iterations)?;
         for &c in cams {
@@ -231,19 +206,12 @@ fn adjust(
             adj.ext[c].copy_from_slice(&p.params[ext_b[&c]]);
             if let (Some(cov), Some(off)) = (&sol.covariance, sol.offsets[intr_b[&c]]) {
                 for j in 0..9 {
-                    adj.std[c][j] = if opts.fix_k3 && j == 8 {
-                        0.0
-                    } else {
-                        cov[(off + j, off + j)].max(0.0).sqrt()
-                    };
+                    adj.std[c][j] = if opts.fix_k3 && j == 8 { 0.0 } else { cov[(off + j, off + j)].max(0.0).sqrt() };
                 }
             }
         }
         for (v, b) in &pose_b {
-            adj.poses
-                .get_mut(v)
-                .expect("pose")
-                .copy_from_slice(&p.params[*b]);
+            adj.poses.get_mut(v).expect("pose").copy_from_slice(&p.params[*b]);
         }
         if round == opts.outlier_rounds {
             break;
@@ -253,15 +221,7 @@ fn adjust(
         for &o in obs_idx {
             adj.rejected[o].iter_mut().for_each(|r| *r = false);
         }
-        let norms: Vec<(usize, usize, f64)> = obs_idx
-            .iter()
-            .flat_map(|&o| {
-                residual_norms(input, adj, o)
-                    .into_iter()
-                    .enumerate()
-                    .map(move |(i, n)| (o, i, n.unwrap_or(f64::INFINITY)))
-            })
-            .collect();
+        let norms: Vec<(usize, usize, f64)> = obs_idx.iter().flat_map(|&o| residual_norms(input, adj, o).into_iter().enumerate().map(move |(i, n)| (o, i, n.unwrap_or(f64::INFINITY)))).collect();
         let mut sorted: Vec<f64> = norms.iter().map(|x| x.2).collect();
         sorted.sort_by(f64::total_cmp);
         let sigma = sorted[sorted.len() / 2] / 1.1774;
@@ -286,20 +246,14 @@ fn residual_norms(input: &CalibrationInput, adj: &Adjustment, o: usize) -> Vec<O
             if adj.rejected[o][i] {
                 return None;
             }
-            let pc = transform(
-                &adj.ext[ob.camera],
-                &transform(&adj.poses[&ob.view], &x.coords),
-            );
+            let pc = transform(&adj.ext[ob.camera], &transform(&adj.poses[&ob.view], &x.coords));
             project_cam(&adj.intr[ob.camera], &pc).map(|q| (q - u).norm())
         })
         .collect()
 }
 
 /// Calibrates the cameras of `input` (one camera: intrinsics only; several: also extrinsics).
-pub fn calibrate(
-    input: &CalibrationInput,
-    opts: &CalibrationOptions,
-) -> Result<RigCalibration, CalibError> {
+pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<RigCalibration, CalibError> {
     let nc = input.cameras.len();
     if nc == 0 {
         return Err(CalibError::TooFew("no cameras".into()));
@@ -307,54 +261,18 @@ pub fn calibrate(
     let mut skipped = Vec::new();
     let mut usable: Vec<Vec<usize>> = vec![Vec::new(); nc];
     let mut init_pose: BTreeMap<(usize, usize), Pose> = BTreeMap::new();
-    let mut adj = Adjustment {
-        intr: vec![[0.0; 9]; nc],
-        ext: vec![[0.0; 6]; nc],
-        poses: BTreeMap::new(),
-        rejected: input
-            .observations
-            .iter()
-            .map(|o| vec![false; o.object.len()])
-            .collect(),
-        std: vec![[0.0; 9]; nc],
-    };
+    let mut adj = Adjustment { intr: vec![[0.0; 9]; nc], ext: vec![[0.0; 6]; nc], poses: BTreeMap::new(), rejected: input.observations.iter().map(|o| vec![false; o.object.len()]).collect(), std: vec![[0.0; 9]; nc] };
     for (o, ob) in input.observations.iter().enumerate() {
-        let name = input
-            .cameras
-            .get(ob.camera)
-            .map(|c| c.name.as_str())
-            .ok_or_else(|| {
-                CalibError::invalid(
-                    "observation",
-                    format!("camera index {} out of range", ob.camera),
-                )
-            })?;
+        let name = input.cameras.get(ob.camera).map(|c| c.name.as_str()).ok_or_else(|| CalibError::invalid("observation", format!("camera index {} out of range", ob.camera)))?;
         if ob.object.len() != ob.image.len() {
-            return Err(CalibError::invalid(
-                "observation",
-                format!(
-                    "camera {name} view {}: {} object points but {} image points",
-                    ob.view,
-                    ob.object.len(),
-                    ob.image.len()
-                ),
-            ));
+            return Err(CalibError::invalid("observation", format!("camera {name} view {}: {} object points but {} image points", ob.view, ob.object.len(), ob.image.len())));
         }
         if ob.object.iter().any(|p| p.z.abs() > 1e-9) {
-            return Err(CalibError::invalid(
-                "observation",
-                format!(
-                    "camera {name} view {}: target points must be planar (z = 0)",
-                    ob.view
-                ),
-            ));
+            return Err(CalibError::invalid("observation", format!("camera {name} view {}: target points must be planar (z = 0)", ob.view)));
         }
         let obj2: Vec<Point2<f64>> = ob.object.iter().map(|p| Point2::new(p.x, p.y)).collect();
         let check = if ob.object.len() < 6 {
-            Err(CalibError::TooFew(format!(
-                "{} corners, need at least 6",
-                ob.object.len()
-            )))
+            Err(CalibError::TooFew(format!("{} corners, need at least 6", ob.object.len())))
         } else {
             check_spread(&obj2, "target").and_then(|_| check_spread(&ob.image, "image"))
         };
@@ -367,53 +285,23 @@ pub fn calibrate(
     for c in 0..nc {
         let spec = &input.cameras[c];
         if usable[c].len() < opts.min_views {
-            return Err(CalibError::TooFew(format!(
-                "camera {}: {} usable views, need at least {}{}",
-                spec.name,
-                usable[c].len(),
-                opts.min_views,
-                if skipped.is_empty() {
-                    String::new()
-                } else {
-                    format!(" (skipped: {})", skipped.join("; "))
-                }
-            )));
+            return Err(CalibError::TooFew(format!("camera {}: {} usable views, need at least {}{}", spec.name, usable[c].len(), opts.min_views, if skipped.is_empty() { String::new() } else { format!(" (skipped: {})", skipped.join("; ")) })));
         }
         let hs = usable[c]
             .iter()
             .map(|&o| {
                 let ob = &input.observations[o];
-                let obj2: Vec<Point2<f64>> =
-                    ob.object.iter().map(|p| Point2::new(p.x, p.y)).collect();
+                let obj2: Vec<Point2<f64>> = ob.object.iter().map(|p| Point2::new(p.x, p.y)).collect();
                 homography(&obj2, &ob.image)
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let k4 = zhang_intrinsics(&hs)
-            .map_err(|e| CalibError::Degenerate(format!("camera {}: {e}", spec.name)))?;
-        let kinv = nalgebra::Matrix3::new(
-            1.0 / k4[0],
-            0.0,
-            -k4[2] / k4[0],
-            0.0,
-            1.0 / k4[1],
-            -k4[3] / k4[1],
-            0.0,
-            0.0,
-            1.0,
-        );
+        let k4 = zhang_intrinsics(&hs).map_err(|e| CalibError::Degenerate(format!("camera {}: {e}", spec.name)))?;
+        let kinv = nalgebra::Matrix3::new(1.0 / k4[0], 0.0, -k4[2] / k4[0], 0.0, 1.0 / k4[1], -k4[3] / k4[1], 0.0, 0.0, 1.0);
         adj.intr[c] = [k4[0], k4[1], k4[2], k4[3], 0.0, 0.0, 0.0, 0.0, 0.0];
-        let mut single = Adjustment {
-            intr: adj.intr.clone(),
-            ext: vec![[0.0; 6]; nc],
-            poses: BTreeMap::new(),
-            rejected: adj.rejected.clone(),
-            std: vec![[0.0; 9]; nc],
-        };
+        let mut single = Adjustment { intr: adj.intr.clone(), ext: vec![[0.0; 6]; nc], poses: BTreeMap::new(), rejected: adj.rejected.clone(), std: vec![[0.0; 9]; nc] };
         for (&o, h) in usable[c].iter().zip(&hs) {
             let pose = pose_from_homography(&(kinv * h))?;
-            single
-                .poses
-                .insert(input.observations[o].view, pose_vec(&pose));
+            single.poses.insert(input.observations[o].view, pose_vec(&pose));
         }
         // Single-camera adjustment uses per-camera view indices: make them unique per camera.
         adjust(input, &usable[c], &mut single, opts, &[c])?;
@@ -434,17 +322,11 @@ pub fn calibrate(
                 continue;
             }
             for a in 0..nc {
-                let Some(t_ref_a) = t_ref_cam[a] else {
-                    continue;
-                };
+                let Some(t_ref_a) = t_ref_cam[a] else { continue };
                 let rel: Vec<Pose> = init_pose
                     .iter()
                     .filter(|((cc, _), _)| *cc == c)
-                    .filter_map(|((_, v), t_c_b)| {
-                        init_pose
-                            .get(&(a, *v))
-                            .map(|t_a_b| *t_a_b * t_c_b.inverse())
-                    })
+                    .filter_map(|((_, v), t_c_b)| init_pose.get(&(a, *v)).map(|t_a_b| *t_a_b * t_c_b.inverse()))
                     .collect();
                 if let Some(t_a_c) = average_poses(&rel) {
                     t_ref_cam[c] = Some(t_ref_a * t_a_c);
@@ -459,8 +341,7 @@ pub fn calibrate(
     }
     for ((c, v), t_c_b) in &init_pose {
         if !adj.poses.contains_key(v) {
-            adj.poses
-                .insert(*v, pose_vec(&(t_ref_cam[*c].expect("set") * *t_c_b)));
+            adj.poses.insert(*v, pose_vec(&(t_ref_cam[*c].expect("set") * *t_c_b)));
         }
     }
     let all: Vec<usize> = usable.iter().flatten().copied().collect();
@@ -480,12 +361,7 @@ pub fn calibrate(
             let kept: Vec<f64> = norms.iter().flatten().copied().collect();
             let s: f64 = kept.iter().map(|n| n * n).sum();
             let out = norms.len() - kept.len();
-            views.push(ViewResidual {
-                view: input.observations[o].view,
-                rms_px: (s / kept.len().max(1) as f64).sqrt(),
-                points: kept.len(),
-                outliers: out,
-            });
+            views.push(ViewResidual { view: input.observations[o].view, rms_px: (s / kept.len().max(1) as f64).sqrt(), points: kept.len(), outliers: out });
             csum += s;
             cn += kept.len();
             cout += out;
@@ -493,48 +369,13 @@ pub fn calibrate(
         sum2 += csum;
         npts += cn;
         let t_rig_cam = pose_from_vec(&adj.ext[c]).inverse();
-        cameras.push(CameraCalibration {
-            name: spec.name.clone(),
-            model: model_from_vec(spec.width, spec.height, &adj.intr[c]),
-            std: adj.std[c],
-            t_rig_cam,
-            rms_px: (csum / cn.max(1) as f64).sqrt(),
-            views,
-            points: cn,
-            outliers: cout,
-        });
+        cameras.push(CameraCalibration { name: spec.name.clone(), model: model_from_vec(spec.width, spec.height, &adj.intr[c]), std: adj.std[c], t_rig_cam, rms_px: (csum / cn.max(1) as f64).sqrt(), views, points: cn, outliers: cout });
     }
-    let rig = Rig {
-        cameras: cameras
-            .iter()
-            .map(|c| RigCamera {
-                name: c.name.clone(),
-                model: c.model.clone(),
-                t_rig_cam: c.t_rig_cam,
-            })
-            .collect(),
-        stereo_pairs: input.stereo_pairs.clone(),
-    };
+    let rig = Rig { cameras: cameras.iter().map(|c| RigCamera { name: c.name.clone(), model: c.model.clone(), t_rig_cam: c.t_rig_cam }).collect(), stereo_pairs: input.stereo_pairs.clone() };
     rig.validate()?;
-    let baselines = input
-        .stereo_pairs
-        .iter()
-        .map(|(l, r)| Ok((l.clone(), r.clone(), rig.baseline(l, r)?)))
-        .collect::<Result<Vec<_>, CalibError>>()?;
+    let baselines = input.stereo_pairs.iter().map(|(l, r)| Ok((l.clone(), r.clone(), rig.baseline(l, r)?))).collect::<Result<Vec<_>, CalibError>>()?;
     let rms_px = (sum2 / npts.max(1) as f64).sqrt();
-    Ok(RigCalibration {
-        rig,
-        cameras,
-        rms_px,
-        rms_coord_px: rms_px / std::f64::consts::SQRT_2,
-        baselines,
-        skipped,
-        board_poses: adj
-            .poses
-            .iter()
-            .map(|(v, p)| (*v, pose_from_vec(p)))
-            .collect(),
-    })
+    Ok(RigCalibration { rig, cameras, rms_px, rms_coord_px: rms_px / std::f64::consts::SQRT_2, baselines, skipped, board_poses: adj.poses.iter().map(|(v, p)| (*v, pose_from_vec(p))).collect() })
 }
 
 /// Intrinsics vector of a model (re-exported for reports).

@@ -42,10 +42,7 @@ impl TagFamily {
             "tag25h9" => Ok(TagFamily::Tag25h9),
             "tag16h5" => Ok(TagFamily::Tag16h5),
             "tagStandard41h12" => Ok(TagFamily::TagStandard41h12),
-            _ => Err(CalibError::invalid(
-                "tag family",
-                format!("unknown family {name:?} (tag36h11, tag25h9, tag16h5, tagStandard41h12)"),
-            )),
+            _ => Err(CalibError::invalid("tag family", format!("unknown family {name:?} (tag36h11, tag25h9, tag16h5, tagStandard41h12)"))),
         }
     }
 
@@ -92,17 +89,7 @@ pub struct DetectorConfig {
 
 impl Default for DetectorConfig {
     fn default() -> Self {
-        DetectorConfig {
-            families: vec![TagFamily::Tag36h11],
-            max_hamming: 2,
-            decimation: 1.0,
-            sigma: 0.0,
-            threads: 1,
-            refine_edges: true,
-            sharpening: 0.25,
-            min_decision_margin: 0.0,
-            linearize_srgb: false,
-        }
+        DetectorConfig { families: vec![TagFamily::Tag36h11], max_hamming: 2, decimation: 1.0, sigma: 0.0, threads: 1, refine_edges: true, sharpening: 0.25, min_decision_margin: 0.0, linearize_srgb: false }
     }
 }
 
@@ -131,11 +118,7 @@ pub fn srgb_to_linear_lut() -> [u8; 256] {
     let mut lut = [0u8; 256];
     for (i, o) in lut.iter_mut().enumerate() {
         let v = i as f64 / 255.0;
-        let l = if v <= 0.04045 {
-            v / 12.92
-        } else {
-            ((v + 0.055) / 1.055).powf(2.4)
-        };
+        let l = if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) };
         *o = (l * 255.0).round() as u8;
     }
     lut
@@ -150,9 +133,7 @@ pub struct TagDetector {
 
 impl std::fmt::Debug for TagDetector {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TagDetector")
-            .field("config", &self.config)
-            .finish()
+        f.debug_struct("TagDetector").field("config", &self.config).finish()
     }
 }
 
@@ -163,16 +144,10 @@ impl TagDetector {
             return Err(CalibError::invalid("detector", "no tag family given"));
         }
         if !(config.decimation >= 1.0 && config.decimation.is_finite()) {
-            return Err(CalibError::invalid(
-                "decimation",
-                format!("must be >= 1, got {}", config.decimation),
-            ));
+            return Err(CalibError::invalid("decimation", format!("must be >= 1, got {}", config.decimation)));
         }
         if !(config.sigma >= 0.0) || config.threads == 0 || config.max_hamming > 3 {
-            return Err(CalibError::invalid(
-                "detector",
-                "sigma must be >= 0, threads >= 1, max_hamming <= 3",
-            ));
+            return Err(CalibError::invalid("detector", "sigma must be >= 0, threads >= 1, max_hamming <= 3"));
         }
         let mut b = DetectorBuilder::new();
         for f in &config.families {
@@ -185,11 +160,7 @@ impl TagDetector {
         inner.set_refine_edges(config.refine_edges);
         inner.set_shapening(config.sharpening);
         let families = config.families.clone();
-        Ok(TagDetector {
-            inner,
-            config,
-            families,
-        })
+        Ok(TagDetector { inner, config, families })
     }
 
     /// The options in use.
@@ -204,19 +175,11 @@ impl TagDetector {
         // families (NUL-terminated name); ownership goes back to a `Detection` that frees it.
         let name = unsafe {
             let fam = ptr.as_ref().family;
-            let name = if fam.is_null() || (*fam).name.is_null() {
-                None
-            } else {
-                std::ffi::CStr::from_ptr((*fam).name)
-                    .to_str()
-                    .ok()
-                    .map(str::to_owned)
-            };
+            let name = if fam.is_null() || (*fam).name.is_null() { None } else { std::ffi::CStr::from_ptr((*fam).name).to_str().ok().map(str::to_owned) };
             drop(apriltag::Detection::from_raw(ptr.as_ptr()));
             name
         };
-        name.and_then(|n| TagFamily::from_name(&n).ok())
-            .unwrap_or(self.families[0])
+        name.and_then(|n| TagFamily::from_name(&n).ok()).unwrap_or(self.families[0])
     }
 
     /// Detects tags in an 8-bit grey plane; detections sorted by (id, centre x).
@@ -225,43 +188,23 @@ impl TagDetector {
     }
 
     /// Detects tags in an `image` crate grey image.
-    pub fn detect_image(
-        &mut self,
-        img: &image::GrayImage,
-    ) -> Result<Vec<TagDetection>, CalibError> {
+    pub fn detect_image(&mut self, img: &image::GrayImage) -> Result<Vec<TagDetection>, CalibError> {
         let (w, h) = img.dimensions();
         self.detect_raw(w as usize, h as usize, w as usize, img.as_raw())
     }
 
     /// Detects tags in a raw buffer with the given row stride (bytes).
-    pub fn detect_raw(
-        &mut self,
-        width: usize,
-        height: usize,
-        stride: usize,
-        data: &[u8],
-    ) -> Result<Vec<TagDetection>, CalibError> {
-        if width == 0 || height == 0 || stride < width || data.len() < stride * (height - 1) + width
-        {
-            return Err(CalibError::invalid(
-                "image",
-                format!(
-                    "{width}x{height} stride {stride} does not fit a buffer of {} bytes",
-                    data.len()
-                ),
-            ));
+    pub fn detect_raw(&mut self, width: usize, height: usize, stride: usize, data: &[u8]) -> Result<Vec<TagDetection>, CalibError> {
+        if width == 0 || height == 0 || stride < width || data.len() < stride * (height - 1) + width {
+            return Err(CalibError::invalid("image", format!("{width}x{height} stride {stride} does not fit a buffer of {} bytes", data.len())));
         }
-        let mut im = Image::zeros_with_alignment(width, height, 96)
-            .map_err(|e| CalibError::Detector(e.to_string()))?;
+        let mut im = Image::zeros_with_alignment(width, height, 96).map_err(|e| CalibError::Detector(e.to_string()))?;
         let s = im.stride();
         let buf = im.as_slice_mut();
         if self.config.linearize_srgb {
             let lut = srgb_to_linear_lut();
             for y in 0..height {
-                for (o, &v) in buf[y * s..y * s + width]
-                    .iter_mut()
-                    .zip(&data[y * stride..y * stride + width])
-                {
+                for (o, &v) in buf[y * s..y * s + width].iter_mut().zip(&data[y * stride..y * stride + width]) {
                     *o = lut[v as usize];
                 }
             }
@@ -289,23 +232,9 @@ impl TagDetector {
                 hm[1][c] += C_TO_OPENCV_PX * hm[2][c];
             }
             let shift = |p: [f64; 2]| [p[0] + C_TO_OPENCV_PX, p[1] + C_TO_OPENCV_PX];
-            let (id, hamming, margin, center, corners) = (
-                d.id() as u32,
-                d.hamming() as u32,
-                d.decision_margin(),
-                shift(d.center()),
-                d.corners().map(shift),
-            );
+            let (id, hamming, margin, center, corners) = (d.id() as u32, d.hamming() as u32, d.decision_margin(), shift(d.center()), d.corners().map(shift));
             let family = self.family_of(d);
-            out.push(TagDetection {
-                family,
-                id,
-                hamming,
-                decision_margin: margin,
-                center,
-                corners,
-                homography: hm,
-            });
+            out.push(TagDetection { family, id, hamming, decision_margin: margin, center, corners, homography: hm });
         }
         out.sort_by(|a, b| a.id.cmp(&b.id).then(a.center[0].total_cmp(&b.center[0])));
         Ok(out)

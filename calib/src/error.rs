@@ -44,16 +44,10 @@ pub enum CalibError {
 impl CalibError {
     /// Builds [`CalibError::Invalid`].
     pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
-        CalibError::Invalid {
-            what: what.into(),
-            message: message.into(),
-        }
+        CalibError::Invalid { what: what.into(), message: message.into() }
     }
     /// Builds [`CalibError::Parse`].
     pub fn parse(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        CalibError::Parse {
-            path: path.into(),
-            message: message.into(),
-        }
+        CalibError::Parse { path: path.into(), message: message.into() }
     }
 }

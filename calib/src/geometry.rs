@@ -16,21 +16,7 @@ pub fn intrinsics_vec(m: &CameraModel) -> [f64; 9] {
 
 /// A camera model of size `width x height` from an intrinsics vector.
 pub fn model_from_vec(width: u32, height: u32, k: &[f64]) -> CameraModel {
-    CameraModel {
-        width,
-        height,
-        fx: k[0],
-        fy: k[1],
-        cx: k[2],
-        cy: k[3],
-        distortion: Distortion {
-            k1: k[4],
-            k2: k[5],
-            p1: k[6],
-            p2: k[7],
-            k3: k[8],
-        },
-    }
+    CameraModel { width, height, fx: k[0], fy: k[1], cx: k[2], cy: k[3], distortion: Distortion { k1: k[4], k2: k[5], p1: k[6], p2: k[7], k3: k[8] } }
 }
 
 /// The pose vector `[ω, t]` of a pose.
@@ -42,10 +28,7 @@ pub fn pose_vec(p: &Pose) -> [f64; 6] {
 
 /// The pose of a pose vector `[ω, t]`.
 pub fn pose_from_vec(v: &[f64]) -> Pose {
-    Pose::from_parts(
-        Rotation3::new(Vector3::new(v[0], v[1], v[2])),
-        Vector3::new(v[3], v[4], v[5]),
-    )
+    Pose::from_parts(Rotation3::new(Vector3::new(v[0], v[1], v[2])), Vector3::new(v[3], v[4], v[5]))
 }
 
 /// Projects object point `x` through pose vector `pose` (`T_cam_obj`) and intrinsics `k`;
@@ -73,19 +56,9 @@ pub fn project_cam(k: &[f64], p: &Vector3<f64>) -> Option<Point2<f64>> {
 
 fn normalizer(pts: &[Point2<f64>]) -> Matrix3<f64> {
     let n = pts.len() as f64;
-    let (mx, my) = pts
-        .iter()
-        .fold((0.0, 0.0), |(a, b), p| (a + p.x / n, b + p.y / n));
-    let d = pts
-        .iter()
-        .map(|p| ((p.x - mx).powi(2) + (p.y - my).powi(2)).sqrt())
-        .sum::<f64>()
-        / n;
-    let s = if d > 0.0 {
-        std::f64::consts::SQRT_2 / d
-    } else {
-        1.0
-    };
+    let (mx, my) = pts.iter().fold((0.0, 0.0), |(a, b), p| (a + p.x / n, b + p.y / n));
+    let d = pts.iter().map(|p| ((p.x - mx).powi(2) + (p.y - my).powi(2)).sqrt()).sum::<f64>() / n;
+    let s = if d > 0.0 { std::f64::consts::SQRT_2 / d } else { 1.0 };
     Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
 }
 
@@ -93,15 +66,10 @@ fn normalizer(pts: &[Point2<f64>]) -> Matrix3<f64> {
 /// spread at least `1e-3` of the larger (else they are collinear).
 pub fn check_spread(pts: &[Point2<f64>], what: &str) -> Result<(), CalibError> {
     if pts.len() < 4 {
-        return Err(CalibError::TooFew(format!(
-            "{what}: {} points, need at least 4",
-            pts.len()
-        )));
+        return Err(CalibError::TooFew(format!("{what}: {} points, need at least 4", pts.len())));
     }
     let n = pts.len() as f64;
-    let (mx, my) = pts
-        .iter()
-        .fold((0.0, 0.0), |(a, b), p| (a + p.x / n, b + p.y / n));
+    let (mx, my) = pts.iter().fold((0.0, 0.0), |(a, b), p| (a + p.x / n, b + p.y / n));
     let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
     for p in pts {
         let (dx, dy) = (p.x - mx, p.y - my);
@@ -113,14 +81,7 @@ pub fn check_spread(pts: &[Point2<f64>], what: &str) -> Result<(), CalibError> {
     let disc = ((sxx - syy).powi(2) + 4.0 * sxy * sxy).sqrt();
     let (l1, l2) = ((tr + disc) / 2.0, (tr - disc) / 2.0);
     if l1 <= 0.0 || l2 / l1 < 1e-6 {
-        return Err(CalibError::Degenerate(format!(
-            "{what}: points are collinear (spread ratio {:.1e})",
-            if l1 > 0.0 {
-                (l2 / l1).max(0.0).sqrt()
-            } else {
-                0.0
-            }
-        )));
+        return Err(CalibError::Degenerate(format!("{what}: points are collinear (spread ratio {:.1e})", if l1 > 0.0 { (l2 / l1).max(0.0).sqrt() } else { 0.0 })));
     }
     Ok(())
 }
@@ -144,26 +105,13 @@ pub fn homography(src: &[Point2<f64>], dst: &[Point2<f64>]) -> Result<Matrix3<f6
     }
     let ata = a.transpose() * &a;
     let eig = ata.symmetric_eigen();
-    let (imin, _) =
-        eig.eigenvalues
-            .iter()
-            .enumerate()
-            .fold(
-                (0, f64::INFINITY),
-                |(bi, bv), (i, &v)| if v < bv { (i, v) } else { (bi, bv) },
-            );
+    let (imin, _) = eig.eigenvalues.iter().enumerate().fold((0, f64::INFINITY), |(bi, bv), (i, &v)| if v < bv { (i, v) } else { (bi, bv) });
     let h = eig.eigenvectors.column(imin);
     let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
-    let tdi = td
-        .try_inverse()
-        .ok_or_else(|| CalibError::Degenerate("homography normalization".into()))?;
+    let tdi = td.try_inverse().ok_or_else(|| CalibError::Degenerate("homography normalization".into()))?;
     let hm = tdi * hn * ts;
     let s = hm[(2, 2)];
-    let hm = if s.abs() > 1e-12 {
-        hm / s
-    } else {
-        hm / hm.norm()
-    };
+    let hm = if s.abs() > 1e-12 { hm / s } else { hm / hm.norm() };
     if !hm.iter().all(|v| v.is_finite()) {
         return Err(CalibError::Degenerate("homography is not finite".into()));
     }
@@ -184,16 +132,10 @@ pub fn nearest_rotation(m: &Matrix3<f64>) -> Rotation3<f64> {
 /// `T_cam_plane` from a homography mapping plane `(x, y)` (metres) to normalized image
 /// coordinates (`K = I`): `[r1 r2 t] ∝ H`, sign chosen so the plane is in front (t.z > 0).
 pub fn pose_from_homography(h: &Matrix3<f64>) -> Result<Pose, CalibError> {
-    let (h1, h2, h3) = (
-        h.column(0).into_owned(),
-        h.column(1).into_owned(),
-        h.column(2).into_owned(),
-    );
+    let (h1, h2, h3) = (h.column(0).into_owned(), h.column(1).into_owned(), h.column(2).into_owned());
     let s = 2.0 / (h1.norm() + h2.norm());
     if !s.is_finite() {
-        return Err(CalibError::Degenerate(
-            "homography has a zero column".into(),
-        ));
+        return Err(CalibError::Degenerate("homography has a zero column".into()));
     }
     let s = if h3.z * s < 0.0 { -s } else { s };
     let (r1, r2, t) = (h1 * s, h2 * s, h3 * s);
@@ -205,21 +147,11 @@ pub fn pose_from_homography(h: &Matrix3<f64>) -> Result<Pose, CalibError> {
 /// `h_iᵀ B h_j` constraints on `B = K⁻ᵀK⁻¹`. Returns `[fx, fy, cx, cy]`.
 pub fn zhang_intrinsics(hs: &[Matrix3<f64>]) -> Result<[f64; 4], CalibError> {
     if hs.len() < 3 {
-        return Err(CalibError::TooFew(format!(
-            "{} views for Zhang's initialization, need at least 3",
-            hs.len()
-        )));
+        return Err(CalibError::TooFew(format!("{} views for Zhang's initialization, need at least 3", hs.len())));
     }
     let v = |h: &Matrix3<f64>, i: usize, j: usize| -> [f64; 6] {
         let (a, b) = (h.column(i), h.column(j));
-        [
-            a[0] * b[0],
-            a[0] * b[1] + a[1] * b[0],
-            a[1] * b[1],
-            a[2] * b[0] + a[0] * b[2],
-            a[2] * b[1] + a[1] * b[2],
-            a[2] * b[2],
-        ]
+        [a[0] * b[0], a[0] * b[1] + a[1] * b[0], a[1] * b[1], a[2] * b[0] + a[0] * b[2], a[2] * b[1] + a[1] * b[2], a[2] * b[2]]
     };
     let mut m = DMatrix::<f64>::zeros(2 * hs.len() + 1, 6);
     for (k, h) in hs.iter().enumerate() {
@@ -234,14 +166,7 @@ pub fn zhang_intrinsics(hs: &[Matrix3<f64>]) -> Result<[f64; 4], CalibError> {
     // Zero skew: B12 = 0 (weighted strongly).
     m[(2 * hs.len(), 1)] = 1e3;
     let eig = (m.transpose() * &m).symmetric_eigen();
-    let (imin, _) =
-        eig.eigenvalues
-            .iter()
-            .enumerate()
-            .fold(
-                (0, f64::INFINITY),
-                |(bi, bv), (i, &x)| if x < bv { (i, x) } else { (bi, bv) },
-            );
+    let (imin, _) = eig.eigenvalues.iter().enumerate().fold((0, f64::INFINITY), |(bi, bv), (i, &x)| if x < bv { (i, x) } else { (bi, bv) });
     let b = eig.eigenvectors.column(imin);
     let (b11, b12, b22, b13, b23, b33) = (b[0], b[1], b[2], b[3], b[4], b[5]);
     let den = b11 * b22 - b12 * b12;
@@ -279,13 +204,8 @@ mod tests {
 
     #[test]
     fn homography_and_pose_round_trip() {
-        let pose = Pose::from_parts(
-            Rotation3::from_euler_angles(0.3, -0.2, 0.1),
-            Vector3::new(0.1, -0.05, 1.5),
-        );
-        let src: Vec<Point2<f64>> = (0..12)
-            .map(|i| Point2::new((i % 4) as f64 * 0.1, (i / 4) as f64 * 0.1))
-            .collect();
+        let pose = Pose::from_parts(Rotation3::from_euler_angles(0.3, -0.2, 0.1), Vector3::new(0.1, -0.05, 1.5));
+        let src: Vec<Point2<f64>> = (0..12).map(|i| Point2::new((i % 4) as f64 * 0.1, (i / 4) as f64 * 0.1)).collect();
         let dst: Vec<Point2<f64>> = src
             .iter()
             .map(|s| {
@@ -297,9 +217,7 @@ mod tests {
         let back = pose_from_homography(&h).unwrap();
         let (a, d) = back.distance(&pose);
         assert!(a < 1e-9 && d < 1e-9, "{a} {d}");
-        let line: Vec<Point2<f64>> = (0..6)
-            .map(|i| Point2::new(i as f64, 2.0 * i as f64))
-            .collect();
+        let line: Vec<Point2<f64>> = (0..6).map(|i| Point2::new(i as f64, 2.0 * i as f64)).collect();
         let err = homography(&line, &line).unwrap_err().to_string();
         assert!(err.contains("collinear"), "{err}");
     }

@@ -20,10 +20,7 @@ pub mod tagpose;
 pub mod views;
 pub mod yaml;
 
-pub use calibrate::{
-    calibrate, CalibrationInput, CalibrationOptions, CameraCalibration, CameraSpec, Observation,
-    RigCalibration,
-};
+pub use calibrate::{calibrate, CalibrationInput, CalibrationOptions, CameraCalibration, CameraSpec, Observation, RigCalibration};
 pub use detect::{DetectorConfig, TagDetection, TagDetector, TagFamily};
 pub use error::CalibError;
 pub use mount::{MountedTag, TagMount};

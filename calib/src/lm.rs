@@ -78,8 +78,7 @@ pub fn plus(kind: BlockKind, x: &[f64], delta: &[f64], out: &mut [f64]) {
             }
         }
         BlockKind::Pose => {
-            let r = Rotation3::new(Vector3::new(delta[0], delta[1], delta[2]))
-                * Rotation3::new(Vector3::new(x[0], x[1], x[2]));
+            let r = Rotation3::new(Vector3::new(delta[0], delta[1], delta[2])) * Rotation3::new(Vector3::new(x[0], x[1], x[2]));
             let w = r.scaled_axis();
             out[..3].copy_from_slice(w.as_slice());
             for i in 3..6 {
@@ -92,12 +91,7 @@ pub fn plus(kind: BlockKind, x: &[f64], delta: &[f64], out: &mut [f64]) {
 impl<'a> Problem<'a> {
     /// An empty problem.
     pub fn new() -> Self {
-        Problem {
-            params: Vec::new(),
-            kinds: Vec::new(),
-            fixed: Vec::new(),
-            residuals: Vec::new(),
-        }
+        Problem { params: Vec::new(), kinds: Vec::new(), fixed: Vec::new(), residuals: Vec::new() }
     }
 
     /// Adds a parameter block and returns its index.
@@ -113,22 +107,13 @@ impl<'a> Problem<'a> {
 
     /// Adds a residual block.
     pub fn add_residual(&mut self, blocks: Vec<usize>, len: usize, f: ResidualFn<'a>) {
-        self.residuals.push(ResidualBlock {
-            blocks,
-            len,
-            f,
-            active: true,
-        });
+        self.residuals.push(ResidualBlock { blocks, len, f, active: true });
     }
 
     /// Residuals of block `k` at the current parameters (`None` when undefined).
     pub fn residual(&self, k: usize) -> Option<Vec<f64>> {
         let rb = &self.residuals[k];
-        let xs: Vec<&[f64]> = rb
-            .blocks
-            .iter()
-            .map(|&b| self.params[b].as_slice())
-            .collect();
+        let xs: Vec<&[f64]> = rb.blocks.iter().map(|&b| self.params[b].as_slice()).collect();
         let mut r = vec![0.0; rb.len];
         (rb.f)(&xs, &mut r).then_some(r)
     }
@@ -149,11 +134,7 @@ impl<'a> Problem<'a> {
 
     /// Builds `JᵀJ` and `Jᵀr` at the current parameters (residual blocks split across rayon
     /// workers, each with its own accumulator).
-    fn normal_equations(
-        &self,
-        offsets: &[Option<usize>],
-        n: usize,
-    ) -> Result<(DMatrix<f64>, DVector<f64>, f64), CalibError> {
+    fn normal_equations(&self, offsets: &[Option<usize>], n: usize) -> Result<(DMatrix<f64>, DVector<f64>, f64), CalibError> {
         let active: Vec<&ResidualBlock> = self.residuals.iter().filter(|r| r.active).collect();
         let chunk = (active.len() / (4 * rayon::current_num_threads().max(1))).max(256);
         active
@@ -167,30 +148,18 @@ impl<'a> Problem<'a> {
                 }
                 Ok((h, g, cost))
             })
-            .try_reduce(
-                || (DMatrix::zeros(n, n), DVector::zeros(n), 0.0),
-                |a, b| Ok((a.0 + b.0, a.1 + b.1, a.2 + b.2)),
-            )
+            .try_reduce(|| (DMatrix::zeros(n, n), DVector::zeros(n), 0.0), |a, b| Ok((a.0 + b.0, a.1 + b.1, a.2 + b.2)))
     }
 
     /// Adds one residual block's `JᵀJ` and `Jᵀr` (numeric Jacobian); returns its `Σr²`.
-    fn accumulate(
-        &self,
-        rb: &ResidualBlock,
-        offsets: &[Option<usize>],
-        h: &mut DMatrix<f64>,
-        g: &mut DVector<f64>,
-    ) -> Result<f64, CalibError> {
-        let mut scratch: Vec<Vec<f64>> =
-            rb.blocks.iter().map(|&b| self.params[b].clone()).collect();
+    fn accumulate(&self, rb: &ResidualBlock, offsets: &[Option<usize>], h: &mut DMatrix<f64>, g: &mut DVector<f64>) -> Result<f64, CalibError> {
+        let mut scratch: Vec<Vec<f64>> = rb.blocks.iter().map(|&b| self.params[b].clone()).collect();
         let m = rb.len;
         let mut r0 = vec![0.0; m];
         {
             let xs: Vec<&[f64]> = scratch.iter().map(|v| v.as_slice()).collect();
             if !(rb.f)(&xs, &mut r0) {
-                return Err(CalibError::Optimization(
-                    "a residual became undefined (point behind a camera?)".into(),
-                ));
+                return Err(CalibError::Optimization("a residual became undefined (point behind a camera?)".into()));
             }
         }
         let cost = r0.iter().map(|v| v * v).sum::<f64>();
@@ -209,27 +178,16 @@ impl<'a> Problem<'a> {
                 };
                 d[i] = step;
                 plus(kind, &x, &d, &mut scratch[slot]);
-                let okp = (rb.f)(
-                    &scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(),
-                    &mut rp,
-                );
+                let okp = (rb.f)(&scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(), &mut rp);
                 d[i] = -step;
                 plus(kind, &x, &d, &mut scratch[slot]);
-                let okm = (rb.f)(
-                    &scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(),
-                    &mut rm,
-                );
+                let okm = (rb.f)(&scratch.iter().map(|v| v.as_slice()).collect::<Vec<_>>(), &mut rm);
                 d[i] = 0.0;
                 scratch[slot].copy_from_slice(&x);
                 if !(okp && okm) {
-                    return Err(CalibError::Optimization(
-                        "a residual is undefined next to the current estimate".into(),
-                    ));
+                    return Err(CalibError::Optimization("a residual is undefined next to the current estimate".into()));
                 }
-                cols.push((
-                    off + i,
-                    (0..m).map(|k| (rp[k] - rm[k]) / (2.0 * step)).collect(),
-                ));
+                cols.push((off + i, (0..m).map(|k| (rp[k] - rm[k]) / (2.0 * step)).collect()));
             }
         }
         for (a, (ca, ja)) in cols.iter().enumerate() {
@@ -255,20 +213,11 @@ impl<'a> Problem<'a> {
                 n += self.params[b].len();
             }
         }
-        let m: usize = self
-            .residuals
-            .iter()
-            .filter(|r| r.active)
-            .map(|r| r.len)
-            .sum();
+        let m: usize = self.residuals.iter().filter(|r| r.active).map(|r| r.len).sum();
         if m < n {
-            return Err(CalibError::TooFew(format!(
-                "{m} residuals for {n} unknowns"
-            )));
+            return Err(CalibError::TooFew(format!("{m} residuals for {n} unknowns")));
         }
-        let initial_cost = self.cost_at(&self.params).ok_or_else(|| {
-            CalibError::Optimization("residuals undefined at the initial estimate".into())
-        })?;
+        let initial_cost = self.cost_at(&self.params).ok_or_else(|| CalibError::Optimization("residuals undefined at the initial estimate".into()))?;
         let mut lambda = 1e-3;
         let mut iterations = 0;
         let (mut h, mut g, mut cost) = self.normal_equations(&offsets, n)?;
@@ -289,12 +238,7 @@ impl<'a> Problem<'a> {
                 for b in 0..trial.len() {
                     if let Some(off) = offsets[b] {
                         let x = self.params[b].clone();
-                        plus(
-                            self.kinds[b],
-                            &x,
-                            &delta.as_slice()[off..off + x.len()],
-                            &mut trial[b],
-                        );
+                        plus(self.kinds[b], &x, &delta.as_slice()[off..off + x.len()], &mut trial[b]);
                     }
                 }
                 match self.cost_at(&trial) {
@@ -308,15 +252,7 @@ impl<'a> Problem<'a> {
                         g = g2;
                         cost = c2;
                         if rel < 1e-10 || delta.norm() < 1e-12 {
-                            return Ok(self.finish(
-                                h,
-                                cost,
-                                initial_cost,
-                                iterations,
-                                m,
-                                n,
-                                offsets,
-                            ));
+                            return Ok(self.finish(h, cost, initial_cost, iterations, m, n, offsets));
                         }
                         break;
                     }
@@ -331,29 +267,14 @@ impl<'a> Problem<'a> {
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn finish(
-        &self,
-        h: DMatrix<f64>,
-        cost: f64,
-        initial_cost: f64,
-        iterations: usize,
-        m: usize,
-        n: usize,
-        offsets: Vec<Option<usize>>,
-    ) -> Solution {
+    fn finish(&self, h: DMatrix<f64>, cost: f64, initial_cost: f64, iterations: usize, m: usize, n: usize, offsets: Vec<Option<usize>>) -> Solution {
         // Condition of the column-scaled normal matrix.
         let d: Vec<f64> = (0..n).map(|i| 1.0 / h[(i, i)].max(1e-300).sqrt()).collect();
         let hs = DMatrix::from_fn(n, n, |i, j| h[(i, j)] * d[i] * d[j]);
         let eig = hs.clone().symmetric_eigenvalues();
-        let (mn, mx) = eig
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
+        let (mn, mx) = eig.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
         let inverse_condition = if mx > 0.0 { (mn / mx).max(0.0) } else { 0.0 };
-        let sigma2 = if m > n {
-            cost / (m - n) as f64
-        } else {
-            f64::NAN
-        };
+        let sigma2 = if m > n { cost / (m - n) as f64 } else { f64::NAN };
         let covariance = if inverse_condition > 1e-14 {
             hs.cholesky().map(|c| {
                 let inv = c.inverse();
@@ -362,16 +283,7 @@ impl<'a> Problem<'a> {
         } else {
             None
         };
-        Solution {
-            cost,
-            initial_cost,
-            iterations,
-            residual_count: m,
-            free_params: n,
-            offsets,
-            covariance,
-            inverse_condition,
-        }
+        Solution { cost, initial_cost, iterations, residual_count: m, free_params: n, offsets, covariance, inverse_condition }
     }
 }
 
@@ -389,30 +301,18 @@ mod tests {
     fn fits_an_exponential_and_reports_covariance() {
         // y = a·exp(b·x) with a = 2, b = -0.7, plus small deterministic perturbations.
         let xs: Vec<f64> = (0..30).map(|i| i as f64 * 0.1).collect();
-        let ys: Vec<f64> = xs
-            .iter()
-            .enumerate()
-            .map(|(i, x)| 2.0 * (-0.7 * x).exp() + 1e-3 * ((i * 7 % 5) as f64 - 2.0))
-            .collect();
+        let ys: Vec<f64> = xs.iter().enumerate().map(|(i, x)| 2.0 * (-0.7 * x).exp() + 1e-3 * ((i * 7 % 5) as f64 - 2.0)).collect();
         let mut p = Problem::new();
         let b = p.add_block(vec![1.0, 0.0], BlockKind::Euclidean, false);
         for (x, y) in xs.iter().zip(&ys) {
             let (x, y) = (*x, *y);
-            p.add_residual(
-                vec![b],
-                1,
-                Box::new(move |v, r| {
-                    r[0] = v[0][0] * (v[0][1] * x).exp() - y;
-                    true
-                }),
-            );
+            p.add_residual(vec![b], 1, Box::new(move |v, r| {
+                r[0] = v[0][0] * (v[0][1] * x).exp() - y;
+                true
+            }));
         }
         let s = p.solve(100).unwrap();
-        assert!(
-            (p.params[b][0] - 2.0).abs() < 5e-3 && (p.params[b][1] + 0.7).abs() < 5e-3,
-            "{:?}",
-            p.params[b]
-        );
+        assert!((p.params[b][0] - 2.0).abs() < 5e-3 && (p.params[b][1] + 0.7).abs() < 5e-3, "{:?}", p.params[b]);
         assert!(s.cost < s.initial_cost * 1e-4);
         let cov = s.covariance.unwrap();
         assert!(cov[(0, 0)] > 0.0 && cov[(0, 0)].sqrt() < 1e-2);
@@ -422,15 +322,9 @@ mod tests {
     fn pose_block_rotates_on_the_left() {
         let x = [0.1, -0.2, 0.3, 1.0, 2.0, 3.0];
         let mut out = [0.0; 6];
-        plus(
-            BlockKind::Pose,
-            &x,
-            &[0.0, 0.0, 0.5, 0.0, 0.0, 1.0],
-            &mut out,
-        );
+        plus(BlockKind::Pose, &x, &[0.0, 0.0, 0.5, 0.0, 0.0, 1.0], &mut out);
         let r = Rotation3::new(Vector3::new(out[0], out[1], out[2]));
-        let expect = Rotation3::new(Vector3::new(0.0, 0.0, 0.5))
-            * Rotation3::new(Vector3::new(0.1, -0.2, 0.3));
+        let expect = Rotation3::new(Vector3::new(0.0, 0.0, 0.5)) * Rotation3::new(Vector3::new(0.1, -0.2, 0.3));
         assert!(r.angle_to(&expect) < 1e-12 && out[5] == 4.0);
     }
 }

@@ -33,12 +33,7 @@ impl MountedTag {
 /// `(-s/2, s/2, 0), (s/2, s/2, 0), (s/2, -s/2, 0), (-s/2, -s/2, 0)`.
 pub fn tag_corners(size_m: f64) -> [Point3<f64>; 4] {
     let s = size_m / 2.0;
-    [
-        Point3::new(-s, s, 0.0),
-        Point3::new(s, s, 0.0),
-        Point3::new(s, -s, 0.0),
-        Point3::new(-s, -s, 0.0),
-    ]
+    [Point3::new(-s, s, 0.0), Point3::new(s, s, 0.0), Point3::new(s, -s, 0.0), Point3::new(-s, -s, 0.0)]
 }
 
 /// A tag mount.
@@ -74,50 +69,35 @@ impl TagMount {
 
     /// Parses the TOML text; `path` only names the source in errors.
     pub fn from_toml(text: &str, path: &Path) -> Result<Self, CalibError> {
-        let m: MountToml =
-            toml::from_str(text).map_err(|e| CalibError::parse(path, e.to_string()))?;
-        let family = TagFamily::from_name(m.family.as_deref().unwrap_or("tag36h11"))
-            .map_err(|e| CalibError::parse(path, format!("family: {e}")))?;
+        let m: MountToml = toml::from_str(text).map_err(|e| CalibError::parse(path, e.to_string()))?;
+        let family = TagFamily::from_name(m.family.as_deref().unwrap_or("tag36h11")).map_err(|e| CalibError::parse(path, format!("family: {e}")))?;
         if m.tags.is_empty() {
             return Err(CalibError::parse(path, "tags: at least one tag is needed"));
         }
         let mut tags = Vec::new();
         for (i, t) in m.tags.iter().enumerate() {
             if !(t.size_m > 0.0 && t.size_m.is_finite()) {
-                return Err(CalibError::parse(
-                    path,
-                    format!("tags[{i}].size_m must be positive, got {}", t.size_m),
-                ));
+                return Err(CalibError::parse(path, format!("tags[{i}].size_m must be positive, got {}", t.size_m)));
             }
             if tags.iter().any(|o: &MountedTag| o.id == t.id) {
-                return Err(CalibError::parse(
-                    path,
-                    format!("tags[{i}].id {} appears twice", t.id),
-                ));
+                return Err(CalibError::parse(path, format!("tags[{i}].id {} appears twice", t.id)));
             }
             let r = Matrix3::from_fn(|a, b| t.rotation[a][b]);
-            let pose = Pose::try_from_matrix(&r, Vector3::from(t.translation_m))
-                .map_err(|e| CalibError::parse(path, format!("tags[{i}].rotation: {e}")))?;
-            tags.push(MountedTag {
-                id: t.id,
-                size_m: t.size_m,
-                t_tube_tag: pose,
-            });
+            let pose = Pose::try_from_matrix(&r, Vector3::from(t.translation_m)).map_err(|e| CalibError::parse(path, format!("tags[{i}].rotation: {e}")))?;
+            tags.push(MountedTag { id: t.id, size_m: t.size_m, t_tube_tag: pose });
         }
         Ok(TagMount { family, tags })
     }
 
     /// Reads a mount file.
     pub fn load(path: &Path) -> Result<Self, CalibError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+        let text = std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
         Self::from_toml(&text, path)
     }
 
     /// The shipped mount, `data/tag_mount.toml`.
     pub fn default_mount() -> Self {
-        Self::from_toml(DEFAULT_MOUNT_TOML, Path::new("data/tag_mount.toml"))
-            .expect("data/tag_mount.toml is valid (checked by tests)")
+        Self::from_toml(DEFAULT_MOUNT_TOML, Path::new("data/tag_mount.toml")).expect("data/tag_mount.toml is valid (checked by tests)")
     }
 }
 

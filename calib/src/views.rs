@@ -35,10 +35,7 @@ impl Board {
     /// Board-frame corners of tag `id` in the detector's order, or `None` if not on the board.
     pub fn corners(&self, id: u32) -> Option<[Point3<f64>; 4]> {
         let t = self.tags.iter().find(|t| t.id == id)?;
-        Some(
-            crate::mount::tag_corners(self.tag_size_m)
-                .map(|p| Point3::new(p.x + t.centre[0], p.y + t.centre[1], 0.0)),
-        )
+        Some(crate::mount::tag_corners(self.tag_size_m).map(|p| Point3::new(p.x + t.centre[0], p.y + t.centre[1], 0.0)))
     }
 }
 
@@ -92,66 +89,30 @@ pub struct LoadedSet {
 }
 
 /// Reads `dir/calib_set.json`; with [`CornerSource::Detect`] runs `detector` on each image.
-pub fn load_calib_set(
-    dir: &Path,
-    source: CornerSource,
-    detector: Option<&mut TagDetector>,
-) -> Result<LoadedSet, CalibError> {
+pub fn load_calib_set(dir: &Path, source: CornerSource, detector: Option<&mut TagDetector>) -> Result<LoadedSet, CalibError> {
     let path = dir.join("calib_set.json");
     let set: SetJson = tubeloc_core::files::read_json(&path)?;
     let mut detector = detector;
-    let cameras: Vec<CameraSpec> = set
-        .rig
-        .cameras
-        .iter()
-        .map(|c| CameraSpec {
-            name: c.name.clone(),
-            width: c.model.width,
-            height: c.model.height,
-        })
-        .collect();
-    let index: BTreeMap<&str, usize> = cameras
-        .iter()
-        .enumerate()
-        .map(|(i, c)| (c.name.as_str(), i))
-        .collect();
+    let cameras: Vec<CameraSpec> = set.rig.cameras.iter().map(|c| CameraSpec { name: c.name.clone(), width: c.model.width, height: c.model.height }).collect();
+    let index: BTreeMap<&str, usize> = cameras.iter().enumerate().map(|(i, c)| (c.name.as_str(), i)).collect();
     let mut observations = Vec::new();
     for v in &set.views {
         for o in &v.observations {
-            let cam = *index.get(o.camera.as_str()).ok_or_else(|| {
-                CalibError::parse(
-                    &path,
-                    format!("views[{}]: unknown camera {:?}", v.index, o.camera),
-                )
-            })?;
+            let cam = *index.get(o.camera.as_str()).ok_or_else(|| CalibError::parse(&path, format!("views[{}]: unknown camera {:?}", v.index, o.camera)))?;
             let tags: Vec<(u32, [[f64; 2]; 4])> = match source {
                 CornerSource::Exact => o.exact.iter().map(|t| (t.id, t.corners)).collect(),
                 CornerSource::Noisy => o.noisy.iter().map(|t| (t.id, t.corners)).collect(),
                 CornerSource::Detect => {
                     let name = o.image.as_ref().ok_or_else(|| CalibError::parse(&path, format!("views[{}] camera {}: no image to detect in (set made without rendering)", v.index, o.camera)))?;
                     let ip = dir.join(name);
-                    let img = image::open(&ip)
-                        .map_err(|e| CalibError::parse(&ip, e.to_string()))?
-                        .to_luma8();
-                    let det = detector.as_deref_mut().ok_or_else(|| {
-                        CalibError::invalid("detector", "corner source Detect needs a detector")
-                    })?;
-                    det.detect_image(&img)?
-                        .into_iter()
-                        .map(|d| (d.id, d.corners))
-                        .collect()
+                    let img = image::open(&ip).map_err(|e| CalibError::parse(&ip, e.to_string()))?.to_luma8();
+                    let det = detector.as_deref_mut().ok_or_else(|| CalibError::invalid("detector", "corner source Detect needs a detector"))?;
+                    det.detect_image(&img)?.into_iter().map(|d| (d.id, d.corners)).collect()
                 }
             };
-            let mut ob = Observation {
-                camera: cam,
-                view: v.index,
-                object: Vec::new(),
-                image: Vec::new(),
-            };
+            let mut ob = Observation { camera: cam, view: v.index, object: Vec::new(), image: Vec::new() };
             for (id, corners) in tags {
-                let Some(obj) = set.board.corners(id) else {
-                    continue;
-                };
+                let Some(obj) = set.board.corners(id) else { continue };
                 for (p, c) in obj.iter().zip(&corners) {
                     ob.object.push(*p);
                     ob.image.push(Point2::new(c[0], c[1]));
@@ -162,14 +123,6 @@ pub fn load_calib_set(
             }
         }
     }
-    let input = CalibrationInput {
-        cameras,
-        observations,
-        stereo_pairs: set.rig.stereo_pairs.clone(),
-    };
-    Ok(LoadedSet {
-        input,
-        board: set.board,
-        truth: set.rig,
-    })
+    let input = CalibrationInput { cameras, observations, stereo_pairs: set.rig.stereo_pairs.clone() };
+    Ok(LoadedSet { input, board: set.board, truth: set.rig })
 }

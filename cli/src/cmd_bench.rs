@@ -81,10 +81,7 @@ pub struct BenchArgs {
 
 /// The benchmark's splits, with the paper's Line2D (AP50, AR) and Mask R-CNN (AP50, AR) figures
 /// (Tables I and II; Mask R-CNN tested on this split after training on the other).
-const SPLITS: [(&str, (f64, f64), (f64, f64)); 2] = [
-    ("no-tags", (0.345, 0.184), (0.911, 0.555)),
-    ("with-tags", (0.255, 0.153), (0.918, 0.575)),
-];
+const SPLITS: [(&str, (f64, f64), (f64, f64)); 2] = [("no-tags", (0.345, 0.184), (0.911, 0.555)), ("with-tags", (0.255, 0.153), (0.918, 0.575))];
 
 /// Stage bookkeeping: wall time per finished stage, persisted after each one.
 struct Stages {
@@ -95,23 +92,13 @@ struct Stages {
 impl Stages {
     fn load(out: &Path, fresh: bool) -> Result<Stages> {
         let path = out.join("bench_state.json");
-        let done = if path.exists() && !fresh {
-            files::read_json(&path)
-                .with_context(|| format!("{}: delete it or pass --fresh", path.display()))?
-        } else {
-            BTreeMap::new()
-        };
+        let done = if path.exists() && !fresh { files::read_json(&path).with_context(|| format!("{}: delete it or pass --fresh", path.display()))? } else { BTreeMap::new() };
         Ok(Stages { path, done })
     }
 
     /// Runs `f` unless stage `name` is recorded as done and all `outputs` exist; records its
     /// wall time (and what `f` returns) and the process peak memory so far.
-    fn run(
-        &mut self,
-        name: &str,
-        outputs: &[PathBuf],
-        f: impl FnOnce() -> Result<Value>,
-    ) -> Result<()> {
+    fn run(&mut self, name: &str, outputs: &[PathBuf], f: impl FnOnce() -> Result<Value>) -> Result<()> {
         if self.done.contains_key(name) && outputs.iter().all(|p| p.exists()) {
             eprintln!("== bench: {name}: done in an earlier run, skipped");
             return Ok(());
@@ -147,98 +134,41 @@ fn words(w: &[&str]) -> Vec<String> {
 fn write_split(dataset: &Path, split: &str, limit: Option<usize>, dir: &Path) -> Result<usize> {
     let src = dataset.join("annotations.json");
     let mut v: Value = files::read_json(&src)?;
-    let images = v
-        .get("images")
-        .and_then(Value::as_array)
-        .with_context(|| format!("{}: no images array", src.display()))?;
-    let mut keep: Vec<Value> = images
-        .iter()
-        .filter(|im| im.get("split").and_then(Value::as_str) == Some(split))
-        .cloned()
-        .collect();
+    let images = v.get("images").and_then(Value::as_array).with_context(|| format!("{}: no images array", src.display()))?;
+    let mut keep: Vec<Value> = images.iter().filter(|im| im.get("split").and_then(Value::as_str) == Some(split)).cloned().collect();
     if keep.is_empty() {
-        bail!(
-            "{}: no images with split {split:?} (is it a paper-preset dataset?)",
-            src.display()
-        );
+        bail!("{}: no images with split {split:?} (is it a paper-preset dataset?)", src.display());
     }
     keep.sort_by_key(|im| im.get("id").and_then(Value::as_u64).unwrap_or(0));
     if let Some(n) = limit.filter(|&n| n > 0 && n < keep.len()) {
         let step = keep.len() as f64 / n as f64;
-        keep = (0..n)
-            .map(|i| keep[(i as f64 * step) as usize].clone())
-            .collect();
+        keep = (0..n).map(|i| keep[(i as f64 * step) as usize].clone()).collect();
     }
-    let ids: std::collections::HashSet<u64> = keep
-        .iter()
-        .filter_map(|im| im.get("id").and_then(Value::as_u64))
-        .collect();
-    let anns: Vec<Value> = v
-        .get("annotations")
-        .and_then(Value::as_array)
-        .map(|a| {
-            a.iter()
-                .filter(|x| {
-                    x.get("image_id")
-                        .and_then(Value::as_u64)
-                        .is_some_and(|id| ids.contains(&id))
-                })
-                .cloned()
-                .collect()
-        })
-        .unwrap_or_default();
+    let ids: std::collections::HashSet<u64> = keep.iter().filter_map(|im| im.get("id").and_then(Value::as_u64)).collect();
+    let anns: Vec<Value> = v.get("annotations").and_then(Value::as_array).map(|a| a.iter().filter(|x| x.get("image_id").and_then(Value::as_u64).is_some_and(|id| ids.contains(&id))).cloned().collect()).unwrap_or_default();
     let n = keep.len();
     v["images"] = Value::Array(keep);
     v["annotations"] = Value::Array(anns);
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let link = dir.join("images");
     if !link.exists() {
-        let target = std::fs::canonicalize(dataset.join("images"))
-            .with_context(|| format!("{}/images", dataset.display()))?;
-        std::os::unix::fs::symlink(&target, &link)
-            .with_context(|| format!("linking {} -> {}", link.display(), target.display()))?;
+        let target = std::fs::canonicalize(dataset.join("images")).with_context(|| format!("{}/images", dataset.display()))?;
+        std::os::unix::fs::symlink(&target, &link).with_context(|| format!("linking {} -> {}", link.display(), target.display()))?;
     }
     files::write_json(&dir.join("annotations.json"), &v)?;
     Ok(n)
 }
 
 /// Detection + evaluation of one detector on one split; returns ms per image.
-fn detect_and_eval(
-    method: &str,
-    extra: &[String],
-    split_dir: &Path,
-    out: &Path,
-    n_images: usize,
-) -> Result<Value> {
+fn detect_and_eval(method: &str, extra: &[String], split_dir: &Path, out: &Path, n_images: usize) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let dets = out.join("detections.json");
-    let mut w = words(&[
-        "detect",
-        "--method",
-        method,
-        "--dataset",
-        &s(split_dir),
-        "--out",
-        &s(&dets),
-    ]);
+    let mut w = words(&["detect", "--method", method, "--dataset", &s(split_dir), "--out", &s(&dets)]);
     w.extend(extra.iter().cloned());
     let t = Instant::now();
     crate::run_words(&w)?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / n_images.max(1) as f64;
-    crate::run_words(&words(&[
-        "eval",
-        "--gt",
-        &s(&split_dir.join("annotations.json")),
-        "--dt",
-        &s(&dets),
-        "--out",
-        &s(&out.join("eval")),
-        "--by",
-        "terrain",
-        "time",
-        "height_m",
-        "occlusion",
-    ]))?;
+    crate::run_words(&words(&["eval", "--gt", &s(&split_dir.join("annotations.json")), "--dt", &s(&dets), "--out", &s(&out.join("eval")), "--by", "terrain", "time", "height_m", "occlusion"]))?;
     Ok(json!({"ms_per_image": ms}))
 }
 
@@ -266,38 +196,20 @@ pub fn run(a: BenchArgs) -> Result<()> {
         }
     };
     if !dataset.join("annotations.json").exists() {
-        bail!(
-            "{}: no annotations.json (render one with `tubeloc synth --preset paper --out DIR`)",
-            dataset.display()
-        );
+        bail!("{}: no annotations.json (render one with `tubeloc synth --preset paper --out DIR`)", dataset.display());
     }
 
     // 2. Splits.
     let split_dir = |split: &str| out.join("splits").join(split);
-    let outputs: Vec<PathBuf> = SPLITS
-        .iter()
-        .map(|(sp, ..)| split_dir(sp).join("annotations.json"))
-        .collect();
+    let outputs: Vec<PathBuf> = SPLITS.iter().map(|(sp, ..)| split_dir(sp).join("annotations.json")).collect();
     st.run("splits", &outputs, || {
         let mut r = serde_json::Map::new();
         for (sp, ..) in SPLITS {
-            r.insert(
-                sp.into(),
-                json!(write_split(
-                    &dataset,
-                    sp,
-                    a.images_per_split,
-                    &split_dir(sp)
-                )?),
-            );
+            r.insert(sp.into(), json!(write_split(&dataset, sp, a.images_per_split, &split_dir(sp))?));
         }
         Ok(Value::Object(r))
     })?;
-    let n_images = |sp: &str| {
-        st.result("splits")
-            .and_then(|r| r[sp].as_u64())
-            .unwrap_or(0) as usize
-    };
+    let n_images = |sp: &str| st.result("splits").and_then(|r| r[sp].as_u64()).unwrap_or(0) as usize;
     let n_img: BTreeMap<&str, usize> = SPLITS.iter().map(|(sp, ..)| (*sp, n_images(sp))).collect();
 
     // The benchmark camera: the first image's (crops share the focal length).
@@ -312,14 +224,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             None => {
                 let l = out.join("templates.tlt");
                 st.run("templates", &[l.clone()], || {
-                    crate::run_words(&words(&[
-                        "templates",
-                        "build",
-                        "--camera",
-                        &s(&camera),
-                        "--out",
-                        &s(&l),
-                    ]))?;
+                    crate::run_words(&words(&["templates", "build", "--camera", &s(&camera), "--out", &s(&l)]))?;
                     Ok(Value::Null)
                 })?;
                 l
@@ -328,49 +233,26 @@ pub fn run(a: BenchArgs) -> Result<()> {
         for (sp, ..) in SPLITS {
             let dir = out.join("line2d").join(sp);
             let extra = words(&["--templates", &s(&lib), "--camera", &s(&camera)]);
-            st.run(
-                &format!("line2d/{sp}"),
-                &[dir.join("eval/metrics.json")],
-                || detect_and_eval("line2d", &extra, &split_dir(sp), &dir, n_img[sp]),
-            )?;
+            st.run(&format!("line2d/{sp}"), &[dir.join("eval/metrics.json")], || detect_and_eval("line2d", &extra, &split_dir(sp), &dir, n_img[sp]))?;
         }
     }
 
     // 4. Learned.
     if !a.skip.contains(&Part::Learned) {
         for (sp, ..) in SPLITS {
-            let cross = if sp == "no-tags" {
-                &a.model_trained_with_tags
-            } else {
-                &a.model_trained_no_tags
-            };
-            let model = cross
-                .clone()
-                .or_else(|| a.model.clone())
-                .unwrap_or_else(crate::cmd_detect_learned::default_model);
+            let cross = if sp == "no-tags" { &a.model_trained_with_tags } else { &a.model_trained_no_tags };
+            let model = cross.clone().or_else(|| a.model.clone()).unwrap_or_else(crate::cmd_detect_learned::default_model);
             if !model.exists() {
-                bail!(
-                    "learned model {} not found (pass --model, or --skip learned)",
-                    model.display()
-                );
+                bail!("learned model {} not found (pass --model, or --skip learned)", model.display());
             }
             let dir = out.join("learned").join(sp);
             let extra = words(&["--model", &s(&model)]);
-            st.run(
-                &format!("learned/{sp}"),
-                &[dir.join("eval/metrics.json")],
-                || {
-                    let mut r =
-                        detect_and_eval("learned", &extra, &split_dir(sp), &dir, n_img[sp])?;
-                    r["model"] = json!(model);
-                    r["protocol"] = json!(if cross.is_some() {
-                        "cross-split"
-                    } else {
-                        "trained on generated scenes"
-                    });
-                    Ok(r)
-                },
-            )?;
+            st.run(&format!("learned/{sp}"), &[dir.join("eval/metrics.json")], || {
+                let mut r = detect_and_eval("learned", &extra, &split_dir(sp), &dir, n_img[sp])?;
+                r["model"] = json!(model);
+                r["protocol"] = json!(if cross.is_some() { "cross-split" } else { "trained on generated scenes" });
+                Ok(r)
+            })?;
         }
     }
 
@@ -416,99 +298,42 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if !a.skip.contains(&Part::Stereo) {
         let sdir = out.join("stereo");
         let set = sdir.join("set");
-        let model = a
-            .model
-            .clone()
-            .unwrap_or_else(crate::cmd_detect_learned::default_model);
-        st.run(
-            "stereo",
-            &[
-                sdir.join("gt_seeds/eval/pose_metrics.json"),
-                sdir.join("learned/eval/pose_metrics.json"),
-            ],
-            || {
-                crate::run_words(&words(&[
-                    "synth",
-                    "stereo",
-                    "--out",
-                    &s(&set),
-                    "--scenes",
-                    &a.stereo_scenes.to_string(),
-                    "--seed",
-                    "3",
-                    "--force",
-                ]))?;
-                let gt = set.join("annotations.json");
-                let dets = sdir.join("learned_detections.json");
-                crate::run_words(&words(&[
-                    "detect",
-                    "--method",
-                    "learned",
-                    "--model",
-                    &s(&model),
-                    "--dataset",
-                    &s(&set),
-                    "--out",
-                    &s(&dets),
-                ]))?;
-                let mut r = serde_json::Map::new();
-                for (name, seed_words) in [
-                    ("gt_seeds", words(&["--gt-seeds", "10,5"])),
-                    ("learned", words(&["--detections", &s(&dets)])),
-                ] {
-                    let dir = sdir.join(name);
-                    std::fs::create_dir_all(&dir)?;
-                    let seeds_of = |ground: bool| {
-                        dir.join(if ground {
-                            "seeds_ground.json"
-                        } else {
-                            "seeds.json"
-                        })
-                    };
-                    let mut labels = vec![
-                        format!("coarse={}", s(&seeds_of(false))),
-                        format!("coarse_ground={}", s(&seeds_of(true))),
-                    ];
-                    // With and without the ground plane of the rig's pose (`--ground auto`): a rover
-                    // knows its cameras' height and tilt, and mono seeds need it for their tilt.
-                    for (mode, stereo, ground) in [
-                        ("mono", false, false),
-                        ("stereo", true, false),
-                        ("mono_ground", false, true),
-                        ("stereo_ground", true, true),
-                    ] {
-                        let poses = dir.join(format!("poses_{mode}.json"));
-                        let mut w = words(&["refine", "--dataset", &s(&set), "--out", &s(&poses)]);
-                        w.extend(seed_words.iter().cloned());
-                        if stereo {
-                            // The stereo runs' seeds (depth from the stereo points) are the coarse rows.
-                            w.extend(words(&["--stereo", "--seeds-out", &s(&seeds_of(ground))]));
-                        }
-                        if ground {
-                            w.extend(words(&["--ground", "auto"]));
-                        }
-                        let t = Instant::now();
-                        crate::run_words(&w)?;
-                        r.insert(
-                            format!("{name}/{mode}_seconds"),
-                            json!(t.elapsed().as_secs_f64()),
-                        );
-                        labels.push(format!("{mode}={}", s(&poses)));
+        let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+        st.run("stereo", &[sdir.join("gt_seeds/eval/pose_metrics.json"), sdir.join("learned/eval/pose_metrics.json")], || {
+            crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--seed", "3", "--force"]))?;
+            let gt = set.join("annotations.json");
+            let dets = sdir.join("learned_detections.json");
+            crate::run_words(&words(&["detect", "--method", "learned", "--model", &s(&model), "--dataset", &s(&set), "--out", &s(&dets)]))?;
+            let mut r = serde_json::Map::new();
+            for (name, seed_words) in [("gt_seeds", words(&["--gt-seeds", "10,5"])), ("learned", words(&["--detections", &s(&dets)]))] {
+                let dir = sdir.join(name);
+                std::fs::create_dir_all(&dir)?;
+                let seeds_of = |ground: bool| dir.join(if ground { "seeds_ground.json" } else { "seeds.json" });
+                let mut labels = vec![format!("coarse={}", s(&seeds_of(false))), format!("coarse_ground={}", s(&seeds_of(true)))];
+                // With and without the ground plane of the rig's pose (`--ground auto`): a rover
+                // knows its cameras' height and tilt, and mono seeds need it for their tilt.
+                for (mode, stereo, ground) in [("mono", false, false), ("stereo", true, false), ("mono_ground", false, true), ("stereo_ground", true, true)] {
+                    let poses = dir.join(format!("poses_{mode}.json"));
+                    let mut w = words(&["refine", "--dataset", &s(&set), "--out", &s(&poses)]);
+                    w.extend(seed_words.iter().cloned());
+                    if stereo {
+                        // The stereo runs' seeds (depth from the stereo points) are the coarse rows.
+                        w.extend(words(&["--stereo", "--seeds-out", &s(&seeds_of(ground))]));
                     }
-                    let mut w = words(&[
-                        "eval",
-                        "--gt",
-                        &s(&gt),
-                        "--out",
-                        &s(&dir.join("eval")),
-                        "--poses",
-                    ]);
-                    w.extend(labels);
+                    if ground {
+                        w.extend(words(&["--ground", "auto"]));
+                    }
+                    let t = Instant::now();
                     crate::run_words(&w)?;
+                    r.insert(format!("{name}/{mode}_seconds"), json!(t.elapsed().as_secs_f64()));
+                    labels.push(format!("{mode}={}", s(&poses)));
                 }
-                Ok(Value::Object(r))
-            },
-        )?;
+                let mut w = words(&["eval", "--gt", &s(&gt), "--out", &s(&dir.join("eval")), "--poses"]);
+                w.extend(labels);
+                crate::run_words(&w)?;
+            }
+            Ok(Value::Object(r))
+        })?;
     }
 
     // 6b. Tag-pair ground truth on the with-tags split (a copy, so the dataset is not modified).
@@ -531,43 +356,22 @@ pub fn run(a: BenchArgs) -> Result<()> {
             if !(tag_gt.exists() && poses.exists() && seeds.exists()) {
                 continue;
             }
-            st.run(
-                &format!("poses/{det}/with-tags/tag-truth"),
-                &[dir.join("eval_tag_truth/pose_metrics.json")],
-                || {
-                    crate::run_words(&words(&[
-                        "eval",
-                        "--gt",
-                        &s(&tag_gt),
-                        "--truth-field",
-                        "T_cam_tube_tags",
-                        "--poses",
-                        &format!("coarse={}", s(&seeds)),
-                        &format!("mono={}", s(&poses)),
-                        "--out",
-                        &s(&dir.join("eval_tag_truth")),
-                    ]))?;
-                    Ok(json!({}))
-                },
-            )?;
+            st.run(&format!("poses/{det}/with-tags/tag-truth"), &[dir.join("eval_tag_truth/pose_metrics.json")], || {
+                crate::run_words(&words(&["eval", "--gt", &s(&tag_gt), "--truth-field", "T_cam_tube_tags", "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval_tag_truth"))]))?;
+                Ok(json!({}))
+            })?;
         }
     }
 
     // 7. Full resolution, in a child process so that its peak memory is its own.
     if !a.skip.contains(&Part::Fullres) {
         let fdir = out.join("fullres");
-        st.run("fullres", &[fdir.join("poses.json")], || {
-            fullres(&dataset, &fdir)
-        })?;
+        st.run("fullres", &[fdir.join("poses.json")], || fullres(&dataset, &fdir))?;
     }
 
     // 8. Report.
     let report = write_report(&out, &st, &n_img)?;
-    eprintln!(
-        "\nbench finished in {:.0} s (this run); report: {}",
-        t0.elapsed().as_secs_f64(),
-        report.display()
-    );
+    eprintln!("\nbench finished in {:.0} s (this run); report: {}", t0.elapsed().as_secs_f64(), report.display());
     Ok(())
 }
 
@@ -577,27 +381,12 @@ fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     std::fs::create_dir_all(dir)?;
     let rig_path = dataset.join("rig.json");
     let rig = tubeloc_core::Rig::load_json(&rig_path)?;
-    let (l, _) = rig
-        .stereo_pairs
-        .first()
-        .cloned()
-        .with_context(|| format!("{}: no stereo pair", rig_path.display()))?;
-    let cam = rig
-        .camera(&l)
-        .with_context(|| format!("{}: no camera {l}", rig_path.display()))?;
+    let (l, _) = rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo pair", rig_path.display()))?;
+    let cam = rig.camera(&l).with_context(|| format!("{}: no camera {l}", rig_path.display()))?;
     let gt: Value = files::read_json(&dataset.join("annotations.json"))?;
-    let first = gt["images"][0]["file_name"]
-        .as_str()
-        .context("dataset has no images")?;
-    let src = image::open(dataset.join("images").join(first))
-        .with_context(|| format!("reading {first}"))?;
-    let big = src
-        .resize_exact(
-            cam.model.width,
-            cam.model.height,
-            image::imageops::FilterType::Triangle,
-        )
-        .to_rgb8();
+    let first = gt["images"][0]["file_name"].as_str().context("dataset has no images")?;
+    let src = image::open(dataset.join("images").join(first)).with_context(|| format!("reading {first}"))?;
+    let big = src.resize_exact(cam.model.width, cam.model.height, image::imageops::FilterType::Triangle).to_rgb8();
     let img_path = dir.join("fullres.png");
     let mut buf = std::io::Cursor::new(Vec::new());
     big.write_to(&mut buf, image::ImageFormat::Png)?;
@@ -605,24 +394,14 @@ fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     let exe = std::env::current_exe().context("locating the tubeloc executable")?;
     let t = Instant::now();
     let status = std::process::Command::new(&exe)
-        .args([
-            "locate",
-            "--rig",
-            &s(&rig_path),
-            "--image",
-            &s(&img_path),
-            "--out",
-            &s(&dir.join("poses.json")),
-        ])
+        .args(["locate", "--rig", &s(&rig_path), "--image", &s(&img_path), "--out", &s(&dir.join("poses.json"))])
         .status()
         .with_context(|| format!("running {}", exe.display()))?;
     if !matches!(status.code(), Some(0) | Some(3)) {
         bail!("locate on the full-resolution image failed ({status})");
     }
     let doc: Value = files::read_json(&dir.join("poses.json"))?;
-    Ok(
-        json!({"seconds": t.elapsed().as_secs_f64(), "peak_rss_mb": doc["run"]["peak_rss_mb"], "width": cam.model.width, "height": cam.model.height}),
-    )
+    Ok(json!({"seconds": t.elapsed().as_secs_f64(), "peak_rss_mb": doc["run"]["peak_rss_mb"], "width": cam.model.width, "height": cam.model.height}))
 }
 
 fn f3(x: f64) -> String {
@@ -632,18 +411,11 @@ fn f3(x: f64) -> String {
 /// Writes `<out>/report.md` from the stage results; returns its path.
 fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Result<PathBuf> {
     let mut r = String::new();
-    let _ = writeln!(
-        r,
-        "# tubeloc bench: the paper's experiments on the synthetic paper preset\n"
-    );
+    let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
     let _ = writeln!(r, "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n", env!("CARGO_PKG_VERSION"), n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "));
     // One table row per split: `stages(sp)` names the stages whose `ms_per_image` add up to
     // the row's time, `eval_dir(sp)` the evaluation folder (relative to `out`).
-    let table = |r: &mut String,
-                 stages: &dyn Fn(&str) -> Vec<String>,
-                 eval_dir: &dyn Fn(&str) -> String,
-                 paper_of: &dyn Fn(usize) -> (f64, f64),
-                 title: &str| {
+    let table = |r: &mut String, stages: &dyn Fn(&str) -> Vec<String>, eval_dir: &dyn Fn(&str) -> String, paper_of: &dyn Fn(usize) -> (f64, f64), title: &str| {
         let _ = writeln!(r, "## {title}\n\n| test split | AP [.5] ours | AR [.5:.95] ours | AP [.5] paper | AR paper | ms / image | details |\n|---|---|---|---|---|---|---|");
         for (i, (sp, ..)) in SPLITS.iter().enumerate() {
             let rel = eval_dir(sp);
@@ -651,19 +423,9 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
             let (p_ap, p_ar) = paper_of(i);
             match crate::figures::ap50_ar(&m) {
                 Some((ap, ar)) => {
-                    let ms: Option<f64> = stages(sp)
-                        .iter()
-                        .map(|k| st.result(k).and_then(|v| v["ms_per_image"].as_f64()))
-                        .sum();
+                    let ms: Option<f64> = stages(sp).iter().map(|k| st.result(k).and_then(|v| v["ms_per_image"].as_f64())).sum();
                     let ms = ms.map(|x| format!("{x:.0}")).unwrap_or_default();
-                    let _ = writeln!(
-                        r,
-                        "| {sp} | {} | {} | {} | {} | {ms} | [report]({rel}/report.md) |",
-                        f3(ap),
-                        f3(ar),
-                        f3(p_ap),
-                        f3(p_ar)
-                    );
+                    let _ = writeln!(r, "| {sp} | {} | {} | {} | {} | {ms} | [report]({rel}/report.md) |", f3(ap), f3(ar), f3(p_ap), f3(p_ar));
                 }
                 None => {
                     let _ = writeln!(r, "| {sp} | not run | | {} | {} | | |", f3(p_ap), f3(p_ar));
@@ -672,17 +434,8 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         }
         r.push('\n');
     };
-    table(
-        &mut r,
-        &|sp| vec![format!("line2d/{sp}")],
-        &|sp| format!("line2d/{sp}/eval"),
-        &|i| SPLITS[i].1,
-        "Table I: Line2D",
-    );
-    let protocol = st
-        .result("learned/no-tags")
-        .and_then(|v| v["protocol"].as_str().map(String::from))
-        .unwrap_or_else(|| "not run".into());
+    table(&mut r, &|sp| vec![format!("line2d/{sp}")], &|sp| format!("line2d/{sp}/eval"), &|i| SPLITS[i].1, "Table I: Line2D");
+    let protocol = st.result("learned/no-tags").and_then(|v| v["protocol"].as_str().map(String::from)).unwrap_or_else(|| "not run".into());
     table(&mut r, &|sp| vec![format!("learned/{sp}")], &|sp| format!("learned/{sp}/eval"), &|i| SPLITS[i].2, &format!("Table II: learned segmenter ({protocol}; the paper's Mask R-CNN was trained on the other split)"));
     table(
         &mut r,
@@ -691,26 +444,16 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         &|i| SPLITS[i].2,
         "Table II (b): the learned masks snapped to their mono-refined poses' silhouettes (`tubeloc refine --snapped-out`; time: detection + refinement)",
     );
-    for (det, rel) in [
-        ("line2d", "line2d/{sp}/eval"),
-        ("learned", "learned/{sp}/eval"),
-        ("learned, snapped", "poses/learned/{sp}/snapped_eval"),
-    ] {
+    for (det, rel) in [("line2d", "line2d/{sp}/eval"), ("learned", "learned/{sp}/eval"), ("learned, snapped", "poses/learned/{sp}/snapped_eval")] {
         for (sp, ..) in SPLITS {
             let dir = out.join(rel.replace("{sp}", sp));
             if let Ok(md) = std::fs::read_to_string(dir.join("breakdown.md")) {
-                let _ = writeln!(
-                    r,
-                    "### {det} on {sp}: breakdown (AP50 / AP / AR100 per value)\n\n{md}\n"
-                );
+                let _ = writeln!(r, "### {det} on {sp}: breakdown (AP50 / AP / AR100 per value)\n\n{md}\n");
             }
         }
     }
     let _ = writeln!(r, "PR curves: each detector's `eval/report.md` above holds the ten PR curves (IoU 0.50 to 0.95) as PNG.\n");
-    let _ = writeln!(
-        r,
-        "## Pose errors (tubes at least half visible, against the renderer's exact poses)\n"
-    );
+    let _ = writeln!(r, "## Pose errors (tubes at least half visible, against the renderer's exact poses)\n");
     for det in ["line2d", "learned"] {
         for (sp, ..) in SPLITS {
             let p = out.join("poses").join(det).join(sp).join("eval/report.md");
@@ -720,21 +463,12 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         }
     }
     for det in ["line2d", "learned"] {
-        let p = out
-            .join("poses")
-            .join(det)
-            .join("with-tags/eval_tag_truth/report.md");
+        let p = out.join("poses").join(det).join("with-tags/eval_tag_truth/report.md");
         if let Some(t) = crate::figures::pose_table(&p) {
             let _ = writeln!(r, "### {det} detections on with-tags, against the tag-pair ground truth (`T_cam_tube_tags`, the paper's protocol) ([report with histograms](poses/{det}/with-tags/eval_tag_truth/report.md))\n\n{t}");
         }
     }
-    for (name, what) in [
-        (
-            "gt_seeds",
-            "exact poses perturbed by 10 mm / 5 deg as seeds",
-        ),
-        ("learned", "learned detections as seeds"),
-    ] {
+    for (name, what) in [("gt_seeds", "exact poses perturbed by 10 mm / 5 deg as seeds"), ("learned", "learned detections as seeds")] {
         let p = out.join("stereo").join(name).join("eval/report.md");
         if let Some(t) = crate::figures::pose_table(&p) {
             let _ = writeln!(r, "### Synthetic stereo set (L20/R20, 1024 crops at half resolution), {what} ([report with histograms](stereo/{name}/eval/report.md))\n\n{t}");
@@ -749,28 +483,13 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
     }
     let _ = writeln!(r, "\n## Timings and memory\n\n| stage | wall s | peak RSS of the bench process so far, MiB |\n|---|---|---|");
     for (name, v) in &st.done {
-        let _ = writeln!(
-            r,
-            "| {name} | {:.1} | {} |",
-            st.seconds(name).unwrap_or(0.0),
-            v["peak_rss_mb"]
-                .as_f64()
-                .map(|m| format!("{m:.0}"))
-                .unwrap_or_default()
-        );
+        let _ = writeln!(r, "| {name} | {:.1} | {} |", st.seconds(name).unwrap_or(0.0), v["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or_default());
     }
     if let Some(f) = st.result("fullres") {
         let _ = writeln!(r, "\nFull resolution ({}x{}): `tubeloc locate` in a child process took {:.1} s with a peak RSS of {} MiB.", f["width"], f["height"], f["seconds"].as_f64().unwrap_or(0.0), f["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or("?".into()));
     }
     let argv: Vec<String> = std::env::args().skip(1).collect();
-    let _ = writeln!(
-        r,
-        "\nMachine: {} logical CPUs. Command: `tubeloc {}`.",
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1),
-        argv.join(" ")
-    );
+    let _ = writeln!(r, "\nMachine: {} logical CPUs. Command: `tubeloc {}`.", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1), argv.join(" "));
     let p = out.join("report.md");
     files::write_atomic(&p, r.as_bytes())?;
     Ok(p)

@@ -3,10 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
-use tubeloc_calib::{
-    calibrate, estimate_tube_pose, load_calib_set, save_rig_yaml, CalibError, CalibrationOptions,
-    CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount,
-};
+use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount};
 use tubeloc_core::{files, CameraModel, Rig};
 
 /// Calibration subcommands.
@@ -43,19 +40,8 @@ pub struct DetectorArgs {
 
 impl DetectorArgs {
     fn detector(&self) -> Result<TagDetector> {
-        let families = self
-            .family
-            .iter()
-            .map(|f| TagFamily::from_name(f.trim()))
-            .collect::<Result<Vec<_>, _>>()?;
-        Ok(TagDetector::new(DetectorConfig {
-            families,
-            decimation: self.decimate,
-            threads: self.threads,
-            refine_edges: !self.no_refine_edges,
-            linearize_srgb: self.encoding == "srgb",
-            ..Default::default()
-        })?)
+        let families = self.family.iter().map(|f| TagFamily::from_name(f.trim())).collect::<Result<Vec<_>, _>>()?;
+        Ok(TagDetector::new(DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: !self.no_refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)
     }
 }
 
@@ -127,19 +113,13 @@ fn run_detect(a: DetectArgs) -> Result<()> {
     let mut det = a.detector.detector()?;
     let mut all = serde_json::Map::new();
     for p in &a.images {
-        let img = image::open(p)
-            .with_context(|| format!("reading {}", p.display()))?
-            .to_luma8();
-        let d = det
-            .detect_image(&img)
-            .with_context(|| format!("detecting in {}", p.display()))?;
+        let img = image::open(p).with_context(|| format!("reading {}", p.display()))?.to_luma8();
+        let d = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()))?;
         all.insert(p.display().to_string(), serde_json::to_value(d)?);
     }
     let v = serde_json::Value::Object(all);
     match a.out {
-        Some(out) => {
-            files::write_json(&out, &v).with_context(|| format!("writing {}", out.display()))?
-        }
+        Some(out) => files::write_json(&out, &v).with_context(|| format!("writing {}", out.display()))?,
         None => println!("{}", serde_json::to_string_pretty(&v)?),
     }
     Ok(())
@@ -152,17 +132,10 @@ fn run_rig(a: RigArgs) -> Result<()> {
         _ => CornerSource::Detect,
     };
     let mut det = a.detector.detector()?;
-    let set = load_calib_set(&a.views, source, Some(&mut det))
-        .with_context(|| format!("reading calibration set {}", a.views.display()))?;
-    let opts = CalibrationOptions {
-        fix_k3: a.fix_k3,
-        ..Default::default()
-    };
-    let cal = calibrate(&set.input, &opts)
-        .with_context(|| format!("calibrating from {}", a.views.display()))?;
-    cal.rig
-        .save_json(&a.out)
-        .with_context(|| format!("writing {}", a.out.display()))?;
+    let set = load_calib_set(&a.views, source, Some(&mut det)).with_context(|| format!("reading calibration set {}", a.views.display()))?;
+    let opts = CalibrationOptions { fix_k3: a.fix_k3, ..Default::default() };
+    let cal = calibrate(&set.input, &opts).with_context(|| format!("calibrating from {}", a.views.display()))?;
+    cal.rig.save_json(&a.out).with_context(|| format!("writing {}", a.out.display()))?;
     if let Some(y) = &a.yaml {
         save_rig_yaml(&cal.rig, y).with_context(|| format!("writing {}", y.display()))?;
         // Read both back as a check.
@@ -179,10 +152,7 @@ fn run_rig(a: RigArgs) -> Result<()> {
     for (l, r, b) in &cal.baselines {
         println!("baseline {l}-{r}: {:.2} mm", b * 1e3);
     }
-    println!(
-        "overall rms {:.4} px per corner ({:.4} px per coordinate)",
-        cal.rms_px, cal.rms_coord_px
-    );
+    println!("overall rms {:.4} px per corner ({:.4} px per coordinate)", cal.rms_px, cal.rms_coord_px);
     for s in &cal.skipped {
         eprintln!("skipped: {s}");
     }
@@ -190,20 +160,14 @@ fn run_rig(a: RigArgs) -> Result<()> {
 }
 
 fn bbox_score(ann: &serde_json::Value, u: f64, v: f64) -> f64 {
-    let Some(b) = ann.get("bbox").and_then(|b| b.as_array()) else {
-        return f64::INFINITY;
-    };
+    let Some(b) = ann.get("bbox").and_then(|b| b.as_array()) else { return f64::INFINITY };
     let b: Vec<f64> = b.iter().filter_map(|x| x.as_f64()).collect();
     if b.len() != 4 {
         return f64::INFINITY;
     }
     let inside = u >= b[0] && u <= b[0] + b[2] && v >= b[1] && v <= b[1] + b[3];
     let d = (u - (b[0] + b[2] / 2.0)).hypot(v - (b[1] + b[3] / 2.0));
-    if inside {
-        d
-    } else {
-        1e6 + d
-    }
+    if inside { d } else { 1e6 + d }
 }
 
 /// The mount recorded with an image by `tubeloc synth` (`tags.tags[*]` with `id`, `size_m`,
@@ -215,68 +179,35 @@ fn mount_from_image(im: &serde_json::Value) -> Option<TagMount> {
         let id = t.get("id")?.as_u64()? as u32;
         let size_m = t.get("size_m")?.as_f64()?;
         let pose: tubeloc_core::Pose = serde_json::from_value(t.get("T_tube_tag")?.clone()).ok()?;
-        out.push(tubeloc_calib::MountedTag {
-            id,
-            size_m,
-            t_tube_tag: pose,
-        });
+        out.push(tubeloc_calib::MountedTag { id, size_m, t_tube_tag: pose });
     }
-    (!out.is_empty()).then(|| TagMount {
-        family: tubeloc_calib::TagFamily::Tag36h11,
-        tags: out,
-    })
+    (!out.is_empty()).then(|| TagMount { family: tubeloc_calib::TagFamily::Tag36h11, tags: out })
 }
 
 fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
     let given_mount = a.mount.as_deref().map(TagMount::load).transpose()?;
-    let fallback_cam = a
-        .camera
-        .as_deref()
-        .map(CameraModel::load_json)
-        .transpose()?;
+    let fallback_cam = a.camera.as_deref().map(CameraModel::load_json).transpose()?;
     let ann_path = a.dataset.join("annotations.json");
     let mut coco: serde_json::Value = files::read_json(&ann_path)?;
-    let images = coco
-        .get("images")
-        .and_then(|v| v.as_array())
-        .cloned()
-        .with_context(|| format!("{}: no `images` array", ann_path.display()))?;
+    let images = coco.get("images").and_then(|v| v.as_array()).cloned().with_context(|| format!("{}: no `images` array", ann_path.display()))?;
     let mut det = a.detector.detector()?;
     let bar = indicatif::ProgressBar::new(images.len() as u64);
     let (mut posed, mut single, mut none) = (0, 0, 0);
     for (i, im) in images.iter().enumerate() {
         bar.inc(1);
-        let id = im
-            .get("id")
-            .cloned()
-            .with_context(|| format!("{}: images[{i}] has no id", ann_path.display()))?;
-        let file = im
-            .get("file_name")
-            .and_then(|f| f.as_str())
-            .with_context(|| format!("{}: images[{i}] has no file_name", ann_path.display()))?;
+        let id = im.get("id").cloned().with_context(|| format!("{}: images[{i}] has no id", ann_path.display()))?;
+        let file = im.get("file_name").and_then(|f| f.as_str()).with_context(|| format!("{}: images[{i}] has no file_name", ann_path.display()))?;
         let camera: CameraModel = match im.get("camera") {
-            Some(c) => serde_json::from_value(c.clone())
-                .with_context(|| format!("{}: images[{i}].camera", ann_path.display()))?,
-            None => fallback_cam.clone().with_context(|| {
-                format!(
-                    "{}: images[{i}] has no `camera`; pass --camera",
-                    ann_path.display()
-                )
-            })?,
+            Some(c) => serde_json::from_value(c.clone()).with_context(|| format!("{}: images[{i}].camera", ann_path.display()))?,
+            None => fallback_cam.clone().with_context(|| format!("{}: images[{i}] has no `camera`; pass --camera", ann_path.display()))?,
         };
         let mount = match &given_mount {
             Some(m) => m.clone(),
             None => mount_from_image(im).unwrap_or_else(TagMount::default_mount),
         };
         let direct = a.dataset.join(file);
-        let path = if direct.is_file() {
-            direct
-        } else {
-            a.dataset.join("images").join(file)
-        };
-        let img = image::open(&path)
-            .with_context(|| format!("reading {}", path.display()))?
-            .to_luma8();
+        let path = if direct.is_file() { direct } else { a.dataset.join("images").join(file) };
+        let img = image::open(&path).with_context(|| format!("reading {}", path.display()))?.to_luma8();
         let dets = det.detect_image(&img)?;
         let est = match estimate_tube_pose(&camera, &mount, &dets) {
             Ok(e) => e,
@@ -284,31 +215,18 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
                 none += 1;
                 continue;
             }
-            Err(e) => {
-                return Err(anyhow::Error::new(e).context(format!("tag pose in {}", path.display())))
-            }
+            Err(e) => return Err(anyhow::Error::new(e).context(format!("tag pose in {}", path.display()))),
         };
         let c = est.t_cam_tube.translation();
         let centre = camera.project(&nalgebra::Point3::from(c));
-        let anns = coco
-            .get_mut("annotations")
-            .and_then(|v| v.as_array_mut())
-            .with_context(|| format!("{}: no `annotations` array", ann_path.display()))?;
+        let anns = coco.get_mut("annotations").and_then(|v| v.as_array_mut()).with_context(|| format!("{}: no `annotations` array", ann_path.display()))?;
         let mut best: Option<(f64, usize)> = None;
         for (k, ann) in anns.iter().enumerate() {
             if ann.get("image_id") != Some(&id) {
                 continue;
             }
-            let flagged = ["carries_tags", "has_tags"]
-                .iter()
-                .any(|k| ann.get(*k).and_then(|v| v.as_bool()).unwrap_or(false));
-            let score = if flagged {
-                -1.0
-            } else {
-                centre
-                    .map(|p| bbox_score(ann, p.x, p.y))
-                    .unwrap_or(f64::INFINITY)
-            };
+            let flagged = ["carries_tags", "has_tags"].iter().any(|k| ann.get(*k).and_then(|v| v.as_bool()).unwrap_or(false));
+            let score = if flagged { -1.0 } else { centre.map(|p| bbox_score(ann, p.x, p.y)).unwrap_or(f64::INFINITY) };
             if best.map(|b| score < b.0).unwrap_or(true) {
                 best = Some((score, k));
             }
@@ -319,13 +237,8 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
             none += 1;
             continue;
         };
-        let obj = anns[k]
-            .as_object_mut()
-            .with_context(|| format!("{}: annotation is not an object", ann_path.display()))?;
-        obj.insert(
-            "T_cam_tube_tags".into(),
-            serde_json::to_value(est.t_cam_tube)?,
-        );
+        let obj = anns[k].as_object_mut().with_context(|| format!("{}: annotation is not an object", ann_path.display()))?;
+        obj.insert("T_cam_tube_tags".into(), serde_json::to_value(est.t_cam_tube)?);
         obj.insert("tags_pose".into(), serde_json::json!({"single_tag": est.single_tag, "ambiguous": est.ambiguous, "tags_used": est.tags_used, "rms_px": est.rms_px, "covariance": est.covariance}));
         posed += 1;
         if est.single_tag {
@@ -333,17 +246,10 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
-    files::write_json(&ann_path, &coco)
-        .with_context(|| format!("writing {}", ann_path.display()))?;
-    println!(
-        "{}: {posed} tag poses ({single} from one tag only), {none} images without mount tags",
-        ann_path.display()
-    );
+    files::write_json(&ann_path, &coco).with_context(|| format!("writing {}", ann_path.display()))?;
+    println!("{}: {posed} tag poses ({single} from one tag only), {none} images without mount tags", ann_path.display());
     if posed == 0 && !images.is_empty() {
-        bail!(
-            "no mount tag found in any image of {}",
-            Path::new(&a.dataset).display()
-        );
+        bail!("no mount tag found in any image of {}", Path::new(&a.dataset).display());
     }
     Ok(())
 }

@@ -66,151 +66,49 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 1. A with-tags CFA6 scene from the tiny preset, at quarter resolution.
     let (res, seed) = (a.resolution.to_string(), a.seed.to_string());
-    step(
-        "render a with-tags scene",
-        words(&[
-            "synth",
-            "--preset",
-            "tiny",
-            "--scenes",
-            "1",
-            "--scale",
-            "0.5",
-            "--resolution",
-            &res,
-            "--seed",
-            &seed,
-            "--force",
-            "--out",
-            &p(&dataset),
-        ]),
-        &mut log,
-    )?;
+    step("render a with-tags scene", words(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.5", "--resolution", &res, "--seed", &seed, "--force", "--out", &p(&dataset)]), &mut log)?;
     let gt_path = dataset.join("annotations.json");
 
     // 2. The paper's ground truth: tube poses from the AprilTag pair on the tagged tube.
     // A scene may show no tag pair (tags hidden or out of the crops): reported, not fatal.
-    if let Err(e) = step(
-        "tag-pair ground truth",
-        words(&["calib", "groundtruth", "--dataset", &p(&dataset)]),
-        &mut log,
-    ) {
+    if let Err(e) = step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset)]), &mut log) {
         eprintln!("demo: no tag-pair ground truth: {e:#}");
     }
     let tags = crate::figures::tag_pose_errors(&gt_path)?;
 
     let gt = CocoDataset::load(&gt_path)?;
-    let first = gt
-        .images
-        .first()
-        .with_context(|| format!("{}: no images", gt_path.display()))?;
-    let camera: CameraModel =
-        serde_json::from_value(
-            first.extra.get("camera").cloned().with_context(|| {
-                format!("{}: image {} has no camera", gt_path.display(), first.id)
-            })?,
-        )
-        .with_context(|| format!("{}: image {}: camera", gt_path.display(), first.id))?;
+    let first = gt.images.first().with_context(|| format!("{}: no images", gt_path.display()))?;
+    let camera: CameraModel = serde_json::from_value(first.extra.get("camera").cloned().with_context(|| format!("{}: image {} has no camera", gt_path.display(), first.id))?).with_context(|| format!("{}: image {}: camera", gt_path.display(), first.id))?;
     let cam_path = out.join("camera.json");
     files::write_json(&cam_path, &camera)?;
 
     // 3. Detectors: Line2D (a library coarser than the default, to stay quick) and the
     //    learned segmenter when a model is available.
     let lib = out.join("templates.tlt");
-    step(
-        "build Line2D templates",
-        words(&[
-            "templates",
-            "build",
-            "--out",
-            &p(&lib),
-            "--camera",
-            &p(&cam_path),
-            "--distances",
-            "1.0:3.5:0.25",
-            "--step-deg",
-            "12",
-        ]),
-        &mut log,
-    )?;
-    let model = a
-        .model
-        .clone()
-        .unwrap_or_else(crate::cmd_detect_learned::default_model);
-    let mut detectors: Vec<(&str, Vec<String>)> = vec![(
-        "line2d",
-        words(&["--templates", &p(&lib), "--camera", &p(&cam_path)]),
-    )];
+    step("build Line2D templates", words(&["templates", "build", "--out", &p(&lib), "--camera", &p(&cam_path), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]), &mut log)?;
+    let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+    let mut detectors: Vec<(&str, Vec<String>)> = vec![("line2d", words(&["--templates", &p(&lib), "--camera", &p(&cam_path)]))];
     if model.exists() {
         detectors.push(("learned", words(&["--model", &p(&model)])));
     } else {
-        eprintln!(
-            "demo: no learned model at {} (skipping the learned detector)",
-            model.display()
-        );
+        eprintln!("demo: no learned model at {} (skipping the learned detector)", model.display());
     }
     let mut pose_inputs = Vec::new();
     for (det, extra) in &detectors {
         let dets = out.join(format!("{det}_detections.json"));
-        let mut w = words(&[
-            "detect",
-            "--method",
-            det,
-            "--dataset",
-            &p(&dataset),
-            "--out",
-            &p(&dets),
-        ]);
+        let mut w = words(&["detect", "--method", det, "--dataset", &p(&dataset), "--out", &p(&dets)]);
         w.extend(extra.iter().cloned());
         step(&format!("detect ({det})"), w, &mut log)?;
-        step(
-            &format!("evaluate detections ({det})"),
-            words(&[
-                "eval",
-                "--gt",
-                &p(&gt_path),
-                "--dt",
-                &p(&dets),
-                "--out",
-                &p(&out.join(format!("eval_{det}"))),
-            ]),
-            &mut log,
-        )?;
-        let (poses, seeds) = (
-            out.join(format!("{det}_poses.json")),
-            out.join(format!("{det}_seeds.json")),
-        );
-        step(
-            &format!("refine ({det} seeds)"),
-            words(&[
-                "refine",
-                "--dataset",
-                &p(&dataset),
-                "--detections",
-                &p(&dets),
-                "--ground",
-                "auto",
-                "--out",
-                &p(&poses),
-                "--seeds-out",
-                &p(&seeds),
-            ]),
-            &mut log,
-        )?;
+        step(&format!("evaluate detections ({det})"), words(&["eval", "--gt", &p(&gt_path), "--dt", &p(&dets), "--out", &p(&out.join(format!("eval_{det}")))]), &mut log)?;
+        let (poses, seeds) = (out.join(format!("{det}_poses.json")), out.join(format!("{det}_seeds.json")));
+        step(&format!("refine ({det} seeds)"), words(&["refine", "--dataset", &p(&dataset), "--detections", &p(&dets), "--ground", "auto", "--out", &p(&poses), "--seeds-out", &p(&seeds)]), &mut log)?;
         pose_inputs.push(format!("{det}-coarse={}", p(&seeds)));
         pose_inputs.push(format!("{det}-refined={}", p(&poses)));
     }
 
     // 4. Pose errors against the renderer's exact poses, all detectors in one set of histograms.
     let pose_dir = out.join("eval_poses");
-    let mut w = words(&[
-        "eval",
-        "--gt",
-        &p(&gt_path),
-        "--out",
-        &p(&pose_dir),
-        "--poses",
-    ]);
+    let mut w = words(&["eval", "--gt", &p(&gt_path), "--out", &p(&pose_dir), "--poses"]);
     w.extend(pose_inputs);
     step("evaluate poses", w, &mut log)?;
 
@@ -219,22 +117,13 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let rig_path = out.join("rig.json");
     files::write_json(&rig_path, &rig)?;
     let image = dataset.join("images").join(&first.file_name);
-    let mut w = words(&[
-        "locate",
-        "--rig",
-        &p(&rig_path),
-        "--image",
-        &p(&image),
-        "--out",
-        &p(&out.join("locate/poses.json")),
-    ]);
+    let mut w = words(&["locate", "--rig", &p(&rig_path), "--image", &p(&image), "--out", &p(&out.join("locate/poses.json"))]);
     match detectors.last() {
         Some(("learned", _)) => w.extend(words(&["--detector", "learned", "--model", &p(&model)])),
         _ => w.extend(words(&["--detector", "line2d", "--templates", &p(&lib)])),
     }
     if let Some(v) = first.extra.get("T_world_cam") {
-        let t: Pose = serde_json::from_value(v.clone())
-            .with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), first.id))?;
+        let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), first.id))?;
         w.extend(["--ground".to_string(), ground_of(&t)]);
     }
     eprintln!("\n== demo: locate: tubeloc {}", w.join(" "));
@@ -242,50 +131,26 @@ pub fn run(a: DemoArgs) -> Result<()> {
     crate::run_words(&w).context("demo step \"locate\"")?;
     log.push(("locate (first image)".into(), t.elapsed().as_secs_f64()));
 
-    let report = build_report(
-        &a,
-        &log,
-        &detectors.iter().map(|d| d.0).collect::<Vec<_>>(),
-        &tags,
-        out,
-    );
+    let report = build_report(&a, &log, &detectors.iter().map(|d| d.0).collect::<Vec<_>>(), &tags, out);
     let report_path = out.join("report.md");
     files::write_atomic(&report_path, report.as_bytes())?;
-    println!(
-        "\ndemo finished in {:.1} s; report: {}",
-        t0.elapsed().as_secs_f64(),
-        report_path.display()
-    );
+    println!("\ndemo finished in {:.1} s; report: {}", t0.elapsed().as_secs_f64(), report_path.display());
     Ok(())
 }
 
-fn build_report(
-    a: &DemoArgs,
-    log: &[(String, f64)],
-    detectors: &[&str],
-    tags: &serde_json::Value,
-    out: &Path,
-) -> String {
+fn build_report(a: &DemoArgs, log: &[(String, f64)], detectors: &[&str], tags: &serde_json::Value, out: &Path) -> String {
     let mut r = String::new();
     let _ = writeln!(r, "# tubeloc demo\n\nScene: tiny preset, with-tags CFA6, seed {}, {} px crops at half resolution (the paper preset's scale). Every number below was measured by this run.\n", a.seed, a.resolution);
     let _ = writeln!(r, "## Detection (COCO, segm; PR curves in each `eval_*/report.md`)\n\n| detector | AP [.5] | AR [.5:.95] | report |\n|---|---|---|---|");
     for det in detectors {
         let m = crate::figures::ap50_ar(&out.join(format!("eval_{det}/metrics.json")));
-        let (ap, ar) = m
-            .map(|(x, y)| (format!("{x:.3}"), format!("{y:.3}")))
-            .unwrap_or_default();
-        let _ = writeln!(
-            r,
-            "| {det} | {ap} | {ar} | [eval_{det}/report.md](eval_{det}/report.md) |"
-        );
+        let (ap, ar) = m.map(|(x, y)| (format!("{x:.3}"), format!("{y:.3}"))).unwrap_or_default();
+        let _ = writeln!(r, "| {det} | {ap} | {ar} | [eval_{det}/report.md](eval_{det}/report.md) |");
     }
     if !detectors.contains(&"learned") {
         let _ = writeln!(r, "\nThe learned detector was skipped: no model file.");
     }
-    let _ = writeln!(
-        r,
-        "\n## Tube poses vs the renderer's exact poses (tubes at least half visible)\n"
-    );
+    let _ = writeln!(r, "\n## Tube poses vs the renderer's exact poses (tubes at least half visible)\n");
     match crate::figures::pose_table(&out.join("eval_poses/report.md")) {
         Some(t) => {
             let _ = writeln!(r, "{t}\nHistograms: [eval_poses/report.md](eval_poses/report.md).\n\n![axis angle](eval_poses/pose_axis_angle.png)\n");

@@ -53,59 +53,40 @@ pub struct DetectArgs {
 pub fn run(args: DetectArgs) -> Result<()> {
     let dets = match args.method {
         Method::Line2d => {
-            let images = crate::cmd_detect_learned::image_list(
-                args.image.as_deref(),
-                args.image_id,
-                args.dataset.as_deref(),
-            )?;
+            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
             let cameras = match &args.dataset {
                 Some(d) => crate::cmd_detect_learned::dataset_cameras(d)?,
                 None => Default::default(),
             };
             let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras)?;
-            tubeloc_core::files::write_json(&args.out, &dets)
-                .with_context(|| format!("writing {}", args.out.display()))?;
+            tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
             eprintln!("{} detections -> {}", dets.len(), args.out.display());
             return Ok(());
         }
         Method::Learned => {
-            let images = crate::cmd_detect_learned::image_list(
-                args.image.as_deref(),
-                args.image_id,
-                args.dataset.as_deref(),
-            )?;
-            let model = args
-                .model
-                .clone()
-                .unwrap_or_else(crate::cmd_detect_learned::default_model);
+            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
+            let model = args.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
             let cfg = match &args.decode_config {
-                Some(p) => tubeloc_core::files::read_json(p)
-                    .with_context(|| format!("decoder config {}", p.display()))?,
+                Some(p) => tubeloc_core::files::read_json(p).with_context(|| format!("decoder config {}", p.display()))?,
                 None => Default::default(),
             };
             crate::cmd_detect_learned::run_learned(&model, &images, &cfg)?
         }
         Method::External => {
-            let results = args
-                .results
-                .as_deref()
-                .context("--method external needs --results FILE")?;
+            let results = args.results.as_deref().context("--method external needs --results FILE")?;
             let mut sizes = std::collections::HashMap::new();
             if let Some(d) = &args.dataset {
                 let ann = d.join("annotations.json");
-                let ds = tubeloc_core::CocoDataset::load(&ann)
-                    .with_context(|| format!("reading {}", ann.display()))?;
+                let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
                 sizes.extend(ds.images.iter().map(|im| (im.id, (im.width, im.height))));
             } else if let Some(p) = &args.image {
-                let (w, h) = image::image_dimensions(p)
-                    .with_context(|| format!("reading {}", p.display()))?;
+                let (w, h) = image::image_dimensions(p).with_context(|| format!("reading {}", p.display()))?;
                 sizes.insert(args.image_id, (w, h));
             }
             crate::cmd_detect_learned::run_external(results, &|id| sizes.get(&id).copied())?
         }
     };
-    tubeloc_core::files::write_json(&args.out, &dets)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("{} detections -> {}", dets.len(), args.out.display());
     Ok(())
 }

@@ -7,10 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{
-    AxisSeed, BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation,
-    TubeDetection,
-};
+use tubeloc_core::{AxisSeed, BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel};
 
 /// One output entry: a COCO result with the detection's seed fields.
@@ -27,10 +24,7 @@ pub struct DetectionOut {
 pub fn default_model() -> PathBuf {
     let rel = Path::new("data/models/tubenet.safetensors");
     let mut candidates = vec![rel.to_path_buf()];
-    if let Some(ws) = std::env::current_exe()
-        .ok()
-        .and_then(|e| e.parent()?.parent()?.parent().map(Path::to_path_buf))
-    {
+    if let Some(ws) = std::env::current_exe().ok().and_then(|e| e.parent()?.parent()?.parent().map(Path::to_path_buf)) {
         candidates.push(ws.join(rel));
     }
     let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel);
@@ -39,16 +33,13 @@ pub fn default_model() -> PathBuf {
 
 /// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`), by id;
 /// images without one are left out.
-pub fn dataset_cameras(
-    dataset: &Path,
-) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {
+pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {
     let ann = dataset.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
     let mut out = std::collections::BTreeMap::new();
     for im in &ds.images {
         if let Some(c) = im.extra.get("camera") {
-            let cam = serde_json::from_value(c.clone())
-                .with_context(|| format!("{}: image {}: camera", ann.display(), im.id))?;
+            let cam = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {}: camera", ann.display(), im.id))?;
             out.insert(im.id, cam);
         }
     }
@@ -56,30 +47,18 @@ pub fn dataset_cameras(
 }
 
 /// Images to process: `(image_id, path)`.
-pub fn image_list(
-    image: Option<&Path>,
-    image_id: u64,
-    dataset: Option<&Path>,
-) -> Result<Vec<(u64, PathBuf)>> {
+pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -> Result<Vec<(u64, PathBuf)>> {
     match (image, dataset) {
         (Some(p), None) => Ok(vec![(image_id, p.to_path_buf())]),
         (None, Some(d)) => {
             let ann = d.join("annotations.json");
-            let ds =
-                CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+            let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
             Ok(ds
                 .images
                 .iter()
                 .map(|im| {
                     let p = d.join(&im.file_name);
-                    (
-                        im.id,
-                        if p.exists() {
-                            p
-                        } else {
-                            d.join("images").join(&im.file_name)
-                        },
-                    )
+                    (im.id, if p.exists() { p } else { d.join("images").join(&im.file_name) })
                 })
                 .collect())
         }
@@ -88,47 +67,28 @@ pub fn image_list(
 }
 
 /// Runs the learned model over images; returns the output entries.
-pub fn run_learned(
-    model_path: &Path,
-    images: &[(u64, PathBuf)],
-    cfg: &DecodeConfig,
-) -> Result<Vec<DetectionOut>> {
+pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
     if !model_path.exists() {
         bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model_path.display());
     }
-    let model = LearnedModel::load(model_path)
-        .with_context(|| format!("loading model {}", model_path.display()))?;
+    let model = LearnedModel::load(model_path).with_context(|| format!("loading model {}", model_path.display()))?;
     let pb = ProgressBar::new(images.len() as u64);
-    pb.set_style(
-        ProgressStyle::with_template("detect {bar:30} {pos}/{len} {elapsed}<{eta}")
-            .expect("template"),
-    );
+    pb.set_style(ProgressStyle::with_template("detect {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
     let per: Vec<Vec<DetectionOut>> = images
         .iter()
         .map(|(id, p)| {
-            let rgb = image::open(p)
-                .with_context(|| format!("reading image {}", p.display()))?
-                .to_rgb8();
+            let rgb = image::open(p).with_context(|| format!("reading image {}", p.display()))?.to_rgb8();
             let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-            let inst = detect_rgb(&model, rgb.as_raw(), w, h, cfg)
-                .with_context(|| format!("detecting in {}", p.display()))?;
+            let inst = detect_rgb(&model, rgb.as_raw(), w, h, cfg).with_context(|| format!("detecting in {}", p.display()))?;
             pb.inc(1);
             Ok(inst
                 .into_par_iter()
                 .map(|i| {
-                    let mask = BinaryMask {
-                        width: w,
-                        height: h,
-                        data: i.mask.data,
-                    };
+                    let mask = BinaryMask { width: w, height: h, data: i.mask.data };
                     let rle = Rle::from_mask(&mask);
-                    let mut det =
-                        TubeDetection::new(*id, i.score, i.bbox, DetectionSource::Learned);
+                    let mut det = TubeDetection::new(*id, i.score, i.bbox, DetectionSource::Learned);
                     det.axis_seed = Some(i.axis);
-                    DetectionOut {
-                        det,
-                        segmentation: Some(Segmentation::from_rle(&rle)),
-                    }
+                    DetectionOut { det, segmentation: Some(Segmentation::from_rle(&rle)) }
                 })
                 .collect())
         })
@@ -140,13 +100,9 @@ pub fn run_learned(
 /// Passes external COCO results through: the mask's principal axis becomes the axis seed (the
 /// box diagonal when there is no mask). Polygon masks need the image size: `--image` or
 /// `--dataset` gives it.
-pub fn run_external(
-    results: &Path,
-    sizes: &(dyn Fn(u64) -> Option<(u32, u32)> + Sync),
-) -> Result<Vec<DetectionOut>> {
+pub fn run_external(results: &Path, sizes: &(dyn Fn(u64) -> Option<(u32, u32)> + Sync)) -> Result<Vec<DetectionOut>> {
     let text = std::fs::read(results).with_context(|| format!("reading {}", results.display()))?;
-    let list: Vec<CocoResult> = serde_json::from_slice(&text)
-        .with_context(|| format!("{}: not a COCO results list", results.display()))?;
+    let list: Vec<CocoResult> = serde_json::from_slice(&text).with_context(|| format!("{}: not a COCO results list", results.display()))?;
     list.into_par_iter()
         .enumerate()
         .map(|(k, r)| {
@@ -155,22 +111,10 @@ pub fn run_external(
                 None => None,
                 Some(seg) => {
                     let (h, w) = match seg {
-                        Segmentation::CompressedRle { size, .. }
-                        | Segmentation::UncompressedRle { size, .. } => (size[0], size[1]),
-                        Segmentation::Polygons(_) => {
-                            sizes(r.image_id).map(|(w, h)| (h, w)).with_context(|| {
-                                format!(
-                                    "{}: polygon mask needs the image size (--image or --dataset)",
-                                    ctx()
-                                )
-                            })?
-                        }
+                        Segmentation::CompressedRle { size, .. } | Segmentation::UncompressedRle { size, .. } => (size[0], size[1]),
+                        Segmentation::Polygons(_) => sizes(r.image_id).map(|(w, h)| (h, w)).with_context(|| format!("{}: polygon mask needs the image size (--image or --dataset)", ctx()))?,
                     };
-                    Some(
-                        seg.to_rle(h, w)
-                            .and_then(|x| x.to_mask())
-                            .with_context(ctx)?,
-                    )
+                    Some(seg.to_rle(h, w).and_then(|x| x.to_mask()).with_context(ctx)?)
                 }
             };
             let bbox = match (r.bbox, &mask) {
@@ -182,21 +126,13 @@ pub fn run_external(
             det.category_id = r.category_id;
             det.axis_seed = Some(match &mask {
                 Some(m) => {
-                    let px = m
-                        .data
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, &v)| v != 0)
-                        .map(|(i, _)| ((i % m.width) as f64, (i / m.width) as f64));
+                    let px = m.data.iter().enumerate().filter(|(_, &v)| v != 0).map(|(i, _)| ((i % m.width) as f64, (i / m.width) as f64));
                     AxisSeed::from_pixels(px).unwrap_or_else(|| det.axis_seed_from_bbox())
                 }
                 None => det.axis_seed_from_bbox(),
             });
             det.validate().with_context(ctx)?;
-            Ok(DetectionOut {
-                det,
-                segmentation: r.segmentation,
-            })
+            Ok(DetectionOut { det, segmentation: r.segmentation })
         })
         .collect()
 }

@@ -51,40 +51,23 @@ pub struct EvalArgs {
 /// Runs the evaluation, prints the summary (and breakdown table), writes the JSON files.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !args.poses.is_empty() {
-        return poses::run(
-            &args.gt,
-            &args.poses,
-            &args.truth_field,
-            args.min_visible,
-            args.match_mm,
-            args.out.as_deref(),
-        );
+        return poses::run(&args.gt, &args.poses, &args.truth_field, args.min_visible, args.match_mm, args.out.as_deref());
     }
-    let gt = CocoDataset::load(&args.gt)
-        .with_context(|| format!("loading ground truth {}", args.gt.display()))?;
+    let gt = CocoDataset::load(&args.gt).with_context(|| format!("loading ground truth {}", args.gt.display()))?;
     let mut dt = Vec::new();
     for path in &args.dt {
-        let r = load_results(path, &gt)
-            .with_context(|| format!("loading results {}", path.display()))?;
+        let r = load_results(path, &gt).with_context(|| format!("loading results {}", path.display()))?;
         dt.extend(r);
     }
     let spinner = indicatif::ProgressBar::new_spinner();
-    spinner.set_message(format!(
-        "evaluating {} detections on {} images",
-        dt.len(),
-        gt.images.len()
-    ));
+    spinner.set_message(format!("evaluating {} detections on {} images", dt.len(), gt.images.len()));
     spinner.enable_steady_tick(std::time::Duration::from_millis(120));
-    let evaluator =
-        CocoEvaluator::new(&gt, &dt, args.iou_type).context("preparing the evaluation")?;
+    let evaluator = CocoEvaluator::new(&gt, &dt, args.iou_type).context("preparing the evaluation")?;
     let result = evaluator.evaluate();
     let mut breakdowns: Vec<Breakdown> = Vec::new();
     for attr in &args.by {
         spinner.set_message(format!("breakdown by {attr}"));
-        breakdowns.push(
-            breakdown::breakdown(&evaluator, &gt, attr)
-                .with_context(|| format!("breakdown by {attr}"))?,
-        );
+        breakdowns.push(breakdown::breakdown(&evaluator, &gt, attr).with_context(|| format!("breakdown by {attr}"))?);
     }
     spinner.finish_and_clear();
 
@@ -101,15 +84,12 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         write_json(&p, &metrics).with_context(|| format!("writing {}", p.display()))?;
         if !breakdowns.is_empty() {
             let p = out.join("breakdown.json");
-            write_json(&p, &breakdown::to_json(&breakdowns))
-                .with_context(|| format!("writing {}", p.display()))?;
+            write_json(&p, &breakdown::to_json(&breakdowns)).with_context(|| format!("writing {}", p.display()))?;
             let p = out.join("breakdown.md");
-            write_atomic(&p, table.as_bytes())
-                .with_context(|| format!("writing {}", p.display()))?;
+            write_atomic(&p, table.as_bytes()).with_context(|| format!("writing {}", p.display()))?;
         }
         let report = report_of(&args, &result, &breakdowns);
-        let md = tubeloc_eval::report::write_eval_report(out, &report)
-            .with_context(|| format!("writing the report in {}", out.display()))?;
+        let md = tubeloc_eval::report::write_eval_report(out, &report).with_context(|| format!("writing the report in {}", out.display()))?;
         eprintln!("report: {}", md.display());
     }
     Ok(())
@@ -117,47 +97,23 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
 /// The markdown report's content: the 12 numbers, the PR curves (area all, 100 detections) and
 /// each breakdown as AP50 / AP / AR100 per value.
-fn report_of(
-    args: &EvalArgs,
-    result: &tubeloc_eval::coco_eval::EvalResult,
-    breakdowns: &[Breakdown],
-) -> tubeloc_eval::report::EvalReport {
+fn report_of(args: &EvalArgs, result: &tubeloc_eval::coco_eval::EvalResult, breakdowns: &[Breakdown]) -> tubeloc_eval::report::EvalReport {
     use tubeloc_eval::coco_eval::STATS;
     let pick = |r: &tubeloc_eval::coco_eval::EvalResult| vec![r.stats[1], r.stats[0], r.stats[8]];
     tubeloc_eval::report::EvalReport {
         title: "COCO evaluation".into(),
         inputs: std::iter::once(("ground truth".to_string(), args.gt.display().to_string()))
-            .chain(
-                args.dt
-                    .iter()
-                    .map(|d| ("results".to_string(), d.display().to_string())),
-            )
-            .chain(std::iter::once((
-                "IoU type".to_string(),
-                result.iou_type.name().to_string(),
-            )))
+            .chain(args.dt.iter().map(|d| ("results".to_string(), d.display().to_string())))
+            .chain(std::iter::once(("IoU type".to_string(), result.iou_type.name().to_string())))
             .collect(),
-        stats: STATS
-            .iter()
-            .zip(result.stats)
-            .map(|(s, v)| (s.name.to_string(), v))
-            .collect(),
-        pr_curves: result
-            .iou_thrs
-            .iter()
-            .enumerate()
-            .map(|(t, &thr)| (thr, result.pr_curve(t)))
-            .collect(),
+        stats: STATS.iter().zip(result.stats).map(|(s, v)| (s.name.to_string(), v)).collect(),
+        pr_curves: result.iou_thrs.iter().enumerate().map(|(t, &thr)| (thr, result.pr_curve(t))).collect(),
         breakdowns: breakdowns
             .iter()
             .map(|b| tubeloc_eval::report::Breakdown {
                 attribute: b.attribute.clone(),
                 metrics: vec!["AP50".into(), "AP".into(), "AR100".into()],
-                rows: b
-                    .rows
-                    .iter()
-                    .map(|r| (r.value.clone(), r.num_images, pick(&r.result)))
-                    .collect(),
+                rows: b.rows.iter().map(|r| (r.value.clone(), r.num_images, pick(&r.result))).collect(),
             })
             .collect(),
         poses: Vec::new(),

@@ -112,11 +112,7 @@ pub struct LocateOutput {
 }
 
 fn parse_vec3(flag: &str, s: &str) -> Result<Vector3<f64>> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .with_context(|| format!("{flag} {s:?}: expected three numbers x,y,z"))?;
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("{flag} {s:?}: expected three numbers x,y,z"))?;
     if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
         bail!("{flag} {s:?}: expected three finite numbers x,y,z");
     }
@@ -140,10 +136,7 @@ fn up_direction(a: &LocateArgs) -> Result<Vector3<f64>> {
 }
 
 fn sidecar(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "poses".into());
+    let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "poses".into());
     out.with_file_name(format!("{stem}.{suffix}"))
 }
 
@@ -157,9 +150,7 @@ pub fn run(a: LocateArgs) -> Result<usize> {
     let rig = Rig::load_json(&a.rig).with_context(|| format!("rig {}", a.rig.display()))?;
     let pair = match &a.pair {
         Some(p) => {
-            let (l, r) = p
-                .split_once(',')
-                .with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
+            let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
             Some((l.trim().to_string(), r.trim().to_string()))
         }
         None => rig.stereo_pairs.first().cloned(),
@@ -167,55 +158,30 @@ pub fn run(a: LocateArgs) -> Result<usize> {
     let cam_name = match (&a.camera_name, &pair) {
         (Some(n), _) => n.clone(),
         (None, Some((l, _))) => l.clone(),
-        (None, None) => rig
-            .cameras
-            .first()
-            .map(|c| c.name.clone())
-            .with_context(|| format!("{}: the rig has no cameras", a.rig.display()))?,
+        (None, None) => rig.cameras.first().map(|c| c.name.clone()).with_context(|| format!("{}: the rig has no cameras", a.rig.display()))?,
     };
-    let rig_cam = rig
-        .camera(&cam_name)
-        .with_context(|| format!("{}: no camera named {cam_name:?}", a.rig.display()))?;
+    let rig_cam = rig.camera(&cam_name).with_context(|| format!("{}: no camera named {cam_name:?}", a.rig.display()))?;
     if a.right.is_some() {
         match &pair {
             Some((l, _)) if *l == cam_name => {}
-            Some((l, r)) => bail!(
-                "--right: the image's camera {cam_name:?} is not the left camera of pair {l},{r}"
-            ),
-            None => bail!(
-                "--right: {} has no stereo pair; pass --pair LEFT,RIGHT",
-                a.rig.display()
-            ),
+            Some((l, r)) => bail!("--right: the image's camera {cam_name:?} is not the left camera of pair {l},{r}"),
+            None => bail!("--right: {} has no stereo pair; pass --pair LEFT,RIGHT", a.rig.display()),
         }
     }
-    let (w, h) = image::image_dimensions(&a.image)
-        .with_context(|| format!("reading {}", a.image.display()))?;
+    let (w, h) = image::image_dimensions(&a.image).with_context(|| format!("reading {}", a.image.display()))?;
     if (w, h) != (rig_cam.model.width, rig_cam.model.height) {
-        bail!(
-            "{} is {w}x{h} but rig camera {cam_name:?} in {} is {}x{}",
-            a.image.display(),
-            a.rig.display(),
-            rig_cam.model.width,
-            rig_cam.model.height
-        );
+        bail!("{} is {w}x{h} but rig camera {cam_name:?} in {} is {}x{}", a.image.display(), a.rig.display(), rig_cam.model.width, rig_cam.model.height);
     }
     let up = up_direction(&a)?;
     if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let camera_path = sidecar(&a.out, "camera.json");
-    files::write_json(&camera_path, &rig_cam.model)
-        .with_context(|| format!("writing {}", camera_path.display()))?;
+    files::write_json(&camera_path, &rig_cam.model).with_context(|| format!("writing {}", camera_path.display()))?;
 
     // 1. Detect.
     let dets = sidecar(&a.out, "detections.json");
-    let mut w = vec![
-        "detect".to_string(),
-        "--image".into(),
-        s(&a.image),
-        "--out".into(),
-        s(&dets),
-    ];
+    let mut w = vec!["detect".to_string(), "--image".into(), s(&a.image), "--out".into(), s(&dets)];
     match a.detector {
         Detector::Learned => {
             w.extend(["--method".into(), "learned".into()]);
@@ -225,58 +191,23 @@ pub fn run(a: LocateArgs) -> Result<usize> {
         }
         Detector::Line2d => {
             let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
-            w.extend([
-                "--method".into(),
-                "line2d".into(),
-                "--templates".into(),
-                s(lib),
-                "--camera".into(),
-                s(&camera_path),
-            ]);
+            w.extend(["--method".into(), "line2d".into(), "--templates".into(), s(lib), "--camera".into(), s(&camera_path)]);
         }
         Detector::External => {
-            let r = a
-                .results
-                .as_ref()
-                .context("--detector external needs --results coco_results.json")?;
-            w.extend([
-                "--method".into(),
-                "external".into(),
-                "--results".into(),
-                s(r),
-            ]);
+            let r = a.results.as_ref().context("--detector external needs --results coco_results.json")?;
+            w.extend(["--method".into(), "external".into(), "--results".into(), s(r)]);
         }
     }
     crate::run_words(&w).context("detection")?;
 
     // 2. Refine (mono or stereo).
     let raw_poses = sidecar(&a.out, "refined.json");
-    let overlay = a
-        .overlay
-        .clone()
-        .unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
-    let mut w = vec![
-        "refine".to_string(),
-        "--image".into(),
-        s(&a.image),
-        "--detections".into(),
-        s(&dets),
-        "--out".into(),
-        s(&raw_poses),
-        "--overlay".into(),
-        s(&overlay),
-    ];
+    let overlay = a.overlay.clone().unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
+    let mut w = vec!["refine".to_string(), "--image".into(), s(&a.image), "--detections".into(), s(&dets), "--out".into(), s(&raw_poses), "--overlay".into(), s(&overlay)];
     match &a.right {
         Some(r) => {
             let (l, rr) = pair.clone().context("stereo needs a pair")?;
-            w.extend([
-                "--right".into(),
-                s(r),
-                "--rig".into(),
-                s(&a.rig),
-                "--pair".into(),
-                format!("{l},{rr}"),
-            ]);
+            w.extend(["--right".into(), s(r), "--rig".into(), s(&a.rig), "--pair".into(), format!("{l},{rr}")]);
         }
         None => w.extend(["--camera".into(), s(&camera_path)]),
     }
@@ -287,33 +218,17 @@ pub fn run(a: LocateArgs) -> Result<usize> {
 
     // 3. One pose per physical tube, grasp frames, summary, output.
     let mut poses: Vec<TubeAxisPose> = files::read_json(&raw_poses)?;
-    poses.sort_by(|x, y| {
-        y.converged
-            .cmp(&x.converged)
-            .then(y.score.total_cmp(&x.score))
-    });
-    let merged = tubeloc_refine::duplicates::merge_duplicates(
-        &mut poses,
-        &tubeloc_core::TubeModel::default(),
-    );
+    poses.sort_by(|x, y| y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score)));
+    let merged = tubeloc_refine::duplicates::merge_duplicates(&mut poses, &tubeloc_core::TubeModel::default());
     let tubes: Vec<LocatedTube> = poses
         .into_iter()
         .map(|pose| {
             let t_cam_grasp = pose.grasp_frame(&up);
-            LocatedTube {
-                t_rig_grasp: rig_cam.t_rig_cam * t_cam_grasp,
-                t_cam_grasp,
-                pose,
-            }
+            LocatedTube { t_rig_grasp: rig_cam.t_rig_cam * t_cam_grasp, t_cam_grasp, pose }
         })
         .collect();
     let converged = tubes.iter().filter(|t| t.pose.converged).count();
-    println!(
-        "{}: {} tube(s) located, {} detection(s) rejected, {merged} duplicate(s) merged",
-        a.image.display(),
-        converged,
-        tubes.len() - converged
-    );
+    println!("{}: {} tube(s) located, {} detection(s) rejected, {merged} duplicate(s) merged", a.image.display(), converged, tubes.len() - converged);
     for (i, t) in tubes.iter().enumerate() {
         let p = &t.pose;
         let c = p.centre * 1e3;
@@ -339,10 +254,6 @@ pub fn run(a: LocateArgs) -> Result<usize> {
     };
     files::write_json(&a.out, &doc).with_context(|| format!("writing {}", a.out.display()))?;
     let _ = std::fs::remove_file(&raw_poses);
-    eprintln!(
-        "poses -> {} (overlay {})",
-        a.out.display(),
-        overlay.display()
-    );
+    eprintln!("poses -> {} (overlay {})", a.out.display(), overlay.display());
     Ok(converged)
 }

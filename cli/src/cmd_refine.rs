@@ -32,8 +32,8 @@ use clap::Args;
 use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
-use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, MaskSnap};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
+use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, MaskSnap};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
 
 mod colour;
@@ -187,11 +187,7 @@ pub struct RefineArgs {
 }
 
 pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .with_context(|| format!("--ground {s:?}: expected nx,ny,nz,d"))?;
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--ground {s:?}: expected nx,ny,nz,d"))?;
     if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
         bail!("--ground {s:?}: expected 4 finite numbers nx,ny,nz,d");
     }
@@ -200,59 +196,33 @@ pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
     if norm < 1e-9 {
         bail!("--ground {s:?}: the normal is zero");
     }
-    Ok(GroundPlane {
-        normal: n / norm,
-        offset: v[3] / norm,
-    })
+    Ok(GroundPlane { normal: n / norm, offset: v[3] / norm })
 }
+
 
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
 /// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
 /// `--stereo-erode`) or box (see [`stereo`]).
-fn stereo_points(
-    args: &RefineArgs,
-    left: &Plane<u8>,
-    rig_path: &Path,
-    dets: &[TubeDetection],
-) -> Result<(CameraModel, stereo::StereoRegions, RectifiedPair)> {
+fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, stereo::StereoRegions, RectifiedPair)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
-    let (_, lcam, rect) =
-        crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
+    let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
     let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
     let regions: Vec<StereoRegion> = dets.iter().map(stereo::region_of).collect();
-    let (per, pair) = stereo::match_regions(
-        &rect,
-        &lcam,
-        left,
-        &right,
-        &regions,
-        args.disparities,
-        args.stereo_erode,
-    )
-    .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
+    let (per, pair) = stereo::match_regions(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
+        .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
     Ok((lcam, per, pair))
 }
 
 /// Draws the fitted contour of each pose into an RGB copy of the image.
-fn overlay(
-    path: &Path,
-    gray: &Plane<u8>,
-    refiner: &Refiner,
-    cam: &CameraModel,
-    poses: &[TubeAxisPose],
-) -> Result<()> {
+fn overlay(path: &Path, gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: &[TubeAxisPose]) -> Result<()> {
     let (w, h) = (gray.width as u32, gray.height as u32);
     let mut img = image::RgbImage::from_fn(w, h, |x, y| {
         let v = gray.get(x as usize, y as usize);
         image::Rgb([v, v, v])
     });
     for p in poses {
-        let col = if p.converged {
-            [40, 230, 60]
-        } else {
-            [240, 40, 40]
-        };
+        let col = if p.converged { [40, 230, 60] } else { [240, 40, 40] };
         for u in refiner.contour_pixels(cam, p, 0.5) {
             let (x, y) = (u.x.round(), u.y.round());
             if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
@@ -261,10 +231,7 @@ fn overlay(
         }
         if let Some(c) = cam.project(&Point3::from(p.centre)) {
             for k in -3i64..=3 {
-                for (x, y) in [
-                    (c.x.round() as i64 + k, c.y.round() as i64),
-                    (c.x.round() as i64, c.y.round() as i64 + k),
-                ] {
+                for (x, y) in [(c.x.round() as i64 + k, c.y.round() as i64), (c.x.round() as i64, c.y.round() as i64 + k)] {
                     if x >= 0 && y >= 0 && x < w as i64 && y < h as i64 {
                         img.put_pixel(x as u32, y as u32, image::Rgb(col));
                     }
@@ -273,8 +240,7 @@ fn overlay(
         }
     }
     let mut buf = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut buf, image::ImageFormat::Png)
-        .context("cannot encode PNG")?;
+    img.write_to(&mut buf, image::ImageFormat::Png).context("cannot encode PNG")?;
     files::write_atomic(path, &buf.into_inner())?;
     Ok(())
 }
@@ -282,8 +248,7 @@ fn overlay(
 /// The refiner of the arguments (config and tube model files).
 pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
     let config = match &args.config {
-        Some(p) => files::read_json::<RefineConfig>(p)
-            .with_context(|| format!("refine config {}", p.display()))?,
+        Some(p) => files::read_json::<RefineConfig>(p).with_context(|| format!("refine config {}", p.display()))?,
         None => RefineConfig::default(),
     };
     let tube = match &args.tube {
@@ -295,21 +260,8 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
 
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
 /// (and is the fit's, not a kept seed) and agrees with the mask; otherwise `det` unchanged. Returns whether it was snapped.
-pub(crate) fn snapped_detection(
-    det: &mut TubeDetection,
-    pose: &TubeAxisPose,
-    refiner: &Refiner,
-    camera: &CameraModel,
-    snap: &MaskSnap,
-) -> bool {
-    let Some(mask) = det
-        .mask
-        .as_ref()
-        .filter(|_| pose.converged && pose.seed_kept.is_none())
-        .and_then(|m| m.to_mask().ok())
-    else {
-        return false;
-    };
+pub(crate) fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
+    let Some(mask) = det.mask.as_ref().filter(|_| pose.converged && pose.seed_kept.is_none()).and_then(|m| m.to_mask().ok()) else { return false };
     let silhouette = silhouette_mask(&refiner.model, pose, camera);
     match snap_mask(&mask, &silhouette, snap) {
         Some(m) => {
@@ -325,31 +277,18 @@ impl RefineArgs {
     /// The mask snap of `--snapped-out`.
     pub(crate) fn mask_snap(&self) -> Result<MaskSnap> {
         if !(0.0..=1.0).contains(&self.snap_min_agreement) {
-            bail!(
-                "--snap-min-agreement {}: expected a value in [0, 1]",
-                self.snap_min_agreement
-            );
+            bail!("--snap-min-agreement {}: expected a value in [0, 1]", self.snap_min_agreement);
         }
-        Ok(MaskSnap {
-            dilate_px: self.snap_dilate_px,
-            min_agreement: self.snap_min_agreement,
-        })
+        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement })
     }
 
     /// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks
     /// were snapped.
     pub(crate) fn write_snapped(&self, snapped: &[(TubeDetection, bool)]) -> Result<()> {
-        let Some(path) = &self.snapped_out else {
-            return Ok(());
-        };
+        let Some(path) = &self.snapped_out else { return Ok(()) };
         let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
         files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
-        eprintln!(
-            "{} of {} masks snapped to their poses -> {}",
-            snapped.iter().filter(|(_, s)| *s).count(),
-            snapped.len(),
-            path.display()
-        );
+        eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
         Ok(())
     }
     /// Whether the photometric stage moves each end along its own ray (distance and tilt)
@@ -361,11 +300,7 @@ impl RefineArgs {
 
     /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]); with a ground
     /// plane the rims' tilt change has the ground tilt prior's deviation.
-    pub(crate) fn photo_stage(
-        &self,
-        ground: Option<&GroundPlane>,
-        refiner: &Refiner,
-    ) -> PhotoStage {
+    pub(crate) fn photo_stage(&self, ground: Option<&GroundPlane>, refiner: &Refiner) -> PhotoStage {
         let has_ground = ground.is_some();
         PhotoStage {
             two_view: self.two_view.then_some(self.two_view_settings),
@@ -383,8 +318,7 @@ impl RefineArgs {
 /// Runs `tubeloc refine`.
 pub fn run(mut args: RefineArgs) -> Result<()> {
     if let Some(p) = &args.two_view_config {
-        args.two_view_settings =
-            files::read_json(p).with_context(|| format!("two-view config {}", p.display()))?;
+        args.two_view_settings = files::read_json(p).with_context(|| format!("two-view config {}", p.display()))?;
     }
     if args.dataset.is_some() {
         return dataset::run(&args);
@@ -392,14 +326,8 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     let refiner = refiner_of(&args)?;
     let snap = args.mask_snap()?;
     let ground = args.ground.as_deref().map(parse_ground).transpose()?;
-    let det_path = args
-        .detections
-        .as_ref()
-        .context("--detections is required without --dataset")?;
-    let image_path = args
-        .image
-        .as_ref()
-        .context("--image is required without --dataset")?;
+    let det_path = args.detections.as_ref().context("--detections is required without --dataset")?;
+    let image_path = args.image.as_ref().context("--image is required without --dataset")?;
     let mut dets = tubeloc_core::detection::read_coco_results(det_path)?;
     if let Some(id) = args.image_id {
         dets.retain(|d| d.image_id == id);
@@ -416,50 +344,18 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
             if args.right.is_some() {
                 bail!("--right needs --rig (the pair's calibration)");
             }
-            let p = args
-                .camera
-                .as_ref()
-                .context("--camera is required without --rig")?;
-            (
-                CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?,
-                vec![Vec::new(); dets.len()],
-                None,
-                None,
-            )
+            let p = args.camera.as_ref().context("--camera is required without --rig")?;
+            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None, None)
         }
     };
     if gray.width != camera.width as usize || gray.height != camera.height as usize {
-        bail!(
-            "{} is {}x{} but the camera is {}x{}",
-            image_path.display(),
-            gray.width,
-            gray.height,
-            camera.width,
-            camera.height
-        );
+        bail!("{} is {}x{} but the camera is {}x{}", image_path.display(), gray.width, gray.height, camera.width, camera.height);
     }
-    let image = Plane::from_vec(
-        gray.width,
-        gray.height,
-        gray.data.iter().map(|&v| v as f32 / 255.0).collect(),
-    );
+    let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
     let bar = indicatif::ProgressBar::new(dets.len() as u64);
     let mut poses = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
-        let input = RefineInput {
-            image: &image,
-            camera: &camera,
-            ground,
-            scene: Scene {
-                depth: depth
-                    .as_ref()
-                    .filter(|_| args.scene_occlusion)
-                    .map(|d| (d, &camera)),
-                stereo_points: &stereo[i],
-                ground: None,
-                mask: None,
-            },
-        };
+        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None } };
         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
         bar.inc(1);
     }
@@ -481,8 +377,7 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
             p.image_id, p.score, c.x, c.y, c.z, p.axis.x, p.axis.y, p.axis.z, p.end_confidence, p.residuals.rms_px, p.residuals.inliers, p.residuals.count, stereo[i].len()
         );
     }
-    files::write_json(&args.out, &poses)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    files::write_json(&args.out, &poses).with_context(|| format!("writing {}", args.out.display()))?;
     if args.snapped_out.is_some() {
         let snapped: Vec<(TubeDetection, bool)> = dets
             .iter()
@@ -496,14 +391,8 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
         args.write_snapped(&snapped)?;
     }
     if let Some(o) = &args.overlay {
-        overlay(o, &gray, &refiner, &camera, &poses)
-            .with_context(|| format!("writing {}", o.display()))?;
+        overlay(o, &gray, &refiner, &camera, &poses).with_context(|| format!("writing {}", o.display()))?;
     }
-    eprintln!(
-        "{} poses ({} converged) -> {}",
-        poses.len(),
-        poses.iter().filter(|p| p.converged).count(),
-        args.out.display()
-    );
+    eprintln!("{} poses ({} converged) -> {}", poses.len(), poses.iter().filter(|p| p.converged).count(), args.out.display());
     Ok(())
 }

@@ -18,9 +18,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files::write_atomic, Plane, Rig};
-use tubeloc_stereo::{
-    disparity_regions, io, Paths, Roi, SgmMatcher, SgmParams, StereoRectification,
-};
+use tubeloc_stereo::{disparity_regions, io, Paths, Roi, SgmMatcher, SgmParams, StereoRectification};
 
 /// Arguments of `tubeloc stereo`.
 #[derive(Args, Debug)]
@@ -74,34 +72,21 @@ pub struct StereoArgs {
 
 /// Reads an image as 8-bit grey, naming the file on error.
 pub(crate) fn load_gray(path: &Path) -> Result<Plane<u8>> {
-    let img = image::open(path)
-        .with_context(|| format!("cannot read image {}", path.display()))?
-        .to_luma8();
-    Ok(Plane::from_vec(
-        img.width() as usize,
-        img.height() as usize,
-        img.into_raw(),
-    ))
+    let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
+    Ok(Plane::from_vec(img.width() as usize, img.height() as usize, img.into_raw()))
 }
 
-fn png_bytes<P: image::PixelWithColorType>(
-    img: image::ImageBuffer<P, Vec<P::Subpixel>>,
-) -> Result<Vec<u8>>
+fn png_bytes<P: image::PixelWithColorType>(img: image::ImageBuffer<P, Vec<P::Subpixel>>) -> Result<Vec<u8>>
 where
     [P::Subpixel]: image::EncodableLayout,
 {
     let mut buf = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut buf, image::ImageFormat::Png)
-        .context("cannot encode PNG")?;
+    img.write_to(&mut buf, image::ImageFormat::Png).context("cannot encode PNG")?;
     Ok(buf.into_inner())
 }
 
 fn parse_roi(s: &str) -> Result<Roi> {
-    let v: Vec<i64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<i64>())
-        .collect::<std::result::Result<_, _>>()
-        .with_context(|| format!("--roi {s:?}: expected x,y,w,h integers"))?;
+    let v: Vec<i64> = s.split(',').map(|t| t.trim().parse::<i64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--roi {s:?}: expected x,y,w,h integers"))?;
     if v.len() != 4 {
         bail!("--roi {s:?}: expected 4 numbers x,y,w,h, got {}", v.len());
     }
@@ -111,8 +96,7 @@ fn parse_roi(s: &str) -> Result<Roi> {
 /// Runs `tubeloc stereo`.
 pub fn run(args: StereoArgs) -> Result<()> {
     let mut params = match &args.params {
-        Some(p) => tubeloc_core::files::read_json::<SgmParams>(p)
-            .with_context(|| format!("SGM parameters {}", p.display()))?,
+        Some(p) => tubeloc_core::files::read_json::<SgmParams>(p).with_context(|| format!("SGM parameters {}", p.display()))?,
         None => SgmParams::default(),
     };
     params.num_disparities = args.disparities;
@@ -125,14 +109,8 @@ pub fn run(args: StereoArgs) -> Result<()> {
     if let Some(set) = &args.set {
         return eval_set(set, &params, args.limit, &args.out);
     }
-    let (Some(left_path), Some(right_path)) = (args.left.clone(), args.right.clone()) else {
-        bail!("--left and --right are required without --set")
-    };
-    let rois = args
-        .rois
-        .iter()
-        .map(|s| parse_roi(s))
-        .collect::<Result<Vec<_>>>()?;
+    let (Some(left_path), Some(right_path)) = (args.left.clone(), args.right.clone()) else { bail!("--left and --right are required without --set") };
+    let rois = args.rois.iter().map(|s| parse_roi(s)).collect::<Result<Vec<_>>>()?;
     let (mut left, mut right) = (load_gray(&left_path)?, load_gray(&right_path)?);
     let mut header = serde_json::json!({
         "left": left_path, "right": right_path, "params": params,
@@ -141,17 +119,11 @@ pub fn run(args: StereoArgs) -> Result<()> {
     let mut rect = None;
     if let Some(rig_path) = &args.rig {
         let ((ln, rn), _, r) = rectification_from_rig(rig_path, args.pair.as_deref())?;
-        let (rl, rr) = r
-            .rectify_pair(&left, &right)
-            .with_context(|| format!("{} / {}", left_path.display(), right_path.display()))?;
+        let (rl, rr) = r.rectify_pair(&left, &right).with_context(|| format!("{} / {}", left_path.display(), right_path.display()))?;
         left = rl;
         right = rr;
-        for (name, p) in [
-            ("rectified_left.png", &left),
-            ("rectified_right.png", &right),
-        ] {
-            let img = image::GrayImage::from_raw(p.width as u32, p.height as u32, p.data.clone())
-                .context("image buffer")?;
+        for (name, p) in [("rectified_left.png", &left), ("rectified_right.png", &right)] {
+            let img = image::GrayImage::from_raw(p.width as u32, p.height as u32, p.data.clone()).context("image buffer")?;
             write_atomic(&args.out.join(name), &png_bytes(img)?)?;
         }
         header["rectification"] = serde_json::json!({
@@ -164,110 +136,53 @@ pub fn run(args: StereoArgs) -> Result<()> {
         rect = Some(r);
     }
     let disp = if rois.is_empty() {
-        SgmMatcher::new(params.clone())?
-            .compute(&left, &right)
-            .with_context(|| {
-                format!(
-                    "matching {} / {}",
-                    left_path.display(),
-                    right_path.display()
-                )
-            })?
+        SgmMatcher::new(params.clone())?.compute(&left, &right).with_context(|| format!("matching {} / {}", left_path.display(), right_path.display()))?
     } else {
         header["regions"] = serde_json::to_value(&rois)?;
         header["margin"] = args.margin.into();
-        disparity_regions(&left, &right, &params, &rois, args.margin).with_context(|| {
-            format!(
-                "matching {} / {}",
-                left_path.display(),
-                right_path.display()
-            )
-        })?
+        disparity_regions(&left, &right, &params, &rois, args.margin).with_context(|| format!("matching {} / {}", left_path.display(), right_path.display()))?
     };
     let (w, h) = (disp.width as u32, disp.height as u32);
     write_atomic(&args.out.join("disparity.pfm"), &io::encode_pfm(&disp))?;
-    let d16 =
-        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, io::to_u16_x16(&disp))
-            .context("image buffer")?;
+    let d16 = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, io::to_u16_x16(&disp)).context("image buffer")?;
     write_atomic(&args.out.join("disparity16.png"), &png_bytes(d16)?)?;
     let lo = params.min_disparity as f32;
-    let preview = image::RgbImage::from_raw(
-        w,
-        h,
-        io::colorize(&disp, lo, lo + params.num_disparities as f32),
-    )
-    .context("image buffer")?;
-    write_atomic(
-        &args.out.join("disparity_preview.png"),
-        &png_bytes(preview)?,
-    )?;
+    let preview = image::RgbImage::from_raw(w, h, io::colorize(&disp, lo, lo + params.num_disparities as f32)).context("image buffer")?;
+    write_atomic(&args.out.join("disparity_preview.png"), &png_bytes(preview)?)?;
     let valid = disp.data.iter().filter(|d| !d.is_nan()).count();
     header["width"] = w.into();
     header["height"] = h.into();
     header["valid_pixels"] = valid.into();
     if args.ply {
-        let r = rect
-            .as_ref()
-            .context("--ply needs --rig (the baseline and focal length come from the rig)")?;
-        let pts = r.points_in_left_camera(&tubeloc_stereo::triangulate(
-            &disp,
-            &r.geometry(),
-            args.sigma_d,
-        ));
+        let r = rect.as_ref().context("--ply needs --rig (the baseline and focal length come from the rig)")?;
+        let pts = r.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &r.geometry(), args.sigma_d));
         let mut ply = format!("ply\nformat ascii 1.0\ncomment frame: original left camera (OpenCV axes), metres\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float sigma_z\nend_header\n", pts.len());
         for p in &pts {
-            ply.push_str(&format!(
-                "{:.5} {:.5} {:.5} {:.5}\n",
-                p.point.x, p.point.y, p.point.z, p.sigma_z
-            ));
+            ply.push_str(&format!("{:.5} {:.5} {:.5} {:.5}\n", p.point.x, p.point.y, p.point.z, p.sigma_z));
         }
         write_atomic(&args.out.join("points.ply"), ply.as_bytes())?;
         header["points"] = pts.len().into();
     }
     tubeloc_core::files::write_json(&args.out.join("disparity.json"), &header)?;
-    println!(
-        "{}: {}x{} disparity, {:.1}% valid",
-        args.out.display(),
-        w,
-        h,
-        100.0 * valid as f64 / (w as f64 * h as f64).max(1.0)
-    );
+    println!("{}: {}x{} disparity, {:.1}% valid", args.out.display(), w, h, 100.0 * valid as f64 / (w as f64 * h as f64).max(1.0));
     Ok(())
 }
 
 /// Reads a rig file and rectifies one of its pairs: `pair` is "LEFT,RIGHT" (camera names), by
 /// default the rig's first stereo pair. Returns the pair's names, the left camera's model and the
 /// rectification.
-pub(crate) fn rectification_from_rig(
-    rig_path: &Path,
-    pair: Option<&str>,
-) -> Result<(
-    (String, String),
-    tubeloc_core::CameraModel,
-    StereoRectification,
-)> {
+pub(crate) fn rectification_from_rig(rig_path: &Path, pair: Option<&str>) -> Result<((String, String), tubeloc_core::CameraModel, StereoRectification)> {
     let rig = Rig::load_json(rig_path)?;
     let (ln, rn) = match pair {
         Some(p) => {
-            let (a, b) = p
-                .split_once(',')
-                .with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
+            let (a, b) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
             (a.trim().to_string(), b.trim().to_string())
         }
-        None => rig.stereo_pairs.first().cloned().with_context(|| {
-            format!(
-                "{}: no stereo_pairs; pass --pair LEFT,RIGHT",
-                rig_path.display()
-            )
-        })?,
+        None => rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", rig_path.display()))?,
     };
-    let cam = |n: &str| {
-        rig.camera(n)
-            .with_context(|| format!("{}: no camera named {n:?}", rig_path.display()))
-    };
+    let cam = |n: &str| rig.camera(n).with_context(|| format!("{}: no camera named {n:?}", rig_path.display()));
     let (lcam, rcam) = (&cam(&ln)?.model, &cam(&rn)?.model);
-    let rect = StereoRectification::new(lcam, rcam, &rig.relative_pose(&ln, &rn)?)
-        .with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
+    let rect = StereoRectification::new(lcam, rcam, &rig.relative_pose(&ln, &rn)?).with_context(|| format!("rectifying pair {ln},{rn} of {}", rig_path.display()))?;
     Ok(((ln.clone(), rn.clone()), lcam.clone(), rect))
 }
 
@@ -276,8 +191,7 @@ fn eval_set(dir: &Path, params: &SgmParams, limit: Option<usize>, out: &Path) ->
     use tubeloc_core::{CameraModel, CocoDataset, Pose, Segmentation, TubeModel};
     use tubeloc_stereo::pair_eval::PairEval;
     let ann_path = dir.join("annotations.json");
-    let ds = CocoDataset::load(&ann_path)
-        .with_context(|| format!("reading stereo set {}", ann_path.display()))?;
+    let ds = CocoDataset::load(&ann_path).with_context(|| format!("reading stereo set {}", ann_path.display()))?;
     let model = TubeModel::default();
     let mut matcher = SgmMatcher::new(params.clone())?;
     let (mut total, mut per_pair) = (PairEval::default(), Vec::new());
@@ -286,57 +200,22 @@ fn eval_set(dir: &Path, params: &SgmParams, limit: Option<usize>, out: &Path) ->
     let mut ms = Vec::new();
     for img in images {
         let e = &img.extra;
-        let field = |k: &str| {
-            e.get(k).with_context(|| {
-                format!(
-                    "{}: image {} has no {k:?} (not a stereo set?)",
-                    ann_path.display(),
-                    img.id
-                )
-            })
-        };
-        let cam: CameraModel = serde_json::from_value(field("camera")?.clone())
-            .with_context(|| format!("image {}: camera", img.id))?;
-        let baseline = field("baseline_m")?
-            .as_f64()
-            .context("baseline_m is not a number")?;
-        let geom = tubeloc_stereo::RectifiedGeometry {
-            f: cam.fx,
-            cx: cam.cx,
-            cy: cam.cy,
-            baseline,
-        };
+        let field = |k: &str| e.get(k).with_context(|| format!("{}: image {} has no {k:?} (not a stereo set?)", ann_path.display(), img.id));
+        let cam: CameraModel = serde_json::from_value(field("camera")?.clone()).with_context(|| format!("image {}: camera", img.id))?;
+        let baseline = field("baseline_m")?.as_f64().context("baseline_m is not a number")?;
+        let geom = tubeloc_stereo::RectifiedGeometry { f: cam.fx, cx: cam.cx, cy: cam.cy, baseline };
         let left = load_gray(&dir.join("images").join(&img.file_name))?;
-        let right = load_gray(
-            &dir.join("right").join(
-                field("right_file_name")?
-                    .as_str()
-                    .context("right_file_name")?,
-            ),
-        )?;
-        let gt_path = dir.join("disparity").join(
-            field("disparity_file_name")?
-                .as_str()
-                .context("disparity_file_name")?,
-        );
-        let gt = io::decode_pfm(
-            &std::fs::read(&gt_path).with_context(|| format!("reading {}", gt_path.display()))?,
-        )
-        .with_context(|| format!("decoding {}", gt_path.display()))?;
+        let right = load_gray(&dir.join("right").join(field("right_file_name")?.as_str().context("right_file_name")?))?;
+        let gt_path = dir.join("disparity").join(field("disparity_file_name")?.as_str().context("disparity_file_name")?);
+        let gt = io::decode_pfm(&std::fs::read(&gt_path).with_context(|| format!("reading {}", gt_path.display()))?).with_context(|| format!("decoding {}", gt_path.display()))?;
         let t0 = std::time::Instant::now();
-        let est = matcher
-            .compute(&left, &right)
-            .with_context(|| format!("matching {}", img.file_name))?;
+        let est = matcher.compute(&left, &right).with_context(|| format!("matching {}", img.file_name))?;
         ms.push(t0.elapsed().as_secs_f64() * 1e3);
         let mut masks = Vec::new();
         for a in ds.annotations.iter().filter(|a| a.image_id == img.id) {
-            let Some(Segmentation::CompressedRle { counts, size }) = &a.segmentation else {
-                continue;
-            };
+            let Some(Segmentation::CompressedRle { counts, size }) = &a.segmentation else { continue };
             let mask = tubeloc_core::Rle::from_compressed_string(counts, *size)?.to_mask()?;
-            let pose: Pose =
-                serde_json::from_value(a.extra.get("T_cam_tube").cloned().unwrap_or_default())
-                    .with_context(|| format!("annotation {}: T_cam_tube", a.id))?;
+            let pose: Pose = serde_json::from_value(a.extra.get("T_cam_tube").cloned().unwrap_or_default()).with_context(|| format!("annotation {}: T_cam_tube", a.id))?;
             masks.push((mask, pose));
         }
         let tubes: Vec<_> = masks.iter().map(|(m, p)| (m, *p)).collect();

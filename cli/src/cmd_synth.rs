@@ -64,17 +64,9 @@ pub struct DatasetArgs {
 }
 
 fn parse_shard(s: &str) -> Result<(usize, usize)> {
-    let (a, b) = s
-        .split_once('/')
-        .with_context(|| format!("--shard {s:?}: expected I/N, e.g. 0/4"))?;
-    let i: usize = a
-        .trim()
-        .parse()
-        .with_context(|| format!("--shard {s:?}: I is not a number"))?;
-    let n: usize = b
-        .trim()
-        .parse()
-        .with_context(|| format!("--shard {s:?}: N is not a number"))?;
+    let (a, b) = s.split_once('/').with_context(|| format!("--shard {s:?}: expected I/N, e.g. 0/4"))?;
+    let i: usize = a.trim().parse().with_context(|| format!("--shard {s:?}: I is not a number"))?;
+    let n: usize = b.trim().parse().with_context(|| format!("--shard {s:?}: N is not a number"))?;
     if n == 0 || i >= n {
         bail!("--shard {s:?}: need 0 <= I < N");
     }
@@ -93,13 +85,7 @@ pub fn run(a: SynthArgs) -> Result<()> {
 
 /// A preset's dataset spec with the command line's overrides: scene count, crop side (px) and
 /// render scale.
-pub(crate) fn preset_spec(
-    preset: &str,
-    seed: u64,
-    scenes: Option<usize>,
-    crop: Option<u32>,
-    scale: Option<f64>,
-) -> Result<DatasetSpec> {
+pub(crate) fn preset_spec(preset: &str, seed: u64, scenes: Option<usize>, crop: Option<u32>, scale: Option<f64>) -> Result<DatasetSpec> {
     let mut spec = DatasetSpec::preset(preset, seed)?;
     if let Some(n) = scenes {
         spec = spec.with_scenes(n)?;
@@ -114,41 +100,21 @@ pub(crate) fn preset_spec(
 }
 
 fn run_dataset(a: DatasetArgs) -> Result<()> {
-    let Some(out) = a.out.clone() else {
-        bail!("--out DIR is required")
-    };
+    let Some(out) = a.out.clone() else { bail!("--out DIR is required") };
     let shard = parse_shard(&a.shard)?;
     let mut spec = preset_spec(&a.preset, a.seed, a.scenes, a.resolution, a.scale)?;
     if let Some(p) = &a.tube_mesh {
-        let mesh =
-            TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?;
+        let mesh = TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?;
         spec.tube_shape = Arc::new(TubeShape::from_mesh(&mesh));
         spec.tube_source = format!("mesh {}", p.display());
     }
     spec.validate()?;
-    let total: usize = (0..spec.scenes.len())
-        .filter(|s| s % shard.1 == shard.0)
-        .map(|s| spec.scenes[s].images)
-        .sum();
+    let total: usize = (0..spec.scenes.len()).filter(|s| s % shard.1 == shard.0).map(|s| spec.scenes[s].images).sum();
     let bar = indicatif::ProgressBar::new(total as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} images  {elapsed_precise} (eta {eta})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} images  {elapsed_precise} (eta {eta})").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
     let t0 = std::time::Instant::now();
-    let summary = write_dataset(&spec, &out, shard, a.force, &|done, _| {
-        bar.set_position(done as u64)
-    })
-    .with_context(|| format!("writing dataset {}", out.display()))?;
+    let summary = write_dataset(&spec, &out, shard, a.force, &|done, _| bar.set_position(done as u64)).with_context(|| format!("writing dataset {}", out.display()))?;
     bar.finish_and_clear();
-    println!(
-        "{}: {} images, {} annotations in {:.1} s",
-        summary.out.display(),
-        summary.images,
-        summary.annotations,
-        t0.elapsed().as_secs_f64()
-    );
+    println!("{}: {} images, {} annotations in {:.1} s", summary.out.display(), summary.images, summary.annotations, t0.elapsed().as_secs_f64());
     Ok(())
 }

@@ -4,9 +4,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
 use tubeloc_core::Rig;
-use tubeloc_synth::calib_set::{
-    default_rig, generate, write_calib_set, BoardLayout, CalibSetConfig,
-};
+use tubeloc_synth::calib_set::{default_rig, generate, write_calib_set, BoardLayout, CalibSetConfig};
 
 /// Arguments of `tubeloc synth calib`.
 #[derive(Args)]
@@ -46,25 +44,12 @@ pub fn run(a: SynthCalibArgs) -> Result<()> {
         Some(p) => Rig::load_json(p)?,
         None => default_rig(),
     };
-    let cfg = CalibSetConfig {
-        views: a.views,
-        seed: a.seed,
-        corner_noise_px: a.noise,
-        image_noise: a.image_noise,
-        scale: a.scale,
-        render: !a.no_images,
-        ..Default::default()
-    };
+    let cfg = CalibSetConfig { views: a.views, seed: a.seed, corner_noise_px: a.noise, image_noise: a.image_noise, scale: a.scale, render: !a.no_images, ..Default::default() };
     let set = generate(&rig, &BoardLayout::default_board(), &cfg)?;
     let n: usize = set.views.iter().map(|v| v.observations.len()).sum();
     let bar = indicatif::ProgressBar::new(if cfg.render { n as u64 } else { 0 });
-    write_calib_set(&a.out, &set, || bar.inc(1))
-        .with_context(|| format!("writing {}", a.out.display()))?;
+    write_calib_set(&a.out, &set, || bar.inc(1)).with_context(|| format!("writing {}", a.out.display()))?;
     bar.finish_and_clear();
-    println!(
-        "{}: {} views, {n} images/observations",
-        a.out.display(),
-        set.views.len()
-    );
+    println!("{}: {} views, {n} images/observations", a.out.display(), set.views.len());
     Ok(())
 }

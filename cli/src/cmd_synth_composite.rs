@@ -43,11 +43,7 @@ pub struct CompositeArgs {
 }
 
 fn numbers(s: &str, n: usize, what: &str) -> Result<Vec<f64>> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("--{what} {s:?}: expected {n} comma-separated numbers"))?;
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--{what} {s:?}: expected {n} comma-separated numbers"))?;
     if v.len() != n || v.iter().any(|x| !x.is_finite()) {
         bail!("--{what} {s:?}: expected {n} finite comma-separated numbers");
     }
@@ -58,92 +54,31 @@ fn numbers(s: &str, n: usize, what: &str) -> Result<Vec<f64>> {
 pub fn run(a: CompositeArgs) -> Result<()> {
     let g = numbers(&a.ground, 4, "ground")?;
     let s = numbers(&a.sun, 2, "sun")?;
-    let cam = CameraModel::load_json(&a.camera)
-        .with_context(|| format!("reading camera {}", a.camera.display()))?;
-    let img = image::open(&a.background)
-        .with_context(|| format!("reading background {}", a.background.display()))?
-        .to_rgb8();
+    let cam = CameraModel::load_json(&a.camera).with_context(|| format!("reading camera {}", a.camera.display()))?;
+    let img = image::open(&a.background).with_context(|| format!("reading background {}", a.background.display()))?.to_rgb8();
     if img.width() != cam.width || img.height() != cam.height {
-        bail!(
-            "{}: photo is {}x{} but camera {} is {}x{}",
-            a.background.display(),
-            img.width(),
-            img.height(),
-            a.camera.display(),
-            cam.width,
-            cam.height
-        );
+        bail!("{}: photo is {}x{} but camera {} is {}x{}", a.background.display(), img.width(), img.height(), a.camera.display(), cam.width, cam.height);
     }
     let shape = match &a.tube_mesh {
-        Some(p) => TubeShape::from_mesh(
-            &TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?,
-        ),
+        Some(p) => TubeShape::from_mesh(&TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?),
         None => TubeShape::from_model(&TubeModel::default()),
     };
-    let cfg = CompositeConfig {
-        ground: (nalgebra::Vector3::new(g[0], g[1], g[2]), g[3]),
-        sun_az_el_deg: (s[0], s[1]),
-        tubes: a.tubes,
-        dust: a.dust,
-        seed: a.seed,
-        tube_shape: Arc::new(shape),
-    };
+    let cfg = CompositeConfig { ground: (nalgebra::Vector3::new(g[0], g[1], g[2]), g[3]), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape) };
     let c = composite(img.as_raw(), &cam, &cfg)?;
-    let stem = a
-        .background
-        .file_stem()
-        .map(|s| s.to_string_lossy().to_string())
-        .unwrap_or_else(|| "composite".into());
+    let stem = a.background.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "composite".into());
     let file_name = format!("{stem}_composite.png");
-    let png = encode_png(&c.output.rgb, cam.width, cam.height)
-        .map_err(|m| anyhow::anyhow!("encoding PNG: {m}"))?;
+    let png = encode_png(&c.output.rgb, cam.width, cam.height).map_err(|m| anyhow::anyhow!("encoding PNG: {m}"))?;
     let mut extra = Map::new();
     extra.insert("camera".into(), serde_json::to_value(&cam)?);
     extra.insert("T_world_cam".into(), pose_json(&c.t_ground_cam));
-    extra.insert(
-        "background".into(),
-        json!(a.background.display().to_string()),
-    );
+    extra.insert("background".into(), json!(a.background.display().to_string()));
     extra.insert("sun_az_el_deg".into(), json!([s[0], s[1]]));
-    let image = CocoImage {
-        id: 1,
-        width: cam.width,
-        height: cam.height,
-        file_name: file_name.clone(),
-        extra,
-    };
-    let anns = c
-        .truth
-        .iter()
-        .enumerate()
-        .map(|(j, t)| {
-            annotation_from_truth(
-                j as u64 + 1,
-                1,
-                &cam,
-                t,
-                Map::from_iter([("dust".to_string(), json!(a.dust))]),
-            )
-        })
-        .collect();
-    let ds = CocoDataset {
-        info: Some(
-            json!({"description": "tubeloc composite on a real photograph", "seed": a.seed}),
-        ),
-        licenses: None,
-        images: vec![image],
-        annotations: anns,
-        categories: vec![tube_category()],
-        extra: Map::new(),
-    };
+    let image = CocoImage { id: 1, width: cam.width, height: cam.height, file_name: file_name.clone(), extra };
+    let anns = c.truth.iter().enumerate().map(|(j, t)| annotation_from_truth(j as u64 + 1, 1, &cam, t, Map::from_iter([("dust".to_string(), json!(a.dust))]))).collect();
+    let ds = CocoDataset { info: Some(json!({"description": "tubeloc composite on a real photograph", "seed": a.seed})), licenses: None, images: vec![image], annotations: anns, categories: vec![tube_category()], extra: Map::new() };
     files::write_atomic(&a.out.join("images").join(&file_name), &png)?;
     files::write_json(&a.out.join("camera.json"), &cam)?;
     ds.save(&a.out.join("annotations.json"))?;
-    println!(
-        "{}: {} tubes composited onto {}",
-        a.out.display(),
-        c.truth.len(),
-        a.background.display()
-    );
+    println!("{}: {} tubes composited onto {}", a.out.display(), c.truth.len(), a.background.display());
     Ok(())
 }

@@ -39,35 +39,15 @@ pub struct SynthStereoArgs {
 
 /// Runs `tubeloc synth stereo`.
 pub fn run(a: SynthStereoArgs) -> Result<()> {
-    let Some((l, r)) = a.pair.split_once(',') else {
-        bail!("--pair {:?}: expected LEFT,RIGHT, e.g. L20,R20", a.pair)
-    };
+    let Some((l, r)) = a.pair.split_once(',') else { bail!("--pair {:?}: expected LEFT,RIGHT, e.g. L20,R20", a.pair) };
     let base = crate::cmd_synth::preset_spec(&a.preset, a.seed, a.scenes, a.resolution, a.scale)?;
-    let spec = StereoSetSpec {
-        base,
-        pair: (l.trim().to_string(), r.trim().to_string()),
-        pairs_per_scene: a.pairs_per_scene,
-    };
+    let spec = StereoSetSpec { base, pair: (l.trim().to_string(), r.trim().to_string()), pairs_per_scene: a.pairs_per_scene };
     let total = spec.base.scenes.len() * spec.pairs_per_scene;
     let bar = indicatif::ProgressBar::new(total as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} pairs  {elapsed_precise} (eta {eta})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} pairs  {elapsed_precise} (eta {eta})").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
     let t0 = std::time::Instant::now();
-    let summary = write_stereo_set(&spec, &a.out, a.force, &|done, _| {
-        bar.set_position(done as u64)
-    })
-    .with_context(|| format!("writing stereo set {}", a.out.display()))?;
+    let summary = write_stereo_set(&spec, &a.out, a.force, &|done, _| bar.set_position(done as u64)).with_context(|| format!("writing stereo set {}", a.out.display()))?;
     bar.finish_and_clear();
-    println!(
-        "{}: {} pairs, {} annotations in {:.1} s",
-        summary.out.display(),
-        summary.images,
-        summary.annotations,
-        t0.elapsed().as_secs_f64()
-    );
+    println!("{}: {} pairs, {} annotations in {:.1} s", summary.out.display(), summary.images, summary.annotations, t0.elapsed().as_secs_f64());
     Ok(())
 }

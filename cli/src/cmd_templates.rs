@@ -69,11 +69,7 @@ pub struct BuildArgs {
 }
 
 fn parse_range(s: &str) -> Result<(f64, f64, f64)> {
-    let v: Vec<f64> = s
-        .split(':')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("--distances {s:?}: expected MIN:MAX:STEP in metres"))?;
+    let v: Vec<f64> = s.split(':').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--distances {s:?}: expected MIN:MAX:STEP in metres"))?;
     if v.len() != 3 {
         bail!("--distances {s:?}: expected MIN:MAX:STEP in metres");
     }
@@ -85,25 +81,14 @@ pub fn run(args: TemplatesArgs) -> Result<()> {
     match args.cmd {
         TemplatesCmd::Build(a) => build(a),
         TemplatesCmd::Info { path } => {
-            let lib = TemplateLibrary::load(&path)
-                .with_context(|| format!("reading {}", path.display()))?;
+            let lib = TemplateLibrary::load(&path).with_context(|| format!("reading {}", path.display()))?;
             let p = &lib.params;
             println!("{}: {} templates", path.display(), lib.len());
-            println!(
-                "camera fx {:.2} fy {:.2} cx {:.2} cy {:.2}",
-                p.camera.fx, p.camera.fy, p.camera.cx, p.camera.cy
-            );
+            println!("camera fx {:.2} fy {:.2} cx {:.2} cy {:.2}", p.camera.fx, p.camera.fy, p.camera.cx, p.camera.cy);
             println!("views {:?}", p.views);
             println!("features per level {}", p.features);
-            let nf: usize = lib
-                .templates
-                .iter()
-                .map(|t| t.levels[0].features.len())
-                .sum();
-            println!(
-                "mean level-0 features {:.1}",
-                nf as f64 / lib.len().max(1) as f64
-            );
+            let nf: usize = lib.templates.iter().map(|t| t.levels[0].features.len()).sum();
+            println!("mean level-0 features {:.1}", nf as f64 / lib.len().max(1) as f64);
             Ok(())
         }
     }
@@ -113,20 +98,9 @@ fn build(a: BuildArgs) -> Result<()> {
     let shape = match &a.tube_mesh {
         Some(p) => {
             let mesh = TubeMesh::load_obj(p).with_context(|| format!("reading {}", p.display()))?;
-            let exclude: &[TubeMaterial] = if a.mesh_keep_cap {
-                &[]
-            } else {
-                &[TubeMaterial::Plastic]
-            };
-            let shape = MeshShape::from_mesh(&mesh, exclude).with_context(|| {
-                format!("{}: no triangle left after excluding the cap", p.display())
-            })?;
-            eprintln!(
-                "mesh {}: {} triangles, length {:.1} mm",
-                p.display(),
-                shape.triangles.len(),
-                shape.length() * 1000.0
-            );
+            let exclude: &[TubeMaterial] = if a.mesh_keep_cap { &[] } else { &[TubeMaterial::Plastic] };
+            let shape = MeshShape::from_mesh(&mesh, exclude).with_context(|| format!("{}: no triangle left after excluding the cap", p.display()))?;
+            eprintln!("mesh {}: {} triangles, length {:.1} mm", p.display(), shape.triangles.len(), shape.length() * 1000.0);
             Some(shape)
         }
         None => None,
@@ -141,36 +115,19 @@ fn build(a: BuildArgs) -> Result<()> {
     };
     let (dist_min, dist_max, dist_step) = parse_range(&a.distances)?;
     let params = LibraryParams {
-        camera: Pinhole {
-            fx: cam.fx,
-            fy: cam.fy,
-            cx: cam.cx,
-            cy: cam.cy,
-        },
-        views: ViewParams {
-            step_deg: a.step_deg,
-            inplane_step_deg: a.inplane_step_deg,
-            inplane_range_deg: a.inplane_range_deg,
-            dedupe_tol_deg: a.dedupe_tol_deg,
-            dist_min,
-            dist_max,
-            dist_step,
-        },
+        camera: Pinhole { fx: cam.fx, fy: cam.fy, cx: cam.cx, cy: cam.cy },
+        views: ViewParams { step_deg: a.step_deg, inplane_step_deg: a.inplane_step_deg, inplane_range_deg: a.inplane_range_deg, dedupe_tol_deg: a.dedupe_tol_deg, dist_min, dist_max, dist_step },
         features: a.features,
     };
     let total = tubeloc_detect::line2d::viewpoints::generate_views(&params.views)?.len();
     let bar = ProgressBar::new(total as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} templates {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} templates {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let lib = match &shape {
         Some(m) => TemplateLibrary::build_from_mesh(m, &params, &|n| bar.set_position(n as u64))?,
         None => TemplateLibrary::build(&tube, &params, &|n| bar.set_position(n as u64))?,
     };
     bar.finish_and_clear();
-    lib.save(&a.out)
-        .with_context(|| format!("writing {}", a.out.display()))?;
+    lib.save(&a.out).with_context(|| format!("writing {}", a.out.display()))?;
     eprintln!("{} templates -> {}", lib.len(), a.out.display());
     Ok(())
 }

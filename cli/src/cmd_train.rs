@@ -112,42 +112,18 @@ pub struct TrainArgs {
 fn average_models(args: &TrainArgs) -> Result<()> {
     let mut models = Vec::new();
     for p in &args.average {
-        models.push(
-            LearnedModel::load(p)
-                .with_context(|| format!("reading --average model {}", p.display()))?,
-        );
+        models.push(LearnedModel::load(p).with_context(|| format!("reading --average model {}", p.display()))?);
     }
-    let names: Vec<String> = args
-        .average
-        .iter()
-        .enumerate()
-        .map(|(k, p)| format!("model {} = {}", k + 1, p.display()))
-        .collect();
-    let mut soup = tubeloc_detect::learned::weight_average(&models)
-        .with_context(|| format!("averaging {}", names.join(", ")))?;
-    let names: Vec<String> = args
-        .average
-        .iter()
-        .map(|p| p.display().to_string())
-        .collect();
+    let names: Vec<String> = args.average.iter().enumerate().map(|(k, p)| format!("model {} = {}", k + 1, p.display())).collect();
+    let mut soup = tubeloc_detect::learned::weight_average(&models).with_context(|| format!("averaging {}", names.join(", ")))?;
+    let names: Vec<String> = args.average.iter().map(|p| p.display().to_string()).collect();
     soup.meta.notes = format!("uniform weight average of {}", names.join(", "));
     if let Some(d) = &args.val {
-        let val = load_coco_dir(d, soup.meta.preprocess, Some(args.val_limit))
-            .with_context(|| format!("loading validation set {}", d.display()))?;
-        eprintln!(
-            "val AP50 {:.4} ({} images of {})",
-            ap50(&soup, &val, &DecodeConfig::default())?,
-            val.len(),
-            d.display()
-        );
+        let val = load_coco_dir(d, soup.meta.preprocess, Some(args.val_limit)).with_context(|| format!("loading validation set {}", d.display()))?;
+        eprintln!("val AP50 {:.4} ({} images of {})", ap50(&soup, &val, &DecodeConfig::default())?, val.len(), d.display());
     }
-    soup.save(&args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!(
-        "saved {} (average of {} models)",
-        args.out.display(),
-        models.len()
-    );
+    soup.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!("saved {} (average of {} models)", args.out.display(), models.len());
     Ok(())
 }
 
@@ -160,45 +136,27 @@ fn generated_set(n: usize, seed: u64, crop: u32, dir: &std::path::Path) -> Resul
     }
     let ann = dir.join("annotations.json");
     if ann.exists() {
-        let ds = tubeloc_core::CocoDataset::load(&ann)
-            .with_context(|| format!("reading {}", ann.display()))?;
+        let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
         if ds.images.len() == n {
             eprintln!("{}: reusing {} generated images", dir.display(), n);
             return Ok(());
         }
-        bail!(
-            "{} holds {} images, not {n}: remove it or pick another --gen-dir",
-            dir.display(),
-            ds.images.len()
-        );
+        bail!("{} holds {} images, not {n}: remove it or pick another --gen-dir", dir.display(), ds.images.len());
     }
-    let bench: Vec<u64> = DatasetSpec::preset("paper", 0)?
-        .scenes
-        .iter()
-        .map(|s| s.seed)
-        .collect();
+    let bench: Vec<u64> = DatasetSpec::preset("paper", 0)?.scenes.iter().map(|s| s.seed).collect();
     let scenes = (n / 16).max(15);
     let mut spec = DatasetSpec::preset("paper", seed)?.with_scenes(scenes)?;
     spec.crop = crop;
     for (k, s) in spec.scenes.iter_mut().enumerate() {
         s.images = n / scenes + usize::from(k < n % scenes);
         if bench.contains(&s.seed) {
-            bail!(
-                "generated scene {k} has the benchmark's scene seed {}; pick another --gen-seed",
-                s.seed
-            );
+            bail!("generated scene {k} has the benchmark's scene seed {}; pick another --gen-seed", s.seed);
         }
     }
     spec.scenes.retain(|s| s.images > 0);
     let pb = ProgressBar::new(n as u64);
-    pb.set_style(
-        ProgressStyle::with_template("render {bar:30} {pos}/{len} {elapsed}<{eta}")
-            .expect("template"),
-    );
-    tubeloc_synth::write_dataset(&spec, dir, (0, 1), false, &|done, _| {
-        pb.set_position(done as u64)
-    })
-    .with_context(|| format!("rendering the generated set into {}", dir.display()))?;
+    pb.set_style(ProgressStyle::with_template("render {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
+    tubeloc_synth::write_dataset(&spec, dir, (0, 1), false, &|done, _| pb.set_position(done as u64)).with_context(|| format!("rendering the generated set into {}", dir.display()))?;
     pb.finish_and_clear();
     Ok(())
 }
@@ -208,24 +166,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
     if !args.average.is_empty() {
         return average_models(&args);
     }
-    let pre = Preprocess::parse(&args.preprocess).with_context(|| {
-        format!(
-            "unknown --preprocess {:?} (gray-box, gray-box:R, rgb)",
-            args.preprocess
-        )
-    })?;
+    let pre = Preprocess::parse(&args.preprocess).with_context(|| format!("unknown --preprocess {:?} (gray-box, gray-box:R, rgb)", args.preprocess))?;
     if !(0.0..=1.0).contains(&args.occluders) {
-        bail!(
-            "--occluders {} is not a probability (0 to 1)",
-            args.occluders
-        );
+        bail!("--occluders {} is not a probability (0 to 1)", args.occluders);
     }
     let mut dirs = args.train.clone();
     if let Some(n) = args.generate {
-        let dir = args
-            .gen_dir
-            .clone()
-            .unwrap_or_else(|| PathBuf::from(format!("{}.gen", args.out.display())));
+        let dir = args.gen_dir.clone().unwrap_or_else(|| PathBuf::from(format!("{}.gen", args.out.display())));
         generated_set(n, args.gen_seed, args.gen_crop, &dir)?;
         dirs.push(dir);
     }
@@ -233,27 +180,18 @@ pub fn run(args: TrainArgs) -> Result<()> {
         bail!("nothing to train on: give --train DATASET and/or --generate N");
     }
     let init = match &args.init {
-        Some(p) => Some(
-            LearnedModel::load(p)
-                .with_context(|| format!("reading the --init model {}", p.display()))?,
-        ),
+        Some(p) => Some(LearnedModel::load(p).with_context(|| format!("reading the --init model {}", p.display()))?),
         None => None,
     };
     let pre = match (&args.resume, &init) {
-        (Some(p), _) => {
-            LearnedModel::load(p)
-                .with_context(|| format!("resuming from {}", p.display()))?
-                .meta
-                .preprocess
-        }
+        (Some(p), _) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?.meta.preprocess,
         (None, Some(_)) if args.init_rgb => Preprocess::Rgb,
         (None, Some(m)) => m.meta.preprocess,
         (None, None) => pre,
     };
     let mut images = Vec::new();
     for d in &dirs {
-        let mut v = load_coco_dir(d, pre, args.train_limit)
-            .with_context(|| format!("loading training set {}", d.display()))?;
+        let mut v = load_coco_dir(d, pre, args.train_limit).with_context(|| format!("loading training set {}", d.display()))?;
         eprintln!("{}: {} images", d.display(), v.len());
         images.append(&mut v);
     }
@@ -261,41 +199,24 @@ pub fn run(args: TrainArgs) -> Result<()> {
         bail!("no training images");
     }
     let val = match &args.val {
-        Some(d) => load_coco_dir(d, pre, Some(args.val_limit))
-            .with_context(|| format!("loading validation set {}", d.display()))?,
+        Some(d) => load_coco_dir(d, pre, Some(args.val_limit)).with_context(|| format!("loading validation set {}", d.display()))?,
         None => Vec::new(),
     };
     let pixels: usize = images.iter().map(|i| i.width * i.height).sum();
-    let per_epoch = (pixels as f64 / (args.crop * args.crop * args.batch) as f64)
-        .ceil()
-        .max(1.0) as u64;
+    let per_epoch = (pixels as f64 / (args.crop * args.crop * args.batch) as f64).ceil().max(1.0) as u64;
     let total = args.steps.unwrap_or(args.epochs * per_epoch);
     let cfg = TrainConfig {
         batch: args.batch,
         lr: args.lr,
         total_steps: total,
         seed: args.seed,
-        augment: AugmentConfig {
-            crop: args.crop,
-            upright: args.upright,
-            occluders: args.occluders,
-            ..Default::default()
-        },
+        augment: AugmentConfig { crop: args.crop, upright: args.upright, occluders: args.occluders, ..Default::default() },
         ..Default::default()
     };
     let mut trainer = match &args.resume {
         Some(p) => {
-            let (t, had_opt) = Trainer::resume(p, cfg)
-                .with_context(|| format!("resuming from {}", p.display()))?;
-            eprintln!(
-                "resuming at step {} ({})",
-                t.model.meta.steps,
-                if had_opt {
-                    "with optimizer state"
-                } else {
-                    "no optimizer state found: fresh moments"
-                }
-            );
+            let (t, had_opt) = Trainer::resume(p, cfg).with_context(|| format!("resuming from {}", p.display()))?;
+            eprintln!("resuming at step {} ({})", t.model.meta.steps, if had_opt { "with optimizer state" } else { "no optimizer state found: fresh moments" });
             t
         }
         None => {
@@ -303,21 +224,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
             let fine_mask = args.fine_mask || init.as_ref().is_some_and(|m| m.meta.net.fine_mask);
             let mut model = LearnedModel::with_fine_mask(pre, width, fine_mask, args.seed)?;
             if let (Some(m), Some(p), true) = (&init, &args.init, args.init_rgb) {
-                let n = model
-                    .init_from_gray(m)
-                    .with_context(|| format!("--init-rgb from {}", p.display()))?;
-                eprintln!(
-                    "warm start (gray -> rgb): {n} tensors from {} ({} steps)",
-                    p.display(),
-                    m.meta.steps
-                );
+                let n = model.init_from_gray(m).with_context(|| format!("--init-rgb from {}", p.display()))?;
+                eprintln!("warm start (gray -> rgb): {n} tensors from {} ({} steps)", p.display(), m.meta.steps);
             } else if let (Some(m), Some(p)) = (&init, &args.init) {
                 let n = model.init_from(m)?;
-                eprintln!(
-                    "warm start: {n} tensors from {} ({} steps)",
-                    p.display(),
-                    m.meta.steps
-                );
+                eprintln!("warm start: {n} tensors from {} ({} steps)", p.display(), m.meta.steps);
             }
             if args.freeze_coarse {
                 if !model.meta.net.fine_mask {
@@ -331,34 +242,18 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let start = trainer.model.meta.steps;
     let ckpt = PathBuf::from(format!("{}.ckpt", args.out.display()));
     let pb = ProgressBar::new(total);
-    pb.set_style(
-        ProgressStyle::with_template("train {bar:30} {pos}/{len} {elapsed}<{eta} {msg}")
-            .expect("template"),
-    );
+    pb.set_style(ProgressStyle::with_template("train {bar:30} {pos}/{len} {elapsed}<{eta} {msg}").expect("template"));
     pb.set_position(start.min(total));
     let (mut ema, mut last_ap) = (f32::NAN, f64::NAN);
-    let validate = |t: &Trainer| -> Result<f64> {
-        if val.is_empty() {
-            Ok(f64::NAN)
-        } else {
-            Ok(ap50(&t.model, &val, &DecodeConfig::default())?)
-        }
-    };
+    let validate = |t: &Trainer| -> Result<f64> { if val.is_empty() { Ok(f64::NAN) } else { Ok(ap50(&t.model, &val, &DecodeConfig::default())?) } };
     let t0 = std::time::Instant::now();
     while trainer.model.meta.steps < total {
         let l = trainer.step(&images)?;
-        ema = if ema.is_nan() {
-            l
-        } else {
-            0.95 * ema + 0.05 * l
-        };
+        ema = if ema.is_nan() { l } else { 0.95 * ema + 0.05 * l };
         let k = trainer.model.meta.steps;
         if k % args.val_every == 0 {
             last_ap = validate(&trainer)?;
-            let line = format!(
-                "step {k}: loss {ema:.4} val AP50 {last_ap:.3} ({:.0} s)",
-                t0.elapsed().as_secs_f64()
-            );
+            let line = format!("step {k}: loss {ema:.4} val AP50 {last_ap:.3} ({:.0} s)", t0.elapsed().as_secs_f64());
             if pb.is_hidden() {
                 eprintln!("{line}");
             } else {
@@ -366,9 +261,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             }
         }
         if k % args.ckpt_every == 0 {
-            trainer
-                .save_checkpoint(&ckpt)
-                .with_context(|| format!("writing checkpoint {}", ckpt.display()))?;
+            trainer.save_checkpoint(&ckpt).with_context(|| format!("writing checkpoint {}", ckpt.display()))?;
         }
         pb.set_position(k);
         pb.set_message(format!("loss {ema:.4} val AP50 {last_ap:.3}"));
@@ -380,24 +273,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         _ => String::new(),
     };
     let crops = if args.upright { " upright crops" } else { "" };
-    let crops = if args.occluders > 0.0 {
-        format!("{crops} occluders {}", args.occluders)
-    } else {
-        crops.to_string()
-    };
-    trainer.model.meta.notes = format!(
-        "steps {} seed {}{crops} val AP50 {ap:.4}{warm}",
-        trainer.model.meta.steps, args.seed
-    );
-    trainer
-        .model
-        .save(&args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!(
-        "saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)",
-        args.out.display(),
-        trainer.model.meta.steps,
-        t0.elapsed().as_secs_f64()
-    );
+    let crops = if args.occluders > 0.0 { format!("{crops} occluders {}", args.occluders) } else { crops.to_string() };
+    trainer.model.meta.notes = format!("steps {} seed {}{crops} val AP50 {ap:.4}{warm}", trainer.model.meta.steps, args.seed);
+    trainer.model.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)", args.out.display(), trainer.model.meta.steps, t0.elapsed().as_secs_f64());
     Ok(())
 }

@@ -5,24 +5,24 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
-mod cmd_bench;
 mod cmd_calib;
-mod cmd_demo;
 mod cmd_detect;
-mod cmd_detect_learned;
 mod cmd_detect_line2d;
-mod cmd_eval;
-mod cmd_locate;
-mod cmd_refine;
-mod cmd_stereo;
-mod cmd_synth;
-mod cmd_synth_calib;
-mod cmd_synth_composite;
-mod cmd_synth_stereo;
 mod cmd_templates;
+mod cmd_detect_learned;
+mod cmd_eval;
+mod cmd_synth;
+mod cmd_stereo;
+mod cmd_refine;
+mod cmd_synth_calib;
+mod cmd_synth_stereo;
+mod cmd_synth_composite;
 mod cmd_train;
-mod figures;
+mod cmd_demo;
+mod cmd_locate;
+mod cmd_bench;
 mod memory;
+mod figures;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -76,9 +76,7 @@ fn dispatch(command: Command) -> anyhow::Result<u8> {
         Command::Stereo(a) => cmd_stereo::run(a),
         Command::Refine(a) => cmd_refine::run(a),
         Command::Demo(a) => cmd_demo::run(a),
-        Command::Locate(a) => {
-            return cmd_locate::run(a).map(|n| if n == 0 { EXIT_NO_TUBE } else { 0 })
-        }
+        Command::Locate(a) => return cmd_locate::run(a).map(|n| if n == 0 { EXIT_NO_TUBE } else { 0 }),
         Command::Bench(a) => cmd_bench::run(a),
     };
     done.map(|()| 0)
@@ -88,8 +86,7 @@ fn dispatch(command: Command) -> anyhow::Result<u8> {
 /// `demo` uses it to chain the same subcommands a user would run.
 pub(crate) fn run_words(words: &[String]) -> anyhow::Result<()> {
     let argv = std::iter::once("tubeloc".to_string()).chain(words.iter().cloned());
-    let cli = Cli::try_parse_from(argv)
-        .map_err(|e| anyhow::anyhow!("internal command `tubeloc {}`: {e}", words.join(" ")))?;
+    let cli = Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("internal command `tubeloc {}`: {e}", words.join(" ")))?;
     dispatch(cli.command).map(|_| ())
 }
 

@@ -6,20 +6,12 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn tubeloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tubeloc"))
-        .args(args)
-        .output()
-        .expect("running tubeloc")
+    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
 }
 
 fn ok(args: &[&str]) -> Output {
     let o = tubeloc(args);
-    assert!(
-        o.status.success(),
-        "tubeloc {} failed: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert!(o.status.success(), "tubeloc {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr));
     o
 }
 
@@ -41,58 +33,26 @@ impl Scene {
     fn new(scenes: &str, resolution: &str) -> Scene {
         let dir = tempfile::tempdir().unwrap();
         let ds = dir.path().join("dataset");
-        ok(&[
-            "synth",
-            "--preset",
-            "tiny",
-            "--scenes",
-            scenes,
-            "--scale",
-            "0.25",
-            "--resolution",
-            resolution,
-            "--seed",
-            "7",
-            "--out",
-            p(&ds),
-        ]);
-        let gt: Value =
-            serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap())
-                .unwrap();
+        ok(&["synth", "--preset", "tiny", "--scenes", scenes, "--scale", "0.25", "--resolution", resolution, "--seed", "7", "--out", p(&ds)]);
+        let gt: Value = serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap()).unwrap();
         let cam = &gt["images"][0]["camera"];
         std::fs::write(dir.path().join("camera.json"), cam.to_string()).unwrap();
         let rig = serde_json::json!({"cameras": [{"name": "C", "model": cam, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 0, 1], [0, -1, 0]], "translation": [0.1, 0.2, 0.3]}}], "stereo_pairs": []});
         std::fs::write(dir.path().join("rig.json"), rig.to_string()).unwrap();
         let lib = dir.path().join("lib.tlt");
-        ok(&[
-            "templates",
-            "build",
-            "--out",
-            p(&lib),
-            "--camera",
-            p(&dir.path().join("camera.json")),
-            "--distances",
-            "1.0:3.5:0.25",
-            "--step-deg",
-            "12",
-        ]);
+        ok(&["templates", "build", "--out", p(&lib), "--camera", p(&dir.path().join("camera.json")), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]);
         Scene { dir, gt }
     }
     fn path(&self, name: &str) -> std::path::PathBuf {
         self.dir.path().join(name)
     }
     fn image(&self, i: usize) -> std::path::PathBuf {
-        self.path("dataset/images")
-            .join(self.gt["images"][i]["file_name"].as_str().unwrap())
+        self.path("dataset/images").join(self.gt["images"][i]["file_name"].as_str().unwrap())
     }
 }
 
 fn vec3(v: &Value) -> [f64; 3] {
-    [
-        v[0].as_f64().unwrap(),
-        v[1].as_f64().unwrap(),
-        v[2].as_f64().unwrap(),
-    ]
+    [v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap()]
 }
 
 #[test]
@@ -110,63 +70,23 @@ fn locate_errors_name_the_file_and_the_problem() {
     let img = dir.path().join("img.png");
     image::RgbImage::new(64, 48).save(&img).unwrap();
     let out = dir.path().join("poses.json");
-    let o = tubeloc(&[
-        "locate",
-        "--rig",
-        p(&rig),
-        "--image",
-        p(&img),
-        "--out",
-        p(&out),
-    ]);
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("rig.json"), "{}", stderr(&o));
 
     // A valid rig whose camera is not the image's size.
     let cam = serde_json::json!({"width": 640, "height": 480, "fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0});
     std::fs::write(&rig, serde_json::json!({"cameras": [{"name": "C", "model": cam, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}}], "stereo_pairs": []}).to_string()).unwrap();
-    let o = tubeloc(&[
-        "locate",
-        "--rig",
-        p(&rig),
-        "--image",
-        p(&img),
-        "--out",
-        p(&out),
-    ]);
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).contains("img.png is 64x48 but rig camera \"C\""),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("img.png is 64x48 but rig camera \"C\""), "{}", stderr(&o));
 
     // Line2D without a library; stereo without a pair.
     image::RgbImage::new(640, 480).save(&img).unwrap();
-    let o = tubeloc(&[
-        "locate",
-        "--rig",
-        p(&rig),
-        "--image",
-        p(&img),
-        "--detector",
-        "line2d",
-        "--out",
-        p(&out),
-    ]);
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--detector", "line2d", "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("needs --templates"), "{}", stderr(&o));
-    let o = tubeloc(&[
-        "locate",
-        "--rig",
-        p(&rig),
-        "--image",
-        p(&img),
-        "--right",
-        p(&img),
-        "--out",
-        p(&out),
-    ]);
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--right", p(&img), "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("no stereo pair"), "{}", stderr(&o));
     assert!(!out.exists(), "a failed run must not leave an output");
@@ -177,92 +97,45 @@ fn locate_finds_tubes_on_a_rendered_scene_with_grasp_frames() {
     let s = Scene::new("1", "512");
     let out = s.path("out/poses.json");
     // The mast pose is known, so is the ground plane z_world = 0 in the camera frame.
-    let t: tubeloc_core::Pose =
-        serde_json::from_value(s.gt["images"][0]["T_world_cam"].clone()).unwrap();
+    let t: tubeloc_core::Pose = serde_json::from_value(s.gt["images"][0]["T_world_cam"].clone()).unwrap();
     let (normal, d) = tubeloc_core::geometry::ground_plane_in_camera(&t);
     let n = [normal.x, normal.y, normal.z];
     let ground = format!("{},{},{},{d}", n[0], n[1], n[2]);
-    let o = tubeloc(&[
-        "locate",
-        "--rig",
-        p(&s.path("rig.json")),
-        "--image",
-        p(&s.image(0)),
-        "--detector",
-        "line2d",
-        "--templates",
-        p(&s.path("lib.tlt")),
-        "--ground",
-        &ground,
-        "--out",
-        p(&out),
-    ]);
+    let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "line2d", "--templates", p(&s.path("lib.tlt")), "--ground", &ground, "--out", p(&out)]);
     let code = o.status.code();
     assert!(code == Some(0) || code == Some(3), "{}", stderr(&o));
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(doc["schema"], "tubeloc.locate.v1");
-    assert!(
-        s.path("out/poses.overlay.png").exists() && s.path("out/poses.detections.json").exists()
-    );
+    assert!(s.path("out/poses.overlay.png").exists() && s.path("out/poses.detections.json").exists());
     let tubes = doc["tubes"].as_array().unwrap();
     let converged: Vec<&Value> = tubes.iter().filter(|t| t["converged"] == true).collect();
-    assert_eq!(
-        code == Some(0),
-        !converged.is_empty(),
-        "exit 3 exactly when no tube converged"
-    );
+    assert_eq!(code == Some(0), !converged.is_empty(), "exit 3 exactly when no tube converged");
     for t in tubes {
         // Grasp frame: +x along the flip-free axis, +z (approach) perpendicular to it and
         // downward (against the ground normal), rig frame = T_rig_cam * camera frame.
         let r = &t["T_cam_grasp"]["rotation"];
-        let col = |j: usize| {
-            [
-                r[0][j].as_f64().unwrap(),
-                r[1][j].as_f64().unwrap(),
-                r[2][j].as_f64().unwrap(),
-            ]
-        };
+        let col = |j: usize| [r[0][j].as_f64().unwrap(), r[1][j].as_f64().unwrap(), r[2][j].as_f64().unwrap()];
         let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let axis = vec3(&t["axis"]);
         assert!((dot(col(0), axis).abs() - 1.0).abs() < 1e-6);
         assert!(dot(col(2), axis).abs() < 1e-6);
-        assert!(
-            dot(col(2), n) <= 1e-9,
-            "approach must not point up: {:?}",
-            col(2)
-        );
+        assert!(dot(col(2), n) <= 1e-9, "approach must not point up: {:?}", col(2));
         let tc = vec3(&t["T_cam_grasp"]["translation"]);
         let tr = vec3(&t["T_rig_grasp"]["translation"]);
         // T_rig_cam: x' = x + 0.1, y' = z + 0.2, z' = -y + 0.3.
-        assert!(
-            (tr[0] - (tc[0] + 0.1)).abs() < 1e-9
-                && (tr[1] - (tc[2] + 0.2)).abs() < 1e-9
-                && (tr[2] - (0.3 - tc[1])).abs() < 1e-9
-        );
+        assert!((tr[0] - (tc[0] + 0.1)).abs() < 1e-9 && (tr[1] - (tc[2] + 0.2)).abs() < 1e-9 && (tr[2] - (0.3 - tc[1])).abs() < 1e-9);
     }
     // At least one located tube lies within 50 mm of a rendered tube.
     let id = s.gt["images"][0]["id"].clone();
-    let truths: Vec<[f64; 3]> = s.gt["annotations"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|a| a["image_id"] == id)
-        .map(|a| vec3(&a["T_cam_tube"]["translation"]))
-        .collect();
+    let truths: Vec<[f64; 3]> = s.gt["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == id).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();
     let best = converged
         .iter()
-        .flat_map(|t| {
-            truths.iter().map(move |g| {
-                let c = vec3(&t["centre"]);
-                ((c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2)).sqrt()
-            })
-        })
+        .flat_map(|t| truths.iter().map(move |g| {
+            let c = vec3(&t["centre"]);
+            ((c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2)).sqrt()
+        }))
         .fold(f64::INFINITY, f64::min);
-    assert!(
-        best < 0.05,
-        "nearest located tube is {:.1} mm from a rendered one",
-        best * 1e3
-    );
+    assert!(best < 0.05, "nearest located tube is {:.1} mm from a rendered one", best * 1e3);
 }
 
 #[test]
@@ -270,164 +143,58 @@ fn bench_runs_on_a_tiny_dataset_and_resumes() {
     let s = Scene::new("2", "384");
     let out = s.path("bench");
     let (ds, lib) = (s.path("dataset"), s.path("lib.tlt"));
-    let args = [
-        "bench",
-        "--dataset",
-        p(&ds),
-        "--templates",
-        p(&lib),
-        "--skip",
-        "learned,poses,stereo,fullres,tags",
-        "--out",
-        p(&out),
-    ];
+    let args = ["bench", "--dataset", p(&ds), "--templates", p(&lib), "--skip", "learned,poses,stereo,fullres,tags", "--out", p(&out)];
     ok(&args);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("Table I: Line2D"), "{report}");
     for split in ["no-tags", "with-tags"] {
-        let row = report
-            .lines()
-            .find(|l| l.starts_with(&format!("| {split} |")))
-            .unwrap_or_else(|| panic!("no {split} row in {report}"));
-        let ap: f64 = row
-            .split('|')
-            .nth(2)
-            .unwrap()
-            .trim()
-            .parse()
-            .unwrap_or_else(|_| panic!("no AP in {row}"));
+        let row = report.lines().find(|l| l.starts_with(&format!("| {split} |"))).unwrap_or_else(|| panic!("no {split} row in {report}"));
+        let ap: f64 = row.split('|').nth(2).unwrap().trim().parse().unwrap_or_else(|_| panic!("no AP in {row}"));
         assert!((0.0..=1.0).contains(&ap));
-        assert!(out
-            .join("line2d")
-            .join(split)
-            .join("eval/metrics.json")
-            .exists());
+        assert!(out.join("line2d").join(split).join("eval/metrics.json").exists());
     }
-    let state: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("bench_state.json")).unwrap())
-            .unwrap();
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(out.join("bench_state.json")).unwrap()).unwrap();
     assert!(state["line2d/no-tags"]["seconds"].as_f64().unwrap() > 0.0);
     // A second run resumes: every stage is skipped, the report is rewritten.
     let o = ok(&args);
-    assert!(
-        stderr(&o).contains("line2d/with-tags: done in an earlier run, skipped"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("line2d/with-tags: done in an earlier run, skipped"), "{}", stderr(&o));
 }
 
 #[test]
 fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
     let dir = tempfile::tempdir().unwrap();
     let ds = dir.path().join("dataset");
-    ok(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--scenes",
-        "2",
-        "--scale",
-        "0.5",
-        "--resolution",
-        "768",
-        "--seed",
-        "3",
-        "--out",
-        p(&ds),
-    ]);
+    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.5", "--resolution", "768", "--seed", "3", "--out", p(&ds)]);
     let o = ok(&["calib", "groundtruth", "--dataset", p(&ds)]);
-    let gt: Value =
-        serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap())
-            .unwrap();
+    let gt: Value = serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap()).unwrap();
     let mut posed = 0;
     for a in gt["annotations"].as_array().unwrap() {
-        let Some(est) = a.get("T_cam_tube_tags") else {
-            continue;
-        };
-        assert_eq!(
-            a["carries_tags"], true,
-            "tag pose on a tube without tags: {a}"
-        );
-        let (e, g) = (
-            vec3(&est["translation"]),
-            vec3(&a["T_cam_tube"]["translation"]),
-        );
+        let Some(est) = a.get("T_cam_tube_tags") else { continue };
+        assert_eq!(a["carries_tags"], true, "tag pose on a tube without tags: {a}");
+        let (e, g) = (vec3(&est["translation"]), vec3(&a["T_cam_tube"]["translation"]));
         let d = ((e[0] - g[0]).powi(2) + (e[1] - g[1]).powi(2) + (e[2] - g[2]).powi(2)).sqrt();
-        let axis = |r: &Value| {
-            [
-                r[0][2].as_f64().unwrap(),
-                r[1][2].as_f64().unwrap(),
-                r[2][2].as_f64().unwrap(),
-            ]
-        };
+        let axis = |r: &Value| [r[0][2].as_f64().unwrap(), r[1][2].as_f64().unwrap(), r[2][2].as_f64().unwrap()];
         let (ae, ag) = (axis(&est["rotation"]), axis(&a["T_cam_tube"]["rotation"]));
-        let ang = (ae[0] * ag[0] + ae[1] * ag[1] + ae[2] * ag[2])
-            .abs()
-            .min(1.0)
-            .acos()
-            .to_degrees();
-        assert!(
-            d < 0.015 && ang < 1.0,
-            "tag-pair pose {:.1} mm / {ang:.2} deg from the exact pose ({})",
-            d * 1e3,
-            String::from_utf8_lossy(&o.stdout)
-        );
+        let ang = (ae[0] * ag[0] + ae[1] * ag[1] + ae[2] * ag[2]).abs().min(1.0).acos().to_degrees();
+        assert!(d < 0.015 && ang < 1.0, "tag-pair pose {:.1} mm / {ang:.2} deg from the exact pose ({})", d * 1e3, String::from_utf8_lossy(&o.stdout));
         posed += 1;
     }
-    assert!(
-        posed >= 1,
-        "no tag pose added: {}",
-        String::from_utf8_lossy(&o.stdout)
-    );
+    assert!(posed >= 1, "no tag pose added: {}", String::from_utf8_lossy(&o.stdout));
 
     // Refined poses scored against the tag-pair truth (the paper's protocol): only the tagged
     // tubes are truths, and exact seeds refine to within the tag pair's own error.
     let poses = dir.path().join("poses.json");
-    ok(&[
-        "refine",
-        "--dataset",
-        p(&ds),
-        "--gt-seeds",
-        "0,0",
-        "--out",
-        p(&poses),
-    ]);
+    ok(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--out", p(&poses)]);
     let ev = dir.path().join("eval_tags");
-    ok(&[
-        "eval",
-        "--gt",
-        p(&ds.join("annotations.json")),
-        "--truth-field",
-        "T_cam_tube_tags",
-        "--min-visible",
-        "0",
-        "--poses",
-        &format!("refined={}", p(&poses)),
-        "--out",
-        p(&ev),
-    ]);
-    let m: Value =
-        serde_json::from_str(&std::fs::read_to_string(ev.join("pose_metrics.json")).unwrap())
-            .unwrap();
+    ok(&["eval", "--gt", p(&ds.join("annotations.json")), "--truth-field", "T_cam_tube_tags", "--min-visible", "0", "--poses", &format!("refined={}", p(&poses)), "--out", p(&ev)]);
+    let m: Value = serde_json::from_str(&std::fs::read_to_string(ev.join("pose_metrics.json")).unwrap()).unwrap();
     assert_eq!(m["truth_field"], "T_cam_tube_tags");
     let r = &m["poses"][0];
     assert_eq!(r["n_truths"].as_u64().unwrap(), posed as u64, "{r}");
     assert!(r["n_matched"].as_u64().unwrap() >= 1, "{r}");
-    let o = tubeloc(&[
-        "eval",
-        "--gt",
-        p(&ds.join("annotations.json")),
-        "--truth-field",
-        "T_cam_tube_laser",
-        "--poses",
-        p(&poses),
-    ]);
+    let o = tubeloc(&["eval", "--gt", p(&ds.join("annotations.json")), "--truth-field", "T_cam_tube_laser", "--poses", p(&poses)]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).contains("no annotation with T_cam_tube_laser"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("no annotation with T_cam_tube_laser"), "{}", stderr(&o));
 }
 
 #[test]
@@ -436,35 +203,15 @@ fn demo_runs_the_whole_pipeline_and_reports_measured_figures() {
     let out = dir.path().join("demo");
     ok(&["demo", "--out", p(&out)]);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
-    let row = report
-        .lines()
-        .find(|l| l.starts_with("| line2d |"))
-        .unwrap_or_else(|| panic!("no line2d row in {report}"));
-    let ap: f64 = row
-        .split('|')
-        .nth(2)
-        .unwrap()
-        .trim()
-        .parse()
-        .unwrap_or_else(|_| panic!("no AP in {row}"));
+    let row = report.lines().find(|l| l.starts_with("| line2d |")).unwrap_or_else(|| panic!("no line2d row in {report}"));
+    let ap: f64 = row.split('|').nth(2).unwrap().trim().parse().unwrap_or_else(|_| panic!("no AP in {row}"));
     assert!((0.0..=1.0).contains(&ap));
-    assert!(
-        report.lines().any(|l| l.starts_with("| line2d-refined |")),
-        "{report}"
-    );
-    for f in [
-        "locate/poses.json",
-        "locate/poses.overlay.png",
-        "eval_poses/pose_metrics.json",
-        "eval_line2d/metrics.json",
-    ] {
+    assert!(report.lines().any(|l| l.starts_with("| line2d-refined |")), "{report}");
+    for f in ["locate/poses.json", "locate/poses.overlay.png", "eval_poses/pose_metrics.json", "eval_line2d/metrics.json"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
     // The tag-pair ground truth of the tagged tube agrees with the exact pose to centimetres.
-    let row = report
-        .lines()
-        .find(|l| l.contains("two tags |"))
-        .unwrap_or_else(|| panic!("no tag-pair row in {report}"));
+    let row = report.lines().find(|l| l.contains("two tags |")).unwrap_or_else(|| panic!("no tag-pair row in {report}"));
     let pos: f64 = row.split('|').nth(3).unwrap().trim().parse().unwrap();
     assert!(pos < 10.0, "tag-pair position error {pos} mm");
 }
@@ -474,96 +221,29 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
     use tubeloc_core::{BinaryMask, CocoDataset, Rle, Segmentation};
     let dir = tempfile::tempdir().unwrap();
     let ds = dir.path().join("dataset");
-    ok(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--scenes",
-        "2",
-        "--scale",
-        "0.5",
-        "--resolution",
-        "512",
-        "--seed",
-        "5",
-        "--out",
-        p(&ds),
-    ]);
+    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.5", "--resolution", "512", "--seed", "5", "--out", p(&ds)]);
     let gt = CocoDataset::load(&ds.join("annotations.json")).unwrap();
-    let size = |id: u64| {
-        gt.images
-            .iter()
-            .find(|im| im.id == id)
-            .map(|im| (im.height, im.width))
-            .unwrap()
-    };
+    let size = |id: u64| gt.images.iter().find(|im| im.id == id).map(|im| (im.height, im.width)).unwrap();
     // A coarse segmenter: each well visible tube's mask moved 3 px down and fattened by 2 px.
     let mut truth = Vec::new();
     let mut coarse = Vec::new();
     for a in &gt.annotations {
-        if a.extra
-            .get("visible_fraction")
-            .and_then(Value::as_f64)
-            .unwrap_or(0.0)
-            < 0.8
-        {
+        if a.extra.get("visible_fraction").and_then(Value::as_f64).unwrap_or(0.0) < 0.8 {
             continue;
         }
         let (h, w) = size(a.image_id);
-        let m = a
-            .segmentation
-            .as_ref()
-            .unwrap()
-            .to_rle(h, w)
-            .unwrap()
-            .to_mask()
-            .unwrap();
+        let m = a.segmentation.as_ref().unwrap().to_rle(h, w).unwrap().to_mask().unwrap();
         let shifted = BinaryMask::from_fn(m.width, m.height, |x, y| y >= 3 && m.get(x, y - 3));
         let fat = shifted.dilated(2);
         coarse.push(serde_json::json!({"image_id": a.image_id, "category_id": 1, "score": 0.9, "segmentation": Segmentation::from_rle(&Rle::from_mask(&fat))}));
         truth.push(m);
     }
-    assert!(
-        truth.len() >= 2,
-        "tiny scene has {} well visible tubes",
-        truth.len()
-    );
-    let (results, dets, poses, snapped) = (
-        dir.path().join("coarse.json"),
-        dir.path().join("dets.json"),
-        dir.path().join("poses.json"),
-        dir.path().join("snapped.json"),
-    );
+    assert!(truth.len() >= 2, "tiny scene has {} well visible tubes", truth.len());
+    let (results, dets, poses, snapped) = (dir.path().join("coarse.json"), dir.path().join("dets.json"), dir.path().join("poses.json"), dir.path().join("snapped.json"));
     std::fs::write(&results, serde_json::to_string(&coarse).unwrap()).unwrap();
-    ok(&[
-        "detect",
-        "--method",
-        "external",
-        "--results",
-        p(&results),
-        "--dataset",
-        p(&ds),
-        "--out",
-        p(&dets),
-    ]);
-    let o = ok(&[
-        "refine",
-        "--dataset",
-        p(&ds),
-        "--detections",
-        p(&dets),
-        "--ground",
-        "auto",
-        "--out",
-        p(&poses),
-        "--snapped-out",
-        p(&snapped),
-    ]);
-    assert!(
-        stderr(&o).contains("masks snapped to their poses"),
-        "{}",
-        stderr(&o)
-    );
+    ok(&["detect", "--method", "external", "--results", p(&results), "--dataset", p(&ds), "--out", p(&dets)]);
+    let o = ok(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--ground", "auto", "--out", p(&poses), "--snapped-out", p(&snapped)]);
+    assert!(stderr(&o).contains("masks snapped to their poses"), "{}", stderr(&o));
     let read = |path: &Path| tubeloc_core::detection::read_coco_results(path).unwrap();
     let (before, after) = (read(&dets), read(&snapped));
     assert_eq!(before.len(), after.len());
@@ -575,10 +255,7 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
     };
     let mut k_of_image: std::collections::BTreeMap<u64, Vec<usize>> = Default::default();
     for (k, c) in coarse.iter().enumerate() {
-        k_of_image
-            .entry(c["image_id"].as_u64().unwrap())
-            .or_default()
-            .push(k);
+        k_of_image.entry(c["image_id"].as_u64().unwrap()).or_default().push(k);
     }
     let (mut sum_before, mut sum_after, mut n) = (0.0, 0.0, 0);
     let mut seen: std::collections::BTreeMap<u64, usize> = Default::default();
@@ -593,48 +270,15 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
     }
     let (mb, ma) = (sum_before / n as f64, sum_after / n as f64);
     assert!(mb < 0.8, "coarse masks' mean IoU {mb:.3}");
-    assert!(
-        ma > 0.9 && ma > mb + 0.1,
-        "snapped masks' mean IoU {ma:.3}, coarse {mb:.3}"
-    );
+    assert!(ma > 0.9 && ma > mb + 0.1, "snapped masks' mean IoU {ma:.3}, coarse {mb:.3}");
 
     // Bad settings and a mode without masks are refused before any work.
-    let o = tubeloc(&[
-        "refine",
-        "--dataset",
-        p(&ds),
-        "--detections",
-        p(&dets),
-        "--out",
-        p(&poses),
-        "--snapped-out",
-        p(&snapped),
-        "--snap-min-agreement",
-        "2",
-    ]);
+    let o = tubeloc(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--out", p(&poses), "--snapped-out", p(&snapped), "--snap-min-agreement", "2"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).contains("--snap-min-agreement 2"),
-        "{}",
-        stderr(&o)
-    );
-    let o = tubeloc(&[
-        "refine",
-        "--dataset",
-        p(&ds),
-        "--gt-seeds",
-        "0,0",
-        "--out",
-        p(&poses),
-        "--snapped-out",
-        p(&snapped),
-    ]);
+    assert!(stderr(&o).contains("--snap-min-agreement 2"), "{}", stderr(&o));
+    let o = tubeloc(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--out", p(&poses), "--snapped-out", p(&snapped)]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).contains("--snapped-out needs --detections"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("--snapped-out needs --detections"), "{}", stderr(&o));
 }
 
 #[test]
@@ -642,23 +286,10 @@ fn detect_decoder_config_is_read_and_bad_fields_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("decode.json");
     std::fs::write(&bad, r#"{"mask_logit_rel": 0.4, "mask_threshold_typo": 1}"#).unwrap();
-    let o = tubeloc(&[
-        "detect",
-        "--method",
-        "learned",
-        "--image",
-        "absent.png",
-        "--decode-config",
-        p(&bad),
-        "--out",
-        p(&dir.path().join("d.json")),
-    ]);
+    let o = tubeloc(&["detect", "--method", "learned", "--image", "absent.png", "--decode-config", p(&bad), "--out", p(&dir.path().join("d.json"))]);
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
-    assert!(
-        e.contains("decode.json") && e.contains("unknown field `mask_threshold_typo`"),
-        "{e}"
-    );
+    assert!(e.contains("decode.json") && e.contains("unknown field `mask_threshold_typo`"), "{e}");
     assert!(!dir.path().join("d.json").exists(), "no output on error");
 }
 
@@ -668,23 +299,10 @@ fn refine_two_view_config_bad_fields_are_refused_before_any_work() {
     let bad = dir.path().join("two_view.json");
     std::fs::write(&bad, r#"{"max_iterations_typo": 3}"#).unwrap();
     let out = dir.path().join("poses.json");
-    let o = tubeloc(&[
-        "refine",
-        "--image",
-        "absent.png",
-        "--detections",
-        "absent.json",
-        "--two-view-config",
-        p(&bad),
-        "--out",
-        p(&out),
-    ]);
+    let o = tubeloc(&["refine", "--image", "absent.png", "--detections", "absent.json", "--two-view-config", p(&bad), "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
-    assert!(
-        e.contains("two_view.json") && e.contains("unknown field `max_iterations_typo`"),
-        "{e}"
-    );
+    assert!(e.contains("two_view.json") && e.contains("unknown field `max_iterations_typo`"), "{e}");
     assert!(!out.exists(), "no output on error");
 }
 
@@ -692,65 +310,27 @@ fn refine_two_view_config_bad_fields_are_refused_before_any_work() {
 fn train_average_writes_the_weight_average_and_refuses_mismatched_models() {
     let dir = tempfile::tempdir().unwrap();
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models");
-    let (rgb, gray) = (
-        models.join("tubenet.safetensors"),
-        models.join("gray/tubenet.safetensors"),
-    );
+    let (rgb, gray) = (models.join("tubenet.safetensors"), models.join("gray/tubenet.safetensors"));
     // Averaging a model with itself gives the same weights: the soup detects what the model does.
     let soup = dir.path().join("soup.safetensors");
     ok(&["train", "--average", p(&rgb), p(&rgb), "--out", p(&soup)]);
     let ds = dir.path().join("dataset");
-    ok(&[
-        "synth",
-        "--preset",
-        "tiny",
-        "--scenes",
-        "1",
-        "--scale",
-        "0.25",
-        "--resolution",
-        "256",
-        "--seed",
-        "7",
-        "--out",
-        p(&ds),
-    ]);
+    ok(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
     let det = |m: &Path, name: &str| -> Vec<Value> {
         let out = dir.path().join(name);
-        ok(&[
-            "detect",
-            "--method",
-            "learned",
-            "--model",
-            p(m),
-            "--dataset",
-            p(&ds),
-            "--out",
-            p(&out),
-        ]);
+        ok(&["detect", "--method", "learned", "--model", p(m), "--dataset", p(&ds), "--out", p(&out)]);
         serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap()
     };
     let (a, b) = (det(&rgb, "a.json"), det(&soup, "b.json"));
-    assert!(
-        !a.is_empty(),
-        "the shipped model finds tubes on the tiny scene"
-    );
+    assert!(!a.is_empty(), "the shipped model finds tubes on the tiny scene");
     assert_eq!(a, b);
     // An RGB and a gray model cannot be averaged: the error names both files; nothing written.
     let bad = dir.path().join("bad.safetensors");
     let o = tubeloc(&["train", "--average", p(&rgb), p(&gray), "--out", p(&bad)]);
     assert_eq!(o.status.code(), Some(1));
     let e = stderr(&o);
-    assert!(
-        e.contains("gray/tubenet.safetensors") && e.contains("architecture and preprocessing"),
-        "{e}"
-    );
+    assert!(e.contains("gray/tubenet.safetensors") && e.contains("architecture and preprocessing"), "{e}");
     assert!(!bad.exists(), "no output on error");
     // One model is not an average.
-    assert_eq!(
-        tubeloc(&["train", "--average", p(&rgb), "--out", p(&bad)])
-            .status
-            .code(),
-        Some(2)
-    );
+    assert_eq!(tubeloc(&["train", "--average", p(&rgb), "--out", p(&bad)]).status.code(), Some(2));
 }

@@ -128,29 +128,15 @@ impl CameraModel {
     /// Checks that sizes are non-zero and all numbers finite with positive focal lengths.
     pub fn validate(&self) -> Result<(), CoreError> {
         let d = &self.distortion;
-        let nums = [
-            self.fx, self.fy, self.cx, self.cy, d.k1, d.k2, d.p1, d.p2, d.k3,
-        ];
+        let nums = [self.fx, self.fy, self.cx, self.cy, d.k1, d.k2, d.p1, d.p2, d.k3];
         if self.width == 0 || self.height == 0 {
-            return Err(CoreError::invalid(
-                "camera",
-                "width and height must be positive",
-            ));
+            return Err(CoreError::invalid("camera", "width and height must be positive"));
         }
         if nums.iter().any(|v| !v.is_finite()) {
-            return Err(CoreError::invalid(
-                "camera",
-                "all intrinsics must be finite numbers",
-            ));
+            return Err(CoreError::invalid("camera", "all intrinsics must be finite numbers"));
         }
         if self.fx <= 0.0 || self.fy <= 0.0 {
-            return Err(CoreError::invalid(
-                "camera",
-                format!(
-                    "focal lengths must be positive (fx={}, fy={})",
-                    self.fx, self.fy
-                ),
-            ));
+            return Err(CoreError::invalid("camera", format!("focal lengths must be positive (fx={}, fy={})", self.fx, self.fy)));
         }
         Ok(())
     }
@@ -208,21 +194,12 @@ impl CameraModel {
 
     /// The same camera for a crop whose top-left pixel is `(x0, y0)` and size `width x height`.
     pub fn cropped(&self, x0: u32, y0: u32, width: u32, height: u32) -> Self {
-        CameraModel {
-            width,
-            height,
-            cx: self.cx - x0 as f64,
-            cy: self.cy - y0 as f64,
-            ..self.clone()
-        }
+        CameraModel { width, height, cx: self.cx - x0 as f64, cy: self.cy - y0 as f64, ..self.clone() }
     }
 
     /// True when the pixel lies inside the image (centres at integers, edges at -0.5).
     pub fn contains(&self, px: &Point2<f64>) -> bool {
-        px.x >= -0.5
-            && px.y >= -0.5
-            && px.x < self.width as f64 - 0.5
-            && px.y < self.height as f64 - 0.5
+        px.x >= -0.5 && px.y >= -0.5 && px.x < self.width as f64 - 0.5 && px.y < self.height as f64 - 0.5
     }
 
     /// Horizontal field of view in degrees (ignoring distortion).
@@ -238,8 +215,7 @@ impl CameraModel {
     /// Reads a camera from a JSON file and validates it.
     pub fn load_json(path: &std::path::Path) -> Result<Self, CoreError> {
         let cam: CameraModel = crate::files::read_json(path)?;
-        cam.validate()
-            .map_err(|e| CoreError::parse(path, e.to_string()))?;
+        cam.validate().map_err(|e| CoreError::parse(path, e.to_string()))?;
         Ok(cam)
     }
 }
@@ -250,13 +226,7 @@ mod tests {
 
     fn lens() -> CameraModel {
         CameraModel {
-            distortion: Distortion {
-                k1: -0.12,
-                k2: 0.05,
-                p1: 0.001,
-                p2: -0.0007,
-                k3: -0.01,
-            },
+            distortion: Distortion { k1: -0.12, k2: 0.05, p1: 0.001, p2: -0.0007, k3: -0.01 },
             ..CameraModel::from_hfov(1024, 768, 77.0)
         }
     }
@@ -264,12 +234,7 @@ mod tests {
     #[test]
     fn project_unproject_round_trip_with_distortion() {
         let cam = lens();
-        for &(x, y, z) in &[
-            (0.1, -0.2, 1.0),
-            (-0.7, 0.5, 1.3),
-            (0.0, 0.0, 2.0),
-            (0.6, 0.45, 0.9),
-        ] {
+        for &(x, y, z) in &[(0.1, -0.2, 1.0), (-0.7, 0.5, 1.3), (0.0, 0.0, 2.0), (0.6, 0.45, 0.9)] {
             let p = Point3::new(x, y, z);
             let px = cam.project(&p).unwrap();
             let back = cam.unproject_depth(&px, z);

@@ -122,17 +122,11 @@ impl Segmentation {
                     // pycocotools' frPyObjects reads such a list as boxes (4) or rejects it (< 4).
                     return Err(CoreError::invalid(
                         "segmentation",
-                        format!(
-                            "polygon 0 has {} numbers; a polygon needs at least 6",
-                            first.len()
-                        ),
+                        format!("polygon 0 has {} numbers; a polygon needs at least 6", first.len()),
                     ));
                 }
                 if let Some(bad) = polys.iter().flatten().find(|v| !v.is_finite()) {
-                    return Err(CoreError::invalid(
-                        "segmentation",
-                        format!("non-finite polygon coordinate {bad}"),
-                    ));
+                    return Err(CoreError::invalid("segmentation", format!("non-finite polygon coordinate {bad}")));
                 }
                 Rle::from_polygons(polys, h, w)
             }
@@ -142,10 +136,7 @@ impl Segmentation {
             }
             Segmentation::UncompressedRle { size, counts } => {
                 check_size(*size, h, w)?;
-                let rle = Rle {
-                    size: *size,
-                    counts: counts.clone(),
-                };
+                let rle = Rle { size: *size, counts: counts.clone() };
                 rle.check()?;
                 Ok(rle)
             }
@@ -154,10 +145,7 @@ impl Segmentation {
 
     /// The compressed-RLE segmentation of `rle`.
     pub fn from_rle(rle: &Rle) -> Segmentation {
-        Segmentation::CompressedRle {
-            size: rle.size,
-            counts: rle.to_compressed_string(),
-        }
+        Segmentation::CompressedRle { size: rle.size, counts: rle.to_compressed_string() }
     }
 }
 
@@ -249,19 +237,12 @@ pub fn load_results(path: &Path, gt: &CocoDataset) -> Result<Vec<CocoResult>, Co
 
 /// Checks results against `gt` (see [`load_results`]); the message names the entry.
 pub fn validate_results(results: &[CocoResult], gt: &CocoDataset) -> Result<(), String> {
-    let sizes: std::collections::HashMap<u64, (u32, u32)> = gt
-        .images
-        .iter()
-        .map(|im| (im.id, (im.height, im.width)))
-        .collect();
+    let sizes: std::collections::HashMap<u64, (u32, u32)> =
+        gt.images.iter().map(|im| (im.id, (im.height, im.width))).collect();
     for (i, r) in results.iter().enumerate() {
         let at = || format!("results[{i}] (image_id {})", r.image_id);
         let Some(&(h, w)) = sizes.get(&r.image_id) else {
-            return Err(format!(
-                "{}: image_id {} is not in the ground truth",
-                at(),
-                r.image_id
-            ));
+            return Err(format!("{}: image_id {} is not in the ground truth", at(), r.image_id));
         };
         if !r.score.is_finite() {
             return Err(format!("{}: non-finite score", at()));
@@ -284,9 +265,7 @@ fn explain_dataset_error(path: &Path, text: &[u8], e: serde_json::Error) -> Core
         return CoreError::parse(path, format!("invalid JSON: {e}"));
     };
     for key in ["images", "annotations", "categories"] {
-        let Some(Value::Array(items)) = top.get(key) else {
-            continue;
-        };
+        let Some(Value::Array(items)) = top.get(key) else { continue };
         let msg = match key {
             "images" => first_bad::<CocoImage>(key, items),
             "annotations" => first_bad::<CocoAnnotation>(key, items),

@@ -105,29 +105,16 @@ impl AxisSeed {
 
     /// Checks finite values, a unit direction (within 1e-3) and positive sizes.
     pub fn validate(&self) -> Result<(), CoreError> {
-        let v = [
-            self.centre_px[0],
-            self.centre_px[1],
-            self.direction_px[0],
-            self.direction_px[1],
-            self.length_px,
-            self.width_px,
-        ];
+        let v = [self.centre_px[0], self.centre_px[1], self.direction_px[0], self.direction_px[1], self.length_px, self.width_px];
         if v.iter().any(|x| !x.is_finite()) {
             return Err(CoreError::invalid("axis_seed", "non-finite value"));
         }
         let n = self.direction_px[0].hypot(self.direction_px[1]);
         if (n - 1.0).abs() > 1e-3 {
-            return Err(CoreError::invalid(
-                "axis_seed",
-                format!("direction_px must be a unit vector (norm {n:.4})"),
-            ));
+            return Err(CoreError::invalid("axis_seed", format!("direction_px must be a unit vector (norm {n:.4})")));
         }
         if self.length_px <= 0.0 || self.width_px <= 0.0 {
-            return Err(CoreError::invalid(
-                "axis_seed",
-                "length_px and width_px must be positive",
-            ));
+            return Err(CoreError::invalid("axis_seed", "length_px and width_px must be positive"));
         }
         Ok(())
     }
@@ -152,20 +139,11 @@ pub struct TubeDetection {
     /// Instance mask, written as COCO `segmentation` in compressed RLE
     /// (`{"size": [h, w], "counts": "..."}`); uncompressed RLE (`counts` as a number list) is
     /// read too. Polygon segmentations are refused (COCO results carry RLE).
-    #[serde(
-        rename = "segmentation",
-        default,
-        skip_serializing_if = "Option::is_none",
-        with = "rle_serde"
-    )]
+    #[serde(rename = "segmentation", default, skip_serializing_if = "Option::is_none", with = "rle_serde")]
     pub mask: Option<Rle>,
     /// Coarse pose of the tube in the camera frame (Line2D template pose), tube frame as in
     /// [`crate::tube`]: origin at the tube centre, +z toward the seal end.
-    #[serde(
-        rename = "T_cam_tube",
-        default,
-        skip_serializing_if = "Option::is_none"
-    )]
+    #[serde(rename = "T_cam_tube", default, skip_serializing_if = "Option::is_none")]
     pub t_cam_tube: Option<Pose>,
     /// Axis of the tube in the image (learned segmenter, or from the mask).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -181,33 +159,17 @@ pub struct TubeDetection {
 impl TubeDetection {
     /// A detection with only the COCO fields set.
     pub fn new(image_id: u64, score: f64, bbox: [f64; 4], source: DetectionSource) -> Self {
-        TubeDetection {
-            image_id,
-            category_id: 1,
-            score,
-            bbox,
-            mask: None,
-            t_cam_tube: None,
-            axis_seed: None,
-            template_id: None,
-            source,
-        }
+        TubeDetection { image_id, category_id: 1, score, bbox, mask: None, t_cam_tube: None, axis_seed: None, template_id: None, source }
     }
 
     /// Checks finite score and box, non-negative box size, a valid axis seed if present, and a
     /// mask whose counts match its size, of at most [`crate::mask::MAX_MASK_PIXELS`] pixels.
     pub fn validate(&self) -> Result<(), CoreError> {
         if !self.score.is_finite() || self.bbox.iter().any(|v| !v.is_finite()) {
-            return Err(CoreError::invalid(
-                "detection",
-                "score and bbox must be finite",
-            ));
+            return Err(CoreError::invalid("detection", "score and bbox must be finite"));
         }
         if self.bbox[2] < 0.0 || self.bbox[3] < 0.0 {
-            return Err(CoreError::invalid(
-                "detection",
-                "bbox width and height must be non-negative",
-            ));
+            return Err(CoreError::invalid("detection", "bbox width and height must be non-negative"));
         }
         if let Some(a) = &self.axis_seed {
             a.validate()?;
@@ -218,12 +180,7 @@ impl TubeDetection {
             if pixels > crate::mask::MAX_MASK_PIXELS {
                 return Err(CoreError::invalid(
                     "segmentation",
-                    format!(
-                        "mask size {}x{} (h x w) exceeds the limit of {} pixels",
-                        m.size[0],
-                        m.size[1],
-                        crate::mask::MAX_MASK_PIXELS
-                    ),
+                    format!("mask size {}x{} (h x w) exceeds the limit of {} pixels", m.size[0], m.size[1], crate::mask::MAX_MASK_PIXELS),
                 ));
             }
         }
@@ -233,17 +190,10 @@ impl TubeDetection {
     /// The principal axis of the mask ([`AxisSeed::from_pixels`] over the set pixel centres);
     /// `None` without a mask or with fewer than 2 set pixels.
     pub fn axis_seed_from_mask(&self) -> Result<Option<AxisSeed>, CoreError> {
-        let Some(rle) = &self.mask else {
-            return Ok(None);
-        };
+        let Some(rle) = &self.mask else { return Ok(None) };
         let m = rle.to_mask()?;
         let w = m.width;
-        let px = m
-            .data
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| **v != 0)
-            .map(move |(i, _)| ((i % w) as f64, (i / w) as f64));
+        let px = m.data.iter().enumerate().filter(|(_, v)| **v != 0).map(move |(i, _)| ((i % w) as f64, (i / w) as f64));
         Ok(AxisSeed::from_pixels(px))
     }
 
@@ -253,12 +203,7 @@ impl TubeDetection {
         let [x, y, w, h] = self.bbox;
         let c = [x + 0.5 * w - 0.5, y + 0.5 * h - 0.5];
         let n = w.hypot(h).max(1e-9);
-        AxisSeed {
-            centre_px: c,
-            direction_px: [w / n, h / n],
-            length_px: n.max(1.0),
-            width_px: (w.min(h)).max(1.0),
-        }
+        AxisSeed { centre_px: c, direction_px: [w / n, h / n], length_px: n.max(1.0), width_px: (w.min(h)).max(1.0) }
     }
 }
 
@@ -273,15 +218,12 @@ pub fn read_coco_results(path: &Path) -> Result<Vec<TubeDetection>, CoreError> {
 
 /// Parses COCO results JSON text (see [`read_coco_results`]); `origin` names the source.
 pub fn parse_coco_results(text: &[u8], origin: &Path) -> Result<Vec<TubeDetection>, CoreError> {
-    let mut dets: Vec<TubeDetection> = serde_json::from_slice(text)
-        .map_err(|e| CoreError::parse(origin, format!("invalid COCO results JSON: {e}")))?;
+    let mut dets: Vec<TubeDetection> =
+        serde_json::from_slice(text).map_err(|e| CoreError::parse(origin, format!("invalid COCO results JSON: {e}")))?;
     for (i, d) in dets.iter_mut().enumerate() {
-        d.validate()
-            .map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
+        d.validate().map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
         if d.axis_seed.is_none() {
-            d.axis_seed = d
-                .axis_seed_from_mask()
-                .map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
+            d.axis_seed = d.axis_seed_from_mask().map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
         }
     }
     Ok(dets)
@@ -300,19 +242,13 @@ mod rle_serde {
         use serde::de::Error;
         match Option::<Segmentation>::deserialize(d)? {
             None => Ok(None),
-            Some(Segmentation::CompressedRle { size, counts }) => {
-                Rle::from_compressed_string(&counts, size)
-                    .map(Some)
-                    .map_err(D::Error::custom)
-            }
+            Some(Segmentation::CompressedRle { size, counts }) => Rle::from_compressed_string(&counts, size).map(Some).map_err(D::Error::custom),
             Some(Segmentation::UncompressedRle { size, counts }) => {
                 let rle = Rle { size, counts };
                 rle.check().map_err(D::Error::custom)?;
                 Ok(Some(rle))
             }
-            Some(Segmentation::Polygons(_)) => Err(D::Error::custom(
-                "polygon segmentation in a results entry: COCO results carry RLE masks",
-            )),
+            Some(Segmentation::Polygons(_)) => Err(D::Error::custom("polygon segmentation in a results entry: COCO results carry RLE masks")),
         }
     }
 }
@@ -333,18 +269,9 @@ mod tests {
             }
         }
         let seed = AxisSeed::from_pixels(px.iter().copied()).unwrap();
-        assert!(
-            (seed.centre_px[0] - 100.0).abs() < 0.1 && (seed.centre_px[1] - 50.0).abs() < 0.1,
-            "{seed:?}"
-        );
-        assert!(
-            (seed.direction_px[0] - c).abs() < 1e-3 && (seed.direction_px[1] - s).abs() < 1e-3,
-            "{seed:?}"
-        );
-        assert!(
-            (seed.length_px - 60.9).abs() < 0.5 && (seed.width_px - 8.9).abs() < 0.5,
-            "{seed:?}"
-        );
+        assert!((seed.centre_px[0] - 100.0).abs() < 0.1 && (seed.centre_px[1] - 50.0).abs() < 0.1, "{seed:?}");
+        assert!((seed.direction_px[0] - c).abs() < 1e-3 && (seed.direction_px[1] - s).abs() < 1e-3, "{seed:?}");
+        assert!((seed.length_px - 60.9).abs() < 0.5 && (seed.width_px - 8.9).abs() < 0.5, "{seed:?}");
         assert!(AxisSeed::from_pixels([(1.0, 1.0)]).is_none());
     }
 
@@ -359,13 +286,10 @@ mod tests {
         assert_eq!(d[1].source, DetectionSource::Line2d);
         assert_eq!(d[1].template_id, Some(7));
         assert_eq!(d[1].t_cam_tube.unwrap().translation().z, 1.0);
-        let back: Vec<TubeDetection> =
-            serde_json::from_str(&serde_json::to_string(&d).unwrap()).unwrap();
+        let back: Vec<TubeDetection> = serde_json::from_str(&serde_json::to_string(&d).unwrap()).unwrap();
         assert_eq!(back, d);
         let bad = br#"[{"image_id": 1, "bbox": [0, 0, -1, 1], "score": 1}]"#;
-        let err = parse_coco_results(bad, Path::new("r.json"))
-            .unwrap_err()
-            .to_string();
+        let err = parse_coco_results(bad, Path::new("r.json")).unwrap_err().to_string();
         assert!(err.contains("r.json") && err.contains("entry 0"), "{err}");
     }
 
@@ -382,51 +306,23 @@ mod tests {
         let mut d = TubeDetection::new(2, 0.7, m.bbox(), DetectionSource::External);
         d.mask = Some(rle.clone());
         let text = serde_json::to_string(&[&d]).unwrap();
-        assert!(
-            text.contains(&format!(
-                "\"segmentation\":{{\"size\":[48,64],\"counts\":\"{}\"}}",
-                rle.to_compressed_string()
-            )),
-            "{text}"
-        );
+        assert!(text.contains(&format!("\"segmentation\":{{\"size\":[48,64],\"counts\":\"{}\"}}", rle.to_compressed_string())), "{text}");
         let back = parse_coco_results(text.as_bytes(), Path::new("m.json")).unwrap();
         assert_eq!(back[0].mask.as_ref(), Some(&rle));
         let a = back[0].axis_seed.expect("axis seed from the mask");
-        assert!(
-            (a.centre_px[0] - 30.0).abs() < 0.6 && (a.centre_px[1] - 20.0).abs() < 0.6,
-            "{a:?}"
-        );
+        assert!((a.centre_px[0] - 30.0).abs() < 0.6 && (a.centre_px[1] - 20.0).abs() < 0.6, "{a:?}");
         let h = 0.5f64.sqrt();
-        assert!(
-            (a.direction_px[0].abs() - h).abs() < 0.02
-                && (a.direction_px[1].abs() - h).abs() < 0.02,
-            "{a:?}"
-        );
+        assert!((a.direction_px[0].abs() - h).abs() < 0.02 && (a.direction_px[1].abs() - h).abs() < 0.02, "{a:?}");
         assert!(a.direction_px[0] * a.direction_px[1] > 0.0, "{a:?}");
-        assert!(
-            (a.length_px - 41.0).abs() < 3.0 && a.width_px > 4.0 && a.width_px < 10.0,
-            "{a:?}"
-        );
+        assert!((a.length_px - 41.0).abs() < 3.0 && a.width_px > 4.0 && a.width_px < 10.0, "{a:?}");
         // Uncompressed RLE is read too; a bad RLE and a polygon are refused with the entry named.
         let unc = format!("[{{\"image_id\":1,\"bbox\":[0,0,2,2],\"score\":1,\"segmentation\":{{\"size\":[48,64],\"counts\":{:?}}}}}]", rle.counts);
-        assert_eq!(
-            parse_coco_results(unc.as_bytes(), Path::new("u.json")).unwrap()[0]
-                .mask
-                .as_ref(),
-            Some(&rle)
-        );
+        assert_eq!(parse_coco_results(unc.as_bytes(), Path::new("u.json")).unwrap()[0].mask.as_ref(), Some(&rle));
         let bad = br#"[{"image_id":1,"bbox":[0,0,2,2],"score":1,"segmentation":{"size":[4,4],"counts":[3,2]}}]"#;
-        let err = parse_coco_results(bad, Path::new("b.json"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("b.json") && err.contains("counts sum to 5"),
-            "{err}"
-        );
+        let err = parse_coco_results(bad, Path::new("b.json")).unwrap_err().to_string();
+        assert!(err.contains("b.json") && err.contains("counts sum to 5"), "{err}");
         let poly = br#"[{"image_id":1,"bbox":[0,0,2,2],"score":1,"segmentation":[[0,0,5,0,5,5]]}]"#;
-        let err = parse_coco_results(poly, Path::new("p.json"))
-            .unwrap_err()
-            .to_string();
+        let err = parse_coco_results(poly, Path::new("p.json")).unwrap_err().to_string();
         assert!(err.contains("polygon"), "{err}");
     }
 }

@@ -34,23 +34,14 @@ pub enum CoreError {
 impl CoreError {
     /// Builds a [`CoreError::Parse`] for `path`.
     pub fn parse(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        CoreError::Parse {
-            path: path.into(),
-            message: message.into(),
-        }
+        CoreError::Parse { path: path.into(), message: message.into() }
     }
     /// Builds a [`CoreError::Invalid`].
     pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
-        CoreError::Invalid {
-            what: what.into(),
-            message: message.into(),
-        }
+        CoreError::Invalid { what: what.into(), message: message.into() }
     }
     /// Builds a [`CoreError::Io`] for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        CoreError::Io {
-            path: path.into(),
-            source,
-        }
+        CoreError::Io { path: path.into(), source }
     }
 }

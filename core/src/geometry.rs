@@ -23,24 +23,12 @@ mod tests {
     #[test]
     fn ground_points_satisfy_the_plane_and_the_camera_height_is_minus_d() {
         // Camera 1.5 m above the ground looking down and forward.
-        let t = Pose::look_at(
-            &Point3::new(0.3, -0.2, 1.5),
-            &Point3::new(1.0, 2.0, 0.0),
-            &Vector3::z(),
-        )
-        .unwrap();
+        let t = Pose::look_at(&Point3::new(0.3, -0.2, 1.5), &Point3::new(1.0, 2.0, 0.0), &Vector3::z()).unwrap();
         let (n, d) = ground_plane_in_camera(&t);
         assert!((n.norm() - 1.0).abs() < 1e-12);
-        assert!(
-            (d + 1.5).abs() < 1e-12,
-            "camera height 1.5 m gives d = -1.5, got {d}"
-        );
+        assert!((d + 1.5).abs() < 1e-12, "camera height 1.5 m gives d = -1.5, got {d}");
         let t_cam_world = t.inverse();
-        for p in [
-            Point3::new(1.0, 2.0, 0.0),
-            Point3::new(-3.0, 0.5, 0.0),
-            Point3::new(0.0, 7.0, 0.0),
-        ] {
+        for p in [Point3::new(1.0, 2.0, 0.0), Point3::new(-3.0, 0.5, 0.0), Point3::new(0.0, 7.0, 0.0)] {
             let x = t_cam_world.transform_point(&p);
             assert!((n.dot(&x.coords) - d).abs() < 1e-9, "{p:?}");
         }

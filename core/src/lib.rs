@@ -6,9 +6,9 @@
 //! and +z along the axis toward the seal end.
 
 pub mod camera;
-pub mod coco;
 pub mod detection;
 pub mod error;
+pub mod coco;
 pub mod files;
 pub mod geometry;
 pub mod mask;

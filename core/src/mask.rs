@@ -28,11 +28,7 @@ pub struct BinaryMask {
 impl BinaryMask {
     /// An all-zero mask.
     pub fn new(width: usize, height: usize) -> Self {
-        BinaryMask {
-            width,
-            height,
-            data: vec![0; width * height],
-        }
+        BinaryMask { width, height, data: vec![0; width * height] }
     }
 
     /// A mask with pixel `(x, y)` set where `f(x, y)` is true.
@@ -43,11 +39,7 @@ impl BinaryMask {
                 data.push(f(x, y) as u8);
             }
         }
-        BinaryMask {
-            width,
-            height,
-            data,
-        }
+        BinaryMask { width, height, data }
     }
 
     /// Whether pixel `(x, y)` is set (false outside the mask).
@@ -94,21 +86,11 @@ impl BinaryMask {
             std::mem::swap(&mut prev, &mut out);
             for y in y0..y1 {
                 for x in x0..x1 {
-                    let n = [
-                        x > 0 && prev.get(x - 1, y),
-                        prev.get(x + 1, y),
-                        y > 0 && prev.get(x, y - 1),
-                        prev.get(x, y + 1),
-                    ];
+                    let n = [x > 0 && prev.get(x - 1, y), prev.get(x + 1, y), y > 0 && prev.get(x, y - 1), prev.get(x, y + 1)];
                     let v = if grow {
                         prev.get(x, y) || n.iter().any(|&b| b)
                     } else {
-                        prev.get(x, y)
-                            && x > 0
-                            && y > 0
-                            && x + 1 < w
-                            && y + 1 < h
-                            && n.iter().all(|&b| b)
+                        prev.get(x, y) && x > 0 && y > 0 && x + 1 < w && y + 1 < h && n.iter().all(|&b| b)
                     };
                     out.data[y * w + x] = v as u8;
                 }
@@ -140,12 +122,7 @@ impl BinaryMask {
         if x0 == usize::MAX {
             return [0.0; 4];
         }
-        [
-            x0 as f64,
-            y0 as f64,
-            (x1 - x0 + 1) as f64,
-            (y1 - y0 + 1) as f64,
-        ]
+        [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64]
     }
 }
 
@@ -194,10 +171,7 @@ impl Rle {
             }
         }
         counts.push(run);
-        Rle {
-            size: [h as u32, w as u32],
-            counts,
-        }
+        Rle { size: [h as u32, w as u32], counts }
     }
 
     /// Decodes into a row-major mask. Errors when the counts do not sum to `h * w`.
@@ -227,10 +201,7 @@ impl Rle {
         if total != expect {
             return Err(CoreError::invalid(
                 "RLE",
-                format!(
-                    "counts sum to {total} but size {}x{} (h x w) has {expect} pixels",
-                    self.size[0], self.size[1]
-                ),
+                format!("counts sum to {total} but size {}x{} (h x w) has {expect} pixels", self.size[0], self.size[1]),
             ));
         }
         Ok(())
@@ -238,12 +209,7 @@ impl Rle {
 
     /// Number of set pixels: the sum of the odd-indexed counts (`rleArea`).
     pub fn area(&self) -> u64 {
-        self.counts
-            .iter()
-            .skip(1)
-            .step_by(2)
-            .map(|&c| c as u64)
-            .sum()
+        self.counts.iter().skip(1).step_by(2).map(|&c| c as u64).sum()
     }
 
     /// Bounding box `[x, y, w, h]` exactly as `rleToBbox`: when a run of ones wraps from one
@@ -274,40 +240,26 @@ impl Rle {
             ys = ys.min(y);
             ye = ye.max(y);
         }
-        [
-            xs as f64,
-            ys as f64,
-            (xe as f64) - (xs as f64) + 1.0,
-            (ye as f64) - (ys as f64) + 1.0,
-        ]
+        [xs as f64, ys as f64, (xe as f64) - (xs as f64) + 1.0, (ye as f64) - (ys as f64) + 1.0]
     }
 
     /// Union (`intersect == false`) or intersection of several RLEs, like `rleMerge`.
     /// An empty list gives an empty 0x0 RLE; differing sizes are an error.
     pub fn merge(rles: &[Rle], intersect: bool) -> Result<Rle, CoreError> {
         let Some(first) = rles.first() else {
-            return Ok(Rle {
-                size: [0, 0],
-                counts: Vec::new(),
-            });
+            return Ok(Rle { size: [0, 0], counts: Vec::new() });
         };
         let mut acc = first.counts.clone();
         for (i, b) in rles.iter().enumerate().skip(1) {
             if b.size != first.size {
                 return Err(CoreError::invalid(
                     "RLE merge",
-                    format!(
-                        "mask {i} has size {:?} but mask 0 has {:?} (h, w)",
-                        b.size, first.size
-                    ),
+                    format!("mask {i} has size {:?} but mask 0 has {:?} (h, w)", b.size, first.size),
                 ));
             }
             acc = merge_two(&acc, &b.counts, intersect);
         }
-        Ok(Rle {
-            size: first.size,
-            counts: acc,
-        })
+        Ok(Rle { size: first.size, counts: acc })
     }
 
     /// IoU of every detection against every ground truth, like `maskUtils.iou`: returns
@@ -408,25 +360,16 @@ impl Rle {
             let mut k = 0u32;
             loop {
                 let Some(&b) = bytes.get(p) else {
-                    return Err(CoreError::invalid(
-                        "RLE string",
-                        format!("truncated count at byte {p}"),
-                    ));
+                    return Err(CoreError::invalid("RLE string", format!("truncated count at byte {p}")));
                 };
                 if !(48..=111).contains(&b) {
                     return Err(CoreError::invalid(
                         "RLE string",
-                        format!(
-                            "byte {p} is {:?}, outside the RLE alphabet '0'..'o'",
-                            b as char
-                        ),
+                        format!("byte {p} is {:?}, outside the RLE alphabet '0'..'o'", b as char),
                     ));
                 }
                 if k >= 12 {
-                    return Err(CoreError::invalid(
-                        "RLE string",
-                        format!("count too long at byte {p}"),
-                    ));
+                    return Err(CoreError::invalid("RLE string", format!("count too long at byte {p}")));
                 }
                 let c = (b - 48) as i64;
                 x |= (c & 0x1f) << (5 * k);
@@ -444,10 +387,7 @@ impl Rle {
                 x += counts[m - 2] as i64;
             }
             let v = u32::try_from(x).map_err(|_| {
-                CoreError::invalid(
-                    "RLE string",
-                    format!("count {m} decodes to {x}, outside 0..2^32"),
-                )
+                CoreError::invalid("RLE string", format!("count {m} decodes to {x}, outside 0..2^32"))
             })?;
             counts.push(v);
         }
@@ -460,10 +400,7 @@ impl Rle {
 /// Merges two count lists of the same size (union or intersection), as in `rleMerge`.
 fn merge_two(a: &[u32], b: &[u32], intersect: bool) -> Vec<u32> {
     let mut out = Vec::with_capacity(a.len() + b.len());
-    let (mut ca, mut cb) = (
-        a.first().copied().unwrap_or(0),
-        b.first().copied().unwrap_or(0),
-    );
+    let (mut ca, mut cb) = (a.first().copied().unwrap_or(0), b.first().copied().unwrap_or(0));
     let (mut va, mut vb, mut v) = (false, false, false);
     let (mut ia, mut ib) = (1usize, 1usize);
     let mut cc: u32 = 0;
@@ -504,10 +441,7 @@ fn rle_pair_iou(d: &Rle, g: &Rle, crowd: bool) -> f64 {
         return -1.0;
     }
     let (a, b) = (&d.counts, &g.counts);
-    let (mut ca, mut cb) = (
-        a.first().copied().unwrap_or(0),
-        b.first().copied().unwrap_or(0),
-    );
+    let (mut ca, mut cb) = (a.first().copied().unwrap_or(0), b.first().copied().unwrap_or(0));
     let (mut va, mut vb) = (false, false);
     let (mut ia, mut ib) = (1usize, 1usize);
     let (mut inter, mut union) = (0u64, 0u64);

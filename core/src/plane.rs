@@ -17,28 +17,16 @@ pub struct Plane<T> {
 impl<T: Copy + Default> Plane<T> {
     /// A plane filled with `T::default()`.
     pub fn new(width: usize, height: usize) -> Self {
-        Plane {
-            width,
-            height,
-            data: vec![T::default(); width * height],
-        }
+        Plane { width, height, data: vec![T::default(); width * height] }
     }
     /// A plane filled with `value`.
     pub fn filled(width: usize, height: usize, value: T) -> Self {
-        Plane {
-            width,
-            height,
-            data: vec![value; width * height],
-        }
+        Plane { width, height, data: vec![value; width * height] }
     }
     /// Wraps an existing buffer; panics if `data.len() != width * height` (programming error).
     pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Self {
         assert_eq!(data.len(), width * height, "plane buffer size mismatch");
-        Plane {
-            width,
-            height,
-            data,
-        }
+        Plane { width, height, data }
     }
     /// Pixel at column `x`, row `y` (panics when out of bounds).
     #[inline]

@@ -29,10 +29,7 @@ impl Pose {
 
     /// A pose from a rotation and a translation (metres).
     pub fn from_parts(rotation: Rotation3<f64>, translation: Vector3<f64>) -> Self {
-        Pose(Isometry3::from_parts(
-            Translation3::from(translation),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        ))
+        Pose(Isometry3::from_parts(Translation3::from(translation), UnitQuaternion::from_rotation_matrix(&rotation)))
     }
 
     /// A pose from a 3x3 matrix that must be a rotation (orthonormal, det +1 within `1e-6`).
@@ -42,13 +39,7 @@ impl Pose {
         }
         let orth = (r.transpose() * r - Matrix3::identity()).abs().max();
         if orth > 1e-6 || (r.determinant() - 1.0).abs() > 1e-6 {
-            return Err(CoreError::invalid(
-                "pose",
-                format!(
-                    "rotation is not orthonormal with det +1 (error {orth:.2e}, det {:.6})",
-                    r.determinant()
-                ),
-            ));
+            return Err(CoreError::invalid("pose", format!("rotation is not orthonormal with det +1 (error {orth:.2e}, det {:.6})", r.determinant())));
         }
         let rot = Rotation3::from_matrix_eps(r, 1e-12, 100, Rotation3::identity());
         Ok(Pose::from_parts(rot, t))
@@ -87,11 +78,7 @@ impl Pose {
     /// `T_world_cam` of an OpenCV camera at `eye` looking at `target`, with image "up" as close
     /// as possible to `up` (camera y points down, so camera -y is aligned with `up`).
     /// Fails when `eye == target` or the view direction is parallel to `up`.
-    pub fn look_at(
-        eye: &Point3<f64>,
-        target: &Point3<f64>,
-        up: &Vector3<f64>,
-    ) -> Result<Pose, CoreError> {
+    pub fn look_at(eye: &Point3<f64>, target: &Point3<f64>, up: &Vector3<f64>) -> Result<Pose, CoreError> {
         let z = target - eye;
         if z.norm() < 1e-12 {
             return Err(CoreError::invalid("look_at", "eye and target coincide"));
@@ -99,27 +86,18 @@ impl Pose {
         let z = z.normalize();
         let x = z.cross(up);
         if x.norm() < 1e-9 {
-            return Err(CoreError::invalid(
-                "look_at",
-                "view direction is parallel to up",
-            ));
+            return Err(CoreError::invalid("look_at", "view direction is parallel to up"));
         }
         let x = x.normalize();
         let y = z.cross(&x);
         let r = Matrix3::from_columns(&[x, y, z]);
-        Ok(Pose::from_parts(
-            Rotation3::from_matrix_unchecked(r),
-            eye.coords,
-        ))
+        Ok(Pose::from_parts(Rotation3::from_matrix_unchecked(r), eye.coords))
     }
 
     /// Rotation angle (radians) and translation distance (metres) between two poses.
     pub fn distance(&self, other: &Pose) -> (f64, f64) {
         let d = self.inverse().compose(other);
-        (
-            d.0.rotation.angle(),
-            (self.translation() - other.translation()).norm(),
-        )
+        (d.0.rotation.angle(), (self.translation() - other.translation()).norm())
     }
 }
 
@@ -141,11 +119,7 @@ impl Serialize for Pose {
         let r = self.rotation();
         let t = self.translation();
         PoseJson {
-            rotation: [
-                [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
-                [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
-                [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
-            ],
+            rotation: [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]],
             translation: [t.x, t.y, t.z],
         }
         .serialize(s)
@@ -166,10 +140,7 @@ mod tests {
     use super::*;
 
     fn sample() -> Pose {
-        Pose::from_parts(
-            Rotation3::from_euler_angles(0.3, -0.8, 2.0),
-            Vector3::new(0.4, -1.2, 3.0),
-        )
+        Pose::from_parts(Rotation3::from_euler_angles(0.3, -0.8, 2.0), Vector3::new(0.4, -1.2, 3.0))
     }
 
     #[test]
@@ -177,10 +148,7 @@ mod tests {
         let p = sample();
         let (a, d) = (p * p.inverse()).distance(&Pose::identity());
         assert!(a < 1e-12 && d < 1e-12);
-        let q = Pose::from_parts(
-            Rotation3::from_euler_angles(-1.0, 0.2, 0.1),
-            Vector3::new(1.0, 0.0, -2.0),
-        );
+        let q = Pose::from_parts(Rotation3::from_euler_angles(-1.0, 0.2, 0.1), Vector3::new(1.0, 0.0, -2.0));
         let x = Point3::new(0.1, 0.2, 0.3);
         let lhs = (p * q).transform_point(&x);
         let rhs = p.transform_point(&q.transform_point(&x));

@@ -38,12 +38,8 @@ impl Rig {
 
     /// `T_left_right` of a pair of cameras by name.
     pub fn relative_pose(&self, left: &str, right: &str) -> Result<Pose, CoreError> {
-        let l = self
-            .camera(left)
-            .ok_or_else(|| CoreError::invalid("rig", format!("no camera named {left:?}")))?;
-        let r = self
-            .camera(right)
-            .ok_or_else(|| CoreError::invalid("rig", format!("no camera named {right:?}")))?;
+        let l = self.camera(left).ok_or_else(|| CoreError::invalid("rig", format!("no camera named {left:?}")))?;
+        let r = self.camera(right).ok_or_else(|| CoreError::invalid("rig", format!("no camera named {right:?}")))?;
         Ok(l.t_rig_cam.inverse() * r.t_rig_cam)
     }
 
@@ -58,14 +54,9 @@ impl Rig {
             return Err(CoreError::invalid("rig", "no cameras"));
         }
         for (i, c) in self.cameras.iter().enumerate() {
-            c.model.validate().map_err(|e| {
-                CoreError::invalid(format!("cameras[{i}] ({})", c.name), e.to_string())
-            })?;
+            c.model.validate().map_err(|e| CoreError::invalid(format!("cameras[{i}] ({})", c.name), e.to_string()))?;
             if self.cameras[..i].iter().any(|o| o.name == c.name) {
-                return Err(CoreError::invalid(
-                    "rig",
-                    format!("camera name {:?} appears twice", c.name),
-                ));
+                return Err(CoreError::invalid("rig", format!("camera name {:?} appears twice", c.name)));
             }
         }
         for (l, r) in &self.stereo_pairs {
@@ -77,8 +68,7 @@ impl Rig {
     /// Reads and validates a rig JSON file; errors name the file.
     pub fn load_json(path: &Path) -> Result<Rig, CoreError> {
         let rig: Rig = crate::files::read_json(path)?;
-        rig.validate()
-            .map_err(|e| CoreError::parse(path, e.to_string()))?;
+        rig.validate().map_err(|e| CoreError::parse(path, e.to_string()))?;
         Ok(rig)
     }
 
@@ -98,16 +88,8 @@ mod tests {
         let model = CameraModel::from_hfov(640, 480, 77.0);
         let rig = Rig {
             cameras: vec![
-                RigCamera {
-                    name: "L".into(),
-                    model: model.clone(),
-                    t_rig_cam: Pose::identity(),
-                },
-                RigCamera {
-                    name: "R".into(),
-                    model,
-                    t_rig_cam: Pose::from_parts(Rotation3::identity(), Vector3::new(0.2, 0.0, 0.0)),
-                },
+                RigCamera { name: "L".into(), model: model.clone(), t_rig_cam: Pose::identity() },
+                RigCamera { name: "R".into(), model, t_rig_cam: Pose::from_parts(Rotation3::identity(), Vector3::new(0.2, 0.0, 0.0)) },
             ],
             stereo_pairs: vec![("L".into(), "R".into())],
         };

@@ -71,18 +71,15 @@ pub const DEFAULT_TUBE_TOML: &str = include_str!("../../data/tube.toml");
 
 impl Default for TubeModel {
     fn default() -> Self {
-        TubeModel::from_toml_str(DEFAULT_TUBE_TOML, Path::new("data/tube.toml"))
-            .expect("embedded tube model is valid")
+        TubeModel::from_toml_str(DEFAULT_TUBE_TOML, Path::new("data/tube.toml")).expect("embedded tube model is valid")
     }
 }
 
 impl TubeModel {
     /// Parses and validates a model from TOML text; `origin` names the source in errors.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Self, CoreError> {
-        let m: TubeModel =
-            toml::from_str(text).map_err(|e| CoreError::parse(origin, e.to_string()))?;
-        m.validate()
-            .map_err(|e| CoreError::parse(origin, e.to_string()))?;
+        let m: TubeModel = toml::from_str(text).map_err(|e| CoreError::parse(origin, e.to_string()))?;
+        m.validate().map_err(|e| CoreError::parse(origin, e.to_string()))?;
         Ok(m)
     }
 
@@ -95,32 +92,17 @@ impl TubeModel {
     /// Checks positive finite sizes and ordered, in-range sections.
     pub fn validate(&self) -> Result<(), CoreError> {
         if !(self.length.is_finite() && self.length > 0.0) {
-            return Err(CoreError::invalid(
-                "length",
-                format!("must be a positive number of metres, got {}", self.length),
-            ));
+            return Err(CoreError::invalid("length", format!("must be a positive number of metres, got {}", self.length)));
         }
         if self.sections.is_empty() {
-            return Err(CoreError::invalid(
-                "section",
-                "at least one section is needed",
-            ));
+            return Err(CoreError::invalid("section", "at least one section is needed"));
         }
         for (i, s) in self.sections.iter().enumerate() {
-            let ok = s.z0.is_finite()
-                && s.z1.is_finite()
-                && s.radius.is_finite()
-                && s.z0 >= 0.0
-                && s.z1 > s.z0
-                && s.z1 <= self.length + 1e-9
-                && s.radius > 0.0;
+            let ok = s.z0.is_finite() && s.z1.is_finite() && s.radius.is_finite() && s.z0 >= 0.0 && s.z1 > s.z0 && s.z1 <= self.length + 1e-9 && s.radius > 0.0;
             if !ok {
                 return Err(CoreError::invalid(
                     format!("section[{i}] ({})", s.name),
-                    format!(
-                        "need 0 <= z0 < z1 <= length and radius > 0 (z0={}, z1={}, radius={})",
-                        s.z0, s.z1, s.radius
-                    ),
+                    format!("need 0 <= z0 < z1 <= length and radius > 0 (z0={}, z1={}, radius={})", s.z0, s.z1, s.radius),
                 ));
             }
         }
@@ -135,11 +117,7 @@ impl TubeModel {
     /// Outer radius at axial coordinate `z` of the tube frame; 0 outside the tube.
     pub fn radius_at(&self, z: f64) -> f64 {
         let zf = z + self.length / 2.0;
-        self.sections
-            .iter()
-            .filter(|s| zf >= s.z0 && zf <= s.z1)
-            .map(|s| s.radius)
-            .fold(0.0, f64::max)
+        self.sections.iter().filter(|s| zf >= s.z0 && zf <= s.z1).map(|s| s.radius).fold(0.0, f64::max)
     }
 
     /// The largest section radius, metres.
@@ -149,11 +127,7 @@ impl TubeModel {
 
     /// Radius of the longest section (the body), metres: the width that dominates the image.
     pub fn body_radius(&self) -> f64 {
-        self.sections
-            .iter()
-            .max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0)))
-            .map(|s| s.radius)
-            .unwrap_or(0.0)
+        self.sections.iter().max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0))).map(|s| s.radius).unwrap_or(0.0)
     }
 }
 
@@ -190,12 +164,8 @@ impl TubeMesh {
                 Some("v") => {
                     let mut c = [0.0f64; 3];
                     for v in c.iter_mut() {
-                        let tok = it
-                            .next()
-                            .ok_or_else(|| err("vertex needs 3 coordinates".into()))?;
-                        *v = tok
-                            .parse()
-                            .map_err(|_| err(format!("bad coordinate {tok:?}")))?;
+                        let tok = it.next().ok_or_else(|| err("vertex needs 3 coordinates".into()))?;
+                        *v = tok.parse().map_err(|_| err(format!("bad coordinate {tok:?}")))?;
                         if !v.is_finite() {
                             return Err(err("non-finite coordinate".into()));
                         }
@@ -211,9 +181,7 @@ impl TubeMesh {
                     let mut idx = Vec::with_capacity(4);
                     for tok in it {
                         let first = tok.split('/').next().unwrap_or("");
-                        let i: i64 = first
-                            .parse()
-                            .map_err(|_| err(format!("bad face index {tok:?}")))?;
+                        let i: i64 = first.parse().map_err(|_| err(format!("bad face index {tok:?}")))?;
                         let n = vertices.len() as i64;
                         let k = if i > 0 { i - 1 } else { n + i };
                         if i == 0 || k < 0 || k >= n {
@@ -236,33 +204,18 @@ impl TubeMesh {
             return Err(CoreError::parse(origin, "no faces: not a usable mesh"));
         }
         let zmin = vertices.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-        let zmax = vertices
-            .iter()
-            .map(|p| p.z)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let zmax = vertices.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
         let mid = 0.5 * (zmin + zmax);
         for p in &mut vertices {
             p.z -= mid;
         }
-        Ok(TubeMesh {
-            vertices,
-            triangles,
-            materials,
-        })
+        Ok(TubeMesh { vertices, triangles, materials })
     }
 
     /// Length along the axis (metres).
     pub fn length(&self) -> f64 {
-        let zmin = self
-            .vertices
-            .iter()
-            .map(|p| p.z)
-            .fold(f64::INFINITY, f64::min);
-        let zmax = self
-            .vertices
-            .iter()
-            .map(|p| p.z)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let zmin = self.vertices.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+        let zmax = self.vertices.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
         zmax - zmin
     }
 }
@@ -284,27 +237,20 @@ mod tests {
     #[test]
     fn invalid_model_is_refused_with_field() {
         let bad = DEFAULT_TUBE_TOML.replace("radius = 0.00855", "radius = -1.0");
-        let err = TubeModel::from_toml_str(&bad, Path::new("tube.toml"))
-            .unwrap_err()
-            .to_string();
+        let err = TubeModel::from_toml_str(&bad, Path::new("tube.toml")).unwrap_err().to_string();
         assert!(err.contains("tube.toml") && err.contains("body"), "{err}");
-        let err = TubeModel::from_toml_str("name = 1", Path::new("x.toml"))
-            .unwrap_err()
-            .to_string();
+        let err = TubeModel::from_toml_str("name = 1", Path::new("x.toml")).unwrap_err().to_string();
         assert!(err.contains("x.toml"), "{err}");
     }
 
     #[test]
     fn obj_parser_triangulates_and_reports_bad_lines() {
-        let obj =
-            "v 0 0 0\nv 1 0 0\nv 1 1 0.2\nv 0 1 0.2\nusemtl titanium_nitrade\nf 1/1 2/2 3/3 4/4\n";
+        let obj = "v 0 0 0\nv 1 0 0\nv 1 1 0.2\nv 0 1 0.2\nusemtl titanium_nitrade\nf 1/1 2/2 3/3 4/4\n";
         let m = TubeMesh::parse_obj(obj, Path::new("q.obj")).unwrap();
         assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
         assert_eq!(m.materials[0], TubeMaterial::Gold);
         assert!((m.vertices[0].z + 0.1).abs() < 1e-12);
-        let err = TubeMesh::parse_obj("v 0 0 0\nf 1 2 3\n", Path::new("q.obj"))
-            .unwrap_err()
-            .to_string();
+        let err = TubeMesh::parse_obj("v 0 0 0\nf 1 2 3\n", Path::new("q.obj")).unwrap_err().to_string();
         assert!(err.contains("q.obj") && err.contains("line 2"), "{err}");
         assert!(TubeMesh::parse_obj("v 0 0 nan\n", Path::new("q.obj")).is_err());
         assert!(TubeMesh::parse_obj("", Path::new("q.obj")).is_err());
@@ -312,17 +258,13 @@ mod tests {
 
     #[test]
     fn loads_the_cad_mesh_when_present() {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/data/sample_tube/sample_tube.obj");
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/sample_tube/sample_tube.obj");
         if !p.exists() {
             eprintln!("skipping: {} absent", p.display());
             return;
         }
         let m = TubeMesh::load_obj(&p).unwrap();
         assert!((m.length() - 0.170).abs() < 0.002, "length {}", m.length());
-        assert!(
-            m.materials.contains(&TubeMaterial::Gold)
-                && m.materials.contains(&TubeMaterial::Alumina)
-        );
+        assert!(m.materials.contains(&TubeMaterial::Gold) && m.materials.contains(&TubeMaterial::Alumina));
     }
 }

@@ -133,18 +133,11 @@ pub fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 impl TubeAxisPose {
     /// A pose from a centre and a directed axis (toward the seal end), with zero covariance,
     /// `converged = true` and no residuals. Fails on a non-finite centre or zero axis.
-    pub fn new(
-        image_id: u64,
-        score: f64,
-        centre: Vector3<f64>,
-        seal_direction: Vector3<f64>,
-        end_confidence: f64,
-    ) -> Result<Self, CoreError> {
+    pub fn new(image_id: u64, score: f64, centre: Vector3<f64>, seal_direction: Vector3<f64>, end_confidence: f64) -> Result<Self, CoreError> {
         if centre.iter().any(|v| !v.is_finite()) {
             return Err(CoreError::invalid("tube pose", "non-finite centre"));
         }
-        let axis = canonical_axis(&seal_direction)
-            .ok_or_else(|| CoreError::invalid("tube pose", "zero or non-finite axis"))?;
+        let axis = canonical_axis(&seal_direction).ok_or_else(|| CoreError::invalid("tube pose", "zero or non-finite axis"))?;
         let end = seal_direction.normalize();
         Ok(TubeAxisPose {
             image_id,
@@ -164,10 +157,7 @@ impl TubeAxisPose {
     /// Marks the pose as failed with a reason (keeps the last finite estimate).
     pub fn fail(mut self, reason: FailureReason, message: impl Into<String>) -> Self {
         self.converged = false;
-        self.failure = Some(RefineFailure {
-            reason,
-            message: message.into(),
-        });
+        self.failure = Some(RefineFailure { reason, message: message.into() });
         self
     }
 
@@ -176,24 +166,17 @@ impl TubeAxisPose {
     pub fn to_pose(&self) -> Pose {
         let z = self.end_direction.normalize();
         let (x, y) = tangent_basis(&z);
-        Pose::from_parts(
-            Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z])),
-            self.centre,
-        )
+        Pose::from_parts(Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z])), self.centre)
     }
 
     /// Standard deviation of the axis direction, radians: `sqrt(σ²_δ1 + σ²_δ2)`.
     pub fn axis_std_rad(&self) -> f64 {
-        (self.covariance[3][3] + self.covariance[4][4])
-            .max(0.0)
-            .sqrt()
+        (self.covariance[3][3] + self.covariance[4][4]).max(0.0).sqrt()
     }
 
     /// Standard deviation of the centre, metres: `sqrt(trace of the 3x3 centre block)`.
     pub fn centre_std_m(&self) -> f64 {
-        (self.covariance[0][0] + self.covariance[1][1] + self.covariance[2][2])
-            .max(0.0)
-            .sqrt()
+        (self.covariance[0][0] + self.covariance[1][1] + self.covariance[2][2]).max(0.0).sqrt()
     }
 
     /// Position error against a ground-truth centre, split into the part perpendicular to the
@@ -229,10 +212,7 @@ impl TubeAxisPose {
             .or_else(|| perp(Vector3::y()))
             .unwrap_or_else(|| tangent_basis(&x).0);
         let y = z.cross(&x);
-        Pose::from_parts(
-            Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z])),
-            self.centre,
-        )
+        Pose::from_parts(Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z])), self.centre)
     }
 }
 
@@ -249,35 +229,19 @@ mod tests {
         assert_eq!(canonical_axis(&b).unwrap(), Vector3::y());
         assert!(canonical_axis(&Vector3::zeros()).is_none());
         assert!((axis_angle(&a, &-a)).abs() < 1e-7);
-        assert!(
-            (axis_angle(&Vector3::x(), &Vector3::y()) - std::f64::consts::FRAC_PI_2).abs() < 1e-12
-        );
+        assert!((axis_angle(&Vector3::x(), &Vector3::y()) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
     }
 
     #[test]
     fn grasp_frame_approaches_from_above_and_closes_across_axis() {
         // Camera looking down at 45 degrees: world up is (0, -1, -1)/√2 in the camera frame.
         let up = Vector3::new(0.0, -1.0, -1.0).normalize();
-        let p = TubeAxisPose::new(
-            0,
-            1.0,
-            Vector3::new(0.1, 0.2, 1.0),
-            Vector3::new(-1.0, 0.0, 0.0),
-            0.9,
-        )
-        .unwrap();
+        let p = TubeAxisPose::new(0, 1.0, Vector3::new(0.1, 0.2, 1.0), Vector3::new(-1.0, 0.0, 0.0), 0.9).unwrap();
         let g = p.grasp_frame(&up);
         let r = g.rotation();
         assert!((r.determinant() - 1.0).abs() < 1e-12);
-        let (x, y, z) = (
-            r.column(0).into_owned(),
-            r.column(1).into_owned(),
-            r.column(2).into_owned(),
-        );
-        assert!(
-            (x - Vector3::x()).norm() < 1e-12,
-            "x follows the flip-free axis"
-        );
+        let (x, y, z) = (r.column(0).into_owned(), r.column(1).into_owned(), r.column(2).into_owned());
+        assert!((x - Vector3::x()).norm() < 1e-12, "x follows the flip-free axis");
         assert!((z + up).norm() < 1e-12, "approach is straight down here");
         assert!(y.dot(&p.axis).abs() < 1e-12);
         assert_eq!(g.translation(), p.centre);
@@ -294,14 +258,7 @@ mod tests {
 
     #[test]
     fn json_round_trip_and_errors() {
-        let mut p = TubeAxisPose::new(
-            5,
-            0.7,
-            Vector3::new(0.0, 0.1, 0.9),
-            Vector3::new(0.0, 0.0, -1.0),
-            0.8,
-        )
-        .unwrap();
+        let mut p = TubeAxisPose::new(5, 0.7, Vector3::new(0.0, 0.1, 0.9), Vector3::new(0.0, 0.0, -1.0), 0.8).unwrap();
         p.covariance[0][0] = 1e-6;
         let p = p.fail(FailureReason::TooFewEdges, "3 of 200 samples");
         let text = serde_json::to_string(&p).unwrap();

@@ -6,26 +6,17 @@ use tubeloc_core::mask::bbox_iou;
 use tubeloc_core::{BinaryMask, Rle};
 
 fn fixture() -> Value {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures/rle_pycocotools.json");
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/rle_pycocotools.json");
     serde_json::from_slice(&std::fs::read(&p).expect("fixture present")).expect("fixture JSON")
 }
 
 fn mask_from_rows(h: usize, w: usize, rows: &Value) -> BinaryMask {
-    let rows: Vec<&str> = rows
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|r| r.as_str().unwrap())
-        .collect();
+    let rows: Vec<&str> = rows.as_array().unwrap().iter().map(|r| r.as_str().unwrap()).collect();
     BinaryMask::from_fn(w, h, |x, y| rows[y].as_bytes()[x] == b'1')
 }
 
 fn hw(c: &Value) -> (u32, u32) {
-    (
-        c["h"].as_u64().unwrap() as u32,
-        c["w"].as_u64().unwrap() as u32,
-    )
+    (c["h"].as_u64().unwrap() as u32, c["w"].as_u64().unwrap() as u32)
 }
 
 #[test]
@@ -37,19 +28,10 @@ fn encode_matches_pycocotools_strings_area_and_bbox() {
         let (h, w) = hw(c);
         let m = mask_from_rows(h as usize, w as usize, &c["rows"]);
         let rle = Rle::from_mask(&m);
-        assert_eq!(
-            rle.to_compressed_string(),
-            c["counts"].as_str().unwrap(),
-            "mask {i}"
-        );
+        assert_eq!(rle.to_compressed_string(), c["counts"].as_str().unwrap(), "mask {i}");
         assert_eq!(rle.area(), c["area"].as_u64().unwrap(), "mask {i}");
         assert_eq!(m.area(), rle.area());
-        let bb: Vec<f64> = c["bbox"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let bb: Vec<f64> = c["bbox"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         assert_eq!(rle.to_bbox().to_vec(), bb, "mask {i}");
         assert_eq!(m.bbox().to_vec(), bb, "mask {i}: BinaryMask::bbox");
         // string -> rle -> mask round trip
@@ -66,23 +48,14 @@ fn large_sparse_mask_multi_chunk_counts() {
     let (h, w) = hw(c);
     let mut m = BinaryMask::new(w as usize, h as usize);
     for p in c["ones"].as_array().unwrap() {
-        m.set(
-            p[1].as_u64().unwrap() as usize,
-            p[0].as_u64().unwrap() as usize,
-            true,
-        );
+        m.set(p[1].as_u64().unwrap() as usize, p[0].as_u64().unwrap() as usize, true);
     }
     let rle = Rle::from_mask(&m);
     let s = c["counts"].as_str().unwrap();
     assert_eq!(rle.to_compressed_string(), s);
     assert_eq!(Rle::from_compressed_string(s, [h, w]).unwrap(), rle);
     assert_eq!(rle.area(), c["area"].as_u64().unwrap());
-    let bb: Vec<f64> = c["bbox"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let bb: Vec<f64> = c["bbox"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert_eq!(rle.to_bbox().to_vec(), bb);
 }
 
@@ -103,14 +76,8 @@ fn merge_matches_pycocotools() {
                 Rle::from_compressed_string(m["counts"].as_str().unwrap(), [h, w]).unwrap()
             })
             .collect();
-        assert_eq!(
-            Rle::merge(&rles, false).unwrap().to_compressed_string(),
-            c["union"].as_str().unwrap()
-        );
-        assert_eq!(
-            Rle::merge(&rles, true).unwrap().to_compressed_string(),
-            c["intersection"].as_str().unwrap()
-        );
+        assert_eq!(Rle::merge(&rles, false).unwrap().to_compressed_string(), c["union"].as_str().unwrap());
+        assert_eq!(Rle::merge(&rles, true).unwrap().to_compressed_string(), c["intersection"].as_str().unwrap());
     }
 }
 
@@ -120,28 +87,15 @@ fn mask_iou_matches_pycocotools_including_crowd() {
     for c in f["ious"].as_array().unwrap() {
         let (h, w) = hw(c);
         let dec = |k: &str| -> Vec<Rle> {
-            c[k].as_array()
-                .unwrap()
-                .iter()
-                .map(|s| Rle::from_compressed_string(s.as_str().unwrap(), [h, w]).unwrap())
-                .collect()
+            c[k].as_array().unwrap().iter().map(|s| Rle::from_compressed_string(s.as_str().unwrap(), [h, w]).unwrap()).collect()
         };
         let (dt, gt) = (dec("dt"), dec("gt"));
-        let crowd: Vec<bool> = c["iscrowd"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap() == 1)
-            .collect();
+        let crowd: Vec<bool> = c["iscrowd"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() == 1).collect();
         let got = Rle::iou(&dt, &gt, &crowd);
         let want = c["iou"].as_array().unwrap();
         for d in 0..dt.len() {
             for g in 0..gt.len() {
-                assert_eq!(
-                    got[d * gt.len() + g],
-                    want[d][g].as_f64().unwrap(),
-                    "d {d} g {g}"
-                );
+                assert_eq!(got[d * gt.len() + g], want[d][g].as_f64().unwrap(), "d {d} g {g}");
             }
         }
     }
@@ -155,19 +109,11 @@ fn polygons_rasterize_like_rle_fr_poly() {
         let polys: Vec<Vec<f64>> = serde_json::from_value(c["polygons"].clone()).unwrap();
         for (j, p) in polys.iter().enumerate() {
             let rle = Rle::from_polygon(p, h, w);
-            assert_eq!(
-                rle.to_compressed_string(),
-                c["each"][j].as_str().unwrap(),
-                "case {i} polygon {j}"
-            );
+            assert_eq!(rle.to_compressed_string(), c["each"][j].as_str().unwrap(), "case {i} polygon {j}");
             rle.check().unwrap();
         }
         let merged = Rle::from_polygons(&polys, h, w).unwrap();
-        assert_eq!(
-            merged.to_compressed_string(),
-            c["merged"].as_str().unwrap(),
-            "case {i} merged"
-        );
+        assert_eq!(merged.to_compressed_string(), c["merged"].as_str().unwrap(), "case {i} merged");
     }
 }
 
@@ -177,11 +123,7 @@ fn boxes_rasterize_like_rle_fr_bbox() {
     for (i, c) in f["boxes"].as_array().unwrap().iter().enumerate() {
         let (h, w) = hw(c);
         let bb: [f64; 4] = serde_json::from_value(c["bbox"].clone()).unwrap();
-        assert_eq!(
-            Rle::from_bbox(bb, h, w).to_compressed_string(),
-            c["counts"].as_str().unwrap(),
-            "box {i}"
-        );
+        assert_eq!(Rle::from_bbox(bb, h, w).to_compressed_string(), c["counts"].as_str().unwrap(), "box {i}");
     }
 }
 
@@ -191,12 +133,7 @@ fn bbox_iou_matches_pycocotools() {
     let c = &f["bbox_iou"];
     let dt: Vec<[f64; 4]> = serde_json::from_value(c["dt"].clone()).unwrap();
     let gt: Vec<[f64; 4]> = serde_json::from_value(c["gt"].clone()).unwrap();
-    let crowd: Vec<bool> = c["iscrowd"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap() == 1)
-        .collect();
+    let crowd: Vec<bool> = c["iscrowd"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() == 1).collect();
     let got = bbox_iou(&dt, &gt, &crowd);
     let want: Vec<Vec<f64>> = serde_json::from_value(c["iou"].clone()).unwrap();
     for d in 0..dt.len() {
@@ -204,40 +141,26 @@ fn bbox_iou_matches_pycocotools() {
             assert_eq!(got[d * gt.len() + g], want[d][g], "d {d} g {g}");
         }
     }
-    assert!(
-        (got[0] - 1.0).abs() < 1e-12,
-        "identical box against a crowd gt: {}",
-        got[0]
-    );
+    assert!((got[0] - 1.0).abs() < 1e-12, "identical box against a crowd gt: {}", got[0]);
 }
 
 #[test]
 fn malformed_strings_and_sizes_are_errors() {
     // character outside the alphabet
-    let e = Rle::from_compressed_string("12 3", [2, 3])
-        .unwrap_err()
-        .to_string();
+    let e = Rle::from_compressed_string("12 3", [2, 3]).unwrap_err().to_string();
     assert!(e.contains("byte 2"), "{e}");
     // continuation bit set on the last byte: truncated
-    let e = Rle::from_compressed_string("0P", [1, 1])
-        .unwrap_err()
-        .to_string();
+    let e = Rle::from_compressed_string("0P", [1, 1]).unwrap_err().to_string();
     assert!(e.contains("truncated"), "{e}");
     // counts that do not cover the image
     let good = Rle::from_mask(&BinaryMask::from_fn(4, 3, |x, y| x == y)).to_compressed_string();
-    let e = Rle::from_compressed_string(&good, [3, 5])
-        .unwrap_err()
-        .to_string();
+    let e = Rle::from_compressed_string(&good, [3, 5]).unwrap_err().to_string();
     assert!(e.contains("sum to 12"), "{e}");
     // merge of different sizes
     let a = Rle::from_mask(&BinaryMask::new(2, 2));
     let b = Rle::from_mask(&BinaryMask::new(3, 2));
     assert!(Rle::merge(&[a.clone(), b.clone()], false).is_err());
-    assert_eq!(
-        Rle::iou(&[a], &[b], &[false]),
-        vec![0.0],
-        "empty masks: zero bbox overlap"
-    );
+    assert_eq!(Rle::iou(&[a], &[b], &[false]), vec![0.0], "empty masks: zero bbox overlap");
 }
 
 #[test]
@@ -267,12 +190,7 @@ fn morph_reference(m: &BinaryMask, r: usize, grow: bool) -> BinaryMask {
     for _ in 0..r {
         let p = cur.clone();
         cur = BinaryMask::from_fn(w, h, |x, y| {
-            let n = [
-                x > 0 && p.get(x - 1, y),
-                p.get(x + 1, y),
-                y > 0 && p.get(x, y - 1),
-                p.get(x, y + 1),
-            ];
+            let n = [x > 0 && p.get(x - 1, y), p.get(x + 1, y), y > 0 && p.get(x, y - 1), p.get(x, y + 1)];
             if grow {
                 p.get(x, y) || n.iter().any(|&b| b)
             } else {
@@ -316,20 +234,10 @@ fn windowed_morphology_matches_the_whole_image_reference() {
         let (w, h) = (1 + next(39), 1 + next(39));
         let (cx, cy, rad) = (next(w) as f64, next(h) as f64, 0.5 + next(8) as f64);
         let sparse = next(5) + 7;
-        let m = BinaryMask::from_fn(w, h, |x, y| {
-            (x as f64 - cx).hypot(y as f64 - cy) < rad || (x * 7 + y * 3) % (sparse * 3) == 0
-        });
+        let m = BinaryMask::from_fn(w, h, |x, y| (x as f64 - cx).hypot(y as f64 - cy) < rad || (x * 7 + y * 3) % (sparse * 3) == 0);
         for r in 0..5 {
-            assert_eq!(
-                m.dilated(r),
-                morph_reference(&m, r, true),
-                "dilate r {r} on {w}x{h}"
-            );
-            assert_eq!(
-                m.eroded(r),
-                morph_reference(&m, r, false),
-                "erode r {r} on {w}x{h}"
-            );
+            assert_eq!(m.dilated(r), morph_reference(&m, r, true), "dilate r {r} on {w}x{h}");
+            assert_eq!(m.eroded(r), morph_reference(&m, r, false), "erode r {r} on {w}x{h}");
         }
     }
 }

@@ -4,9 +4,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
-use tubeloc_detect::learned::{
-    detect_rgb, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer,
-};
+use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer};
 
 fn synthetic_image(size: usize) -> (Vec<u8>, Vec<u8>) {
     let mut rgb = vec![0u8; size * size * 3];
@@ -14,9 +12,7 @@ fn synthetic_image(size: usize) -> (Vec<u8>, Vec<u8>) {
     for y in 0..size {
         for x in 0..size {
             let v = (((x * 7 + y * 13) % 31) * 4 + 60) as u8;
-            let on = (y as isize - (size / 2) as isize).abs() < 7
-                && x > size / 3
-                && x < size / 3 + size / 4;
+            let on = (y as isize - (size / 2) as isize).abs() < 7 && x > size / 3 && x < size / 3 + size / 4;
             let v = if on { 200 } else { v };
             rgb[(y * size + x) * 3..][..3].copy_from_slice(&[v, v, v]);
             mask[y * size + x] = on as u8;
@@ -31,31 +27,18 @@ fn bench(c: &mut Criterion) {
     let img = TrainImage::new(768, 768, pre.apply(&rgb, 768, 768), &[mask]);
     // The shipped architecture: width 8, stride-4 heads.
     let model = LearnedModel::new(pre, 8, 1).unwrap();
-    let cfg = TrainConfig {
-        batch: 8,
-        augment: AugmentConfig {
-            crop: 384,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let cfg = TrainConfig { batch: 8, augment: AugmentConfig { crop: 384, ..Default::default() }, ..Default::default() };
     let mut trainer = Trainer::new(model, cfg).unwrap();
     let images = vec![img];
     let mut g = c.benchmark_group("learned");
     g.sample_size(10);
-    g.bench_function("train_step_8x1x384x384", |b| {
-        b.iter(|| trainer.step(&images).unwrap())
-    });
+    g.bench_function("train_step_8x1x384x384", |b| b.iter(|| trainer.step(&images).unwrap()));
     let (rgb, _) = synthetic_image(1024);
     let model = &trainer.model;
-    g.bench_function("detect_rgb_1024x1024", |b| {
-        b.iter(|| detect_rgb(model, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap())
-    });
+    g.bench_function("detect_rgb_1024x1024", |b| b.iter(|| detect_rgb(model, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap()));
     // With the optional full-resolution mask branch (`tubeloc train --fine-mask`).
     let fine = LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap();
-    g.bench_function("detect_rgb_1024x1024_fine_mask", |b| {
-        b.iter(|| detect_rgb(&fine, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap())
-    });
+    g.bench_function("detect_rgb_1024x1024_fine_mask", |b| b.iter(|| detect_rgb(&fine, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap()));
     g.finish();
 }
 

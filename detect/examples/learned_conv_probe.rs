@@ -7,9 +7,7 @@ use candle_nn::{Conv2dConfig, VarBuilder, VarMap};
 use std::time::Instant;
 use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
 use tubeloc_detect::learned::layers::Conv;
-use tubeloc_detect::learned::{
-    detect_rgb, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer,
-};
+use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer};
 
 fn median_ms(mut f: impl FnMut()) -> f64 {
     f();
@@ -43,16 +41,8 @@ fn main() -> candle_core::Result<()> {
         ("5x5 s2 1->8 @1024 (old stem)", 1, 8, 5, 2, 1, 1024),
     ];
     let only_net = std::env::var("ONLY_NET").is_ok();
-    for (i, &(name, cin, cout, k, stride, groups, side)) in
-        cases.iter().enumerate().filter(|_| !only_net)
-    {
-        let cfg = Conv2dConfig {
-            padding: k / 2,
-            stride,
-            dilation: 1,
-            groups,
-            cudnn_fwd_algo: None,
-        };
+    for (i, &(name, cin, cout, k, stride, groups, side)) in cases.iter().enumerate().filter(|_| !only_net) {
+        let cfg = Conv2dConfig { padding: k / 2, stride, dilation: 1, groups, cudnn_fwd_algo: None };
         let conv = candle_nn::conv2d(cin, cout, k, cfg, vb.pp(format!("c{i}")))?;
         let x = Tensor::randn(0f32, 1.0, (1, cin, side, side), &dev)?;
         let ms = median_ms(|| {
@@ -60,10 +50,7 @@ fn main() -> candle_core::Result<()> {
         });
         let out = side / stride;
         let gmac = (out * out * cout * cin / groups * k * k) as f64 / 1e9;
-        println!(
-            "{name:32} {ms:8.2} ms  {:6.2} GFLOP/s",
-            2.0 * gmac / (ms / 1e3)
-        );
+        println!("{name:32} {ms:8.2} ms  {:6.2} GFLOP/s", 2.0 * gmac / (ms / 1e3));
     }
     let x = Tensor::randn(0f32, 1.0, (1, 16, 128, 128), &dev)?;
     let s = Tensor::randn(0f32, 1.0, (1, 8, 256, 256), &dev)?;
@@ -81,19 +68,12 @@ fn main() -> candle_core::Result<()> {
         let ms = median_ms(|| {
             conv.forward(&x).unwrap().relu().unwrap();
         });
-        println!(
-            "matmul-conv {name:20} {ms:8.2} ms  {:6.2} GFLOP/s",
-            2.0 * (side * side * cout * cin * k * k) as f64 / 1e9 / (ms / 1e3)
-        );
+        println!("matmul-conv {name:20} {ms:8.2} ms  {:6.2} GFLOP/s", 2.0 * (side * side * cout * cin * k * k) as f64 / 1e9 / (ms / 1e3));
     }
     // Whole network: 1024x1024 forward and training steps.
-    let width: usize = std::env::var("PROBE_WIDTH")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(12);
+    let width: usize = std::env::var("PROBE_WIDTH").ok().and_then(|v| v.parse().ok()).unwrap_or(12);
     let pre = Preprocess::default();
-    let model =
-        LearnedModel::new(pre, width, 1).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+    let model = LearnedModel::new(pre, width, 1).map_err(|e| candle_core::Error::Msg(e.to_string()))?;
     let x = Tensor::randn(0f32, 1.0, (1, 1, 1024, 1024), &dev)?;
     let ms = median_ms(|| {
         model.forward(&x).unwrap();
@@ -111,21 +91,9 @@ fn main() -> candle_core::Result<()> {
         detect_rgb(&model, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap();
     });
     println!("detect_rgb 1024x1024 (w{width})        {ms:8.2} ms");
-    let images = vec![TrainImage::new(
-        1024,
-        1024,
-        pre.apply(&rgb, 1024, 1024),
-        &[mask],
-    )];
+    let images = vec![TrainImage::new(1024, 1024, pre.apply(&rgb, 1024, 1024), &[mask])];
     for (batch, crop) in [(8usize, 384usize), (8, 512)] {
-        let cfg = TrainConfig {
-            batch,
-            augment: AugmentConfig {
-                crop,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
+        let cfg = TrainConfig { batch, augment: AugmentConfig { crop, ..Default::default() }, ..Default::default() };
         let mut trainer = Trainer::new(LearnedModel::new(pre, width, 1).unwrap(), cfg).unwrap();
         let ms = median_ms(|| {
             trainer.step(&images).unwrap();

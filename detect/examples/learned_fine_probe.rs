@@ -11,17 +11,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut acc = vec![[0usize; 4]; ts.len()];
     for (i, img) in imgs.iter().enumerate() {
         let p = model.predict(&img.input, img.width, img.height)?;
-        let Some(f) = &p.fine else {
-            return Err("model has no fine branch".into());
-        };
+        let Some(f) = &p.fine else { return Err("model has no fine branch".into()) };
         if let Ok(dir) = std::env::var("FINE_PROBE_DUMP") {
             // Raw little-endian f32 planes for inspection: fine logits, input, labels.
-            let dump = |name: &str, v: &mut dyn Iterator<Item = f32>| {
-                std::fs::write(
-                    format!("{dir}/{i}_{name}.f32"),
-                    v.flat_map(f32::to_le_bytes).collect::<Vec<u8>>(),
-                )
-            };
+            let dump = |name: &str, v: &mut dyn Iterator<Item = f32>| std::fs::write(format!("{dir}/{i}_{name}.f32"), v.flat_map(f32::to_le_bytes).collect::<Vec<u8>>());
             dump("fine", &mut f.iter().copied())?;
             dump("input", &mut img.input.iter().copied())?;
             dump("labels", &mut img.labels.iter().map(|&l| l as f32))?;
@@ -31,13 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for y in 0..img.height {
             for x in 0..w {
                 // Only pixels within 8 px of a tube pixel (the instance neighbourhood).
-                let near = (y.saturating_sub(8)..(y + 9).min(img.height))
-                    .step_by(4)
-                    .any(|yy| {
-                        (x.saturating_sub(8)..(x + 9).min(w))
-                            .step_by(4)
-                            .any(|xx| img.labels[yy * w + xx] != 0)
-                    });
+                let near = (y.saturating_sub(8)..(y + 9).min(img.height)).step_by(4).any(|yy| (x.saturating_sub(8)..(x + 9).min(w)).step_by(4).any(|xx| img.labels[yy * w + xx] != 0));
                 if !near {
                     continue;
                 }
@@ -56,11 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     for (k, t) in ts.iter().enumerate() {
         let r = acc[k];
-        println!(
-            "logit > {t:5.1}: fine IoU {:.3}  stride-4 (nearest) IoU {:.3}",
-            r[0] as f64 / r[1].max(1) as f64,
-            r[2] as f64 / r[3].max(1) as f64
-        );
+        println!("logit > {t:5.1}: fine IoU {:.3}  stride-4 (nearest) IoU {:.3}", r[0] as f64 / r[1].max(1) as f64, r[2] as f64 / r[3].max(1) as f64);
     }
     Ok(())
 }

@@ -7,9 +7,7 @@ use std::collections::HashMap;
 use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
 use tubeloc_detect::learned::net::{upsample4_bilinear, HEADS, LENGTH_SCALE};
 use tubeloc_detect::learned::train::make_batch;
-use tubeloc_detect::learned::{
-    decode, DecodeConfig, LearnedModel, Prediction, Preprocess, TrainConfig, Trainer,
-};
+use tubeloc_detect::learned::{decode, DecodeConfig, LearnedModel, Prediction, Preprocess, TrainConfig, Trainer};
 
 /// A textured image with bright bars ("tubes") at random places and angles, plus their masks.
 fn bar_image(size: usize, bars: usize, seed: u64) -> (Vec<u8>, Vec<Vec<u8>>) {
@@ -22,20 +20,14 @@ fn bar_image(size: usize, bars: usize, seed: u64) -> (Vec<u8>, Vec<Vec<u8>>) {
         .collect();
     let mut masks = Vec::new();
     for _ in 0..bars {
-        let (cx, cy) = (
-            rng.random_range(0.25..0.75) * size as f64,
-            rng.random_range(0.25..0.75) * size as f64,
-        );
+        let (cx, cy) = (rng.random_range(0.25..0.75) * size as f64, rng.random_range(0.25..0.75) * size as f64);
         let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
         let (len, wid) = (rng.random_range(40.0..70.0), rng.random_range(5.0..8.0));
         let mut m = vec![0u8; size * size];
         for y in 0..size {
             for x in 0..size {
                 let (dx, dy) = (x as f64 - cx, y as f64 - cy);
-                let (a, b) = (
-                    dx * th.cos() + dy * th.sin(),
-                    -dx * th.sin() + dy * th.cos(),
-                );
+                let (a, b) = (dx * th.cos() + dy * th.sin(), -dx * th.sin() + dy * th.cos());
                 if a.abs() < len / 2.0 && b.abs() < wid / 2.0 {
                     m[y * size + x] = 1;
                     rgb[(y * size + x) * 3..][..3].copy_from_slice(&[215, 215, 215]);
@@ -60,19 +52,8 @@ fn tiny_set(pre: Preprocess) -> Vec<TrainImage> {
 fn training_a_few_steps_lowers_the_loss() {
     let pre = Preprocess::default();
     let images = tiny_set(pre);
-    let aug = AugmentConfig {
-        crop: 128,
-        ..Default::default()
-    };
-    let cfg = TrainConfig {
-        batch: 4,
-        lr: 3e-3,
-        warmup: 5,
-        total_steps: 60,
-        seed: 7,
-        augment: aug,
-        ..Default::default()
-    };
+    let aug = AugmentConfig { crop: 128, ..Default::default() };
+    let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 5, total_steps: 60, seed: 7, augment: aug, ..Default::default() };
     let model = LearnedModel::new(pre, 8, 3).unwrap();
     let mut trainer = Trainer::new(model, cfg).unwrap();
     let held = make_batch(&images, &aug, 8, 12345, 0).unwrap();
@@ -96,11 +77,7 @@ fn same_seed_gives_same_weights_and_save_load_gives_identical_outputs() {
     let tensors = |m: &LearnedModel| {
         let bytes = m.to_bytes().unwrap();
         let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
-        let mut v: Vec<(String, Vec<u8>)> = st
-            .tensors()
-            .into_iter()
-            .map(|(n, t)| (n, t.data().to_vec()))
-            .collect();
+        let mut v: Vec<(String, Vec<u8>)> = st.tensors().into_iter().map(|(n, t)| (n, t.data().to_vec())).collect();
         v.sort();
         v
     };
@@ -118,11 +95,7 @@ fn same_seed_gives_same_weights_and_save_load_gives_identical_outputs() {
     let p2 = loaded.predict(&input, 100, 100).unwrap();
     assert_eq!((p1.out_w, p1.out_h), (25, 25));
     assert_eq!((p1.out_w, p1.out_h), (p2.out_w, p2.out_h));
-    assert!(p1
-        .planes
-        .iter()
-        .zip(&p2.planes)
-        .all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert!(p1.planes.iter().zip(&p2.planes).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
 
 #[test]
@@ -135,43 +108,28 @@ fn corrupt_or_mismatched_weights_are_refused_with_a_clear_error() {
         std::fs::write(&p, b).unwrap();
         p
     };
-    let err = |p: &std::path::Path| {
-        LearnedModel::load(p)
-            .err()
-            .expect("must be refused")
-            .to_string()
-    };
+    let err = |p: &std::path::Path| LearnedModel::load(p).err().expect("must be refused").to_string();
 
     // A flipped bit in the tensor data.
     let mut flipped = bytes.clone();
     let n = flipped.len();
     flipped[n - 10] ^= 0x40;
     let e = err(&write("flipped.safetensors", &flipped));
-    assert!(
-        e.contains("flipped.safetensors") && e.contains("checksum mismatch"),
-        "{e}"
-    );
+    assert!(e.contains("flipped.safetensors") && e.contains("checksum mismatch"), "{e}");
 
     // Truncated.
     let e = err(&write("short.safetensors", &bytes[..bytes.len() / 2]));
-    assert!(
-        e.contains("short.safetensors") && e.contains("not a safetensors file"),
-        "{e}"
-    );
+    assert!(e.contains("short.safetensors") && e.contains("not a safetensors file"), "{e}");
 
     // Another format version / another program's file.
     let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
     let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
     let md: HashMap<String, String> = header.metadata().clone().unwrap();
-    let rewrite =
-        |md: HashMap<String, String>| safetensors::serialize(st.tensors(), Some(md)).unwrap();
+    let rewrite = |md: HashMap<String, String>| safetensors::serialize(st.tensors(), Some(md)).unwrap();
     let mut v2 = md.clone();
     v2.insert("format_version".into(), "999".into());
     let e = err(&write("v999.safetensors", &rewrite(v2)));
-    assert!(
-        e.contains("v999.safetensors") && e.contains("format version 999"),
-        "{e}"
-    );
+    assert!(e.contains("v999.safetensors") && e.contains("format version 999"), "{e}");
     let mut other = md.clone();
     other.remove("format");
     let e = err(&write("other.safetensors", &rewrite(other)));
@@ -179,10 +137,7 @@ fn corrupt_or_mismatched_weights_are_refused_with_a_clear_error() {
 
     // Width changed in the metadata: tensors no longer match the architecture.
     let mut wide = md.clone();
-    wide.insert(
-        "meta".into(),
-        md["meta"].replace("\"width\":4", "\"width\":8"),
-    );
+    wide.insert("meta".into(), md["meta"].replace("\"width\":4", "\"width\":8"));
     let e = err(&write("wide.safetensors", &rewrite(wide)));
     assert!(e.contains("does not match the architecture"), "{e}");
 
@@ -201,10 +156,7 @@ fn decoding_splits_touching_tubes_and_recovers_axes() {
         for y in 0..oh {
             for x in 0..ow {
                 let (dx, dy) = (x as f32 - cx, y as f32 - cy);
-                let (a, b) = (
-                    dx * th.cos() + dy * th.sin(),
-                    -dx * th.sin() + dy * th.cos(),
-                );
+                let (a, b) = (dx * th.cos() + dy * th.sin(), -dx * th.sin() + dy * th.cos());
                 let c = y * ow + x;
                 if a.abs() <= half && b.abs() <= wid {
                     out[c] = 4.0;
@@ -224,36 +176,14 @@ fn decoding_splits_touching_tubes_and_recovers_axes() {
     put(20.0, 24.0, 0.0, 10.0, 1.0);
     // A diagonal bar far away.
     put(45.0, 45.0, std::f32::consts::FRAC_PI_4, 8.0, 1.0);
-    let pred = Prediction {
-        planes: out,
-        out_w: ow,
-        out_h: oh,
-        width: 256,
-        height: 256,
-        fine: None,
-    };
+    let pred = Prediction { planes: out, out_w: ow, out_h: oh, width: 256, height: 256, fine: None };
     let inst = decode(&pred, &DecodeConfig::default());
-    assert_eq!(
-        inst.len(),
-        3,
-        "{:?}",
-        inst.iter().map(|i| i.axis).collect::<Vec<_>>()
-    );
+    assert_eq!(inst.len(), 3, "{:?}", inst.iter().map(|i| i.axis).collect::<Vec<_>>());
     let diag = inst.iter().find(|i| i.axis.centre_px[0] > 150.0).unwrap();
     // Cell 45 -> pixel 45 * 4 + 1.5 = 181.5.
-    assert!(
-        (diag.axis.centre_px[0] - 181.5).abs() < 1.0
-            && (diag.axis.centre_px[1] - 181.5).abs() < 1.0,
-        "{:?}",
-        diag.axis
-    );
+    assert!((diag.axis.centre_px[0] - 181.5).abs() < 1.0 && (diag.axis.centre_px[1] - 181.5).abs() < 1.0, "{:?}", diag.axis);
     let s = std::f64::consts::FRAC_1_SQRT_2;
-    assert!(
-        (diag.axis.direction_px[0] - s).abs() < 0.02
-            && (diag.axis.direction_px[1] - s).abs() < 0.02,
-        "{:?}",
-        diag.axis
-    );
+    assert!((diag.axis.direction_px[0] - s).abs() < 0.02 && (diag.axis.direction_px[1] - s).abs() < 0.02, "{:?}", diag.axis);
     assert!((diag.axis.length_px - 64.0).abs() < 2.0, "{:?}", diag.axis);
     for i in &inst {
         let area = i.mask.data.iter().filter(|&&v| v != 0).count();
@@ -261,50 +191,24 @@ fn decoding_splits_touching_tubes_and_recovers_axes() {
         assert!(i.score > 0.5 && i.score <= 1.0, "score {}", i.score);
     }
     // The two touching bars are separate instances with disjoint masks.
-    let bars: Vec<_> = inst
-        .iter()
-        .filter(|i| i.axis.centre_px[0] < 150.0)
-        .collect();
+    let bars: Vec<_> = inst.iter().filter(|i| i.axis.centre_px[0] < 150.0).collect();
     assert_eq!(bars.len(), 2);
-    assert!(bars[0]
-        .mask
-        .data
-        .iter()
-        .zip(&bars[1].mask.data)
-        .all(|(a, b)| *a == 0 || *b == 0));
+    assert!(bars[0].mask.data.iter().zip(&bars[1].mask.data).all(|(a, b)| *a == 0 || *b == 0));
     let mut ys: Vec<f64> = bars.iter().map(|b| b.axis.centre_px[1]).collect();
     ys.sort_by(f64::total_cmp);
     // Rows 21 and 24 -> pixels 85.5 and 97.5.
-    assert!(
-        (ys[0] - 85.5).abs() < 2.0 && (ys[1] - 97.5).abs() < 2.0,
-        "{ys:?}"
-    );
+    assert!((ys[0] - 85.5).abs() < 2.0 && (ys[1] - 97.5).abs() < 2.0, "{ys:?}");
 }
 
 #[test]
 fn resumed_training_continues_exactly() {
     let pre = Preprocess::default();
     let images = tiny_set(pre);
-    let cfg = TrainConfig {
-        batch: 2,
-        lr: 3e-3,
-        warmup: 2,
-        total_steps: 6,
-        seed: 5,
-        augment: AugmentConfig {
-            crop: 64,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let cfg = TrainConfig { batch: 2, lr: 3e-3, warmup: 2, total_steps: 6, seed: 5, augment: AugmentConfig { crop: 64, ..Default::default() }, ..Default::default() };
     let weights = |t: &Trainer| {
         let st = t.model.to_bytes().unwrap();
         let st = safetensors::SafeTensors::deserialize(&st).unwrap();
-        let mut v: Vec<(String, Vec<u8>)> = st
-            .tensors()
-            .into_iter()
-            .map(|(n, t)| (n, t.data().to_vec()))
-            .collect();
+        let mut v: Vec<(String, Vec<u8>)> = st.tensors().into_iter().map(|(n, t)| (n, t.data().to_vec())).collect();
         v.sort();
         v
     };
@@ -340,40 +244,19 @@ fn fine_mask_branch_warm_starts_trains_and_round_trips() {
     let plain = LearnedModel::new(pre, 8, 3).unwrap();
     let mut fine = LearnedModel::with_fine_mask(pre, 8, true, 22).unwrap();
     // Every tensor of the plain model is copied; the stride-4 heads then agree bit for bit.
-    let n_plain = safetensors::SafeTensors::deserialize(&plain.to_bytes().unwrap())
-        .unwrap()
-        .tensors()
-        .len();
+    let n_plain = safetensors::SafeTensors::deserialize(&plain.to_bytes().unwrap()).unwrap().tensors().len();
     assert_eq!(fine.init_from(&plain).unwrap(), n_plain);
     let (rgb, _) = bar_image(96, 1, 4);
     let input = pre.apply(&rgb, 96, 96);
-    let (pp, pf) = (
-        plain.predict(&input, 96, 96).unwrap(),
-        fine.predict(&input, 96, 96).unwrap(),
-    );
+    let (pp, pf) = (plain.predict(&input, 96, 96).unwrap(), fine.predict(&input, 96, 96).unwrap());
     assert!(pp.fine.is_none());
-    assert!(pp
-        .planes
-        .iter()
-        .zip(&pf.planes)
-        .all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert!(pp.planes.iter().zip(&pf.planes).all(|(a, b)| a.to_bits() == b.to_bits()));
     assert_eq!(pf.fine.as_ref().map(Vec::len), Some(96 * 96));
 
     // Training lowers the loss, which now includes the full-resolution mask term.
     let images = tiny_set(pre);
-    let aug = AugmentConfig {
-        crop: 128,
-        ..Default::default()
-    };
-    let cfg = TrainConfig {
-        batch: 4,
-        lr: 3e-3,
-        warmup: 5,
-        total_steps: 60,
-        seed: 7,
-        augment: aug,
-        ..Default::default()
-    };
+    let aug = AugmentConfig { crop: 128, ..Default::default() };
+    let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 5, total_steps: 60, seed: 7, augment: aug, ..Default::default() };
     let mut trainer = Trainer::new(fine, cfg).unwrap();
     let held = make_batch(&images, &aug, 8, 12345, 0).unwrap();
     let before = trainer.eval_loss(&held).unwrap();
@@ -389,16 +272,8 @@ fn fine_mask_branch_warm_starts_trains_and_round_trips() {
     trainer.model.save(&path).unwrap();
     let loaded = LearnedModel::load(&path).unwrap();
     assert!(loaded.meta.net.fine_mask);
-    let (a, b) = (
-        trainer.model.predict(&input, 96, 96).unwrap(),
-        loaded.predict(&input, 96, 96).unwrap(),
-    );
-    assert!(a
-        .fine
-        .unwrap()
-        .iter()
-        .zip(&b.fine.unwrap())
-        .all(|(x, y)| x.to_bits() == y.to_bits()));
+    let (a, b) = (trainer.model.predict(&input, 96, 96).unwrap(), loaded.predict(&input, 96, 96).unwrap());
+    assert!(a.fine.unwrap().iter().zip(&b.fine.unwrap()).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
 
 #[test]
@@ -409,24 +284,10 @@ fn freezing_the_coarse_layers_trains_only_the_fine_branch() {
     let tensors = |m: &LearnedModel| {
         let st = m.to_bytes().unwrap();
         let st = safetensors::SafeTensors::deserialize(&st).unwrap();
-        st.tensors()
-            .into_iter()
-            .map(|(n, t)| (n, t.data().to_vec()))
-            .collect::<HashMap<String, Vec<u8>>>()
+        st.tensors().into_iter().map(|(n, t)| (n, t.data().to_vec())).collect::<HashMap<String, Vec<u8>>>()
     };
     let before = tensors(&model);
-    let cfg = TrainConfig {
-        batch: 2,
-        lr: 3e-3,
-        warmup: 1,
-        total_steps: 3,
-        seed: 2,
-        augment: AugmentConfig {
-            crop: 64,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let cfg = TrainConfig { batch: 2, lr: 3e-3, warmup: 1, total_steps: 3, seed: 2, augment: AugmentConfig { crop: 64, ..Default::default() }, ..Default::default() };
     let mut t = Trainer::new(model, cfg).unwrap();
     let images = tiny_set(pre);
     for _ in 0..3 {
@@ -464,27 +325,13 @@ fn decoding_with_fine_logits_follows_them_to_the_pixel() {
             fine[y * 256 + x] = 5.0;
         }
     }
-    let pred = Prediction {
-        planes,
-        out_w: ow,
-        out_h: oh,
-        width: 256,
-        height: 256,
-        fine: Some(fine.clone()),
-    };
+    let pred = Prediction { planes, out_w: ow, out_h: oh, width: 256, height: 256, fine: Some(fine.clone()) };
     let inst = decode(&pred, &DecodeConfig::default());
     assert_eq!(inst.len(), 1);
     let m = &inst[0].mask.data;
-    assert!(
-        m.iter().zip(&fine).all(|(&a, &f)| (a != 0) == (f > 0.0)),
-        "mask differs from the fine logits"
-    );
+    assert!(m.iter().zip(&fine).all(|(&a, &f)| (a != 0) == (f > 0.0)), "mask differs from the fine logits");
     assert_eq!(inst[0].bbox, [82.0, 121.0, 76.0, 6.0]);
-    assert!(
-        (inst[0].axis.width_px - 6.0).abs() < 1e-9,
-        "{:?}",
-        inst[0].axis
-    );
+    assert!((inst[0].axis.width_px - 6.0).abs() < 1e-9, "{:?}", inst[0].axis);
 }
 
 #[test]
@@ -499,19 +346,8 @@ fn fine_mask_branch_learns_pixel_outlines_that_stride_4_logits_miss() {
             TrainImage::new(s, s, pre.apply(&rgb, s, s), &masks)
         })
         .collect();
-    let aug = AugmentConfig {
-        crop: 128,
-        ..Default::default()
-    };
-    let cfg = TrainConfig {
-        batch: 4,
-        lr: 3e-3,
-        warmup: 20,
-        total_steps: 300,
-        seed: 1,
-        augment: aug,
-        ..Default::default()
-    };
+    let aug = AugmentConfig { crop: 128, ..Default::default() };
+    let cfg = TrainConfig { batch: 4, lr: 3e-3, warmup: 20, total_steps: 300, seed: 1, augment: aug, ..Default::default() };
     let mut t = Trainer::new(LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap(), cfg).unwrap();
     for _ in 0..300 {
         t.step(&images).unwrap();
@@ -532,10 +368,7 @@ fn fine_mask_branch_learns_pixel_outlines_that_stride_4_logits_miss() {
     }
     let iou = |iu: [usize; 2]| iu[0] as f64 / iu[1].max(1) as f64;
     let (f, c) = (iou(fine_iu), iou(coarse_iu));
-    assert!(
-        f > 0.8 && f > c + 0.05,
-        "pixel IoU: fine {f:.3}, stride-4 {c:.3}"
-    );
+    assert!(f > 0.8 && f > c + 0.05, "pixel IoU: fine {f:.3}, stride-4 {c:.3}");
 }
 
 #[test]
@@ -548,18 +381,9 @@ fn mirror_averaged_predictions_are_mirror_symmetric() {
     let (s, cw) = (96, 24);
     let (rgb, _) = bar_image(s, 2, 9);
     let input = pre.apply(&rgb, s, s);
-    let mirrored: Vec<f32> = input
-        .chunks_exact(s)
-        .flat_map(|r| r.iter().rev().copied())
-        .collect();
-    let (p, q) = (
-        m.predict_mirror_averaged(&input, s, s).unwrap(),
-        m.predict_mirror_averaged(&mirrored, s, s).unwrap(),
-    );
-    let (plain_p, plain_q) = (
-        m.predict(&input, s, s).unwrap(),
-        m.predict(&mirrored, s, s).unwrap(),
-    );
+    let mirrored: Vec<f32> = input.chunks_exact(s).flat_map(|r| r.iter().rev().copied()).collect();
+    let (p, q) = (m.predict_mirror_averaged(&input, s, s).unwrap(), m.predict_mirror_averaged(&mirrored, s, s).unwrap());
+    let (plain_p, plain_q) = (m.predict(&input, s, s).unwrap(), m.predict(&mirrored, s, s).unwrap());
     let n = cw * cw;
     let gap = |a: &Prediction, b: &Prediction| {
         let mut worst = 0f32;
@@ -567,41 +391,17 @@ fn mirror_averaged_predictions_are_mirror_symmetric() {
             let sign = if k == 3 { -1.0 } else { 1.0 };
             for y in 0..cw {
                 for x in 0..cw {
-                    worst = worst.max(
-                        (a.planes[k * n + y * cw + x]
-                            - sign * b.planes[k * n + y * cw + cw - 1 - x])
-                            .abs(),
-                    );
+                    worst = worst.max((a.planes[k * n + y * cw + x] - sign * b.planes[k * n + y * cw + cw - 1 - x]).abs());
                 }
             }
         }
         worst
     };
-    assert!(
-        gap(&p, &q) < 1e-4,
-        "mirror-averaged outputs differ by {}",
-        gap(&p, &q)
-    );
-    assert!(
-        gap(&plain_p, &plain_q) > 1e-3,
-        "the plain network is not symmetric by itself"
-    );
+    assert!(gap(&p, &q) < 1e-4, "mirror-averaged outputs differ by {}", gap(&p, &q));
+    assert!(gap(&plain_p, &plain_q) > 1e-3, "the plain network is not symmetric by itself");
     // Widths that are not a multiple of 4 get the plain prediction.
-    let odd = pre.apply(
-        &rgb[..(s * 95 * 3)]
-            .iter()
-            .copied()
-            .collect::<Vec<_>>()
-            .chunks_exact(s * 3)
-            .flat_map(|r| r[..95 * 3].to_vec())
-            .collect::<Vec<_>>(),
-        95,
-        95,
-    );
-    assert_eq!(
-        m.predict_mirror_averaged(&odd, 95, 95).unwrap().planes,
-        m.predict(&odd, 95, 95).unwrap().planes
-    );
+    let odd = pre.apply(&rgb[..(s * 95 * 3)].iter().copied().collect::<Vec<_>>().chunks_exact(s * 3).flat_map(|r| r[..95 * 3].to_vec()).collect::<Vec<_>>(), 95, 95);
+    assert_eq!(m.predict_mirror_averaged(&odd, 95, 95).unwrap().planes, m.predict(&odd, 95, 95).unwrap().planes);
 }
 
 /// An RGB model warm-started from a gray model computes what the gray model computes on the
@@ -614,36 +414,15 @@ fn rgb_model_started_from_a_gray_model_matches_it_on_the_luma() {
     assert!(n >= 10, "only {n} tensors set");
     let (w, h) = (64usize, 64usize);
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let pixels: Vec<u8> = (0..w * h * 3)
-        .map(|_| rng.random_range(0..=255u8))
-        .collect();
-    let pg = gray
-        .predict(
-            &Preprocess::GrayBox { radius: 0 }.apply(&pixels, w, h),
-            w,
-            h,
-        )
-        .unwrap();
-    let pr = rgb
-        .predict(&Preprocess::Rgb.apply(&pixels, w, h), w, h)
-        .unwrap();
-    let worst = pg
-        .planes
-        .iter()
-        .zip(&pr.planes)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0f32, f32::max);
+    let pixels: Vec<u8> = (0..w * h * 3).map(|_| rng.random_range(0..=255u8)).collect();
+    let pg = gray.predict(&Preprocess::GrayBox { radius: 0 }.apply(&pixels, w, h), w, h).unwrap();
+    let pr = rgb.predict(&Preprocess::Rgb.apply(&pixels, w, h), w, h).unwrap();
+    let worst = pg.planes.iter().zip(&pr.planes).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
     assert!(worst < 1e-3, "largest output difference {worst}");
     // A fresh RGB model differs: the equality above comes from the warm start.
     let fresh = LearnedModel::new(Preprocess::Rgb, 4, 9).unwrap();
-    let pf = fresh
-        .predict(&Preprocess::Rgb.apply(&pixels, w, h), w, h)
-        .unwrap();
-    assert!(pg
-        .planes
-        .iter()
-        .zip(&pf.planes)
-        .any(|(a, b)| (a - b).abs() > 1e-2));
+    let pf = fresh.predict(&Preprocess::Rgb.apply(&pixels, w, h), w, h).unwrap();
+    assert!(pg.planes.iter().zip(&pf.planes).any(|(a, b)| (a - b).abs() > 1e-2));
     // Mismatched kinds are refused.
     let mut g2 = LearnedModel::new(Preprocess::GrayBox { radius: 1 }, 4, 1).unwrap();
     assert!(g2.init_from_gray(&gray).is_err());

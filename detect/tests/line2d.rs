@@ -7,9 +7,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tubeloc_core::{Pose, TubeModel};
 use tubeloc_detect::line2d::gradient::{downsample_rgb, quantize_rgb};
-use tubeloc_detect::line2d::matching::{
-    coarse_scores, fine_score_at, fine_search, match_template, prepare_image,
-};
+use tubeloc_detect::line2d::matching::{coarse_scores, fine_score_at, fine_search, match_template, prepare_image};
 use tubeloc_detect::line2d::render::{intersect_tube, Pinhole};
 use tubeloc_detect::line2d::response::similarity;
 use tubeloc_detect::line2d::template::{LibraryParams, TemplateLibrary};
@@ -19,25 +17,9 @@ use tubeloc_detect::line2d::{Line2dDetector, MatchParams, ViewParams};
 /// `t_cam_tube` (white alumina body and foot, gold seal, a little shading and noise).
 fn scene(w: usize, h: usize, k: &Pinhole, t_cam_tube: &Pose, seed: u64) -> Vec<u8> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let blobs: Vec<(f64, f64, f64, f64)> = (0..60)
-        .map(|_| {
-            (
-                rng.random_range(0.0..w as f64),
-                rng.random_range(0.0..h as f64),
-                rng.random_range(5.0..40.0),
-                rng.random_range(-35.0..35.0),
-            )
-        })
-        .collect();
+    let blobs: Vec<(f64, f64, f64, f64)> = (0..60).map(|_| (rng.random_range(0.0..w as f64), rng.random_range(0.0..h as f64), rng.random_range(5.0..40.0), rng.random_range(-35.0..35.0))).collect();
     let tube = TubeModel::default();
-    let sections: Vec<(f64, f64, f64)> = tube
-        .sections
-        .iter()
-        .map(|s| {
-            let (a, b) = tube.section_z_in_tube_frame(s);
-            (a, b, s.radius)
-        })
-        .collect();
+    let sections: Vec<(f64, f64, f64)> = tube.sections.iter().map(|s| { let (a, b) = tube.section_z_in_tube_frame(s); (a, b, s.radius) }).collect();
     let inv = t_cam_tube.inverse();
     let (o, rot) = (inv.translation(), inv.rotation());
     let mut img = vec![0u8; w * h * 3];
@@ -56,11 +38,7 @@ fn scene(w: usize, h: usize, k: &Pinhole, t_cam_tube: &Pose, seed: u64) -> Vec<u
                 let p = o + d * t;
                 let zf = p.z + tube.length / 2.0;
                 let shade = 0.75 + 0.25 * (p.y / 0.0115).clamp(-1.0, 1.0);
-                rgb = if zf > 0.090 {
-                    [200.0 * shade, 165.0 * shade, 80.0 * shade]
-                } else {
-                    [235.0 * shade, 232.0 * shade, 225.0 * shade]
-                };
+                rgb = if zf > 0.090 { [200.0 * shade, 165.0 * shade, 80.0 * shade] } else { [235.0 * shade, 232.0 * shade, 225.0 * shade] };
             }
             for c in 0..3 {
                 let n: f64 = rng.random_range(-12.0..12.0);
@@ -73,11 +51,7 @@ fn scene(w: usize, h: usize, k: &Pinhole, t_cam_tube: &Pose, seed: u64) -> Vec<u
 
 fn small_params(dmin: f64, dmax: f64, features: u32) -> LibraryParams {
     let mut p = LibraryParams::default();
-    p.views = ViewParams {
-        dist_min: dmin,
-        dist_max: dmax,
-        ..ViewParams::default()
-    };
+    p.views = ViewParams { dist_min: dmin, dist_max: dmax, ..ViewParams::default() };
     p.features = features;
     p
 }
@@ -86,12 +60,7 @@ fn small_params(dmin: f64, dmax: f64, features: u32) -> LibraryParams {
 fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     let (w, h) = (512usize, 384usize);
     let mut params = small_params(1.8, 2.2, 64);
-    params.camera = Pinhole {
-        fx: params.camera.fx,
-        fy: params.camera.fy,
-        cx: (w as f64 - 1.0) / 2.0,
-        cy: (h as f64 - 1.0) / 2.0,
-    };
+    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
     let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
     assert!(lib.len() > 500, "{} templates", lib.len());
     // True pose: axis 60 degrees off the line of sight, between template views, off-centre.
@@ -107,11 +76,7 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     let c = t_true.translation();
     let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
     let err_px = ((best.centre_px[0] - u).powi(2) + (best.centre_px[1] - v).powi(2)).sqrt();
-    assert!(
-        err_px < 8.0,
-        "centre {:?} vs ({u:.1}, {v:.1}): {err_px:.1} px",
-        best.centre_px
-    );
+    assert!(err_px < 8.0, "centre {:?} vs ({u:.1}, {v:.1}): {err_px:.1} px", best.centre_px);
     // Coarse pose within one template step: undirected axis angle <= 10 deg view step (+ slack for
     // the off-axis shift), distance within one 0.1 m step.
     let a_det = best.t_cam_tube.rotation().column(2).into_owned();
@@ -119,24 +84,11 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     // The truth as a template would see it: centre moved onto the optical axis.
     let to_centre = Rotation3::rotation_between(&c.normalize(), &Vector3::z()).unwrap();
     let axis_c = to_centre * axis;
-    let nearest = det
-        .library
-        .templates
-        .iter()
-        .map(|t| {
-            let a = t.axis();
-            a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees()
-        })
-        .fold(f64::INFINITY, f64::min);
+    let nearest = det.library.templates.iter().map(|t| { let a = t.axis(); a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees() }).fold(f64::INFINITY, f64::min);
     eprintln!("best: template {} similarity {:.1}, centre error {err_px:.1} px; nearest template axis {nearest:.1} deg", best.template_id, best.similarity);
     if std::env::var("L2D_DEBUG").is_ok() {
         for t0 in [4usize, 2] {
-            let pp = MatchParams {
-                t0,
-                threshold: 50.0,
-                coarse_threshold: Some(50.0),
-                ..MatchParams::default()
-            };
+            let pp = MatchParams { t0, threshold: 50.0, coarse_threshold: Some(50.0), ..MatchParams::default() };
             let prep = prepare_image(&img, w, h, &pp).unwrap();
             let (mut a16, mut a8) = (Vec::new(), Vec::new());
             let mut rows = vec![];
@@ -148,40 +100,18 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
                 rows.push((best, t.id, e, t.distance));
             }
             rows.sort_by(|a, b| b.0.total_cmp(&a.0));
-            for r in rows.iter().take(8) {
-                eprintln!(
-                    "t0={t0} score {:.1} id {} axis err {:.1} dist {:.1}",
-                    r.0, r.1, r.2, r.3
-                );
-            }
-            for r in rows
-                .iter()
-                .filter(|r| r.2 < 6.0 && (r.3 - 2.0).abs() < 0.06)
-            {
-                eprintln!(
-                    "t0={t0} near-true: score {:.1} id {} axis err {:.1} dist {:.1}",
-                    r.0, r.1, r.2, r.3
-                );
-            }
+            for r in rows.iter().take(8) { eprintln!("t0={t0} score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3); }
+            for r in rows.iter().filter(|r| r.2 < 6.0 && (r.3 - 2.0).abs() < 0.06) { eprintln!("t0={t0} near-true: score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3); }
         }
     }
     let ang = undirected(&a_det);
-    eprintln!(
-        "axis error {ang:.1} deg, distance {:.3} m vs {:.3} m",
-        best.t_cam_tube.translation().norm(),
-        c.norm()
-    );
+    eprintln!("axis error {ang:.1} deg, distance {:.3} m vs {:.3} m", best.t_cam_tube.translation().norm(), c.norm());
     assert!(ang <= 12.0, "axis error {ang:.1} deg");
     let dist_err = (best.t_cam_tube.translation().norm() - c.norm()).abs();
     assert!(dist_err <= 0.11, "distance error {dist_err:.3} m");
     assert!(best.similarity >= 80.0);
     // The silhouette placed at the detection overlaps the true position.
-    assert!(
-        best.bbox[0] <= u
-            && u <= best.bbox[0] + best.bbox[2]
-            && best.bbox[1] <= v
-            && v <= best.bbox[1] + best.bbox[3]
-    );
+    assert!(best.bbox[0] <= u && u <= best.bbox[0] + best.bbox[2] && best.bbox[1] <= v && v <= best.bbox[1] + best.bbox[3]);
     // COCO output carries the pose, template id and an RLE of the right area.
     let j = best.to_coco_json(3);
     assert_eq!(j["image_id"], 3);
@@ -190,22 +120,12 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     // No confident false positive elsewhere on the background.
     for d in &dets[1..] {
         let e = ((d.centre_px[0] - u).powi(2) + (d.centre_px[1] - v).powi(2)).sqrt();
-        assert!(
-            d.similarity < best.similarity || e < 40.0,
-            "competing detection {:?} at {e:.0} px",
-            d.similarity
-        );
+        assert!(d.similarity < best.similarity || e < 40.0, "competing detection {:?} at {e:.0} px", d.similarity);
     }
 }
 
 /// Brute force: `Σ_f max_{d ∈ [-T/2, T - T/2)²} s(o_f, Q(p + p_f + d))` on the one-hot plane `q`.
-fn brute(
-    q: &tubeloc_core::Plane<u8>,
-    feats: &[tubeloc_detect::line2d::Feature],
-    t: usize,
-    x: usize,
-    y: usize,
-) -> u32 {
+fn brute(q: &tubeloc_core::Plane<u8>, feats: &[tubeloc_detect::line2d::Feature], t: usize, x: usize, y: usize) -> u32 {
     let lo = (t / 2) as i64;
     feats
         .iter()
@@ -235,23 +155,10 @@ fn response_maps_and_linear_memories_equal_brute_force() {
     let mut params = small_params(1.0, 1.0, 150);
     params.views.step_deg = 30.0;
     let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
-    let t = lib
-        .templates
-        .iter()
-        .find(|t| {
-            t.levels[0].width < 120 && t.levels[0].height < 100 && t.levels[0].features.len() > 63
-        })
-        .expect("a small template")
-        .clone();
+    let t = lib.templates.iter().find(|t| t.levels[0].width < 120 && t.levels[0].height < 100 && t.levels[0].features.len() > 63).expect("a small template").clone();
     let mut rng = ChaCha8Rng::seed_from_u64(11);
-    let img: Vec<u8> = (0..w * h * 3)
-        .map(|_| rng.random_range(0..=255u8))
-        .collect();
-    let p = MatchParams {
-        threshold: 0.0,
-        coarse_threshold: Some(0.0),
-        ..MatchParams::default()
-    };
+    let img: Vec<u8> = (0..w * h * 3).map(|_| rng.random_range(0..=255u8)).collect();
+    let p = MatchParams { threshold: 0.0, coarse_threshold: Some(0.0), ..MatchParams::default() };
     let prep = prepare_image(&img, w, h, &p).unwrap();
     // Level 0: direct response-map sums at every valid position.
     let q0 = quantize_rgb(&img, w, h, &p.gradient);
@@ -259,22 +166,14 @@ fn response_maps_and_linear_memories_equal_brute_force() {
     let mut checked = 0;
     for y in (0..=h - th).step_by(3) {
         for x in (0..=w - tw).step_by(2) {
-            assert_eq!(
-                fine_score_at(&prep.resp0, &t, x, y),
-                brute(&q0, &t.levels[0].features, p.t0, x, y),
-                "level 0 at ({x},{y})"
-            );
+            assert_eq!(fine_score_at(&prep.resp0, &t, x, y), brute(&q0, &t.levels[0].features, p.t0, x, y), "level 0 at ({x},{y})");
             checked += 1;
         }
     }
     assert!(checked > 100);
     // The 32-lane fine search equals the exhaustive maximum of the direct sums over windows
     // (first position in row-major order on ties), including windows wider than 32 lanes.
-    for (x_lo, x_hi, y_lo, y_hi) in [
-        (0, 20, 0, 20),
-        (3, w - tw, 5, 9),
-        (w - tw - 7, w - tw, h - th - 3, h - th),
-    ] {
+    for (x_lo, x_hi, y_lo, y_hi) in [(0, 20, 0, 20), (3, w - tw, 5, 9), (w - tw - 7, w - tw, h - th - 3, h - th)] {
         let mut best = (0u32, x_lo, y_lo);
         for y in y_lo..=y_hi {
             for x in x_lo..=x_hi {
@@ -284,19 +183,10 @@ fn response_maps_and_linear_memories_equal_brute_force() {
                 }
             }
         }
-        assert_eq!(
-            fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, 1),
-            best,
-            "window x {x_lo}..={x_hi}, y {y_lo}..={y_hi}"
-        );
+        assert_eq!(fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, 1), best, "window x {x_lo}..={x_hi}, y {y_lo}..={y_hi}");
         // Every second row, then the rows next to the best: at least the best of the even rows,
         // and its score is the direct sum at its position.
-        let even = (y_lo..=y_hi)
-            .step_by(2)
-            .flat_map(|y| (x_lo..=x_hi).map(move |x| (x, y)))
-            .map(|(x, y)| fine_score_at(&prep.resp0, &t, x, y))
-            .max()
-            .unwrap();
+        let even = (y_lo..=y_hi).step_by(2).flat_map(|y| (x_lo..=x_hi).map(move |x| (x, y))).map(|(x, y)| fine_score_at(&prep.resp0, &t, x, y)).max().unwrap();
         let (e2, x2, y2) = fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, 2);
         assert!(e2 >= even && e2 <= best.0);
         assert_eq!(e2, fine_score_at(&prep.resp0, &t, x2, y2));
@@ -311,11 +201,7 @@ fn response_maps_and_linear_memories_equal_brute_force() {
     let gw = prep.lm1.grid_w;
     for r in 0..=(prep.lm1.grid_h * tt - th1) / tt {
         for c in 0..=(gw * tt - tw1) / tt {
-            assert_eq!(
-                a16[r * gw + c] as u32,
-                brute(&q1, &t.levels[1].features, tt, c * tt, r * tt),
-                "level 1 at grid ({c},{r})"
-            );
+            assert_eq!(a16[r * gw + c] as u32, brute(&q1, &t.levels[1].features, tt, c * tt, r * tt), "level 1 at grid ({c},{r})");
         }
     }
     // The matcher's reported scores are the brute-force scores at the reported positions.
@@ -324,10 +210,7 @@ fn response_maps_and_linear_memories_equal_brute_force() {
     assert!(!ms.is_empty());
     for m in ms {
         let e = brute(&q0, &t.levels[0].features, p.t0, m.x as usize, m.y as usize);
-        assert_eq!(
-            m.score,
-            100.0 * e as f32 / (4.0 * t.levels[0].features.len() as f32)
-        );
+        assert_eq!(m.score, 100.0 * e as f32 / (4.0 * t.levels[0].features.len() as f32));
     }
 }
 
@@ -345,18 +228,10 @@ fn library_round_trip_and_corrupt_files_are_refused() {
     for (a, b) in back.templates.iter().zip(&lib.templates) {
         let (ang, d) = a.t_cam_tube.distance(&b.t_cam_tube);
         assert!(ang < 1e-9 && d < 1e-12, "pose of template {} changed", a.id);
-        let same = a.id == b.id
-            && a.levels == b.levels
-            && a.mask == b.mask
-            && a.centre == b.centre
-            && (a.alpha_deg, a.psi_deg, a.distance) == (b.alpha_deg, b.psi_deg, b.distance);
+        let same = a.id == b.id && a.levels == b.levels && a.mask == b.mask && a.centre == b.centre && (a.alpha_deg, a.psi_deg, a.distance) == (b.alpha_deg, b.psi_deg, b.distance);
         assert!(same, "template {} differs after the round trip", a.id);
     }
-    assert_eq!(
-        back.templates[0].levels[0].features.len(),
-        80,
-        "feature count is not capped at 63"
-    );
+    assert_eq!(back.templates[0].levels[0].features.len(), 80, "feature count is not capped at 63");
     let bytes = std::fs::read(&path).unwrap();
     let expect_err = |b: &[u8], needle: &str| {
         let p = dir.path().join("bad.tlt");
@@ -377,10 +252,7 @@ fn library_round_trip_and_corrupt_files_are_refused() {
     magic[0] = b'X';
     expect_err(&magic, "magic");
     let missing = dir.path().join("missing.tlt");
-    assert!(TemplateLibrary::load(&missing)
-        .unwrap_err()
-        .to_string()
-        .contains("missing.tlt"));
+    assert!(TemplateLibrary::load(&missing).unwrap_err().to_string().contains("missing.tlt"));
 }
 
 /// Templates rendered from the CAD mesh (cap excluded) agree with the parametric model's.
@@ -389,51 +261,24 @@ fn mesh_silhouettes_match_the_parametric_model_and_build_a_library() {
     use tubeloc_core::{TubeMaterial, TubeMesh};
     use tubeloc_detect::line2d::mesh::{render_mesh_silhouette, MeshShape};
     use tubeloc_detect::line2d::render::render_silhouette;
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/sample_tube/sample_tube.obj");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/sample_tube/sample_tube.obj");
     if !path.exists() {
-        eprintln!(
-            "skipping: {} not found (third-party data absent)",
-            path.display()
-        );
+        eprintln!("skipping: {} not found (third-party data absent)", path.display());
         return;
     }
     let mesh = TubeMesh::load_obj(&path).unwrap();
     let shape = MeshShape::from_mesh(&mesh, &[TubeMaterial::Plastic]).unwrap();
     let tube = TubeModel::default();
-    assert!(
-        (shape.length() - tube.length).abs() < 0.01,
-        "mesh length {} vs model {}",
-        shape.length(),
-        tube.length
-    );
-    let k = Pinhole {
-        fx: 1720.0,
-        fy: 1720.0,
-        cx: 400.0,
-        cy: 300.0,
-    };
-    for (axis, t) in [
-        (Vector3::x(), Vector3::new(0.0, 0.0, 1.5)),
-        (
-            Vector3::new(0.6, 0.3, -0.7).normalize(),
-            Vector3::new(0.05, -0.03, 2.2),
-        ),
-    ] {
-        let pose = Pose::from_parts(
-            Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(),
-            t,
-        );
+    assert!((shape.length() - tube.length).abs() < 0.01, "mesh length {} vs model {}", shape.length(), tube.length);
+    let k = Pinhole { fx: 1720.0, fy: 1720.0, cx: 400.0, cy: 300.0 };
+    for (axis, t) in [(Vector3::x(), Vector3::new(0.0, 0.0, 1.5)), (Vector3::new(0.6, 0.3, -0.7).normalize(), Vector3::new(0.05, -0.03, 2.2))] {
+        let pose = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), t);
         let a = render_mesh_silhouette(&shape, &k, &pose, Some((800, 600)));
         let b = render_silhouette(&tube, &k, &pose, Some((800, 600)));
         // IoU of the two silhouettes on the image.
         let at = |s: &tubeloc_detect::line2d::Silhouette, x: i32, y: i32| {
             let (lx, ly) = (x - s.x0, y - s.y0);
-            lx >= 0
-                && ly >= 0
-                && (lx as usize) < s.width
-                && (ly as usize) < s.height
-                && s.mask[ly as usize * s.width + lx as usize] != 0
+            lx >= 0 && ly >= 0 && (lx as usize) < s.width && (ly as usize) < s.height && s.mask[ly as usize * s.width + lx as usize] != 0
         };
         let (mut inter, mut uni) = (0, 0);
         for y in 0..600 {
@@ -444,27 +289,12 @@ fn mesh_silhouettes_match_the_parametric_model_and_build_a_library() {
             }
         }
         let iou = inter as f64 / uni as f64;
-        assert!(
-            iou > 0.8,
-            "mesh vs parametric silhouette IoU {iou:.3} (areas {} / {})",
-            a.area(),
-            b.area()
-        );
+        assert!(iou > 0.8, "mesh vs parametric silhouette IoU {iou:.3} (areas {} / {})", a.area(), b.area());
         // Depth along the line of sight agrees at the centre pixel within 5 mm.
-        let (u, v) = (
-            (k.fx * t.x / t.z + k.cx).round() as i32,
-            (k.fy * t.y / t.z + k.cy).round() as i32,
-        );
+        let (u, v) = ((k.fx * t.x / t.z + k.cx).round() as i32, (k.fy * t.y / t.z + k.cy).round() as i32);
         if at(&a, u, v) && at(&b, u, v) {
-            let i = |s: &tubeloc_detect::line2d::Silhouette| {
-                ((v - s.y0) as usize) * s.width + (u - s.x0) as usize
-            };
-            assert!(
-                (a.depth[i(&a)] - b.depth[i(&b)]).abs() < 0.005,
-                "depth {} vs {}",
-                a.depth[i(&a)],
-                b.depth[i(&b)]
-            );
+            let i = |s: &tubeloc_detect::line2d::Silhouette| ((v - s.y0) as usize) * s.width + (u - s.x0) as usize;
+            assert!((a.depth[i(&a)] - b.depth[i(&b)]).abs() < 0.005, "depth {} vs {}", a.depth[i(&a)], b.depth[i(&b)]);
         }
     }
     let mut params = small_params(2.0, 2.0, 48);
@@ -475,12 +305,6 @@ fn mesh_silhouettes_match_the_parametric_model_and_build_a_library() {
     for (m, r) in lib.templates.iter().zip(&reference.templates) {
         assert_eq!(m.levels[0].features.len(), 48);
         let rel = (m.area as f64 - r.area as f64).abs() / r.area as f64;
-        assert!(
-            rel < 0.25,
-            "template {}: mesh area {} vs model {}",
-            m.id,
-            m.area,
-            r.area
-        );
+        assert!(rel < 0.25, "template {}: mesh area {} vs model {}", m.id, m.area, r.area);
     }
 }

@@ -64,10 +64,9 @@ fn dataset(n_images: usize, dets_per_image: usize) -> (CocoDataset, Vec<CocoResu
         anns.extend(a);
         dts.extend(d);
     }
-    let gt: CocoDataset = serde_json::from_value(
-        json!({"images": images, "annotations": anns, "categories": [{"id": 1, "name": "tube"}]}),
-    )
-    .unwrap();
+    let gt: CocoDataset =
+        serde_json::from_value(json!({"images": images, "annotations": anns, "categories": [{"id": 1, "name": "tube"}]}))
+            .unwrap();
     let dt: Vec<CocoResult> = serde_json::from_value(serde_json::Value::Array(dts)).unwrap();
     (gt, dt)
 }
@@ -77,17 +76,10 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("coco_eval");
     g.sample_size(10);
     g.bench_function("segm_1000img_100det", |b| {
-        b.iter(|| {
-            CocoEvaluator::new(&gt, &dt, IouType::Segm)
-                .unwrap()
-                .evaluate()
-                .stats[0]
-        })
+        b.iter(|| CocoEvaluator::new(&gt, &dt, IouType::Segm).unwrap().evaluate().stats[0])
     });
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm).unwrap();
-    g.bench_function("segm_1000img_100det_evaluate_only", |b| {
-        b.iter(|| ev.evaluate().stats[0])
-    });
+    g.bench_function("segm_1000img_100det_evaluate_only", |b| b.iter(|| ev.evaluate().stats[0]));
     g.finish();
 }
 

@@ -60,11 +60,7 @@ fn attr_of(extra: &Map<String, Value>, attr: &str) -> String {
 
 /// Evaluates `evaluator` (prepared on `gt`) once per value of `attr`. The attribute is looked up
 /// on images first, then on annotations; an attribute found on neither is an error.
-pub fn breakdown(
-    evaluator: &CocoEvaluator,
-    gt: &CocoDataset,
-    attr: &str,
-) -> Result<Breakdown, EvalError> {
+pub fn breakdown(evaluator: &CocoEvaluator, gt: &CocoDataset, attr: &str) -> Result<Breakdown, EvalError> {
     let on_images = gt.images.iter().any(|im| im.extra.contains_key(attr));
     let on_anns = gt.annotations.iter().any(|a| a.extra.contains_key(attr));
     let level = match (on_images, on_anns) {
@@ -80,58 +76,30 @@ pub fn breakdown(
     let mut rows = Vec::new();
     match level {
         AttrLevel::Image => {
-            let img_val: std::collections::HashMap<u64, String> = gt
-                .images
-                .iter()
-                .map(|im| (im.id, attr_of(&im.extra, attr)))
-                .collect();
+            let img_val: std::collections::HashMap<u64, String> =
+                gt.images.iter().map(|im| (im.id, attr_of(&im.extra, attr))).collect();
             let values: BTreeSet<&String> = img_val.values().collect();
             for v in values {
                 let keep = |id: u64| img_val.get(&id) == Some(v);
                 let result = evaluator.evaluate_with(&keep, &|_| false);
-                let num_objects = gt
-                    .annotations
-                    .iter()
-                    .filter(|a| a.iscrowd == 0 && img_val.get(&a.image_id) == Some(v))
-                    .count();
-                rows.push(BreakdownRow {
-                    value: v.clone(),
-                    num_images: result.num_images,
-                    num_objects,
-                    result,
-                });
+                let num_objects =
+                    gt.annotations.iter().filter(|a| a.iscrowd == 0 && img_val.get(&a.image_id) == Some(v)).count();
+                rows.push(BreakdownRow { value: v.clone(), num_images: result.num_images, num_objects, result });
             }
         }
         AttrLevel::Annotation => {
-            let ann_val: Vec<String> = gt
-                .annotations
-                .iter()
-                .map(|a| attr_of(&a.extra, attr))
-                .collect();
+            let ann_val: Vec<String> = gt.annotations.iter().map(|a| attr_of(&a.extra, attr)).collect();
             let values: BTreeSet<&String> = ann_val.iter().collect();
             for v in values {
                 let ignore = |j: usize| &ann_val[j] != v;
                 let result = evaluator.evaluate_with(&|_| true, &ignore);
-                let num_objects = gt
-                    .annotations
-                    .iter()
-                    .zip(&ann_val)
-                    .filter(|(a, av)| a.iscrowd == 0 && *av == v)
-                    .count();
-                rows.push(BreakdownRow {
-                    value: v.clone(),
-                    num_images: result.num_images,
-                    num_objects,
-                    result,
-                });
+                let num_objects =
+                    gt.annotations.iter().zip(&ann_val).filter(|(a, av)| a.iscrowd == 0 && *av == v).count();
+                rows.push(BreakdownRow { value: v.clone(), num_images: result.num_images, num_objects, result });
             }
         }
     }
-    Ok(Breakdown {
-        attribute: attr.to_string(),
-        level,
-        rows,
-    })
+    Ok(Breakdown { attribute: attr.to_string(), level, rows })
 }
 
 fn cell(v: f64) -> String {
@@ -155,10 +123,7 @@ pub fn markdown_table(breakdowns: &[Breakdown]) -> String {
     s += "\n";
     for b in breakdowns {
         for r in &b.rows {
-            s += &format!(
-                "| {} | {} | {} | {} |",
-                b.attribute, r.value, r.num_images, r.num_objects
-            );
+            s += &format!("| {} | {} | {} | {} |", b.attribute, r.value, r.num_images, r.num_objects);
             for &c in &cols {
                 s += &format!(" {} |", cell(r.result.stats[c]));
             }

@@ -32,9 +32,7 @@ pub enum PlotError {
 }
 
 /// Converts a plotters drawing error.
-pub(crate) fn draw_err<E: std::error::Error + Send + Sync>(
-    e: DrawingAreaErrorKind<E>,
-) -> PlotError {
+pub(crate) fn draw_err<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> PlotError {
     PlotError::Draw(e.to_string())
 }
 
@@ -106,10 +104,7 @@ impl PlotFormat {
 pub fn render_png<C: Chart>(chart: &C, size: (u32, u32)) -> Result<Vec<u8>, PlotError> {
     register_fonts()?;
     if size.0 < 100 || size.1 < 100 {
-        return Err(PlotError::Data(format!(
-            "plot size {}x{} is too small (at least 100x100)",
-            size.0, size.1
-        )));
+        return Err(PlotError::Data(format!("plot size {}x{} is too small (at least 100x100)", size.0, size.1)));
     }
     let mut buf = vec![255u8; size.0 as usize * size.1 as usize * 3];
     {
@@ -117,11 +112,9 @@ pub fn render_png<C: Chart>(chart: &C, size: (u32, u32)) -> Result<Vec<u8>, Plot
         chart.draw(&root)?;
         root.present().map_err(draw_err)?;
     }
-    let img = image::RgbImage::from_raw(size.0, size.1, buf)
-        .ok_or_else(|| PlotError::Draw("bitmap buffer size".into()))?;
+    let img = image::RgbImage::from_raw(size.0, size.1, buf).ok_or_else(|| PlotError::Draw("bitmap buffer size".into()))?;
     let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|e| PlotError::Draw(format!("PNG encoding: {e}")))?;
+    img.write_to(&mut out, image::ImageFormat::Png).map_err(|e| PlotError::Draw(format!("PNG encoding: {e}")))?;
     Ok(out.into_inner())
 }
 
@@ -139,21 +132,16 @@ pub fn render_svg<C: Chart>(chart: &C, size: (u32, u32)) -> Result<String, PlotE
 
 /// Renders `chart` to `path` (format from the extension), atomically.
 pub fn save<C: Chart>(chart: &C, path: &Path, size: (u32, u32)) -> Result<(), PlotError> {
-    let bytes =
-        match PlotFormat::from_path(path).ok_or_else(|| PlotError::Format(path.to_path_buf()))? {
-            PlotFormat::Png => render_png(chart, size)?,
-            PlotFormat::Svg => render_svg(chart, size)?.into_bytes(),
-        };
+    let bytes = match PlotFormat::from_path(path).ok_or_else(|| PlotError::Format(path.to_path_buf()))? {
+        PlotFormat::Png => render_png(chart, size)?,
+        PlotFormat::Svg => render_svg(chart, size)?.into_bytes(),
+    };
     tubeloc_core::files::write_atomic(path, &bytes)?;
     Ok(())
 }
 
 /// Writes `stem.png` and `stem.svg` (any extension of `stem` is replaced); returns both paths.
-pub fn save_png_svg<C: Chart>(
-    chart: &C,
-    stem: &Path,
-    size: (u32, u32),
-) -> Result<(PathBuf, PathBuf), PlotError> {
+pub fn save_png_svg<C: Chart>(chart: &C, stem: &Path, size: (u32, u32)) -> Result<(PathBuf, PathBuf), PlotError> {
     let png = stem.with_extension("png");
     let svg = stem.with_extension("svg");
     save(chart, &png, size)?;

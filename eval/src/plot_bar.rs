@@ -26,19 +26,8 @@ pub struct BarChart {
 
 impl BarChart {
     /// A chart of `series` over `categories`, automatic y range.
-    pub fn new(
-        title: impl Into<String>,
-        y_label: impl Into<String>,
-        categories: Vec<String>,
-        series: Vec<(String, Vec<f64>)>,
-    ) -> Self {
-        BarChart {
-            title: title.into(),
-            y_label: y_label.into(),
-            categories,
-            series,
-            y_range: None,
-        }
+    pub fn new(title: impl Into<String>, y_label: impl Into<String>, categories: Vec<String>, series: Vec<(String, Vec<f64>)>) -> Self {
+        BarChart { title: title.into(), y_label: y_label.into(), categories, series, y_range: None }
     }
 }
 
@@ -56,25 +45,12 @@ impl Chart for BarChart {
             return Err(PlotError::Data("bar chart without categories".into()));
         }
         if let Some((label, v)) = self.series.iter().find(|(_, v)| v.len() != n) {
-            return Err(PlotError::Data(format!(
-                "bar series {label:?} has {} values for {n} categories",
-                v.len()
-            )));
+            return Err(PlotError::Data(format!("bar series {label:?} has {} values for {n} categories", v.len())));
         }
-        let max = self
-            .series
-            .iter()
-            .flat_map(|(_, v)| v.iter())
-            .copied()
-            .filter(|&v| defined(v))
-            .fold(0.0, f64::max);
-        let (y0, y1) = self
-            .y_range
-            .unwrap_or((0.0, if max > 0.0 { max * 1.1 } else { 1.0 }));
+        let max = self.series.iter().flat_map(|(_, v)| v.iter()).copied().filter(|&v| defined(v)).fold(0.0, f64::max);
+        let (y0, y1) = self.y_range.unwrap_or((0.0, if max > 0.0 { max * 1.1 } else { 1.0 }));
         if !(y0.is_finite() && y1.is_finite() && y1 > y0) {
-            return Err(PlotError::Data(format!(
-                "bar chart y range ({y0}, {y1}) is empty or not finite"
-            )));
+            return Err(PlotError::Data(format!("bar chart y range ({y0}, {y1}) is empty or not finite")));
         }
         area.fill(&WHITE).map_err(draw_err)?;
         let mut chart = ChartBuilder::on(area)
@@ -101,29 +77,20 @@ impl Chart for BarChart {
         for (s, (label, values)) in self.series.iter().enumerate() {
             let color = series_color(s);
             chart
-                .draw_series(values.iter().enumerate().filter(|(_, &v)| defined(v)).map(
-                    |(i, &v)| {
-                        let x0 = i as f64 - 0.4 + s as f64 * bw;
-                        Rectangle::new([(x0, y0), (x0 + bw * 0.95, v.min(y1))], color.filled())
-                    },
-                ))
+                .draw_series(values.iter().enumerate().filter(|(_, &v)| defined(v)).map(|(i, &v)| {
+                    let x0 = i as f64 - 0.4 + s as f64 * bw;
+                    Rectangle::new([(x0, y0), (x0 + bw * 0.95, v.min(y1))], color.filled())
+                }))
                 .map_err(draw_err)?
                 .label(label.as_str())
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.filled())
-                });
+                .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.filled()));
         }
         // Category names under the groups, on the whole drawing area (the plot area clips).
         let style = tick_font().pos(Pos::new(HPos::Center, VPos::Top));
         let (bx, by) = area.get_base_pixel();
         for (i, name) in self.categories.iter().enumerate() {
             let (px, py) = chart.backend_coord(&(i as f64, y0));
-            area.draw(&Text::new(
-                name.as_str(),
-                (px - bx, py - by + 8),
-                style.clone(),
-            ))
-            .map_err(draw_err)?;
+            area.draw(&Text::new(name.as_str(), (px - bx, py - by + 8), style.clone())).map_err(draw_err)?;
         }
         if !self.series.is_empty() {
             chart

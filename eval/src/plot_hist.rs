@@ -35,18 +35,8 @@ pub struct Histogram {
 
 impl Histogram {
     /// A histogram of `series` with 20 bins over `(0, max)`.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        series: Vec<HistSeries>,
-    ) -> Self {
-        Histogram {
-            title: title.into(),
-            x_label: x_label.into(),
-            series,
-            bins: 20,
-            range: None,
-        }
+    pub fn new(title: impl Into<String>, x_label: impl Into<String>, series: Vec<HistSeries>) -> Self {
+        Histogram { title: title.into(), x_label: x_label.into(), series, bins: 20, range: None }
     }
 
     /// The bin range actually used.
@@ -54,18 +44,8 @@ impl Histogram {
         if let Some(r) = self.range {
             return r;
         }
-        let max = self
-            .series
-            .iter()
-            .flat_map(|s| s.values.iter())
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(f64::NEG_INFINITY, f64::max);
-        let hi = if max.is_finite() && max > 0.0 {
-            max * 1.0001
-        } else {
-            1.0
-        };
+        let max = self.series.iter().flat_map(|s| s.values.iter()).copied().filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, f64::max);
+        let hi = if max.is_finite() && max > 0.0 { max * 1.0001 } else { 1.0 };
         (0.0, hi)
     }
 
@@ -92,9 +72,7 @@ impl Chart for Histogram {
     {
         let (lo, hi) = self.bin_range();
         if !(lo.is_finite() && hi.is_finite() && hi > lo) {
-            return Err(PlotError::Data(format!(
-                "histogram range ({lo}, {hi}) is empty or not finite"
-            )));
+            return Err(PlotError::Data(format!("histogram range ({lo}, {hi}) is empty or not finite")));
         }
         let n = self.bins.max(1);
         let counts: Vec<Vec<u64>> = self.series.iter().map(|s| self.counts(&s.values)).collect();
@@ -138,14 +116,8 @@ impl Chart for Histogram {
             chart
                 .draw_series(LineSeries::new(step, color.stroke_width(2)))
                 .map_err(draw_err)?
-                .label(format!(
-                    "{} (n={})",
-                    s.label,
-                    s.values.iter().filter(|v| v.is_finite()).count()
-                ))
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.mix(0.6).filled())
-                });
+                .label(format!("{} (n={})", s.label, s.values.iter().filter(|v| v.is_finite()).count()))
+                .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.mix(0.6).filled()));
         }
         if !self.series.is_empty() {
             chart

@@ -19,11 +19,7 @@ pub struct PrCurves {
 
 /// AP of one curve: mean of the defined (`> -1`) precisions; `None` when none is defined.
 pub fn curve_ap(precision: &[f64; 101]) -> Option<f64> {
-    let v: Vec<f64> = precision
-        .iter()
-        .copied()
-        .filter(|&p| p > -1.0 && p.is_finite())
-        .collect();
+    let v: Vec<f64> = precision.iter().copied().filter(|&p| p > -1.0 && p.is_finite()).collect();
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
@@ -38,10 +34,7 @@ pub fn legend_label(iou: f64, precision: &[f64; 101]) -> String {
 impl PrCurves {
     /// A chart from plain data, like `&[(0.5, precisions), ...]`.
     pub fn new(title: impl Into<String>, curves: &[(f64, [f64; 101])]) -> Self {
-        PrCurves {
-            title: title.into(),
-            curves: curves.to_vec(),
-        }
+        PrCurves { title: title.into(), curves: curves.to_vec() }
     }
 }
 
@@ -50,14 +43,8 @@ impl Chart for PrCurves {
     where
         DB::ErrorType: 'static,
     {
-        if self
-            .curves
-            .iter()
-            .any(|(t, p)| !t.is_finite() || p.iter().any(|v| !v.is_finite()))
-        {
-            return Err(PlotError::Data(
-                "PR curves: non-finite IoU threshold or precision".into(),
-            ));
+        if self.curves.iter().any(|(t, p)| !t.is_finite() || p.iter().any(|v| !v.is_finite())) {
+            return Err(PlotError::Data("PR curves: non-finite IoU threshold or precision".into()));
         }
         area.fill(&WHITE).map_err(draw_err)?;
         let mut chart = ChartBuilder::on(area)
@@ -83,19 +70,13 @@ impl Chart for PrCurves {
             .map_err(draw_err)?;
         for (i, (iou, prec)) in self.curves.iter().enumerate() {
             let color = series_color(i);
-            let pts: Vec<(f64, f64)> = prec
-                .iter()
-                .enumerate()
-                .filter(|(_, &p)| p > -1.0)
-                .map(|(k, &p)| (k as f64 / 100.0, p))
-                .collect();
+            let pts: Vec<(f64, f64)> =
+                prec.iter().enumerate().filter(|(_, &p)| p > -1.0).map(|(k, &p)| (k as f64 / 100.0, p)).collect();
             chart
                 .draw_series(LineSeries::new(pts, color.stroke_width(2)))
                 .map_err(draw_err)?
                 .label(legend_label(*iou, prec))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
-                });
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
         }
         chart
             .configure_series_labels()

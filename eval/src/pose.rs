@@ -34,10 +34,7 @@ pub enum PoseEvalError {
 
 impl PoseEvalError {
     pub(crate) fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
-        PoseEvalError::Invalid {
-            what: what.into(),
-            message: message.into(),
-        }
+        PoseEvalError::Invalid { what: what.into(), message: message.into() }
     }
 }
 
@@ -54,29 +51,17 @@ pub struct AxisLine {
 impl AxisLine {
     /// A line from a centre (metres) and a non-zero, finite direction (normalized here).
     pub fn new(centre: Point3<f64>, axis: Vector3<f64>) -> Result<Self, PoseEvalError> {
-        if !centre
-            .coords
-            .iter()
-            .chain(axis.iter())
-            .all(|v| v.is_finite())
-        {
-            return Err(PoseEvalError::invalid(
-                "axis line",
-                "non-finite centre or axis",
-            ));
+        if !centre.coords.iter().chain(axis.iter()).all(|v| v.is_finite()) {
+            return Err(PoseEvalError::invalid("axis line", "non-finite centre or axis"));
         }
-        let axis = Unit::try_new(axis, 1e-12)
-            .ok_or_else(|| PoseEvalError::invalid("axis line", "zero-length axis"))?;
+        let axis = Unit::try_new(axis, 1e-12).ok_or_else(|| PoseEvalError::invalid("axis line", "zero-length axis"))?;
         Ok(AxisLine { centre, axis })
     }
 
     /// The axis line of a tube pose `T_cam_tube`: centre = translation, axis = R e_z.
     pub fn from_pose(t_cam_tube: &Pose) -> Self {
         let axis = Unit::new_normalize(t_cam_tube.transform_vector(&Vector3::z()));
-        AxisLine {
-            centre: Point3::from(t_cam_tube.translation()),
-            axis,
-        }
+        AxisLine { centre: Point3::from(t_cam_tube.translation()), axis }
     }
 
     /// The axis line of a refined grasp pose, directed along its `end_direction`.

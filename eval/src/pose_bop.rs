@@ -39,24 +39,13 @@ impl ModelPoints {
         if points.is_empty() {
             return Err(PoseEvalError::invalid("model points", "no points"));
         }
-        if points
-            .iter()
-            .any(|p| !p.coords.iter().all(|v| v.is_finite()))
-        {
-            return Err(PoseEvalError::invalid(
-                "model points",
-                "non-finite coordinate",
-            ));
+        if points.iter().any(|p| !p.coords.iter().all(|v| v.is_finite())) {
+            return Err(PoseEvalError::invalid("model points", "non-finite coordinate"));
         }
         let diameter = points
             .par_iter()
             .enumerate()
-            .map(|(i, p)| {
-                points[i + 1..]
-                    .iter()
-                    .map(|q| (p - q).norm_squared())
-                    .fold(0.0, f64::max)
-            })
+            .map(|(i, p)| points[i + 1..].iter().map(|q| (p - q).norm_squared()).fold(0.0, f64::max))
             .reduce(|| 0.0, f64::max)
             .sqrt();
         Ok(ModelPoints { points, diameter })
@@ -67,14 +56,9 @@ impl ModelPoints {
     /// ring has its points evenly spread in angle, so their centroid lies on the axis.
     pub fn from_tube(model: &TubeModel, spacing: f64) -> Result<Self, PoseEvalError> {
         if !(spacing.is_finite() && spacing > 0.0) {
-            return Err(PoseEvalError::invalid(
-                "spacing",
-                format!("must be a positive length in metres, got {spacing}"),
-            ));
+            return Err(PoseEvalError::invalid("spacing", format!("must be a positive length in metres, got {spacing}")));
         }
-        model
-            .validate()
-            .map_err(|e| PoseEvalError::invalid("tube model", e.to_string()))?;
+        model.validate().map_err(|e| PoseEvalError::invalid("tube model", e.to_string()))?;
         let mut pts = Vec::new();
         let ring = |pts: &mut Vec<Point3<f64>>, r: f64, z: f64| {
             if r <= 0.0 {
@@ -103,27 +87,12 @@ impl ModelPoints {
         }
         // End faces (discs) and the steps between consecutive sections.
         let first = &model.sections[0];
-        annulus(
-            &mut pts,
-            0.0,
-            first.radius,
-            model.section_z_in_tube_frame(first).0,
-        );
+        annulus(&mut pts, 0.0, first.radius, model.section_z_in_tube_frame(first).0);
         let last = &model.sections[model.sections.len() - 1];
-        annulus(
-            &mut pts,
-            0.0,
-            last.radius,
-            model.section_z_in_tube_frame(last).1,
-        );
+        annulus(&mut pts, 0.0, last.radius, model.section_z_in_tube_frame(last).1);
         for w in model.sections.windows(2) {
             if (w[0].radius - w[1].radius).abs() > 1e-12 {
-                annulus(
-                    &mut pts,
-                    w[0].radius,
-                    w[1].radius,
-                    model.section_z_in_tube_frame(&w[0]).1,
-                );
+                annulus(&mut pts, w[0].radius, w[1].radius, model.section_z_in_tube_frame(&w[0]).1);
             }
         }
         Self::from_points(pts)
@@ -142,19 +111,11 @@ impl Symmetries {
     /// also each of them followed by 180° about x: `S = R_x(π) R_z(θ)`.
     pub fn tube(step_deg: f64, flip: bool) -> Result<Self, PoseEvalError> {
         if !(step_deg.is_finite() && step_deg > 0.0 && step_deg <= 360.0) {
-            return Err(PoseEvalError::invalid(
-                "symmetry step",
-                format!("must be in (0, 360] degrees, got {step_deg}"),
-            ));
+            return Err(PoseEvalError::invalid("symmetry step", format!("must be in (0, 360] degrees, got {step_deg}")));
         }
         let n = (360.0 / step_deg).round().max(1.0) as usize;
         let axial: Vec<Rotation3<f64>> = (0..n)
-            .map(|k| {
-                Rotation3::from_axis_angle(
-                    &Vector3::z_axis(),
-                    std::f64::consts::TAU * k as f64 / n as f64,
-                )
-            })
+            .map(|k| Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::TAU * k as f64 / n as f64))
             .collect();
         let mut rotations = axial.clone();
         if flip {
@@ -166,9 +127,7 @@ impl Symmetries {
 
     /// Only the identity (an asymmetric object).
     pub fn none() -> Self {
-        Symmetries {
-            rotations: vec![Rotation3::identity()],
-        }
+        Symmetries { rotations: vec![Rotation3::identity()] }
     }
 }
 
@@ -194,18 +153,8 @@ pub fn mssd(est: &Pose, gt: &Pose, model: &ModelPoints, sym: &Symmetries) -> f64
 
 /// MSPD in pixels with `camera` (definition in the module documentation). Points at or
 /// behind the camera plane give an infinite error for that symmetry.
-pub fn mspd(
-    est: &Pose,
-    gt: &Pose,
-    model: &ModelPoints,
-    sym: &Symmetries,
-    camera: &CameraModel,
-) -> f64 {
-    let proj_e: Vec<Option<Point2<f64>>> = model
-        .points
-        .iter()
-        .map(|x| camera.project(&est.transform_point(x)))
-        .collect();
+pub fn mspd(est: &Pose, gt: &Pose, model: &ModelPoints, sym: &Symmetries, camera: &CameraModel) -> f64 {
+    let proj_e: Vec<Option<Point2<f64>>> = model.points.iter().map(|x| camera.project(&est.transform_point(x))).collect();
     let rg = gt.rotation();
     let tg = gt.translation();
     let mut best = f64::INFINITY;
@@ -245,13 +194,7 @@ pub fn mspd_thresholds_640() -> Vec<f64> {
 pub fn bop_recalls(errors: &[f64], n_truths: usize, thresholds: &[f64]) -> Vec<f64> {
     thresholds
         .iter()
-        .map(|&t| {
-            if n_truths == 0 {
-                0.0
-            } else {
-                errors.iter().filter(|&&e| e < t).count() as f64 / n_truths as f64
-            }
-        })
+        .map(|&t| if n_truths == 0 { 0.0 } else { errors.iter().filter(|&&e| e < t).count() as f64 / n_truths as f64 })
         .collect()
 }
 

@@ -34,11 +34,7 @@ impl TubeEstimate {
     /// The estimate of a refined grasp pose: `T_cam_tube` with +z along its end direction
     /// (rotation about the axis is arbitrary, which every symmetric metric ignores).
     pub fn from_axis_pose(p: &TubeAxisPose) -> Self {
-        TubeEstimate {
-            image_id: p.image_id,
-            pose: p.to_pose(),
-            score: p.score,
-        }
+        TubeEstimate { image_id: p.image_id, pose: p.to_pose(), score: p.score }
     }
 }
 
@@ -61,15 +57,9 @@ pub enum MatchMethod {
 impl std::fmt::Display for MatchMethod {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            MatchMethod::MaskIou { min_iou } => {
-                write!(f, "greedy by score, highest mask IoU >= {min_iou}")
-            }
+            MatchMethod::MaskIou { min_iou } => write!(f, "greedy by score, highest mask IoU >= {min_iou}"),
             MatchMethod::CentreDistance { max_distance } => {
-                write!(
-                    f,
-                    "greedy by score, nearest 3D centre within {:.1} mm",
-                    max_distance * 1e3
-                )
+                write!(f, "greedy by score, nearest 3D centre within {:.1} mm", max_distance * 1e3)
             }
         }
     }
@@ -120,17 +110,11 @@ pub fn greedy_match(
     let mut unmatched_estimates = Vec::new();
     for e in order {
         let mut best: Option<(usize, f64)> = None;
-        for &t in by_image
-            .get(&estimates[e].image_id)
-            .map(|v| v.as_slice())
-            .unwrap_or(&[])
-        {
+        for &t in by_image.get(&estimates[e].image_id).map(|v| v.as_slice()).unwrap_or(&[]) {
             if taken[t] {
                 continue;
             }
-            let Some(s) = similarity(e, t).filter(|s| s.is_finite()) else {
-                continue;
-            };
+            let Some(s) = similarity(e, t).filter(|s| s.is_finite()) else { continue };
             let better = match best {
                 None => true,
                 Some((_, b)) => (higher_is_better && s > b) || (!higher_is_better && s < b),
@@ -142,43 +126,22 @@ pub fn greedy_match(
         match best {
             Some((t, s)) => {
                 taken[t] = true;
-                pairs.push(PoseMatch {
-                    estimate: e,
-                    truth: t,
-                    similarity: s,
-                });
+                pairs.push(PoseMatch { estimate: e, truth: t, similarity: s });
             }
             None => unmatched_estimates.push(e),
         }
     }
     unmatched_estimates.sort_unstable();
     let unmatched_truths = (0..truths.len()).filter(|&t| !taken[t]).collect();
-    Matching {
-        method,
-        pairs,
-        unmatched_truths,
-        unmatched_estimates,
-    }
+    Matching { method, pairs, unmatched_truths, unmatched_estimates }
 }
 
 /// Matches by the distance between tube centres (metres), gated at `max_distance`.
-pub fn match_by_centre_distance(
-    truths: &[TubeTruth],
-    estimates: &[TubeEstimate],
-    max_distance: f64,
-) -> Matching {
-    greedy_match(
-        truths,
-        estimates,
-        MatchMethod::CentreDistance { max_distance },
-        false,
-        |e, t| {
-            let d = (Point3::from(estimates[e].pose.translation())
-                - Point3::from(truths[t].pose.translation()))
-            .norm();
-            (d <= max_distance).then_some(d)
-        },
-    )
+pub fn match_by_centre_distance(truths: &[TubeTruth], estimates: &[TubeEstimate], max_distance: f64) -> Matching {
+    greedy_match(truths, estimates, MatchMethod::CentreDistance { max_distance }, false, |e, t| {
+        let d = (Point3::from(estimates[e].pose.translation()) - Point3::from(truths[t].pose.translation())).norm();
+        (d <= max_distance).then_some(d)
+    })
 }
 
 /// Matches by mask IoU, gated at `min_iou`; `iou(e, t)` gives the IoU of estimate `e`'s mask
@@ -189,16 +152,10 @@ pub fn match_by_iou(
     min_iou: f64,
     mut iou: impl FnMut(usize, usize) -> f64,
 ) -> Matching {
-    greedy_match(
-        truths,
-        estimates,
-        MatchMethod::MaskIou { min_iou },
-        true,
-        |e, t| {
-            let v = iou(e, t);
-            (v >= min_iou).then_some(v)
-        },
-    )
+    greedy_match(truths, estimates, MatchMethod::MaskIou { min_iou }, true, |e, t| {
+        let v = iou(e, t);
+        (v >= min_iou).then_some(v)
+    })
 }
 
 /// Matches by the IoU of COCO RLE masks (`Rle::iou`, no crowd), gated at `min_iou`;
@@ -224,10 +181,6 @@ pub fn match_by_mask_iou(
         ));
     }
     Ok(match_by_iou(truths, estimates, min_iou, |e, t| {
-        Rle::iou(
-            std::slice::from_ref(&estimate_masks[e]),
-            std::slice::from_ref(&truth_masks[t]),
-            &[false],
-        )[0]
+        Rle::iou(std::slice::from_ref(&estimate_masks[e]), std::slice::from_ref(&truth_masks[t]), &[false])[0]
     }))
 }

@@ -6,9 +6,7 @@
 //! 5/10/20 pixels for MSPD. Fractions are over matched pairs; BOP recalls are over all truths.
 
 use crate::pose::{pose_axis_error, AxisError, PoseEvalError};
-use crate::pose_bop::{
-    bop_recalls, mspd, mspd_thresholds_640, mssd, mssd_thresholds, ModelPoints, Symmetries,
-};
+use crate::pose_bop::{bop_recalls, mspd, mspd_thresholds_640, mssd, mssd_thresholds, ModelPoints, Symmetries};
 use crate::pose_match::{MatchMethod, Matching, TubeEstimate, TubeTruth};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -67,14 +65,7 @@ pub fn summarize(values: &[f64], thresholds: &[f64]) -> Summary {
     let n = v.len();
     let within = thresholds
         .iter()
-        .map(|&t| Within {
-            threshold: t,
-            fraction: if n == 0 {
-                0.0
-            } else {
-                v.iter().filter(|&&x| x <= t).count() as f64 / n as f64
-            },
-        })
+        .map(|&t| Within { threshold: t, fraction: if n == 0 { 0.0 } else { v.iter().filter(|&&x| x <= t).count() as f64 / n as f64 } })
         .collect();
     Summary {
         count: n,
@@ -197,11 +188,7 @@ pub struct PoseEvalConfig {
 
 impl Default for PoseEvalConfig {
     fn default() -> Self {
-        PoseEvalConfig {
-            symmetry_step_deg: 1.0,
-            cameras: BTreeMap::new(),
-            default_camera: None,
-        }
+        PoseEvalConfig { symmetry_step_deg: 1.0, cameras: BTreeMap::new(), default_camera: None }
     }
 }
 
@@ -218,10 +205,7 @@ pub fn evaluate_poses(
     let flip = Symmetries::tube(config.symmetry_step_deg, true)?;
     for m in &matching.pairs {
         if m.truth >= truths.len() || m.estimate >= estimates.len() {
-            return Err(PoseEvalError::invalid(
-                "matching",
-                format!("pair ({}, {}) out of range", m.estimate, m.truth),
-            ));
+            return Err(PoseEvalError::invalid("matching", format!("pair ({}, {}) out of range", m.estimate, m.truth)));
         }
     }
     let pairs: Vec<PairErrors> = matching
@@ -229,10 +213,7 @@ pub fn evaluate_poses(
         .par_iter()
         .map(|m| {
             let (e, g) = (&estimates[m.estimate], &truths[m.truth]);
-            let cam = config
-                .cameras
-                .get(&g.image_id)
-                .or(config.default_camera.as_ref());
+            let cam = config.cameras.get(&g.image_id).or(config.default_camera.as_ref());
             PairErrors {
                 image_id: g.image_id,
                 estimate: m.estimate,
@@ -247,26 +228,12 @@ pub fn evaluate_poses(
             }
         })
         .collect();
-    let col = |f: &dyn Fn(&PairErrors) -> Option<f64>| -> Vec<f64> {
-        pairs.iter().filter_map(f).collect()
-    };
+    let col = |f: &dyn Fn(&PairErrors) -> Option<f64>| -> Vec<f64> { pairs.iter().filter_map(f).collect() };
     let summaries = PoseSummaries {
-        axis_angle_deg: summarize(
-            &col(&|p| Some(p.axis.axis_angle_deg)),
-            &ANGLE_THRESHOLDS_DEG,
-        ),
-        perpendicular_mm: summarize(
-            &col(&|p| Some(p.axis.perpendicular_mm)),
-            &DISTANCE_THRESHOLDS_MM,
-        ),
-        along_axis_abs_mm: summarize(
-            &col(&|p| Some(p.axis.along_axis_mm.abs())),
-            &DISTANCE_THRESHOLDS_MM,
-        ),
-        centre_distance_mm: summarize(
-            &col(&|p| Some(p.axis.centre_distance_mm)),
-            &DISTANCE_THRESHOLDS_MM,
-        ),
+        axis_angle_deg: summarize(&col(&|p| Some(p.axis.axis_angle_deg)), &ANGLE_THRESHOLDS_DEG),
+        perpendicular_mm: summarize(&col(&|p| Some(p.axis.perpendicular_mm)), &DISTANCE_THRESHOLDS_MM),
+        along_axis_abs_mm: summarize(&col(&|p| Some(p.axis.along_axis_mm.abs())), &DISTANCE_THRESHOLDS_MM),
+        centre_distance_mm: summarize(&col(&|p| Some(p.axis.centre_distance_mm)), &DISTANCE_THRESHOLDS_MM),
         mssd_mm: summarize(&col(&|p| Some(p.mssd_mm)), &DISTANCE_THRESHOLDS_MM),
         mssd_flip_mm: summarize(&col(&|p| Some(p.mssd_flip_mm)), &DISTANCE_THRESHOLDS_MM),
         mspd_px: summarize(&col(&|p| p.mspd_px), &PIXEL_THRESHOLDS_PX),
@@ -278,27 +245,14 @@ pub fn evaluate_poses(
     let px_thr = mspd_thresholds_640();
     // MSPD errors normalized to a 640-pixel-wide image, so one threshold list serves all.
     let norm = |f: &dyn Fn(&PairErrors) -> Option<f64>| -> Vec<f64> {
-        pairs
-            .iter()
-            .filter_map(|p| Some(f(p)? * 640.0 / p.image_width? as f64))
-            .collect()
+        pairs.iter().filter_map(|p| Some(f(p)? * 640.0 / p.image_width? as f64)).collect()
     };
-    let has_cam = pairs.iter().any(|p| p.mspd_px.is_some())
-        || (pairs.is_empty() && (config.default_camera.is_some() || !config.cameras.is_empty()));
-    let mean = |r: &[f64]| {
-        if r.is_empty() {
-            0.0
-        } else {
-            r.iter().sum::<f64>() / r.len() as f64
-        }
-    };
+    let has_cam = pairs.iter().any(|p| p.mspd_px.is_some()) || (pairs.is_empty() && (config.default_camera.is_some() || !config.cameras.is_empty()));
+    let mean = |r: &[f64]| if r.is_empty() { 0.0 } else { r.iter().sum::<f64>() / r.len() as f64 };
     let mssd_recalls = bop_recalls(&col(&|p| Some(p.mssd_mm)), n, &mssd_thr);
     let mssd_flip_recalls = bop_recalls(&col(&|p| Some(p.mssd_flip_mm)), n, &mssd_thr);
     let (mspd_recalls, mspd_flip_recalls) = if has_cam {
-        (
-            bop_recalls(&norm(&|p| p.mspd_px), n, &px_thr),
-            bop_recalls(&norm(&|p| p.mspd_flip_px), n, &px_thr),
-        )
+        (bop_recalls(&norm(&|p| p.mspd_px), n, &px_thr), bop_recalls(&norm(&|p| p.mspd_flip_px), n, &px_thr))
     } else {
         (Vec::new(), Vec::new())
     };
@@ -317,11 +271,7 @@ pub fn evaluate_poses(
         mspd_flip_recalls,
     };
     let n_matched = pairs.len();
-    let end_correct_fraction = if n_matched == 0 {
-        0.0
-    } else {
-        pairs.iter().filter(|p| p.axis.end_correct).count() as f64 / n_matched as f64
-    };
+    let end_correct_fraction = if n_matched == 0 { 0.0 } else { pairs.iter().filter(|p| p.axis.end_correct).count() as f64 / n_matched as f64 };
     Ok(PoseEvaluation {
         method: matching.method.to_string(),
         matching: matching.method.clone(),

@@ -46,10 +46,7 @@ fn escape(cell: &str) -> String {
 impl Table {
     /// An empty table with these headers.
     pub fn new<S: Into<String>>(headers: impl IntoIterator<Item = S>) -> Self {
-        Table {
-            headers: headers.into_iter().map(Into::into).collect(),
-            rows: Vec::new(),
-        }
+        Table { headers: headers.into_iter().map(Into::into).collect(), rows: Vec::new() }
     }
 
     /// Appends a row.
@@ -60,24 +57,11 @@ impl Table {
 
     /// GitHub-flavoured markdown: header, `---` rule, rows (first column left, others right).
     pub fn to_markdown(&self) -> String {
-        let n = self
-            .headers
-            .len()
-            .max(self.rows.iter().map(|r| r.len()).max().unwrap_or(0));
+        let n = self.headers.len().max(self.rows.iter().map(|r| r.len()).max().unwrap_or(0));
         let cell = |r: &Vec<String>, i: usize| escape(r.get(i).map(String::as_str).unwrap_or(""));
-        let line = |r: &Vec<String>| {
-            format!(
-                "| {} |\n",
-                (0..n).map(|i| cell(r, i)).collect::<Vec<_>>().join(" | ")
-            )
-        };
+        let line = |r: &Vec<String>| format!("| {} |\n", (0..n).map(|i| cell(r, i)).collect::<Vec<_>>().join(" | "));
         let mut s = line(&self.headers);
-        s += &format!(
-            "|{}\n",
-            (0..n)
-                .map(|i| if i == 0 { " --- |" } else { " ---: |" })
-                .collect::<String>()
-        );
+        s += &format!("|{}\n", (0..n).map(|i| if i == 0 { " --- |" } else { " ---: |" }).collect::<String>());
         for r in &self.rows {
             s += &line(r);
         }
@@ -91,11 +75,7 @@ enum Block {
     Heading(usize, String),
     Paragraph(String),
     Table(Table),
-    Image {
-        alt: String,
-        path: String,
-        alt_link: Option<String>,
-    },
+    Image { alt: String, path: String, alt_link: Option<String> },
 }
 
 /// A markdown document built block by block.
@@ -108,16 +88,12 @@ pub struct Report {
 impl Report {
     /// A report with a level-1 title.
     pub fn new(title: impl Into<String>) -> Self {
-        Report {
-            title: title.into(),
-            blocks: Vec::new(),
-        }
+        Report { title: title.into(), blocks: Vec::new() }
     }
 
     /// Adds a heading of `level` (2..=6; the title is level 1).
     pub fn heading(&mut self, level: usize, text: impl Into<String>) -> &mut Self {
-        self.blocks
-            .push(Block::Heading(level.clamp(2, 6), text.into()));
+        self.blocks.push(Block::Heading(level.clamp(2, 6), text.into()));
         self
     }
 
@@ -135,17 +111,8 @@ impl Report {
 
     /// Embeds an image by a relative path (e.g. `pr_curves.png`), optionally with a link to
     /// another rendering of it (e.g. the SVG).
-    pub fn image(
-        &mut self,
-        alt: impl Into<String>,
-        path: impl Into<String>,
-        alt_link: Option<String>,
-    ) -> &mut Self {
-        self.blocks.push(Block::Image {
-            alt: alt.into(),
-            path: path.into(),
-            alt_link,
-        });
+    pub fn image(&mut self, alt: impl Into<String>, path: impl Into<String>, alt_link: Option<String>) -> &mut Self {
+        self.blocks.push(Block::Image { alt: alt.into(), path: path.into(), alt_link });
         self
     }
 
@@ -158,11 +125,7 @@ impl Report {
                 Block::Heading(l, t) => s += &format!("{} {}\n", "#".repeat(*l), t),
                 Block::Paragraph(t) => s += &format!("{t}\n"),
                 Block::Table(t) => s += &t.to_markdown(),
-                Block::Image {
-                    alt,
-                    path,
-                    alt_link,
-                } => {
+                Block::Image { alt, path, alt_link } => {
                     s += &format!("![{alt}]({path})\n");
                     if let Some(l) = alt_link {
                         s += &format!("\n[{alt} (SVG)]({l})\n");
@@ -220,16 +183,7 @@ pub struct EvalReport {
 
 /// File-name-safe form of a label: lowercase alphanumerics, others as `_`.
 pub fn slug(s: &str) -> String {
-    let t: String = s
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() {
-                c.to_ascii_lowercase()
-            } else {
-                '_'
-            }
-        })
-        .collect();
+    let t: String = s.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '_' }).collect();
     if t.is_empty() {
         "x".into()
     } else {
@@ -237,14 +191,7 @@ pub fn slug(s: &str) -> String {
     }
 }
 
-fn plot<C: crate::plot::Chart>(
-    chart: &C,
-    dir: &Path,
-    stem: &str,
-    size: (u32, u32),
-    r: &mut Report,
-    alt: &str,
-) -> Result<(), ReportError> {
+fn plot<C: crate::plot::Chart>(chart: &C, dir: &Path, stem: &str, size: (u32, u32), r: &mut Report, alt: &str) -> Result<(), ReportError> {
     let path = dir.join(stem);
     save_png_svg(chart, &path, size).map_err(|source| ReportError::Plot { path, source })?;
     r.image(alt, format!("{stem}.png"), Some(format!("{stem}.svg")));
@@ -252,26 +199,17 @@ fn plot<C: crate::plot::Chart>(
 }
 
 fn opt(v: Option<f64>, unit: &str) -> String {
-    v.map(|x| format!("{x:.2}{unit}"))
-        .unwrap_or_else(|| "n/a".into())
+    v.map(|x| format!("{x:.2}{unit}")).unwrap_or_else(|| "n/a".into())
 }
 
 fn within(s: &Summary) -> String {
-    s.within
-        .iter()
-        .map(|w| format!("{:.0}%", w.fraction * 100.0))
-        .collect::<Vec<_>>()
-        .join(" / ")
+    s.within.iter().map(|w| format!("{:.0}%", w.fraction * 100.0)).collect::<Vec<_>>().join(" / ")
 }
 
 /// Writes the report of an evaluation run into `dir` (created when missing) and returns the
 /// path of `report.md`. Layout in the module documentation.
 pub fn write_eval_report(dir: &Path, e: &EvalReport) -> Result<PathBuf, ReportError> {
-    let mut r = Report::new(if e.title.is_empty() {
-        "Evaluation"
-    } else {
-        &e.title
-    });
+    let mut r = Report::new(if e.title.is_empty() { "Evaluation" } else { &e.title });
     if !e.inputs.is_empty() {
         let mut t = Table::new(["input", "value"]);
         for (k, v) in &e.inputs {
@@ -291,63 +229,25 @@ pub fn write_eval_report(dir: &Path, e: &EvalReport) -> Result<PathBuf, ReportEr
         r.paragraph("COCO 101-point interpolated precision at each IoU threshold (legend: AP at that threshold).");
         let mut t = Table::new(["IoU", "AP"]);
         for (iou, p) in &e.pr_curves {
-            t.row([
-                format!("{iou:.2}"),
-                curve_ap(p).map(fmt_metric).unwrap_or_else(|| "n/a".into()),
-            ]);
+            t.row([format!("{iou:.2}"), curve_ap(p).map(fmt_metric).unwrap_or_else(|| "n/a".into())]);
         }
-        plot(
-            &PrCurves::new(format!("{} - PR curves", r.title), &e.pr_curves),
-            dir,
-            "pr_curves",
-            (900, 700),
-            &mut r,
-            "PR curves",
-        )?;
+        plot(&PrCurves::new(format!("{} - PR curves", r.title), &e.pr_curves), dir, "pr_curves", (900, 700), &mut r, "PR curves")?;
         r.table(t);
     }
     for b in &e.breakdowns {
         r.heading(2, format!("By {}", b.attribute));
-        let mut t = Table::new(
-            std::iter::once(b.attribute.clone())
-                .chain(std::iter::once("images".to_string()))
-                .chain(b.metrics.iter().cloned()),
-        );
+        let mut t = Table::new(std::iter::once(b.attribute.clone()).chain(std::iter::once("images".to_string())).chain(b.metrics.iter().cloned()));
         for (v, n, vals) in &b.rows {
-            t.row(
-                std::iter::once(v.clone())
-                    .chain(std::iter::once(n.to_string()))
-                    .chain(vals.iter().map(|x| fmt_metric(*x))),
-            );
+            t.row(std::iter::once(v.clone()).chain(std::iter::once(n.to_string())).chain(vals.iter().map(|x| fmt_metric(*x))));
         }
         r.table(t);
         let cats: Vec<String> = b.rows.iter().map(|(v, _, _)| v.clone()).collect();
         if !cats.is_empty() && !b.metrics.is_empty() {
-            let series = b
-                .metrics
-                .iter()
-                .enumerate()
-                .map(|(i, m)| {
-                    (
-                        m.clone(),
-                        b.rows
-                            .iter()
-                            .map(|(_, _, v)| v.get(i).copied().unwrap_or(-1.0))
-                            .collect(),
-                    )
-                })
-                .collect();
+            let series = b.metrics.iter().enumerate().map(|(i, m)| (m.clone(), b.rows.iter().map(|(_, _, v)| v.get(i).copied().unwrap_or(-1.0)).collect())).collect();
             let mut chart = BarChart::new(format!("by {}", b.attribute), "value", cats, series);
             chart.y_range = Some((0.0, 1.05));
             let width = (200 + 110 * b.rows.len() as u32).clamp(700, 1600);
-            plot(
-                &chart,
-                dir,
-                &format!("breakdown_{}", slug(&b.attribute)),
-                (width, 500),
-                &mut r,
-                &format!("by {}", b.attribute),
-            )?;
+            plot(&chart, dir, &format!("breakdown_{}", slug(&b.attribute)), (width, 500), &mut r, &format!("by {}", b.attribute))?;
         }
     }
     if !e.poses.is_empty() {
@@ -361,56 +261,26 @@ pub fn write_eval_report(dir: &Path, e: &EvalReport) -> Result<PathBuf, ReportEr
 fn write_pose_section(dir: &Path, e: &EvalReport, r: &mut Report) -> Result<(), ReportError> {
     r.heading(2, "Tube poses");
     for (label, p) in &e.poses {
-        r.paragraph(format!(
-            "`{label}`: {} of {} truths matched by {} ({} estimates).",
-            p.n_matched, p.n_truths, p.method, p.n_estimates
-        ));
+        r.paragraph(format!("`{label}`: {} of {} truths matched by {} ({} estimates).", p.n_matched, p.n_truths, p.method, p.n_estimates));
     }
     let mut t = Table::new([
-        "poses",
-        "axis angle median / p90",
-        "≤1/2/5°",
-        "perp. median / p90",
-        "≤2/5/10 mm",
-        "|along| median / p90",
-        "ends right",
-        "AR MSSD",
-        "AR MSSD flip",
-        "AR MSPD",
-        "AR MSPD flip",
+        "poses", "axis angle median / p90", "≤1/2/5°", "perp. median / p90", "≤2/5/10 mm", "|along| median / p90", "ends right",
+        "AR MSSD", "AR MSSD flip", "AR MSPD", "AR MSPD flip",
     ]);
     for (label, p) in &e.poses {
         let s = &p.summaries;
         t.row([
             label.clone(),
-            format!(
-                "{} / {}",
-                opt(s.axis_angle_deg.median, "°"),
-                opt(s.axis_angle_deg.p90, "°")
-            ),
+            format!("{} / {}", opt(s.axis_angle_deg.median, "°"), opt(s.axis_angle_deg.p90, "°")),
             within(&s.axis_angle_deg),
-            format!(
-                "{} / {}",
-                opt(s.perpendicular_mm.median, " mm"),
-                opt(s.perpendicular_mm.p90, " mm")
-            ),
+            format!("{} / {}", opt(s.perpendicular_mm.median, " mm"), opt(s.perpendicular_mm.p90, " mm")),
             within(&s.perpendicular_mm),
-            format!(
-                "{} / {}",
-                opt(s.along_axis_abs_mm.median, " mm"),
-                opt(s.along_axis_abs_mm.p90, " mm")
-            ),
+            format!("{} / {}", opt(s.along_axis_abs_mm.median, " mm"), opt(s.along_axis_abs_mm.p90, " mm")),
             format!("{:.0}%", p.end_correct_fraction * 100.0),
             fmt_metric(p.bop.ar_mssd),
             fmt_metric(p.bop.ar_mssd_flip),
-            p.bop
-                .ar_mspd
-                .map(fmt_metric)
-                .unwrap_or_else(|| "n/a".into()),
-            p.bop
-                .ar_mspd_flip
-                .map(fmt_metric)
-                .unwrap_or_else(|| "n/a".into()),
+            p.bop.ar_mspd.map(fmt_metric).unwrap_or_else(|| "n/a".into()),
+            p.bop.ar_mspd_flip.map(fmt_metric).unwrap_or_else(|| "n/a".into()),
         ]);
     }
     r.table(t);
@@ -422,48 +292,18 @@ fn write_pose_section(dir: &Path, e: &EvalReport, r: &mut Report) -> Result<(), 
     }
     type Col = fn(&crate::pose_summary::PairErrors) -> Option<f64>;
     let metrics: [(&str, &str, &str, Col); 4] = [
-        (
-            "pose_axis_angle",
-            "Axis angle error",
-            "axis angle error (deg)",
-            |p| Some(p.axis.axis_angle_deg),
-        ),
-        (
-            "pose_perpendicular",
-            "Centre distance to the true axis",
-            "perpendicular distance (mm)",
-            |p| Some(p.axis.perpendicular_mm),
-        ),
-        (
-            "pose_along_axis",
-            "Centre offset along the axis",
-            "|along-axis offset| (mm)",
-            |p| Some(p.axis.along_axis_mm.abs()),
-        ),
-        ("pose_mssd", "MSSD (axial symmetry)", "MSSD (mm)", |p| {
-            Some(p.mssd_mm)
-        }),
+        ("pose_axis_angle", "Axis angle error", "axis angle error (deg)", |p| Some(p.axis.axis_angle_deg)),
+        ("pose_perpendicular", "Centre distance to the true axis", "perpendicular distance (mm)", |p| Some(p.axis.perpendicular_mm)),
+        ("pose_along_axis", "Centre offset along the axis", "|along-axis offset| (mm)", |p| Some(p.axis.along_axis_mm.abs())),
+        ("pose_mssd", "MSSD (axial symmetry)", "MSSD (mm)", |p| Some(p.mssd_mm)),
     ];
     for (stem, title, xl, f) in metrics {
-        let series: Vec<HistSeries> = e
-            .poses
-            .iter()
-            .map(|(l, p)| HistSeries {
-                label: l.clone(),
-                values: p.pairs.iter().filter_map(f).collect(),
-            })
-            .collect();
+        let series: Vec<HistSeries> =
+            e.poses.iter().map(|(l, p)| HistSeries { label: l.clone(), values: p.pairs.iter().filter_map(f).collect() }).collect();
         if series.iter().all(|s| s.values.is_empty()) {
             continue;
         }
-        plot(
-            &Histogram::new(title, xl, series),
-            dir,
-            stem,
-            (800, 560),
-            r,
-            title,
-        )?;
+        plot(&Histogram::new(title, xl, series), dir, stem, (800, 560), r, title)?;
     }
     let json: Vec<serde_json::Value> = e
         .poses

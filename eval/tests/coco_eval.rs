@@ -15,11 +15,7 @@ fn fixtures() -> PathBuf {
 }
 
 fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
+    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
 }
 
 /// Regenerates the committed fixture (needs pycocotools):
@@ -47,25 +43,13 @@ fn matches_numbers_recorded_from_pycocotools() {
     let dir = fixtures();
     let gt = CocoDataset::load(&dir.join("coco_small_gt.json")).unwrap();
     let dt = load_results(&dir.join("coco_small_dt.json"), &gt).unwrap();
-    let want: Value =
-        serde_json::from_slice(&std::fs::read(dir.join("coco_small_pycocotools.json")).unwrap())
-            .unwrap();
-    let res = CocoEvaluator::new(&gt, &dt, IouType::Segm)
-        .unwrap()
-        .evaluate();
+    let want: Value = serde_json::from_slice(&std::fs::read(dir.join("coco_small_pycocotools.json")).unwrap()).unwrap();
+    let res = CocoEvaluator::new(&gt, &dt, IouType::Segm).unwrap().evaluate();
     for (i, (a, b)) in res.stats.iter().zip(floats(&want["stats"])).enumerate() {
         assert!((a - b).abs() <= 1e-9, "stat {i}: {a} vs pycocotools {b}");
     }
-    for (i, (a, b)) in res
-        .precision
-        .iter()
-        .zip(floats(&want["precision"]))
-        .enumerate()
-    {
-        assert!(
-            (a - b).abs() <= 1e-9,
-            "precision[{i}]: {a} vs pycocotools {b}"
-        );
+    for (i, (a, b)) in res.precision.iter().zip(floats(&want["precision"])).enumerate() {
+        assert!((a - b).abs() <= 1e-9, "precision[{i}]: {a} vs pycocotools {b}");
     }
     for (i, (a, b)) in res.recall.iter().zip(floats(&want["recall"])).enumerate() {
         assert!((a - b).abs() <= 1e-9, "recall[{i}]: {a} vs pycocotools {b}");
@@ -74,18 +58,9 @@ fn matches_numbers_recorded_from_pycocotools() {
     assert_eq!(res.summary_text(), want["summary"].as_str().unwrap());
     // PR curve accessor: category-mean of precision[t, :, k, all, 100].
     let curve = res.pr_curve(0);
-    let k_def: Vec<usize> = (0..res.cat_ids.len())
-        .filter(|&k| res.precision_at(0, 0, k, 0, 2) > -1.0)
-        .collect();
-    let mean0 = k_def
-        .iter()
-        .map(|&k| res.precision_at(0, 0, k, 0, 2))
-        .sum::<f64>()
-        / k_def.len() as f64;
-    assert!(
-        (curve[0] - mean0).abs() < 1e-15 && curve.windows(2).all(|w| w[0] >= w[1]),
-        "{curve:?}"
-    );
+    let k_def: Vec<usize> = (0..res.cat_ids.len()).filter(|&k| res.precision_at(0, 0, k, 0, 2) > -1.0).collect();
+    let mean0 = k_def.iter().map(|&k| res.precision_at(0, 0, k, 0, 2)).sum::<f64>() / k_def.len() as f64;
+    assert!((curve[0] - mean0).abs() < 1e-15 && curve.windows(2).all(|w| w[0] >= w[1]), "{curve:?}");
 }
 
 fn tiny_gt(anns: Value) -> CocoDataset {
@@ -98,12 +73,7 @@ fn tiny_gt(anns: Value) -> CocoDataset {
 
 fn boxes(list: &[(u64, [f64; 4], f64)]) -> Vec<CocoResult> {
     list.iter()
-        .map(|(img, bb, s)| {
-            serde_json::from_value(
-                json!({"image_id": img, "category_id": 1, "score": s, "bbox": bb}),
-            )
-            .unwrap()
-        })
+        .map(|(img, bb, s)| serde_json::from_value(json!({"image_id": img, "category_id": 1, "score": s, "bbox": bb})).unwrap())
         .collect()
 }
 
@@ -114,33 +84,19 @@ fn breakdowns_by_image_and_annotation_attribute() {
         {"id": 2, "image_id": 1, "category_id": 1, "area": 400, "bbox": [50, 50, 20, 20], "occlusion": "partial"},
         {"id": 3, "image_id": 2, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20], "occlusion": "none"}]));
     // Image 1: both objects found. Image 2: only a false positive.
-    let dt = boxes(&[
-        (1, [10., 10., 20., 20.], 0.9),
-        (1, [50., 50., 20., 20.], 0.8),
-        (2, [60., 60., 20., 20.], 0.95),
-    ]);
+    let dt = boxes(&[(1, [10., 10., 20., 20.], 0.9), (1, [50., 50., 20., 20.], 0.8), (2, [60., 60., 20., 20.], 0.95)]);
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Bbox).unwrap();
     let all = ev.evaluate();
-    assert!(
-        (all.stats[8] - 2.0 / 3.0).abs() < 1e-12,
-        "AR100 over all: {}",
-        all.stats[8]
-    );
+    assert!((all.stats[8] - 2.0 / 3.0).abs() < 1e-12, "AR100 over all: {}", all.stats[8]);
 
     let by_terrain = breakdown(&ev, &gt, "terrain").unwrap();
-    let rows: Vec<(&str, f64, f64)> = by_terrain
-        .rows
-        .iter()
-        .map(|r| (r.value.as_str(), r.result.stats[1], r.result.stats[8]))
-        .collect();
+    let rows: Vec<(&str, f64, f64)> =
+        by_terrain.rows.iter().map(|r| (r.value.as_str(), r.result.stats[1], r.result.stats[8])).collect();
     // rock: one object, missed, one FP -> AP50 0, AR 0; sand: both found, no FP -> 1, 1
     // (precision is tp / (tp + fp + 2^-52), so "1" is 1 - 2^-52).
     assert_eq!((rows[0].0, rows[0].1, rows[0].2), ("rock", 0.0, 0.0));
     assert_eq!(rows[1].0, "sand");
-    assert!(
-        (rows[1].1 - 1.0).abs() < 1e-12 && (rows[1].2 - 1.0).abs() < 1e-12,
-        "{rows:?}"
-    );
+    assert!((rows[1].1 - 1.0).abs() < 1e-12 && (rows[1].2 - 1.0).abs() < 1e-12, "{rows:?}");
     assert_eq!(by_terrain.rows[1].num_objects, 2);
 
     let by_occ = breakdown(&ev, &gt, "occlusion").unwrap();
@@ -149,23 +105,13 @@ fn breakdowns_by_image_and_annotation_attribute() {
     // "none": objects 1 and 3; the detection of object 2 is ignored (matched to an ignored gt).
     // Ranked: FP (0.95), TP (0.9): recall 1/2 reached at precision 1/2.
     assert!((none.result.stats[8] - 0.5).abs() < 1e-12);
-    assert!(
-        (none.result.stats[1] - 0.5 * 51.0 / 101.0).abs() < 1e-12,
-        "{}",
-        none.result.stats[1]
-    );
+    assert!((none.result.stats[1] - 0.5 * 51.0 / 101.0).abs() < 1e-12, "{}", none.result.stats[1]);
     let partial = &by_occ.rows[1];
-    assert_eq!(
-        (partial.value.as_str(), partial.num_objects),
-        ("partial", 1)
-    );
+    assert_eq!((partial.value.as_str(), partial.num_objects), ("partial", 1));
     assert!((partial.result.stats[8] - 1.0).abs() < 1e-12);
 
     let table = markdown_table(&[by_terrain, by_occ]);
-    assert!(
-        table.contains("| terrain | rock | 1 | 1 | 0.000 |"),
-        "{table}"
-    );
+    assert!(table.contains("| terrain | rock | 1 | 1 | 0.000 |"), "{table}");
     assert_eq!(table.lines().count(), 2 + 4);
 
     let e = breakdown(&ev, &gt, "weather").unwrap_err().to_string();
@@ -178,29 +124,16 @@ fn crowd_regions_absorb_detections_and_no_results_give_zero() {
         {"id": 1, "image_id": 1, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20]},
         {"id": 2, "image_id": 1, "category_id": 1, "area": 2500, "bbox": [40, 40, 50, 50], "iscrowd": 1}]));
     // Three detections inside the crowd box: ignored, not false positives.
-    let dt = boxes(&[
-        (1, [41., 41., 10., 10.], 0.99),
-        (1, [60., 60., 10., 10.], 0.98),
-        (1, [10., 10., 20., 20.], 0.5),
-        (1, [70., 70., 10., 10.], 0.97),
-    ]);
-    let res = CocoEvaluator::new(&gt, &dt, IouType::Bbox)
-        .unwrap()
-        .evaluate();
+    let dt = boxes(&[(1, [41., 41., 10., 10.], 0.99), (1, [60., 60., 10., 10.], 0.98), (1, [10., 10., 20., 20.], 0.5),
+                     (1, [70., 70., 10., 10.], 0.97)]);
+    let res = CocoEvaluator::new(&gt, &dt, IouType::Bbox).unwrap().evaluate();
     assert!((res.stats[0] - 1.0).abs() < 1e-12, "{}", res.summary_text());
     // No results at all: AP and AR are 0 where ground truth exists (pycocotools would raise).
-    let res = CocoEvaluator::new(&gt, &[], IouType::Bbox)
-        .unwrap()
-        .evaluate();
+    let res = CocoEvaluator::new(&gt, &[], IouType::Bbox).unwrap().evaluate();
     assert_eq!(res.stats[0], 0.0);
     // The only medium object is a crowd region (ignored): AP medium is undefined.
     assert_eq!(res.stats[4], -1.0, "{}", res.summary_text());
-    assert!(res
-        .summary_text()
-        .lines()
-        .nth(4)
-        .unwrap()
-        .ends_with("= -1.000"));
+    assert!(res.summary_text().lines().nth(4).unwrap().ends_with("= -1.000"));
 }
 
 #[test]
@@ -208,36 +141,17 @@ fn evaluator_errors_name_the_entry() {
     let gt = tiny_gt(json!([
         {"id": 1, "image_id": 1, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20]},
         {"id": 1, "image_id": 2, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20]}]));
-    let e = CocoEvaluator::new(&gt, &[], IouType::Bbox)
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(
-        e.contains("annotations[1] (id 1)") && e.contains("duplicate"),
-        "{e}"
-    );
+    let e = CocoEvaluator::new(&gt, &[], IouType::Bbox).err().unwrap().to_string();
+    assert!(e.contains("annotations[1] (id 1)") && e.contains("duplicate"), "{e}");
 
-    let gt = tiny_gt(
-        json!([{"id": 1, "image_id": 1, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20]}]),
-    );
+    let gt = tiny_gt(json!([{"id": 1, "image_id": 1, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20]}]));
     let dt = boxes(&[(1, [1., 1., 2., 2.], 0.5), (5, [1., 1., 2., 2.], 0.5)]);
-    let e = CocoEvaluator::new(&gt, &dt, IouType::Bbox)
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(
-        e.contains("results[1] (image_id 5)") && e.contains("not in the ground truth"),
-        "{e}"
-    );
+    let e = CocoEvaluator::new(&gt, &dt, IouType::Bbox).err().unwrap().to_string();
+    assert!(e.contains("results[1] (image_id 5)") && e.contains("not in the ground truth"), "{e}");
     // segm evaluation needs ground-truth masks
     let dt = boxes(&[(1, [1., 1., 2., 2.], 0.5)]);
     let e = CocoEvaluator::new(&gt, &dt, IouType::Segm).err().unwrap();
-    assert!(
-        matches!(e, EvalError::Entry { .. })
-            && e.to_string()
-                .contains("annotations[0] (id 1): no segmentation"),
-        "{e}"
-    );
+    assert!(matches!(e, EvalError::Entry { .. }) && e.to_string().contains("annotations[0] (id 1): no segmentation"), "{e}");
 }
 
 #[test]
@@ -254,12 +168,8 @@ fn shards_merge_and_results_with_wrong_mask_size_are_refused() {
     merged.extend(load_results(&pb, &gt).unwrap());
     let full: Vec<CocoResult> = serde_json::from_value(dt_v.clone()).unwrap();
     assert_eq!(
-        CocoEvaluator::new(&gt, &merged, IouType::Segm)
-            .unwrap()
-            .evaluate(),
-        CocoEvaluator::new(&gt, &full, IouType::Segm)
-            .unwrap()
-            .evaluate()
+        CocoEvaluator::new(&gt, &merged, IouType::Segm).unwrap().evaluate(),
+        CocoEvaluator::new(&gt, &full, IouType::Segm).unwrap().evaluate()
     );
     // A mask made for image 19 (64x48) attached to image 16 (120x90).
     let mut bad = all[..3].to_vec();
@@ -267,8 +177,5 @@ fn shards_merge_and_results_with_wrong_mask_size_are_refused() {
     bad[2] = json!({"image_id": 16, "category_id": 1, "score": 0.5, "segmentation": seg});
     let p = common::write(dir.path(), "bad.json", &Value::Array(bad));
     let e = load_results(&p, &gt).unwrap_err().to_string();
-    assert!(
-        e.contains("bad.json") && e.contains("results[2] (image_id 16)") && e.contains("[48, 64]"),
-        "{e}"
-    );
+    assert!(e.contains("bad.json") && e.contains("results[2] (image_id 16)") && e.contains("[48, 64]"), "{e}");
 }

@@ -34,14 +34,8 @@ fn coco_eval_matches_pycocotools() {
             .arg(&out_path)
             .output()
             .expect("python3 runs");
-        assert!(
-            run.status.success(),
-            "{}: pycocotools failed: {}",
-            case.name,
-            String::from_utf8_lossy(&run.stderr)
-        );
-        let py: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
+        assert!(run.status.success(), "{}: pycocotools failed: {}", case.name, String::from_utf8_lossy(&run.stderr));
+        let py: serde_json::Value = serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
 
         let gt = CocoDataset::load(&gt_path).unwrap();
         let dt = load_results(&dt_path, &gt).unwrap();
@@ -52,50 +46,28 @@ fn coco_eval_matches_pycocotools() {
 }
 
 fn floats(v: &serde_json::Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
+    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
 }
 
 fn compare(name: &str, res: &tubeloc_eval::coco_eval::EvalResult, py: &serde_json::Value) {
     let stats = floats(&py["stats"]);
     for (i, (a, b)) in res.stats.iter().zip(&stats).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-9,
-            "{name}: stat {i}: rust {a} vs pycocotools {b}"
-        );
+        assert!((a - b).abs() <= 1e-9, "{name}: stat {i}: rust {a} vs pycocotools {b}");
     }
     // The fixtures must exercise the metrics: most stats defined and not trivially 0 or 1.
     let informative = stats.iter().filter(|&&s| s > 0.0 && s < 1.0).count();
     assert!(informative >= 6, "{name}: fixture too easy: {stats:?}");
-    let shape: Vec<usize> = py["precision_shape"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap() as usize)
-        .collect();
+    let shape: Vec<usize> = py["precision_shape"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
     assert_eq!(shape, vec![10, 101, res.cat_ids.len(), 4, 3], "{name}");
     let p = floats(&py["precision"]);
     assert_eq!(p.len(), res.precision.len(), "{name}");
     for (i, (a, b)) in res.precision.iter().zip(&p).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-9,
-            "{name}: precision[{i}]: rust {a} vs pycocotools {b}"
-        );
+        assert!((a - b).abs() <= 1e-9, "{name}: precision[{i}]: rust {a} vs pycocotools {b}");
     }
     let r = floats(&py["recall"]);
     assert_eq!(r.len(), res.recall.len(), "{name}");
     for (i, (a, b)) in res.recall.iter().zip(&r).enumerate() {
-        assert!(
-            (a - b).abs() <= 1e-9,
-            "{name}: recall[{i}]: rust {a} vs pycocotools {b}"
-        );
+        assert!((a - b).abs() <= 1e-9, "{name}: recall[{i}]: rust {a} vs pycocotools {b}");
     }
-    assert_eq!(
-        res.summary_text(),
-        py["summary"].as_str().unwrap(),
-        "{name}: summary text"
-    );
+    assert_eq!(res.summary_text(), py["summary"].as_str().unwrap(), "{name}: summary text");
 }

@@ -8,9 +8,7 @@ use tubeloc_eval::plot_hist::{HistSeries, Histogram};
 use tubeloc_eval::plot_pr::{curve_ap, legend_label, PrCurves};
 
 fn out_dir(tmp: &Path) -> PathBuf {
-    std::env::var_os("TUBELOC_PLOT_OUT")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| tmp.to_path_buf())
+    std::env::var_os("TUBELOC_PLOT_OUT").map(PathBuf::from).unwrap_or_else(|| tmp.to_path_buf())
 }
 
 /// Checks a PNG: decodes, has `size`, and its plot area (inner 60%) has inked (lines, bars) and
@@ -31,11 +29,7 @@ fn check_png(path: &Path, size: (u32, u32)) -> usize {
             colours.insert(p);
         }
     }
-    assert!(
-        dark > 50 && light > 1000,
-        "{}: dark {dark}, light {light}",
-        path.display()
-    );
+    assert!(dark > 50 && light > 1000, "{}: dark {dark}, light {light}", path.display());
     colours.len()
 }
 
@@ -47,11 +41,7 @@ fn pr_data() -> Vec<(f64, [f64; 101])> {
             let reach = 1.0 - 0.08 * k as f64; // higher IoU reaches less recall
             for (i, v) in p.iter_mut().enumerate() {
                 let r = i as f64 / 100.0;
-                *v = if r <= reach {
-                    1.0 - 0.3 * (r / reach).powi(3)
-                } else {
-                    0.0
-                };
+                *v = if r <= reach { 1.0 - 0.3 * (r / reach).powi(3) } else { 0.0 };
             }
             (iou, p)
         })
@@ -70,10 +60,7 @@ fn pr_curves_png_and_svg() {
     assert!(colours > 10, "only {colours} colours: curves missing?");
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.starts_with("<svg") || text.contains("<svg"));
-    assert!(
-        text.contains(&legend_label(data[0].0, &data[0].1)),
-        "legend of the first curve missing"
-    );
+    assert!(text.contains(&legend_label(data[0].0, &data[0].1)), "legend of the first curve missing");
     assert!(text.contains("IoU=0.95 (AP n/a)"));
     assert!(text.contains("Recall") && text.contains("Precision"));
 }
@@ -95,18 +82,12 @@ fn overlaid_histograms() {
     let dir = out_dir(tmp.path());
     let series = |label: &str, scale: f64, n: usize| HistSeries {
         label: label.into(),
-        values: (0..n)
-            .map(|i| scale * ((i * 7919 % 101) as f64 / 100.0).powi(2) * 10.0)
-            .collect(),
+        values: (0..n).map(|i| scale * ((i * 7919 % 101) as f64 / 100.0).powi(2) * 10.0).collect(),
     };
     let h = Histogram::new(
         "Axis angle error",
         "axis angle error (deg)",
-        vec![
-            series("coarse", 1.0, 300),
-            series("mono", 0.4, 300),
-            series("stereo", 0.2, 300),
-        ],
+        vec![series("coarse", 1.0, 300), series("mono", 0.4, 300), series("stereo", 0.2, 300)],
     );
     // Bin counts: every finite value is counted once, outliers in the last bin.
     assert_eq!(h.counts(&h.series[0].values).iter().sum::<u64>(), 300);
@@ -124,38 +105,22 @@ fn overlaid_histograms() {
 fn grouped_bar_chart() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = out_dir(tmp.path());
-    let cats: Vec<String> = ["flat", "bedrock", "sand", "rocks"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
+    let cats: Vec<String> = ["flat", "bedrock", "sand", "rocks"].iter().map(|s| s.to_string()).collect();
     let b = BarChart::new(
         "AP50 and AR by terrain",
         "score",
         cats,
-        vec![
-            ("AP50".into(), vec![0.8, 0.6, 0.7, -1.0]),
-            ("AR".into(), vec![0.5, 0.45, 0.52, 0.3]),
-        ],
+        vec![("AP50".into(), vec![0.8, 0.6, 0.7, -1.0]), ("AR".into(), vec![0.5, 0.45, 0.52, 0.3])],
     );
     let (png, svg) = save_png_svg(&b, &dir.join("bars_terrain"), (800, 500)).unwrap();
     check_png(&png, (800, 500));
     let text = std::fs::read_to_string(svg).unwrap();
     assert!(text.contains("bedrock") && text.contains("AP50") && text.contains("AR"));
     // Mismatched series length and a bad extension give clear errors.
-    let bad = BarChart::new(
-        "t",
-        "y",
-        vec!["a".into()],
-        vec![("s".into(), vec![1.0, 2.0])],
-    );
-    let err = save(&bad, &dir.join("bad.png"), (400, 300))
-        .unwrap_err()
-        .to_string();
+    let bad = BarChart::new("t", "y", vec!["a".into()], vec![("s".into(), vec![1.0, 2.0])]);
+    let err = save(&bad, &dir.join("bad.png"), (400, 300)).unwrap_err().to_string();
     assert!(err.contains("\"s\" has 2 values for 1 categories"), "{err}");
-    assert!(matches!(
-        save(&b, &dir.join("x.jpg"), (400, 300)),
-        Err(PlotError::Format(_))
-    ));
+    assert!(matches!(save(&b, &dir.join("x.jpg"), (400, 300)), Err(PlotError::Format(_))));
 }
 
 #[test]

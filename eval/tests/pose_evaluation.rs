@@ -3,25 +3,15 @@
 use nalgebra::{Rotation3, Vector3};
 use tubeloc_core::{CameraModel, Pose, TubeModel};
 use tubeloc_eval::pose_bop::ModelPoints;
-use tubeloc_eval::pose_match::{
-    match_by_centre_distance, match_by_iou, match_by_mask_iou, MatchMethod, TubeEstimate, TubeTruth,
-};
-use tubeloc_eval::pose_summary::{
-    evaluate_poses, percentile, summarize, PoseEvalConfig, PoseEvaluation,
-};
+use tubeloc_eval::pose_match::{match_by_centre_distance, match_by_iou, match_by_mask_iou, MatchMethod, TubeEstimate, TubeTruth};
+use tubeloc_eval::pose_summary::{evaluate_poses, percentile, summarize, PoseEvalConfig, PoseEvaluation};
 
 fn pose(x: f64, y: f64, z: f64) -> Pose {
-    Pose::from_parts(
-        Rotation3::from_euler_angles(1.4, 0.2, 0.7),
-        Vector3::new(x, y, z),
-    )
+    Pose::from_parts(Rotation3::from_euler_angles(1.4, 0.2, 0.7), Vector3::new(x, y, z))
 }
 
 fn shifted(p: &Pose, d: Vector3<f64>) -> Pose {
-    Pose::from_parts(
-        Rotation3::from_matrix_unchecked(p.rotation()),
-        p.translation() + d,
-    )
+    Pose::from_parts(Rotation3::from_matrix_unchecked(p.rotation()), p.translation() + d)
 }
 
 #[test]
@@ -42,24 +32,11 @@ fn percentiles_and_fractions() {
 #[test]
 fn greedy_matching_by_distance_and_by_iou() {
     let truths = vec![
-        TubeTruth {
-            image_id: 1,
-            pose: pose(0.0, 0.0, 1.0),
-        },
-        TubeTruth {
-            image_id: 1,
-            pose: pose(0.3, 0.0, 1.0),
-        },
-        TubeTruth {
-            image_id: 2,
-            pose: pose(0.0, 0.0, 1.0),
-        },
+        TubeTruth { image_id: 1, pose: pose(0.0, 0.0, 1.0) },
+        TubeTruth { image_id: 1, pose: pose(0.3, 0.0, 1.0) },
+        TubeTruth { image_id: 2, pose: pose(0.0, 0.0, 1.0) },
     ];
-    let est = |img, p: Pose, score| TubeEstimate {
-        image_id: img,
-        pose: p,
-        score,
-    };
+    let est = |img, p: Pose, score| TubeEstimate { image_id: img, pose: p, score };
     let estimates = vec![
         // Low score, closest to truth 0, but truth 0 is taken first and truth 1 is beyond the gate.
         est(1, pose(0.004, 0.0, 1.0), 0.2),
@@ -74,22 +51,13 @@ fn greedy_matching_by_distance_and_by_iou() {
     assert!((m.pairs[0].similarity - 0.01).abs() < 1e-12);
     assert_eq!(m.unmatched_estimates, vec![0, 2]);
     assert_eq!(m.unmatched_truths, vec![1, 2]);
-    assert!(m
-        .method
-        .to_string()
-        .contains("nearest 3D centre within 50.0 mm"));
+    assert!(m.method.to_string().contains("nearest 3D centre within 50.0 mm"));
 
     // IoU matrix [estimate][truth].
     let iou = [[0.2, 0.8, 0.0], [0.4, 0.6, 0.0], [0.0, 0.0, 0.0]];
     let m = match_by_iou(&truths, &estimates, 0.5, |e, t| iou[e][t]);
     // Estimate 1 (score 0.9) goes first and takes truth 1 (0.6); estimate 0 is then left with truth 0 (0.2 < 0.5).
-    assert_eq!(
-        m.pairs
-            .iter()
-            .map(|p| (p.estimate, p.truth))
-            .collect::<Vec<_>>(),
-        vec![(1, 1)]
-    );
+    assert_eq!(m.pairs.iter().map(|p| (p.estimate, p.truth)).collect::<Vec<_>>(), vec![(1, 1)]);
     assert_eq!(m.method, MatchMethod::MaskIou { min_iou: 0.5 });
     assert!(m.method.to_string().contains("mask IoU >= 0.5"));
 }
@@ -100,52 +68,24 @@ fn evaluation_recalls_and_summaries_match_hand_computation() {
     let t1 = pose(0.2, 0.1, 1.5);
     let t2 = pose(-0.1, 0.0, 0.8);
     let truths = vec![
-        TubeTruth {
-            image_id: 7,
-            pose: t0,
-        },
-        TubeTruth {
-            image_id: 7,
-            pose: t1,
-        },
-        TubeTruth {
-            image_id: 8,
-            pose: t2,
-        },
+        TubeTruth { image_id: 7, pose: t0 },
+        TubeTruth { image_id: 7, pose: t1 },
+        TubeTruth { image_id: 8, pose: t2 },
     ];
     let estimates = vec![
-        TubeEstimate {
-            image_id: 7,
-            pose: t0,
-            score: 0.9,
-        }, // exact
-        TubeEstimate {
-            image_id: 7,
-            pose: shifted(&t1, Vector3::new(0.0, 0.0, 0.010)),
-            score: 0.8,
-        }, // 10 mm off
-        TubeEstimate {
-            image_id: 8,
-            pose: pose(0.5, 0.5, 3.0),
-            score: 0.7,
-        }, // far: false positive
+        TubeEstimate { image_id: 7, pose: t0, score: 0.9 },                                        // exact
+        TubeEstimate { image_id: 7, pose: shifted(&t1, Vector3::new(0.0, 0.0, 0.010)), score: 0.8 }, // 10 mm off
+        TubeEstimate { image_id: 8, pose: pose(0.5, 0.5, 3.0), score: 0.7 },                      // far: false positive
     ];
     let m = match_by_centre_distance(&truths, &estimates, 0.05);
     assert_eq!(m.pairs.len(), 2);
     let model = ModelPoints::from_tube(&TubeModel::default(), 0.003).unwrap();
-    let cfg = PoseEvalConfig {
-        default_camera: Some(CameraModel::from_hfov(640, 480, 60.0)),
-        ..Default::default()
-    };
+    let cfg = PoseEvalConfig { default_camera: Some(CameraModel::from_hfov(640, 480, 60.0)), ..Default::default() };
     let ev = evaluate_poses(&truths, &estimates, &m, &model, &cfg).unwrap();
     assert_eq!((ev.n_truths, ev.n_estimates, ev.n_matched), (3, 3, 2));
     // MSSD of the 10 mm shift is 10 mm: correct at every threshold (>= 0.1 d ≈ 15 mm) but the
     // first (0.05 d ≈ 7.6 mm); the exact one everywhere; the third truth is a miss.
-    assert!(
-        (ev.bop.diameter_mm - 151.6).abs() < 0.3,
-        "{}",
-        ev.bop.diameter_mm
-    );
+    assert!((ev.bop.diameter_mm - 151.6).abs() < 0.3, "{}", ev.bop.diameter_mm);
     let want = (1.0 / 3.0 + 9.0 * 2.0 / 3.0) / 10.0;
     assert!((ev.bop.ar_mssd - want).abs() < 1e-12, "{}", ev.bop.ar_mssd);
     assert!((ev.bop.ar_mssd_flip - want).abs() < 1e-12);
@@ -169,37 +109,10 @@ fn evaluation_recalls_and_summaries_match_hand_computation() {
 #[test]
 fn mask_iou_matching_uses_core_rle() {
     use tubeloc_core::{BinaryMask, Rle, TubeAxisPose};
-    let rect = |x0: usize, x1: usize| {
-        Rle::from_mask(&BinaryMask::from_fn(20, 10, |x, y| {
-            x >= x0 && x < x1 && (2..8).contains(&y)
-        }))
-    };
-    let truths = vec![
-        TubeTruth {
-            image_id: 1,
-            pose: pose(0.0, 0.0, 1.0),
-        },
-        TubeTruth {
-            image_id: 1,
-            pose: pose(0.2, 0.0, 1.0),
-        },
-    ];
-    let axis = TubeAxisPose::new(
-        1,
-        0.9,
-        Vector3::new(0.2, 0.0, 1.0),
-        Vector3::new(0.0, 1.0, 0.0),
-        0.8,
-    )
-    .unwrap();
-    let estimates = vec![
-        TubeEstimate::from_axis_pose(&axis),
-        TubeEstimate {
-            image_id: 1,
-            pose: pose(0.0, 0.0, 1.0),
-            score: 0.5,
-        },
-    ];
+    let rect = |x0: usize, x1: usize| Rle::from_mask(&BinaryMask::from_fn(20, 10, |x, y| x >= x0 && x < x1 && (2..8).contains(&y)));
+    let truths = vec![TubeTruth { image_id: 1, pose: pose(0.0, 0.0, 1.0) }, TubeTruth { image_id: 1, pose: pose(0.2, 0.0, 1.0) }];
+    let axis = TubeAxisPose::new(1, 0.9, Vector3::new(0.2, 0.0, 1.0), Vector3::new(0.0, 1.0, 0.0), 0.8).unwrap();
+    let estimates = vec![TubeEstimate::from_axis_pose(&axis), TubeEstimate { image_id: 1, pose: pose(0.0, 0.0, 1.0), score: 0.5 }];
     // Truth masks: columns 0..8 and 10..18. Estimate 0 covers 10..16 (IoU 6/8 with truth 1),
     // estimate 1 covers 4..8 (IoU 4/8 with truth 0: below a 0.6 gate, at a 0.5 gate).
     let tm = vec![rect(0, 8), rect(10, 18)];
@@ -211,8 +124,5 @@ fn mask_iou_matching_uses_core_rle() {
     assert_eq!(m.unmatched_estimates, vec![1]);
     let m = match_by_mask_iou(&truths, &estimates, &tm, &em, 0.5).unwrap();
     assert_eq!(m.pairs.len(), 2);
-    assert!(match_by_mask_iou(&truths, &estimates, &tm[..1], &em, 0.5)
-        .unwrap_err()
-        .to_string()
-        .contains("1 truth masks for 2 truths"));
+    assert!(match_by_mask_iou(&truths, &estimates, &tm[..1], &em, 0.5).unwrap_err().to_string().contains("1 truth masks for 2 truths"));
 }

@@ -3,16 +3,11 @@
 use nalgebra::{Point3, Rotation3, Vector3};
 use tubeloc_core::{CameraModel, Pose, TubeModel};
 use tubeloc_eval::pose::{axis_error, pose_axis_error, AxisLine};
-use tubeloc_eval::pose_bop::{
-    average_recall, bop_recalls, mspd, mssd, mssd_thresholds, ModelPoints, Symmetries,
-};
+use tubeloc_eval::pose_bop::{average_recall, bop_recalls, mspd, mssd, mssd_thresholds, ModelPoints, Symmetries};
 
 fn gt() -> Pose {
     // A tube lying 1.2 m in front of the camera, axis tilted in the image.
-    Pose::from_parts(
-        Rotation3::from_euler_angles(1.1, 0.3, -0.4),
-        Vector3::new(0.05, -0.02, 1.2),
-    )
+    Pose::from_parts(Rotation3::from_euler_angles(1.1, 0.3, -0.4), Vector3::new(0.05, -0.02, 1.2))
 }
 
 fn model() -> ModelPoints {
@@ -24,10 +19,7 @@ fn camera() -> CameraModel {
 }
 
 fn rot(axis: Vector3<f64>, deg: f64) -> Pose {
-    Pose::from_parts(
-        Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians()),
-        Vector3::zeros(),
-    )
+    Pose::from_parts(Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians()), Vector3::zeros())
 }
 
 #[test]
@@ -38,10 +30,7 @@ fn rotation_about_the_axis_has_zero_error_in_every_symmetric_metric() {
     for deg in [37.0, 180.0, 271.0] {
         let est = gt() * rot(Vector3::z(), deg);
         let e = pose_axis_error(&est, &gt());
-        assert!(
-            e.axis_angle_deg < 1e-6 && e.perpendicular_mm < 1e-9 && e.along_axis_mm.abs() < 1e-9,
-            "{e:?}"
-        );
+        assert!(e.axis_angle_deg < 1e-6 && e.perpendicular_mm < 1e-9 && e.along_axis_mm.abs() < 1e-9, "{e:?}");
         assert!(e.end_correct);
         assert!(mssd(&est, &gt(), &m, &axial) < 1e-9);
         assert!(mssd(&est, &gt(), &m, &flip) < 1e-9);
@@ -74,10 +63,7 @@ fn known_offsets_give_known_distances() {
     // 3 mm along the axis and 4 mm across it.
     let est = AxisLine::new(Point3::new(0.104, 0.2, 1.003), Vector3::new(0.0, 0.0, -1.0)).unwrap();
     let e = axis_error(&est, &g);
-    assert!(
-        (e.along_axis_mm - 3.0).abs() < 1e-9 && (e.perpendicular_mm - 4.0).abs() < 1e-9,
-        "{e:?}"
-    );
+    assert!((e.along_axis_mm - 3.0).abs() < 1e-9 && (e.perpendicular_mm - 4.0).abs() < 1e-9, "{e:?}");
     assert!((e.centre_distance_mm - 5.0).abs() < 1e-9);
     assert!(e.axis_angle_deg < 1e-9 && !e.end_correct);
     // A 10° tilt, and 170° (the same line, other end).
@@ -96,10 +82,7 @@ fn mssd_of_a_translation_equals_its_length() {
     let m = model();
     let shift = Pose::from_parts(Rotation3::identity(), Vector3::new(0.001, -0.002, 0.002));
     let est = shift * gt();
-    for sym in [
-        Symmetries::tube(1.0, false).unwrap(),
-        Symmetries::tube(1.0, true).unwrap(),
-    ] {
+    for sym in [Symmetries::tube(1.0, false).unwrap(), Symmetries::tube(1.0, true).unwrap()] {
         let e = mssd(&est, &gt(), &m, &sym);
         assert!((e - 0.003).abs() < 1e-12, "{e}");
     }
@@ -112,10 +95,7 @@ fn tube_model_points_have_the_tube_diameter() {
     // Foot rim to the opposite side of the seal rim: sqrt(L² + (r_foot + r_seal)²).
     let want = (0.150f64.powi(2) + (0.0103f64 + 0.0115).powi(2)).sqrt();
     assert!((m.diameter - want).abs() < 2e-4, "{} vs {want}", m.diameter);
-    assert!(m
-        .points
-        .iter()
-        .all(|p| p.z.abs() <= 0.075 + 1e-12 && (p.x.hypot(p.y) <= 0.0115 + 1e-12)));
+    assert!(m.points.iter().all(|p| p.z.abs() <= 0.075 + 1e-12 && (p.x.hypot(p.y) <= 0.0115 + 1e-12)));
     assert!(ModelPoints::from_tube(&t, 0.0).is_err());
     assert!(ModelPoints::from_points(vec![]).is_err());
     assert!(Symmetries::tube(0.0, false).is_err());

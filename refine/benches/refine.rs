@@ -14,24 +14,11 @@ use criterion::{criterion_group, criterion_main, Criterion};
 fn bench(c: &mut Criterion) {
     let ss = speed_scene();
     let (refiner, seed, input) = (&ss.refiner, &ss.seed, ss.input());
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let p = pool.install(|| refiner.refine_seed(&input, seed, 0, 1.0, None));
-    assert!(
-        p.converged,
-        "bench scene does not converge: {:?}",
-        p.failure
-    );
-    eprintln!(
-        "bench tube: {} iterations, error {:.2} mm",
-        p.residuals.iterations,
-        (p.centre - ss.scene.truth.centre).norm() * 1e3
-    );
-    c.bench_function("refine_mono_one_tube_1_thread", |b| {
-        b.iter(|| pool.install(|| refiner.refine_seed(&input, seed, 0, 1.0, None)))
-    });
+    assert!(p.converged, "bench scene does not converge: {:?}", p.failure);
+    eprintln!("bench tube: {} iterations, error {:.2} mm", p.residuals.iterations, (p.centre - ss.scene.truth.centre).norm() * 1e3);
+    c.bench_function("refine_mono_one_tube_1_thread", |b| b.iter(|| pool.install(|| refiner.refine_seed(&input, seed, 0, 1.0, None))));
 }
 
 criterion_group! {

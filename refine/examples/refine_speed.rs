@@ -11,19 +11,11 @@ use common::*;
 
 /// Nanoseconds this thread has spent on a CPU, if the kernel exposes it.
 fn thread_cpu_ns() -> Option<u64> {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
+    std::fs::read_to_string("/proc/thread-self/schedstat").ok()?.split_whitespace().next()?.parse().ok()
 }
 
 fn main() {
-    let n: usize = std::env::args()
-        .nth(1)
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(200);
+    let n: usize = std::env::args().nth(1).and_then(|v| v.parse().ok()).unwrap_or(200);
     let ss = speed_scene();
     let (refiner, seed, input) = (&ss.refiner, &ss.seed, ss.input());
     let p = refiner.refine_seed(&input, seed, 0, 1.0, None);

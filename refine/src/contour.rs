@@ -35,10 +35,7 @@ impl AxisState {
     /// Applies an update: `c += δc`, `a = normalize(a + δ1 u1 + δ2 u2)`.
     pub fn updated(&self, delta: &[f64; 5], u1: &Vector3<f64>, u2: &Vector3<f64>) -> AxisState {
         let a = self.a + u1 * delta[3] + u2 * delta[4];
-        AxisState {
-            c: self.c + Vector3::new(delta[0], delta[1], delta[2]),
-            a: a.normalize(),
-        }
+        AxisState { c: self.c + Vector3::new(delta[0], delta[1], delta[2]), a: a.normalize() }
     }
 
     /// The axis frame `(e1, e2, d)` of the contour formulas; `None` when the camera is on the
@@ -50,13 +47,7 @@ impl AxisState {
             return None;
         }
         let e1 = cp / d;
-        Some(AxisFrame {
-            c: self.c,
-            a: self.a,
-            e1,
-            e2: self.a.cross(&e1),
-            d,
-        })
+        Some(AxisFrame { c: self.c, a: self.a, e1, e2: self.a.cross(&e1), d })
     }
 
     /// Sixteen points around the tube of `model` at this state (camera frame, metres), whose
@@ -76,6 +67,7 @@ impl AxisState {
         }
         Some(out)
     }
+
 }
 
 /// Derived axis frame, see the module docs.
@@ -149,26 +141,13 @@ impl ContourSample {
                 }
                 let beta = (1.0 - alpha * alpha).sqrt();
                 let n = f.e1 * alpha + f.e2 * (side * beta);
-                Some(SamplePoint {
-                    x: Point3::from(f.c + f.a * t + n * s.r),
-                    out: n,
-                    tangent: f.a,
-                })
+                Some(SamplePoint { x: Point3::from(f.c + f.a * t + n * s.r), out: n, tangent: f.a })
             }
-            SampleKind::Rim {
-                end,
-                cos: cs,
-                sin: sn,
-                ..
-            } => {
+            SampleKind::Rim { end, cos: cs, sin: sn, .. } => {
                 let z = if end < 0.0 { s.z0 } else { s.z1 };
                 let n = f.e1 * cs + f.e2 * sn;
                 let x = f.c + f.a * z + n * s.r;
-                Some(SamplePoint {
-                    x: Point3::from(x),
-                    out: (n + f.a * end).normalize(),
-                    tangent: f.e2 * cs - f.e1 * sn,
-                })
+                Some(SamplePoint { x: Point3::from(x), out: (n + f.a * end).normalize(), tangent: f.e2 * cs - f.e1 * sn })
             }
         }
     }
@@ -194,18 +173,11 @@ impl ContourSample {
 /// Builds the sample set for a pose seen by `camera`: limb samples every `spacing_px` pixels
 /// along each section (at least 3 per limb, at most 80) and rim samples every `spacing_px`
 /// around each exterior rim (8 to 64 per rim). Rims hidden inside a wider neighbour are left out.
-pub fn build_samples(
-    model: &CylinderModel,
-    state: &AxisState,
-    camera: &CameraModel,
-    spacing_px: f64,
-) -> Vec<ContourSample> {
+pub fn build_samples(model: &CylinderModel, state: &AxisState, camera: &CameraModel, spacing_px: f64) -> Vec<ContourSample> {
     let f_px = 0.5 * (camera.fx + camera.fy);
     let depth = state.c.z.max(1e-3);
     let px_per_m = f_px / depth;
-    let along = (state.a - state.c.normalize() * state.a.dot(&state.c.normalize()))
-        .norm()
-        .max(0.05);
+    let along = (state.a - state.c.normalize() * state.a.dot(&state.c.normalize())).norm().max(0.05);
     let mut out = Vec::new();
     for (i, s) in model.sections.iter().enumerate() {
         let len_px = (s.z1 - s.z0) * px_per_m * along;
@@ -213,10 +185,7 @@ pub fn build_samples(
         for side in [-1.0, 1.0] {
             for k in 0..n {
                 let t = s.z0 + (s.z1 - s.z0) * (k as f64 + 0.5) / n as f64;
-                out.push(ContourSample {
-                    section: i,
-                    kind: SampleKind::Limb { side, t },
-                });
+                out.push(ContourSample { section: i, kind: SampleKind::Limb { side, t } });
             }
         }
         let circ_px = std::f64::consts::TAU * s.r * px_per_m;
@@ -228,10 +197,7 @@ pub fn build_samples(
             for k in 0..m {
                 let phi = std::f64::consts::TAU * (k as f64 + 0.5) / m as f64;
                 let (sin, cos) = phi.sin_cos();
-                out.push(ContourSample {
-                    section: i,
-                    kind: SampleKind::Rim { end, phi, cos, sin },
-                });
+                out.push(ContourSample { section: i, kind: SampleKind::Rim { end, phi, cos, sin } });
             }
         }
     }
@@ -240,32 +206,18 @@ pub fn build_samples(
 
 /// [`build_samples`] with the spacing widened so that at most about `max_samples` samples
 /// result (the per-curve minimum counts may exceed it slightly).
-pub fn build_samples_capped(
-    model: &CylinderModel,
-    state: &AxisState,
-    camera: &CameraModel,
-    spacing_px: f64,
-    max_samples: usize,
-) -> Vec<ContourSample> {
+pub fn build_samples_capped(model: &CylinderModel, state: &AxisState, camera: &CameraModel, spacing_px: f64, max_samples: usize) -> Vec<ContourSample> {
     let s = build_samples(model, state, camera, spacing_px);
     if s.len() <= max_samples.max(1) {
         return s;
     }
-    build_samples(
-        model,
-        state,
-        camera,
-        spacing_px * s.len() as f64 / max_samples.max(1) as f64,
-    )
+    build_samples(model, state, camera, spacing_px * s.len() as f64 / max_samples.max(1) as f64)
 }
 
 /// Projects a sample point and returns the pixel and the unit image normal, oriented outward
 /// (away from the tube). `None` when behind the camera or degenerate.
 #[inline]
-pub fn project_with_normal(
-    camera: &CameraModel,
-    p: &SamplePoint,
-) -> Option<(Point2<f64>, Vector2<f64>)> {
+pub fn project_with_normal(camera: &CameraModel, p: &SamplePoint) -> Option<(Point2<f64>, Vector2<f64>)> {
     let u = camera.project(&p.x)?;
     let h = 1e-3 * p.x.coords.norm().max(1e-3);
     let ut = camera.project(&(p.x + p.tangent * h))?;
@@ -290,16 +242,10 @@ mod tests {
     #[test]
     fn limb_rays_are_tangent_to_the_surface() {
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
-        let st = AxisState {
-            c: Vector3::new(0.1, 0.05, 0.8),
-            a: Vector3::new(1.0, 0.2, 0.3).normalize(),
-        };
+        let st = AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() };
         let f = st.frame().unwrap();
         for side in [-1.0, 1.0] {
-            let s = ContourSample {
-                section: 1,
-                kind: SampleKind::Limb { side, t: 0.0 },
-            };
+            let s = ContourSample { section: 1, kind: SampleKind::Limb { side, t: 0.0 } };
             let p = s.eval(&model, &f).unwrap();
             // On the surface: distance to the axis equals the radius.
             let rel = p.x.coords - st.c;
@@ -315,10 +261,7 @@ mod tests {
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
         // Axis along x, off to the side: the camera sees the -x end face (toward it) and the
         // side; the +x end face points away.
-        let st = AxisState {
-            c: Vector3::new(0.2, 0.0, 1.0),
-            a: Vector3::x(),
-        };
+        let st = AxisState { c: Vector3::new(0.2, 0.0, 1.0), a: Vector3::x() };
         let f = st.frame().unwrap();
         let cam = CameraModel::from_hfov(640, 480, 60.0);
         let samples = build_samples(&model, &st, &cam, 2.0);
@@ -360,14 +303,8 @@ mod vis_tests {
     fn self_occlusion_matches_brute_force() {
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
         for st in [
-            AxisState {
-                c: Vector3::new(0.1, 0.05, 0.8),
-                a: Vector3::new(1.0, 0.2, 0.3).normalize(),
-            },
-            AxisState {
-                c: Vector3::new(-0.05, 0.1, 0.5),
-                a: Vector3::new(0.2, -0.3, 1.0).normalize(),
-            },
+            AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() },
+            AxisState { c: Vector3::new(-0.05, 0.1, 0.5), a: Vector3::new(0.2, -0.3, 1.0).normalize() },
         ] {
             let f = st.frame().unwrap();
             let mut disagree = 0;

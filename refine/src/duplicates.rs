@@ -16,8 +16,7 @@ pub fn merge_duplicates(poses: &mut Vec<TubeAxisPose>, tube: &TubeModel) -> usiz
             && kept.iter().filter(|k| k.converged).any(|k| {
                 let d = p.centre - k.centre;
                 let along = d.dot(&k.axis).clamp(-half, half);
-                (d - k.axis * along).norm() < radius
-                    && tubeloc_core::tube_pose::axis_angle(&p.axis, &k.axis) < 15f64.to_radians()
+                (d - k.axis * along).norm() < radius && tubeloc_core::tube_pose::axis_angle(&p.axis, &k.axis) < 15f64.to_radians()
             });
         if !dup {
             kept.push(p);
@@ -53,10 +52,6 @@ mod tests {
         poses.push(failed);
         assert_eq!(merge_duplicates(&mut poses, &tube), 1);
         let scores: Vec<f64> = poses.iter().map(|p| p.score).collect();
-        assert_eq!(
-            scores,
-            vec![0.9, 0.7, 0.6, 0.5],
-            "failed fits are kept, not merged"
-        );
+        assert_eq!(scores, vec![0.9, 0.7, 0.6, 0.5], "failed fits are kept, not merged");
     }
 }

@@ -40,12 +40,7 @@ impl GradientLevel {
 
 /// The crop rectangle `(x0, y0, w, h)` of `bbox` grown by `margin` pixels, clamped to the image.
 /// Returns `None` when the rectangle does not overlap the image.
-pub fn roi(
-    bbox: [f64; 4],
-    margin: f64,
-    width: usize,
-    height: usize,
-) -> Option<(usize, usize, usize, usize)> {
+pub fn roi(bbox: [f64; 4], margin: f64, width: usize, height: usize) -> Option<(usize, usize, usize, usize)> {
     let x0 = (bbox[0] - margin).floor().max(0.0);
     let y0 = (bbox[1] - margin).floor().max(0.0);
     let x1 = (bbox[0] + bbox[2] + margin).ceil().min(width as f64);
@@ -53,12 +48,7 @@ pub fn roi(
     if !(x1 - x0 >= 8.0 && y1 - y0 >= 8.0) {
         return None;
     }
-    Some((
-        x0 as usize,
-        y0 as usize,
-        (x1 - x0) as usize,
-        (y1 - y0) as usize,
-    ))
+    Some((x0 as usize, y0 as usize, (x1 - x0) as usize, (y1 - y0) as usize))
 }
 
 fn crop(img: &Plane<f32>, x0: usize, y0: usize, w: usize, h: usize) -> Plane<f32> {
@@ -96,13 +86,7 @@ fn blur(p: &Plane<f32>) -> Plane<f32> {
         let out = &mut tmp[y * w..(y + 1) * w];
         for x in (0..w.min(2)).chain(w.saturating_sub(2).max(2)..w) {
             let xi = x as isize;
-            out[x] = binom(
-                row[cl(xi - 2, w)],
-                row[cl(xi - 1, w)],
-                row[x],
-                row[cl(xi + 1, w)],
-                row[cl(xi + 2, w)],
-            );
+            out[x] = binom(row[cl(xi - 2, w)], row[cl(xi - 1, w)], row[x], row[cl(xi + 1, w)], row[cl(xi + 2, w)]);
         }
         if w > 4 {
             for (o, win) in out[2..w - 2].iter_mut().zip(row.windows(5)) {
@@ -149,25 +133,14 @@ fn gradients(p: &Plane<f32>) -> Vec<[f32; 2]> {
 
 /// Builds `levels` gradient levels for the crop `(x0, y0, w, h)` of `image` seen by `camera`.
 /// Stops early when a level would be smaller than 16 pixels on a side.
-pub fn build_pyramid(
-    image: &Plane<f32>,
-    camera: &CameraModel,
-    rect: (usize, usize, usize, usize),
-    levels: usize,
-) -> Vec<GradientLevel> {
+pub fn build_pyramid(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usize, usize, usize), levels: usize) -> Vec<GradientLevel> {
     build_pyramid_with(image, camera, rect, levels, true)
 }
 
 /// [`build_pyramid`] with the smoothing of level 0 (full resolution) optional: `blur_level0 =
 /// false` differentiates it unsmoothed for the fit and keeps the smoothed one in
 /// [`GradientLevel::smoothed`] (the coarser levels are smoothed either way).
-pub fn build_pyramid_with(
-    image: &Plane<f32>,
-    camera: &CameraModel,
-    rect: (usize, usize, usize, usize),
-    levels: usize,
-    blur_level0: bool,
-) -> Vec<GradientLevel> {
+pub fn build_pyramid_with(image: &Plane<f32>, camera: &CameraModel, rect: (usize, usize, usize, usize), levels: usize, blur_level0: bool) -> Vec<GradientLevel> {
     let (x0, y0, w, h) = rect;
     let mut cur = crop(image, x0, y0, w, h);
     let mut cam = camera.cropped(x0 as u32, y0 as u32, w as u32, h as u32);
@@ -184,20 +157,9 @@ pub fn build_pyramid_with(
             cam.height = cur.height as u32;
             scale *= 0.5;
         }
-        let smooth = GradientLevel {
-            camera: cam.clone(),
-            width: cur.width,
-            height: cur.height,
-            scale,
-            grad: gradients(&blur(&cur)),
-            smoothed: None,
-        };
+        let smooth = GradientLevel { camera: cam.clone(), width: cur.width, height: cur.height, scale, grad: gradients(&blur(&cur)), smoothed: None };
         if k == 0 && !blur_level0 {
-            out.push(GradientLevel {
-                grad: gradients(&cur),
-                smoothed: Some(Box::new(smooth.clone())),
-                ..smooth
-            });
+            out.push(GradientLevel { grad: gradients(&cur), smoothed: Some(Box::new(smooth.clone())), ..smooth });
         } else {
             out.push(smooth);
         }
@@ -218,10 +180,7 @@ impl GradientLevel {
     /// True when `p` is at least `margin` pixels inside this level's image.
     #[inline]
     pub fn inside(&self, p: &Point2<f64>, margin: f64) -> bool {
-        p.x >= margin
-            && p.y >= margin
-            && p.x <= self.width as f64 - 1.0 - margin
-            && p.y <= self.height as f64 - 1.0 - margin
+        p.x >= margin && p.y >= margin && p.x <= self.width as f64 - 1.0 - margin && p.y <= self.height as f64 - 1.0 - margin
     }
 
     /// Directional derivative `∇I(q) · n` by bilinear interpolation of the gradient planes.
@@ -243,12 +202,7 @@ impl GradientLevel {
         let x1 = (x0 + 1).min(w - 1) - x0;
         let y1 = if y0 + 1 < h { w } else { 0 };
         let i = y0 * w + x0;
-        let (a, b, c, d) = (
-            self.grad[i],
-            self.grad[i + x1],
-            self.grad[i + y1],
-            self.grad[i + y1 + x1],
-        );
+        let (a, b, c, d) = (self.grad[i], self.grad[i + x1], self.grad[i + y1], self.grad[i + y1 + x1]);
         let mut out = [0f32; 2];
         for k in 0..2 {
             let top = a[k] + (b[k] - a[k]) * fx;
@@ -263,15 +217,7 @@ impl GradientLevel {
     /// of `∇I · n`; 0 keeps both). Returns up to [`MAX_HYPOTHESES`] edges, strongest first,
     /// each at least `rel_strength` times the strongest; offsets refined by a parabola through
     /// the neighbours.
-    pub fn search_all(
-        &self,
-        p: &Point2<f64>,
-        n: &Vector2<f64>,
-        radius: usize,
-        min_strength: f32,
-        polarity: i8,
-        rel_strength: f32,
-    ) -> EdgeHits {
+    pub fn search_all(&self, p: &Point2<f64>, n: &Vector2<f64>, radius: usize, min_strength: f32, polarity: i8, rel_strength: f32) -> EdgeHits {
         let mut buf = [0f32; 129];
         let m = (2 * radius + 1).min(129);
         let r = (m as isize - 1) / 2;
@@ -303,35 +249,17 @@ impl GradientLevel {
             if a < rel_strength * top {
                 break;
             }
-            let (l, c, rr) = (
-                buf[i - 1].abs() as f64,
-                buf[i].abs() as f64,
-                buf[i + 1].abs() as f64,
-            );
+            let (l, c, rr) = (buf[i - 1].abs() as f64, buf[i].abs() as f64, buf[i + 1].abs() as f64);
             let den = l - 2.0 * c + rr;
-            let delta = if den < -1e-12 {
-                (0.5 * (l - rr) / den).clamp(-0.5, 0.5)
-            } else {
-                0.0
-            };
-            hits.hits[hits.len] = EdgeHit {
-                offset: i as f64 - r as f64 + delta,
-                strength: buf[i],
-            };
+            let delta = if den < -1e-12 { (0.5 * (l - rr) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            hits.hits[hits.len] = EdgeHit { offset: i as f64 - r as f64 + delta, strength: buf[i] };
             hits.len += 1;
         }
         hits
     }
 
     /// The strongest edge of [`GradientLevel::search_all`], if any.
-    pub fn search(
-        &self,
-        p: &Point2<f64>,
-        n: &Vector2<f64>,
-        radius: usize,
-        min_strength: f32,
-        polarity: i8,
-    ) -> Option<EdgeHit> {
+    pub fn search(&self, p: &Point2<f64>, n: &Vector2<f64>, radius: usize, min_strength: f32, polarity: i8) -> Option<EdgeHit> {
         let h = self.search_all(p, n, radius, min_strength, polarity, 1.0);
         (h.len > 0).then(|| h.hits[0])
     }
@@ -351,10 +279,7 @@ pub struct EdgeHits {
 
 impl Default for EdgeHit {
     fn default() -> Self {
-        EdgeHit {
-            offset: 0.0,
-            strength: 0.0,
-        }
+        EdgeHit { offset: 0.0, strength: 0.0 }
     }
 }
 
@@ -382,17 +307,9 @@ mod tests {
             let xe = (40.3 + 0.5) * lv.scale - 0.5;
             let p = Point2::new(xe - 2.2, 8.0 * lv.scale);
             let hit = lv.search(&p, &Vector2::x(), 5, 0.01, 0).unwrap();
-            assert!(
-                (p.x + hit.offset - xe).abs() < 0.1,
-                "level {}: {:?} vs {xe}",
-                lv.scale,
-                hit
-            );
+            assert!((p.x + hit.offset - xe).abs() < 0.1, "level {}: {:?} vs {xe}", lv.scale, hit);
             assert!(hit.strength > 0.0);
-            assert!(
-                lv.search(&p, &Vector2::x(), 5, 0.01, -1).is_none(),
-                "wrong polarity is rejected"
-            );
+            assert!(lv.search(&p, &Vector2::x(), 5, 0.01, -1).is_none(), "wrong polarity is rejected");
         }
     }
 }

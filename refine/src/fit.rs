@@ -18,13 +18,13 @@
 
 use crate::contour::{build_samples_capped, project_with_normal, AxisState, ContourSample};
 use crate::edges::{EdgeHits, GradientLevel};
-use crate::jacobian::{stereo_row, PerturbedFrames};
 use crate::model::CylinderModel;
-use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
-use crate::priors::{self, SeedPrior};
 use crate::robust::{mad_scale, tukey_rho, tukey_weight};
 use crate::seed::GroundPlane;
 use crate::RefineConfig;
+use crate::jacobian::{stereo_row, PerturbedFrames};
+use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
+use crate::priors::{self, SeedPrior};
 use nalgebra::{Matrix2x5, Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
 use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
 use tubeloc_core::{CameraModel, FailureReason, Plane, ResidualStats};
@@ -50,13 +50,7 @@ pub struct Scene<'a> {
 /// Offset (level pixels along `n`, from the sample's level position) of the mask boundary seen
 /// from full-resolution pixel `uf` along the outward normal `n`: the outermost inside → outside
 /// transition within `radius_full` pixels, sampled every 0.25 px (nearest pixel).
-fn mask_boundary(
-    mask: &tubeloc_core::BinaryMask,
-    uf: &Point2<f64>,
-    n: &Vector2<f64>,
-    radius_full: f64,
-    scale: f64,
-) -> Option<f64> {
+fn mask_boundary(mask: &tubeloc_core::BinaryMask, uf: &Point2<f64>, n: &Vector2<f64>, radius_full: f64, scale: f64) -> Option<f64> {
     let at = |t: f64| -> bool {
         let q = uf + n * t;
         q.x >= -0.5 && q.y >= -0.5 && mask.get((q.x + 0.5) as usize, (q.y + 0.5) as usize)
@@ -126,13 +120,7 @@ struct Level<'a> {
     sigma_px: f64,
 }
 
-fn is_visible(
-    model: &CylinderModel,
-    st: &AxisState,
-    x: &Point3<f64>,
-    out: &Vector3<f64>,
-    scene: &Scene,
-) -> bool {
+fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vector3<f64>, scene: &Scene) -> bool {
     let push = 0.02 * model.body_radius() + 1e-4;
     let xp = x + out * push;
     if model.occludes(&st.c, &st.a, &xp) {
@@ -141,8 +129,7 @@ fn is_visible(
     if let Some((depth, cam)) = scene.depth {
         if let Some(u) = cam.project(x) {
             let (ix, iy) = (u.x.round(), u.y.round());
-            if ix >= 0.0 && iy >= 0.0 && (ix as usize) < depth.width && (iy as usize) < depth.height
-            {
+            if ix >= 0.0 && iy >= 0.0 && (ix as usize) < depth.width && (iy as usize) < depth.height {
                 let z = depth.get(ix as usize, iy as usize) as f64;
                 if z.is_finite() && z > 0.0 && z < x.z - model.occlusion_margin() {
                     return false;
@@ -159,21 +146,10 @@ fn is_visible(
 /// `end_limb_scale` scales the residuals of the limbs of sections other than the body (see
 /// `RefineConfig::end_limb_weight`); with 0 they are left out.
 #[allow(clippy::too_many_arguments)]
-fn associate(
-    model: &CylinderModel,
-    st: &AxisState,
-    samples: &[ContourSample],
-    level: &Level,
-    scene: &Scene,
-    cfg: &RefineConfig,
-    polarity: &[i8],
-    end_limb_scale: f64,
-) -> (Vec<Assoc>, usize, usize) {
+fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8], end_limb_scale: f64) -> (Vec<Assoc>, usize, usize) {
     let mut out = Vec::with_capacity(samples.len());
     let mut total = 0;
-    let Some(f) = st.frame() else {
-        return (out, 0, total);
-    };
+    let Some(f) = st.frame() else { return (out, 0, total) };
     let cam = &level.lv.camera;
     let mut visible = 0;
     for (i, s) in samples.iter().enumerate() {
@@ -181,15 +157,9 @@ fn associate(
         if !s.on_silhouette(model, &f, &p) {
             continue;
         }
-        let Some((u, n)) = project_with_normal(cam, &p) else {
-            continue;
-        };
+        let Some((u, n)) = project_with_normal(cam, &p) else { continue };
         let is_limb = matches!(s.kind, crate::contour::SampleKind::Limb { .. });
-        let scale = if is_limb && model.sections[s.section].r != model.body_radius() {
-            end_limb_scale
-        } else {
-            1.0
-        };
+        let scale = if is_limb && model.sections[s.section].r != model.body_radius() { end_limb_scale } else { 1.0 };
         if scale == 0.0 {
             continue;
         }
@@ -202,57 +172,27 @@ fn associate(
         }
         visible += 1;
         if let Some((mask, fcam)) = scene.mask {
-            let Some(uf) = fcam.project(&p.x) else {
-                continue;
-            };
+            let Some(uf) = fcam.project(&p.x) else { continue };
             let scale = level.lv.scale;
             if let Some(off) = mask_boundary(mask, &uf, &n, level.radius as f64 / scale, scale) {
                 let mut hyps = EdgeHits::default();
-                hyps.hits[0] = crate::edges::EdgeHit {
-                    offset: off,
-                    strength: -1.0,
-                };
+                hyps.hits[0] = crate::edges::EdgeHit { offset: off, strength: -1.0 };
                 hyps.len = 1;
-                out.push(Assoc {
-                    sample: *s,
-                    scale,
-                    n,
-                    u0: u,
-                    hyps,
-                });
+                out.push(Assoc { sample: *s, scale, n, u0: u, hyps });
             }
             continue;
         }
         let pol = polarity.get(i).copied().unwrap_or(0);
-        let mut hyps = level.lv.search_all(
-            &u,
-            &n,
-            level.radius,
-            cfg.min_gradient,
-            pol,
-            cfg.rel_edge_strength,
-        );
-        if cfg.outermost_limb_edge
-            && pol != 0
-            && hyps.len > 1
-            && matches!(s.kind, crate::contour::SampleKind::Limb { .. })
-        {
+        let mut hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, pol, cfg.rel_edge_strength);
+        if cfg.outermost_limb_edge && pol != 0 && hyps.len > 1 && matches!(s.kind, crate::contour::SampleKind::Limb { .. }) {
             // Shading boundaries inside the tube have the limb's polarity too; the silhouette is
             // the outermost of the edges (the normal points outward).
-            let k = (0..hyps.len)
-                .max_by(|&a, &b| hyps.hits[a].offset.total_cmp(&hyps.hits[b].offset))
-                .unwrap_or(0);
+            let k = (0..hyps.len).max_by(|&a, &b| hyps.hits[a].offset.total_cmp(&hyps.hits[b].offset)).unwrap_or(0);
             hyps.hits[0] = hyps.hits[k];
             hyps.len = 1;
         }
         if hyps.len > 0 {
-            out.push(Assoc {
-                sample: *s,
-                scale,
-                n,
-                u0: u,
-                hyps,
-            });
+            out.push(Assoc { sample: *s, scale, n, u0: u, hyps });
         }
     }
     (out, visible, total)
@@ -291,33 +231,17 @@ fn limb_polarity(samples: &[ContourSample], assoc: &[Assoc]) -> Vec<i8> {
             }
         })
         .collect();
-    samples
-        .iter()
-        .map(|s| key(s).map_or(0, |k| sign[k]))
-        .collect()
+    samples.iter().map(|s| key(s).map_or(0, |k| sign[k])).collect()
 }
 
 /// Residuals (normalized) of the associations and stereo points at state `st`; missing
 /// projections give `None` entries (skipped).
 #[allow(clippy::too_many_arguments)]
-fn residuals(
-    model: &CylinderModel,
-    st: &AxisState,
-    assoc: &[Assoc],
-    cam: &CameraModel,
-    sigma_px: f64,
-    scene: &Scene,
-    cfg: &RefineConfig,
-    sp: &SeedPrior,
-    out: &mut Vec<Option<f64>>,
-) {
+fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
     out.clear();
     let f = st.frame();
     for a in assoc {
-        let r = f
-            .and_then(|f| a.sample.eval(model, &f))
-            .and_then(|p| cam.project(&p.x))
-            .map(|u| a.scale * a.residual(&u) / sigma_px);
+        let r = f.and_then(|f| a.sample.eval(model, &f)).and_then(|p| cam.project(&p.x)).map(|u| a.scale * a.residual(&u) / sigma_px);
         out.push(r);
     }
     let half = 0.5 * model.length;
@@ -364,20 +288,9 @@ fn robust_cost(r: &[Option<f64>], c_img: f64, c_st: f64, n_img: usize, n_st: usi
 /// Tukey thresholds (normalized units) for the image and stereo groups: `4.685 · MAD scale`,
 /// the image one clamped to `[2 px, 0.6 · search radius]` in level pixels so that a majority of
 /// wrong associations cannot inflate it.
-fn thresholds(
-    r: &[Option<f64>],
-    n_img: usize,
-    n_st: usize,
-    scratch: &mut Vec<f64>,
-    sigma_px: f64,
-    radius: usize,
-) -> (f64, f64) {
+fn thresholds(r: &[Option<f64>], n_img: usize, n_st: usize, scratch: &mut Vec<f64>, sigma_px: f64, radius: usize) -> (f64, f64) {
     let img: Vec<f64> = r[..n_img].iter().flatten().copied().collect();
-    let st: Vec<f64> = r[n_img..(n_img + n_st).min(r.len())]
-        .iter()
-        .flatten()
-        .copied()
-        .collect();
+    let st: Vec<f64> = r[n_img..(n_img + n_st).min(r.len())].iter().flatten().copied().collect();
     let s_img = mad_scale(&img, scratch).unwrap_or(1.0);
     let s_st = mad_scale(&st, scratch).unwrap_or(1.0).max(1.0);
     let lo = 2.0 / sigma_px;
@@ -388,30 +301,14 @@ fn thresholds(
 /// Largest predicted image motion (level pixels) of the associated samples for step `d`, from
 /// their image Jacobians (linearized; the step is small by construction).
 fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
-    jac.iter()
-        .flatten()
-        .map(|j| (j * d).norm())
-        .fold(0.0, f64::max)
+    jac.iter().flatten().map(|j| (j * d).norm()).fold(0.0, f64::max)
 }
 
 /// Normal equations `JᵀWJ`, `JᵀWr` at `st` for the perturbation basis `(u1, u2)` with the
 /// Jacobians of [`crate::jacobian`]; fills `jac` with the image Jacobian of each association
 /// and returns `Σ w r²` and `Σ w`.
 #[allow(clippy::too_many_arguments)]
-fn normal_equations(
-    model: &CylinderModel,
-    st: &AxisState,
-    assoc: &[Assoc],
-    cam: &CameraModel,
-    sigma_px: f64,
-    scene: &Scene,
-    cfg: &RefineConfig,
-    u: (&Vector3<f64>, &Vector3<f64>),
-    r0: &[Option<f64>],
-    c: (f64, f64),
-    sp: &SeedPrior,
-    jac: &mut Vec<Option<Matrix2x5<f64>>>,
-) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), sp: &SeedPrior, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
@@ -419,10 +316,7 @@ fn normal_equations(
     let f0 = st.frame();
     for a in assoc {
         let j = match (&pf, &f0) {
-            (Some(pf), Some(f0)) => a
-                .sample
-                .eval(model, f0)
-                .and_then(|p| pf.image_jacobian(model, &a.sample, cam, &p.x)),
+            (Some(pf), Some(f0)) => a.sample.eval(model, f0).and_then(|p| pf.image_jacobian(model, &a.sample, cam, &p.x)),
             _ => None,
         };
         jac.push(j);
@@ -433,11 +327,7 @@ fn normal_equations(
     for (i, r) in r0.iter().enumerate() {
         let Some(r) = *r else { continue };
         let cthr = group_threshold(i, n_img, n_st, c);
-        let w = if cthr >= 1e6 {
-            1.0
-        } else {
-            tukey_weight(r, cthr)
-        };
+        let w = if cthr >= 1e6 { 1.0 } else { tukey_weight(r, cthr) };
         if w <= 0.0 {
             continue;
         }
@@ -445,8 +335,7 @@ fn normal_equations(
             let Some(ji) = &jac[i] else { continue };
             (ji.transpose() * assoc[i].n) * (assoc[i].scale / sigma_px)
         } else if i < n_img + n_st {
-            Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img]))
-                / cfg.stereo_sigma_m
+            Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
             priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), cfg, sp, u)
         };
@@ -464,22 +353,14 @@ fn normal_equations(
 /// The limb samples' share of the normal equations (image rows of limbs only, same weights as
 /// [`normal_equations`], whose `jac` it reuses): removed from the distance column in the mono
 /// length-depth mode.
-fn limb_normal_equations(
-    assoc: &[Assoc],
-    jac: &[Option<Matrix2x5<f64>>],
-    r0: &[Option<f64>],
-    c_img: f64,
-    sigma_px: f64,
-) -> (Matrix5<f64>, Vector5<f64>) {
+fn limb_normal_equations(assoc: &[Assoc], jac: &[Option<Matrix2x5<f64>>], r0: &[Option<f64>], c_img: f64, sigma_px: f64) -> (Matrix5<f64>, Vector5<f64>) {
     let mut h = Matrix5::zeros();
     let mut g = Vector5::zeros();
     for (i, a) in assoc.iter().enumerate() {
         if !matches!(a.sample.kind, crate::contour::SampleKind::Limb { .. }) {
             continue;
         }
-        let (Some(r), Some(Some(ji))) = (r0.get(i).copied().flatten(), jac.get(i)) else {
-            continue;
-        };
+        let (Some(r), Some(Some(ji))) = (r0.get(i).copied().flatten(), jac.get(i)) else { continue };
         let w = tukey_weight(r, c_img);
         if w <= 0.0 {
             continue;
@@ -496,14 +377,7 @@ fn limb_normal_equations(
 /// Fits the model starting from `seed` over `levels` (coarsest last in the slice order given by
 /// [`crate::edges::build_pyramid`]: index 0 is full resolution). `first_level` is the coarsest
 /// index used; iterations run from it down to 0.
-pub fn fit(
-    model: &CylinderModel,
-    cfg: &RefineConfig,
-    levels: &[GradientLevel],
-    first_level: usize,
-    scene: &Scene,
-    seed: AxisState,
-) -> FitResult {
+pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], first_level: usize, scene: &Scene, seed: AxisState) -> FitResult {
     let mut st = seed;
     let mut iterations = 0;
     let mut scratch = Vec::new();
@@ -511,9 +385,7 @@ pub fn fit(
     let mut rtrial = Vec::new();
     let mut jbuf = Vec::new();
     let top = first_level.min(levels.len().saturating_sub(1));
-    let mono = levels
-        .first()
-        .is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
+    let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
     let sp = SeedPrior::new(cfg, &seed, mono, scene.ground.is_some());
     let tilt_prior = sp.tilt_sin_sigma.is_some();
     // Mono with a ground plane (tilt fixed by it): the distance along the ray from the
@@ -521,10 +393,7 @@ pub fn fit(
     let length_depth = mono && cfg.mono_length_depth && scene.ground.is_some();
     let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
         state: st,
-        stats: ResidualStats {
-            iterations,
-            ..Default::default()
-        },
+        stats: ResidualStats { iterations, ..Default::default() },
         covariance: [[0.0; 5]; 5],
         inlier_fraction: 0.0,
         score: 1.0,
@@ -534,43 +403,17 @@ pub fn fit(
     // with the fine search; when the coarsest level is full resolution (narrow tubes), it is
     // run again with the fine search (fewer shading and texture edges within reach).
     let fine = cfg.fine_search_radius_px.min(cfg.search_radius_px);
-    let mut stages: Vec<(usize, usize)> = (0..=top)
-        .rev()
-        .map(|li| {
-            (
-                li,
-                if li == top {
-                    cfg.search_radius_px
-                } else {
-                    fine
-                },
-            )
-        })
-        .collect();
+    let mut stages: Vec<(usize, usize)> = (0..=top).rev().map(|li| (li, if li == top { cfg.search_radius_px } else { fine })).collect();
     if top == 0 && cfg.fine_polish && fine < cfg.search_radius_px {
         stages.push((0, fine));
     }
     for (si, &(li, radius)) in stages.iter().enumerate() {
         let lv = &levels[li];
-        let level = Level {
-            lv,
-            radius,
-            sigma_px: cfg.edge_sigma_px,
-        };
+        let level = Level { lv, radius, sigma_px: cfg.edge_sigma_px };
         let first_stage = si == 0;
-        let samples = build_samples_capped(
-            model,
-            &st,
-            &lv.camera,
-            cfg.sample_spacing_px,
-            cfg.max_samples,
-        );
+        let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
         let mut polarity = vec![0i8; samples.len()];
-        let max_it = if first_stage {
-            cfg.max_iterations
-        } else {
-            cfg.max_iterations.div_ceil(2)
-        };
+        let max_it = if first_stage { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
         let mut lambda = 1e-3;
         // Edge associations are refreshed when the contour has moved more than
         // `reassociate_px` since the last search (and on the first two iterations, before and
@@ -582,98 +425,32 @@ pub fn fit(
             iterations += 1;
             let fresh = it <= 1 || drift > cfg.reassociate_px;
             if fresh {
-                let (a, visible, _) = associate(
-                    model,
-                    &st,
-                    &samples,
-                    &level,
-                    scene,
-                    cfg,
-                    &polarity,
-                    cfg.end_limb_weight.sqrt(),
-                );
+                let (a, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity, cfg.end_limb_weight.sqrt());
                 assoc = a;
                 drift = 0.0;
                 if cfg.limb_polarity && it == 0 {
                     polarity = limb_polarity(&samples, &assoc);
                 }
                 if visible < cfg.min_samples {
-                    return fail(
-                        st,
-                        FailureReason::OutOfImage,
-                        format!(
-                            "only {visible} contour samples visible in the image at level {li}"
-                        ),
-                        iterations,
-                    );
+                    return fail(st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}"), iterations);
                 }
                 if assoc.len() < cfg.min_samples {
-                    return fail(
-                        st,
-                        FailureReason::TooFewEdges,
-                        format!(
-                            "{} of {visible} contour samples found an edge at level {li}",
-                            assoc.len()
-                        ),
-                        iterations,
-                    );
+                    return fail(st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len()), iterations);
                 }
             }
             let n_img = assoc.len();
-            residuals(
-                model,
-                &st,
-                &assoc,
-                &lv.camera,
-                level.sigma_px,
-                scene,
-                cfg,
-                &sp,
-                &mut rbuf,
-            );
+            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &sp, &mut rbuf);
             let n_st = scene.stereo_points.len();
-            let c = thresholds(
-                &rbuf,
-                n_img,
-                n_st,
-                &mut scratch,
-                level.sigma_px,
-                level.radius,
-            );
+            let c = thresholds(&rbuf, n_img, n_st, &mut scratch, level.sigma_px, level.radius);
             let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
             let ax = st.a;
             let (u1, u2) = tangent_basis(&ax);
-            let (h, g, _, _) = normal_equations(
-                model,
-                &st,
-                &assoc,
-                &lv.camera,
-                level.sigma_px,
-                scene,
-                cfg,
-                (&u1, &u2),
-                &rbuf,
-                c,
-                &sp,
-                &mut jbuf,
-            );
+            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &sp, &mut jbuf);
             let mut accepted = None;
-            let basis = if mono {
-                mono_basis(
-                    &st,
-                    &u1,
-                    &u2,
-                    scene.ground.is_some() || tilt_prior,
-                    length_depth,
-                )
-            } else {
-                None
-            };
-            let limb_part = length_depth
-                .then(|| limb_normal_equations(&assoc, &jbuf, &rbuf, c.0, level.sigma_px));
+            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some() || tilt_prior, length_depth) } else { None };
+            let limb_part = length_depth.then(|| limb_normal_equations(&assoc, &jbuf, &rbuf, c.0, level.sigma_px));
             for _ in 0..6 {
-                let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref(), limb_part.as_ref())
-                else {
+                let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref(), limb_part.as_ref()) else {
                     lambda *= 10.0;
                     continue;
                 };
@@ -685,17 +462,7 @@ pub fn fit(
                 }
                 let delta = [d[0], d[1], d[2], d[3], d[4]];
                 let trial = st.updated(&delta, &u1, &u2);
-                residuals(
-                    model,
-                    &trial,
-                    &assoc,
-                    &lv.camera,
-                    level.sigma_px,
-                    scene,
-                    cfg,
-                    &sp,
-                    &mut rtrial,
-                );
+                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &sp, &mut rtrial);
                 let cost = robust_cost(&rtrial, c.0, c.1, n_img, n_st);
                 if cost.is_finite() && cost <= cost0 {
                     lambda = (lambda / 3.0).max(1e-7);
@@ -714,15 +481,8 @@ pub fn fit(
             st = next;
             let motion = max_motion(&jbuf, &d);
             drift += motion;
-            if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite()))
-                || st.c.z < 0.02
-            {
-                return fail(
-                    seed,
-                    FailureReason::Diverged,
-                    format!("pose left the valid range (centre {:?})", st.c.as_slice()),
-                    iterations,
-                );
+            if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.c.z < 0.02 {
+                return fail(seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice()), iterations);
             }
             if motion < cfg.converged_px {
                 if fresh {
@@ -732,19 +492,8 @@ pub fn fit(
             }
         }
         let moved = (st.c - seed.c).norm();
-        if moved > cfg.max_centre_shift_frac * seed.c.norm()
-            || axis_angle(&st.a, &seed.a) > cfg.max_axis_change_deg.to_radians()
-        {
-            return fail(
-                seed,
-                FailureReason::Diverged,
-                format!(
-                    "fit moved {:.1} mm and turned {:.1} deg from the seed",
-                    moved * 1e3,
-                    axis_angle(&st.a, &seed.a).to_degrees()
-                ),
-                iterations,
-            );
+        if moved > cfg.max_centre_shift_frac * seed.c.norm() || axis_angle(&st.a, &seed.a) > cfg.max_axis_change_deg.to_radians() {
+            return fail(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees()), iterations);
         }
     }
     if mono {
@@ -752,16 +501,7 @@ pub fn fit(
     }
     // Acceptance and statistics on the smoothed level (texture and noise make more edges in the
     // unsmoothed one), the score that ranks hypotheses and ends on the level fitted.
-    let mut r = finish(
-        model,
-        cfg,
-        levels[0].smooth(),
-        scene,
-        st,
-        &sp,
-        iterations,
-        mono,
-    );
+    let mut r = finish(model, cfg, levels[0].smooth(), scene, st, &sp, iterations, mono);
     if levels[0].smoothed.is_some() {
         r.score = finish(model, cfg, &levels[0], scene, st, &sp, iterations, mono).score;
     }
@@ -772,43 +512,13 @@ pub fn fit(
 /// `mono`: keep-depth mode, where a tube cut by the image border keeps its seed's distance, so
 /// the in-image fraction is not checked.
 #[allow(clippy::too_many_arguments)]
-fn finish(
-    model: &CylinderModel,
-    cfg: &RefineConfig,
-    lv: &GradientLevel,
-    scene: &Scene,
-    st: AxisState,
-    sp: &SeedPrior,
-    iterations: usize,
-    mono: bool,
-) -> FitResult {
-    let level = Level {
-        lv,
-        radius: cfg.fine_search_radius_px.min(cfg.search_radius_px),
-        sigma_px: cfg.edge_sigma_px,
-    };
-    let samples = build_samples_capped(
-        model,
-        &st,
-        &lv.camera,
-        cfg.sample_spacing_px,
-        cfg.max_samples,
-    );
+fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, sp: &SeedPrior, iterations: usize, mono: bool) -> FitResult {
+    let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
+    let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
     let polarity = vec![0i8; samples.len()];
-    let (assoc, visible, total) =
-        associate(model, &st, &samples, &level, scene, cfg, &polarity, 1.0);
+    let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity, 1.0);
     let mut r = Vec::new();
-    residuals(
-        model,
-        &st,
-        &assoc,
-        &lv.camera,
-        level.sigma_px,
-        scene,
-        cfg,
-        sp,
-        &mut r,
-    );
+    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, sp, &mut r);
     let n_img = assoc.len();
     let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
     let tau = cfg.inlier_px / to_px;
@@ -823,34 +533,14 @@ fn finish(
         score += (v / tau).powi(2).min(1.0);
     }
     score += (visible.saturating_sub(n_img)) as f64;
-    let score = if visible > 0 {
-        score / visible as f64
-    } else {
-        1.0
-    };
-    let stereo: Vec<f64> = r[n_img..(n_img + scene.stereo_points.len()).min(r.len())]
-        .iter()
-        .flatten()
-        .map(|v| v * cfg.stereo_sigma_m)
-        .collect();
-    let stereo_in: Vec<f64> = stereo
-        .iter()
-        .copied()
-        .filter(|v| v.abs() < 3.0 * cfg.stereo_sigma_m.max(1e-4) * 3.0)
-        .collect();
+    let score = if visible > 0 { score / visible as f64 } else { 1.0 };
+    let stereo: Vec<f64> = r[n_img..(n_img + scene.stereo_points.len()).min(r.len())].iter().flatten().map(|v| v * cfg.stereo_sigma_m).collect();
+    let stereo_in: Vec<f64> = stereo.iter().copied().filter(|v| v.abs() < 3.0 * cfg.stereo_sigma_m.max(1e-4) * 3.0).collect();
     let stats = ResidualStats {
-        rms_px: if inl > 0 {
-            (ss / inl as f64).sqrt()
-        } else {
-            0.0
-        },
+        rms_px: if inl > 0 { (ss / inl as f64).sqrt() } else { 0.0 },
         inliers: inl,
         count: visible,
-        stereo_rms_m: if stereo_in.is_empty() {
-            0.0
-        } else {
-            (stereo_in.iter().map(|v| v * v).sum::<f64>() / stereo_in.len() as f64).sqrt()
-        },
+        stereo_rms_m: if stereo_in.is_empty() { 0.0 } else { (stereo_in.iter().map(|v| v * v).sum::<f64>() / stereo_in.len() as f64).sqrt() },
         stereo_points: stereo_in.len(),
         iterations,
     };
@@ -859,32 +549,8 @@ fn finish(
     let sgn = if axis.dot(&st.a) >= 0.0 { 1.0 } else { -1.0 };
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
-    let c = if r.is_empty() {
-        (1.0, 1.0)
-    } else {
-        thresholds(
-            &r,
-            n_img,
-            scene.stereo_points.len(),
-            &mut Vec::new(),
-            level.sigma_px,
-            level.radius,
-        )
-    };
-    let (h, _, wrr, wsum) = normal_equations(
-        model,
-        &st,
-        &assoc,
-        &lv.camera,
-        level.sigma_px,
-        scene,
-        cfg,
-        (&u1, &u2),
-        &r,
-        c,
-        sp,
-        &mut Vec::new(),
-    );
+    let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
+    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, sp, &mut Vec::new());
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {
@@ -897,16 +563,9 @@ fn finish(
             }
         }
     }
-    let inlier_fraction = if visible > 0 {
-        inl as f64 / visible as f64
-    } else {
-        0.0
-    };
+    let inlier_fraction = if visible > 0 { inl as f64 / visible as f64 } else { 0.0 };
     let failure = if visible < cfg.min_samples {
-        Some((
-            FailureReason::OutOfImage,
-            format!("only {visible} contour samples visible at full resolution"),
-        ))
+        Some((FailureReason::OutOfImage, format!("only {visible} contour samples visible at full resolution")))
     } else if !mono && (visible as f64) < cfg.min_in_image_fraction * total as f64 {
         Some((FailureReason::OutOfImage, format!("only {visible} of {total} visible contour samples ({:.0}%) lie inside the image: depth is not constrained enough", 100.0 * visible as f64 / total.max(1) as f64)))
     } else if inlier_fraction < cfg.min_inlier_fraction {
@@ -914,12 +573,5 @@ fn finish(
     } else {
         None
     };
-    FitResult {
-        state: st,
-        stats,
-        covariance: cov,
-        inlier_fraction,
-        score,
-        failure,
-    }
+    FitResult { state: st, stats, covariance: cov, inlier_fraction, score, failure }
 }

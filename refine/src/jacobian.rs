@@ -30,14 +30,7 @@ pub fn projection_jacobian(cam: &CameraModel, p: &Point3<f64>) -> Option<Matrix2
     let (x, y) = (p.x * iz, p.y * iz);
     let d = cam.distortion.jacobian(x, y);
     let (a00, a01, a10, a11) = (cam.fx * d[0], cam.fx * d[1], cam.fy * d[2], cam.fy * d[3]);
-    Some(Matrix2x3::new(
-        a00 * iz,
-        a01 * iz,
-        -(a00 * x + a01 * y) * iz,
-        a10 * iz,
-        a11 * iz,
-        -(a10 * x + a11 * y) * iz,
-    ))
+    Some(Matrix2x3::new(a00 * iz, a01 * iz, -(a00 * x + a01 * y) * iz, a10 * iz, a11 * iz, -(a10 * x + a11 * y) * iz))
 }
 
 /// The axis frames of the ten states `θ ± STEP e_k` around `st` in the basis `(u1, u2)`.
@@ -64,13 +57,7 @@ impl PerturbedFrames {
     /// Image Jacobian `∂u/∂θ` (2x5, level pixels per unit of θ) of one contour sample whose
     /// current 3D point is `x`; `None` when the sample or its projection is undefined.
     #[inline]
-    pub fn image_jacobian(
-        &self,
-        model: &CylinderModel,
-        s: &ContourSample,
-        cam: &CameraModel,
-        x: &Point3<f64>,
-    ) -> Option<Matrix2x5<f64>> {
+    pub fn image_jacobian(&self, model: &CylinderModel, s: &ContourSample, cam: &CameraModel, x: &Point3<f64>) -> Option<Matrix2x5<f64>> {
         let pj = projection_jacobian(cam, x)?;
         let mut j = Matrix2x5::zeros();
         for k in 0..5 {
@@ -87,12 +74,7 @@ impl PerturbedFrames {
 /// Gradient row `∂s/∂θ` (before the `1/σ_s` normalization) of the stereo residual of point
 /// `p` at state `st`: `ρ = |P - c - z a|`, `z = (P - c)·a`.
 #[inline]
-pub fn stereo_row(
-    st: &AxisState,
-    u1: &Vector3<f64>,
-    u2: &Vector3<f64>,
-    p: &Point3<f64>,
-) -> [f64; 5] {
+pub fn stereo_row(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>, p: &Point3<f64>) -> [f64; 5] {
     let rel = p.coords - st.c;
     let z = rel.dot(&st.a);
     let perp = rel - st.a * z;
@@ -114,17 +96,8 @@ mod tests {
     fn image_jacobian_matches_finite_differences_of_the_projection() {
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
         let mut cam = CameraModel::from_hfov(1024, 768, 50.0);
-        cam.distortion = Distortion {
-            k1: -0.1,
-            k2: 0.03,
-            p1: 0.001,
-            p2: -0.0005,
-            k3: 0.0,
-        };
-        let st = AxisState {
-            c: Vector3::new(0.1, 0.05, 0.8),
-            a: Vector3::new(1.0, 0.2, 0.3).normalize(),
-        };
+        cam.distortion = Distortion { k1: -0.1, k2: 0.03, p1: 0.001, p2: -0.0005, k3: 0.0 };
+        let st = AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() };
         let (u1, u2) = tubeloc_core::tube_pose::tangent_basis(&st.a);
         let pf = PerturbedFrames::new(&st, &u1, &u2).unwrap();
         let f = st.frame().unwrap();
@@ -137,39 +110,19 @@ mod tests {
                 let h = 1e-5;
                 let mut d = [0.0; 5];
                 d[k] = h;
-                let up = cam
-                    .project(
-                        &s.eval(&model, &st.updated(&d, &u1, &u2).frame().unwrap())
-                            .unwrap()
-                            .x,
-                    )
-                    .unwrap();
+                let up = cam.project(&s.eval(&model, &st.updated(&d, &u1, &u2).frame().unwrap()).unwrap().x).unwrap();
                 d[k] = -h;
-                let um = cam
-                    .project(
-                        &s.eval(&model, &st.updated(&d, &u1, &u2).frame().unwrap())
-                            .unwrap()
-                            .x,
-                    )
-                    .unwrap();
+                let um = cam.project(&s.eval(&model, &st.updated(&d, &u1, &u2).frame().unwrap()).unwrap().x).unwrap();
                 let fd = (up - um) / (2.0 * h);
                 let scale = fd.norm().max(1.0);
-                assert!(
-                    (fd.x - j[(0, k)]).abs() < 1e-4 * scale
-                        && (fd.y - j[(1, k)]).abs() < 1e-4 * scale,
-                    "k {k}: {fd:?} vs {:?}",
-                    j.column(k)
-                );
+                assert!((fd.x - j[(0, k)]).abs() < 1e-4 * scale && (fd.y - j[(1, k)]).abs() < 1e-4 * scale, "k {k}: {fd:?} vs {:?}", j.column(k));
             }
         }
     }
 
     #[test]
     fn stereo_row_matches_finite_differences() {
-        let st = AxisState {
-            c: Vector3::new(0.1, 0.05, 0.8),
-            a: Vector3::new(1.0, 0.2, 0.3).normalize(),
-        };
+        let st = AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() };
         let (u1, u2) = tubeloc_core::tube_pose::tangent_basis(&st.a);
         let p = Point3::new(0.13, 0.04, 0.79);
         let rho = |s: &AxisState| {

@@ -17,16 +17,16 @@ pub mod fit;
 pub mod jacobian;
 pub mod model;
 mod mono;
-pub mod photo;
 mod priors;
+pub mod photo;
 pub mod rims;
 pub mod robust;
-pub mod seal_end;
 pub mod search;
+pub mod stereo_stage;
 pub mod seed;
+pub mod seal_end;
 pub mod seed_policy;
 pub mod silhouette;
-pub mod stereo_stage;
 pub mod two_view;
 
 pub use contour::AxisState;
@@ -37,11 +37,9 @@ pub use seed::{seed_from_detection, GroundPlane, Seed};
 pub use seed_policy::{SeedKind, SeedSettings};
 
 use nalgebra::{Point2, Point3, Vector3};
-use seal_end::ColourImage;
 use serde::{Deserialize, Serialize};
-use tubeloc_core::{
-    BinaryMask, CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel,
-};
+use seal_end::ColourImage;
+use tubeloc_core::{BinaryMask, CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
 
 /// Tuning of the refiner. Pixel values are in pixels of the level they apply to unless noted.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -362,10 +360,7 @@ impl Refiner {
     /// A refiner for `tube` with `config`.
     pub fn new(tube: &TubeModel, config: RefineConfig) -> Result<Self, RefineError> {
         config.validate()?;
-        Ok(Refiner {
-            model: CylinderModel::new(tube)?,
-            config,
-        })
+        Ok(Refiner { model: CylinderModel::new(tube)?, config })
     }
 
     /// Refines one detection, with the settings of its seed's kind ([`SeedKind::of`],
@@ -379,54 +374,23 @@ impl Refiner {
     /// [`Refiner::refine`] with the image's colours: where the fit shows enough of the seal
     /// section and the body (kept to the detection's mask), their colours decide which end is
     /// the seal end ([`seal_end`]) instead of the edges, and set `end_confidence`.
-    pub fn refine_with_colour(
-        &self,
-        input: &RefineInput,
-        det: &TubeDetection,
-        colour: Option<&ColourImage>,
-    ) -> TubeAxisPose {
-        match seed_from_detection(
-            det,
-            input.camera,
-            &self.model,
-            input.ground.as_ref(),
-            input.scene.stereo_points,
-        ) {
+    pub fn refine_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> TubeAxisPose {
+        match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
             Ok(seed) => {
                 // Detector seeds are worse than explicit ones in kind-specific ways
                 // ([`seed_policy`]).
                 let has_ground = input.ground.is_some() || input.scene.ground.is_some();
-                let cfg = SeedSettings::new(&self.config, SeedKind::of(det), has_ground)
-                    .config(&self.config);
-                let r = Refiner {
-                    model: self.model.clone(),
-                    config: cfg,
-                };
+                let cfg = SeedSettings::new(&self.config, SeedKind::of(det), has_ground).config(&self.config);
+                let r = Refiner { model: self.model.clone(), config: cfg };
                 let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
-                let ends = colour.map(|image| EndColour {
-                    image,
-                    visible: mask.as_ref(),
-                });
-                let pose = r.refine_seed_inner(
-                    input,
-                    &seed,
-                    det.image_id,
-                    det.score,
-                    Some(det.bbox),
-                    ends,
-                );
+                let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
+                let pose = r.refine_seed_inner(input, &seed, det.image_id, det.score, Some(det.bbox), ends);
                 match (&mask, det.t_cam_tube.is_none()) {
                     (Some(m), true) => self.checked_against_mask(pose, &seed, m, input.camera),
                     _ => pose,
                 }
             }
-            Err(e) => failed(
-                det.image_id,
-                det.score,
-                None,
-                FailureReason::BadSeed,
-                e.to_string(),
-            ),
+            Err(e) => failed(det.image_id, det.score, None, FailureReason::BadSeed, e.to_string()),
         }
     }
 
@@ -435,40 +399,18 @@ impl Refiner {
     /// [`silhouette::snap_mask`]) went to the wrong edges: the seed's centre and axis are
     /// returned instead, with the fit's end decision, the covariance widened by the squared
     /// fit-to-seed differences, and [`TubeAxisPose::seed_kept`] saying why.
-    fn checked_against_mask(
-        &self,
-        mut pose: TubeAxisPose,
-        seed: &Seed,
-        mask: &BinaryMask,
-        camera: &CameraModel,
-    ) -> TubeAxisPose {
+    fn checked_against_mask(&self, mut pose: TubeAxisPose, seed: &Seed, mask: &BinaryMask, camera: &CameraModel) -> TubeAxisPose {
         let tau = self.config.mask_seed_min_agreement;
         if !(pose.converged && tau > 0.0) {
             return pose;
         }
         let sil = silhouette::silhouette_mask(&self.model, &pose, camera);
-        let Some((_, iou)) =
-            silhouette::snap_candidate(mask, &sil, silhouette::MaskSnap::default().dilate_px)
-        else {
-            return pose;
-        };
+        let Some((_, iou)) = silhouette::snap_candidate(mask, &sil, silhouette::MaskSnap::default().dilate_px) else { return pose };
         if iou >= tau {
             return pose;
         }
-        let a = if seed.state.a.dot(&pose.end_direction) >= 0.0 {
-            seed.state.a
-        } else {
-            -seed.state.a
-        };
-        let Ok(kept) = TubeAxisPose::new(
-            pose.image_id,
-            pose.score,
-            seed.state.c,
-            a,
-            pose.end_confidence,
-        ) else {
-            return pose;
-        };
+        let a = if seed.state.a.dot(&pose.end_direction) >= 0.0 { seed.state.a } else { -seed.state.a };
+        let Ok(kept) = TubeAxisPose::new(pose.image_id, pose.score, seed.state.c, a, pose.end_confidence) else { return pose };
         let dc = pose.centre - kept.centre;
         let angle = tubeloc_core::tube_pose::axis_angle(&pose.axis, &kept.axis);
         for i in 0..3 {
@@ -480,109 +422,47 @@ impl Refiner {
         pose.centre = kept.centre;
         pose.axis = kept.axis;
         pose.end_direction = kept.end_direction;
-        pose.seed_kept = Some(format!(
-            "the fitted silhouette agrees with the detector's mask at IoU {iou:.2} < {tau}"
-        ));
+        pose.seed_kept = Some(format!("the fitted silhouette agrees with the detector's mask at IoU {iou:.2} < {tau}"));
         pose
     }
 
     /// Refines from an explicit seed. `bbox` (COCO `[x, y, w, h]`) widens the region of
     /// interest when given.
-    pub fn refine_seed(
-        &self,
-        input: &RefineInput,
-        seed: &Seed,
-        image_id: u64,
-        score: f64,
-        bbox: Option<[f64; 4]>,
-    ) -> TubeAxisPose {
+    pub fn refine_seed(&self, input: &RefineInput, seed: &Seed, image_id: u64, score: f64, bbox: Option<[f64; 4]>) -> TubeAxisPose {
         self.refine_seed_inner(input, seed, image_id, score, bbox, None)
     }
 
     /// [`Refiner::refine_seed`], with the colour end decision when `ends` is given.
-    fn refine_seed_inner(
-        &self,
-        input: &RefineInput,
-        seed: &Seed,
-        image_id: u64,
-        score: f64,
-        bbox: Option<[f64; 4]>,
-        ends: Option<EndColour>,
-    ) -> TubeAxisPose {
+    fn refine_seed_inner(&self, input: &RefineInput, seed: &Seed, image_id: u64, score: f64, bbox: Option<[f64; 4]>, ends: Option<EndColour>) -> TubeAxisPose {
         let cam = input.camera;
         if input.image.width != cam.width as usize || input.image.height != cam.height as usize {
-            let msg = format!(
-                "image is {}x{} but the camera is {}x{}",
-                input.image.width, input.image.height, cam.width, cam.height
-            );
-            return failed(
-                image_id,
-                score,
-                Some(&seed.state),
-                FailureReason::BadSeed,
-                msg,
-            );
+            let msg = format!("image is {}x{} but the camera is {}x{}", input.image.width, input.image.height, cam.width, cam.height);
+            return failed(image_id, score, Some(&seed.state), FailureReason::BadSeed, msg);
         }
         let st = seed.state;
-        if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite()))
-            || st.a.norm() < 1e-9
-            || st.c.z <= 0.0
-        {
-            return failed(
-                image_id,
-                score,
-                None,
-                FailureReason::BadSeed,
-                "seed is not finite or is behind the camera".into(),
-            );
+        if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.a.norm() < 1e-9 || st.c.z <= 0.0 {
+            return failed(image_id, score, None, FailureReason::BadSeed, "seed is not finite or is behind the camera".into());
         }
-        let st = AxisState {
-            c: st.c,
-            a: st.a.normalize(),
-        };
+        let st = AxisState { c: st.c, a: st.a.normalize() };
         let Some((rect, top)) = self.region(cam, &st, bbox) else {
-            return failed(
-                image_id,
-                score,
-                Some(&st),
-                FailureReason::OutOfImage,
-                "the seed projects outside the image".into(),
-            );
+            return failed(image_id, score, Some(&st), FailureReason::OutOfImage, "the seed projects outside the image".into());
         };
         // Unsmoothed full-resolution gradients only for narrow tubes (fitted at full resolution
         // alone), where smoothing merges a limb's shading ramp with its step.
-        let pyr = edges::build_pyramid_with(
-            input.image,
-            cam,
-            rect,
-            top + 1,
-            self.config.blur_full_resolution || top > 0,
-        );
-        let scene = Scene {
-            ground: input.scene.ground.or(input.ground),
-            ..input.scene
-        };
+        let pyr = edges::build_pyramid_with(input.image, cam, rect, top + 1, self.config.blur_full_resolution || top > 0);
+        let scene = Scene { ground: input.scene.ground.or(input.ground), ..input.scene };
         let top = top.min(pyr.len() - 1);
         let mut a = self.fit_candidates(&pyr, top, &scene, &st);
         if a.failure.is_some() && self.config.decide_end {
             // A template flipped end to end misplaces the sections; retry the other end.
-            let b = fit::fit(
-                &self.model,
-                &self.config,
-                &pyr,
-                top,
-                &scene,
-                AxisState { c: st.c, a: -st.a },
-            );
+            let b = fit::fit(&self.model, &self.config, &pyr, top, &scene, AxisState { c: st.c, a: -st.a });
             if b.failure.is_none() {
                 a = b;
             }
         }
         let colour_evidence = ends.and_then(|e| {
             let pose = to_pose(image_id, score, &a, 0.5);
-            (a.failure.is_none())
-                .then(|| seal_end::seal_end_evidence(&self.model, &pose, cam, e.image, e.visible))
-                .flatten()
+            (a.failure.is_none()).then(|| seal_end::seal_end_evidence(&self.model, &pose, cam, e.image, e.visible)).flatten()
         });
         let (best, conf) = if let (true, Some(ev)) = (self.config.decide_end, colour_evidence) {
             // The colours decide; the flipped hypothesis is fitted (its sections placed) when
@@ -591,43 +471,17 @@ impl Refiner {
             if ev.contrast >= 0.0 {
                 (a, p)
             } else {
-                let b = fit::fit(
-                    &self.model,
-                    &self.config,
-                    &pyr,
-                    top.min(1),
-                    &scene,
-                    AxisState {
-                        c: a.state.c,
-                        a: -a.state.a,
-                    },
-                );
+                let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &scene, AxisState { c: a.state.c, a: -a.state.a });
                 if b.failure.is_none() {
                     (b, p)
                 } else {
-                    (
-                        FitResult {
-                            state: AxisState {
-                                c: a.state.c,
-                                a: -a.state.a,
-                            },
-                            ..a
-                        },
-                        p,
-                    )
+                    (FitResult { state: AxisState { c: a.state.c, a: -a.state.a }, ..a }, p)
                 }
             }
         } else if self.config.decide_end && a.failure.is_none() {
-            let flipped = AxisState {
-                c: a.state.c,
-                a: -a.state.a,
-            };
+            let flipped = AxisState { c: a.state.c, a: -a.state.a };
             let b = fit::fit(&self.model, &self.config, &pyr, top.min(1), &scene, flipped);
-            let dscore = if b.failure.is_none() {
-                b.score - a.score
-            } else {
-                1.0
-            };
+            let dscore = if b.failure.is_none() { b.score - a.score } else { 1.0 };
             let p = 1.0 / (1.0 + (-dscore.abs() / self.config.end_score_scale).exp());
             // A detector that claims the end (template pose) is overruled only by clear image
             // evidence; small tubes often cannot tell the ends apart in grey levels.
@@ -643,24 +497,12 @@ impl Refiner {
             (a, if seed.end_known { 0.6 } else { 0.5 })
         };
         let mut best = best;
-        if self.config.stereo_edge_polish
-            && !scene.stereo_points.is_empty()
-            && scene.mask.is_none()
-            && best.failure.is_none()
-        {
+        if self.config.stereo_edge_polish && !scene.stereo_points.is_empty() && scene.mask.is_none() && best.failure.is_none() {
             // Stereo points fix the distance and tilt but, biased at the tube's outline, also
             // pull it across the image; the edges alone then place it in the image with the
             // distance and tilt kept (the mono keep-depth mode, forced).
-            let cfg = RefineConfig {
-                mono_width_sigma_px: f64::INFINITY,
-                seed_search: false,
-                decide_end: false,
-                ..self.config.clone()
-            };
-            let mono_scene = Scene {
-                stereo_points: &[],
-                ..scene
-            };
+            let cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
+            let mono_scene = Scene { stereo_points: &[], ..scene };
             let polished = fit::fit(&self.model, &cfg, &pyr, 0, &mono_scene, best.state);
             if polished.failure.is_none() {
                 best.state = polished.state;
@@ -673,13 +515,7 @@ impl Refiner {
     /// best scored first, up to `max_hypotheses` fits: the best hypothesis and the seed are both
     /// fitted and the better final score ([`FitResult::score`]) wins; further hypotheses are
     /// tried only while none succeeded. Returns the first failure when all fail.
-    fn fit_candidates(
-        &self,
-        pyr: &[edges::GradientLevel],
-        top: usize,
-        scene: &Scene,
-        st: &AxisState,
-    ) -> FitResult {
+    fn fit_candidates(&self, pyr: &[edges::GradientLevel], top: usize, scene: &Scene, st: &AxisState) -> FitResult {
         let cfg = &self.config;
         let mut cands: Vec<AxisState> = Vec::new();
         if cfg.seed_search {
@@ -690,14 +526,7 @@ impl Refiner {
                 rotation_step_deg: 2.5,
                 max_samples: 120,
             };
-            let hyps = search::coarse_search(
-                &self.model,
-                &pyr[top],
-                st,
-                scene.ground.as_ref(),
-                cfg.ground_height_known,
-                &spec,
-            );
+            let hyps = search::coarse_search(&self.model, &pyr[top], st, scene.ground.as_ref(), cfg.ground_height_known, &spec);
             cands.extend(hyps.iter().map(|h| h.state));
         }
         // The seed itself goes second (or first without the search).
@@ -711,11 +540,7 @@ impl Refiner {
                 // The seed's own fit wins unless a search hypothesis scores clearly better (the
                 // search can prefer a neighbouring edge structure, e.g. a limb shaded into the
                 // tube's own cast shadow, whose shadow edge and terminator pair up).
-                let adjusted = if k == seed_index {
-                    r.score - cfg.seed_score_margin
-                } else {
-                    r.score
-                };
+                let adjusted = if k == seed_index { r.score - cfg.seed_score_margin } else { r.score };
                 if best.as_ref().is_none_or(|b| adjusted < b.score) {
                     r.score = adjusted;
                     best = Some(r);
@@ -734,12 +559,7 @@ impl Refiner {
     }
 
     /// Region of interest (crop rectangle) and coarsest pyramid level for a state.
-    fn region(
-        &self,
-        cam: &CameraModel,
-        st: &AxisState,
-        bbox: Option<[f64; 4]>,
-    ) -> Option<((usize, usize, usize, usize), usize)> {
+    fn region(&self, cam: &CameraModel, st: &AxisState, bbox: Option<[f64; 4]>) -> Option<((usize, usize, usize, usize), usize)> {
         let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
         for p in st.bounding_points(&self.model)? {
             if let Some(u) = cam.project(&Point3::from(p)) {
@@ -757,49 +577,23 @@ impl Refiner {
         }
         let fpx = 0.5 * (cam.fx + cam.fy);
         let body_px = 2.0 * self.model.body_radius() * fpx / st.c.norm();
-        let top = ((body_px / self.config.min_body_width_px)
-            .max(1.0)
-            .log2()
-            .floor() as usize)
-            .min(self.config.max_levels - 1);
-        let extra = if self.config.seed_search {
-            self.config.seed_search_radius_px as f64
-        } else {
-            0.0
-        };
-        let margin = (self.config.search_radius_px as f64 + 4.0 + extra) * (1u64 << top) as f64
-            + 0.1 * (x1 - x0).max(y1 - y0);
-        let rect = edges::roi(
-            [x0, y0, x1 - x0, y1 - y0],
-            margin,
-            cam.width as usize,
-            cam.height as usize,
-        )?;
+        let top = ((body_px / self.config.min_body_width_px).max(1.0).log2().floor() as usize).min(self.config.max_levels - 1);
+        let extra = if self.config.seed_search { self.config.seed_search_radius_px as f64 } else { 0.0 };
+        let margin = (self.config.search_radius_px as f64 + 4.0 + extra) * (1u64 << top) as f64 + 0.1 * (x1 - x0).max(y1 - y0);
+        let rect = edges::roi([x0, y0, x1 - x0, y1 - y0], margin, cam.width as usize, cam.height as usize)?;
         Some((rect, top))
     }
 
     /// Points of the fitted occluding contour in pixels (for overlays), sampled every
     /// `spacing_px`; only silhouette points not hidden by the tube itself.
-    pub fn contour_pixels(
-        &self,
-        camera: &CameraModel,
-        pose: &TubeAxisPose,
-        spacing_px: f64,
-    ) -> Vec<Point2<f64>> {
-        let st = AxisState {
-            c: pose.centre,
-            a: pose.end_direction,
-        };
-        let Some(f) = st.frame() else {
-            return Vec::new();
-        };
+    pub fn contour_pixels(&self, camera: &CameraModel, pose: &TubeAxisPose, spacing_px: f64) -> Vec<Point2<f64>> {
+        let st = AxisState { c: pose.centre, a: pose.end_direction };
+        let Some(f) = st.frame() else { return Vec::new() };
         contour::build_samples(&self.model, &st, camera, spacing_px)
             .iter()
             .filter_map(|s| {
                 let p = s.eval(&self.model, &f)?;
-                if !s.on_silhouette(&self.model, &f, &p)
-                    || self.model.occludes(&st.c, &st.a, &(p.x + p.out * 1e-4))
-                {
+                if !s.on_silhouette(&self.model, &f, &p) || self.model.occludes(&st.c, &st.a, &(p.x + p.out * 1e-4)) {
                     return None;
                 }
                 camera.project(&p.x)
@@ -808,36 +602,18 @@ impl Refiner {
     }
 }
 
-fn failed(
-    image_id: u64,
-    score: f64,
-    st: Option<&AxisState>,
-    reason: FailureReason,
-    msg: String,
-) -> TubeAxisPose {
+fn failed(image_id: u64, score: f64, st: Option<&AxisState>, reason: FailureReason, msg: String) -> TubeAxisPose {
     let (c, a) = match st {
-        Some(s) if s.c.iter().chain(s.a.iter()).all(|v| v.is_finite()) && s.a.norm() > 1e-9 => {
-            (s.c, s.a)
-        }
+        Some(s) if s.c.iter().chain(s.a.iter()).all(|v| v.is_finite()) && s.a.norm() > 1e-9 => (s.c, s.a),
         _ => (Vector3::zeros(), Vector3::z()),
     };
-    TubeAxisPose::new(image_id, score, c, a, 0.5)
-        .expect("finite centre and unit axis")
-        .fail(reason, msg)
+    TubeAxisPose::new(image_id, score, c, a, 0.5).expect("finite centre and unit axis").fail(reason, msg)
 }
 
 fn to_pose(image_id: u64, score: f64, r: &FitResult, end_confidence: f64) -> TubeAxisPose {
     let mut p = match TubeAxisPose::new(image_id, score, r.state.c, r.state.a, end_confidence) {
         Ok(p) => p,
-        Err(e) => {
-            return failed(
-                image_id,
-                score,
-                None,
-                FailureReason::Diverged,
-                e.to_string(),
-            )
-        }
+        Err(e) => return failed(image_id, score, None, FailureReason::Diverged, e.to_string()),
     };
     p.covariance = r.covariance;
     p.residuals = r.stats;

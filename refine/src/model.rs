@@ -37,11 +37,7 @@ impl CylinderModel {
             .iter()
             .map(|s| {
                 let (z0, z1) = tube.section_z_in_tube_frame(s);
-                Section {
-                    z0,
-                    z1,
-                    r: s.radius,
-                }
+                Section { z0, z1, r: s.radius }
             })
             .collect();
         sections.sort_by(|a, b| a.z0.total_cmp(&b.z0));
@@ -50,33 +46,19 @@ impl CylinderModel {
 
     /// A single plain cylinder of the given length and radius, centred (metres).
     pub fn plain(length: f64, radius: f64) -> Result<Self, RefineError> {
-        Self::from_sections(vec![Section {
-            z0: -length / 2.0,
-            z1: length / 2.0,
-            r: radius,
-        }])
+        Self::from_sections(vec![Section { z0: -length / 2.0, z1: length / 2.0, r: radius }])
     }
 
     fn from_sections(sections: Vec<Section>) -> Result<Self, RefineError> {
         if sections.is_empty() {
             return Err(RefineError::Model("no sections".into()));
         }
-        if sections.iter().any(|s| {
-            !(s.r > 0.0 && s.z1 > s.z0 && s.r.is_finite() && s.z0.is_finite() && s.z1.is_finite())
-        }) {
-            return Err(RefineError::Model(
-                "sections need z0 < z1 and a positive radius".into(),
-            ));
+        if sections.iter().any(|s| !(s.r > 0.0 && s.z1 > s.z0 && s.r.is_finite() && s.z0.is_finite() && s.z1.is_finite())) {
+            return Err(RefineError::Model("sections need z0 < z1 and a positive radius".into()));
         }
         let zmin = sections.iter().map(|s| s.z0).fold(f64::INFINITY, f64::min);
-        let zmax = sections
-            .iter()
-            .map(|s| s.z1)
-            .fold(f64::NEG_INFINITY, f64::max);
-        Ok(CylinderModel {
-            sections,
-            length: zmax - zmin,
-        })
+        let zmax = sections.iter().map(|s| s.z1).fold(f64::NEG_INFINITY, f64::max);
+        Ok(CylinderModel { sections, length: zmax - zmin })
     }
 
     /// Largest radius, metres.
@@ -93,20 +75,12 @@ impl CylinderModel {
 
     /// Radius of the longest section (the body), metres.
     pub fn body_radius(&self) -> f64 {
-        self.sections
-            .iter()
-            .max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0)))
-            .map(|s| s.r)
-            .unwrap_or(0.0)
+        self.sections.iter().max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0))).map(|s| s.r).unwrap_or(0.0)
     }
 
     /// Radius at axial coordinate `z` of the tube frame (largest section covering `z`), or 0.
     pub fn radius_at(&self, z: f64) -> f64 {
-        self.sections
-            .iter()
-            .filter(|s| z >= s.z0 && z <= s.z1)
-            .map(|s| s.r)
-            .fold(0.0, f64::max)
+        self.sections.iter().filter(|s| z >= s.z0 && z <= s.z1).map(|s| s.r).fold(0.0, f64::max)
     }
 
     /// Radius of the neighbour beyond end `end` (-1: below `z0`, +1: above `z1`) of section `i`;

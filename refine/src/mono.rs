@@ -18,40 +18,21 @@ use tubeloc_core::CameraModel;
 /// stereo points nor a mask, and a tube so narrow that its width fixes the distance worse than
 /// the seed does: `mono_width_sigma_px / w < mono_depth_sigma_frac` fails, with
 /// `w = 2 r_body f / |c|` the body width in full-resolution pixels.
-pub(crate) fn mono_mode(
-    cfg: &RefineConfig,
-    scene: &Scene,
-    model: &CylinderModel,
-    seed: &AxisState,
-    cam: &CameraModel,
-) -> bool {
+pub(crate) fn mono_mode(cfg: &RefineConfig, scene: &Scene, model: &CylinderModel, seed: &AxisState, cam: &CameraModel) -> bool {
     let w = 2.0 * model.body_radius() * 0.5 * (cam.fx + cam.fy) / seed.c.norm().max(1e-9);
-    cfg.mono_keep_depth
-        && scene.stereo_points.is_empty()
-        && scene.mask.is_none()
-        && cfg.mono_width_sigma_px / w > cfg.mono_depth_sigma_frac
+    cfg.mono_keep_depth && scene.stereo_points.is_empty() && scene.mask.is_none() && cfg.mono_width_sigma_px / w > cfg.mono_depth_sigma_frac
 }
 
 /// Columns of the mono subspace of the 5-parameter step `(δc, δ1, δ2)` at `st` for the axis
 /// tangent basis `(u1, u2)`: the centre across its viewing ray `ĉ` (two columns), the axis
 /// turned about the ray (`ĉ × a`), and with `tilt` the axis tilted toward the camera
 /// (`a × (ĉ × a)`). The distance along the ray is left out.
-pub(crate) fn mono_basis(
-    st: &AxisState,
-    u1: &Vector3<f64>,
-    u2: &Vector3<f64>,
-    tilt: bool,
-    depth: bool,
-) -> Option<Vec<Vector5<f64>>> {
+pub(crate) fn mono_basis(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>, tilt: bool, depth: bool) -> Option<Vec<Vector5<f64>>> {
     let ch = st.c.try_normalize(1e-12)?;
     let w1 = ch.cross(&st.a).try_normalize(1e-9)?;
     let l1 = (st.a - ch * st.a.dot(&ch)).try_normalize(1e-9)?;
     let l2 = ch.cross(&l1);
-    let mut b = vec![
-        Vector5::new(l1.x, l1.y, l1.z, 0.0, 0.0),
-        Vector5::new(l2.x, l2.y, l2.z, 0.0, 0.0),
-        Vector5::new(0.0, 0.0, 0.0, w1.dot(u1), w1.dot(u2)),
-    ];
+    let mut b = vec![Vector5::new(l1.x, l1.y, l1.z, 0.0, 0.0), Vector5::new(l2.x, l2.y, l2.z, 0.0, 0.0), Vector5::new(0.0, 0.0, 0.0, w1.dot(u1), w1.dot(u2))];
     if tilt {
         let w2 = st.a.cross(&w1);
         b.push(Vector5::new(0.0, 0.0, 0.0, w2.dot(u1), w2.dot(u2)));
@@ -67,13 +48,7 @@ pub(crate) fn mono_basis(
 /// With `no_depth = Some((h_l, g_l))` the last basis column (the distance along the ray) gets
 /// no information from the part `(h_l, g_l)` (the limbs): its row and column of `Bᵀh_lB` and
 /// entry of `Bᵀg_l` are removed.
-pub(crate) fn damped_step(
-    h: &Matrix5<f64>,
-    g: &Vector5<f64>,
-    lambda: f64,
-    basis: Option<&[Vector5<f64>]>,
-    no_depth: Option<&(Matrix5<f64>, Vector5<f64>)>,
-) -> Option<Vector5<f64>> {
+pub(crate) fn damped_step(h: &Matrix5<f64>, g: &Vector5<f64>, lambda: f64, basis: Option<&[Vector5<f64>]>, no_depth: Option<&(Matrix5<f64>, Vector5<f64>)>) -> Option<Vector5<f64>> {
     match basis {
         None => {
             let mut hd = *h;
@@ -114,37 +89,19 @@ pub(crate) fn damped_step(
 /// of it) and the distance that puts the tube's lowest point on the ground (σ =
 /// `ground_sigma_m` when the ground height is known, else `ground_relief_sigma_m`; the height
 /// changes by `n·ĉ` per metre along the ray).
-pub(crate) fn mono_ground_depth(
-    model: &CylinderModel,
-    cfg: &RefineConfig,
-    scene: &Scene,
-    st: AxisState,
-    seed_dist: f64,
-) -> AxisState {
+pub(crate) fn mono_ground_depth(model: &CylinderModel, cfg: &RefineConfig, scene: &Scene, st: AxisState, seed_dist: f64) -> AxisState {
     let Some(g) = &scene.ground else { return st };
-    let sigma_g = if cfg.ground_height_known {
-        cfg.ground_sigma_m
-    } else {
-        cfg.ground_relief_sigma_m
-    };
-    let Some(ch) = st.c.try_normalize(1e-12) else {
-        return st;
-    };
+    let sigma_g = if cfg.ground_height_known { cfg.ground_sigma_m } else { cfg.ground_relief_sigma_m };
+    let Some(ch) = st.c.try_normalize(1e-12) else { return st };
     let k = g.normal.dot(&ch);
     if sigma_g <= 0.0 || k.abs() < 0.05 {
         return st;
     }
     // Lowest surface point above the ground for a tube of radius r_max tilted by the axis.
-    let height = g.normal.dot(&st.c)
-        - g.offset
-        - model.max_radius() * (1.0 - g.normal.dot(&st.a).powi(2)).max(0.0).sqrt()
-        - 0.5 * model.length * g.normal.dot(&st.a).abs();
+    let height = g.normal.dot(&st.c) - g.offset - model.max_radius() * (1.0 - g.normal.dot(&st.a).powi(2)).max(0.0).sqrt() - 0.5 * model.length * g.normal.dot(&st.a).abs();
     let s_ground = -height / k;
     let var_g = (sigma_g / k).powi(2);
     let var_s = (cfg.mono_depth_sigma_frac * seed_dist).powi(2);
     let s = s_ground * var_s / (var_s + var_g);
-    AxisState {
-        c: st.c + ch * s,
-        a: st.a,
-    }
+    AxisState { c: st.c + ch * s, a: st.a }
 }

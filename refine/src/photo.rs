@@ -68,15 +68,7 @@ fn front_depth(model: &CylinderModel, st: &AxisState, r: &Vector3<f64>) -> Optio
 /// `left`/`right` (intensities, any scale); `st` is in that camera's frame; `fb` is
 /// `f · B` in pixel metres. `None` when fewer than 30 pixels are covered or the correlation is
 /// undefined (flat images).
-pub fn photometric_depth(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    fb: f64,
-    st: &AxisState,
-    range_m: f64,
-) -> Option<PhotoDepth> {
+pub fn photometric_depth(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoDepth> {
     photometric_depth_visible(model, camera, left, right, fb, st, range_m, None)
 }
 
@@ -94,16 +86,7 @@ pub struct Occluders<'a> {
 
 /// [`photometric_depth`] leaving out the pixels hidden by `occluders`.
 #[allow(clippy::too_many_arguments)]
-pub fn photometric_depth_visible(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    fb: f64,
-    st: &AxisState,
-    range_m: f64,
-    occluders: Option<&Occluders>,
-) -> Option<PhotoDepth> {
+pub fn photometric_depth_visible(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64, occluders: Option<&Occluders>) -> Option<PhotoDepth> {
     let px = covered_pixels(model, camera, left, st, fb, occluders)?;
     let w = left.width as f64;
     let dist = st.c.norm();
@@ -121,27 +104,19 @@ pub fn photometric_depth_visible(
     };
     let scan = |lo: f64, hi: f64, step: f64| -> Option<(f64, f64)> {
         let k = ((hi - lo) / step).round() as i64;
-        (0..=k)
-            .filter_map(|i| {
-                let s = lo + i as f64 * step;
-                zncc(s).map(|c| (s, c))
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1))
+        (0..=k).filter_map(|i| {
+            let s = lo + i as f64 * step;
+            zncc(s).map(|c| (s, c))
+        }).max_by(|a, b| a.1.total_cmp(&b.1))
     };
     let (s1, _) = scan(-range_m, range_m, 1e-3)?;
     let (s2, c2) = scan(s1 - 1.5e-3, s1 + 1.5e-3, 1e-4)?;
     // Parabola through the best three fine samples.
     let shift = match (zncc(s2 - 1e-4), zncc(s2 + 1e-4)) {
-        (Some(a), Some(b)) if a + b - 2.0 * c2 < 0.0 => {
-            s2 + 0.5 * 1e-4 * (a - b) / (a + b - 2.0 * c2)
-        }
+        (Some(a), Some(b)) if a + b - 2.0 * c2 < 0.0 => s2 + 0.5 * 1e-4 * (a - b) / (a + b - 2.0 * c2),
         _ => s2,
     };
-    Some(PhotoDepth {
-        shift_m: shift,
-        zncc: c2,
-        pixels: px.len(),
-    })
+    Some(PhotoDepth { shift_m: shift, zncc: c2, pixels: px.len() })
 }
 
 /// Result of [`photometric_ends`].
@@ -163,40 +138,20 @@ pub struct PhotoEnds {
 /// image) follow the stereo pair. The front depth `Z(u)` of every pixel covered by the input
 /// state is recomputed per hypothesis; a grid of 2 mm over `±range_m`, then 0.25 mm over
 /// ±2 mm and 0.05 mm over ±0.25 mm around the best.
-pub fn photometric_ends(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    fb: f64,
-    st: &AxisState,
-    range_m: f64,
-) -> Option<PhotoEnds> {
+pub fn photometric_ends(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoEnds> {
     photometric_ends_visible(model, camera, left, right, fb, st, range_m, None)
 }
 
 /// [`photometric_ends`] leaving out the pixels hidden by `occluders`.
 #[allow(clippy::too_many_arguments)]
-pub fn photometric_ends_visible(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    fb: f64,
-    st: &AxisState,
-    range_m: f64,
-    occluders: Option<&Occluders>,
-) -> Option<PhotoEnds> {
+pub fn photometric_ends_visible(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64, occluders: Option<&Occluders>) -> Option<PhotoEnds> {
     let half = 0.5 * model.length;
     let (pm, pp) = (st.c - st.a * half, st.c + st.a * half);
     let (rm, rp) = (pm.normalize(), pp.normalize());
     let state_of = |dm: f64, dp: f64| -> Option<AxisState> {
         let (qm, qp) = (pm + rm * dm, pp + rp * dp);
         let a = qp - qm;
-        (a.norm() > 1e-6 && qm.z > 0.0 && qp.z > 0.0).then(|| AxisState {
-            c: 0.5 * (qm + qp),
-            a: a.normalize(),
-        })
+        (a.norm() > 1e-6 && qm.z > 0.0 && qp.z > 0.0).then(|| AxisState { c: 0.5 * (qm + qp), a: a.normalize() })
     };
     let pix = covered_pixels(model, camera, left, st, fb, occluders)?;
     let w = left.width as f64;
@@ -205,11 +160,7 @@ pub fn photometric_ends_visible(
         let s = state_of(dm, dp)?;
         pairs.clear();
         for &(x, y, l, z0) in &pix {
-            let r = Vector3::new(
-                (x as f64 - camera.cx) / camera.fx,
-                (y as f64 - camera.cy) / camera.fy,
-                1.0,
-            );
+            let r = Vector3::new((x as f64 - camera.cx) / camera.fx, (y as f64 - camera.cy) / camera.fy, 1.0);
             let z = front_depth(model, &s, &r).unwrap_or(z0 * s.c.norm() / st.c.norm());
             let xr = x as f64 - fb / z;
             if xr >= 0.0 && xr <= w - 1.0 {
@@ -238,54 +189,29 @@ pub fn photometric_ends_visible(
     let (dm, dp, _) = best?;
     grid((dm, dp), 2.5e-4, 5e-5, &mut best);
     let (dm, dp, v) = best?;
-    Some(PhotoEnds {
-        state: state_of(dm, dp)?,
-        shifts_m: (dm, dp),
-        zncc: v,
-        pixels: pix.len(),
-    })
+    Some(PhotoEnds { state: state_of(dm, dp)?, shifts_m: (dm, dp), zncc: v, pixels: pix.len() })
 }
 
 /// Pixels covered by the tube's lateral surface at `st` and not hidden by `occluders`, each
 /// `(x, y, left intensity, front depth)`; `None` when fewer than 30.
-fn covered_pixels(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    st: &AxisState,
-    fb: f64,
-    occluders: Option<&Occluders>,
-) -> Option<Vec<(f32, f32, f32, f64)>> {
+fn covered_pixels(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, st: &AxisState, fb: f64, occluders: Option<&Occluders>) -> Option<Vec<(f32, f32, f32, f64)>> {
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     for p in st.bounding_points(model)? {
         let u = camera.project(&nalgebra::Point3::from(p))?;
         (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
     }
     let (w, h) = (left.width as f64, left.height as f64);
-    let (xa, ya, xb, yb) = (
-        x0.floor().max(0.0),
-        y0.floor().max(0.0),
-        x1.ceil().min(w - 1.0),
-        y1.ceil().min(h - 1.0),
-    );
+    let (xa, ya, xb, yb) = (x0.floor().max(0.0), y0.floor().max(0.0), x1.ceil().min(w - 1.0), y1.ceil().min(h - 1.0));
     if xa > xb || ya > yb {
         return None;
     }
     let mut px = Vec::new();
     for y in ya as usize..=yb as usize {
         for x in xa as usize..=xb as usize {
-            let r = Vector3::new(
-                (x as f64 - camera.cx) / camera.fx,
-                (y as f64 - camera.cy) / camera.fy,
-                1.0,
-            );
+            let r = Vector3::new((x as f64 - camera.cx) / camera.fx, (y as f64 - camera.cy) / camera.fy, 1.0);
             if let Some(z) = front_depth(model, st, &r) {
                 let hidden = occluders.is_some_and(|o| {
-                    let d = if x < o.disparity.width && y < o.disparity.height {
-                        o.disparity.get(x, y) as f64
-                    } else {
-                        f64::NAN
-                    };
+                    let d = if x < o.disparity.width && y < o.disparity.height { o.disparity.get(x, y) as f64 } else { f64::NAN };
                     d.is_finite() && d > 0.0 && fb / d < z - o.margin_m
                 });
                 if !hidden {
@@ -304,9 +230,7 @@ fn zncc_of(pairs: &[(f64, f64)], total: usize) -> Option<f64> {
         return None;
     }
     let n = pairs.len() as f64;
-    let (ml, mr) = pairs
-        .iter()
-        .fold((0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n));
+    let (ml, mr) = pairs.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n));
     let (mut cov, mut vl, mut vr) = (0.0, 0.0, 0.0);
     for &(l, r) in pairs {
         cov += (l - ml) * (r - mr);
@@ -319,8 +243,5 @@ fn zncc_of(pairs: &[(f64, f64)], total: usize) -> Option<f64> {
 /// `st` moved by `shift_m` along its centre's viewing ray (the axis direction is unchanged).
 pub fn shifted(st: &AxisState, shift_m: f64) -> AxisState {
     let d = st.c.norm();
-    AxisState {
-        c: st.c * ((d + shift_m) / d),
-        a: st.a,
-    }
+    AxisState { c: st.c * ((d + shift_m) / d), a: st.a }
 }

@@ -35,43 +35,20 @@ impl SeedPrior {
     /// out of the image plane (`RefineConfig::mono_tilt_min_deg`) and without a ground plane.
     pub fn new(cfg: &RefineConfig, seed: &AxisState, mono: bool, has_ground: bool) -> Self {
         let ray = seed.c.try_normalize(1e-12).unwrap_or(Vector3::z());
-        let tilt_prior = mono
-            && !has_ground
-            && cfg.mono_tilt_sigma_deg > 0.0
-            && seed.a.dot(&ray).abs() >= cfg.mono_tilt_min_deg.to_radians().sin();
-        SeedPrior {
-            dist: seed.c.norm(),
-            ray,
-            tilt: seed.a.dot(&ray),
-            tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()),
-        }
+        let tilt_prior = mono && !has_ground && cfg.mono_tilt_sigma_deg > 0.0 && seed.a.dot(&ray).abs() >= cfg.mono_tilt_min_deg.to_radians().sin();
+        SeedPrior { dist: seed.c.norm(), ray, tilt: seed.a.dot(&ray), tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()) }
     }
 }
 
 /// Appends the prior residuals at `st` to `out` (order: see the module doc).
-pub(crate) fn push_residuals(
-    model: &CylinderModel,
-    st: &AxisState,
-    ground: Option<&GroundPlane>,
-    cfg: &RefineConfig,
-    sp: &SeedPrior,
-    out: &mut Vec<Option<f64>>,
-) {
+pub(crate) fn push_residuals(model: &CylinderModel, st: &AxisState, ground: Option<&GroundPlane>, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
     let seed_dist = sp.dist;
     if let Some(g) = ground {
-        out.push(
-            cfg.ground_height_known.then(|| {
-                (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m
-            }),
-        );
-        out.push(Some(
-            g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians(),
-        ));
+        out.push(cfg.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m));
+        out.push(Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()));
     }
     if cfg.seed_distance_sigma_frac > 0.0 {
-        out.push(Some(
-            (st.c.norm() - seed_dist) / (cfg.seed_distance_sigma_frac * seed_dist),
-        ));
+        out.push(Some((st.c.norm() - seed_dist) / (cfg.seed_distance_sigma_frac * seed_dist)));
     }
     if let Some(ss) = sp.tilt_sin_sigma {
         out.push(Some((st.a.dot(&sp.ray) - sp.tilt) / ss));
@@ -81,23 +58,11 @@ pub(crate) fn push_residuals(
 /// Jacobian row of prior residual `k` (its index among the priors, order of [`push_residuals`])
 /// for the perturbation basis `u = (u1, u2)` of the axis (parameters: centre x, y, z, axis
 /// along u1, u2).
-pub(crate) fn jacobian_row(
-    k: usize,
-    st: &AxisState,
-    ground: Option<&GroundPlane>,
-    cfg: &RefineConfig,
-    sp: &SeedPrior,
-    u: (&Vector3<f64>, &Vector3<f64>),
-) -> Vector5<f64> {
+pub(crate) fn jacobian_row(k: usize, st: &AxisState, ground: Option<&GroundPlane>, cfg: &RefineConfig, sp: &SeedPrior, u: (&Vector3<f64>, &Vector3<f64>)) -> Vector5<f64> {
     let mut k = k;
     match (ground, k) {
-        (Some(gp), 0) => {
-            Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m
-        }
-        (Some(gp), 1) => {
-            Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1))
-                / cfg.ground_tilt_sigma_deg.to_radians()
-        }
+        (Some(gp), 0) => Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
+        (Some(gp), 1) => Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians(),
         _ => {
             if ground.is_some() {
                 k -= 2;
@@ -123,34 +88,15 @@ mod tests {
     #[test]
     fn jacobian_rows_match_finite_differences() {
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
-        let cfg = RefineConfig {
-            seed_distance_sigma_frac: 0.02,
-            mono_tilt_sigma_deg: 2.0,
-            ..RefineConfig::default()
-        };
-        let seed = AxisState {
-            c: Vector3::new(0.1, 0.3, 2.0),
-            a: Vector3::new(0.3, -0.2, 0.8).normalize(),
-        };
+        let cfg = RefineConfig { seed_distance_sigma_frac: 0.02, mono_tilt_sigma_deg: 2.0, ..RefineConfig::default() };
+        let seed = AxisState { c: Vector3::new(0.1, 0.3, 2.0), a: Vector3::new(0.3, -0.2, 0.8).normalize() };
         let sp = SeedPrior::new(&cfg, &seed, true, false);
         assert!(sp.tilt_sin_sigma.is_some());
-        let ground = GroundPlane {
-            normal: Vector3::new(0.0, -0.8, -0.6),
-            offset: -1.0,
-        };
-        let st = AxisState {
-            c: Vector3::new(0.12, 0.28, 2.05),
-            a: Vector3::new(0.25, -0.1, 0.9).normalize(),
-        };
-        let (u1, u2) = (
-            st.a.cross(&Vector3::x()).normalize(),
-            st.a.cross(&st.a.cross(&Vector3::x())).normalize(),
-        );
+        let ground = GroundPlane { normal: Vector3::new(0.0, -0.8, -0.6), offset: -1.0 };
+        let st = AxisState { c: Vector3::new(0.12, 0.28, 2.05), a: Vector3::new(0.25, -0.1, 0.9).normalize() };
+        let (u1, u2) = (st.a.cross(&Vector3::x()).normalize(), st.a.cross(&st.a.cross(&Vector3::x())).normalize());
         let eval = |p: &Vector5<f64>| {
-            let s = AxisState {
-                c: st.c + Vector3::new(p[0], p[1], p[2]),
-                a: (st.a + u1 * p[3] + u2 * p[4]).normalize(),
-            };
+            let s = AxisState { c: st.c + Vector3::new(p[0], p[1], p[2]), a: (st.a + u1 * p[3] + u2 * p[4]).normalize() };
             let mut out = Vec::new();
             push_residuals(&model, &s, Some(&ground), &cfg, &sp, &mut out);
             out.into_iter().map(|r| r.unwrap()).collect::<Vec<f64>>()
@@ -163,11 +109,7 @@ mod tests {
                 let mut e = Vector5::zeros();
                 e[j] = 1e-6;
                 let fd = (eval(&e)[k] - eval(&(-e))[k]) / 2e-6;
-                assert!(
-                    (fd - row[j]).abs() < 1e-4 * (1.0 + fd.abs()),
-                    "prior {k} parameter {j}: {fd} vs {}",
-                    row[j]
-                );
+                assert!((fd - row[j]).abs() < 1e-4 * (1.0 + fd.abs()), "prior {k} parameter {j}: {fd} vs {}", row[j]);
             }
         }
     }

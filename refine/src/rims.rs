@@ -45,22 +45,14 @@ pub(crate) struct View {
 
 /// The [`View`] of `image` (camera centre `origin`) for the tube at `st`; `None` when the tube
 /// does not project into the image.
-pub(crate) fn view(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    image: &Plane<f32>,
-    st: &AxisState,
-    origin: Vector3<f64>,
-) -> Option<View> {
+pub(crate) fn view(model: &CylinderModel, camera: &CameraModel, image: &Plane<f32>, st: &AxisState, origin: Vector3<f64>) -> Option<View> {
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     for p in st.bounding_points(model)? {
         let u = camera.project(&nalgebra::Point3::from(p - origin))?;
         (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
     }
     let rect = roi([x0, y0, x1 - x0, y1 - y0], 16.0, image.width, image.height)?;
-    let level = build_pyramid_with(image, camera, rect, 1, false)
-        .into_iter()
-        .next()?;
+    let level = build_pyramid_with(image, camera, rect, 1, false).into_iter().next()?;
     Some(View { level, origin })
 }
 
@@ -70,86 +62,35 @@ pub(crate) fn view(
 /// `range_m` bounds each end's move. `None` when either view has fewer than `min_samples` rim
 /// edges or the fit leaves the range.
 #[allow(clippy::too_many_arguments)]
-pub fn rim_ends(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    baseline_m: f64,
-    st: &AxisState,
-    range_m: f64,
-    min_samples: usize,
-) -> Option<RimEnds> {
-    rim_ends_with_prior(
-        model,
-        camera,
-        left,
-        right,
-        baseline_m,
-        st,
-        range_m,
-        min_samples,
-        f64::INFINITY,
-    )
+pub fn rim_ends(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, baseline_m: f64, st: &AxisState, range_m: f64, min_samples: usize) -> Option<RimEnds> {
+    rim_ends_with_prior(model, camera, left, right, baseline_m, st, range_m, min_samples, f64::INFINITY)
 }
 
 /// [`rim_ends`] with a prior on `τ`: standard deviation `tau_sigma_m` (metres) about 0, i.e.
 /// about the input's tilt (e.g. one fitted under a ground plane's tilt prior: `σ_τ ≈ (L/2) σ_θ`);
 /// the rim residuals count with a nominal 0.5 px noise against it.
 #[allow(clippy::too_many_arguments)]
-pub fn rim_ends_with_prior(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    baseline_m: f64,
-    st: &AxisState,
-    range_m: f64,
-    min_samples: usize,
-    tau_sigma_m: f64,
-) -> Option<RimEnds> {
-    let views = [
-        view(model, camera, left, st, Vector3::zeros())?,
-        view(model, camera, right, st, Vector3::new(baseline_m, 0.0, 0.0))?,
-    ];
+pub fn rim_ends_with_prior(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, baseline_m: f64, st: &AxisState, range_m: f64, min_samples: usize, tau_sigma_m: f64) -> Option<RimEnds> {
+    let views = [view(model, camera, left, st, Vector3::zeros())?, view(model, camera, right, st, Vector3::new(baseline_m, 0.0, 0.0))?];
     let half = 0.5 * model.length;
     let (pm, pp) = (st.c - st.a * half, st.c + st.a * half);
     let (rm, rp) = (pm.normalize(), pp.normalize());
     let state_of = |p: &Vector2<f64>| -> Option<AxisState> {
         let (qm, qp) = (pm - rm * p.x, pp + rp * p.x);
         let a = (qp - qm).try_normalize(1e-9)?;
-        (qm.z > 0.0 && qp.z > 0.0).then(|| AxisState {
-            c: 0.5 * (qm + qp) + a * p.y,
-            a,
-        })
+        (qm.z > 0.0 && qp.z > 0.0).then(|| AxisState { c: 0.5 * (qm + qp) + a * p.y, a })
     };
-    let samples: Vec<_> = build_samples(model, st, camera, 1.5)
-        .into_iter()
-        .filter(|s| matches!(s.kind, SampleKind::Rim { .. }))
-        .collect();
+    let samples: Vec<_> = build_samples(model, st, camera, 1.5).into_iter().filter(|s| matches!(s.kind, SampleKind::Rim { .. })).collect();
     // Projections (pixel, normal) of the visible rim samples in view `v` at parameters `p`.
     let project = |v: &View, p: &Vector2<f64>| -> Vec<Option<(Point2<f64>, Vector2<f64>)>> {
-        let Some(s) = state_of(p) else {
-            return vec![None; samples.len()];
-        };
-        let sv = AxisState {
-            c: s.c - v.origin,
-            a: s.a,
-        };
-        let Some(f) = sv.frame() else {
-            return vec![None; samples.len()];
-        };
+        let Some(s) = state_of(p) else { return vec![None; samples.len()] };
+        let sv = AxisState { c: s.c - v.origin, a: s.a };
+        let Some(f) = sv.frame() else { return vec![None; samples.len()] };
         samples
             .iter()
             .map(|smp| {
                 let q = smp.eval(model, &f)?;
-                if !smp.on_silhouette(model, &f, &q)
-                    || model.occludes(
-                        &sv.c,
-                        &sv.a,
-                        &(q.x + q.out * (0.02 * model.body_radius() + 1e-4)),
-                    )
-                {
+                if !smp.on_silhouette(model, &f, &q) || model.occludes(&sv.c, &sv.a, &(q.x + q.out * (0.02 * model.body_radius() + 1e-4))) {
                     return None;
                 }
                 let (u, n) = project_with_normal(&v.level.camera, &q)?;
@@ -169,18 +110,11 @@ pub fn rim_ends_with_prior(
         counts = (0, 0);
         for (vi, v) in views.iter().enumerate() {
             let base = project(v, &p);
-            let dirs: Vec<_> = (0..2)
-                .map(|k| project(v, &(p + Vector2::ith(k, h))))
-                .collect();
+            let dirs: Vec<_> = (0..2).map(|k| project(v, &(p + Vector2::ith(k, h)))).collect();
             for (i, b) in base.iter().enumerate() {
                 let Some((u, n)) = b else { continue };
                 let hits = v.level.search_all(u, n, radius, 0.004, 0, 0.25);
-                let Some(off) = (0..hits.len)
-                    .map(|k| hits.hits[k].offset)
-                    .min_by(|a, b| a.abs().total_cmp(&b.abs()))
-                else {
-                    continue;
-                };
+                let Some(off) = (0..hits.len).map(|k| hits.hits[k].offset).min_by(|a, b| a.abs().total_cmp(&b.abs())) else { continue };
                 let mut j = Vector2::zeros();
                 let mut ok = true;
                 for k in 0..2 {
@@ -235,10 +169,5 @@ pub fn rim_ends_with_prior(
             break;
         }
     }
-    Some(RimEnds {
-        state: state_of(&p)?,
-        shifts_m: (-p.x, p.x, p.y),
-        samples: counts,
-        rms_px: rms,
-    })
+    Some(RimEnds { state: state_of(&p)?, shifts_m: (-p.x, p.x, p.y), samples: counts, rms_px: rms })
 }

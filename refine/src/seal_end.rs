@@ -60,22 +60,13 @@ pub const CONFIDENCE_SCALE: f64 = 8.0;
 /// The colour evidence of `image` (same size as the camera) for `pose`'s end direction, or
 /// `None` when the seal section or the body covers fewer than 10 pixels (tube cut by the
 /// border, hidden, end-on) or the sizes differ. `visible`: the detector's mask of the tube.
-pub fn seal_end_evidence(
-    model: &CylinderModel,
-    pose: &TubeAxisPose,
-    camera: &CameraModel,
-    image: &ColourImage,
-    visible: Option<&BinaryMask>,
-) -> Option<SealEndEvidence> {
+pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, image: &ColourImage, visible: Option<&BinaryMask>) -> Option<SealEndEvidence> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     if image.width != w || image.height != h || image.rgb.len() != w * h * 3 {
         return None;
     }
     let seal = *model.sections.last()?;
-    let body = *model
-        .sections
-        .iter()
-        .max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0)))?;
+    let body = *model.sections.iter().max_by(|a, b| (a.z1 - a.z0).total_cmp(&(b.z1 - b.z0)))?;
     if seal == body {
         return None;
     }
@@ -90,12 +81,7 @@ pub fn seal_end_evidence(
     let (mut ys, mut gs, mut ns) = (0.0, 0.0, 0usize);
     let (mut yb, mut gb, mut nb) = (0.0, 0.0, 0usize);
     let mut coloured = false;
-    for (i, _) in sil
-        .data
-        .iter()
-        .enumerate()
-        .filter(|(i, &v)| v != 0 && near.as_ref().is_none_or(|m| m.data[*i] != 0))
-    {
+    for (i, _) in sil.data.iter().enumerate().filter(|(i, &v)| v != 0 && near.as_ref().is_none_or(|m| m.data[*i] != 0)) {
         let (x, y) = (i % w, i / w);
         let r = camera.unproject(&Point2::new(x as f64, y as f64));
         let (rr, ra, rc) = (r.dot(&r), r.dot(&a), r.dot(&c));
@@ -119,17 +105,8 @@ pub fn seal_end_evidence(
         return None;
     }
     let (ns_f, nb_f) = (ns as f64, nb as f64);
-    let contrast = if coloured {
-        ys / ns_f - yb / nb_f
-    } else {
-        gb / nb_f - gs / ns_f
-    };
-    Some(SealEndEvidence {
-        contrast,
-        seal_pixels: ns,
-        body_pixels: nb,
-        monochrome: !coloured,
-    })
+    let contrast = if coloured { ys / ns_f - yb / nb_f } else { gb / nb_f - gs / ns_f };
+    Some(SealEndEvidence { contrast, seal_pixels: ns, body_pixels: nb, monochrome: !coloured })
 }
 
 /// Decides `pose`'s seal end from `evidence` (computed for this pose): flips `end_direction`
@@ -164,8 +141,7 @@ mod tests {
             let (x, y) = ((i % sil.width) as f64, (i / sil.width) as f64);
             let r = cam.unproject(&Point2::new(x, y));
             let (c, a) = (truth.centre, truth.end_direction);
-            let z =
-                (r.dot(&a) * r.dot(&c) - r.dot(&r) * c.dot(&a)) / (r.dot(&r) - r.dot(&a).powi(2));
+            let z = (r.dot(&a) * r.dot(&c) - r.dot(&r) * c.dot(&a)) / (r.dot(&r) - r.dot(&a).powi(2));
             rgb.extend_from_slice(match (v != 0, z >= seal_z0) {
                 (false, _) => &[150, 120, 95],
                 (true, true) => &[200, 160, 60],
@@ -182,23 +158,12 @@ mod tests {
         let axis = Vector3::new(1.0, 0.2, 0.1).normalize();
         let truth = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), axis, 0.5).unwrap();
         let rgb = painted(&model, &truth, &cam);
-        let image = ColourImage {
-            width: 640,
-            height: 480,
-            rgb: &rgb,
-        };
-        let grey: Vec<u8> = rgb
-            .chunks(3)
-            .flat_map(|p| {
-                let g = ((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8;
-                [g, g, g]
-            })
-            .collect();
-        let grey_image = ColourImage {
-            width: 640,
-            height: 480,
-            rgb: &grey,
-        };
+        let image = ColourImage { width: 640, height: 480, rgb: &rgb };
+        let grey: Vec<u8> = rgb.chunks(3).flat_map(|p| {
+            let g = ((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8;
+            [g, g, g]
+        }).collect();
+        let grey_image = ColourImage { width: 640, height: 480, rgb: &grey };
         for (img, mono) in [(&image, false), (&grey_image, true)] {
             // A pose pointing the wrong way is flipped, with high confidence.
             let mut flipped = TubeAxisPose::new(0, 1.0, truth.centre, -axis, 0.9).unwrap();
@@ -213,10 +178,7 @@ mod tests {
             let mut right = truth.clone();
             let ev = seal_end_evidence(&model, &right, &cam, img, None).unwrap();
             apply_seal_end(&mut right, &ev);
-            assert!(
-                right.end_direction.dot(&axis) > 0.999 && ev.contrast > 20.0,
-                "{ev:?}"
-            );
+            assert!(right.end_direction.dot(&axis) > 0.999 && ev.contrast > 20.0, "{ev:?}");
         }
     }
 
@@ -224,26 +186,15 @@ mod tests {
     fn no_evidence_without_enough_pixels_of_both_sections() {
         let cam = CameraModel::from_hfov(640, 480, 40.0);
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
-        let pose =
-            TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), Vector3::x(), 0.5).unwrap();
+        let pose = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), Vector3::x(), 0.5).unwrap();
         let rgb = painted(&model, &pose, &cam);
-        let image = ColourImage {
-            width: 640,
-            height: 480,
-            rgb: &rgb,
-        };
+        let image = ColourImage { width: 640, height: 480, rgb: &rgb };
         // The mask shows only the seal half: no body pixels.
         let sil = silhouette_mask(&model, &pose, &cam);
-        let seal_only = BinaryMask::from_fn(640, 480, |x, y| {
-            sil.get(x, y) && x as f64 > cam.cx + 0.03 * cam.fx
-        });
+        let seal_only = BinaryMask::from_fn(640, 480, |x, y| sil.get(x, y) && x as f64 > cam.cx + 0.03 * cam.fx);
         assert!(seal_end_evidence(&model, &pose, &cam, &image, Some(&seal_only)).is_none());
         // A wrongly sized image gives no evidence rather than a panic.
-        let small = ColourImage {
-            width: 10,
-            height: 10,
-            rgb: &rgb[..300],
-        };
+        let small = ColourImage { width: 10, height: 10, rgb: &rgb[..300] };
         assert!(seal_end_evidence(&model, &pose, &cam, &small, None).is_none());
     }
 }

@@ -45,25 +45,13 @@ pub struct Hypothesis {
 }
 
 /// Projected visible contour of a state at a level: pixel, normal.
-fn projected(
-    model: &CylinderModel,
-    st: &AxisState,
-    lv: &GradientLevel,
-    max_samples: usize,
-    out: &mut Vec<(Point2<f64>, Vector2<f64>)>,
-) {
+fn projected(model: &CylinderModel, st: &AxisState, lv: &GradientLevel, max_samples: usize, out: &mut Vec<(Point2<f64>, Vector2<f64>)>) {
     out.clear();
     let Some(f) = st.frame() else { return };
     let spacing = 2.0;
     for s in build_samples_capped(model, st, &lv.camera, spacing, max_samples) {
         let Some(p) = s.eval(model, &f) else { continue };
-        if !s.on_silhouette(model, &f, &p)
-            || model.occludes(
-                &st.c,
-                &st.a,
-                &(p.x + p.out * (0.02 * model.body_radius() + 1e-4)),
-            )
-        {
+        if !s.on_silhouette(model, &f, &p) || model.occludes(&st.c, &st.a, &(p.x + p.out * (0.02 * model.body_radius() + 1e-4))) {
             continue;
         }
         if let Some(un) = project_with_normal(&lv.camera, &p) {
@@ -82,14 +70,7 @@ struct Tap {
 }
 
 fn taps(pts: &[(Point2<f64>, Vector2<f64>)]) -> Vec<Tap> {
-    pts.iter()
-        .map(|(u, n)| Tap {
-            x: u.x.round() as i32,
-            y: u.y.round() as i32,
-            nx: n.x as f32,
-            ny: n.y as f32,
-        })
-        .collect()
+    pts.iter().map(|(u, n)| Tap { x: u.x.round() as i32, y: u.y.round() as i32, nx: n.x as f32, ny: n.y as f32 }).collect()
 }
 
 /// Mean edge support of the projected samples shifted by `(dx, dy)` level pixels.
@@ -118,8 +99,7 @@ fn best_shift(lv: &GradientLevel, pts: &[Tap], spec: &SearchSpec) -> (f64, i32, 
         while dx <= r {
             let s = support(lv, pts, dx, dy);
             // Ties prefer the smaller move.
-            if s > best.0 || (s == best.0 && dx * dx + dy * dy < best.1 * best.1 + best.2 * best.2)
-            {
+            if s > best.0 || (s == best.0 && dx * dx + dy * dy < best.1 * best.1 + best.2 * best.2) {
                 best = (s, dx, dy);
             }
             dx += step;
@@ -143,12 +123,7 @@ fn best_shift(lv: &GradientLevel, pts: &[Tap], spec: &SearchSpec) -> (f64, i32, 
 
 /// Moves the centre of `st` so that its projection moves by `d` level pixels: along the new
 /// image ray at the same depth, or at the same height above `ground`.
-fn shifted(
-    st: &AxisState,
-    lv: &GradientLevel,
-    d: Vector2<f64>,
-    ground: Option<&GroundPlane>,
-) -> Option<AxisState> {
+fn shifted(st: &AxisState, lv: &GradientLevel, d: Vector2<f64>, ground: Option<&GroundPlane>) -> Option<AxisState> {
     let u = lv.camera.project(&Point3::from(st.c))?;
     let ray = lv.camera.unproject(&(u + d));
     let t = match ground {
@@ -162,10 +137,7 @@ fn shifted(
         }
         None => st.c.z / ray.z,
     };
-    (t.is_finite() && t > 0.0).then(|| AxisState {
-        c: ray * t,
-        a: st.a,
-    })
+    (t.is_finite() && t > 0.0).then(|| AxisState { c: ray * t, a: st.a })
 }
 
 /// The seed resting on `g`: centre moved along its viewing ray to height `h`, axis projected
@@ -178,38 +150,18 @@ pub fn onto_ground(st: &AxisState, g: &GroundPlane, h: f64) -> Option<AxisState>
     }
     let t = (g.offset + h) / den;
     let a = st.a - g.normal * g.normal.dot(&st.a);
-    (t > 0.0 && t.is_finite() && a.norm() > 1e-3).then(|| AxisState {
-        c: st.c * t,
-        a: a.normalize(),
-    })
+    (t > 0.0 && t.is_finite() && a.norm() > 1e-3).then(|| AxisState { c: st.c * t, a: a.normalize() })
 }
 
 /// Scores rotated and shifted copies of `seed` at level `lv` (`height_known`: see
 /// [`crate::RefineConfig::ground_height_known`]) and returns them best first (one
 /// per rotation, each at its best translation). The unmoved seed is among the candidates
 /// scored (rotation 0, translation 0 competes on the same grid).
-pub fn coarse_search(
-    model: &CylinderModel,
-    lv: &GradientLevel,
-    seed: &AxisState,
-    ground: Option<&GroundPlane>,
-    height_known: bool,
-    spec: &SearchSpec,
-) -> Vec<Hypothesis> {
+pub fn coarse_search(model: &CylinderModel, lv: &GradientLevel, seed: &AxisState, ground: Option<&GroundPlane>, height_known: bool, spec: &SearchSpec) -> Vec<Hypothesis> {
     // With a ground plane, first put the seed on it: centre `max_radius` above the plane along
     // its viewing ray (same pixel; with `height_known` false the seed keeps its height), axis
     // parallel to the plane.
-    let seed = &match ground.and_then(|g| {
-        onto_ground(
-            seed,
-            g,
-            if height_known {
-                model.max_radius()
-            } else {
-                g.normal.dot(&seed.c) - g.offset
-            },
-        )
-    }) {
+    let seed = &match ground.and_then(|g| onto_ground(seed, g, if height_known { model.max_radius() } else { g.normal.dot(&seed.c) - g.offset })) {
         Some(s) => s,
         None => *seed,
     };
@@ -217,14 +169,8 @@ pub fn coarse_search(
         Some(g) => g.normal,
         None => seed.c.normalize(),
     };
-    let Some(rot_axis) = Unit::try_new(axis_of_rotation, 1e-9) else {
-        return Vec::new();
-    };
-    let nrot = if spec.rotation_step_deg > 0.0 {
-        (spec.max_rotation_deg / spec.rotation_step_deg).floor() as i32
-    } else {
-        0
-    };
+    let Some(rot_axis) = Unit::try_new(axis_of_rotation, 1e-9) else { return Vec::new() };
+    let nrot = if spec.rotation_step_deg > 0.0 { (spec.max_rotation_deg / spec.rotation_step_deg).floor() as i32 } else { 0 };
     let mut pts = Vec::new();
     let mut out = Vec::new();
     for k in -nrot..=nrot {
@@ -237,16 +183,8 @@ pub fn coarse_search(
         }
         let (score, dx, dy) = best_shift(lv, &taps(&pts), spec);
         // Over a ground of unknown height the seed's depth is the better guess than its height.
-        if let Some(moved) = shifted(
-            &st,
-            lv,
-            Vector2::new(dx as f64, dy as f64),
-            ground.filter(|_| height_known),
-        ) {
-            out.push(Hypothesis {
-                state: moved,
-                score,
-            });
+        if let Some(moved) = shifted(&st, lv, Vector2::new(dx as f64, dy as f64), ground.filter(|_| height_known)) {
+            out.push(Hypothesis { state: moved, score });
         }
     }
     out.sort_by(|a, b| b.score.total_cmp(&a.score));

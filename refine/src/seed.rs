@@ -32,10 +32,7 @@ impl GroundPlane {
     /// The plane through `point` with upward normal `normal` (normalized here).
     pub fn from_point_normal(point: &Vector3<f64>, normal: &Vector3<f64>) -> Self {
         let n = normal.normalize();
-        GroundPlane {
-            normal: n,
-            offset: n.dot(point),
-        }
+        GroundPlane { normal: n, offset: n.dot(point) }
     }
 }
 
@@ -56,31 +53,17 @@ pub struct Seed {
 pub fn perturbed(state: &AxisState, pos_m: f64, ang_deg: f64, seed: u64) -> AxisState {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let dc = Vector3::new(
-        rng.random_range(-1.0..=1.0),
-        rng.random_range(-1.0..=1.0),
-        rng.random_range(-1.0..=1.0),
-    ) * pos_m;
+    let dc = Vector3::new(rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0)) * pos_m;
     let dir = loop {
-        let v = Vector3::new(
-            rng.random_range(-1.0..=1.0),
-            rng.random_range(-1.0..=1.0),
-            rng.random_range(-1.0..=1.0),
-        );
+        let v = Vector3::new(rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0), rng.random_range(-1.0..=1.0));
         let v = v - state.a * state.a.dot(&v) / state.a.norm_squared().max(1e-300);
         let n = v.norm();
         if n > 1e-3 {
             break v / n;
         }
     };
-    let r = nalgebra::Rotation3::from_axis_angle(
-        &nalgebra::Unit::new_unchecked(dir),
-        ang_deg.to_radians(),
-    );
-    AxisState {
-        c: state.c + dc,
-        a: r * state.a,
-    }
+    let r = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_unchecked(dir), ang_deg.to_radians());
+    AxisState { c: state.c + dc, a: r * state.a }
 }
 
 /// A template pose found under camera `from` moved to camera `to` so that it looks the same:
@@ -92,19 +75,13 @@ pub fn reanchored(state: &AxisState, from: &CameraModel, to: &CameraModel) -> Op
     let u = from.project(&Point3::from(state.c))?;
     let new_ray = to.unproject(&u);
     let r = nalgebra::Rotation3::rotation_between(&state.c, &new_ray)?;
-    Some(AxisState {
-        c: r * state.c,
-        a: r * state.a,
-    })
+    Some(AxisState { c: r * state.c, a: r * state.a })
 }
 
 /// The axis state of a tube pose `T_cam_tube`: centre = its translation, axis = its +z (toward
 /// the seal end) in the camera frame.
 pub fn axis_state_of(t: &Pose) -> AxisState {
-    AxisState {
-        c: t.translation(),
-        a: t.transform_vector(&Vector3::z()),
-    }
+    AxisState { c: t.translation(), a: t.transform_vector(&Vector3::z()) }
 }
 
 /// [`reanchored`] for a full template pose `T_cam_tube` (camera `from` -> camera `to`): the
@@ -113,12 +90,8 @@ pub fn axis_state_of(t: &Pose) -> AxisState {
 pub fn reanchored_pose(t: &Pose, from: &CameraModel, to: &CameraModel) -> Option<Pose> {
     let st = axis_state_of(t);
     let r = reanchored(&st, from, to)?;
-    let rot = nalgebra::Rotation3::rotation_between(&st.c, &r.c)
-        .unwrap_or_else(nalgebra::Rotation3::identity);
-    Some(Pose::from_parts(
-        nalgebra::Rotation3::from_matrix_unchecked(rot.matrix() * t.rotation()),
-        r.c,
-    ))
+    let rot = nalgebra::Rotation3::rotation_between(&st.c, &r.c).unwrap_or_else(nalgebra::Rotation3::identity);
+    Some(Pose::from_parts(nalgebra::Rotation3::from_matrix_unchecked(rot.matrix() * t.rotation()), r.c))
 }
 
 /// The mask axis' centre moved along the axis to the foot of the perpendicular from the box
@@ -127,11 +100,7 @@ pub fn reanchored_pose(t: &Pose, from: &CameraModel, to: &CameraModel) -> Option
 /// silhouette's extent: on the paper preset (80 no-tags images) the centre's image error along
 /// the axis went 11.2 -> 5.2 px at the median (p90 36.0 -> 19.3), and a ground-plane seed's
 /// distance follows it. Unchanged when the box or the direction is degenerate.
-pub fn recentred_along_axis(
-    c: &Point2<f64>,
-    d: &nalgebra::Vector2<f64>,
-    bbox: &[f64; 4],
-) -> Point2<f64> {
+pub fn recentred_along_axis(c: &Point2<f64>, d: &nalgebra::Vector2<f64>, bbox: &[f64; 4]) -> Point2<f64> {
     let n = d.norm();
     if !(n > 1e-12 && bbox.iter().all(|v| v.is_finite()) && bbox[2] > 0.0 && bbox[3] > 0.0) {
         return *c;
@@ -142,44 +111,20 @@ pub fn recentred_along_axis(
 }
 
 /// Builds a seed from a detection. See the module docs for the order of preference.
-pub fn seed_from_detection(
-    det: &TubeDetection,
-    camera: &CameraModel,
-    model: &CylinderModel,
-    ground: Option<&GroundPlane>,
-    stereo: &[Point3<f64>],
-) -> Result<Seed, RefineError> {
+pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel, ground: Option<&GroundPlane>, stereo: &[Point3<f64>]) -> Result<Seed, RefineError> {
     if let Some(t) = &det.t_cam_tube {
         let c = t.translation();
         let a = t.transform_vector(&Vector3::z());
         if c.iter().any(|v| !v.is_finite()) || c.z <= 0.0 {
-            return Err(RefineError::Seed(format!(
-                "template pose places the tube behind the camera (z = {:.3} m)",
-                c.z
-            )));
+            return Err(RefineError::Seed(format!("template pose places the tube behind the camera (z = {:.3} m)", c.z)));
         }
-        return Ok(Seed {
-            state: AxisState {
-                c,
-                a: a.normalize(),
-            },
-            end_known: true,
-        });
+        return Ok(Seed { state: AxisState { c, a: a.normalize() }, end_known: true });
     }
     let from_mask = det.axis_seed.is_some();
     let ax = det.axis_seed.unwrap_or_else(|| det.axis_seed_from_bbox());
-    ax.validate()
-        .map_err(|e| RefineError::Seed(e.to_string()))?;
+    ax.validate().map_err(|e| RefineError::Seed(e.to_string()))?;
     let d_px = nalgebra::Vector2::new(ax.direction_px[0], ax.direction_px[1]);
-    let c_px = if from_mask {
-        recentred_along_axis(
-            &Point2::new(ax.centre_px[0], ax.centre_px[1]),
-            &d_px,
-            &det.bbox,
-        )
-    } else {
-        Point2::new(ax.centre_px[0], ax.centre_px[1])
-    };
+    let c_px = if from_mask { recentred_along_axis(&Point2::new(ax.centre_px[0], ax.centre_px[1]), &d_px, &det.bbox) } else { Point2::new(ax.centre_px[0], ax.centre_px[1]) };
     let r0 = camera.unproject(&c_px);
     let r1 = camera.unproject(&(c_px + d_px * (0.25 * ax.length_px).max(5.0)));
     let m = r0.cross(&r1);
@@ -190,25 +135,16 @@ pub fn seed_from_detection(
     let f = 0.5 * (camera.fx + camera.fy);
     // Axis direction: parallel to the ground plane when there is one (inside the plane through
     // the camera centre and the image line), else perpendicular to the viewing ray.
-    let ground_axis = ground
-        .map(|g| (g, m.cross(&g.normal)))
-        .filter(|(_, a)| a.norm() > 1e-3);
+    let ground_axis = ground.map(|g| (g, m.cross(&g.normal))).filter(|(_, a)| a.norm() > 1e-3);
     let axis = ground_axis.map_or_else(|| r0.cross(&m).normalize(), |(_, a)| a.normalize());
     let mut state = None;
     if !stereo.is_empty() {
-        let mut z: Vec<f64> = stereo
-            .iter()
-            .map(|p| p.z)
-            .filter(|z| z.is_finite() && *z > 0.0)
-            .collect();
+        let mut z: Vec<f64> = stereo.iter().map(|p| p.z).filter(|z| z.is_finite() && *z > 0.0).collect();
         if !z.is_empty() {
             let mid = z.len() / 2;
             let (_, zm, _) = z.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
             let zc = *zm + model.body_radius();
-            state = Some(AxisState {
-                c: r0 * (zc / r0.z),
-                a: axis,
-            });
+            state = Some(AxisState { c: r0 * (zc / r0.z), a: axis });
         }
     }
     if let (None, Some((g, _))) = (state, ground_axis) {
@@ -223,36 +159,20 @@ pub fn seed_from_detection(
     let mut state = match state {
         Some(s) => s,
         None => {
-            let z = if from_mask {
-                f * 2.0 * model.max_radius() / ax.width_px
-            } else {
-                f * (model.length + 2.0 * model.max_radius()) / ax.length_px
-            };
+            let z = if from_mask { f * 2.0 * model.max_radius() / ax.width_px } else { f * (model.length + 2.0 * model.max_radius()) / ax.length_px };
             if !(z.is_finite() && z > 0.0) {
-                return Err(RefineError::Seed(format!(
-                    "cannot infer depth from the seed (width {} px, length {} px)",
-                    ax.width_px, ax.length_px
-                )));
+                return Err(RefineError::Seed(format!("cannot infer depth from the seed (width {} px, length {} px)", ax.width_px, ax.length_px)));
             }
-            AxisState {
-                c: r0 * (z / r0.z),
-                a: r0.cross(&m).normalize(),
-            }
+            AxisState { c: r0 * (z / r0.z), a: r0.cross(&m).normalize() }
         }
     };
     // Orient the axis along the image direction of the seed.
-    if let (Some(p0), Some(p1)) = (
-        camera.project(&Point3::from(state.c)),
-        camera.project(&Point3::from(state.c + state.a * 0.01)),
-    ) {
+    if let (Some(p0), Some(p1)) = (camera.project(&Point3::from(state.c)), camera.project(&Point3::from(state.c + state.a * 0.01))) {
         if (p1 - p0).dot(&d_px) < 0.0 {
             state.a = -state.a;
         }
     }
-    Ok(Seed {
-        state,
-        end_known: false,
-    })
+    Ok(Seed { state, end_known: false })
 }
 
 #[cfg(test)]
@@ -265,15 +185,9 @@ mod tests {
         let mut to = from.clone();
         to.cx = -237.5;
         to.cy = 776.5;
-        let st = AxisState {
-            c: Vector3::new(0.2, -0.1, 2.5),
-            a: Vector3::new(1.0, 0.3, 0.1).normalize(),
-        };
+        let st = AxisState { c: Vector3::new(0.2, -0.1, 2.5), a: Vector3::new(1.0, 0.3, 0.1).normalize() };
         let r = reanchored(&st, &from, &to).unwrap();
-        let (u0, u1) = (
-            from.project(&Point3::from(st.c)).unwrap(),
-            to.project(&Point3::from(r.c)).unwrap(),
-        );
+        let (u0, u1) = (from.project(&Point3::from(st.c)).unwrap(), to.project(&Point3::from(r.c)).unwrap());
         assert!((u0 - u1).norm() < 1e-9, "{u0} vs {u1}");
         assert!((r.c.norm() - st.c.norm()).abs() < 1e-12);
         // The axis keeps its angle to the viewing ray.
@@ -288,10 +202,7 @@ mod tests {
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.1);
         let t = Pose::from_parts(rot, Vector3::new(0.2, -0.1, 2.5));
         let p = reanchored_pose(&t, &from, &to).unwrap();
-        let (st, r) = (
-            axis_state_of(&p),
-            reanchored(&axis_state_of(&t), &from, &to).unwrap(),
-        );
+        let (st, r) = (axis_state_of(&p), reanchored(&axis_state_of(&t), &from, &to).unwrap());
         assert!((st.c - r.c).norm() < 1e-12 && (st.a - r.a).norm() < 1e-12);
         // A rotation: the tube's x axis stays perpendicular to its axis.
         assert!(p.transform_vector(&Vector3::x()).dot(&st.a).abs() < 1e-12);
@@ -309,38 +220,15 @@ mod tests {
         let r0 = cam.unproject(&Point2::new(320.0, 300.0));
         let t = (ground.offset + 0.05 + model.max_radius()) / up.dot(&r0);
         let (centre, axis) = (r0 * t, Vector3::x());
-        let (p0, p1) = (
-            cam.project(&Point3::from(centre - axis * 0.075)).unwrap(),
-            cam.project(&Point3::from(centre + axis * 0.075)).unwrap(),
-        );
-        let mut det = TubeDetection::new(
-            1,
-            0.9,
-            [p0.x, 300.0 - 5.0, p1.x - p0.x, 10.0],
-            tubeloc_core::DetectionSource::Learned,
-        );
-        det.axis_seed = Some(tubeloc_core::AxisSeed {
-            centre_px: [320.0, 300.0],
-            direction_px: [1.0, 0.0],
-            length_px: p1.x - p0.x,
-            width_px: 10.0,
-        });
+        let (p0, p1) = (cam.project(&Point3::from(centre - axis * 0.075)).unwrap(), cam.project(&Point3::from(centre + axis * 0.075)).unwrap());
+        let mut det = TubeDetection::new(1, 0.9, [p0.x, 300.0 - 5.0, p1.x - p0.x, 10.0], tubeloc_core::DetectionSource::Learned);
+        det.axis_seed = Some(tubeloc_core::AxisSeed { centre_px: [320.0, 300.0], direction_px: [1.0, 0.0], length_px: p1.x - p0.x, width_px: 10.0 });
         // Stereo points on the tube's near surface along the viewing ray of its centre.
         let near = centre.z - model.body_radius();
-        let stereo: Vec<Point3<f64>> = (0..9)
-            .map(|k| Point3::new(-0.04 + 0.01 * k as f64, centre.y, near))
-            .collect();
+        let stereo: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.04 + 0.01 * k as f64, centre.y, near)).collect();
         let seed = seed_from_detection(&det, &cam, &model, Some(&ground), &stereo).unwrap();
-        assert!(
-            (seed.state.c - centre).norm() < 1e-3,
-            "stereo depth: centre off by {:.4} m",
-            (seed.state.c - centre).norm()
-        );
-        assert!(
-            seed.state.a.dot(&up).abs() < 1e-9 && seed.state.a.x.abs() > 1.0 - 1e-9,
-            "ground tilt: axis {}",
-            seed.state.a
-        );
+        assert!((seed.state.c - centre).norm() < 1e-3, "stereo depth: centre off by {:.4} m", (seed.state.c - centre).norm());
+        assert!(seed.state.a.dot(&up).abs() < 1e-9 && seed.state.a.x.abs() > 1.0 - 1e-9, "ground tilt: axis {}", seed.state.a);
         // The ground alone puts the seed on the nominal plane, 5 cm below the dune, along the ray.
         let seed = seed_from_detection(&det, &cam, &model, Some(&ground), &[]).unwrap();
         assert!((up.dot(&seed.state.c) - (ground.offset + model.max_radius())).abs() < 1e-9);
@@ -357,22 +245,13 @@ mod tests {
         let c = recentred_along_axis(&Point2::new(100.0, 50.0), &d, &[72.0, 36.0, 40.0, 40.0]);
         assert!((c - Point2::new(100.0, 50.0)).norm() < 1e-9, "{c}");
         // Degenerate boxes leave the centre alone.
-        assert_eq!(
-            recentred_along_axis(&Point2::new(1.0, 2.0), &d, &[0.0, 0.0, 0.0, 5.0]),
-            Point2::new(1.0, 2.0)
-        );
-        assert_eq!(
-            recentred_along_axis(&Point2::new(1.0, 2.0), &d, &[f64::NAN, 0.0, 4.0, 5.0]),
-            Point2::new(1.0, 2.0)
-        );
+        assert_eq!(recentred_along_axis(&Point2::new(1.0, 2.0), &d, &[0.0, 0.0, 0.0, 5.0]), Point2::new(1.0, 2.0));
+        assert_eq!(recentred_along_axis(&Point2::new(1.0, 2.0), &d, &[f64::NAN, 0.0, 4.0, 5.0]), Point2::new(1.0, 2.0));
     }
 
     #[test]
     fn perturbation_has_the_requested_size_and_is_reproducible() {
-        let st = AxisState {
-            c: Vector3::new(0.1, 0.2, 1.5),
-            a: Vector3::new(1.0, 0.5, -0.2).normalize(),
-        };
+        let st = AxisState { c: Vector3::new(0.1, 0.2, 1.5), a: Vector3::new(1.0, 0.5, -0.2).normalize() };
         for k in 0..20 {
             let p = perturbed(&st, 0.01, 5.0, k);
             assert_eq!(p, perturbed(&st, 0.01, 5.0, k));

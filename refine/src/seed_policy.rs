@@ -76,26 +76,14 @@ impl SeedSettings {
         };
         match kind {
             SeedKind::Explicit => explicit,
-            SeedKind::TemplatePose => SeedSettings {
-                depth_sigma_frac: c.detection_depth_sigma_frac,
-                end_limb_weight: c.detection_end_limb_weight,
-                ..explicit
-            },
+            SeedKind::TemplatePose => SeedSettings { depth_sigma_frac: c.detection_depth_sigma_frac, end_limb_weight: c.detection_end_limb_weight, ..explicit },
             SeedKind::MaskOrBox => SeedSettings {
                 depth_sigma_frac: c.detection_depth_sigma_frac,
                 end_limb_weight: c.mask_seed_end_limb_weight,
                 keep_depth: c.mask_seed_keep_depth,
                 length_depth: c.mask_seed_length_depth,
-                relief_sigma_m: if c.mask_seed_relief_sigma_m > 0.0 {
-                    c.mask_seed_relief_sigma_m
-                } else {
-                    c.ground_relief_sigma_m
-                },
-                ground_tilt_sigma_deg: if has_ground {
-                    c.mask_seed_tilt_sigma_deg
-                } else {
-                    c.ground_tilt_sigma_deg
-                },
+                relief_sigma_m: if c.mask_seed_relief_sigma_m > 0.0 { c.mask_seed_relief_sigma_m } else { c.ground_relief_sigma_m },
+                ground_tilt_sigma_deg: if has_ground { c.mask_seed_tilt_sigma_deg } else { c.ground_tilt_sigma_deg },
             },
         }
     }
@@ -105,11 +93,7 @@ impl SeedSettings {
         RefineConfig {
             mono_depth_sigma_frac: self.depth_sigma_frac,
             end_limb_weight: self.end_limb_weight,
-            mono_width_sigma_px: if self.keep_depth {
-                f64::INFINITY
-            } else {
-                base.mono_width_sigma_px
-            },
+            mono_width_sigma_px: if self.keep_depth { f64::INFINITY } else { base.mono_width_sigma_px },
             mono_length_depth: self.length_depth,
             ground_relief_sigma_m: self.relief_sigma_m,
             ground_tilt_sigma_deg: self.ground_tilt_sigma_deg,
@@ -124,47 +108,20 @@ mod tests {
 
     #[test]
     fn explicit_seeds_keep_the_configuration() {
-        let c = RefineConfig {
-            mono_length_depth: true,
-            ground_relief_sigma_m: 0.02,
-            ..RefineConfig::default()
-        };
-        assert_eq!(
-            SeedSettings::new(&c, SeedKind::Explicit, true).config(&c),
-            c
-        );
+        let c = RefineConfig { mono_length_depth: true, ground_relief_sigma_m: 0.02, ..RefineConfig::default() };
+        assert_eq!(SeedSettings::new(&c, SeedKind::Explicit, true).config(&c), c);
     }
 
     #[test]
     fn detector_seeds_take_their_settings() {
         let c = RefineConfig::default();
         let t = SeedSettings::new(&c, SeedKind::TemplatePose, true).config(&c);
-        assert_eq!(
-            (t.mono_depth_sigma_frac, t.end_limb_weight),
-            (c.detection_depth_sigma_frac, c.detection_end_limb_weight)
-        );
-        assert_eq!(
-            (t.mono_width_sigma_px, t.ground_tilt_sigma_deg),
-            (c.mono_width_sigma_px, c.ground_tilt_sigma_deg)
-        );
+        assert_eq!((t.mono_depth_sigma_frac, t.end_limb_weight), (c.detection_depth_sigma_frac, c.detection_end_limb_weight));
+        assert_eq!((t.mono_width_sigma_px, t.ground_tilt_sigma_deg), (c.mono_width_sigma_px, c.ground_tilt_sigma_deg));
         let m = SeedSettings::new(&c, SeedKind::MaskOrBox, true).config(&c);
-        assert_eq!(
-            (
-                m.end_limb_weight,
-                m.ground_tilt_sigma_deg,
-                m.ground_relief_sigma_m
-            ),
-            (
-                c.mask_seed_end_limb_weight,
-                c.mask_seed_tilt_sigma_deg,
-                c.mask_seed_relief_sigma_m
-            )
-        );
+        assert_eq!((m.end_limb_weight, m.ground_tilt_sigma_deg, m.ground_relief_sigma_m), (c.mask_seed_end_limb_weight, c.mask_seed_tilt_sigma_deg, c.mask_seed_relief_sigma_m));
         assert!(m.mono_width_sigma_px.is_infinite());
         // Without a ground plane the tilt prior is the configured one.
-        assert_eq!(
-            SeedSettings::new(&c, SeedKind::MaskOrBox, false).ground_tilt_sigma_deg,
-            c.ground_tilt_sigma_deg
-        );
+        assert_eq!(SeedSettings::new(&c, SeedKind::MaskOrBox, false).ground_tilt_sigma_deg, c.ground_tilt_sigma_deg);
     }
 }

@@ -33,10 +33,7 @@ impl Default for MaskSnap {
     /// test splits), learned masks IoU-snapped to mono-refined poses: segm AP50 0.726 -> 0.770
     /// and 0.810 -> 0.824, AR 0.312 -> 0.458 and 0.346 -> 0.500.
     fn default() -> Self {
-        MaskSnap {
-            dilate_px: 4,
-            min_agreement: 0.6,
-        }
+        MaskSnap { dilate_px: 4, min_agreement: 0.6 }
     }
 }
 
@@ -44,40 +41,22 @@ impl Default for MaskSnap {
 /// in an image of `camera`: pixel `(x, y)` is set when the ray through its centre meets the
 /// solid tube. Only the pixels inside the projection's bounding box (plus 2 px) are tested;
 /// an empty mask when the tube is behind the camera or outside the image.
-pub fn silhouette_mask(
-    model: &CylinderModel,
-    pose: &TubeAxisPose,
-    camera: &CameraModel,
-) -> BinaryMask {
+pub fn silhouette_mask(model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel) -> BinaryMask {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut mask = BinaryMask::new(w, h);
     let (c, a) = (pose.centre, pose.end_direction);
     let state = crate::AxisState { c, a };
-    let Some(bounds) = state.bounding_points(model) else {
-        return mask;
-    };
-    let (mut x0, mut y0, mut x1, mut y1) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
+    let Some(bounds) = state.bounding_points(model) else { return mask };
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
     for p in &bounds {
-        let Some(u) = camera.project(&Point3::from(*p)) else {
-            return mask;
-        };
+        let Some(u) = camera.project(&Point3::from(*p)) else { return mask };
         (x0, y0, x1, y1) = (x0.min(u.x), y0.min(u.y), x1.max(u.x), y1.max(u.y));
     }
     let clip = |v: f64, n: usize| v.clamp(0.0, n as f64 - 1.0) as usize;
     if !(x1 >= -2.0 && y1 >= -2.0 && x0 <= w as f64 + 1.0 && y0 <= h as f64 + 1.0) {
         return mask;
     }
-    let (xa, xb, ya, yb) = (
-        clip((x0 - 2.0).floor(), w),
-        clip((x1 + 2.0).ceil(), w),
-        clip((y0 - 2.0).floor(), h),
-        clip((y1 + 2.0).ceil(), h),
-    );
+    let (xa, xb, ya, yb) = (clip((x0 - 2.0).floor(), w), clip((x1 + 2.0).ceil(), w), clip((y0 - 2.0).floor(), h), clip((y1 + 2.0).ceil(), h));
     // A point on each pixel's ray beyond the whole tube: the segment from the camera to it
     // crosses the solid exactly when the ray does.
     let far = 2.0 * (c.norm() + model.length);
@@ -110,37 +89,20 @@ pub fn mask_iou(a: &BinaryMask, b: &BinaryMask) -> f64 {
 /// The segmenter's `mask` snapped to a fitted `silhouette` (same image size):
 /// `silhouette ∩ dilate(mask, snap.dilate_px)`, or `None` when that disagrees with the mask
 /// (`IoU < snap.min_agreement`), the sizes differ, or it is empty.
-pub fn snap_mask(
-    mask: &BinaryMask,
-    silhouette: &BinaryMask,
-    snap: &MaskSnap,
-) -> Option<BinaryMask> {
+pub fn snap_mask(mask: &BinaryMask, silhouette: &BinaryMask, snap: &MaskSnap) -> Option<BinaryMask> {
     let (snapped, agreement) = snap_candidate(mask, silhouette, snap.dilate_px)?;
     (snapped.area() > 0 && agreement >= snap.min_agreement).then_some(snapped)
 }
 
 /// `silhouette ∩ dilate(mask, dilate_px)` and its IoU with `mask` (the agreement that
 /// [`snap_mask`] tests); `None` when the sizes differ.
-pub fn snap_candidate(
-    mask: &BinaryMask,
-    silhouette: &BinaryMask,
-    dilate_px: usize,
-) -> Option<(BinaryMask, f64)> {
+pub fn snap_candidate(mask: &BinaryMask, silhouette: &BinaryMask, dilate_px: usize) -> Option<(BinaryMask, f64)> {
     if mask.width != silhouette.width || mask.height != silhouette.height {
         return None;
     }
     let near = mask.dilated(dilate_px);
-    let data: Vec<u8> = silhouette
-        .data
-        .iter()
-        .zip(&near.data)
-        .map(|(&s, &n)| (s != 0 && n != 0) as u8)
-        .collect();
-    let snapped = BinaryMask {
-        width: mask.width,
-        height: mask.height,
-        data,
-    };
+    let data: Vec<u8> = silhouette.data.iter().zip(&near.data).map(|(&s, &n)| (s != 0 && n != 0) as u8).collect();
+    let snapped = BinaryMask { width: mask.width, height: mask.height, data };
     let agreement = mask_iou(&snapped, mask);
     Some((snapped, agreement))
 }
@@ -164,100 +126,49 @@ mod tests {
         // 20 f / 1000 px wide (to within the limb's slight widening at the ends).
         let cam = camera();
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
-        let m = silhouette_mask(
-            &model,
-            &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::x()),
-            &cam,
-        );
+        let m = silhouette_mask(&model, &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::x()), &cam);
         let [_, _, bw, bh] = m.bbox();
         let f = cam.fx;
-        assert!(
-            (bw - 0.1 * f).abs() <= 2.0,
-            "length {bw} px, expected {:.1}",
-            0.1 * f
-        );
-        assert!(
-            (bh - 0.02 * f).abs() <= 2.0,
-            "width {bh} px, expected {:.1}",
-            0.02 * f
-        );
+        assert!((bw - 0.1 * f).abs() <= 2.0, "length {bw} px, expected {:.1}", 0.1 * f);
+        assert!((bh - 0.02 * f).abs() <= 2.0, "width {bh} px, expected {:.1}", 0.02 * f);
         let area = m.area() as f64;
-        assert!(
-            (area / (0.1 * f * 0.02 * f) - 1.0).abs() < 0.05,
-            "area {area}"
-        );
+        assert!((area / (0.1 * f * 0.02 * f) - 1.0).abs() < 0.05, "area {area}");
     }
 
     #[test]
     fn silhouette_behind_the_camera_or_outside_the_image_is_empty() {
         let cam = camera();
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
-        assert_eq!(
-            silhouette_mask(
-                &model,
-                &pose(Vector3::new(0.0, 0.0, -1.0), Vector3::x()),
-                &cam
-            )
-            .area(),
-            0
-        );
-        assert_eq!(
-            silhouette_mask(
-                &model,
-                &pose(Vector3::new(5.0, 0.0, 1.0), Vector3::x()),
-                &cam
-            )
-            .area(),
-            0
-        );
+        assert_eq!(silhouette_mask(&model, &pose(Vector3::new(0.0, 0.0, -1.0), Vector3::x()), &cam).area(), 0);
+        assert_eq!(silhouette_mask(&model, &pose(Vector3::new(5.0, 0.0, 1.0), Vector3::x()), &cam).area(), 0);
     }
 
     #[test]
     fn snapping_a_shifted_coarse_mask_recovers_the_silhouette() {
         let cam = camera();
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
-        let sil = silhouette_mask(
-            &model,
-            &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::new(1.0, 0.3, 0.0)),
-            &cam,
-        );
+        let sil = silhouette_mask(&model, &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::new(1.0, 0.3, 0.0)), &cam);
         // A segmenter's mask 2 px off across the tube, 2 px too fat.
-        let coarse = BinaryMask::from_fn(sil.width, sil.height, |x, y| y >= 2 && sil.get(x, y - 2))
-            .dilated(2);
+        let coarse = BinaryMask::from_fn(sil.width, sil.height, |x, y| y >= 2 && sil.get(x, y - 2)).dilated(2);
         let before = mask_iou(&coarse, &sil);
         let snapped = snap_mask(&coarse, &sil, &MaskSnap::default()).expect("agrees");
         assert!(before < 0.8, "coarse IoU {before}");
-        assert!(
-            mask_iou(&snapped, &sil) > 0.99,
-            "snapped IoU {}",
-            mask_iou(&snapped, &sil)
-        );
+        assert!(mask_iou(&snapped, &sil) > 0.99, "snapped IoU {}", mask_iou(&snapped, &sil));
     }
 
     #[test]
     fn snapping_keeps_the_hidden_part_hidden_and_refuses_a_disagreeing_pose() {
         let cam = camera();
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
-        let sil = silhouette_mask(
-            &model,
-            &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::x()),
-            &cam,
-        );
+        let sil = silhouette_mask(&model, &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::x()), &cam);
         // Left half of the tube hidden (by a rock): the snapped mask stays within r of it.
         let cx = cam.cx as usize;
         let visible = BinaryMask::from_fn(sil.width, sil.height, |x, y| x > cx && sil.get(x, y));
         let snapped = snap_mask(&visible, &sil, &MaskSnap::default()).expect("agrees");
-        let leak = (0..sil.height)
-            .flat_map(|y| (0..=cx.saturating_sub(5)).map(move |x| (x, y)))
-            .filter(|&(x, y)| snapped.get(x, y))
-            .count();
+        let leak = (0..sil.height).flat_map(|y| (0..=cx.saturating_sub(5)).map(move |x| (x, y))).filter(|&(x, y)| snapped.get(x, y)).count();
         assert_eq!(leak, 0, "snapped mask leaked into the hidden half");
         // A pose 30 px off: no agreement, no snap.
-        let off = silhouette_mask(
-            &model,
-            &pose(Vector3::new(0.0, 30.0 / cam.fy, 1.0), Vector3::x()),
-            &cam,
-        );
+        let off = silhouette_mask(&model, &pose(Vector3::new(0.0, 30.0 / cam.fy, 1.0), Vector3::x()), &cam);
         assert!(snap_mask(&visible, &off, &MaskSnap::default()).is_none());
     }
 }

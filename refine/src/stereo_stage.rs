@@ -21,15 +21,12 @@ pub struct StereoRegion {
     pub seed_z: Option<f64>,
 }
 
+
 /// Start of the disparity window, pixels: `floor(f B / (z_max + 0.5 m))` with `f B` the
 /// rectified focal length times the baseline (pixels · metres) and `z_max` the farthest seed's
 /// depth; 0 without seeds.
 pub fn min_disparity(regions: &[StereoRegion], fb: f64) -> i32 {
-    let z_max = regions
-        .iter()
-        .filter_map(|r| r.seed_z)
-        .filter(|z| z.is_finite() && *z > 0.0)
-        .fold(0.0, f64::max);
+    let z_max = regions.iter().filter_map(|r| r.seed_z).filter(|z| z.is_finite() && *z > 0.0).fold(0.0, f64::max);
     if z_max > 0.0 {
         (fb / (z_max + 0.5)).floor() as i32
     } else {
@@ -39,10 +36,7 @@ pub fn min_disparity(regions: &[StereoRegion], fb: f64) -> i32 {
 
 /// Splats points (left camera frame, metres) into a depth map `Z` of the left image of `lcam`
 /// (nearest pixel, the nearest point wins; NaN where none falls).
-pub fn depth_map<'a>(
-    lcam: &CameraModel,
-    points: impl IntoIterator<Item = &'a Point3<f64>>,
-) -> Plane<f32> {
+pub fn depth_map<'a>(lcam: &CameraModel, points: impl IntoIterator<Item = &'a Point3<f64>>) -> Plane<f32> {
     let (w, h) = (lcam.width as usize, lcam.height as usize);
     let mut depth = Plane::filled(w, h, f32::NAN);
     for p in points {
@@ -66,28 +60,15 @@ pub fn depth_map<'a>(
 /// by `erode_px`) or box, and its column `x ≥ 1.05 f B / z_seed + 2` (`fb = f B`): columns whose
 /// match at about the seed's disparity falls left of the right image cannot be matched (SGM
 /// picks a wrong, smaller disparity there).
-pub fn region_points(
-    lcam: &CameraModel,
-    points: &[(f32, Point3<f64>)],
-    regions: &[StereoRegion],
-    fb: f64,
-    erode_px: usize,
-) -> Vec<Vec<Point3<f64>>> {
-    let masks: Vec<Option<BinaryMask>> = regions
-        .iter()
-        .map(|r| r.mask.as_ref().map(|m| m.eroded(erode_px)))
-        .collect();
+pub fn region_points(lcam: &CameraModel, points: &[(f32, Point3<f64>)], regions: &[StereoRegion], fb: f64, erode_px: usize) -> Vec<Vec<Point3<f64>>> {
+    let masks: Vec<Option<BinaryMask>> = regions.iter().map(|r| r.mask.as_ref().map(|m| m.eroded(erode_px))).collect();
     // Each point's left-image projection, once for all regions.
-    let projected: Vec<Option<nalgebra::Point2<f64>>> =
-        points.iter().map(|(_, p)| lcam.project(p)).collect();
+    let projected: Vec<Option<nalgebra::Point2<f64>>> = points.iter().map(|(_, p)| lcam.project(p)).collect();
     regions
         .iter()
         .zip(&masks)
         .map(|(d, m)| {
-            let min_x = d
-                .seed_z
-                .filter(|z| z.is_finite() && *z > 0.0)
-                .map_or(f64::NEG_INFINITY, |z| 1.05 * fb / z + 2.0);
+            let min_x = d.seed_z.filter(|z| z.is_finite() && *z > 0.0).map_or(f64::NEG_INFINITY, |z| 1.05 * fb / z + 2.0);
             points
                 .iter()
                 .zip(&projected)
@@ -98,13 +79,7 @@ pub fn region_points(
                     let u = (*u)?;
                     let [x, y, w, h] = d.bbox;
                     let inside = match m {
-                        Some(m) => {
-                            u.x >= -0.5
-                                && u.y >= -0.5
-                                && (u.x + 0.5) < m.width as f64
-                                && (u.y + 0.5) < m.height as f64
-                                && m.get((u.x + 0.5) as usize, (u.y + 0.5) as usize)
-                        }
+                        Some(m) => u.x >= -0.5 && u.y >= -0.5 && (u.x + 0.5) < m.width as f64 && (u.y + 0.5) < m.height as f64 && m.get((u.x + 0.5) as usize, (u.y + 0.5) as usize),
                         None => u.x >= x && u.y >= y && u.x <= x + w && u.y <= y + h,
                     };
                     inside.then_some(*p)
@@ -134,28 +109,9 @@ pub struct RectifiedPair {
 
 impl RectifiedPair {
     /// The pair from 8-bit rectified images (`v / 255`).
-    pub fn from_u8(
-        left: &Plane<u8>,
-        right: &Plane<u8>,
-        camera: CameraModel,
-        r_left: Matrix3<f64>,
-        baseline: f64,
-    ) -> Self {
-        let f = |p: &Plane<u8>| {
-            Plane::from_vec(
-                p.width,
-                p.height,
-                p.data.iter().map(|&v| v as f32 / 255.0).collect(),
-            )
-        };
-        RectifiedPair {
-            left: f(left),
-            right: f(right),
-            camera,
-            r_left,
-            baseline,
-            disparity: None,
-        }
+    pub fn from_u8(left: &Plane<u8>, right: &Plane<u8>, camera: CameraModel, r_left: Matrix3<f64>, baseline: f64) -> Self {
+        let f = |p: &Plane<u8>| Plane::from_vec(p.width, p.height, p.data.iter().map(|&v| v as f32 / 255.0).collect());
+        RectifiedPair { left: f(left), right: f(right), camera, r_left, baseline, disparity: None }
     }
 
     /// `f B`: rectified focal length times baseline (pixels · metres; disparity = `f B / Z`).
@@ -200,30 +156,15 @@ pub struct PhotoStage {
 /// photometric search gave no answer. Last, with `two_view`, the whole contour is fitted in
 /// both views from that result ([`two_view::fit_two_view`], with the ground's tilt prior
 /// `ground`), and replaces it when the fit succeeds. `TUBELOC_DEBUG_PHOTO=1` prints each result.
-pub fn photo_refine(
-    pose: &mut TubeAxisPose,
-    model: &CylinderModel,
-    pair: &RectifiedPair,
-    cfg: &PhotoStage,
-) -> Option<f64> {
+pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &RectifiedPair, cfg: &PhotoStage) -> Option<f64> {
     if !pose.converged {
         return None;
     }
     let range_m = cfg.range_m;
     let r1 = pair.r_left;
-    let st = AxisState {
-        c: r1 * pose.centre,
-        a: r1 * pose.end_direction,
-    };
+    let st = AxisState { c: r1 * pose.centre, a: r1 * pose.end_direction };
     let fb = pair.fb();
-    let occ = pair
-        .disparity
-        .as_ref()
-        .filter(|_| cfg.occlusion)
-        .map(|d| Occluders {
-            disparity: d,
-            margin_m: model.occlusion_margin(),
-        });
+    let occ = pair.disparity.as_ref().filter(|_| cfg.occlusion).map(|d| Occluders { disparity: d, margin_m: model.occlusion_margin() });
     let debug = std::env::var_os("TUBELOC_DEBUG_PHOTO").is_some();
     let photo = if cfg.ends {
         photo::photometric_ends_visible(model, &pair.camera, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref()).and_then(|pe| {
@@ -233,75 +174,31 @@ pub fn photo_refine(
             (pe.zncc >= cfg.min_zncc && pe.shifts_m.0.abs() < range_m && pe.shifts_m.1.abs() < range_m).then_some(pe.state)
         })
     } else {
-        photo::photometric_depth_visible(
-            model,
-            &pair.camera,
-            &pair.left,
-            &pair.right,
-            fb,
-            &st,
-            range_m,
-            occ.as_ref(),
-        )
-        .and_then(|pd| {
-            (pd.zncc >= cfg.min_zncc && pd.shift_m.abs() < range_m)
-                .then(|| photo::shifted(&st, pd.shift_m))
-        })
+        photo::photometric_depth_visible(model, &pair.camera, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())
+            .and_then(|pd| (pd.zncc >= cfg.min_zncc && pd.shift_m.abs() < range_m).then(|| photo::shifted(&st, pd.shift_m)))
     };
     // The axis direction from the rims in both views about the photometric centre (whose
     // distance, from all covered pixels, is better than the rims'), for axes within
     // `rim_max_epipolar_deg` of the rows (angle ψ of the image direction to the rows).
     let base = photo.unwrap_or(st);
-    let dir = Vector2::new(
-        base.a.x - base.a.z * base.c.x / base.c.z,
-        base.a.y - base.a.z * base.c.y / base.c.z,
-    );
+    let dir = Vector2::new(base.a.x - base.a.z * base.c.x / base.c.z, base.a.y - base.a.z * base.c.y / base.c.z);
     let psi = dir.y.abs().atan2(dir.x.abs()).to_degrees();
     // With a ground plane, the rims weigh against the tilt fitted under the ground's tilt prior
     // (its standard deviation σ_θ gives the end offsets' σ_τ = (L/2) σ_θ).
-    let tau_sigma = cfg
-        .rim_tilt_prior_deg
-        .map_or(f64::INFINITY, |d| 0.5 * model.length * d.to_radians());
-    let rims = if psi < cfg.rim_max_epipolar_deg {
-        rims::rim_ends_with_prior(
-            model,
-            &pair.camera,
-            &pair.left,
-            &pair.right,
-            pair.baseline,
-            &base,
-            range_m,
-            6,
-            tau_sigma,
-        )
-    } else {
-        None
-    };
+    let tau_sigma = cfg.rim_tilt_prior_deg.map_or(f64::INFINITY, |d| 0.5 * model.length * d.to_radians());
+    let rims = if psi < cfg.rim_max_epipolar_deg { rims::rim_ends_with_prior(model, &pair.camera, &pair.left, &pair.right, pair.baseline, &base, range_m, 6, tau_sigma) } else { None };
     if let (true, Some(r)) = (debug, &rims) {
         eprintln!("rims image {} centre {:.4} psi {psi:.1}: shifts {:.2} {:.2} {:.2} mm samples {:?} rms {:.2}", pose.image_id, pose.centre.x, r.shifts_m.0 * 1e3, r.shifts_m.1 * 1e3, r.shifts_m.2 * 1e3, r.samples, r.rms_px);
     }
     let moved = match (photo, rims) {
-        (_, Some(r)) => Some(AxisState {
-            c: base.c,
-            a: r.state.a,
-        }),
+        (_, Some(r)) => Some(AxisState { c: base.c, a: r.state.a }),
         (Some(p), None) => Some(p),
         (None, None) => None,
     };
     // The whole contour in both views, from the stages' result (or the fit's).
     let tv = cfg.two_view.as_ref().and_then(|tc| {
         let ground = cfg.ground.map(|(n, deg)| (r1 * n, deg.to_radians()));
-        two_view::fit_two_view(
-            model,
-            &pair.camera,
-            &pair.left,
-            &pair.right,
-            pair.baseline,
-            &moved.unwrap_or(st),
-            occ.as_ref(),
-            ground,
-            tc,
-        )
+        two_view::fit_two_view(model, &pair.camera, &pair.left, &pair.right, pair.baseline, &moved.unwrap_or(st), occ.as_ref(), ground, tc)
     });
     if let (true, Some(t)) = (debug, &tv) {
         eprintln!("two-view image {} centre {:.4}: moved {:.2} mm turned {:.2} deg samples {:?} rms {:.2} limb offsets {:.2} {:.2} px it {}", pose.image_id, pose.centre.x, t.moved_m * 1e3, t.turned_deg, t.samples, t.rms_px, t.limb_offsets_px.0, t.limb_offsets_px.1, t.iterations);
@@ -321,26 +218,13 @@ mod tests {
     use super::*;
 
     fn cam() -> CameraModel {
-        CameraModel {
-            width: 100,
-            height: 100,
-            fx: 100.0,
-            fy: 100.0,
-            cx: 50.0,
-            cy: 50.0,
-            distortion: Default::default(),
-        }
+        CameraModel { width: 100, height: 100, fx: 100.0, fy: 100.0, cx: 50.0, cy: 50.0, distortion: Default::default() }
     }
 
     #[test]
     fn depth_map_keeps_the_nearest_point() {
         let cam = cam();
-        let pts = [
-            Point3::new(0.0, 0.0, 2.0),
-            Point3::new(0.0, 0.0, 1.0),
-            Point3::new(0.0, 0.0, 3.0),
-            Point3::new(10.0, 0.0, 1.0),
-        ];
+        let pts = [Point3::new(0.0, 0.0, 2.0), Point3::new(0.0, 0.0, 1.0), Point3::new(0.0, 0.0, 3.0), Point3::new(10.0, 0.0, 1.0)];
         let d = depth_map(&cam, &pts);
         assert_eq!(d.get(50, 50), 1.0);
         assert_eq!(d.data.iter().filter(|v| v.is_finite()).count(), 1);
@@ -349,29 +233,11 @@ mod tests {
     #[test]
     fn region_points_drop_unmatchable_columns_and_use_the_box() {
         let cam = cam();
-        let region = StereoRegion {
-            bbox: [40.0, 40.0, 20.0, 20.0],
-            mask: None,
-            seed_z: Some(2.0),
-        };
+        let region = StereoRegion { bbox: [40.0, 40.0, 20.0, 20.0], mask: None, seed_z: Some(2.0) };
         // f B = 10: min column 1.05 * 10 / 2 + 2 = 7.25.
-        let pts = [
-            (10.0, Point3::new(0.0, 0.0, 2.0)),
-            (5.0, Point3::new(0.01, 0.0, 2.0)),
-            (10.0, Point3::new(1.0, 0.0, 2.0)),
-        ];
+        let pts = [(10.0, Point3::new(0.0, 0.0, 2.0)), (5.0, Point3::new(0.01, 0.0, 2.0)), (10.0, Point3::new(1.0, 0.0, 2.0))];
         let per = region_points(&cam, &pts, &[region], 10.0, 0);
         assert_eq!(per, vec![vec![Point3::new(0.0, 0.0, 2.0)]]);
-        assert_eq!(
-            min_disparity(
-                &[StereoRegion {
-                    bbox: [0.0; 4],
-                    mask: None,
-                    seed_z: Some(1.5)
-                }],
-                100.0
-            ),
-            50
-        );
+        assert_eq!(min_disparity(&[StereoRegion { bbox: [0.0; 4], mask: None, seed_z: Some(1.5) }], 100.0), 50);
     }
 }

@@ -125,28 +125,20 @@ pub struct TwoViewFit {
     pub iterations: usize,
 }
 
+
 /// Sub-pixel edge offset along `n` from `u` near the search's `offset`: the centroid of
 /// `|∇I · n| − ½ max` (where positive) sampled every 0.25 px over ±1.5 px about the
 /// strongest sample. The search's parabola through samples one pixel apart, taken from the
 /// projection `u`, locks onto that grid (biased toward offset 0, so that a fit stays where it
 /// starts); the half-maximum centroid on a finer grid does not.
-fn refine_offset(
-    level: &GradientLevel,
-    u: &nalgebra::Point2<f64>,
-    n: &nalgebra::Vector2<f64>,
-    offset: f64,
-) -> f64 {
+fn refine_offset(level: &GradientLevel, u: &nalgebra::Point2<f64>, n: &nalgebra::Vector2<f64>, offset: f64) -> f64 {
     const H: f64 = 0.25;
     let mut s = [0f64; 13];
     for (k, v) in s.iter_mut().enumerate() {
         let o = offset + (k as f64 - 6.0) * H;
         *v = (level.directional(&(u + n * o), n) as f64).abs();
     }
-    let (imax, &smax) = s
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .unwrap_or((6, &0.0));
+    let (imax, &smax) = s.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap_or((6, &0.0));
     if smax <= 0.0 {
         return offset;
     }
@@ -160,20 +152,12 @@ fn refine_offset(
             swx += v * o;
         }
     }
-    if sw > 0.0 {
-        swx / sw
-    } else {
-        offset
-    }
+    if sw > 0.0 { swx / sw } else { offset }
 }
 
 /// Two unit vectors perpendicular to `a` (and to each other).
 fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let t = if a.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
+    let t = if a.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
     let u1 = a.cross(&t).normalize();
     (u1, a.cross(&u1))
 }
@@ -197,28 +181,20 @@ pub fn fit_two_view(
     ground: Option<(Vector3<f64>, f64)>,
     cfg: &TwoViewConfig,
 ) -> Option<TwoViewFit> {
-    let views = [
-        view(model, camera, left, st, Vector3::zeros())?,
-        view(model, camera, right, st, Vector3::new(baseline_m, 0.0, 0.0))?,
-    ];
+    let views = [view(model, camera, left, st, Vector3::zeros())?, view(model, camera, right, st, Vector3::new(baseline_m, 0.0, 0.0))?];
     let samples = build_samples(model, st, camera, cfg.spacing_px);
     let body_r = model.body_radius();
     let scale_of = |s: &ContourSample| match s.kind {
-        SampleKind::Limb { .. } if model.sections[s.section].r != body_r => {
-            cfg.end_limb_weight.sqrt()
-        }
+        SampleKind::Limb { .. } if model.sections[s.section].r != body_r => cfg.end_limb_weight.sqrt(),
         _ => 1.0,
     };
     let fb = camera.fx * baseline_m;
     // Scene occlusion of a point (rectified left frame) from the left view's disparity.
     let scene_hidden = |x: &Point3<f64>| -> bool {
         let Some(o) = occluders else { return false };
-        let Some(u) = camera.project(x) else {
-            return false;
-        };
+        let Some(u) = camera.project(x) else { return false };
         let (ix, iy) = (u.x.round(), u.y.round());
-        if ix < 0.0 || iy < 0.0 || ix >= o.disparity.width as f64 || iy >= o.disparity.height as f64
-        {
+        if ix < 0.0 || iy < 0.0 || ix >= o.disparity.width as f64 || iy >= o.disparity.height as f64 {
             return false;
         }
         let d = o.disparity.get(ix as usize, iy as usize) as f64;
@@ -246,14 +222,9 @@ pub fn fit_two_view(
         let radius = if it < 3 { 4 } else { 2 };
         let (u1, u2) = tangent_basis(&cur.a);
         let state_of = |d: &Vector5<f64>| -> AxisState {
-            AxisState {
-                c: cur.c + Vector3::new(d[0], d[1], d[2]),
-                a: (cur.a + u1 * d[3] + u2 * d[4]).normalize(),
-            }
+            AxisState { c: cur.c + Vector3::new(d[0], d[1], d[2]), a: (cur.a + u1 * d[3] + u2 * d[4]).normalize() }
         };
-        let perturbed: Vec<AxisState> = (0..5)
-            .map(|k| state_of(&(Vector5::ith(k, if k < 3 { hc } else { ha }))))
-            .collect();
+        let perturbed: Vec<AxisState> = (0..5).map(|k| state_of(&(Vector5::ith(k, if k < 3 { hc } else { ha })))).collect();
         let f0 = cur.frame()?;
         let frames: Vec<_> = perturbed.iter().map(|s| s.frame()).collect();
         let mut jtj = M7::zeros();
@@ -262,49 +233,27 @@ pub fn fit_two_view(
         counts = (0, 0);
         let mut votes = [vec![0i32; n_limbs], vec![0i32; n_limbs]];
         for s in &samples {
-            let Some(q) = s.eval(model, &f0) else {
-                continue;
-            };
-            if !s.on_silhouette(model, &f0, &q)
-                || model.occludes(&cur.c, &cur.a, &(q.x + q.out * (0.02 * body_r + 1e-4)))
-                || scene_hidden(&q.x)
-            {
+            let Some(q) = s.eval(model, &f0) else { continue };
+            if !s.on_silhouette(model, &f0, &q) || model.occludes(&cur.c, &cur.a, &(q.x + q.out * (0.02 * body_r + 1e-4))) || scene_hidden(&q.x) {
                 continue;
             }
             let scale = scale_of(s);
             if scale <= 0.0 {
                 continue;
             }
-            let qk: Vec<Option<Point3<f64>>> = frames
-                .iter()
-                .map(|f| f.as_ref().and_then(|f| s.eval(model, f)).map(|p| p.x))
-                .collect();
+            let qk: Vec<Option<Point3<f64>>> = frames.iter().map(|f| f.as_ref().and_then(|f| s.eval(model, f)).map(|p| p.x)).collect();
             for (vi, v) in views.iter().enumerate() {
                 let mut qv = q;
                 qv.x -= v.origin;
-                let Some((u, n)) = project_with_normal(&v.level.camera, &qv) else {
-                    continue;
-                };
+                let Some((u, n)) = project_with_normal(&v.level.camera, &qv) else { continue };
                 if !v.level.inside(&u, 5.0) {
                     continue;
                 }
                 let key = limb_key(s);
                 let pol = key.map_or(0, |k| polarity[vi][k]);
                 let hits = v.level.search_all(&u, &n, radius, 0.004, pol, 0.25);
-                let Some(hit) = (0..hits.len)
-                    .map(|k| hits.hits[k])
-                    .min_by(|a, b| a.offset.abs().total_cmp(&b.offset.abs()))
-                else {
-                    continue;
-                };
-                let hit = if cfg.centroid_edges {
-                    EdgeHit {
-                        offset: refine_offset(&v.level, &u, &n, hit.offset),
-                        ..hit
-                    }
-                } else {
-                    hit
-                };
+                let Some(hit) = (0..hits.len).map(|k| hits.hits[k]).min_by(|a, b| a.offset.abs().total_cmp(&b.offset.abs())) else { continue };
+                let hit = if cfg.centroid_edges { EdgeHit { offset: refine_offset(&v.level, &u, &n, hit.offset), ..hit } } else { hit };
                 if let (Some(k), 0) = (key, it) {
                     // The strongest hit's sign votes for the limb's polarity.
                     votes[vi][k] += if hits.hits[0].strength > 0.0 { 1 } else { -1 };
@@ -312,8 +261,7 @@ pub fn fit_two_view(
                 let mut j = V7::zeros();
                 let mut ok = true;
                 for k in 0..5 {
-                    let uk = qk[k]
-                        .and_then(|p| v.level.camera.project(&Point3::from(p.coords - v.origin)));
+                    let uk = qk[k].and_then(|p| v.level.camera.project(&Point3::from(p.coords - v.origin)));
                     match uk {
                         Some(uk) => j[k] = n.dot(&(uk - u)) / if k < 3 { hc } else { ha },
                         None => ok = false,
@@ -326,11 +274,7 @@ pub fn fit_two_view(
                 let mut r = -hit.offset;
                 if cfg.limb_offsets {
                     if let SampleKind::Limb { .. } = s.kind {
-                        let k = if model.sections[s.section].r == body_r {
-                            5
-                        } else {
-                            6
-                        };
+                        let k = if model.sections[s.section].r == body_r { 5 } else { 6 };
                         r -= boff[k - 5];
                         j[k] = -1.0;
                     }
@@ -382,11 +326,7 @@ pub fn fit_two_view(
             a += jd * jd.transpose();
             g += jd * (s * (cur.c.norm() - c0.norm()));
         }
-        let wb = if cfg.limb_offsets {
-            (cfg.noise_px / cfg.limb_offset_sigma_px).powi(2)
-        } else {
-            1.0
-        };
+        let wb = if cfg.limb_offsets { (cfg.noise_px / cfg.limb_offset_sigma_px).powi(2) } else { 1.0 };
         for k in 5..7 {
             a[(k, k)] += wb;
             g[k] += wb * boff[k - 5];
@@ -394,8 +334,7 @@ pub fn fit_two_view(
         if let Some((nrm, sigma)) = ground {
             // Residual g = (n·a)/σ in units of the nominal noise: J = (n·u1, n·u2)/σ.
             let s = cfg.noise_px / sigma;
-            let jg =
-                V7::from_column_slice(&[0.0, 0.0, 0.0, nrm.dot(&u1), nrm.dot(&u2), 0.0, 0.0]) * s;
+            let jg = V7::from_column_slice(&[0.0, 0.0, 0.0, nrm.dot(&u1), nrm.dot(&u2), 0.0, 0.0]) * s;
             a += jg * jg.transpose();
             g += jg * (s * nrm.dot(&cur.a));
         }
@@ -417,20 +356,11 @@ pub fn fit_two_view(
             boff[k - 5] += step[k].clamp(-0.5, 0.5);
         }
         cur = state_of(&step.fixed_rows::<5>(0).into_owned());
-        if step.fixed_rows::<3>(0).amax() < 2e-5 && step.fixed_rows::<2>(3).amax() < 2e-5 && it >= 3
-        {
+        if step.fixed_rows::<3>(0).amax() < 2e-5 && step.fixed_rows::<2>(3).amax() < 2e-5 && it >= 3 {
             break;
         }
     }
     let moved = (cur.c - c0).norm();
     let turned = cur.a.dot(&a0).clamp(-1.0, 1.0).acos().to_degrees();
-    (moved <= cfg.max_move_m && turned <= cfg.max_turn_deg).then_some(TwoViewFit {
-        state: cur,
-        samples: counts,
-        rms_px: rms,
-        moved_m: moved,
-        turned_deg: turned,
-        limb_offsets_px: (boff[0], boff[1]),
-        iterations: iters,
-    })
+    (moved <= cfg.max_move_m && turned <= cfg.max_turn_deg).then_some(TwoViewFit { state: cur, samples: counts, rms_px: rms, moved_m: moved, turned_deg: turned, limb_offsets_px: (boff[0], boff[1]), iterations: iters })
 }

@@ -6,9 +6,7 @@ use common::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tubeloc_core::tube_pose::axis_angle;
-use tubeloc_refine::photo::{
-    photometric_depth, photometric_ends, photometric_ends_visible, shifted, Occluders,
-};
+use tubeloc_refine::photo::{photometric_depth, photometric_ends, photometric_ends_visible, shifted, Occluders};
 use tubeloc_refine::AxisState;
 
 const BASELINE: f64 = 0.06;
@@ -29,12 +27,7 @@ fn row_sine(cam: &tubeloc_core::CameraModel, t: &Truth) -> f64 {
 
 /// The tube (1.6 to 2.2 m away) of the first random seed after `*seed` whose [`row_sine`]
 /// `accept`s; `*seed` is left at that seed.
-fn next_truth(
-    model: &tubeloc_refine::CylinderModel,
-    cam: &tubeloc_core::CameraModel,
-    seed: &mut u64,
-    accept: impl Fn(f64) -> bool,
-) -> (Truth, nalgebra::Vector3<f64>, f64) {
+fn next_truth(model: &tubeloc_refine::CylinderModel, cam: &tubeloc_core::CameraModel, seed: &mut u64, accept: impl Fn(f64) -> bool) -> (Truth, nalgebra::Vector3<f64>, f64) {
     loop {
         *seed += 1;
         let mut rng = ChaCha8Rng::seed_from_u64(*seed);
@@ -76,25 +69,15 @@ fn good_seeds(from: u64, n: usize) -> Vec<(u64, Scene, Scene)> {
 fn photometric_depth_recovers_the_distance_along_the_ray() {
     let model = default_model();
     for (seed, l, r) in good_seeds(0, 3) {
-        let t = AxisState {
-            c: l.truth.centre,
-            a: l.truth.axis,
-        };
+        let t = AxisState { c: l.truth.centre, a: l.truth.axis };
         // Start 9 mm too far along the viewing ray (the image is unchanged by such a move).
         let start = shifted(&t, 0.009);
         let fb = l.camera.fx * BASELINE;
-        let pd = photometric_depth(&model, &l.camera, &l.image, &r.image, fb, &start, 0.03)
-            .expect("an answer");
+        let pd = photometric_depth(&model, &l.camera, &l.image, &r.image, fb, &start, 0.03).expect("an answer");
         let got = shifted(&start, pd.shift_m);
         let err = (got.c - t.c).norm();
         // 0.05 px of disparity at 2.2 m with f B ≈ 206 px m is 1.2 mm; allow 1.5 mm.
-        assert!(
-            err < 1.5e-3,
-            "seed {seed}: centre error {:.2} mm (zncc {:.3}, {} px)",
-            err * 1e3,
-            pd.zncc,
-            pd.pixels
-        );
+        assert!(err < 1.5e-3, "seed {seed}: centre error {:.2} mm (zncc {:.3}, {} px)", err * 1e3, pd.zncc, pd.pixels);
         assert!(pd.zncc > 0.8, "zncc {}", pd.zncc);
     }
 }
@@ -103,34 +86,19 @@ fn photometric_depth_recovers_the_distance_along_the_ray() {
 fn photometric_ends_recover_distance_and_tilt() {
     let model = default_model();
     for (seed, l, r) in good_seeds(100, 3) {
-        let t = AxisState {
-            c: l.truth.centre,
-            a: l.truth.axis,
-        };
+        let t = AxisState { c: l.truth.centre, a: l.truth.axis };
         // Move the two ends along their rays by +10 and -4 mm: same image line, tilted and farther.
         let half = 0.5 * model.length;
         let (pm, pp) = (t.c - t.a * half, t.c + t.a * half);
         let (qm, qp) = (pm + pm.normalize() * 0.010, pp - pp.normalize() * 0.004);
-        let start = AxisState {
-            c: 0.5 * (qm + qp),
-            a: (qp - qm).normalize(),
-        };
+        let start = AxisState { c: 0.5 * (qm + qp), a: (qp - qm).normalize() };
         assert!(axis_angle(&start.a, &t.a).to_degrees() > 2.0);
         let fb = l.camera.fx * BASELINE;
-        let pe = photometric_ends(&model, &l.camera, &l.image, &r.image, fb, &start, 0.03)
-            .expect("an answer");
-        let (ce, ae) = (
-            (pe.state.c - t.c).norm(),
-            axis_angle(&pe.state.a, &t.a).to_degrees(),
-        );
+        let pe = photometric_ends(&model, &l.camera, &l.image, &r.image, fb, &start, 0.03).expect("an answer");
+        let (ce, ae) = ((pe.state.c - t.c).norm(), axis_angle(&pe.state.a, &t.a).to_degrees());
         // Each end's depth within ~0.05 px of disparity (1.2 mm at 2.2 m, f B ≈ 206 px m): the
         // centre within 1.5 mm, the axis within atan(2 · 1.2 / 150) ≈ 0.9 degrees; allow 1.
-        assert!(
-            ce < 1.5e-3 && ae < 1.0,
-            "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3})",
-            ce * 1e3,
-            pe.zncc
-        );
+        assert!(ce < 1.5e-3 && ae < 1.0, "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3})", ce * 1e3, pe.zncc);
     }
 }
 
@@ -150,62 +118,18 @@ fn photometric_ends_leave_out_pixels_hidden_by_a_rock() {
         let r = render_right_rock(&model, &cam, t, up, gd, rock, seed, 0.01, BASELINE);
         let fb = cam.fx * BASELINE;
         // Scene disparity of the left image (exact here; SGM in the CLI).
-        let disparity = tubeloc_core::Plane::from_vec(
-            l.depth.width,
-            l.depth.height,
-            l.depth
-                .data
-                .iter()
-                .map(|&z| {
-                    if z.is_finite() && z > 0.0 {
-                        (fb / z as f64) as f32
-                    } else {
-                        f32::NAN
-                    }
-                })
-                .collect(),
-        );
-        let occ = Occluders {
-            disparity: &disparity,
-            margin_m: model.occlusion_margin(),
-        };
+        let disparity = tubeloc_core::Plane::from_vec(l.depth.width, l.depth.height, l.depth.data.iter().map(|&z| if z.is_finite() && z > 0.0 { (fb / z as f64) as f32 } else { f32::NAN }).collect());
+        let occ = Occluders { disparity: &disparity, margin_m: model.occlusion_margin() };
         let truth = AxisState { c, a };
         let (pm, pp) = (c - a * half, c + a * half);
         let (qm, qp) = (pm + pm.normalize() * 0.008, pp - pp.normalize() * 0.006);
-        let start = AxisState {
-            c: 0.5 * (qm + qp),
-            a: (qp - qm).normalize(),
-        };
-        let pe = photometric_ends_visible(
-            &model,
-            &cam,
-            &l.image,
-            &r.image,
-            fb,
-            &start,
-            0.03,
-            Some(&occ),
-        )
-        .expect("an answer");
-        let all = photometric_ends(&model, &cam, &l.image, &r.image, fb, &start, 0.03)
-            .expect("an answer");
-        assert!(
-            pe.pixels < all.pixels * 9 / 10,
-            "seed {seed}: the rock hides {} of {} pixels",
-            all.pixels - pe.pixels,
-            all.pixels
-        );
-        let (ce, ae) = (
-            (pe.state.c - truth.c).norm(),
-            axis_angle(&pe.state.a, &truth.a).to_degrees(),
-        );
+        let start = AxisState { c: 0.5 * (qm + qp), a: (qp - qm).normalize() };
+        let pe = photometric_ends_visible(&model, &cam, &l.image, &r.image, fb, &start, 0.03, Some(&occ)).expect("an answer");
+        let all = photometric_ends(&model, &cam, &l.image, &r.image, fb, &start, 0.03).expect("an answer");
+        assert!(pe.pixels < all.pixels * 9 / 10, "seed {seed}: the rock hides {} of {} pixels", all.pixels - pe.pixels, all.pixels);
+        let (ce, ae) = ((pe.state.c - truth.c).norm(), axis_angle(&pe.state.a, &truth.a).to_degrees());
         assert!(ce < 2.0e-3 && ae < 1.5, "seed {seed}: centre {:.2} mm, axis {ae:.2} deg (zncc {:.3}); all pixels: {:.2} mm, {:.2} deg", ce * 1e3, pe.zncc, (all.state.c - truth.c).norm() * 1e3, axis_angle(&all.state.a, &truth.a).to_degrees());
-        eprintln!(
-            "seed {seed}: visible pixels {:.2} mm {ae:.2} deg; all pixels {:.2} mm {:.2} deg",
-            ce * 1e3,
-            (all.state.c - truth.c).norm() * 1e3,
-            axis_angle(&all.state.a, &truth.a).to_degrees()
-        );
+        eprintln!("seed {seed}: visible pixels {:.2} mm {ae:.2} deg; all pixels {:.2} mm {:.2} deg", ce * 1e3, (all.state.c - truth.c).norm() * 1e3, axis_angle(&all.state.a, &truth.a).to_degrees());
     }
 }
 
@@ -225,25 +149,14 @@ fn rims_in_both_views_recover_the_tilt_of_a_tube_along_the_rows() {
         let half = 0.5 * model.length;
         let (pm, pp) = (c - a * half, c + a * half);
         let (qm, qp) = (pm + pm.normalize() * 0.006, pp - pp.normalize() * 0.006);
-        let start = AxisState {
-            c: 0.5 * (qm + qp),
-            a: (qp - qm).normalize(),
-        };
+        let start = AxisState { c: 0.5 * (qm + qp), a: (qp - qm).normalize() };
         let before = axis_angle(&start.a, &a).to_degrees();
         assert!(before > 3.0, "seed {seed}: start {before:.2} deg");
-        let re = tubeloc_refine::rims::rim_ends(
-            &model, &cam, &l.image, &r.image, BASELINE, &start, 0.03, 6,
-        )
-        .expect("a rim fit");
+        let re = tubeloc_refine::rims::rim_ends(&model, &cam, &l.image, &r.image, BASELINE, &start, 0.03, 6).expect("a rim fit");
         let after = axis_angle(&re.state.a, &a).to_degrees();
         // Each end's disparity to ~0.1 px (f B ≈ 206 px m at 2.2 m: 2.3 mm) over 150 mm: ~1.2
         // degrees at worst.
         eprintln!("seed {seed}: axis {before:.2} -> {after:.2} deg shifts {:?} ({:?} samples, rms {:.2} px)", re.shifts_m, re.samples, re.rms_px);
-        assert!(
-            after < 1.2,
-            "seed {seed}: axis {before:.2} -> {after:.2} deg ({:?} samples, rms {:.2} px)",
-            re.samples,
-            re.rms_px
-        );
+        assert!(after < 1.2, "seed {seed}: axis {before:.2} -> {after:.2} deg ({:?} samples, rms {:.2} px)", re.samples, re.rms_px);
     }
 }

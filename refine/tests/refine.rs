@@ -11,21 +11,10 @@ use tubeloc_refine::{AxisState, RefineConfig, RefineInput, Refiner, Scene as Fit
 
 /// Seed = truth moved by ~`pos_m` in each coordinate and the axis turned by `ang_deg`.
 fn perturb(rng: &mut ChaCha8Rng, t: &Truth, pos_m: f64, ang_deg: f64) -> AxisState {
-    let dc = Vector3::new(
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-    ) * pos_m;
-    let ax = Unit::new_normalize(Vector3::new(
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-    ));
+    let dc = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * pos_m;
+    let ax = Unit::new_normalize(Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)));
     let r = Rotation3::from_axis_angle(&ax, ang_deg.to_radians());
-    AxisState {
-        c: t.centre + dc,
-        a: r * t.axis,
-    }
+    AxisState { c: t.centre + dc, a: r * t.axis }
 }
 
 struct Errors {
@@ -38,107 +27,31 @@ struct Errors {
     seed_ang: Vec<f64>,
 }
 
-fn run_batch(
-    n: usize,
-    seed: u64,
-    stereo: bool,
-    distorted: bool,
-    ground: bool,
-    pos_m: f64,
-    ang_deg: f64,
-) -> Errors {
-    run_batch_at(
-        (0.8, 1.6),
-        n,
-        seed,
-        stereo,
-        distorted,
-        ground,
-        pos_m,
-        ang_deg,
-    )
+fn run_batch(n: usize, seed: u64, stereo: bool, distorted: bool, ground: bool, pos_m: f64, ang_deg: f64) -> Errors {
+    run_batch_at((0.8, 1.6), n, seed, stereo, distorted, ground, pos_m, ang_deg)
 }
 
 /// [`run_batch`] with tubes at distances `dist` (metres).
 #[allow(clippy::too_many_arguments)]
-fn run_batch_at(
-    dist: (f64, f64),
-    n: usize,
-    seed: u64,
-    stereo: bool,
-    distorted: bool,
-    ground: bool,
-    pos_m: f64,
-    ang_deg: f64,
-) -> Errors {
+fn run_batch_at(dist: (f64, f64), n: usize, seed: u64, stereo: bool, distorted: bool, ground: bool, pos_m: f64, ang_deg: f64) -> Errors {
     let model = default_model();
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
     let cam = camera(distorted);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut e = Errors {
-        pos: vec![],
-        ang: vec![],
-        end_ok: 0,
-        failed: 0,
-        seed_pos: vec![],
-        seed_ang: vec![],
-    };
+    let mut e = Errors { pos: vec![], ang: vec![], end_ok: 0, failed: 0, seed_pos: vec![], seed_ang: vec![] };
     for i in 0..n {
         let (truth, up, gd) = random_truth(&mut rng, &model, &cam, dist);
-        let sc = render(
-            &model,
-            &cam,
-            truth,
-            up,
-            gd,
-            None,
-            seed * 1000 + i as u64,
-            0.01,
-        );
-        let pts = if stereo {
-            stereo_points(&model, &sc, 4, 0.25, 0.2, i as u64)
-        } else {
-            vec![]
-        };
-        let g = ground.then(|| tubeloc_refine::GroundPlane {
-            normal: sc.ground_n,
-            offset: sc.ground_d,
-        });
-        let input = RefineInput {
-            image: &sc.image,
-            camera: &sc.camera,
-            ground: g,
-            scene: FitScene {
-                depth: None,
-                stereo_points: &pts,
-                ground: None,
-                mask: None,
-            },
-        };
+        let sc = render(&model, &cam, truth, up, gd, None, seed * 1000 + i as u64, 0.01);
+        let pts = if stereo { stereo_points(&model, &sc, 4, 0.25, 0.2, i as u64) } else { vec![] };
+        let g = ground.then(|| tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d });
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: g, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
         let seed_state = perturb(&mut rng, &truth, pos_m, ang_deg);
         if std::env::var("REFINE_DEBUG").is_ok() {
-            eprintln!(
-                "scene {i}: truth c {:?} a {:?}; seed c {:?} a {:?}",
-                truth.centre.as_slice(),
-                truth.axis.as_slice(),
-                seed_state.c.as_slice(),
-                seed_state.a.as_slice()
-            );
+            eprintln!("scene {i}: truth c {:?} a {:?}; seed c {:?} a {:?}", truth.centre.as_slice(), truth.axis.as_slice(), seed_state.c.as_slice(), seed_state.a.as_slice());
         }
         e.seed_pos.push((seed_state.c - truth.centre).norm());
-        e.seed_ang
-            .push(axis_angle(&seed_state.a, &truth.axis).to_degrees());
-        let p = refiner.refine_seed(
-            &input,
-            &Seed {
-                state: seed_state,
-                end_known: false,
-            },
-            0,
-            1.0,
-            None,
-        );
+        e.seed_ang.push(axis_angle(&seed_state.a, &truth.axis).to_degrees());
+        let p = refiner.refine_seed(&input, &Seed { state: seed_state, end_known: false }, 0, 1.0, None);
         assert!(p.centre.iter().chain(p.axis.iter()).all(|v| v.is_finite()));
         if !p.converged {
             eprintln!("scene {i}: failed {:?}", p.failure);
@@ -161,12 +74,7 @@ fn report(name: &str, e: &mut Errors) -> (f64, f64, f64, f64) {
 
 /// Seed perturbation (metres, degrees): `PERTURB_MM` (default 3) and `PERTURB_DEG` (default 2).
 fn perturbation() -> (f64, f64) {
-    let env = |k: &str, default: f64| {
-        std::env::var(k)
-            .ok()
-            .and_then(|v| v.parse::<f64>().ok())
-            .unwrap_or(default)
-    };
+    let env = |k: &str, default: f64| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok()).unwrap_or(default);
     (env("PERTURB_MM", 3.0) * 1e-3, env("PERTURB_DEG", 2.0))
 }
 
@@ -202,10 +110,7 @@ fn mono_seeds_off_by_10mm_5deg_converge_back() {
     let mut e = run_batch(8, 14, false, false, true, 0.010, 5.0);
     let (pm, p9, am, a9) = report("mono+ground 10 mm / 5 deg", &mut e);
     assert!(e.failed <= 1, "{} failed", e.failed);
-    assert!(
-        pm < 0.008 && p9 < 0.015,
-        "position error median {pm} p90 {p9}"
-    );
+    assert!(pm < 0.008 && p9 < 0.015, "position error median {pm} p90 {p9}");
     assert!(am < 1.0 && a9 < 2.0, "axis error median {am} p90 {a9}");
 }
 
@@ -218,20 +123,10 @@ fn mono_narrow_tubes_improve_on_their_seeds() {
     let (pm, p9, am, a9) = report("mono narrow 10 mm / 5 deg", &mut e);
     let (sm, s9) = med_p90(&mut e.seed_pos);
     let (sam, _) = med_p90(&mut e.seed_ang);
-    eprintln!(
-        "seeds: position median {:.2} mm p90 {:.2} mm; axis median {sam:.2} deg",
-        sm * 1e3,
-        s9 * 1e3
-    );
+    eprintln!("seeds: position median {:.2} mm p90 {:.2} mm; axis median {sam:.2} deg", sm * 1e3, s9 * 1e3);
     assert_eq!(e.failed, 0, "no tube lost");
-    assert!(
-        pm < sm && p9 < s9 * 1.1,
-        "position error median {pm} p90 {p9} vs seeds {sm} {s9}"
-    );
-    assert!(
-        am < sam && a9 < 5.5,
-        "axis error median {am} p90 {a9} vs seeds {sam}"
-    );
+    assert!(pm < sm && p9 < s9 * 1.1, "position error median {pm} p90 {p9} vs seeds {sm} {s9}");
+    assert!(am < sam && a9 < 5.5, "axis error median {am} p90 {a9} vs seeds {sam}");
 }
 
 /// Exact seeds on narrow tubes stay put (issue 8: a fit from the truth must not walk away).
@@ -240,10 +135,7 @@ fn mono_narrow_tubes_exact_seeds_stay_put() {
     let mut e = run_batch_at((2.0, 3.0), 8, 23, false, false, false, 0.0, 0.0);
     let (pm, p9, am, a9) = report("mono narrow exact", &mut e);
     assert_eq!(e.failed, 0, "no tube lost");
-    assert!(
-        pm < 0.001 && p9 < 0.002,
-        "position error median {pm} p90 {p9}"
-    );
+    assert!(pm < 0.001 && p9 < 0.002, "position error median {pm} p90 {p9}");
     assert!(am < 0.2 && a9 < 0.5, "axis error median {am} p90 {a9}");
 }
 
@@ -269,106 +161,30 @@ fn one_scene() -> (Scene, Vec<nalgebra::Point3<f64>>) {
 fn flipped_seed_gives_the_same_flip_free_axis_and_end() {
     let (sc, pts) = one_scene();
     let t = sc.truth;
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput {
-        image: &sc.image,
-        camera: &sc.camera,
-        ground: None,
-        scene: FitScene {
-            depth: None,
-            stereo_points: &pts,
-            ground: None,
-            mask: None,
-        },
-    };
-    let a = refiner.refine_seed(
-        &input,
-        &Seed {
-            state: AxisState {
-                c: t.centre,
-                a: t.axis,
-            },
-            end_known: true,
-        },
-        0,
-        1.0,
-        None,
-    );
-    let b = refiner.refine_seed(
-        &input,
-        &Seed {
-            state: AxisState {
-                c: t.centre,
-                a: -t.axis,
-            },
-            end_known: true,
-        },
-        0,
-        1.0,
-        None,
-    );
-    assert!(
-        a.converged && b.converged,
-        "{:?} {:?}",
-        a.failure,
-        b.failure
-    );
-    assert!(
-        (a.axis - b.axis).norm() < 1e-3,
-        "{:?} vs {:?}",
-        a.axis,
-        b.axis
-    );
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
+    let a = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None);
+    let b = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: -t.axis }, end_known: true }, 0, 1.0, None);
+    assert!(a.converged && b.converged, "{:?} {:?}", a.failure, b.failure);
+    assert!((a.axis - b.axis).norm() < 1e-3, "{:?} vs {:?}", a.axis, b.axis);
     assert!(a.axis.dot(&t.axis).abs() > 0.999);
     // Both hypotheses were compared: the seal end is found whichever way the seed pointed.
-    assert!(
-        a.end_direction.dot(&t.axis) > 0.9 && b.end_direction.dot(&t.axis) > 0.9,
-        "{:?} {:?}",
-        a.end_direction,
-        b.end_direction
-    );
-    assert!(
-        a.end_confidence > 0.6,
-        "end confidence {}",
-        a.end_confidence
-    );
+    assert!(a.end_direction.dot(&t.axis) > 0.9 && b.end_direction.dot(&t.axis) > 0.9, "{:?} {:?}", a.end_direction, b.end_direction);
+    assert!(a.end_confidence > 0.6, "end confidence {}", a.end_confidence);
 }
 
 #[test]
 fn seed_on_empty_terrain_is_rejected_with_a_reason() {
     let (sc, _) = one_scene();
     let t = sc.truth;
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput {
-        image: &sc.image,
-        camera: &sc.camera,
-        ground: None,
-        scene: FitScene::default(),
-    };
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
     // 25 cm beside the tube, still in the image, on textured ground.
     let side = t.axis.cross(&t.centre).normalize() * 0.05;
-    let seed = AxisState {
-        c: t.centre + side * 2.0,
-        a: t.axis,
-    };
-    let p = refiner.refine_seed(
-        &input,
-        &Seed {
-            state: seed,
-            end_known: false,
-        },
-        0,
-        1.0,
-        None,
-    );
+    let seed = AxisState { c: t.centre + side * 2.0, a: t.axis };
+    let p = refiner.refine_seed(&input, &Seed { state: seed, end_known: false }, 0, 1.0, None);
     assert!(p.centre.iter().chain(p.axis.iter()).all(|v| v.is_finite()));
-    assert!(
-        !p.converged,
-        "accepted a tube on bare ground: {:?}",
-        p.residuals
-    );
+    assert!(!p.converged, "accepted a tube on bare ground: {:?}", p.residuals);
     let f = p.failure.expect("a failure reason");
     eprintln!("empty terrain: {:?}: {}", f.reason, f.message);
     assert!(!f.message.is_empty());
@@ -377,93 +193,30 @@ fn seed_on_empty_terrain_is_rejected_with_a_reason() {
 #[test]
 fn seed_outside_the_image_is_flagged_not_nan() {
     let (sc, _) = one_scene();
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput {
-        image: &sc.image,
-        camera: &sc.camera,
-        ground: None,
-        scene: FitScene::default(),
-    };
-    let seed = AxisState {
-        c: nalgebra::Vector3::new(3.0, 0.0, 1.0),
-        a: nalgebra::Vector3::y(),
-    };
-    let p = refiner.refine_seed(
-        &input,
-        &Seed {
-            state: seed,
-            end_known: false,
-        },
-        0,
-        1.0,
-        None,
-    );
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
+    let seed = AxisState { c: nalgebra::Vector3::new(3.0, 0.0, 1.0), a: nalgebra::Vector3::y() };
+    let p = refiner.refine_seed(&input, &Seed { state: seed, end_known: false }, 0, 1.0, None);
     assert!(!p.converged && p.centre.iter().all(|v| v.is_finite()));
-    assert_eq!(
-        p.failure.unwrap().reason,
-        tubeloc_core::FailureReason::OutOfImage
-    );
+    assert_eq!(p.failure.unwrap().reason, tubeloc_core::FailureReason::OutOfImage);
 }
 
 /// Refines a perturbed seed on `sc` and checks: finite output; a converged fit is near the
 /// truth, a failed one carries a reason.
 fn converges_or_is_flagged(name: &str, sc: &Scene, seed_rng: u64) -> tubeloc_core::TubeAxisPose {
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput {
-        image: &sc.image,
-        camera: &sc.camera,
-        ground: None,
-        scene: FitScene::default(),
-    };
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
     let mut rng = ChaCha8Rng::seed_from_u64(seed_rng);
     let st = perturb(&mut rng, &sc.truth, 0.003, 2.0);
-    let p = refiner.refine_seed(
-        &input,
-        &Seed {
-            state: st,
-            end_known: false,
-        },
-        0,
-        1.0,
-        None,
-    );
-    assert!(
-        p.centre
-            .iter()
-            .chain(p.axis.iter())
-            .chain(p.end_direction.iter())
-            .all(|v| v.is_finite()),
-        "{p:?}"
-    );
+    let p = refiner.refine_seed(&input, &Seed { state: st, end_known: false }, 0, 1.0, None);
+    assert!(p.centre.iter().chain(p.axis.iter()).chain(p.end_direction.iter()).all(|v| v.is_finite()), "{p:?}");
     assert!(p.covariance.iter().flatten().all(|v| v.is_finite()) && p.end_confidence.is_finite());
-    let (de, da) = (
-        (p.centre - sc.truth.centre).norm(),
-        axis_angle(&p.axis, &sc.truth.axis).to_degrees(),
-    );
-    eprintln!(
-        "{name}: converged {} error {:.1} mm {:.2} deg, {}/{} inliers, failure {:?}",
-        p.converged,
-        de * 1e3,
-        da,
-        p.residuals.inliers,
-        p.residuals.count,
-        p.failure
-    );
+    let (de, da) = ((p.centre - sc.truth.centre).norm(), axis_angle(&p.axis, &sc.truth.axis).to_degrees());
+    eprintln!("{name}: converged {} error {:.1} mm {:.2} deg, {}/{} inliers, failure {:?}", p.converged, de * 1e3, da, p.residuals.inliers, p.residuals.count, p.failure);
     if p.converged {
-        assert!(
-            de < 0.03 && da < 3.0,
-            "{name}: converged {:.1} mm / {da:.2} deg from the truth",
-            de * 1e3
-        );
+        assert!(de < 0.03 && da < 3.0, "{name}: converged {:.1} mm / {da:.2} deg from the truth", de * 1e3);
     } else {
-        assert!(!p
-            .failure
-            .as_ref()
-            .expect("a failure reason")
-            .message
-            .is_empty());
+        assert!(!p.failure.as_ref().expect("a failure reason").message.is_empty());
     }
     p
 }
@@ -501,48 +254,15 @@ fn partly_occluded_tube_converges_or_is_flagged() {
     let sc = render(&model, &cam, truth, up, gd, Some(rock), 555, 0.01);
     converges_or_is_flagged("occluded", &sc, 50);
     // With the depth map the occluded contour samples are left out.
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput {
-        image: &sc.image,
-        camera: &sc.camera,
-        ground: None,
-        scene: FitScene {
-            depth: Some((&sc.depth, &sc.camera)),
-            stereo_points: &[],
-            ground: None,
-            mask: None,
-        },
-    };
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: Some((&sc.depth, &sc.camera)), stereo_points: &[], ground: None, mask: None } };
     let mut rng = ChaCha8Rng::seed_from_u64(50);
     let st = perturb(&mut rng, &sc.truth, 0.003, 2.0);
-    let p = refiner.refine_seed(
-        &input,
-        &Seed {
-            state: st,
-            end_known: false,
-        },
-        0,
-        1.0,
-        None,
-    );
-    let (de, da) = (
-        (p.centre - truth.centre).norm(),
-        axis_angle(&p.axis, &truth.axis).to_degrees(),
-    );
-    eprintln!(
-        "occluded with depth: converged {} error {:.1} mm {:.2} deg, failure {:?}",
-        p.converged,
-        de * 1e3,
-        da,
-        p.failure
-    );
+    let p = refiner.refine_seed(&input, &Seed { state: st, end_known: false }, 0, 1.0, None);
+    let (de, da) = ((p.centre - truth.centre).norm(), axis_angle(&p.axis, &truth.axis).to_degrees());
+    eprintln!("occluded with depth: converged {} error {:.1} mm {:.2} deg, failure {:?}", p.converged, de * 1e3, da, p.failure);
     assert!(p.centre.iter().chain(p.axis.iter()).all(|v| v.is_finite()));
-    assert!(
-        !p.converged || de < 0.03 && da < 3.0,
-        "{:.1} mm {da:.2} deg",
-        de * 1e3
-    );
+    assert!(!p.converged || de < 0.03 && da < 3.0, "{:.1} mm {da:.2} deg", de * 1e3);
     assert!(p.converged || p.failure.is_some());
 }
 
@@ -552,47 +272,19 @@ fn partly_occluded_tube_converges_or_is_flagged() {
 #[test]
 fn mask_agreement_seeds_off_by_10mm_5deg_converge_back() {
     let model = default_model();
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
     let cam = camera(false);
     let mut rng = ChaCha8Rng::seed_from_u64(21);
-    let mut e = Errors {
-        pos: vec![],
-        ang: vec![],
-        end_ok: 0,
-        failed: 0,
-        seed_pos: vec![],
-        seed_ang: vec![],
-    };
+    let mut e = Errors { pos: vec![], ang: vec![], end_ok: 0, failed: 0, seed_pos: vec![], seed_ang: vec![] };
     for i in 0..6 {
         let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (0.8, 1.6));
         let sc = render(&model, &cam, truth, up, gd, None, 21_000 + i, 0.01);
         let mask = tube_mask(&model, &sc);
-        let input = RefineInput {
-            image: &sc.image,
-            camera: &sc.camera,
-            ground: None,
-            scene: FitScene {
-                depth: None,
-                stereo_points: &[],
-                ground: None,
-                mask: Some((&mask, &sc.camera)),
-            },
-        };
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &[], ground: None, mask: Some((&mask, &sc.camera)) } };
         let seed_state = perturb(&mut rng, &truth, 0.010, 5.0);
         e.seed_pos.push((seed_state.c - truth.centre).norm());
-        e.seed_ang
-            .push(axis_angle(&seed_state.a, &truth.axis).to_degrees());
-        let p = refiner.refine_seed(
-            &input,
-            &Seed {
-                state: seed_state,
-                end_known: false,
-            },
-            0,
-            1.0,
-            None,
-        );
+        e.seed_ang.push(axis_angle(&seed_state.a, &truth.axis).to_degrees());
+        let p = refiner.refine_seed(&input, &Seed { state: seed_state, end_known: false }, 0, 1.0, None);
         assert!(p.centre.iter().chain(p.axis.iter()).all(|v| v.is_finite()));
         if !p.converged {
             e.failed += 1;
@@ -623,70 +315,27 @@ fn mask_seed_whose_fit_disagrees_with_its_mask_keeps_the_seed() {
     let truth_mask = tube_mask(&model, &sc);
     // Image direction of the axis, and the unit normal to it.
     let cam = &sc.camera;
-    let p0 = cam
-        .project(&nalgebra::Point3::from(sc.truth.centre))
-        .unwrap();
-    let p1 = cam
-        .project(&nalgebra::Point3::from(
-            sc.truth.centre + sc.truth.axis * 0.05,
-        ))
-        .unwrap();
+    let p0 = cam.project(&nalgebra::Point3::from(sc.truth.centre)).unwrap();
+    let p1 = cam.project(&nalgebra::Point3::from(sc.truth.centre + sc.truth.axis * 0.05)).unwrap();
     let d = (p1 - p0).normalize();
-    let width = AxisSeed::from_pixels(
-        (0..truth_mask.height)
-            .flat_map(|y| (0..truth_mask.width).map(move |x| (x, y)))
-            .filter(|&(x, y)| truth_mask.get(x, y))
-            .map(|(x, y)| (x as f64, y as f64)),
-    )
-    .unwrap()
-    .width_px;
+    let width = AxisSeed::from_pixels((0..truth_mask.height).flat_map(|y| (0..truth_mask.width).map(move |x| (x, y))).filter(|&(x, y)| truth_mask.get(x, y)).map(|(x, y)| (x as f64, y as f64))).unwrap().width_px;
     let (nx, ny) = (-d.y * 0.6 * width, d.x * 0.6 * width);
     let shifted = tubeloc_core::BinaryMask::from_fn(truth_mask.width, truth_mask.height, |x, y| {
         let (sx, sy) = ((x as f64 - nx).round(), (y as f64 - ny).round());
-        sx >= 0.0
-            && sy >= 0.0
-            && (sx as usize) < truth_mask.width
-            && (sy as usize) < truth_mask.height
-            && truth_mask.get(sx as usize, sy as usize)
+        sx >= 0.0 && sy >= 0.0 && (sx as usize) < truth_mask.width && (sy as usize) < truth_mask.height && truth_mask.get(sx as usize, sy as usize)
     });
-    let pixels: Vec<(f64, f64)> = (0..shifted.height)
-        .flat_map(|y| (0..shifted.width).map(move |x| (x, y)))
-        .filter(|&(x, y)| shifted.get(x, y))
-        .map(|(x, y)| (x as f64, y as f64))
-        .collect();
+    let pixels: Vec<(f64, f64)> = (0..shifted.height).flat_map(|y| (0..shifted.width).map(move |x| (x, y))).filter(|&(x, y)| shifted.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
     let mut det = TubeDetection::new(0, 0.9, shifted.bbox(), DetectionSource::Learned);
     det.axis_seed = AxisSeed::from_pixels(pixels.iter().copied());
     det.mask = Some(Rle::from_mask(&shifted));
-    let g = tubeloc_refine::GroundPlane {
-        normal: sc.ground_n,
-        offset: sc.ground_d,
-    };
-    let input = RefineInput {
-        image: &sc.image,
-        camera: cam,
-        ground: Some(g),
-        scene: FitScene::default(),
-    };
+    let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
+    let input = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene::default() };
     let seed = tubeloc_refine::seed_from_detection(&det, cam, &model, Some(&g), &[]).unwrap();
 
-    let off = Refiner::new(
-        &tubeloc_core::TubeModel::default(),
-        RefineConfig {
-            mask_seed_min_agreement: 0.0,
-            ..RefineConfig::default()
-        },
-    )
-    .unwrap();
+    let off = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_seed_min_agreement: 0.0, ..RefineConfig::default() }).unwrap();
     let fit = off.refine(&input, &det);
-    assert!(
-        fit.converged && fit.seed_kept.is_none(),
-        "{:?}",
-        fit.failure
-    );
-    assert!(
-        (fit.centre - seed.state.c).norm() > 0.005,
-        "the fit stayed at the seed; the test needs it to move to the tube"
-    );
+    assert!(fit.converged && fit.seed_kept.is_none(), "{:?}", fit.failure);
+    assert!((fit.centre - seed.state.c).norm() > 0.005, "the fit stayed at the seed; the test needs it to move to the tube");
 
     let on = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
     let kept = on.refine(&input, &det);
@@ -697,10 +346,7 @@ fn mask_seed_whose_fit_disagrees_with_its_mask_keeps_the_seed() {
     assert!(axis_angle(&kept.axis, &seed.state.a) < 1e-9);
     // The covariance says the position is uncertain by at least the fit-to-seed difference.
     let var: f64 = (0..3).map(|i| kept.covariance[i][i]).sum();
-    assert!(
-        var.sqrt() >= 0.99 * (fit.centre - seed.state.c).norm(),
-        "covariance {var}"
-    );
+    assert!(var.sqrt() >= 0.99 * (fit.centre - seed.state.c).norm(), "covariance {var}");
 }
 
 /// The colour end decision: a template seed that points the wrong way round (seal end
@@ -724,16 +370,9 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
         for y in 0..h {
             for x in 0..w {
                 let v = sc.image.get(x, y).clamp(0.0, 1.0);
-                let r = sc
-                    .camera
-                    .unproject(&nalgebra::Point2::new(x as f64, y as f64));
-                let z = (r.dot(&t.axis) * r.dot(&t.centre) - r.dot(&r) * t.centre.dot(&t.axis))
-                    / (r.dot(&r) - r.dot(&t.axis).powi(2));
-                let gold = if gold_at_seal {
-                    z >= seal_z0
-                } else {
-                    z <= -seal_z0
-                };
+                let r = sc.camera.unproject(&nalgebra::Point2::new(x as f64, y as f64));
+                let z = (r.dot(&t.axis) * r.dot(&t.centre) - r.dot(&r) * t.centre.dot(&t.axis)) / (r.dot(&r) - r.dot(&t.axis).powi(2));
+                let gold = if gold_at_seal { z >= seal_z0 } else { z <= -seal_z0 };
                 let tint: [f32; 3] = match (mask.get(x, y), gold) {
                     (false, _) => [1.0, 0.85, 0.7],
                     (true, true) => [1.0, 0.8, 0.3],
@@ -749,40 +388,16 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
     let true_rot = nalgebra::Rotation3::rotation_between(&Vector3::z(), &t.axis).unwrap();
     let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Line2d);
     det.t_cam_tube = Some(Pose::from_parts(true_rot * flip, t.centre));
-    let refiner =
-        Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput {
-        image: &sc.image,
-        camera: &sc.camera,
-        ground: None,
-        scene: FitScene::default(),
-    };
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
     for gold_at_seal in [true, false] {
         let rgb = paint(gold_at_seal);
-        let colour = ColourImage {
-            width: w,
-            height: h,
-            rgb: &rgb,
-        };
+        let colour = ColourImage { width: w, height: h, rgb: &rgb };
         let p = refiner.refine_with_colour(&input, &det, Some(&colour));
         assert!(p.converged, "{:?}", p.failure);
         let expected = if gold_at_seal { 1.0 } else { -1.0 };
-        assert!(
-            p.end_direction.dot(&t.axis) * expected > 0.99,
-            "gold at the seal: {gold_at_seal}; end {:?}, truth {:?}",
-            p.end_direction,
-            t.axis
-        );
-        assert!(
-            p.end_confidence > 0.9,
-            "end confidence {}",
-            p.end_confidence
-        );
-        assert!(
-            axis_angle(&p.axis, &t.axis).to_degrees() < 1.5 && (p.centre - t.centre).norm() < 0.02,
-            "axis {:.2} deg, centre {:.1} mm",
-            axis_angle(&p.axis, &t.axis).to_degrees(),
-            (p.centre - t.centre).norm() * 1e3
-        );
+        assert!(p.end_direction.dot(&t.axis) * expected > 0.99, "gold at the seal: {gold_at_seal}; end {:?}, truth {:?}", p.end_direction, t.axis);
+        assert!(p.end_confidence > 0.9, "end confidence {}", p.end_confidence);
+        assert!(axis_angle(&p.axis, &t.axis).to_degrees() < 1.5 && (p.centre - t.centre).norm() < 0.02, "axis {:.2} deg, centre {:.1} mm", axis_angle(&p.axis, &t.axis).to_degrees(), (p.centre - t.centre).norm() * 1e3);
     }
 }

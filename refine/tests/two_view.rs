@@ -19,12 +19,8 @@ fn crop_camera() -> tubeloc_core::CameraModel {
 
 /// Sine of the angle between a tube's image direction and the image rows.
 fn row_sine(cam: &tubeloc_core::CameraModel, t: &Truth) -> f64 {
-    let p0 = cam
-        .project(&nalgebra::Point3::from(t.centre - t.axis * 0.05))
-        .unwrap();
-    let p1 = cam
-        .project(&nalgebra::Point3::from(t.centre + t.axis * 0.05))
-        .unwrap();
+    let p0 = cam.project(&nalgebra::Point3::from(t.centre - t.axis * 0.05)).unwrap();
+    let p1 = cam.project(&nalgebra::Point3::from(t.centre + t.axis * 0.05)).unwrap();
     let d = p1 - p0;
     d.y.abs() / d.norm()
 }
@@ -36,14 +32,8 @@ fn moved_start(t: &Truth) -> AxisState {
     let (c, a) = (t.centre, t.axis);
     let ray = c.normalize();
     let side = a.cross(&ray).normalize();
-    let rot = nalgebra::Rotation3::from_axis_angle(
-        &nalgebra::Unit::new_normalize(ray),
-        0.6f64.to_radians(),
-    );
-    AxisState {
-        c: c + side * 0.0005,
-        a: rot * a,
-    }
+    let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(ray), 0.6f64.to_radians());
+    AxisState { c: c + side * 0.0005, a: rot * a }
 }
 
 /// Tubes 1.6-2.2 m away, across and along the rows, come back to the truth from a start moved
@@ -66,35 +56,13 @@ fn two_view_fit_recovers_the_image_placement() {
         let l = render(&model, &cam, t, up, gd, None, seed, 0.01);
         let r = render_right(&model, &cam, t, up, gd, seed, 0.01, BASELINE);
         let start = moved_start(&t);
-        let before = (
-            axis_angle(&start.a, &t.axis).to_degrees(),
-            (start.c - t.centre).norm(),
-        );
-        let fit = fit_two_view(
-            &model,
-            &cam,
-            &l.image,
-            &r.image,
-            BASELINE,
-            &start,
-            None,
-            None,
-            &TwoViewConfig::default(),
-        )
-        .expect("a two-view fit");
-        let (ae, ce) = (
-            axis_angle(&fit.state.a, &t.axis).to_degrees(),
-            (fit.state.c - t.centre).norm(),
-        );
+        let before = (axis_angle(&start.a, &t.axis).to_degrees(), (start.c - t.centre).norm());
+        let fit = fit_two_view(&model, &cam, &l.image, &r.image, BASELINE, &start, None, None, &TwoViewConfig::default()).expect("a two-view fit");
+        let (ae, ce) = (axis_angle(&fit.state.a, &t.axis).to_degrees(), (fit.state.c - t.centre).norm());
         eprintln!("seed {seed} rows {rows}: axis {:.2} -> {ae:.2} deg, centre {:.2} -> {:.2} mm ({:?} samples, rms {:.2} px)", before.0, before.1 * 1e3, ce * 1e3, fit.samples, fit.rms_px);
         // Along the rows only the rims see the tilt: looser there.
         let (max_deg, max_m) = if rows { (1.6, 1.0e-3) } else { (0.2, 0.8e-3) };
-        assert!(
-            ae < max_deg && ce < max_m,
-            "seed {seed} rows {rows}: axis {:.2} -> {ae:.2} deg, centre {:.2} mm",
-            before.0,
-            ce * 1e3
-        );
+        assert!(ae < max_deg && ce < max_m, "seed {seed} rows {rows}: axis {:.2} -> {ae:.2} deg, centre {:.2} mm", before.0, ce * 1e3);
         if rows {
             along_rows += 1;
         } else {
@@ -117,22 +85,9 @@ fn two_view_fit_uses_the_ground_prior_and_needs_both_views() {
     let cfg = TwoViewConfig::default();
     // A ground normal perpendicular to the true axis (the tube lies on it), 0.1 degree prior.
     let n = (up - t.axis * up.dot(&t.axis)).normalize();
-    let fit = fit_two_view(
-        &model,
-        &cam,
-        &l.image,
-        &r.image,
-        BASELINE,
-        &start,
-        None,
-        Some((n, 0.1f64.to_radians())),
-        &cfg,
-    )
-    .expect("a fit");
+    let fit = fit_two_view(&model, &cam, &l.image, &r.image, BASELINE, &start, None, Some((n, 0.1f64.to_radians())), &cfg).expect("a fit");
     let tilt = fit.state.a.dot(&n).asin().to_degrees().abs();
     assert!(tilt < 0.3, "tilt against the ground {tilt:.2} deg");
     let flat = Plane::filled(r.image.width, r.image.height, 0.5f32);
-    assert!(
-        fit_two_view(&model, &cam, &l.image, &flat, BASELINE, &start, None, None, &cfg).is_none()
-    );
+    assert!(fit_two_view(&model, &cam, &l.image, &flat, BASELINE, &start, None, None, &cfg).is_none());
 }

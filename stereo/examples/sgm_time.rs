@@ -9,28 +9,12 @@ use tubeloc_stereo::{Paths, SgmMatcher, SgmParams};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let paths = if args.get(1).map(|s| s.as_str()) == Some("four") {
-        Paths::Four
-    } else {
-        Paths::Eight
-    };
+    let paths = if args.get(1).map(|s| s.as_str()) == Some("four") { Paths::Four } else { Paths::Eight };
     let repeat: usize = args.get(2).and_then(|v| v.parse().ok()).unwrap_or(5);
-    let size: Vec<usize> = std::env::var("SIZE")
-        .unwrap_or_else(|_| "1024x768".into())
-        .split('x')
-        .filter_map(|v| v.parse().ok())
-        .collect();
-    let (w, h) = (
-        size.first().copied().unwrap_or(1024),
-        size.get(1).copied().unwrap_or(768),
-    );
+    let size: Vec<usize> = std::env::var("SIZE").unwrap_or_else(|_| "1024x768".into()).split('x').filter_map(|v| v.parse().ok()).collect();
+    let (w, h) = (size.first().copied().unwrap_or(1024), size.get(1).copied().unwrap_or(768));
     let pair = bench_scene(w, h, 42);
-    let mut m = SgmMatcher::new(SgmParams {
-        num_disparities: 128,
-        paths,
-        ..SgmParams::default()
-    })
-    .expect("params");
+    let mut m = SgmMatcher::new(SgmParams { num_disparities: 128, paths, ..SgmParams::default() }).expect("params");
     let mut d = m.compute(&pair.left, &pair.right).expect("sgm");
     let mut times = Vec::new();
     for _ in 0..repeat {
@@ -50,18 +34,6 @@ fn main() {
             bad += 1;
         }
     }
-    println!(
-        "times_ms {}",
-        times
-            .iter()
-            .map(|t| format!("{t:.2}"))
-            .collect::<Vec<_>>()
-            .join(" ")
-    );
-    println!(
-        "{paths:?}: median {:.1} ms (min {:.1}), bad-2.0 {:.4} on {n} visible px",
-        times[times.len() / 2],
-        times[0],
-        bad as f64 / n as f64
-    );
+    println!("times_ms {}", times.iter().map(|t| format!("{t:.2}")).collect::<Vec<_>>().join(" "));
+    println!("{paths:?}: median {:.1} ms (min {:.1}), bad-2.0 {:.4} on {n} visible px", times[times.len() / 2], times[0], bad as f64 / n as f64);
 }

@@ -24,6 +24,7 @@
 
 use tubeloc_core::Plane;
 
+
 /// Parameters of the aggregation and selection stage (validated by the caller).
 #[derive(Clone, Debug)]
 pub(crate) struct AggParams {
@@ -200,32 +201,18 @@ pub(crate) struct Ctx<'a> {
 
 /// Aggregates the costs that `fill_cost(y, row)` writes (`row[x * nd + d]`), selects
 /// disparities of left image `img` into `out` (`NaN` = invalid).
-pub(crate) fn aggregate_select<F>(
-    img: &Plane<u8>,
-    ap: &AggParams,
-    bufs: &mut AggBuffers,
-    out: &mut [f32],
-    fill_cost: F,
-) where
+pub(crate) fn aggregate_select<F>(img: &Plane<u8>, ap: &AggParams, bufs: &mut AggBuffers, out: &mut [f32], fill_cost: F)
+where
     F: Fn(usize, &mut [u8]) + Sync,
 {
     let w = img.width;
-    sweep_all(img, ap, bufs, out, w, fill_cost, |sw, s_row, out_row| {
-        select_row(sw, ap, w, s_row, out_row)
-    });
+    sweep_all(img, ap, bufs, out, w, fill_cost, |sw, s_row, out_row| select_row(sw, ap, w, s_row, out_row));
 }
 
 /// Runs both sweeps; `finish(sweep, S_row, out_row)` is called once per row with its complete
 /// `S` (`out` has `out_stride` values per row).
-fn sweep_all<T, F, G>(
-    img: &Plane<u8>,
-    ap: &AggParams,
-    bufs: &mut AggBuffers,
-    out: &mut [T],
-    out_stride: usize,
-    fill_cost: F,
-    finish: G,
-) where
+fn sweep_all<T, F, G>(img: &Plane<u8>, ap: &AggParams, bufs: &mut AggBuffers, out: &mut [T], out_stride: usize, fill_cost: F, finish: G)
+where
     T: Send,
     F: Fn(usize, &mut [u8]) + Sync,
     G: Fn(&mut Sweep, &[i16], &mut [T]) + Sync,
@@ -236,25 +223,13 @@ fn sweep_all<T, F, G>(
     bufs.sum.resize(h * row_len, 0);
     bufs.fwd.reset(w, nd, np, ap.narrow);
     bufs.bwd.reset(w, nd, np, ap.narrow);
-    let ctx = Ctx {
-        w,
-        nd,
-        eight: ap.eight_paths,
-        p1: ap.p1,
-        p2_lut: &ap.p2_lut,
-    };
+    let ctx = Ctx { w, nd, eight: ap.eight_paths, p1: ap.p1, p2_lut: &ap.p2_lut };
     let mid = h / 2;
     let (s_top, s_bot) = bufs.sum.split_at_mut(mid * row_len);
     let (o_top, o_bot) = out.split_at_mut(mid * out_stride);
     let (fwd, bwd) = (&mut bufs.fwd, &mut bufs.bwd);
     let prev_row = |y: usize| if y > 0 { Some(img.row(y - 1)) } else { None };
-    let next_row = |y: usize| {
-        if y + 1 < h {
-            Some(img.row(y + 1))
-        } else {
-            None
-        }
-    };
+    let next_row = |y: usize| if y + 1 < h { Some(img.row(y + 1)) } else { None };
     // Phase 1: partial sums of the forward paths (top half), backward paths (bottom half).
     rayon::join(
         || {
@@ -267,60 +242,24 @@ fn sweep_all<T, F, G>(
             for (i, s) in s_bot.chunks_exact_mut(row_len).enumerate().rev() {
                 let y = mid + i;
                 fill_cost(y, &mut bwd.cost);
-                sweep_row(
-                    bwd,
-                    &ctx,
-                    ap.narrow,
-                    img.row(y),
-                    next_row(y),
-                    s,
-                    true,
-                    false,
-                );
+                sweep_row(bwd, &ctx, ap.narrow, img.row(y), next_row(y), s, true, false);
             }
         },
     );
     // Phase 2: each sweep completes the other half's sums and selects.
     rayon::join(
         || {
-            for (i, (s, o)) in s_bot
-                .chunks_exact_mut(row_len)
-                .zip(o_bot.chunks_exact_mut(out_stride))
-                .enumerate()
-            {
+            for (i, (s, o)) in s_bot.chunks_exact_mut(row_len).zip(o_bot.chunks_exact_mut(out_stride)).enumerate() {
                 let y = mid + i;
                 fill_cost(y, &mut fwd.cost);
-                sweep_row(
-                    fwd,
-                    &ctx,
-                    ap.narrow,
-                    img.row(y),
-                    prev_row(y),
-                    s,
-                    false,
-                    true,
-                );
+                sweep_row(fwd, &ctx, ap.narrow, img.row(y), prev_row(y), s, false, true);
                 finish(fwd, s, o);
             }
         },
         || {
-            for (y, (s, o)) in s_top
-                .chunks_exact_mut(row_len)
-                .zip(o_top.chunks_exact_mut(out_stride))
-                .enumerate()
-                .rev()
-            {
+            for (y, (s, o)) in s_top.chunks_exact_mut(row_len).zip(o_top.chunks_exact_mut(out_stride)).enumerate().rev() {
                 fill_cost(y, &mut bwd.cost);
-                sweep_row(
-                    bwd,
-                    &ctx,
-                    ap.narrow,
-                    img.row(y),
-                    next_row(y),
-                    s,
-                    false,
-                    false,
-                );
+                sweep_row(bwd, &ctx, ap.narrow, img.row(y), next_row(y), s, false, false);
                 finish(bwd, s, o);
             }
         },
@@ -338,9 +277,7 @@ fn prefetch(v: &[i16]) {
         // SAFETY: prefetching is a hint; the address lies inside a live slice.
         #[allow(unused_unsafe)]
         unsafe {
-            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
-                line.as_ptr() as *const i8
-            )
+            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr() as *const i8)
         };
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -356,23 +293,13 @@ fn absdiff(a: u8, b: u8) -> usize {
 /// `base = min_k L + P2'`, `pm = min_k L`.
 #[inline(always)]
 fn lr<T: Lane>(c: u8, same: T, lo: T, hi: T, p1: T, base: T, pm: T) -> T {
-    T::from_cost(c)
-        .wadd(same.min(lo.sat_add(p1)).min(hi.sat_add(p1)).min(base))
-        .wsub(pm)
+    T::from_cost(c).wadd(same.min(lo.sat_add(p1)).min(hi.sat_add(p1)).min(base)).wsub(pm)
 }
 
 /// One pixel, two paths (horizontal and vertical): writes `L` into `o[k][1..=nd]`, sets or adds
 /// their sum into `s`, returns each path's `min_d L`.
 #[inline(always)]
-fn pixel2<T: Lane, const SET: bool>(
-    c: &[u8],
-    p: [&[T]; 2],
-    pm: [T; 2],
-    p2: [T; 2],
-    p1: T,
-    o: [&mut [T]; 2],
-    s: &mut [i16],
-) -> [T; 2] {
+fn pixel2<T: Lane, const SET: bool>(c: &[u8], p: [&[T]; 2], pm: [T; 2], p2: [T; 2], p1: T, o: [&mut [T]; 2], s: &mut [i16]) -> [T; 2] {
     let n = c.len();
     let [o0, o1] = o;
     let (o0, o1) = (&mut o0[1..n + 1], &mut o1[1..n + 1]);
@@ -396,33 +323,15 @@ fn pixel2<T: Lane, const SET: bool>(
 
 /// One pixel, four paths (horizontal, vertical, two diagonals); as [`pixel2`].
 #[inline(always)]
-fn pixel4<T: Lane, const SET: bool>(
-    c: &[u8],
-    p: [&[T]; 4],
-    pm: [T; 4],
-    p2: [T; 4],
-    p1: T,
-    o: [&mut [T]; 4],
-    s: &mut [i16],
-) -> [T; 4] {
+fn pixel4<T: Lane, const SET: bool>(c: &[u8], p: [&[T]; 4], pm: [T; 4], p2: [T; 4], p1: T, o: [&mut [T]; 4], s: &mut [i16]) -> [T; 4] {
     let n = c.len();
     let [o0, o1, o2, o3] = o;
-    let (o0, o1, o2, o3) = (
-        &mut o0[1..n + 1],
-        &mut o1[1..n + 1],
-        &mut o2[1..n + 1],
-        &mut o3[1..n + 1],
-    );
+    let (o0, o1, o2, o3) = (&mut o0[1..n + 1], &mut o1[1..n + 1], &mut o2[1..n + 1], &mut o3[1..n + 1]);
     let (a0, a1, a2) = (&p[0][0..n], &p[0][1..n + 1], &p[0][2..n + 2]);
     let (b0, b1, b2) = (&p[1][0..n], &p[1][1..n + 1], &p[1][2..n + 2]);
     let (c0, c1, c2) = (&p[2][0..n], &p[2][1..n + 1], &p[2][2..n + 2]);
     let (e0, e1, e2) = (&p[3][0..n], &p[3][1..n + 1], &p[3][2..n + 2]);
-    let base = [
-        pm[0].sat_add(p2[0]),
-        pm[1].sat_add(p2[1]),
-        pm[2].sat_add(p2[2]),
-        pm[3].sat_add(p2[3]),
-    ];
+    let base = [pm[0].sat_add(p2[0]), pm[1].sat_add(p2[1]), pm[2].sat_add(p2[2]), pm[3].sat_add(p2[3])];
     let s = &mut s[..n];
     let (mut ma, mut mb, mut mc, mut me) = (T::SENT, T::SENT, T::SENT, T::SENT);
     for d in 0..n {
@@ -438,11 +347,7 @@ fn pixel4<T: Lane, const SET: bool>(
         mb = mb.min(vb);
         mc = mc.min(vc);
         me = me.min(ve);
-        let t = va
-            .widen()
-            .wrapping_add(vb.widen())
-            .wrapping_add(vc.widen())
-            .wrapping_add(ve.widen());
+        let t = va.widen().wrapping_add(vb.widen()).wrapping_add(vc.widen()).wrapping_add(ve.widen());
         s[d] = if SET { t } else { s[d].wrapping_add(t) };
     }
     [ma, mb, mc, me]
@@ -464,53 +369,17 @@ crate::multiversion! {
 /// into `s_row`. `forward`: pixels left to right, predecessor row `img_prev` above;
 /// otherwise right to left with the row below.
 #[allow(clippy::too_many_arguments)]
-fn sweep_row(
-    sw: &mut Sweep,
-    ctx: &Ctx,
-    narrow: bool,
-    img_row: &[u8],
-    img_prev: Option<&[u8]>,
-    s_row: &mut [i16],
-    set: bool,
-    forward: bool,
-) {
+fn sweep_row(sw: &mut Sweep, ctx: &Ctx, narrow: bool, img_row: &[u8], img_prev: Option<&[u8]>, s_row: &mut [i16], set: bool, forward: bool) {
     if narrow {
-        sweep_row_narrow(
-            &mut sw.narrow,
-            &sw.cost,
-            ctx,
-            img_row,
-            img_prev,
-            s_row,
-            set,
-            forward,
-        );
+        sweep_row_narrow(&mut sw.narrow, &sw.cost, ctx, img_row, img_prev, s_row, set, forward);
     } else {
-        sweep_row_wide(
-            &mut sw.wide,
-            &sw.cost,
-            ctx,
-            img_row,
-            img_prev,
-            s_row,
-            set,
-            forward,
-        );
+        sweep_row_wide(&mut sw.wide, &sw.cost, ctx, img_row, img_prev, s_row, set, forward);
     }
 }
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn sweep_row_impl<T: Lane>(
-    st: &mut PathState<T>,
-    cost: &[u8],
-    ctx: &Ctx,
-    img_row: &[u8],
-    img_prev: Option<&[u8]>,
-    s_row: &mut [i16],
-    set: bool,
-    forward: bool,
-) {
+fn sweep_row_impl<T: Lane>(st: &mut PathState<T>, cost: &[u8], ctx: &Ctx, img_row: &[u8], img_prev: Option<&[u8]>, s_row: &mut [i16], set: bool, forward: bool) {
     let (w, nd) = (ctx.w, ctx.nd);
     let pp = nd + 2;
     let mut lut = [T::default(); 256];
@@ -518,14 +387,7 @@ fn sweep_row_impl<T: Lane>(
         *l = T::from_i16(v);
     }
     let p1 = T::from_i16(ctx.p1);
-    let PathState {
-        vert,
-        vcur,
-        vmin,
-        vcur_min,
-        hbuf,
-        zero,
-    } = st;
+    let PathState { vert, vcur, vmin, vcur_min, hbuf, zero } = st;
     let zero = &zero[..];
     let (prev, prev_min) = (&vert[..], &vmin[..]);
     let mut hmin = T::default();
@@ -544,18 +406,10 @@ fn sweep_row_impl<T: Lane>(
         let (ha, hb) = hbuf.split_at_mut(pp);
         let (hp, ho) = if i % 2 == 0 { (&*hb, ha) } else { (&*ha, hb) };
         let z = (zero, T::default(), lut[0]);
-        let (ph, pmh, p2h) = if i == 0 {
-            z
-        } else {
-            (hp, hmin, lut[absdiff(img_row[x], img_row[xv])])
-        };
+        let (ph, pmh, p2h) = if i == 0 { z } else { (hp, hmin, lut[absdiff(img_row[x], img_row[xv])]) };
         if !ctx.eight {
             let (pv, pmv, p2v) = match img_prev {
-                Some(ip) => (
-                    &prev[x * pp..(x + 1) * pp],
-                    prev_min[x],
-                    lut[absdiff(img_row[x], ip[x])],
-                ),
+                Some(ip) => (&prev[x * pp..(x + 1) * pp], prev_min[x], lut[absdiff(img_row[x], ip[x])]),
                 None => z,
             };
             let ov = &mut vcur[x * pp..(x + 1) * pp];
@@ -569,48 +423,19 @@ fn sweep_row_impl<T: Lane>(
             continue;
         }
         // Paths: 0 straight (x), 1 visited-side diagonal (xv), 2 unvisited-side diagonal (xu).
-        let (k0, k1, k2) = (
-            x * 3,
-            xv.wrapping_mul(3).wrapping_add(1),
-            xu.wrapping_mul(3).wrapping_add(2),
-        );
+        let (k0, k1, k2) = (x * 3, xv.wrapping_mul(3).wrapping_add(1), xu.wrapping_mul(3).wrapping_add(2));
         let (q0, q1, q2) = match img_prev {
             Some(ip) => {
-                let a = (
-                    &prev[k0 * pp..(k0 + 1) * pp],
-                    prev_min[k0],
-                    lut[absdiff(img_row[x], ip[x])],
-                );
-                let b = if i > 0 {
-                    (
-                        &prev[k1 * pp..(k1 + 1) * pp],
-                        prev_min[k1],
-                        lut[absdiff(img_row[x], ip[xv])],
-                    )
-                } else {
-                    z
-                };
-                let c = if i + 1 < w {
-                    (
-                        &prev[k2 * pp..(k2 + 1) * pp],
-                        prev_min[k2],
-                        lut[absdiff(img_row[x], ip[xu])],
-                    )
-                } else {
-                    z
-                };
+                let a = (&prev[k0 * pp..(k0 + 1) * pp], prev_min[k0], lut[absdiff(img_row[x], ip[x])]);
+                let b = if i > 0 { (&prev[k1 * pp..(k1 + 1) * pp], prev_min[k1], lut[absdiff(img_row[x], ip[xv])]) } else { z };
+                let c = if i + 1 < w { (&prev[k2 * pp..(k2 + 1) * pp], prev_min[k2], lut[absdiff(img_row[x], ip[xu])]) } else { z };
                 (a, b, c)
             }
             None => (z, z, z),
         };
         let (oa, r) = vcur[k0 * pp..(k0 + 3) * pp].split_at_mut(pp);
         let (ob, oc) = r.split_at_mut(pp);
-        let args = (
-            [ph, q0.0, q1.0, q2.0],
-            [pmh, q0.1, q1.1, q2.1],
-            [p2h, q0.2, q1.2, q2.2],
-            [ho, oa, ob, oc],
-        );
+        let args = ([ph, q0.0, q1.0, q2.0], [pmh, q0.1, q1.1, q2.1], [p2h, q0.2, q1.2, q2.2], [ho, oa, ob, oc]);
         let m = if set {
             pixel4::<T, true>(c, args.0, args.1, args.2, p1, args.3, s)
         } else {
@@ -626,23 +451,9 @@ fn sweep_row_impl<T: Lane>(
 /// Winner-takes-all, uniqueness, sub-pixel and left-right check of one complete row of `S`.
 fn select_row(sw: &mut Sweep, ap: &AggParams, w: usize, s_row: &[i16], out_row: &mut [f32]) {
     let nd = ap.nd;
-    select_kernel(
-        s_row,
-        nd,
-        ap.uniqueness,
-        ap.subpixel,
-        &mut sw.best,
-        &mut sw.sub,
-    );
+    select_kernel(s_row, nd, ap.uniqueness, ap.subpixel, &mut sw.best, &mut sw.sub);
     if ap.lr_max_diff >= 0 {
-        right_min(
-            s_row,
-            nd,
-            &mut sw.r_cost,
-            &mut sw.r_idx,
-            &mut sw.rev,
-            &sw.desc,
-        );
+        right_min(s_row, nd, &mut sw.r_cost, &mut sw.r_idx, &mut sw.rev, &sw.desc);
     }
     for x in 0..w {
         let b = sw.best[x];
@@ -652,11 +463,7 @@ fn select_row(sw: &mut Sweep, ap: &AggParams, w: usize, s_row: &[i16], out_row: 
             let j = x + nd - 1 - b as usize;
             ok = (sw.r_idx[j] as i32 - b as i32).abs() <= ap.lr_max_diff;
         }
-        out_row[x] = if ok {
-            ap.dmin as f32 + sw.sub[x]
-        } else {
-            f32::NAN
-        };
+        out_row[x] = if ok { ap.dmin as f32 + sw.sub[x] } else { f32::NAN };
     }
 }
 
@@ -723,14 +530,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     /// Textbook SGM sums `S(p, d)` in `i32`, one path direction at a time.
-    fn reference_sum(
-        cost: &[u8],
-        img: &Plane<u8>,
-        nd: usize,
-        p1: i32,
-        lut: &[i16; 256],
-        eight: bool,
-    ) -> Vec<i32> {
+    fn reference_sum(cost: &[u8], img: &Plane<u8>, nd: usize, p1: i32, lut: &[i16; 256], eight: bool) -> Vec<i32> {
         let (w, h) = (img.width as i64, img.height as i64);
         let mut dirs = vec![(1i64, 0i64), (-1, 0), (0, 1), (0, -1)];
         if eight {
@@ -739,16 +539,8 @@ mod tests {
         let mut sum = vec![0i32; cost.len()];
         for (dx, dy) in dirs {
             let mut l = vec![0i32; cost.len()];
-            let ys: Vec<i64> = if dy < 0 {
-                (0..h).rev().collect()
-            } else {
-                (0..h).collect()
-            };
-            let xs: Vec<i64> = if dx < 0 {
-                (0..w).rev().collect()
-            } else {
-                (0..w).collect()
-            };
+            let ys: Vec<i64> = if dy < 0 { (0..h).rev().collect() } else { (0..h).collect() };
+            let xs: Vec<i64> = if dx < 0 { (0..w).rev().collect() } else { (0..w).collect() };
             for &y in &ys {
                 for &x in &xs {
                     let at = ((y * w + x) as usize) * nd;
@@ -762,9 +554,7 @@ mod tests {
                     let qa = ((qy * w + qx) as usize) * nd;
                     let prev = l[qa..qa + nd].to_vec();
                     let pm = *prev.iter().min().unwrap();
-                    let di = (img.get(x as usize, y as usize) as i32
-                        - img.get(qx as usize, qy as usize) as i32)
-                        .unsigned_abs() as usize;
+                    let di = (img.get(x as usize, y as usize) as i32 - img.get(qx as usize, qy as usize) as i32).unsigned_abs() as usize;
                     let p2 = lut[di] as i32;
                     for d in 0..nd {
                         let mut best = prev[d].min(pm + p2);
@@ -790,52 +580,29 @@ mod tests {
         for (di, v) in p2_lut.iter_mut().enumerate() {
             *v = ((150.0 / (1.0 + di as f32 / 12.0)).round() as i16).max(9);
         }
-        AggParams {
-            nd,
-            dmin: 0,
-            p1: 9,
-            p2_lut,
-            eight_paths: eight,
-            uniqueness: 0,
-            lr_max_diff: -1,
-            subpixel: false,
-            narrow,
-        }
+        AggParams { nd, dmin: 0, p1: 9, p2_lut, eight_paths: eight, uniqueness: 0, lr_max_diff: -1, subpixel: false, narrow }
     }
 
     #[test]
     fn fused_sweeps_equal_textbook_sums_in_both_lane_types() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let (w, h, nd) = (29usize, 13usize, 32usize);
-        let img = Plane::from_vec(
-            w,
-            h,
-            (0..w * h).map(|_| rng.random_range(0..=255u8)).collect(),
-        );
-        let cost: Vec<u8> = (0..w * h * nd)
-            .map(|_| rng.random_range(0..=100u8))
-            .collect();
+        let img = Plane::from_vec(w, h, (0..w * h).map(|_| rng.random_range(0..=255u8)).collect());
+        let cost: Vec<u8> = (0..w * h * nd).map(|_| rng.random_range(0..=100u8)).collect();
         for eight in [true, false] {
             for narrow in [true, false] {
                 let ap = params(nd, eight, narrow);
                 let want = reference_sum(&cost, &img, nd, ap.p1 as i32, &ap.p2_lut, eight);
                 let mut got = vec![0i32; w * h * nd];
                 let mut bufs = AggBuffers::default();
-                let fill = |y: usize, row: &mut [u8]| {
-                    row.copy_from_slice(&cost[y * w * nd..(y + 1) * w * nd])
-                };
+                let fill = |y: usize, row: &mut [u8]| row.copy_from_slice(&cost[y * w * nd..(y + 1) * w * nd]);
                 sweep_all(&img, &ap, &mut bufs, &mut got, w * nd, fill, |_, s, o| {
                     for (a, &b) in o.iter_mut().zip(s) {
                         *a = b as i32;
                     }
                 });
                 let bad = got.iter().zip(&want).filter(|(a, b)| a != b).count();
-                assert_eq!(
-                    bad,
-                    0,
-                    "eight={eight} narrow={narrow}: {bad} of {} sums differ",
-                    got.len()
-                );
+                assert_eq!(bad, 0, "eight={eight} narrow={narrow}: {bad} of {} sums differ", got.len());
             }
         }
     }
@@ -844,28 +611,18 @@ mod tests {
     fn selection_picks_the_textbook_winner() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let (w, h, nd) = (40usize, 9usize, 16usize);
-        let img = Plane::from_vec(
-            w,
-            h,
-            (0..w * h).map(|_| rng.random_range(0..=255u8)).collect(),
-        );
-        let cost: Vec<u8> = (0..w * h * nd)
-            .map(|_| rng.random_range(0..=60u8))
-            .collect();
+        let img = Plane::from_vec(w, h, (0..w * h).map(|_| rng.random_range(0..=255u8)).collect());
+        let cost: Vec<u8> = (0..w * h * nd).map(|_| rng.random_range(0..=60u8)).collect();
         let ap = params(nd, true, true);
         let want = reference_sum(&cost, &img, nd, ap.p1 as i32, &ap.p2_lut, true);
         let mut out = vec![0f32; w * h];
-        let fill =
-            |y: usize, row: &mut [u8]| row.copy_from_slice(&cost[y * w * nd..(y + 1) * w * nd]);
+        let fill = |y: usize, row: &mut [u8]| row.copy_from_slice(&cost[y * w * nd..(y + 1) * w * nd]);
         aggregate_select(&img, &ap, &mut AggBuffers::default(), &mut out, fill);
         for (i, &o) in out.iter().enumerate() {
             let s = &want[i * nd..(i + 1) * nd];
             let best = (0..nd).min_by_key(|&d| (s[d], d)).unwrap();
             if best > i % w {
-                assert!(
-                    o.is_nan(),
-                    "pixel {i}: match outside the right image must be invalid"
-                );
+                assert!(o.is_nan(), "pixel {i}: match outside the right image must be invalid");
             } else {
                 assert_eq!(o, best as f32, "pixel {i}");
             }

@@ -17,17 +17,9 @@ pub fn census_transform(img: &Plane<u8>, win_w: usize, win_h: usize) -> Result<P
 }
 
 /// As [`census_transform`], writing into `out` (resized to the image, its buffer reused).
-pub fn census_into(
-    img: &Plane<u8>,
-    win_w: usize,
-    win_h: usize,
-    out: &mut Plane<u64>,
-) -> Result<()> {
+pub fn census_into(img: &Plane<u8>, win_w: usize, win_h: usize, out: &mut Plane<u64>) -> Result<()> {
     if win_w % 2 == 0 || win_h % 2 == 0 || win_w * win_h < 9 || win_w * win_h > 65 {
-        return Err(param(
-            "census window",
-            format!("{win_w}x{win_h}: sizes must be odd, with 9 <= w*h <= 65"),
-        ));
+        return Err(param("census window", format!("{win_w}x{win_h}: sizes must be odd, with 9 <= w*h <= 65")));
     }
     let (w, h) = (img.width, img.height);
     let (rx, ry) = (win_w / 2, win_h / 2);
@@ -45,21 +37,18 @@ pub fn census_into(
     out.height = h;
     out.data.clear();
     out.data.resize(w * h, 0);
-    out.data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(y, orow)| {
-            let centre = &padded[(y + ry) * pw + rx..][..w];
-            for dy in 0..win_h {
-                for dx in 0..win_w {
-                    if dy == ry && dx == rx {
-                        continue;
-                    }
-                    let nb = &padded[(y + dy) * pw + dx..][..w];
-                    shift_in(orow, nb, centre);
+    out.data.par_chunks_mut(w).enumerate().for_each(|(y, orow)| {
+        let centre = &padded[(y + ry) * pw + rx..][..w];
+        for dy in 0..win_h {
+            for dx in 0..win_w {
+                if dy == ry && dx == rx {
+                    continue;
                 }
+                let nb = &padded[(y + dy) * pw + dx..][..w];
+                shift_in(orow, nb, centre);
             }
-        });
+        }
+    });
     Ok(())
 }
 

@@ -12,19 +12,16 @@ use tubeloc_core::Plane;
 pub(crate) fn sobel_x(img: &Plane<u8>) -> Plane<i16> {
     let (w, h) = (img.width, img.height);
     let mut out = Plane::<i16>::new(w, h);
-    out.data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(y, orow)| {
-            let r0 = img.row(y.saturating_sub(1));
-            let r1 = img.row(y);
-            let r2 = img.row((y + 1).min(h - 1));
-            for (x, o) in orow.iter_mut().enumerate() {
-                let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                let g = |r: &[u8]| r[xr] as i32 - r[xl] as i32;
-                *o = ((g(r0) + 2 * g(r1) + g(r2)) / 4) as i16;
-            }
-        });
+    out.data.par_chunks_mut(w).enumerate().for_each(|(y, orow)| {
+        let r0 = img.row(y.saturating_sub(1));
+        let r1 = img.row(y);
+        let r2 = img.row((y + 1).min(h - 1));
+        for (x, o) in orow.iter_mut().enumerate() {
+            let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let g = |r: &[u8]| r[xr] as i32 - r[xl] as i32;
+            *o = ((g(r0) + 2 * g(r1) + g(r2)) / 4) as i16;
+        }
+    });
     out
 }
 
@@ -52,9 +49,7 @@ pub(crate) fn cost_volume(
     let w = cl.width;
     let mut cr_rev = cr.clone();
     reverse_rows(&mut cr_rev);
-    out.par_chunks_mut(w * nd)
-        .enumerate()
-        .for_each(|(y, orow)| cost_row(y, cl, &cr_rev, grads, dmin, nd, wt, orow));
+    out.par_chunks_mut(w * nd).enumerate().for_each(|(y, orow)| cost_row(y, cl, &cr_rev, grads, dmin, nd, wt, orow));
 }
 
 /// Reverses every row in place (the right census plane is stored this way, so that the
@@ -98,24 +93,24 @@ pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr_rev: &Plane<u64>, grads: Op
 
 #[inline(always)]
 fn census_row(o: &mut [u8], l: u64, win: &[u64], weight: u8) {
-    // o[k] pairs with win[k].
-    if weight == 1 {
-        for (c, &r) in o.iter_mut().zip(win) {
-            *c = (l ^ r).count_ones() as u8;
+        // o[k] pairs with win[k].
+        if weight == 1 {
+            for (c, &r) in o.iter_mut().zip(win) {
+                *c = (l ^ r).count_ones() as u8;
+            }
+        } else {
+            for (c, &r) in o.iter_mut().zip(win) {
+                *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
+            }
         }
-    } else {
-        for (c, &r) in o.iter_mut().zip(win) {
-            *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
-        }
-    }
 }
 
 #[inline(always)]
 fn grad_row(o: &mut [u8], l: i16, win: &[i16], weight: u8, trunc: u8) {
-    for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
-        let diff = (l - r).unsigned_abs().min(trunc as u16) as u8;
-        *c = c.saturating_add(diff.saturating_mul(weight));
-    }
+        for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
+            let diff = (l - r).unsigned_abs().min(trunc as u16) as u8;
+            *c = c.saturating_add(diff.saturating_mul(weight));
+        }
 }
 
 #[cfg(test)]
@@ -126,12 +121,7 @@ mod tests {
     fn cost_is_hamming_distance_and_border_outside() {
         let cl = Plane::from_vec(4, 1, vec![0b1111u64, 0, 0b1, 0b11]);
         let cr = Plane::from_vec(4, 1, vec![0u64, 0b1, 0b111, 0]);
-        let wt = CostWeights {
-            census: 2,
-            grad: 0,
-            grad_trunc: 0,
-            border: 99,
-        };
+        let wt = CostWeights { census: 2, grad: 0, grad_trunc: 0, border: 99 };
         let mut out = vec![0u8; 4 * 3];
         cost_volume(&cl, &cr, None, 0, 3, wt, &mut out);
         // x = 3, l = 0b11: d=0 -> cr[3]=0 (2 bits), d=1 -> cr[2]=0b111 (1 bit), d=2 -> cr[1]=0b1 (1 bit)

@@ -49,8 +49,5 @@ pub enum StereoError {
 pub type Result<T> = std::result::Result<T, StereoError>;
 
 pub(crate) fn param(name: &'static str, message: impl Into<String>) -> StereoError {
-    StereoError::InvalidParam {
-        name,
-        message: message.into(),
-    }
+    StereoError::InvalidParam { name, message: message.into() }
 }

@@ -38,34 +38,21 @@ pub fn decode_pfm(bytes: &[u8]) -> Result<Plane<f32>> {
         if start == pos {
             return Err(bad("truncated header"));
         }
-        fields.push(
-            std::str::from_utf8(&bytes[start..pos])
-                .map_err(|_| bad("header is not text"))?
-                .to_string(),
-        );
+        fields.push(std::str::from_utf8(&bytes[start..pos]).map_err(|_| bad("header is not text"))?.to_string());
     }
     pos += 1; // the single whitespace byte after the scale
     if fields[0] != "Pf" {
-        return Err(bad(&format!(
-            "expected a greyscale 'Pf' file, found {:?}",
-            fields[0]
-        )));
+        return Err(bad(&format!("expected a greyscale 'Pf' file, found {:?}", fields[0])));
     }
     let w: usize = fields[1].parse().map_err(|_| bad("bad width"))?;
     let h: usize = fields[2].parse().map_err(|_| bad("bad height"))?;
     let scale: f32 = fields[3].parse().map_err(|_| bad("bad scale"))?;
     let n = w.checked_mul(h).ok_or_else(|| bad("size overflow"))?;
-    let body = bytes
-        .get(pos..pos + 4 * n)
-        .ok_or_else(|| bad("truncated pixel data"))?;
+    let body = bytes.get(pos..pos + 4 * n).ok_or_else(|| bad("truncated pixel data"))?;
     let mut plane = Plane::<f32>::new(w, h);
     for (i, c) in body.chunks_exact(4).enumerate() {
         let a = [c[0], c[1], c[2], c[3]];
-        let v = if scale < 0.0 {
-            f32::from_le_bytes(a)
-        } else {
-            f32::from_be_bytes(a)
-        };
+        let v = if scale < 0.0 { f32::from_le_bytes(a) } else { f32::from_be_bytes(a) };
         let (x, y) = (i % w, h - 1 - i / w);
         *plane.get_mut(x, y) = if v.is_finite() { v } else { f32::NAN };
     }
@@ -74,16 +61,7 @@ pub fn decode_pfm(bytes: &[u8]) -> Result<Plane<f32>> {
 
 /// Disparity as 16-bit fixed point `round(16 d)`, 0 where invalid or negative.
 pub fn to_u16_x16(disp: &Plane<f32>) -> Vec<u16> {
-    disp.data
-        .iter()
-        .map(|&d| {
-            if d.is_nan() || d <= 0.0 {
-                0
-            } else {
-                (d * 16.0).round().min(65535.0) as u16
-            }
-        })
-        .collect()
+    disp.data.iter().map(|&d| if d.is_nan() || d <= 0.0 { 0 } else { (d * 16.0).round().min(65535.0) as u16 }).collect()
 }
 
 /// RGB preview (3 bytes per pixel): a blue-cyan-green-yellow-red ramp over `[d_min, d_max]`.
@@ -119,13 +97,7 @@ mod tests {
         for (a, b) in d.data.iter().zip(&back.data) {
             assert!(a == b || (a.is_nan() && b.is_nan()));
         }
-        assert!(decode_pfm(b"PF\n1 1\n-1\n")
-            .unwrap_err()
-            .to_string()
-            .contains("Pf"));
-        assert!(decode_pfm(b"Pf\n2 2\n-1\n\0\0")
-            .unwrap_err()
-            .to_string()
-            .contains("truncated"));
+        assert!(decode_pfm(b"PF\n1 1\n-1\n").unwrap_err().to_string().contains("Pf"));
+        assert!(decode_pfm(b"Pf\n2 2\n-1\n\0\0").unwrap_err().to_string().contains("truncated"));
     }
 }

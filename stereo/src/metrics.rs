@@ -46,8 +46,7 @@ impl GroundTruth {
 
     /// Fraction of all pixels that are evaluated.
     pub fn evaluated_fraction(&self) -> f64 {
-        self.mask.data.iter().filter(|&&m| m != 0).count() as f64
-            / self.mask.data.len().max(1) as f64
+        self.mask.data.iter().filter(|&&m| m != 0).count() as f64 / self.mask.data.len().max(1) as f64
     }
 }
 
@@ -67,12 +66,7 @@ pub struct DisparityScore {
 /// Scores `estimate` (`NaN` = invalid) against `gt` at `threshold` pixels.
 pub fn score(estimate: &Plane<f32>, gt: &GroundTruth, threshold: f32) -> DisparityScore {
     let (mut n, mut bad, mut valid, mut abs_sum) = (0usize, 0usize, 0usize, 0f64);
-    for ((&e, &g), &m) in estimate
-        .data
-        .iter()
-        .zip(&gt.disparity.data)
-        .zip(&gt.mask.data)
-    {
+    for ((&e, &g), &m) in estimate.data.iter().zip(&gt.disparity.data).zip(&gt.mask.data) {
         if m == 0 {
             continue;
         }
@@ -89,12 +83,7 @@ pub fn score(estimate: &Plane<f32>, gt: &GroundTruth, threshold: f32) -> Dispari
         }
     }
     let nf = n.max(1) as f64;
-    DisparityScore {
-        evaluated: n,
-        bad: bad as f64 / nf,
-        mae: abs_sum / valid.max(1) as f64,
-        density: valid as f64 / nf,
-    }
+    DisparityScore { evaluated: n, bad: bad as f64 / nf, mae: abs_sum / valid.max(1) as f64, density: valid as f64 / nf }
 }
 
 #[cfg(test)]

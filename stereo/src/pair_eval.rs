@@ -94,11 +94,7 @@ impl ExactAccumulator {
             density: self.est as f64 / n,
             bad1: self.bad1 as f64 / n,
             bad2: self.bad2 as f64 / n,
-            mae: if self.est > 0 {
-                self.abs_sum / self.est as f64
-            } else {
-                f64::NAN
-            },
+            mae: if self.est > 0 { self.abs_sum / self.est as f64 } else { f64::NAN },
         }
     }
 }
@@ -112,11 +108,7 @@ pub fn tube_surface_distance(model: &TubeModel, p: &Point3<f64>) -> f64 {
     if p.z.abs() <= half {
         let side = (r - model.radius_at(p.z)).abs();
         // Inside near an end, the end face may be closer than the side.
-        let end = if r < model.radius_at(p.z) {
-            half - p.z.abs()
-        } else {
-            f64::INFINITY
-        };
+        let end = if r < model.radius_at(p.z) { half - p.z.abs() } else { f64::INFINITY };
         side.min(end)
     } else {
         let rz = model.radius_at(half.copysign(p.z) * (1.0 - 1e-9));
@@ -128,13 +120,7 @@ pub fn tube_surface_distance(model: &TubeModel, p: &Point3<f64>) -> f64 {
 
 /// Distances (metres) of the triangulated estimates at the pixels of `mask` (row-major
 /// indices) to the tube surface; pixels without an estimate are skipped.
-pub fn tube_point_distances(
-    est: &Plane<f32>,
-    geom: &RectifiedGeometry,
-    t_cam_tube: &Pose,
-    model: &TubeModel,
-    mask: impl Fn(usize) -> bool,
-) -> Vec<f64> {
+pub fn tube_point_distances(est: &Plane<f32>, geom: &RectifiedGeometry, t_cam_tube: &Pose, model: &TubeModel, mask: impl Fn(usize) -> bool) -> Vec<f64> {
     let t_tube_cam = t_cam_tube.inverse();
     let mut out = Vec::new();
     for (i, &d) in est.data.iter().enumerate() {
@@ -143,10 +129,7 @@ pub fn tube_point_distances(
         }
         let (u, v) = ((i % est.width) as f64, (i / est.width) as f64);
         if let Some(sp) = geom.triangulate_pixel(u, v, d as f64, 0.0) {
-            out.push(tube_surface_distance(
-                model,
-                &t_tube_cam.transform_point(&sp.point),
-            ));
+            out.push(tube_surface_distance(model, &t_tube_cam.transform_point(&sp.point)));
         }
     }
     out
@@ -193,14 +176,7 @@ pub struct PairEvalSummary {
 impl PairEval {
     /// Adds one pair: estimate `est` and exact `gt` left disparity, the pair's geometry, and per
     /// tube its visible mask in the left image and `T_cam_tube` (left camera).
-    pub fn add(
-        &mut self,
-        est: &Plane<f32>,
-        gt: &Plane<f32>,
-        geom: &RectifiedGeometry,
-        tubes: &[(&BinaryMask, Pose)],
-        model: &TubeModel,
-    ) {
+    pub fn add(&mut self, est: &Plane<f32>, gt: &Plane<f32>, geom: &RectifiedGeometry, tubes: &[(&BinaryMask, Pose)], model: &TubeModel) {
         let valid = valid_mask(gt);
         let w = gt.width;
         self.valid.add(est, gt, |i| valid.data[i] != 0);
@@ -210,8 +186,7 @@ impl PairEval {
             }
             let inside = |i: usize| valid.data[i] != 0 && mask.get(i % w, i / w);
             self.tube.add(est, gt, inside);
-            self.tube_distances_m
-                .extend(tube_point_distances(est, geom, t_cam_tube, model, inside));
+            self.tube_distances_m.extend(tube_point_distances(est, geom, t_cam_tube, model, inside));
         }
     }
 
@@ -236,9 +211,7 @@ mod tests {
         // Background d = 2 with a near box (d = 6) at x = 8..11: background pixels whose right
         // position falls under the box's right-image footprint (2..5) are occluded.
         let w = 14;
-        let row: Vec<f32> = (0..w)
-            .map(|x| if (8..12).contains(&x) { 6.0 } else { 2.0 })
-            .collect();
+        let row: Vec<f32> = (0..w).map(|x| if (8..12).contains(&x) { 6.0 } else { 2.0 }).collect();
         let gt = Plane::from_vec(w, 1, row);
         let m = valid_mask(&gt);
         let valid: Vec<usize> = (0..w).filter(|&x| m.get(x, 0) == 1).collect();
@@ -251,13 +224,9 @@ mod tests {
         let m = TubeModel::default();
         let r = m.radius_at(0.0);
         assert!(tube_surface_distance(&m, &Point3::new(r, 0.0, 0.0)) < 1e-12);
-        assert!(
-            (tube_surface_distance(&m, &Point3::new(0.0, r + 0.003, 0.01)) - 0.003).abs() < 1e-12
-        );
+        assert!((tube_surface_distance(&m, &Point3::new(0.0, r + 0.003, 0.01)) - 0.003).abs() < 1e-12);
         let half = m.length / 2.0;
-        assert!(
-            (tube_surface_distance(&m, &Point3::new(0.0, 0.0, half + 0.002)) - 0.002).abs() < 1e-12
-        );
+        assert!((tube_surface_distance(&m, &Point3::new(0.0, 0.0, half + 0.002)) - 0.002).abs() < 1e-12);
         assert_eq!(quantile(&[3.0, 1.0, 2.0], 0.5), 2.0);
     }
 }

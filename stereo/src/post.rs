@@ -7,47 +7,38 @@ use tubeloc_core::Plane;
 pub fn median3(disp: &Plane<f32>) -> Plane<f32> {
     let (w, h) = (disp.width, disp.height);
     let mut out = disp.clone();
-    out.data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(y, orow)| {
-            let mut buf = [0f32; 9];
-            // Interior pixels whose whole 3x3 is valid: vectorized network over the row.
-            let mut fast = vec![0f32; w.saturating_sub(2)];
-            let mut has_nan = vec![0u8; w.saturating_sub(2)];
-            let interior = y > 0 && y + 1 < h && w > 2;
-            if interior {
-                median_row(
-                    disp.row(y - 1),
-                    disp.row(y),
-                    disp.row(y + 1),
-                    &mut fast,
-                    &mut has_nan,
-                );
+    out.data.par_chunks_mut(w).enumerate().for_each(|(y, orow)| {
+        let mut buf = [0f32; 9];
+        // Interior pixels whose whole 3x3 is valid: vectorized network over the row.
+        let mut fast = vec![0f32; w.saturating_sub(2)];
+        let mut has_nan = vec![0u8; w.saturating_sub(2)];
+        let interior = y > 0 && y + 1 < h && w > 2;
+        if interior {
+            median_row(disp.row(y - 1), disp.row(y), disp.row(y + 1), &mut fast, &mut has_nan);
+        }
+        for (x, o) in orow.iter_mut().enumerate() {
+            if disp.get(x, y).is_nan() {
+                continue;
             }
-            for (x, o) in orow.iter_mut().enumerate() {
-                if disp.get(x, y).is_nan() {
-                    continue;
-                }
-                if interior && x > 0 && x + 1 < w && has_nan[x - 1] == 0 {
-                    *o = fast[x - 1];
-                    continue;
-                }
-                let mut n = 0;
-                for yy in y.saturating_sub(1)..(y + 2).min(h) {
-                    for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                        let v = disp.get(xx, yy);
-                        if !v.is_nan() {
-                            buf[n] = v;
-                            n += 1;
-                        }
+            if interior && x > 0 && x + 1 < w && has_nan[x - 1] == 0 {
+                *o = fast[x - 1];
+                continue;
+            }
+            let mut n = 0;
+            for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let v = disp.get(xx, yy);
+                    if !v.is_nan() {
+                        buf[n] = v;
+                        n += 1;
                     }
                 }
-                let s = &mut buf[..n];
-                s.sort_unstable_by(f32::total_cmp);
-                *o = s[n / 2];
             }
-        });
+            let s = &mut buf[..n];
+            s.sort_unstable_by(f32::total_cmp);
+            *o = s[n / 2];
+        }
+    });
     out
 }
 
@@ -77,25 +68,8 @@ fn median9(mut p: [f32; 9]) -> f32 {
         p[a] = if x < y { x } else { y };
         p[b] = if x < y { y } else { x };
     };
-    s(1, 2);
-    s(4, 5);
-    s(7, 8);
-    s(0, 1);
-    s(3, 4);
-    s(6, 7);
-    s(1, 2);
-    s(4, 5);
-    s(7, 8);
-    s(0, 3);
-    s(5, 8);
-    s(4, 7);
-    s(3, 6);
-    s(1, 4);
-    s(2, 5);
-    s(4, 7);
-    s(4, 2);
-    s(6, 4);
-    s(4, 2);
+    s(1, 2); s(4, 5); s(7, 8); s(0, 1); s(3, 4); s(6, 7); s(1, 2); s(4, 5); s(7, 8);
+    s(0, 3); s(5, 8); s(4, 7); s(3, 6); s(1, 4); s(2, 5); s(4, 7); s(4, 2); s(6, 4); s(4, 2);
     p[4]
 }
 

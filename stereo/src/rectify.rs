@@ -103,16 +103,12 @@ impl StereoRectification {
         let t = t_left_right.translation();
         let baseline = t.norm();
         if !(baseline > 1e-9) {
-            return Err(StereoError::Unrectifiable(format!(
-                "zero baseline ({baseline:.3e} m) between the optical centres"
-            )));
+            return Err(StereoError::Unrectifiable(format!("zero baseline ({baseline:.3e} m) between the optical centres")));
         }
         let e1 = t / baseline;
         let z_mean = Vector3::z() + r * Vector3::z();
         if z_mean.norm() < 1e-6 {
-            return Err(StereoError::Unrectifiable(
-                "the cameras look in opposite directions".into(),
-            ));
+            return Err(StereoError::Unrectifiable("the cameras look in opposite directions".into()));
         }
         let z_mean = z_mean.normalize();
         let along = e1.dot(&z_mean);
@@ -132,45 +128,16 @@ impl StereoRectification {
         // Principal point: the original image centres land, on average, at the rectified centre.
         let mut off = Vector3::zeros();
         for (cam, rot) in [(left, &r1), (right, &r2)] {
-            let (x, y) =
-                cam.normalize(&Point2::new((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0));
+            let (x, y) = cam.normalize(&Point2::new((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0));
             let ray = rot * Vector3::new(x, y, 1.0);
             off += Vector3::new(f * ray.x / ray.z, f * ray.y / ray.z, 0.0) / 2.0;
         }
-        let (cx, cy) = (
-            (w as f64 - 1.0) / 2.0 - off.x,
-            (h as f64 - 1.0) / 2.0 - off.y,
-        );
-        let rectified = CameraModel {
-            width: w as u32,
-            height: h as u32,
-            fx: f,
-            fy: f,
-            cx,
-            cy,
-            distortion: Default::default(),
-        };
+        let (cx, cy) = ((w as f64 - 1.0) / 2.0 - off.x, (h as f64 - 1.0) / 2.0 - off.y);
+        let rectified = CameraModel { width: w as u32, height: h as u32, fx: f, fy: f, cx, cy, distortion: Default::default() };
         let p1 = Matrix3x4::new(f, 0.0, cx, 0.0, 0.0, f, cy, 0.0, 0.0, 0.0, 1.0, 0.0);
         let mut p2 = p1;
         p2[(0, 3)] = -f * baseline;
-        let q = Matrix4::new(
-            1.0,
-            0.0,
-            0.0,
-            -cx,
-            0.0,
-            1.0,
-            0.0,
-            -cy,
-            0.0,
-            0.0,
-            0.0,
-            f,
-            0.0,
-            0.0,
-            1.0 / baseline,
-            0.0,
-        );
+        let q = Matrix4::new(1.0, 0.0, 0.0, -cx, 0.0, 1.0, 0.0, -cy, 0.0, 0.0, 0.0, f, 0.0, 0.0, 1.0 / baseline, 0.0);
         let map_left = remap_table(left, &r1, &rectified);
         let map_right = remap_table(right, &r2, &rectified);
         let valid_left = valid_rect(&map_left);
@@ -194,34 +161,19 @@ impl StereoRectification {
 
     /// Focal length, principal point and baseline for [`crate::triangulate::triangulate`].
     pub fn geometry(&self) -> RectifiedGeometry {
-        RectifiedGeometry {
-            f: self.rectified.fx,
-            cx: self.rectified.cx,
-            cy: self.rectified.cy,
-            baseline: self.baseline,
-        }
+        RectifiedGeometry { f: self.rectified.fx, cx: self.rectified.cx, cy: self.rectified.cy, baseline: self.baseline }
     }
 
     /// Remaps an original image pair into rectified images (bilinear, 0 outside the source).
     /// Errors when an image does not have its camera's size.
-    pub fn rectify_pair(
-        &self,
-        left: &Plane<u8>,
-        right: &Plane<u8>,
-    ) -> Result<(Plane<u8>, Plane<u8>)> {
-        for (name, img, cam) in [
-            ("left image", left, &self.left),
-            ("right image", right, &self.right),
-        ] {
+    pub fn rectify_pair(&self, left: &Plane<u8>, right: &Plane<u8>) -> Result<(Plane<u8>, Plane<u8>)> {
+        for (name, img, cam) in [("left image", left, &self.left), ("right image", right, &self.right)] {
             if img.width != cam.width as usize || img.height != cam.height as usize {
                 return Err(StereoError::SizeMismatch {
                     what: name.into(),
                     a_w: img.width,
                     a_h: img.height,
-                    other: format!(
-                        "its camera model ({})",
-                        name.split(' ').next().unwrap_or("")
-                    ),
+                    other: format!("its camera model ({})", name.split(' ').next().unwrap_or("")),
                     b_w: cam.width as usize,
                     b_h: cam.height as usize,
                 });
@@ -237,19 +189,13 @@ impl StereoRectification {
 
     /// Rectified left pixel of a point given in the original left camera frame.
     pub fn project_left(&self, p_left: &Point3<f64>) -> Option<Point2<f64>> {
-        self.rectified
-            .project(&Point3::from(self.r_left * p_left.coords))
+        self.rectified.project(&Point3::from(self.r_left * p_left.coords))
     }
 
     /// Triangulated points converted into the original left camera frame (`σ_Z` stays the
     /// depth uncertainty along the rectified optical axis).
     pub fn points_in_left_camera(&self, pts: &[StereoPoint]) -> Vec<StereoPoint> {
-        pts.iter()
-            .map(|p| StereoPoint {
-                point: self.to_left_camera(&p.point),
-                ..*p
-            })
-            .collect()
+        pts.iter().map(|p| StereoPoint { point: self.to_left_camera(&p.point), ..*p }).collect()
     }
 }
 
@@ -259,36 +205,22 @@ fn remap_table(cam: &CameraModel, rot: &Matrix3<f64>, rect: &CameraModel) -> Rem
     let mut map_x = Plane::<f32>::new(w, h);
     let mut map_y = Plane::<f32>::new(w, h);
     let (sw, sh) = (cam.width as f64 - 1.0, cam.height as f64 - 1.0);
-    map_x
-        .data
-        .par_chunks_mut(w)
-        .zip(map_y.data.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(v, (mx, my))| {
-            for u in 0..w {
-                let ray = rt
-                    * Vector3::new(
-                        (u as f64 - rect.cx) / rect.fx,
-                        (v as f64 - rect.cy) / rect.fy,
-                        1.0,
-                    );
-                let src = if ray.z > 1e-9 {
-                    Some(cam.project_normalized(ray.x / ray.z, ray.y / ray.z))
-                } else {
-                    None
-                };
-                match src {
-                    Some(s) if s.x >= 0.0 && s.y >= 0.0 && s.x <= sw && s.y <= sh => {
-                        mx[u] = s.x as f32;
-                        my[u] = s.y as f32;
-                    }
-                    _ => {
-                        mx[u] = f32::NAN;
-                        my[u] = f32::NAN;
-                    }
+    map_x.data.par_chunks_mut(w).zip(map_y.data.par_chunks_mut(w)).enumerate().for_each(|(v, (mx, my))| {
+        for u in 0..w {
+            let ray = rt * Vector3::new((u as f64 - rect.cx) / rect.fx, (v as f64 - rect.cy) / rect.fy, 1.0);
+            let src = if ray.z > 1e-9 { Some(cam.project_normalized(ray.x / ray.z, ray.y / ray.z)) } else { None };
+            match src {
+                Some(s) if s.x >= 0.0 && s.y >= 0.0 && s.x <= sw && s.y <= sh => {
+                    mx[u] = s.x as f32;
+                    my[u] = s.y as f32;
+                }
+                _ => {
+                    mx[u] = f32::NAN;
+                    my[u] = f32::NAN;
                 }
             }
-        });
+        }
+    });
     RemapTable { map_x, map_y }
 }
 
@@ -296,23 +228,20 @@ fn remap_table(cam: &CameraModel, rot: &Matrix3<f64>, rect: &CameraModel) -> Rem
 pub fn remap(img: &Plane<u8>, table: &RemapTable) -> Plane<u8> {
     let (w, h) = (table.map_x.width, table.map_x.height);
     let mut out = Plane::<u8>::new(w, h);
-    out.data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(v, orow)| {
-            for (u, o) in orow.iter_mut().enumerate() {
-                let (x, y) = (table.map_x.get(u, v), table.map_y.get(u, v));
-                if x.is_nan() {
-                    continue;
-                }
-                let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-                let (x1, y1) = ((x0 + 1).min(img.width - 1), (y0 + 1).min(img.height - 1));
-                let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-                let a = img.get(x0, y0) as f32 * (1.0 - fx) + img.get(x1, y0) as f32 * fx;
-                let b = img.get(x0, y1) as f32 * (1.0 - fx) + img.get(x1, y1) as f32 * fx;
-                *o = (a * (1.0 - fy) + b * fy).round().clamp(0.0, 255.0) as u8;
+    out.data.par_chunks_mut(w).enumerate().for_each(|(v, orow)| {
+        for (u, o) in orow.iter_mut().enumerate() {
+            let (x, y) = (table.map_x.get(u, v), table.map_y.get(u, v));
+            if x.is_nan() {
+                continue;
             }
-        });
+            let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+            let (x1, y1) = ((x0 + 1).min(img.width - 1), (y0 + 1).min(img.height - 1));
+            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+            let a = img.get(x0, y0) as f32 * (1.0 - fx) + img.get(x1, y0) as f32 * fx;
+            let b = img.get(x0, y1) as f32 * (1.0 - fx) + img.get(x1, y1) as f32 * fx;
+            *o = (a * (1.0 - fy) + b * fy).round().clamp(0.0, 255.0) as u8;
+        }
+    });
     out
 }
 
@@ -336,18 +265,9 @@ fn valid_rect(table: &RemapTable) -> PixelRect {
         let bad_row = |y: usize| (x0..x1).filter(|&x| !ok(x, y)).count();
         let bad_col = |x: usize| (y0..y1).filter(|&y| !ok(x, y)).count();
         let sides = [bad_row(y0), bad_row(y1 - 1), bad_col(x0), bad_col(x1 - 1)];
-        let (worst, &n) = sides
-            .iter()
-            .enumerate()
-            .max_by_key(|(_, &n)| n)
-            .unwrap_or((0, &0));
+        let (worst, &n) = sides.iter().enumerate().max_by_key(|(_, &n)| n).unwrap_or((0, &0));
         if n == 0 {
-            return PixelRect {
-                x: x0,
-                y: y0,
-                width: x1 - x0,
-                height: y1 - y0,
-            };
+            return PixelRect { x: x0, y: y0, width: x1 - x0, height: y1 - y0 };
         }
         match worst {
             0 => y0 += 1,
@@ -356,10 +276,5 @@ fn valid_rect(table: &RemapTable) -> PixelRect {
             _ => x1 -= 1,
         }
     }
-    PixelRect {
-        x: 0,
-        y: 0,
-        width: 0,
-        height: 0,
-    }
+    PixelRect { x: 0, y: 0, width: 0, height: 0 }
 }

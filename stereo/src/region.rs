@@ -27,19 +27,11 @@ pub struct Roi {
 impl Roi {
     /// A region from `(x, y, width, height)`.
     pub fn new(x: i64, y: i64, width: i64, height: i64) -> Self {
-        Roi {
-            x,
-            y,
-            width,
-            height,
-        }
+        Roi { x, y, width, height }
     }
 
     fn err(&self, message: &str) -> StereoError {
-        StereoError::InvalidRegion {
-            roi: (self.x, self.y, self.width, self.height),
-            message: message.into(),
-        }
+        StereoError::InvalidRegion { roi: (self.x, self.y, self.width, self.height), message: message.into() }
     }
 }
 
@@ -57,12 +49,7 @@ impl Rect {
         self.x0 < o.x1 && o.x0 < self.x1 && self.y0 < o.y1 && o.y0 < self.y1
     }
     fn union(&self, o: &Rect) -> Rect {
-        Rect {
-            x0: self.x0.min(o.x0),
-            y0: self.y0.min(o.y0),
-            x1: self.x1.max(o.x1),
-            y1: self.y1.max(o.y1),
-        }
+        Rect { x0: self.x0.min(o.x0), y0: self.y0.min(o.y0), x1: self.x1.max(o.x1), y1: self.y1.max(o.y1) }
     }
 }
 
@@ -70,10 +57,7 @@ impl Rect {
 /// entirely outside the `w x h` image.
 fn grown_regions(rois: &[Roi], margin: usize, w: usize, h: usize) -> Result<Vec<Rect>> {
     if rois.is_empty() {
-        return Err(StereoError::InvalidRegion {
-            roi: (0, 0, 0, 0),
-            message: "no regions of interest given".into(),
-        });
+        return Err(StereoError::InvalidRegion { roi: (0, 0, 0, 0), message: "no regions of interest given".into() });
     }
     let mut rects = Vec::with_capacity(rois.len());
     for r in rois {
@@ -120,13 +104,7 @@ fn crop(img: &Plane<u8>, x0: usize, y0: usize, x1: usize, y1: usize) -> Plane<u8
 
 /// Disparity of a rectified pair only inside `rois` grown by `margin` pixels (`NaN` elsewhere).
 /// Errors on size mismatch, an empty region list, empty regions and regions outside the image.
-pub fn disparity_regions(
-    left: &Plane<u8>,
-    right: &Plane<u8>,
-    params: &SgmParams,
-    rois: &[Roi],
-    margin: usize,
-) -> Result<Plane<f32>> {
+pub fn disparity_regions(left: &Plane<u8>, right: &Plane<u8>, params: &SgmParams, rois: &[Roi], margin: usize) -> Result<Plane<f32>> {
     let mut matcher = SgmMatcher::new(params.clone())?;
     if left.width != right.width || left.height != right.height {
         // Reuse the full-image check for its message.
@@ -142,15 +120,8 @@ pub fn disparity_regions(
         let cx1 = (r.x1 + reach_right).min(w);
         let cy0 = r.y0;
         let cy1 = r.y1;
-        let (lc, rc) = (
-            crop(left, cx0, cy0, cx1, cy1),
-            crop(right, cx0, cy0, cx1, cy1),
-        );
-        let d = if lc.width >= 2 && lc.height >= 2 {
-            matcher.compute(&lc, &rc)?
-        } else {
-            Plane::filled(lc.width, lc.height, f32::NAN)
-        };
+        let (lc, rc) = (crop(left, cx0, cy0, cx1, cy1), crop(right, cx0, cy0, cx1, cy1));
+        let d = if lc.width >= 2 && lc.height >= 2 { matcher.compute(&lc, &rc)? } else { Plane::filled(lc.width, lc.height, f32::NAN) };
         for y in r.y0..r.y1 {
             let src = &d.row(y - cy0)[r.x0 - cx0..r.x1 - cx0];
             out.data[y * w + r.x0..y * w + r.x1].copy_from_slice(src);
@@ -165,43 +136,19 @@ mod tests {
 
     #[test]
     fn regions_are_grown_clipped_and_merged() {
-        let r = grown_regions(
-            &[
-                Roi::new(10, 10, 5, 5),
-                Roi::new(18, 10, 5, 5),
-                Roi::new(90, 90, 20, 20),
-            ],
-            2,
-            100,
-            100,
-        )
-        .unwrap();
+        let r = grown_regions(&[Roi::new(10, 10, 5, 5), Roi::new(18, 10, 5, 5), Roi::new(90, 90, 20, 20)], 2, 100, 100).unwrap();
         assert_eq!(r.len(), 2);
-        assert!(r.contains(&Rect {
-            x0: 8,
-            y0: 8,
-            x1: 25,
-            y1: 17
-        }));
-        assert!(r.contains(&Rect {
-            x0: 88,
-            y0: 88,
-            x1: 100,
-            y1: 100
-        }));
+        assert!(r.contains(&Rect { x0: 8, y0: 8, x1: 25, y1: 17 }));
+        assert!(r.contains(&Rect { x0: 88, y0: 88, x1: 100, y1: 100 }));
     }
 
     #[test]
     fn empty_and_outside_regions_error() {
         let e = grown_regions(&[], 0, 10, 10).unwrap_err().to_string();
         assert!(e.contains("no regions"), "{e}");
-        let e = grown_regions(&[Roi::new(1, 1, 0, 4)], 0, 10, 10)
-            .unwrap_err()
-            .to_string();
+        let e = grown_regions(&[Roi::new(1, 1, 0, 4)], 0, 10, 10).unwrap_err().to_string();
         assert!(e.contains("empty"), "{e}");
-        let e = grown_regions(&[Roi::new(20, 1, 3, 4)], 0, 10, 10)
-            .unwrap_err()
-            .to_string();
+        let e = grown_regions(&[Roi::new(20, 1, 3, 4)], 0, 10, 10).unwrap_err().to_string();
         assert!(e.contains("outside"), "{e}");
     }
 }

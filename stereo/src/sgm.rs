@@ -96,61 +96,28 @@ impl Default for SgmParams {
 impl SgmParams {
     /// Checks ranges; errors name the parameter.
     pub fn validate(&self) -> Result<()> {
-        if self.num_disparities == 0
-            || self.num_disparities % 16 != 0
-            || self.num_disparities > 1024
-        {
-            return Err(param(
-                "num_disparities",
-                format!(
-                    "{} must be a positive multiple of 16, at most 1024",
-                    self.num_disparities
-                ),
-            ));
+        if self.num_disparities == 0 || self.num_disparities % 16 != 0 || self.num_disparities > 1024 {
+            return Err(param("num_disparities", format!("{} must be a positive multiple of 16, at most 1024", self.num_disparities)));
         }
         let (cw, ch) = (self.census_width, self.census_height);
         if cw % 2 == 0 || ch % 2 == 0 || cw * ch < 9 || cw * ch > 65 {
-            return Err(param(
-                "census window",
-                format!("{cw}x{ch}: sizes must be odd with 9 <= w*h <= 65"),
-            ));
+            return Err(param("census window", format!("{cw}x{ch}: sizes must be odd with 9 <= w*h <= 65")));
         }
-        let cmax = self.census_weight as u32 * (cw * ch - 1) as u32
-            + self.gradient_weight as u32 * self.gradient_trunc as u32;
+        let cmax = self.census_weight as u32 * (cw * ch - 1) as u32 + self.gradient_weight as u32 * self.gradient_trunc as u32;
         if cmax > 255 {
-            return Err(param(
-                "census_weight",
-                format!(
-                    "largest pixel cost {cmax} exceeds 255; lower census_weight or gradient_weight"
-                ),
-            ));
+            return Err(param("census_weight", format!("largest pixel cost {cmax} exceeds 255; lower census_weight or gradient_weight")));
         }
         if self.census_weight == 0 && self.gradient_weight == 0 {
-            return Err(param(
-                "census_weight",
-                "census and gradient weights are both zero",
-            ));
+            return Err(param("census_weight", "census and gradient weights are both zero"));
         }
         if self.p1 == 0 || self.p1 > self.p2 || self.p2 > 3800 {
-            return Err(param(
-                "p1/p2",
-                format!(
-                    "need 0 < p1 <= p2 <= 3800, got p1={} p2={}",
-                    self.p1, self.p2
-                ),
-            ));
+            return Err(param("p1/p2", format!("need 0 < p1 <= p2 <= 3800, got p1={} p2={}", self.p1, self.p2)));
         }
         if !(self.p2_edge_k >= 0.0) || !self.p2_edge_k.is_finite() {
-            return Err(param(
-                "p2_edge_k",
-                format!("{} must be finite and >= 0", self.p2_edge_k),
-            ));
+            return Err(param("p2_edge_k", format!("{} must be finite and >= 0", self.p2_edge_k)));
         }
         if self.uniqueness >= 100 {
-            return Err(param(
-                "uniqueness",
-                format!("{} must be below 100 (percent)", self.uniqueness),
-            ));
+            return Err(param("uniqueness", format!("{} must be below 100 (percent)", self.uniqueness)));
         }
         if !(self.speckle_range >= 0.0) {
             return Err(param("speckle_range", "must be >= 0"));
@@ -160,18 +127,13 @@ impl SgmParams {
 
     /// Largest pixel matching cost (census bits times weight plus truncated gradient term).
     fn cost_max(&self) -> u32 {
-        self.census_weight as u32 * (self.census_width * self.census_height - 1) as u32
-            + self.gradient_weight as u32 * self.gradient_trunc as u32
+        self.census_weight as u32 * (self.census_width * self.census_height - 1) as u32 + self.gradient_weight as u32 * self.gradient_trunc as u32
     }
 
     fn agg_params(&self) -> AggParams {
         let mut lut = [0i16; 256];
         for (di, v) in lut.iter_mut().enumerate() {
-            let p2 = if self.p2_edge_k > 0.0 {
-                self.p2 as f32 / (1.0 + di as f32 / self.p2_edge_k)
-            } else {
-                self.p2 as f32
-            };
+            let p2 = if self.p2_edge_k > 0.0 { self.p2 as f32 / (1.0 + di as f32 / self.p2_edge_k) } else { self.p2 as f32 };
             *v = (p2.round() as i16).max(self.p1 as i16);
         }
         AggParams {
@@ -202,11 +164,7 @@ impl SgmMatcher {
     /// A matcher with validated parameters.
     pub fn new(params: SgmParams) -> Result<Self> {
         params.validate()?;
-        Ok(SgmMatcher {
-            params,
-            census: (Plane::new(0, 0), Plane::new(0, 0)),
-            bufs: AggBuffers::default(),
-        })
+        Ok(SgmMatcher { params, census: (Plane::new(0, 0), Plane::new(0, 0)), bufs: AggBuffers::default() })
     }
 
     /// The parameters in use.
@@ -230,28 +188,17 @@ impl SgmMatcher {
         census_into(right, p.census_width, p.census_height, cr)?;
         reverse_rows(cr);
         let (cl, cr) = (&*cl, &*cr);
-        let grads = if p.gradient_weight > 0 {
-            Some((sobel_x(left), sobel_x(right)))
-        } else {
-            None
-        };
+        let grads = if p.gradient_weight > 0 { Some((sobel_x(left), sobel_x(right))) } else { None };
         let wt = CostWeights {
             census: p.census_weight,
             grad: p.gradient_weight,
             grad_trunc: p.gradient_trunc,
-            border: (p.census_weight as u32 * (p.census_width * p.census_height - 1) as u32 / 2)
-                .min(255) as u8,
+            border: (p.census_weight as u32 * (p.census_width * p.census_height - 1) as u32 / 2).min(255) as u8,
         };
         let grads = grads.as_ref().map(|(a, b)| (a, b));
         let dmin = p.min_disparity;
         let mut out = Plane::<f32>::new(w, h);
-        aggregate_select(
-            left,
-            &p.agg_params(),
-            &mut self.bufs,
-            &mut out.data,
-            |y, row| cost_row(y, cl, cr, grads, dmin, nd, wt, row),
-        );
+        aggregate_select(left, &p.agg_params(), &mut self.bufs, &mut out.data, |y, row| cost_row(y, cl, cr, grads, dmin, nd, wt, row));
         if p.median {
             out = median3(&out);
         }
@@ -277,20 +224,8 @@ fn check_pair(left: &Plane<u8>, right: &Plane<u8>) -> Result<()> {
             b_h: right.height,
         });
     }
-    if left.width < 2
-        || left.height < 2
-        || left.data.len() != left.width * left.height
-        || right.data.len() != left.data.len()
-    {
-        return Err(param(
-            "images",
-            format!(
-                "{}x{} image with {} values is too small or inconsistent",
-                left.width,
-                left.height,
-                left.data.len()
-            ),
-        ));
+    if left.width < 2 || left.height < 2 || left.data.len() != left.width * left.height || right.data.len() != left.data.len() {
+        return Err(param("images", format!("{}x{} image with {} values is too small or inconsistent", left.width, left.height, left.data.len())));
     }
     Ok(())
 }

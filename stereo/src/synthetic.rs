@@ -40,9 +40,7 @@ pub struct SyntheticPair {
 
 #[inline]
 fn hash(i: i64, j: i64, seed: u64) -> f64 {
-    let mut h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
-        ^ seed.wrapping_mul(0x1656_67B1_9E37_79F9);
+    let mut h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F) ^ seed.wrapping_mul(0x1656_67B1_9E37_79F9);
     h ^= h >> 31;
     h = h.wrapping_mul(0xD6E8_FEB8_6659_FD93);
     h ^= h >> 29;
@@ -52,10 +50,7 @@ fn hash(i: i64, j: i64, seed: u64) -> f64 {
 /// Procedural texture value in `[0, 255]` at continuous coordinates `(u, v)`.
 fn texture(u: f64, v: f64, seed: u64) -> f64 {
     let mut sum = 0.0;
-    for (k, (cell, amp)) in [(2.0, 0.5), (5.0, 0.3), (13.0, 0.2)]
-        .into_iter()
-        .enumerate()
-    {
+    for (k, (cell, amp)) in [(2.0, 0.5), (5.0, 0.3), (13.0, 0.2)].into_iter().enumerate() {
         let (x, y) = (u / cell, v / cell);
         let (i, j) = (x.floor(), y.floor());
         let (fx, fy) = (x - i, y - j);
@@ -71,13 +66,7 @@ fn texture(u: f64, v: f64, seed: u64) -> f64 {
 
 /// Renders a `width x height` pair: background plane `d = plane.0 + plane.1 x + plane.2 y`
 /// (requires `|plane.1| < 1`) and `boxes` in front of it; `seed` picks the textures.
-pub fn render_scene(
-    width: usize,
-    height: usize,
-    plane: (f64, f64, f64),
-    boxes: &[SyntheticBox],
-    seed: u64,
-) -> SyntheticPair {
+pub fn render_scene(width: usize, height: usize, plane: (f64, f64, f64), boxes: &[SyntheticBox], seed: u64) -> SyntheticPair {
     let (a, b, c) = plane;
     // Front-most surface at a left pixel: (surface id, disparity); id 0 = background.
     let left_surface = |x: f64, y: f64| {
@@ -99,11 +88,7 @@ pub fn render_scene(
         }
         best
     };
-    let tex = |k: usize, u: f64, v: f64| {
-        texture(u, v, seed.wrapping_mul(31).wrapping_add(k as u64 * 104_729))
-            .round()
-            .clamp(0.0, 255.0) as u8
-    };
+    let tex = |k: usize, u: f64, v: f64| texture(u, v, seed.wrapping_mul(31).wrapping_add(k as u64 * 104_729)).round().clamp(0.0, 255.0) as u8;
     let mut left = Plane::<u8>::new(width, height);
     let mut right = Plane::<u8>::new(width, height);
     let mut disparity = Plane::<f32>::new(width, height);
@@ -121,12 +106,7 @@ pub fn render_scene(
             *right.get_mut(x, y) = tex(kr, xf, yf);
         }
     }
-    SyntheticPair {
-        left,
-        right,
-        disparity,
-        visible,
-    }
+    SyntheticPair { left, right, disparity, visible }
 }
 
 /// The benchmark scene used by `benches/sgm.rs` and `scripts/stereo_bench.sh`: a slanted plane
@@ -134,34 +114,10 @@ pub fn render_scene(
 pub fn bench_scene(width: usize, height: usize, seed: u64) -> SyntheticPair {
     let (w, h) = (width as f64, height as f64);
     let boxes = [
-        SyntheticBox {
-            x0: 0.2 * w,
-            y0: 0.2 * h,
-            x1: 0.4 * w,
-            y1: 0.45 * h,
-            d: 100.0,
-        },
-        SyntheticBox {
-            x0: 0.55 * w,
-            y0: 0.15 * h,
-            x1: 0.8 * w,
-            y1: 0.35 * h,
-            d: 110.5,
-        },
-        SyntheticBox {
-            x0: 0.3 * w,
-            y0: 0.6 * h,
-            x1: 0.5 * w,
-            y1: 0.85 * h,
-            d: 117.25,
-        },
-        SyntheticBox {
-            x0: 0.65 * w,
-            y0: 0.55 * h,
-            x1: 0.9 * w,
-            y1: 0.8 * h,
-            d: 124.0,
-        },
+        SyntheticBox { x0: 0.2 * w, y0: 0.2 * h, x1: 0.4 * w, y1: 0.45 * h, d: 100.0 },
+        SyntheticBox { x0: 0.55 * w, y0: 0.15 * h, x1: 0.8 * w, y1: 0.35 * h, d: 110.5 },
+        SyntheticBox { x0: 0.3 * w, y0: 0.6 * h, x1: 0.5 * w, y1: 0.85 * h, d: 117.25 },
+        SyntheticBox { x0: 0.65 * w, y0: 0.55 * h, x1: 0.9 * w, y1: 0.8 * h, d: 124.0 },
     ];
     render_scene(width, height, (20.0, 0.05, 0.03), &boxes, seed)
 }

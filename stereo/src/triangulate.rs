@@ -76,9 +76,7 @@ pub fn triangulate(disp: &Plane<f32>, geom: &RectifiedGeometry, sigma_d: f64) ->
         .par_chunks(disp.width.max(1))
         .enumerate()
         .flat_map_iter(|(y, row)| {
-            row.iter().enumerate().filter_map(move |(x, &d)| {
-                geom.triangulate_pixel(x as f64, y as f64, d as f64, sigma_d)
-            })
+            row.iter().enumerate().filter_map(move |(x, &d)| geom.triangulate_pixel(x as f64, y as f64, d as f64, sigma_d))
         })
         .collect()
 }
@@ -89,12 +87,7 @@ mod tests {
 
     #[test]
     fn depth_and_sigma_follow_formulas() {
-        let g = RectifiedGeometry {
-            f: 1000.0,
-            cx: 500.0,
-            cy: 400.0,
-            baseline: 0.2,
-        };
+        let g = RectifiedGeometry { f: 1000.0, cx: 500.0, cy: 400.0, baseline: 0.2 };
         let p = g.triangulate_pixel(600.0, 300.0, 50.0, 0.25).unwrap();
         assert!((p.point.z - 4.0).abs() < 1e-12);
         assert!((p.point.x - 0.4).abs() < 1e-12 && (p.point.y + 0.4).abs() < 1e-12);

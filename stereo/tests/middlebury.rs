@@ -11,23 +11,17 @@ use tubeloc_stereo::metrics::{score, GroundTruth};
 use tubeloc_stereo::{disparity, SgmParams};
 
 fn data_dir() -> Option<PathBuf> {
-    let d =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/stereo/middlebury2003/cones");
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/stereo/middlebury2003/cones");
     if d.join("im2.png").exists() {
         Some(d)
     } else {
-        eprintln!(
-            "skipping: Middlebury cones not found at {} (see ../shared/data/README.md)",
-            d.display()
-        );
+        eprintln!("skipping: Middlebury cones not found at {} (see ../shared/data/README.md)", d.display());
         None
     }
 }
 
 fn gray(path: &Path) -> Plane<u8> {
-    let img = image::open(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .to_luma8();
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_luma8();
     Plane::from_vec(img.width() as usize, img.height() as usize, img.into_raw())
 }
 
@@ -35,26 +29,11 @@ fn gray(path: &Path) -> Plane<u8> {
 fn cones_bad2_below_threshold() {
     let Some(dir) = data_dir() else { return };
     let (l, r) = (gray(&dir.join("im2.png")), gray(&dir.join("im6.png")));
-    let gt = GroundTruth::from_middlebury(
-        &gray(&dir.join("disp2.png")),
-        &gray(&dir.join("disp6.png")),
-        4.0,
-    );
+    let gt = GroundTruth::from_middlebury(&gray(&dir.join("disp2.png")), &gray(&dir.join("disp6.png")), 4.0);
     assert!(gt.evaluated_fraction() > 0.8);
-    let d = disparity(
-        &l,
-        &r,
-        &SgmParams {
-            num_disparities: 64,
-            ..SgmParams::default()
-        },
-    )
-    .unwrap();
+    let d = disparity(&l, &r, &SgmParams { num_disparities: 64, ..SgmParams::default() }).unwrap();
     let s = score(&d, &gt, 2.0);
-    eprintln!(
-        "cones: bad-2.0 {:.4}, MAE {:.3} px, density {:.3}, {} px evaluated",
-        s.bad, s.mae, s.density, s.evaluated
-    );
+    eprintln!("cones: bad-2.0 {:.4}, MAE {:.3} px, density {:.3}, {} px evaluated", s.bad, s.mae, s.density, s.evaluated);
     assert!(s.bad < 0.065, "bad-2.0 = {}", s.bad);
     assert!(s.mae < 0.6, "MAE = {}", s.mae);
 }

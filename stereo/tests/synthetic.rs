@@ -35,21 +35,11 @@ fn slanted_plane_with_boxes_is_recovered_with_eight_and_four_paths() {
         320,
         240,
         (8.0, 0.04, 0.02),
-        &[SyntheticBox {
-            x0: 150.0,
-            y0: 60.0,
-            x1: 230.0,
-            y1: 150.0,
-            d: 40.5,
-        }],
+        &[SyntheticBox { x0: 150.0, y0: 60.0, x1: 230.0, y1: 150.0, d: 40.5 }],
         7,
     );
     for paths in [Paths::Eight, Paths::Four] {
-        let p = SgmParams {
-            num_disparities: 64,
-            paths,
-            ..SgmParams::default()
-        };
+        let p = SgmParams { num_disparities: 64, paths, ..SgmParams::default() };
         let d = disparity(&pair.left, &pair.right, &p).unwrap();
         let (bad1, mae) = errors(&d, &pair.disparity, &pair.visible, 1.0, 4);
         eprintln!("{paths:?}: bad-1.0 {bad1:.4}, MAE {mae:.3} px");
@@ -72,23 +62,8 @@ fn same_seed_gives_same_images_and_disparities() {
 
 #[test]
 fn region_mode_matches_full_image_inside_the_region() {
-    let pair = render_scene(
-        256,
-        192,
-        (10.0, 0.02, 0.0),
-        &[SyntheticBox {
-            x0: 120.0,
-            y0: 60.0,
-            x1: 180.0,
-            y1: 120.0,
-            d: 30.0,
-        }],
-        11,
-    );
-    let p = SgmParams {
-        num_disparities: 48,
-        ..SgmParams::default()
-    };
+    let pair = render_scene(256, 192, (10.0, 0.02, 0.0), &[SyntheticBox { x0: 120.0, y0: 60.0, x1: 180.0, y1: 120.0, d: 30.0 }], 11);
+    let p = SgmParams { num_disparities: 48, ..SgmParams::default() };
     let full = disparity(&pair.left, &pair.right, &p).unwrap();
     let roi = Roi::new(130, 70, 40, 40);
     let reg = disparity_regions(&pair.left, &pair.right, &p, &[roi], 16).unwrap();
@@ -114,46 +89,14 @@ fn bad_inputs_give_clear_errors() {
     let b = Plane::<u8>::new(64, 40);
     let e = disparity(&a, &b, &SgmParams::default()).unwrap_err();
     assert!(matches!(e, StereoError::SizeMismatch { .. }));
-    assert!(
-        e.to_string().contains("64x48") && e.to_string().contains("64x40"),
-        "{e}"
-    );
-    let e = disparity(
-        &a,
-        &a,
-        &SgmParams {
-            num_disparities: 20,
-            ..SgmParams::default()
-        },
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(
-        e.contains("num_disparities") && e.contains("multiple of 16"),
-        "{e}"
-    );
-    let e = disparity(
-        &a,
-        &a,
-        &SgmParams {
-            p1: 50,
-            p2: 10,
-            ..SgmParams::default()
-        },
-    )
-    .unwrap_err()
-    .to_string();
+    assert!(e.to_string().contains("64x48") && e.to_string().contains("64x40"), "{e}");
+    let e = disparity(&a, &a, &SgmParams { num_disparities: 20, ..SgmParams::default() }).unwrap_err().to_string();
+    assert!(e.contains("num_disparities") && e.contains("multiple of 16"), "{e}");
+    let e = disparity(&a, &a, &SgmParams { p1: 50, p2: 10, ..SgmParams::default() }).unwrap_err().to_string();
     assert!(e.contains("p1"), "{e}");
-    let p = SgmParams {
-        num_disparities: 16,
-        ..SgmParams::default()
-    };
-    let e = disparity_regions(&a, &a, &p, &[], 4)
-        .unwrap_err()
-        .to_string();
+    let p = SgmParams { num_disparities: 16, ..SgmParams::default() };
+    let e = disparity_regions(&a, &a, &p, &[], 4).unwrap_err().to_string();
     assert!(e.contains("no regions"), "{e}");
-    let e = disparity_regions(&a, &a, &p, &[Roi::new(5, 5, 0, 10)], 4)
-        .unwrap_err()
-        .to_string();
+    let e = disparity_regions(&a, &a, &p, &[Roi::new(5, 5, 0, 10)], 4).unwrap_err().to_string();
     assert!(e.contains("empty"), "{e}");
 }

@@ -34,8 +34,7 @@ pub const DEFAULT_RIG_JSON: &str = include_str!("../../data/rig_default.json");
 /// Parses [`DEFAULT_RIG_JSON`]: 4 cameras `L40, L20, R20, R40`, 5472x3648 native, 77 degree
 /// HFOV, stereo pairs `L20-R20` (0.20 m) and `L40-R40` (0.40 m).
 pub fn default_rig() -> Rig {
-    serde_json::from_str(DEFAULT_RIG_JSON)
-        .expect("data/rig_default.json is valid (checked by tests)")
+    serde_json::from_str(DEFAULT_RIG_JSON).expect("data/rig_default.json is valid (checked by tests)")
 }
 
 /// A grid of tags on a planar board.
@@ -68,34 +67,16 @@ pub struct BoardTag {
 
 impl BoardLayout {
     /// A `cols x rows` grid of `tag_size_m` tags at centre spacing `pitch_m`, ids from `first_id`.
-    pub fn grid(
-        family: TagFamily,
-        cols: usize,
-        rows: usize,
-        tag_size_m: f64,
-        pitch_m: f64,
-        first_id: u32,
-    ) -> Self {
+    pub fn grid(family: TagFamily, cols: usize, rows: usize, tag_size_m: f64, pitch_m: f64, first_id: u32) -> Self {
         let mut tags = Vec::with_capacity(cols * rows);
         for r in 0..rows {
             for c in 0..cols {
                 let x = (c as f64 - (cols as f64 - 1.0) / 2.0) * pitch_m;
                 let y = (r as f64 - (rows as f64 - 1.0) / 2.0) * pitch_m;
-                tags.push(BoardTag {
-                    id: first_id + (r * cols + c) as u32,
-                    centre: [x, y],
-                });
+                tags.push(BoardTag { id: first_id + (r * cols + c) as u32, centre: [x, y] });
             }
         }
-        BoardLayout {
-            family,
-            tag_size_m,
-            cols,
-            rows,
-            pitch_m,
-            first_id,
-            tags,
-        }
+        BoardLayout { family, tag_size_m, cols, rows, pitch_m, first_id, tags }
     }
 
     /// The default board: 8 x 6 tag36h11 tags of 6 cm at 8 cm pitch (ids 100..147).
@@ -113,10 +94,7 @@ impl BoardLayout {
 
     /// Half extents of the printed board (tags plus one pitch-gap margin), metres.
     pub fn half_extent(&self) -> (f64, f64) {
-        (
-            0.5 * self.cols as f64 * self.pitch_m,
-            0.5 * self.rows as f64 * self.pitch_m,
-        )
+        (0.5 * self.cols as f64 * self.pitch_m, 0.5 * self.rows as f64 * self.pitch_m)
     }
 }
 
@@ -131,14 +109,7 @@ impl<'a> BoardTexture<'a> {
         let tex = layout
             .tags
             .iter()
-            .map(|t| {
-                TagTexture::new(layout.family, t.id, layout.tag_size_m).ok_or_else(|| {
-                    CoreError::invalid(
-                        "board",
-                        format!("tag id {} not in {}", t.id, layout.family.name()),
-                    )
-                })
-            })
+            .map(|t| TagTexture::new(layout.family, t.id, layout.tag_size_m).ok_or_else(|| CoreError::invalid("board", format!("tag id {} not in {}", t.id, layout.family.name()))))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(BoardTexture { layout, tex })
     }
@@ -150,12 +121,8 @@ impl<'a> BoardTexture<'a> {
             return None;
         }
         let l = self.layout;
-        let c = ((x + hx) / l.pitch_m)
-            .floor()
-            .clamp(0.0, l.cols as f64 - 1.0) as usize;
-        let rr = ((y + hy) / l.pitch_m)
-            .floor()
-            .clamp(0.0, l.rows as f64 - 1.0) as usize;
+        let c = ((x + hx) / l.pitch_m).floor().clamp(0.0, l.cols as f64 - 1.0) as usize;
+        let rr = ((y + hy) / l.pitch_m).floor().clamp(0.0, l.rows as f64 - 1.0) as usize;
         let k = rr * l.cols + c;
         let [cx, cy] = l.tags[k].centre;
         Some(self.tex[k].sample_area(x - cx, y - cy, r).unwrap_or(1.0))
@@ -183,15 +150,7 @@ pub struct CalibSetConfig {
 
 impl Default for CalibSetConfig {
     fn default() -> Self {
-        CalibSetConfig {
-            views: 30,
-            seed: 1,
-            corner_noise_px: 0.2,
-            image_noise: 2.0,
-            scale: 0.25,
-            distance_m: (0.8, 2.0),
-            render: true,
-        }
+        CalibSetConfig { views: 30, seed: 1, corner_noise_px: 0.2, image_noise: 2.0, scale: 0.25, distance_m: (0.8, 2.0), render: true }
     }
 }
 
@@ -266,11 +225,7 @@ fn sample_pose(rng: &mut ChaCha8Rng, rig: &Rig, k: usize, cfg: &CalibSetConfig) 
     let m = &cam.model;
     let tx = (m.width as f64 / 2.0) / m.fx;
     let ty = (m.height as f64 / 2.0) / m.fy;
-    let (centre, frac) = if k % 3 == 0 {
-        (Vector3::zeros(), 0.15)
-    } else {
-        (cam.t_rig_cam.translation(), 0.6)
-    };
+    let (centre, frac) = if k % 3 == 0 { (Vector3::zeros(), 0.15) } else { (cam.t_rig_cam.translation(), 0.6) };
     let x = centre.x + rng.random_range(-frac..frac) * tx * d;
     let y = centre.y + rng.random_range(-frac..frac) * ty * d;
     let p = Vector3::new(x, y, d);
@@ -278,18 +233,12 @@ fn sample_pose(rng: &mut ChaCha8Rng, rig: &Rig, k: usize, cfg: &CalibSetConfig) 
     let ax = rng.random_range(-0.6..0.6);
     let ay = rng.random_range(-0.6..0.6);
     let az = rng.random_range(-0.35..0.35);
-    let tilt = Rotation3::from_axis_angle(&Vector3::x_axis(), ax)
-        * Rotation3::from_axis_angle(&Vector3::y_axis(), ay)
-        * Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::z()), az);
+    let tilt = Rotation3::from_axis_angle(&Vector3::x_axis(), ax) * Rotation3::from_axis_angle(&Vector3::y_axis(), ay) * Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::z()), az);
     Pose::from_parts(base * tilt, p)
 }
 
 /// Exact corners of the tags wholly visible (2 px margin, facing the camera) in `model`.
-fn visible_corners(
-    model: &CameraModel,
-    t_cam_board: &Pose,
-    board: &BoardLayout,
-) -> Vec<TagCorners> {
+fn visible_corners(model: &CameraModel, t_cam_board: &Pose, board: &BoardLayout) -> Vec<TagCorners> {
     let normal = t_cam_board.transform_vector(&Vector3::z());
     let mut out = Vec::new();
     for k in 0..board.tags.len() {
@@ -304,21 +253,12 @@ fn visible_corners(
             }
             // Points far outside the field of view can wrap through the distortion polynomial.
             let (x, y) = (p.x / p.z, p.y / p.z);
-            if x.abs() > 1.3 * model.width as f64 / 2.0 / model.fx
-                || y.abs() > 1.3 * model.height as f64 / 2.0 / model.fy
-            {
+            if x.abs() > 1.3 * model.width as f64 / 2.0 / model.fx || y.abs() > 1.3 * model.height as f64 / 2.0 / model.fy {
                 ok = false;
                 break;
             }
             match model.project(&p) {
-                Some(q)
-                    if q.x >= 2.0
-                        && q.y >= 2.0
-                        && q.x <= model.width as f64 - 3.0
-                        && q.y <= model.height as f64 - 3.0 =>
-                {
-                    px[j] = [q.x, q.y]
-                }
+                Some(q) if q.x >= 2.0 && q.y >= 2.0 && q.x <= model.width as f64 - 3.0 && q.y <= model.height as f64 - 3.0 => px[j] = [q.x, q.y],
                 _ => {
                     ok = false;
                     break;
@@ -326,50 +266,31 @@ fn visible_corners(
             }
         }
         if ok {
-            out.push(TagCorners {
-                id: board.tags[k].id,
-                corners: px,
-            });
+            out.push(TagCorners { id: board.tags[k].id, corners: px });
         }
     }
     out
 }
 
 /// Generates the views of a calibration set (no files written; images are not rendered here).
-pub fn generate(
-    rig: &Rig,
-    board: &BoardLayout,
-    cfg: &CalibSetConfig,
-) -> Result<CalibSet, CoreError> {
+pub fn generate(rig: &Rig, board: &BoardLayout, cfg: &CalibSetConfig) -> Result<CalibSet, CoreError> {
     rig.validate()?;
     if !(cfg.scale > 0.0 && cfg.scale <= 1.0) {
-        return Err(CoreError::invalid(
-            "scale",
-            format!("must be in (0, 1], got {}", cfg.scale),
-        ));
+        return Err(CoreError::invalid("scale", format!("must be in (0, 1], got {}", cfg.scale)));
     }
-    if !(cfg.corner_noise_px >= 0.0)
-        || !(cfg.distance_m.0 > 0.0 && cfg.distance_m.1 > cfg.distance_m.0)
-    {
-        return Err(CoreError::invalid(
-            "calibration set",
-            "noise must be >= 0 and the distance range increasing",
-        ));
+    if !(cfg.corner_noise_px >= 0.0) || !(cfg.distance_m.0 > 0.0 && cfg.distance_m.1 > cfg.distance_m.0) {
+        return Err(CoreError::invalid("calibration set", "noise must be >= 0 and the distance range increasing"));
     }
     BoardTexture::new(board)?;
     let rig_s = scaled_rig(rig, cfg.scale);
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let noise = Normal::new(0.0, cfg.corner_noise_px.max(1e-300))
-        .map_err(|e| CoreError::invalid("noise", e.to_string()))?;
+    let noise = Normal::new(0.0, cfg.corner_noise_px.max(1e-300)).map_err(|e| CoreError::invalid("noise", e.to_string()))?;
     let mut views = Vec::with_capacity(cfg.views);
     let mut attempts = 0;
     while views.len() < cfg.views {
         attempts += 1;
         if attempts > cfg.views * 50 + 100 {
-            return Err(CoreError::invalid(
-                "calibration set",
-                "could not place the board in view; is it too large for the distance range?",
-            ));
+            return Err(CoreError::invalid("calibration set", "could not place the board in view; is it too large for the distance range?"));
         }
         let k = views.len();
         let t_rig_board = sample_pose(&mut rng, &rig_s, k, cfg);
@@ -384,49 +305,23 @@ pub fn generate(
                 .iter()
                 .map(|t| TagCorners {
                     id: t.id,
-                    corners: t.corners.map(|[x, y]| {
-                        if cfg.corner_noise_px > 0.0 {
-                            [x + noise.sample(&mut rng), y + noise.sample(&mut rng)]
-                        } else {
-                            [x, y]
-                        }
-                    }),
+                    corners: t.corners.map(|[x, y]| if cfg.corner_noise_px > 0.0 { [x + noise.sample(&mut rng), y + noise.sample(&mut rng)] } else { [x, y] }),
                 })
                 .collect();
             let image = cfg.render.then(|| format!("view{k:03}_{}.png", cam.name));
-            observations.push(CameraObservation {
-                camera: cam.name.clone(),
-                image,
-                exact,
-                noisy,
-            });
+            observations.push(CameraObservation { camera: cam.name.clone(), image, exact, noisy });
         }
         if observations.is_empty() {
             continue;
         }
-        views.push(CalibView {
-            index: k,
-            t_rig_board,
-            observations,
-        });
+        views.push(CalibView { index: k, t_rig_board, observations });
     }
-    Ok(CalibSet {
-        config: cfg.clone(),
-        board: board.clone(),
-        rig: rig_s,
-        views,
-    })
+    Ok(CalibSet { config: cfg.clone(), board: board.clone(), rig: rig_s, views })
 }
 
 /// Renders the board seen by `model` at `t_cam_board` as 8-bit grey, with `noise` grey levels
 /// of Gaussian noise drawn from `seed`. Background (off the board) is a dim grey.
-pub fn render_board(
-    model: &CameraModel,
-    t_cam_board: &Pose,
-    board: &BoardLayout,
-    noise: f64,
-    seed: u64,
-) -> Result<Plane<u8>, CoreError> {
+pub fn render_board(model: &CameraModel, t_cam_board: &Pose, board: &BoardLayout, noise: f64, seed: u64) -> Result<Plane<u8>, CoreError> {
     render_planes(model, &[(*t_cam_board, board)], noise, seed)
 }
 
@@ -434,16 +329,8 @@ pub fn render_board(
 /// as 8-bit grey; the nearest board hit along each ray wins. 2x2 sub-samples per pixel, each
 /// area-sampling the texture over its footprint; Lambertian shading from a fixed light,
 /// vignetting, and Gaussian grey-level noise of `noise` (seeded by `seed`).
-pub fn render_planes(
-    model: &CameraModel,
-    planes: &[(Pose, &BoardLayout)],
-    noise: f64,
-    seed: u64,
-) -> Result<Plane<u8>, CoreError> {
-    let texs = planes
-        .iter()
-        .map(|(_, b)| BoardTexture::new(b))
-        .collect::<Result<Vec<_>, _>>()?;
+pub fn render_planes(model: &CameraModel, planes: &[(Pose, &BoardLayout)], noise: f64, seed: u64) -> Result<Plane<u8>, CoreError> {
+    let texs = planes.iter().map(|(_, b)| BoardTexture::new(b)).collect::<Result<Vec<_>, _>>()?;
     let (w, h) = (model.width as usize, model.height as usize);
     let light = Vector3::new(0.3, -0.5, -1.0).normalize();
     let geo: Vec<(Matrix3<f64>, Vector3<f64>, Vector3<f64>, f64)> = planes
@@ -456,8 +343,7 @@ pub fn render_planes(
         .collect();
     let mut img = Plane::<u8>::new(w, h);
     img.data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let mut rng =
-            ChaCha8Rng::seed_from_u64(seed ^ (y as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (y as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         let gauss = Normal::new(0.0, noise.max(1e-9)).expect("positive sigma");
         for (x, out) in row.iter_mut().enumerate() {
             let mut acc = 0.0f64;
@@ -476,8 +362,7 @@ pub fn render_planes(
                     }
                     let p = r.transpose() * (d * lambda - t);
                     // Footprint of a quarter pixel on the board, metres.
-                    let foot =
-                        0.25 * lambda * d.norm() / model.fx / (denom.abs() / d.norm()).sqrt();
+                    let foot = 0.25 * lambda * d.norm() / model.fx / (denom.abs() / d.norm()).sqrt();
                     if let Some(v) = tex.sample(p.x, p.y, foot) {
                         best = Some((lambda, (0.06 + 0.8 * v as f64) * shade * 255.0));
                     }
@@ -486,12 +371,7 @@ pub fn render_planes(
             }
             let u = (x as f64 / w as f64 - 0.5, y as f64 / h as f64 - 0.5);
             let vignette = 1.0 - 0.25 * (u.0 * u.0 + u.1 * u.1);
-            let v = acc / 4.0 * vignette
-                + if noise > 0.0 {
-                    gauss.sample(&mut rng)
-                } else {
-                    0.0
-                };
+            let v = acc / 4.0 * vignette + if noise > 0.0 { gauss.sample(&mut rng) } else { 0.0 };
             *out = v.round().clamp(0.0, 255.0) as u8;
         }
     });
@@ -500,34 +380,14 @@ pub fn render_planes(
 
 /// Writes `calib_set.json`, `rig_true.json` and (when `set.config.render`) the images into
 /// `dir`, calling `progress` after each rendered image. All files are written atomically.
-pub fn write_calib_set(
-    dir: &Path,
-    set: &CalibSet,
-    mut progress: impl FnMut(),
-) -> Result<(), CoreError> {
+pub fn write_calib_set(dir: &Path, set: &CalibSet, mut progress: impl FnMut()) -> Result<(), CoreError> {
     for view in &set.views {
         for obs in &view.observations {
             let Some(name) = &obs.image else { continue };
-            let cam = set.rig.camera(&obs.camera).ok_or_else(|| {
-                CoreError::invalid("calibration set", format!("unknown camera {}", obs.camera))
-            })?;
+            let cam = set.rig.camera(&obs.camera).ok_or_else(|| CoreError::invalid("calibration set", format!("unknown camera {}", obs.camera)))?;
             let t_cam_board = cam.t_rig_cam.inverse() * view.t_rig_board;
-            let seed = set.config.seed.wrapping_mul(1_000_003).wrapping_add(
-                (view.index * 16
-                    + set
-                        .rig
-                        .cameras
-                        .iter()
-                        .position(|c| c.name == cam.name)
-                        .unwrap_or(0)) as u64,
-            );
-            let img = render_board(
-                &cam.model,
-                &t_cam_board,
-                &set.board,
-                set.config.image_noise,
-                seed,
-            )?;
+            let seed = set.config.seed.wrapping_mul(1_000_003).wrapping_add((view.index * 16 + set.rig.cameras.iter().position(|c| c.name == cam.name).unwrap_or(0)) as u64);
+            let img = render_board(&cam.model, &t_cam_board, &set.board, set.config.image_noise, seed)?;
             let path = dir.join(name);
             let mut png = Vec::new();
             image::GrayImage::from_raw(img.width as u32, img.height as u32, img.data)
@@ -555,42 +415,23 @@ mod tests {
         assert!((rig.baseline("L40", "R40").unwrap() - 0.40).abs() < 2e-3);
         for c in &rig.cameras {
             assert_eq!((c.model.width, c.model.height), (5472, 3648));
-            assert!(
-                (c.model.hfov_deg() - 77.0).abs() < 0.5,
-                "{}",
-                c.model.hfov_deg()
-            );
+            assert!((c.model.hfov_deg() - 77.0).abs() < 0.5, "{}", c.model.hfov_deg());
             assert!(!c.model.distortion.is_zero());
         }
     }
 
     #[test]
     fn same_seed_same_set_and_simultaneous_views_exist() {
-        let cfg = CalibSetConfig {
-            views: 12,
-            render: false,
-            ..Default::default()
-        };
+        let cfg = CalibSetConfig { views: 12, render: false, ..Default::default() };
         let a = generate(&default_rig(), &BoardLayout::default_board(), &cfg).unwrap();
         let b = generate(&default_rig(), &BoardLayout::default_board(), &cfg).unwrap();
-        assert_eq!(
-            serde_json::to_string(&a).unwrap(),
-            serde_json::to_string(&b).unwrap()
-        );
-        assert!(
-            a.views.iter().any(|v| v.observations.len() == 4),
-            "no view seen by all 4 cameras"
-        );
+        assert_eq!(serde_json::to_string(&a).unwrap(), serde_json::to_string(&b).unwrap());
+        assert!(a.views.iter().any(|v| v.observations.len() == 4), "no view seen by all 4 cameras");
         // Exact corners reproject from the true pose.
         let v = &a.views[0];
         let obs = &v.observations[0];
         let cam = a.rig.camera(&obs.camera).unwrap();
-        let k = a
-            .board
-            .tags
-            .iter()
-            .position(|t| t.id == obs.exact[0].id)
-            .unwrap();
+        let k = a.board.tags.iter().position(|t| t.id == obs.exact[0].id).unwrap();
         let p = (cam.t_rig_cam.inverse() * v.t_rig_board).transform_point(&a.board.corners(k)[0]);
         let q = cam.model.project(&p).unwrap();
         assert!((q.x - obs.exact[0].corners[0][0]).abs() < 1e-9);

@@ -64,10 +64,7 @@ pub struct Composite {
 pub fn ground_frame(n: &Vector3<f64>, d: f64) -> Result<Pose, SynthError> {
     let nn = n.norm();
     if !(nn.is_finite() && nn > 1e-9 && d.is_finite()) {
-        return Err(SynthError::Invalid(format!(
-            "ground plane ({}, {}, {}; {d}) needs a non-zero finite normal and finite d",
-            n.x, n.y, n.z
-        )));
+        return Err(SynthError::Invalid(format!("ground plane ({}, {}, {}; {d}) needs a non-zero finite normal and finite d", n.x, n.y, n.z)));
     }
     let (mut n, mut d) = (n / nn, d / nn);
     if d < 0.0 {
@@ -76,17 +73,11 @@ pub fn ground_frame(n: &Vector3<f64>, d: f64) -> Result<Pose, SynthError> {
         d = -d;
     }
     if d < 1e-6 {
-        return Err(SynthError::Invalid(
-            "the camera lies on the ground plane".into(),
-        ));
+        return Err(SynthError::Invalid("the camera lies on the ground plane".into()));
     }
     let z_axis = Vector3::z();
     let denom = n.dot(&z_axis);
-    let origin = if denom < -1e-6 {
-        z_axis * (-d / denom)
-    } else {
-        -n * d
-    };
+    let origin = if denom < -1e-6 { z_axis * (-d / denom) } else { -n * d };
     let mut x = Vector3::x() - n * n.x;
     if x.norm() < 1e-9 {
         x = Vector3::y() - n * n.y;
@@ -99,40 +90,24 @@ pub fn ground_frame(n: &Vector3<f64>, d: f64) -> Result<Pose, SynthError> {
 }
 
 /// Composites tubes onto `background` (sRGB, `cam.width × cam.height × 3`).
-pub fn composite(
-    background: &[u8],
-    cam: &CameraModel,
-    cfg: &CompositeConfig,
-) -> Result<Composite, SynthError> {
+pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) -> Result<Composite, SynthError> {
     cam.validate()?;
     let (w, h) = (cam.width as usize, cam.height as usize);
     if background.len() != w * h * 3 {
-        return Err(SynthError::Invalid(format!(
-            "background has {} bytes, camera expects {w}x{h} RGB",
-            background.len()
-        )));
+        return Err(SynthError::Invalid(format!("background has {} bytes, camera expects {w}x{h} RGB", background.len())));
     }
     let (az, el) = cfg.sun_az_el_deg;
     if !(az.is_finite() && el.is_finite() && el > 0.0 && el <= 90.0) {
-        return Err(SynthError::Invalid(format!(
-            "sun elevation {el} must be in (0, 90] degrees and azimuth finite"
-        )));
+        return Err(SynthError::Invalid(format!("sun elevation {el} must be in (0, 90] degrees and azimuth finite")));
     }
     if !(0.0..=1.0).contains(&cfg.dust) {
-        return Err(SynthError::Invalid(format!(
-            "dust {} must be in [0, 1]",
-            cfg.dust
-        )));
+        return Err(SynthError::Invalid(format!("dust {} must be in [0, 1]", cfg.dust)));
     }
     let t_ground_cam = ground_frame(&cfg.ground.0, cfg.ground.1)?;
     // Sun in the ground frame: azimuth from the camera's forward direction on the ground.
     let fwd = t_ground_cam.transform_vector(&Vector3::z());
     let fwd = Vector3::new(fwd.x, fwd.y, 0.0);
-    let fwd = if fwd.norm() > 1e-9 {
-        fwd.normalize()
-    } else {
-        Vector3::y()
-    };
+    let fwd = if fwd.norm() > 1e-9 { fwd.normalize() } else { Vector3::y() };
     let right = Vector3::new(fwd.y, -fwd.x, 0.0);
     let (a, e) = (az.to_radians(), el.to_radians());
     let sun = (fwd * a.cos() + right * a.sin()) * e.cos() + Vector3::z() * e.sin();
@@ -144,67 +119,34 @@ pub fn composite(
     let mut tries = 0;
     while objects.tubes.len() < cfg.tubes && tries < 2000 {
         tries += 1;
-        let (u, v) = (
-            rng.random_range(0.0..w as f64),
-            rng.random_range(h as f64 / 3.0..h as f64),
-        );
+        let (u, v) = (rng.random_range(0.0..w as f64), rng.random_range(h as f64 / 3.0..h as f64));
         let (ray, _) = pixel_ray(cam, &t_ground_cam, u, v);
         if ray.dir.z > -1e-3 {
             continue;
         }
         let t = -ray.origin.z / ray.dir.z;
         let p = ray.at(t);
-        if objects
-            .tubes
-            .iter()
-            .any(|o| (o.t_world_tube.translation().xy() - p.coords.xy()).norm() < 2.0 * hl + 0.03)
-        {
+        if objects.tubes.iter().any(|o| (o.t_world_tube.translation().xy() - p.coords.xy()).norm() < 2.0 * hl + 0.03) {
             continue;
         }
-        let pose = Pose::from_parts(
-            lying_rotation(
-                rng.random_range(0.0..std::f64::consts::TAU),
-                rng.random_range(0.0..std::f64::consts::TAU),
-            ),
-            Vector3::new(p.x, p.y, r),
-        );
-        let inst = TubeInstance {
-            t_world_tube: pose,
-            shape: cfg.tube_shape.clone(),
-            dust: cfg.dust,
-            seed: rng.random(),
-        };
+        let pose = Pose::from_parts(lying_rotation(rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(0.0..std::f64::consts::TAU)), Vector3::new(p.x, p.y, r));
+        let inst = TubeInstance { t_world_tube: pose, shape: cfg.tube_shape.clone(), dust: cfg.dust, seed: rng.random() };
         let probe = Objects::new(Vec::new(), vec![inst.clone()], Vec::new());
-        let inside = projected_rect(&probe, 0, cam, &t_ground_cam)
-            .is_some_and(|(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w as i64 && v1 < h as i64);
+        let inside = projected_rect(&probe, 0, cam, &t_ground_cam).is_some_and(|(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w as i64 && v1 < h as i64);
         if inside {
             objects.tubes.push(inst);
         }
     }
     if objects.tubes.len() < cfg.tubes {
-        return Err(SynthError::Invalid(format!(
-            "could place only {} of {} tubes fully inside the image on that ground plane",
-            objects.tubes.len(),
-            cfg.tubes
-        )));
+        return Err(SynthError::Invalid(format!("could place only {} of {} tubes fully inside the image on that ground plane", objects.tubes.len(), cfg.tubes)));
     }
-    let ext = objects
-        .tubes
-        .iter()
-        .map(|t| t.t_world_tube.translation().xy().norm())
-        .fold(0.0, f64::max)
-        + 1.0;
+    let ext = objects.tubes.iter().map(|t| t.t_world_tube.translation().xy().norm()).fold(0.0, f64::max) + 1.0;
     let n = (2.0 * ext / 0.05).ceil() as usize;
     objects.build_grid(-ext, -ext, 0.05, n, n);
 
     // Exposure from the photo: median linear intensity of the lower half = sunlit regolith.
-    let lut: Vec<f32> = (0..256)
-        .map(|i| srgb_to_linear([i as u8, 0, 0])[0])
-        .collect();
-    let mut lows: Vec<f32> = background[w * 3 * (h / 2)..]
-        .chunks(3)
-        .map(|p| (lut[p[0] as usize] + lut[p[1] as usize] + lut[p[2] as usize]) / 3.0)
-        .collect();
+    let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear([i as u8, 0, 0])[0]).collect();
+    let mut lows: Vec<f32> = background[w * 3 * (h / 2)..].chunks(3).map(|p| (lut[p[0] as usize] + lut[p[1] as usize] + lut[p[2] as usize]) / 3.0).collect();
     lows.sort_by(|a, b| a.total_cmp(b));
     let median = lows.get(lows.len() / 2).copied().unwrap_or(0.2).max(0.01);
     let reg = srgb_to_linear(REGOLITH_SRGB);
@@ -219,117 +161,63 @@ pub fn composite(
     let mut surface = Plane::<u8>::new(w, h);
     let to_srgb = |v: f32| -> u8 {
         let v = v.clamp(0.0, 1.0);
-        let s = if v <= 0.0031308 {
-            v * 12.92
-        } else {
-            1.055 * v.powf(1.0 / 2.4) - 0.055
-        };
+        let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
         (s * 255.0 + 0.5) as u8
     };
     let objects_ref = &objects;
-    rgb.par_chunks_mut(w * 3)
-        .zip(depth.data.par_chunks_mut(w))
-        .zip(instance.data.par_chunks_mut(w))
-        .zip(surface.data.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(y, (((row, drow), irow), srow))| {
-            let mut rng = ChaCha8Rng::seed_from_u64(
-                cfg.seed ^ (y as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15),
-            );
-            for x in 0..w {
-                let bg = [
-                    lut[background[(y * w + x) * 3] as usize],
-                    lut[background[(y * w + x) * 3 + 1] as usize],
-                    lut[background[(y * w + x) * 3 + 2] as usize],
-                ];
-                let (centre, zf) = pixel_ray(cam, &t_ground_cam, x as f64, y as f64);
-                let hit = objects_ref.intersect(&centre, 0.0, 1e3);
-                srow[x] = SurfaceKind::Ground as u8;
-                if let Some((t, ObjectHit::Tube(i, _, _))) = hit {
-                    irow[x] = (i + 1) as u16;
-                    drow[x] = (t * zf) as f32;
-                    srow[x] = SurfaceKind::Tube as u8;
-                } else if centre.dir.z < 0.0 {
-                    drow[x] = (-centre.origin.z / centre.dir.z * zf) as f32;
-                }
-                let mut acc = [0.0f32; 3];
-                let near = (0..4).map(|k| {
-                    let (du, dv) = (((k & 1) as f64 - 0.5) * 0.5, ((k >> 1) as f64 - 0.5) * 0.5);
-                    pixel_ray(cam, &t_ground_cam, x as f64 + du, y as f64 + dv).0
-                });
-                for ray in near {
-                    let c = match objects_ref.intersect(&ray, 0.0, 1e3) {
-                        Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(
-                            objects_ref,
-                            i,
-                            mat,
-                            &n,
-                            &ray,
-                            t,
-                            &sun,
-                            e_sun,
-                            e_sky,
-                            exposure,
-                            &mut rng,
-                        ),
-                        _ => {
-                            if ray.dir.z < 0.0 {
-                                let t = -ray.origin.z / ray.dir.z;
-                                let p = ray.at(t);
-                                let sh = Ray {
-                                    origin: p + Vector3::z() * 1e-4,
-                                    dir: sun,
-                                };
-                                if objects_ref.intersect(&sh, 0.0, 50.0).is_some() {
-                                    bg.map(|v| v * shadow_factor)
-                                } else {
-                                    bg
-                                }
+    rgb.par_chunks_mut(w * 3).zip(depth.data.par_chunks_mut(w)).zip(instance.data.par_chunks_mut(w)).zip(surface.data.par_chunks_mut(w)).enumerate().for_each(|(y, (((row, drow), irow), srow))| {
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ (y as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        for x in 0..w {
+            let bg = [lut[background[(y * w + x) * 3] as usize], lut[background[(y * w + x) * 3 + 1] as usize], lut[background[(y * w + x) * 3 + 2] as usize]];
+            let (centre, zf) = pixel_ray(cam, &t_ground_cam, x as f64, y as f64);
+            let hit = objects_ref.intersect(&centre, 0.0, 1e3);
+            srow[x] = SurfaceKind::Ground as u8;
+            if let Some((t, ObjectHit::Tube(i, _, _))) = hit {
+                irow[x] = (i + 1) as u16;
+                drow[x] = (t * zf) as f32;
+                srow[x] = SurfaceKind::Tube as u8;
+            } else if centre.dir.z < 0.0 {
+                drow[x] = (-centre.origin.z / centre.dir.z * zf) as f32;
+            }
+            let mut acc = [0.0f32; 3];
+            let near = (0..4).map(|k| {
+                let (du, dv) = (((k & 1) as f64 - 0.5) * 0.5, ((k >> 1) as f64 - 0.5) * 0.5);
+                pixel_ray(cam, &t_ground_cam, x as f64 + du, y as f64 + dv).0
+            });
+            for ray in near {
+                let c = match objects_ref.intersect(&ray, 0.0, 1e3) {
+                    Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(objects_ref, i, mat, &n, &ray, t, &sun, e_sun, e_sky, exposure, &mut rng),
+                    _ => {
+                        if ray.dir.z < 0.0 {
+                            let t = -ray.origin.z / ray.dir.z;
+                            let p = ray.at(t);
+                            let sh = Ray { origin: p + Vector3::z() * 1e-4, dir: sun };
+                            if objects_ref.intersect(&sh, 0.0, 50.0).is_some() {
+                                bg.map(|v| v * shadow_factor)
                             } else {
                                 bg
                             }
+                        } else {
+                            bg
                         }
-                    };
-                    for k in 0..3 {
-                        acc[k] += c[k] * 0.25;
                     }
-                }
+                };
                 for k in 0..3 {
-                    row[x * 3 + k] = to_srgb(acc[k]);
+                    acc[k] += c[k] * 0.25;
                 }
             }
-        });
-    let output = RenderOutput {
-        width: w,
-        height: h,
-        rgb,
-        depth,
-        instance,
-        surface,
-    };
+            for k in 0..3 {
+                row[x * 3 + k] = to_srgb(acc[k]);
+            }
+        }
+    });
+    let output = RenderOutput { width: w, height: h, rgb, depth, instance, surface };
     let truth = tube_truth(&objects, cam, &t_ground_cam, &output);
-    Ok(Composite {
-        output,
-        truth,
-        t_ground_cam,
-        tubes: objects.tubes,
-    })
+    Ok(Composite { output, truth, t_ground_cam, tubes: objects.tubes })
 }
 
 #[allow(clippy::too_many_arguments)]
-fn shade_tube(
-    objects: &Objects,
-    i: usize,
-    mat: TubeMaterial,
-    n: &Vector3<f64>,
-    ray: &Ray,
-    t: f64,
-    sun: &Vector3<f64>,
-    e_sun: f32,
-    e_sky: f32,
-    exposure: f32,
-    rng: &mut ChaCha8Rng,
-) -> [f32; 3] {
+fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, n: &Vector3<f64>, ray: &Ray, t: f64, sun: &Vector3<f64>, e_sun: f32, e_sky: f32, exposure: f32, rng: &mut ChaCha8Rng) -> [f32; 3] {
     let (alb, ks, shin) = match mat {
         TubeMaterial::Alumina => ([0.78f32, 0.79, 0.75], 0.12f32, 18.0f32),
         TubeMaterial::Gold => ([0.45, 0.28, 0.05], 0.55, 40.0),
@@ -341,22 +229,7 @@ fn shade_tube(
     let alb = [0, 1, 2].map(|k| alb[k] * (1.0 - dust) + reg[k] * dust);
     let p = ray.at(t);
     let ndl = n.dot(sun).max(0.0) as f32;
-    let lit = if ndl > 0.0
-        && objects
-            .intersect(
-                &Ray {
-                    origin: p + n * 2e-4,
-                    dir: *sun,
-                },
-                0.0,
-                50.0,
-            )
-            .is_none()
-    {
-        1.0
-    } else {
-        0.0
-    };
+    let lit = if ndl > 0.0 && objects.intersect(&Ray { origin: p + n * 2e-4, dir: *sun }, 0.0, 50.0).is_none() { 1.0 } else { 0.0 };
     let ao = 0.55 + 0.45 * n.z as f32;
     let hv = (sun - ray.dir).normalize();
     let spec = ks * (1.0 - dust) * (n.dot(&hv).max(0.0) as f32).powf(shin) * lit;

@@ -25,10 +25,7 @@ use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tubeloc_core::{
-    files, CameraModel, CocoAnnotation, CocoCategory, CocoDataset, CocoImage, Pose, Rle,
-    Segmentation, TubeModel,
-};
+use tubeloc_core::{files, CameraModel, CocoAnnotation, CocoCategory, CocoDataset, CocoImage, Pose, Rle, Segmentation, TubeModel};
 
 /// One scene of a dataset.
 #[derive(Clone, Debug)]
@@ -76,9 +73,7 @@ pub struct DatasetSpec {
 
 /// Splits a total into `n` near-equal integer parts.
 fn spread(total: usize, n: usize) -> Vec<usize> {
-    (0..n)
-        .map(|i| total / n + usize::from(i < total % n))
-        .collect()
+    (0..n).map(|i| total / n + usize::from(i < total % n)).collect()
 }
 
 impl DatasetSpec {
@@ -86,38 +81,18 @@ impl DatasetSpec {
     pub fn preset(name: &str, seed: u64) -> Result<DatasetSpec, SynthError> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut scenes = Vec::new();
-        let mut push = |split: &'static str, terrain, time, images| {
-            scenes.push(SceneSpec {
-                split,
-                terrain,
-                time,
-                seed: 0,
-                images,
-            })
-        };
+        let mut push = |split: &'static str, terrain, time, images| scenes.push(SceneSpec { split, terrain, time, seed: 0, images });
         let (scale, crop, extent, cell) = match name {
             "paper" => {
                 let with = [TerrainKind::Flagstone, TerrainKind::Cfa6, TerrainKind::Cfa2];
-                let without = [
-                    TerrainKind::Flagstone,
-                    TerrainKind::Cfa6,
-                    TerrainKind::Ditch,
-                    TerrainKind::Riverbed,
-                ];
+                let without = [TerrainKind::Flagstone, TerrainKind::Cfa6, TerrainKind::Ditch, TerrainKind::Riverbed];
                 let counts = spread(256, 6);
-                for (k, (t, time)) in with
-                    .iter()
-                    .flat_map(|t| [(*t, TimeOfDay::Am), (*t, TimeOfDay::Pm)])
-                    .enumerate()
-                {
+                for (k, (t, time)) in with.iter().flat_map(|t| [(*t, TimeOfDay::Am), (*t, TimeOfDay::Pm)]).enumerate() {
                     push("with-tags", t, time, counts[k]);
                 }
                 // 9 no-tags scenes (a second flagstone layout), 568 images.
                 let counts = spread(568, 9);
-                let mut list: Vec<(TerrainKind, TimeOfDay)> = without
-                    .iter()
-                    .flat_map(|t| [(*t, TimeOfDay::Am), (*t, TimeOfDay::Pm)])
-                    .collect();
+                let mut list: Vec<(TerrainKind, TimeOfDay)> = without.iter().flat_map(|t| [(*t, TimeOfDay::Am), (*t, TimeOfDay::Pm)]).collect();
                 list.push((TerrainKind::Flagstone, TimeOfDay::Am));
                 for (k, (t, time)) in list.into_iter().enumerate() {
                     push("no-tags", t, time, counts[k]);
@@ -129,11 +104,7 @@ impl DatasetSpec {
                 push("no-tags", TerrainKind::Flagstone, TimeOfDay::Pm, 2);
                 (0.125, 256, 5.0, 0.01)
             }
-            other => {
-                return Err(SynthError::Invalid(format!(
-                    "unknown preset {other:?} (known: paper, tiny)"
-                )))
-            }
+            other => return Err(SynthError::Invalid(format!("unknown preset {other:?} (known: paper, tiny)"))),
         };
         for s in &mut scenes {
             s.seed = rng.random();
@@ -176,31 +147,14 @@ impl DatasetSpec {
     /// Checks the numbers before anything is written.
     pub fn validate(&self) -> Result<(), SynthError> {
         if !(self.scale.is_finite() && self.scale > 0.0 && self.scale <= 1.0) {
-            return Err(SynthError::Invalid(format!(
-                "scale {} must be in (0, 1]",
-                self.scale
-            )));
+            return Err(SynthError::Invalid(format!("scale {} must be in (0, 1]", self.scale)));
         }
         let cam = paper_rig().cameras[0].model.scaled(self.scale);
         if self.crop < 16 || self.crop > cam.width.min(cam.height) {
-            return Err(SynthError::Invalid(format!(
-                "crop {} px must be between 16 and {} (the scaled image is {}x{})",
-                self.crop,
-                cam.width.min(cam.height),
-                cam.width,
-                cam.height
-            )));
+            return Err(SynthError::Invalid(format!("crop {} px must be between 16 and {} (the scaled image is {}x{})", self.crop, cam.width.min(cam.height), cam.width, cam.height)));
         }
-        if self.stops == 0
-            || self.heights.is_empty()
-            || self
-                .heights
-                .iter()
-                .any(|h| !(h.is_finite() && *h > 0.1 && *h < 10.0))
-        {
-            return Err(SynthError::Invalid(
-                "need at least one stop and heights between 0.1 and 10 m".into(),
-            ));
+        if self.stops == 0 || self.heights.is_empty() || self.heights.iter().any(|h| !(h.is_finite() && *h > 0.1 && *h < 10.0)) {
+            return Err(SynthError::Invalid("need at least one stop and heights between 0.1 and 10 m".into()));
         }
         for s in &self.scenes {
             let mut cfg = SceneConfig::new(s.terrain, s.time, s.split == "with-tags");
@@ -229,12 +183,7 @@ struct View {
 
 /// Plans `n` views of a scene: random (stop, height, camera) without repetition, each with a
 /// crop that keeps one whole tube (its projected bounding box) inside.
-fn plan_views(
-    scene: &Scene,
-    spec: &DatasetSpec,
-    n: usize,
-    seed: u64,
-) -> Result<Vec<View>, SynthError> {
+fn plan_views(scene: &Scene, spec: &DatasetSpec, n: usize, seed: u64) -> Result<Vec<View>, SynthError> {
     let rig = paper_rig();
     let mut all: Vec<(usize, f64, usize)> = Vec::new();
     for stop in 0..spec.stops {
@@ -254,24 +203,11 @@ fn plan_views(
             return Err(SynthError::Invalid(format!("could not find {n} views with a whole tube inside a {crop} px crop (scene seed {})", scene.seed)));
         };
         let cam = rig.cameras[c].model.scaled(spec.scale);
-        let t_world_cam = stop_pose(
-            &Point3::origin(),
-            STOP_RADIUS_M,
-            height,
-            stop,
-            spec.stops,
-            scene.stop_offset,
-        )? * rig.cameras[c].t_rig_cam;
+        let t_world_cam = stop_pose(&Point3::origin(), STOP_RADIUS_M, height, stop, spec.stops, scene.stop_offset)? * rig.cameras[c].t_rig_cam;
         let Some((x0, y0)) = crop_around_a_tube(scene, &cam, &t_world_cam, crop, &mut rng) else {
             continue;
         };
-        views.push(View {
-            stop,
-            height,
-            camera: c,
-            crop_x0: x0 as u32,
-            crop_y0: y0 as u32,
-        });
+        views.push(View { stop, height, camera: c, crop_x0: x0 as u32, crop_y0: y0 as u32 });
     }
     Ok(views)
 }
@@ -285,13 +221,8 @@ pub fn pose_json(p: &Pose) -> Value {
 pub fn encode_png(rgb: &[u8], w: u32, h: u32) -> Result<Vec<u8>, String> {
     use image::ImageEncoder;
     let mut buf = Vec::new();
-    let enc = image::codecs::png::PngEncoder::new_with_quality(
-        &mut buf,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Adaptive,
-    );
-    enc.write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
-        .map_err(|e| e.to_string())?;
+    let enc = image::codecs::png::PngEncoder::new_with_quality(&mut buf, image::codecs::png::CompressionType::Fast, image::codecs::png::FilterType::Adaptive);
+    enc.write_image(rgb, w, h, image::ExtendedColorType::Rgb8).map_err(|e| e.to_string())?;
     Ok(buf)
 }
 
@@ -309,19 +240,11 @@ pub struct DatasetSummary {
 /// Renders the dataset (or shard `shard.0` of `shard.1`: scenes `s` with `s % N == I`) into
 /// `out`. `overwrite` replaces an existing folder; otherwise an existing `out` is an error.
 /// `progress(done, total)` is called after every image.
-pub fn write_dataset(
-    spec: &DatasetSpec,
-    out: &Path,
-    shard: (usize, usize),
-    overwrite: bool,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<DatasetSummary, SynthError> {
+pub fn write_dataset(spec: &DatasetSpec, out: &Path, shard: (usize, usize), overwrite: bool, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<DatasetSummary, SynthError> {
     spec.validate()?;
     let (si, sn) = shard;
     if sn == 0 || si >= sn {
-        return Err(SynthError::Invalid(format!(
-            "shard {si}/{sn}: need 0 <= I < N"
-        )));
+        return Err(SynthError::Invalid(format!("shard {si}/{sn}: need 0 <= I < N")));
     }
     write_folder_atomically(out, overwrite, |tmp| write_into(spec, tmp, shard, progress))
 }
@@ -329,36 +252,19 @@ pub fn write_dataset(
 /// Writes a dataset folder atomically: `fill` writes into `<out>.tmp-<pid>` and returns
 /// `(images, annotations)`; on success the folder is renamed to `out` (replacing an existing
 /// one only when `overwrite`), on failure it is removed, so `out` is never half-written.
-pub fn write_folder_atomically(
-    out: &Path,
-    overwrite: bool,
-    fill: impl FnOnce(&Path) -> Result<(usize, usize), SynthError>,
-) -> Result<DatasetSummary, SynthError> {
+pub fn write_folder_atomically(out: &Path, overwrite: bool, fill: impl FnOnce(&Path) -> Result<(usize, usize), SynthError>) -> Result<DatasetSummary, SynthError> {
     if out.exists() && !overwrite {
-        return Err(SynthError::Invalid(format!(
-            "{} already exists (remove it or pass --force)",
-            out.display()
-        )));
+        return Err(SynthError::Invalid(format!("{} already exists (remove it or pass --force)", out.display())));
     }
-    let name = out
-        .file_name()
-        .ok_or_else(|| SynthError::Invalid(format!("{} has no folder name", out.display())))?;
-    let tmp = out.with_file_name(format!(
-        "{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    let name = out.file_name().ok_or_else(|| SynthError::Invalid(format!("{} has no folder name", out.display())))?;
+    let tmp = out.with_file_name(format!("{}.tmp-{}", name.to_string_lossy(), std::process::id()));
     match fill(&tmp) {
         Ok((images, annotations)) => {
             if out.exists() {
                 std::fs::remove_dir_all(out).map_err(|e| tubeloc_core::CoreError::io(out, e))?;
             }
             std::fs::rename(&tmp, out).map_err(|e| tubeloc_core::CoreError::io(out, e))?;
-            Ok(DatasetSummary {
-                out: out.to_path_buf(),
-                images,
-                annotations,
-            })
+            Ok(DatasetSummary { out: out.to_path_buf(), images, annotations })
         }
         Err(e) => {
             let _ = std::fs::remove_dir_all(&tmp);
@@ -367,18 +273,11 @@ pub fn write_folder_atomically(
     }
 }
 
-fn write_into(
-    spec: &DatasetSpec,
-    dir: &Path,
-    shard: (usize, usize),
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<(usize, usize), SynthError> {
+fn write_into(spec: &DatasetSpec, dir: &Path, shard: (usize, usize), progress: &(dyn Fn(usize, usize) + Sync)) -> Result<(usize, usize), SynthError> {
     std::fs::create_dir_all(dir.join("images")).map_err(|e| tubeloc_core::CoreError::io(dir, e))?;
     let rig = paper_rig();
     rig.save_json(&dir.join("rig.json"))?;
-    let mine: Vec<usize> = (0..spec.scenes.len())
-        .filter(|s| s % shard.1 == shard.0)
-        .collect();
+    let mine: Vec<usize> = (0..spec.scenes.len()).filter(|s| s % shard.1 == shard.0).collect();
     let total: usize = mine.iter().map(|&s| spec.scenes[s].images).sum();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let mut images = Vec::new();
@@ -397,10 +296,7 @@ fn write_into(
             .enumerate()
             .map(|(k, v)| {
                 let r = render_view(spec, &scene, ss, si, k, v, dir, &rig);
-                progress(
-                    done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
-                    total,
-                );
+                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
                 r
             })
             .collect();
@@ -416,10 +312,7 @@ fn write_into(
             .zip(&scene.tube_info)
             .map(|(t, i)| json!({"T_world_tube": pose_json(&t.t_world_tube), "case": i.case, "dust": i.dust, "carries_tags": i.carries_tags}))
             .collect();
-        let mount = scene
-            .mount
-            .as_ref()
-            .map(|m| json!({"tube_index": m.tube_index, "tags": m.tags}));
+        let mount = scene.mount.as_ref().map(|m| json!({"tube_index": m.tube_index, "tags": m.tags}));
         scenes_meta.push(json!({
             "scene_index": si, "split": ss.split, "terrain": ss.terrain.name(), "time": ss.time.name(), "seed": ss.seed,
             "sun": scene.sun, "solar_hour": scene.solar_hour, "day_of_year": scene.day_of_year,
@@ -448,54 +341,21 @@ fn write_into(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn render_view(
-    spec: &DatasetSpec,
-    scene: &Scene,
-    ss: &SceneSpec,
-    si: usize,
-    k: usize,
-    v: &View,
-    dir: &Path,
-    rig: &tubeloc_core::Rig,
-) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
+fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: usize, v: &View, dir: &Path, rig: &tubeloc_core::Rig) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
     let image_id = (si as u64 + 1) * 1000 + k as u64 + 1;
     let rc = &rig.cameras[v.camera];
-    let cam: CameraModel = rc
-        .model
-        .scaled(spec.scale)
-        .cropped(v.crop_x0, v.crop_y0, spec.crop, spec.crop);
-    let t_world_cam = stop_pose(
-        &Point3::origin(),
-        STOP_RADIUS_M,
-        v.height,
-        v.stop,
-        spec.stops,
-        scene.stop_offset,
-    )? * rc.t_rig_cam;
+    let cam: CameraModel = rc.model.scaled(spec.scale).cropped(v.crop_x0, v.crop_y0, spec.crop, spec.crop);
+    let t_world_cam = stop_pose(&Point3::origin(), STOP_RADIUS_M, v.height, v.stop, spec.stops, scene.stop_offset)? * rc.t_rig_cam;
     let mut opts = spec.render;
     opts.noise_seed = ss.seed ^ image_id.wrapping_mul(0x2545_f491_4f6c_dd1d);
     let out = render(scene, &cam, &t_world_cam, &opts);
     let truth = tube_truth(&scene.objects, &cam, &t_world_cam, &out);
-    let file_name = format!(
-        "{image_id:06}_{}_{}_{}_s{}_h{}_{}.png",
-        ss.split,
-        ss.terrain.name(),
-        ss.time.name(),
-        v.stop,
-        v.height,
-        rc.name
-    );
-    let png = encode_png(&out.rgb, cam.width, cam.height).map_err(|m| SynthError::Image {
-        path: dir.join(&file_name),
-        message: m,
-    })?;
+    let file_name = format!("{image_id:06}_{}_{}_{}_s{}_h{}_{}.png", ss.split, ss.terrain.name(), ss.time.name(), v.stop, v.height, rc.name);
+    let png = encode_png(&out.rgb, cam.width, cam.height).map_err(|m| SynthError::Image { path: dir.join(&file_name), message: m })?;
     files::write_atomic(&dir.join("images").join(&file_name), &png)?;
     let t_cam_world = t_world_cam.inverse();
     let mut extra = Map::new();
-    extra.insert(
-        "camera".into(),
-        serde_json::to_value(&cam).unwrap_or(Value::Null),
-    );
+    extra.insert("camera".into(), serde_json::to_value(&cam).unwrap_or(Value::Null));
     extra.insert("T_world_cam".into(), pose_json(&t_world_cam));
     extra.insert("terrain".into(), json!(ss.terrain.name()));
     extra.insert("time".into(), json!(ss.time.name()));
@@ -520,18 +380,9 @@ fn render_view(
                 json!({"id": t.id, "size_m": t.size_m, "corners_px": corners, "visible": visible, "T_cam_tag": pose_json(&(t_cam_world * t.t_world_tag)), "T_tube_tag": pose_json(&t.t_tube_tag)})
             })
             .collect();
-        extra.insert(
-            "tags".into(),
-            json!({"tube_index": m.tube_index, "tags": tags}),
-        );
+        extra.insert("tags".into(), json!({"tube_index": m.tube_index, "tags": tags}));
     }
-    let image = CocoImage {
-        id: image_id,
-        width: cam.width,
-        height: cam.height,
-        file_name,
-        extra,
-    };
+    let image = CocoImage { id: image_id, width: cam.width, height: cam.height, file_name, extra };
     let anns = scene_annotations(scene, &truth, image_id, &cam);
     Ok((image, anns))
 }
@@ -539,19 +390,11 @@ fn render_view(
 /// A `crop` x `crop` window of the image of `cam` at `t_world_cam` that holds one whole tube
 /// (a tube chosen at random among those whose projected box fits), placed at random around it:
 /// its top-left corner `(x0, y0)`; `None` when no tube fits.
-pub fn crop_around_a_tube(
-    scene: &Scene,
-    cam: &CameraModel,
-    t_world_cam: &Pose,
-    crop: i64,
-    rng: &mut impl Rng,
-) -> Option<(i64, i64)> {
+pub fn crop_around_a_tube(scene: &Scene, cam: &CameraModel, t_world_cam: &Pose, crop: i64, rng: &mut impl Rng) -> Option<(i64, i64)> {
     let (w, h) = (cam.width as i64, cam.height as i64);
     let mut fits: Vec<(i64, i64, i64, i64)> = (0..scene.objects.tubes.len())
         .filter_map(|i| projected_rect(&scene.objects, i, cam, t_world_cam))
-        .filter(|&(u0, v0, u1, v1)| {
-            u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop
-        })
+        .filter(|&(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop)
         .collect();
     if fits.is_empty() {
         return None;
@@ -567,12 +410,7 @@ pub fn crop_around_a_tube(
 
 /// The COCO annotations of one rendered image: one per visible tube, with the scene's per-tube
 /// attributes `case`, `dust`, `carries_tags`; ids `image_id * 100 + k` (k from 1).
-pub fn scene_annotations(
-    scene: &Scene,
-    truth: &[TubeTruth],
-    image_id: u64,
-    cam: &CameraModel,
-) -> Vec<CocoAnnotation> {
+pub fn scene_annotations(scene: &Scene, truth: &[TubeTruth], image_id: u64, cam: &CameraModel) -> Vec<CocoAnnotation> {
     truth
         .iter()
         .enumerate()
@@ -590,13 +428,7 @@ pub fn scene_annotations(
 /// A COCO annotation (category 1, "tube") from one tube's truth: compressed-RLE visible mask,
 /// its bbox and area, and the attributes `tube_index`, `visible_fraction`, `occlusion`,
 /// `amodal_area`, `amodal_bbox`, `T_cam_tube`, plus `extra`.
-pub fn annotation_from_truth(
-    id: u64,
-    image_id: u64,
-    cam: &CameraModel,
-    t: &crate::truth::TubeTruth,
-    mut extra: Map<String, Value>,
-) -> CocoAnnotation {
+pub fn annotation_from_truth(id: u64, image_id: u64, cam: &CameraModel, t: &crate::truth::TubeTruth, mut extra: Map<String, Value>) -> CocoAnnotation {
     let rle = Rle::from_mask(&t.visible);
     extra.insert("tube_index".into(), json!(t.tube));
     extra.insert("visible_fraction".into(), json!(t.visible_fraction));
@@ -608,10 +440,7 @@ pub fn annotation_from_truth(
         id,
         image_id,
         category_id: 1,
-        segmentation: Some(Segmentation::CompressedRle {
-            size: [cam.height, cam.width],
-            counts: rle.to_compressed_string(),
-        }),
+        segmentation: Some(Segmentation::CompressedRle { size: [cam.height, cam.width], counts: rle.to_compressed_string() }),
         area: t.visible_area as f64,
         bbox: t.bbox,
         iscrowd: 0,
@@ -621,9 +450,5 @@ pub fn annotation_from_truth(
 
 /// The single COCO category of tubeloc datasets.
 pub fn tube_category() -> CocoCategory {
-    CocoCategory {
-        id: 1,
-        name: "tube".into(),
-        extra: Map::from_iter([("supercategory".to_string(), json!("object"))]),
-    }
+    CocoCategory { id: 1, name: "tube".into(), extra: Map::from_iter([("supercategory".to_string(), json!("object"))]) }
 }

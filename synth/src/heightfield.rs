@@ -38,19 +38,7 @@ pub struct HeightField {
 impl HeightField {
     /// A flat field of `nx × ny` vertices at height `z`.
     pub fn flat(nx: usize, ny: usize, cell: f64, x0: f64, y0: f64, z: f32) -> Self {
-        let mut hf = HeightField {
-            nx,
-            ny,
-            cell,
-            x0,
-            y0,
-            h: vec![z; nx * ny],
-            tile_max: Vec::new(),
-            ntx: 0,
-            nty: 0,
-            hmin: 0.0,
-            hmax: 0.0,
-        };
+        let mut hf = HeightField { nx, ny, cell, x0, y0, h: vec![z; nx * ny], tile_max: Vec::new(), ntx: 0, nty: 0, hmin: 0.0, hmax: 0.0 };
         hf.rebuild();
         hf
     }
@@ -111,12 +99,7 @@ impl HeightField {
         let v = ((y - self.y0) / self.cell).clamp(0.0, (self.ny - 1) as f64 - 1e-9);
         let (i, j) = (u.floor() as usize, v.floor() as usize);
         let (a, b) = (u - i as f64, v - j as f64);
-        let (h00, h10, h01, h11) = (
-            self.at(i, j),
-            self.at(i + 1, j),
-            self.at(i, j + 1),
-            self.at(i + 1, j + 1),
-        );
+        let (h00, h10, h01, h11) = (self.at(i, j), self.at(i + 1, j), self.at(i, j + 1), self.at(i + 1, j + 1));
         h00 + (h10 - h00) * a + (h01 - h00) * b + (h00 - h10 - h01 + h11) * a * b
     }
 
@@ -147,49 +130,24 @@ impl HeightField {
         let (ta, tb) = clip_aabb(ray, lo, hi, tmin, tmax)?;
         let tile = TILE as f64 * self.cell;
         let (ncx, ncy) = (self.nx - 1, self.ny - 1);
-        dda2(
-            ray,
-            self.x0,
-            self.y0,
-            tile,
-            self.ntx,
-            self.nty,
-            ta,
-            tb,
-            |tx, ty, t0, t1| {
-                let zmin = ray.at(t0).z.min(ray.at(t1).z);
-                if zmin > self.tile_max[ty * self.ntx + tx] as f64 {
-                    return None;
-                }
-                // Cell DDA inside this tile, over the tile's segment.
-                let (cx0, cy0) = (tx * TILE, ty * TILE);
-                let (cnx, cny) = ((ncx - cx0).min(TILE), (ncy - cy0).min(TILE));
-                let ox = self.x0 + cx0 as f64 * self.cell;
-                let oy = self.y0 + cy0 as f64 * self.cell;
-                dda2(
-                    ray,
-                    ox,
-                    oy,
-                    self.cell,
-                    cnx,
-                    cny,
-                    t0,
-                    t1,
-                    |ci, cj, c0, c1| self.hit_cell(ray, cx0 + ci, cy0 + cj, c0, c1),
-                )
-            },
-        )
+        dda2(ray, self.x0, self.y0, tile, self.ntx, self.nty, ta, tb, |tx, ty, t0, t1| {
+            let zmin = ray.at(t0).z.min(ray.at(t1).z);
+            if zmin > self.tile_max[ty * self.ntx + tx] as f64 {
+                return None;
+            }
+            // Cell DDA inside this tile, over the tile's segment.
+            let (cx0, cy0) = (tx * TILE, ty * TILE);
+            let (cnx, cny) = ((ncx - cx0).min(TILE), (ncy - cy0).min(TILE));
+            let ox = self.x0 + cx0 as f64 * self.cell;
+            let oy = self.y0 + cy0 as f64 * self.cell;
+            dda2(ray, ox, oy, self.cell, cnx, cny, t0, t1, |ci, cj, c0, c1| self.hit_cell(ray, cx0 + ci, cy0 + cj, c0, c1))
+        })
     }
 
     /// Exact ray / bilinear-patch intersection inside cell `(i, j)` over `t ∈ [c0, c1]`.
     #[inline]
     fn hit_cell(&self, ray: &Ray, i: usize, j: usize, c0: f64, c1: f64) -> Option<f64> {
-        let (h00, h10, h01, h11) = (
-            self.at(i, j),
-            self.at(i + 1, j),
-            self.at(i, j + 1),
-            self.at(i + 1, j + 1),
-        );
+        let (h00, h10, h01, h11) = (self.at(i, j), self.at(i + 1, j), self.at(i, j + 1), self.at(i + 1, j + 1));
         let p0 = ray.at(c0);
         let z1 = p0.z + ray.dir.z * (c1 - c0);
         if p0.z.min(z1) > h00.max(h10).max(h01).max(h11) {
@@ -264,35 +222,21 @@ mod tests {
             let a = k as f64 * 0.7;
             let origin = Point3::new(1.5 * a.cos(), 1.2 * a.sin(), 1.0 + 0.3 * (k % 3) as f64);
             let target = Point3::new(0.3 * (a * 1.3).sin(), 0.2 * (a * 0.9).cos(), 0.0);
-            let ray = Ray {
-                origin,
-                dir: (target - origin).normalize(),
-            };
-            let t = hf
-                .intersect(&ray, 0.0, 10.0)
-                .expect("ray toward the centre must hit");
+            let ray = Ray { origin, dir: (target - origin).normalize() };
+            let t = hf.intersect(&ray, 0.0, 10.0).expect("ray toward the centre must hit");
             let p = ray.at(t);
-            assert!(
-                (p.z - hf.height(p.x, p.y)).abs() < 1e-9,
-                "off surface at {p:?}"
-            );
+            assert!((p.z - hf.height(p.x, p.y)).abs() < 1e-9, "off surface at {p:?}");
             // No earlier crossing: march finely before t.
             let mut s = 0.0;
             while s < t - 1e-3 {
                 let q = ray.at(s);
                 if hf.contains(q.x, q.y) {
-                    assert!(
-                        q.z > hf.height(q.x, q.y) - 1e-9,
-                        "missed earlier hit at s={s}, t={t}"
-                    );
+                    assert!(q.z > hf.height(q.x, q.y) - 1e-9, "missed earlier hit at s={s}, t={t}");
                 }
                 s += 1e-3;
             }
         }
-        let up = Ray {
-            origin: Point3::new(0.0, 0.0, 0.5),
-            dir: Vector3::z(),
-        };
+        let up = Ray { origin: Point3::new(0.0, 0.0, 0.5), dir: Vector3::z() };
         assert!(hf.intersect(&up, 0.0, 10.0).is_none());
         let n = hf.normal(0.0, 0.0);
         assert!((n.norm() - 1.0).abs() < 1e-12 && n.z > 0.9);

@@ -11,8 +11,8 @@
 use crate::heightfield::HeightField;
 use crate::objects::PlateObject;
 use crate::scene::sand;
-use crate::tags::{TagFamily, TagTexture};
 use crate::terrain::{srgb_to_linear, SAND_SRGB};
+use crate::tags::{TagFamily, TagTexture};
 use crate::SynthError;
 use nalgebra::{Matrix3, Point3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -76,17 +76,13 @@ impl TagMount {
 /// Parses a mount description (TOML text, see `data/tag_mount.toml`) into `(family, [(id,
 /// size_m, T_tube_tag)])`.
 pub fn parse_mount(text: &str) -> Result<(TagFamily, Vec<(u32, f64, Pose)>), SynthError> {
-    let f: MountFile = toml::from_str(text)
-        .map_err(|e| SynthError::Invalid(format!("tag mount description: {e}")))?;
+    let f: MountFile = toml::from_str(text).map_err(|e| SynthError::Invalid(format!("tag mount description: {e}")))?;
     let mut out = Vec::new();
     for t in f.tags {
         let r = Matrix3::from_fn(|i, k| t.rotation[i][k]);
         let pose = Pose::try_from_matrix(&r, Vector3::from(t.translation_m))?;
         if !(t.size_m.is_finite() && t.size_m > 0.0) {
-            return Err(SynthError::Invalid(format!(
-                "tag {}: size_m must be positive",
-                t.id
-            )));
+            return Err(SynthError::Invalid(format!("tag {}: size_m must be positive", t.id)));
         }
         out.push((t.id, t.size_m, pose));
     }
@@ -110,48 +106,24 @@ pub fn build_mount(t_world_tube: &Pose, tube_index: usize) -> Result<TagMount, S
     let mut tags = Vec::new();
     let mut plates = Vec::new();
     for (id, size, t_tube_tag) in list {
-        let tex = TagTexture::new(family, id, size)
-            .ok_or_else(|| SynthError::Invalid(format!("{} has no id {id}", family.name())))?;
+        let tex = TagTexture::new(family, id, size).ok_or_else(|| SynthError::Invalid(format!("{} has no id {id}", family.name())))?;
         let t_world_tag = *t_world_tube * t_tube_tag;
         let half = Vector3::new(tex.half_extent() + 0.006, tex.half_extent() + 0.006, 0.0015);
-        let t_world_box =
-            t_world_tag * Pose::from_parts(Rotation3::identity(), Vector3::new(0.0, 0.0, half.z));
+        let t_world_box = t_world_tag * Pose::from_parts(Rotation3::identity(), Vector3::new(0.0, 0.0, half.z));
         let s = size / 2.0;
         let corners_world = [(-s, s), (s, s), (s, -s), (-s, -s)].map(|(u, v)| {
             let p = t_world_tag.transform_point(&Point3::new(u, v, 0.0));
             [p.x, p.y, p.z]
         });
-        tags.push(MountTag {
-            id,
-            size_m: size,
-            t_world_tag,
-            t_tube_tag,
-            corners_world,
-        });
-        plates.push(PlateObject {
-            t_world_box,
-            half,
-            albedo: [0.70, 0.70, 0.68],
-            tag: Some(tex),
-        });
+        tags.push(MountTag { id, size_m: size, t_world_tag, t_tube_tag, corners_world });
+        plates.push(PlateObject { t_world_box, half, albedo: [0.70, 0.70, 0.68], tag: Some(tex) });
     }
-    Ok(TagMount {
-        tube_index,
-        tags,
-        plates,
-    })
+    Ok(TagMount { tube_index, tags, plates })
 }
 
 /// Piles sand under the plates and over the buried arm (between tube and plates), labelling
 /// the vertices [`sand::MOUNT_COVER`].
-pub fn cover_with_sand(
-    m: &TagMount,
-    hf: &mut HeightField,
-    labels: &mut [u8],
-    lin: &mut [[f32; 3]],
-    t_world_tube: &Pose,
-    r: f64,
-) {
+pub fn cover_with_sand(m: &TagMount, hf: &mut HeightField, labels: &mut [u8], lin: &mut [[f32; 3]], t_world_tube: &Pose, r: f64) {
     let sand_lin = srgb_to_linear(SAND_SRGB);
     let tube_c = t_world_tube.translation();
     let ground = tube_c.z - r;
@@ -160,14 +132,8 @@ pub fn cover_with_sand(
         let c = p.t_world_box.translation();
         let bottom = c.z - 0.012;
         let reach = 0.12;
-        let (i0, i1) = (
-            ((c.x - reach - hf.x0) / hf.cell).floor().max(0.0) as usize,
-            (((c.x + reach - hf.x0) / hf.cell).ceil() as usize).min(n - 1),
-        );
-        let (j0, j1) = (
-            ((c.y - reach - hf.y0) / hf.cell).floor().max(0.0) as usize,
-            (((c.y + reach - hf.y0) / hf.cell).ceil() as usize).min(hf.ny - 1),
-        );
+        let (i0, i1) = (((c.x - reach - hf.x0) / hf.cell).floor().max(0.0) as usize, (((c.x + reach - hf.x0) / hf.cell).ceil() as usize).min(n - 1));
+        let (j0, j1) = (((c.y - reach - hf.y0) / hf.cell).floor().max(0.0) as usize, (((c.y + reach - hf.y0) / hf.cell).ceil() as usize).min(hf.ny - 1));
         // Arm: segment from near the tube to the plate, buried under a low berm.
         let dir = Vector3::new(c.x - tube_c.x, c.y - tube_c.y, 0.0);
         let len = dir.norm();
@@ -180,11 +146,7 @@ pub fn cover_with_sand(
                 let v = Vector3::new(x - tube_c.x, y - tube_c.y, 0.0);
                 let s = v.dot(&dir);
                 let q = (v - dir * s).norm();
-                let berm = if s > r + 0.03 && s < len && q < 0.03 {
-                    ground + 0.008 * (1.0 - q / 0.03)
-                } else {
-                    f64::MIN
-                };
+                let berm = if s > r + 0.03 && s < len && q < 0.03 { ground + 0.008 * (1.0 - q / 0.03) } else { f64::MIN };
                 let target = pile.max(berm);
                 let idx = j * n + i;
                 if target > hf.h[idx] as f64 + 0.001 {

@@ -97,12 +97,7 @@ enum Id {
 impl Objects {
     /// Objects without a grid yet; call [`Objects::build_grid`] before casting rays.
     pub fn new(rocks: Vec<Rock>, tubes: Vec<TubeInstance>, plates: Vec<PlateObject>) -> Self {
-        Objects {
-            rocks,
-            tubes,
-            plates,
-            ..Default::default()
-        }
+        Objects { rocks, tubes, plates, ..Default::default() }
     }
 
     /// World bounds of a tube instance (box around its bounding cylinder).
@@ -194,36 +189,22 @@ impl Objects {
             return None;
         }
         let lo = [self.x0, self.y0, self.zlo];
-        let hi = [
-            self.x0 + self.nx as f64 * self.cell,
-            self.y0 + self.ny as f64 * self.cell,
-            self.zhi,
-        ];
+        let hi = [self.x0 + self.nx as f64 * self.cell, self.y0 + self.ny as f64 * self.cell, self.zhi];
         let (ta, tb) = clip_aabb(ray, lo, hi, tmin, tmax)?;
         let mut best: Option<(f64, ObjectHit)> = None;
         let mut tbest = tb;
-        dda2(
-            ray,
-            self.x0,
-            self.y0,
-            self.cell,
-            self.nx,
-            self.ny,
-            ta,
-            tb,
-            |ix, iy, _t0, t1| {
-                let c = iy * self.nx + ix;
-                for &item in &self.items[self.offsets[c] as usize..self.offsets[c + 1] as usize] {
-                    if let Some((t, h)) = self.hit_one(self.decode(item), ray, tmin, tbest) {
-                        if t < tbest {
-                            tbest = t;
-                            best = Some((t, h));
-                        }
+        dda2(ray, self.x0, self.y0, self.cell, self.nx, self.ny, ta, tb, |ix, iy, _t0, t1| {
+            let c = iy * self.nx + ix;
+            for &item in &self.items[self.offsets[c] as usize..self.offsets[c + 1] as usize] {
+                if let Some((t, h)) = self.hit_one(self.decode(item), ray, tmin, tbest) {
+                    if t < tbest {
+                        tbest = t;
+                        best = Some((t, h));
                     }
                 }
-                (tbest <= t1).then_some(())
-            },
-        );
+            }
+            (tbest <= t1).then_some(())
+        });
         best
     }
 
@@ -236,24 +217,13 @@ impl Objects {
         let (lo, hi) = self.bounds_of(id);
         clip_aabb(ray, lo, hi, tmin, tmax)?;
         match id {
-            Id::Rock(i) => self.rocks[i]
-                .intersect(ray, tmin, tmax)
-                .map(|(t, f)| (t, ObjectHit::Rock(i, f))),
+            Id::Rock(i) => self.rocks[i].intersect(ray, tmin, tmax).map(|(t, f)| (t, ObjectHit::Rock(i, f))),
             Id::Tube(i) => {
                 let tube = &self.tubes[i];
                 let inv = tube.t_world_tube.inverse();
                 let o = inv.transform_point(&ray.origin);
                 let d = inv.transform_vector(&ray.dir);
-                tube.shape.intersect(&o, &d, tmin, tmax).map(|h| {
-                    (
-                        h.t,
-                        ObjectHit::Tube(
-                            i,
-                            h.material,
-                            tube.t_world_tube.transform_vector(&h.normal),
-                        ),
-                    )
-                })
+                tube.shape.intersect(&o, &d, tmin, tmax).map(|h| (h.t, ObjectHit::Tube(i, h.material, tube.t_world_tube.transform_vector(&h.normal))))
             }
             Id::Plate(i) => {
                 let p = &self.plates[i];
@@ -266,15 +236,10 @@ impl Objects {
                 let q = local.at(t0);
                 // Normal: the face whose slab was entered last.
                 let rel = [q.x / h.x, q.y / h.y, q.z / h.z];
-                let k = (0..3)
-                    .max_by(|&a, &b| rel[a].abs().total_cmp(&rel[b].abs()))
-                    .unwrap_or(2);
+                let k = (0..3).max_by(|&a, &b| rel[a].abs().total_cmp(&rel[b].abs())).unwrap_or(2);
                 let mut n = Vector3::zeros();
                 n[k] = rel[k].signum();
-                Some((
-                    t0,
-                    ObjectHit::Plate(i, q, p.t_world_box.transform_vector(&n)),
-                ))
+                Some((t0, ObjectHit::Plate(i, q, p.t_world_box.transform_vector(&n))))
             }
         }
     }

@@ -23,13 +23,7 @@ impl Ray {
 /// Clips the ray against an axis-aligned box (slab method); returns the parameter interval
 /// `[t0, t1]` intersected with `[tmin, tmax]`, or `None` when the ray misses.
 #[inline]
-pub fn clip_aabb(
-    ray: &Ray,
-    lo: [f64; 3],
-    hi: [f64; 3],
-    tmin: f64,
-    tmax: f64,
-) -> Option<(f64, f64)> {
+pub fn clip_aabb(ray: &Ray, lo: [f64; 3], hi: [f64; 3], tmin: f64, tmax: f64) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (tmin, tmax);
     for k in 0..3 {
         let o = ray.origin[k];
@@ -125,10 +119,7 @@ mod tests {
 
     #[test]
     fn dda_visits_contiguous_cells_in_order() {
-        let ray = Ray {
-            origin: Point3::new(0.05, 0.05, 0.0),
-            dir: Vector3::new(1.0, 0.5, 0.0).normalize(),
-        };
+        let ray = Ray { origin: Point3::new(0.05, 0.05, 0.0), dir: Vector3::new(1.0, 0.5, 0.0).normalize() };
         let mut cells = Vec::new();
         let mut last_t = 0.0;
         dda2::<()>(&ray, 0.0, 0.0, 0.1, 10, 10, 0.0, 0.9, |ix, iy, t0, t1| {
@@ -143,18 +134,12 @@ mod tests {
             assert_eq!(d, 1, "{cells:?}");
         }
         let end = ray.at(0.9);
-        assert_eq!(
-            *cells.last().unwrap(),
-            ((end.x / 0.1) as usize, (end.y / 0.1) as usize)
-        );
+        assert_eq!(*cells.last().unwrap(), ((end.x / 0.1) as usize, (end.y / 0.1) as usize));
     }
 
     #[test]
     fn aabb_clip() {
-        let ray = Ray {
-            origin: Point3::new(-1.0, 0.5, 0.5),
-            dir: Vector3::x(),
-        };
+        let ray = Ray { origin: Point3::new(-1.0, 0.5, 0.5), dir: Vector3::x() };
         let (a, b) = clip_aabb(&ray, [0.0; 3], [1.0; 3], 0.0, 10.0).unwrap();
         assert!((a - 1.0).abs() < 1e-12 && (b - 2.0).abs() < 1e-12);
         assert!(clip_aabb(&ray, [0.0, 0.6, 0.0], [1.0; 3], 0.0, 10.0).is_none());

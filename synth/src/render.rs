@@ -72,12 +72,7 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions {
-            shadows: true,
-            sensor: SensorOptions::default(),
-            exposure: 0.72,
-            noise_seed: 0,
-        }
+        RenderOptions { shadows: true, sensor: SensorOptions::default(), exposure: 0.72, noise_seed: 0 }
     }
 }
 
@@ -137,10 +132,7 @@ fn cast(scene: &Scene, ray: &Ray, tmin: f64, tmax: f64) -> Option<(f64, Hit)> {
 
 /// True when the point sees the sun.
 fn sunlit(scene: &Scene, p: &Point3<f64>, n: &Vector3<f64>, sun: &Vector3<f64>) -> bool {
-    let ray = Ray {
-        origin: p + n * 2e-4 + sun * 1e-4,
-        dir: *sun,
-    };
+    let ray = Ray { origin: p + n * 2e-4 + sun * 1e-4, dir: *sun };
     if scene.hf.intersect(&ray, 0.0, 20.0).is_some() {
         return false;
     }
@@ -166,12 +158,7 @@ fn ground_albedo(scene: &Scene, lut: &Lut, x: f64, y: f64) -> ([f32; 3], u8) {
     let (i, j) = (u as usize, v as usize);
     let (a, b) = ((u - i as f64) as f32, (v - j as f64) as f32);
     let n = hf.nx;
-    let c = [
-        scene.albedo[j * n + i],
-        scene.albedo[j * n + i + 1],
-        scene.albedo[(j + 1) * n + i],
-        scene.albedo[(j + 1) * n + i + 1],
-    ];
+    let c = [scene.albedo[j * n + i], scene.albedo[j * n + i + 1], scene.albedo[(j + 1) * n + i], scene.albedo[(j + 1) * n + i + 1]];
     let w = [(1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b];
     let mut out = [0.0f32; 3];
     for k in 0..4 {
@@ -183,10 +170,7 @@ fn ground_albedo(scene: &Scene, lut: &Lut, x: f64, y: f64) -> ([f32; 3], u8) {
     // Pixel-scale grain: value noise at 3 mm, 1 cm and 4 cm.
     let s = scene.terrain.seed;
     let (xf, yf) = (x as f32, y as f32);
-    let g = 1.0
-        + 0.16 * value2(xf / 0.003, yf / 0.003, s ^ 0x101)
-        + 0.10 * value2(xf / 0.01, yf / 0.01, s ^ 0x202)
-        + 0.07 * value2(xf / 0.04, yf / 0.04, s ^ 0x303);
+    let g = 1.0 + 0.16 * value2(xf / 0.003, yf / 0.003, s ^ 0x101) + 0.10 * value2(xf / 0.01, yf / 0.01, s ^ 0x202) + 0.07 * value2(xf / 0.04, yf / 0.04, s ^ 0x303);
     (out.map(|v| v * g), nearest)
 }
 
@@ -210,12 +194,7 @@ fn shade(scene: &Scene, lut: &Lut, ray: &Ray, opts: &RenderOptions) -> Sample {
         // Sky: pale at the horizon, deeper toward the zenith.
         let e = ray.dir.z.max(0.0) as f32;
         let sky = [0.62 - 0.35 * e, 0.70 - 0.30 * e, 0.80 - 0.15 * e];
-        return Sample {
-            rgb: sky,
-            depth_t: f64::INFINITY,
-            instance: 0,
-            surface: SurfaceKind::Sky,
-        };
+        return Sample { rgb: sky, depth_t: f64::INFINITY, instance: 0, surface: SurfaceKind::Sky };
     };
     let p = ray.at(t);
     let view = -ray.dir;
@@ -234,83 +213,36 @@ fn shade(scene: &Scene, lut: &Lut, ray: &Ray, opts: &RenderOptions) -> Sample {
                 sand::MOUNT_COVER => SurfaceKind::MountSand,
                 _ => SurfaceKind::Ground,
             };
-            (
-                alb,
-                scene.hf.normal(p.x, p.y),
-                kind,
-                0,
-                None,
-                scene.sky_at(p.x, p.y),
-            )
+            (alb, scene.hf.normal(p.x, p.y), kind, 0, None, scene.sky_at(p.x, p.y))
         }
         Hit::Object(ObjectHit::Rock(i, f)) => {
             let rock = &scene.objects.rocks[i];
             let n = rock.planes[f].0;
             let (xf, yf, zf) = (p.x as f32, p.y as f32, p.z as f32);
-            let g = 1.0
-                + 0.18 * value2((xf + 0.7 * zf) / 0.004, (yf - 0.5 * zf) / 0.004, rock.seed)
-                + 0.12
-                    * value2(
-                        (xf - 0.3 * zf) / 0.015,
-                        (yf + 0.6 * zf) / 0.015,
-                        rock.seed ^ 1,
-                    );
-            let dusty = (0.35 * n.z.max(0.0) as f32)
-                * (0.5 + 0.5 * value2(xf / 0.02, yf / 0.02, rock.seed ^ 2));
+            let g = 1.0 + 0.18 * value2((xf + 0.7 * zf) / 0.004, (yf - 0.5 * zf) / 0.004, rock.seed) + 0.12 * value2((xf - 0.3 * zf) / 0.015, (yf + 0.6 * zf) / 0.015, rock.seed ^ 1);
+            let dusty = (0.35 * n.z.max(0.0) as f32) * (0.5 + 0.5 * value2(xf / 0.02, yf / 0.02, rock.seed ^ 2));
             let reg = srgb_to_linear(crate::terrain::REGOLITH_SRGB);
             let alb = [0, 1, 2].map(|k| (rock.albedo[k] * g) * (1.0 - dusty) + reg[k] * dusty);
-            (
-                alb,
-                n,
-                SurfaceKind::Rock,
-                0,
-                None,
-                0.55 + 0.45 * n.z.max(-1.0) as f32,
-            )
+            (alb, n, SurfaceKind::Rock, 0, None, 0.55 + 0.45 * n.z.max(-1.0) as f32)
         }
         Hit::Object(ObjectHit::Tube(i, material, n)) => {
             let tube = &scene.objects.tubes[i];
             let (mut alb, ks, shin) = tube_albedo(material);
             let (xf, yf, zf) = (p.x as f32, p.y as f32, p.z as f32);
-            let patch =
-                0.7 + 0.6 * (0.5 + 0.5 * value2((xf + zf) / 0.006, (yf - zf) / 0.006, tube.seed));
+            let patch = 0.7 + 0.6 * (0.5 + 0.5 * value2((xf + zf) / 0.006, (yf - zf) / 0.006, tube.seed));
             let d = (tube.dust * (0.55 + 0.45 * n.z.max(0.0) as f32) * patch).clamp(0.0, 1.0);
             let reg = srgb_to_linear(crate::terrain::REGOLITH_SRGB);
             alb = [0, 1, 2].map(|k| alb[k] * (1.0 - d) + reg[k] * 1.1 * d);
-            (
-                alb,
-                n,
-                SurfaceKind::Tube,
-                (i + 1) as u16,
-                Some((ks * (1.0 - d), shin)),
-                0.55 + 0.45 * n.z as f32,
-            )
+            (alb, n, SurfaceKind::Tube, (i + 1) as u16, Some((ks * (1.0 - d), shin)), 0.55 + 0.45 * n.z as f32)
         }
         Hit::Object(ObjectHit::Plate(i, q, n)) => {
             let plate = &scene.objects.plates[i];
             let alb = plate.albedo_at(&q);
-            (
-                alb,
-                n,
-                SurfaceKind::Plate,
-                0,
-                Some((0.05, 8.0)),
-                0.55 + 0.45 * n.z as f32,
-            )
+            (alb, n, SurfaceKind::Plate, 0, Some((0.05, 8.0)), 0.55 + 0.45 * n.z as f32)
         }
     };
     let ndl = n.dot(&sun).max(0.0) as f32;
-    let lit = if ndl > 0.0 && opts.shadows && !matches!(hit, Hit::Far) {
-        if sunlit(scene, &p, &n, &sun) {
-            1.0
-        } else {
-            0.0
-        }
-    } else if ndl > 0.0 {
-        1.0
-    } else {
-        0.0
-    };
+    let lit = if ndl > 0.0 && opts.shadows && !matches!(hit, Hit::Far) { if sunlit(scene, &p, &n, &sun) { 1.0 } else { 0.0 } } else if ndl > 0.0 { 1.0 } else { 0.0 };
     let mut rgb = [0.0f32; 3];
     for k in 0..3 {
         rgb[k] = albedo[k] * (SUN_RGB[k] * ndl * lit + SKY_RGB[k] * ao);
@@ -328,12 +260,7 @@ fn shade(scene: &Scene, lut: &Lut, ray: &Ray, opts: &RenderOptions) -> Sample {
         let fog = 1.0 - (-(t as f32) / 40.0).exp();
         rgb = [0, 1, 2].map(|k| rgb[k] * (1.0 - fog) + [0.62, 0.70, 0.80][k] * fog);
     }
-    Sample {
-        rgb,
-        depth_t: t,
-        instance,
-        surface,
-    }
+    Sample { rgb, depth_t: t, instance, surface }
 }
 
 /// World-frame ray through pixel `(u, v)` of `cam` at pose `t_world_cam`, and the factor that
@@ -344,23 +271,12 @@ pub fn pixel_ray(cam: &CameraModel, t_world_cam: &Pose, u: f64, v: f64) -> (Ray,
     let d_cam = Vector3::new(x, y, 1.0);
     let norm = d_cam.norm();
     let dir = t_world_cam.transform_vector(&(d_cam / norm));
-    (
-        Ray {
-            origin: Point3::from(t_world_cam.translation()),
-            dir,
-        },
-        1.0 / norm,
-    )
+    (Ray { origin: Point3::from(t_world_cam.translation()), dir }, 1.0 / norm)
 }
 
 /// Renders `scene` through `cam` (intrinsics of the image or crop to produce) at pose
 /// `t_world_cam`: colour after the sensor model, and exact per-pixel ground truth.
-pub fn render(
-    scene: &Scene,
-    cam: &CameraModel,
-    t_world_cam: &Pose,
-    opts: &RenderOptions,
-) -> RenderOutput {
+pub fn render(scene: &Scene, cam: &CameraModel, t_world_cam: &Pose, opts: &RenderOptions) -> RenderOutput {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let lut = Lut::new();
     let mut linear = vec![0.0f32; w * h * 3];
@@ -386,12 +302,5 @@ pub fn render(
             }
         });
     let rgb = develop(&mut linear, w, h, &opts.sensor, opts.noise_seed);
-    RenderOutput {
-        width: w,
-        height: h,
-        rgb,
-        depth,
-        instance,
-        surface,
-    }
+    RenderOutput { width: w, height: h, rgb, depth, instance, surface }
 }

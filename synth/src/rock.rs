@@ -27,13 +27,7 @@ pub fn golombek_cfa(k: f64, d: f64) -> f64 {
 /// `[D, D + dD]` is `area · (−dF/dD) / (π D² / 4) · dD`; diameters are drawn by inverting the
 /// cumulative count `N(≥ D)` (tabulated on a fine grid) with uniform variates, and the total
 /// count is Poisson-free (rounded expectation) so that the covered area matches `F_k`.
-pub fn sample_golombek_diameters<R: Rng>(
-    rng: &mut R,
-    k: f64,
-    area: f64,
-    d_min: f64,
-    d_max: f64,
-) -> Vec<f64> {
+pub fn sample_golombek_diameters<R: Rng>(rng: &mut R, k: f64, area: f64, d_min: f64, d_max: f64) -> Vec<f64> {
     let q = golombek_q(k);
     let n = 2000;
     let step = (d_max - d_min) / n as f64;
@@ -59,11 +53,7 @@ pub fn sample_golombek_diameters<R: Rng>(
                 hi = mid;
             }
         }
-        let frac = if cum[lo] > cum[lo + 1] {
-            (cum[lo] - u) / (cum[lo] - cum[lo + 1])
-        } else {
-            0.5
-        };
+        let frac = if cum[lo] > cum[lo + 1] { (cum[lo] - u) / (cum[lo] - cum[lo + 1]) } else { 0.5 };
         out.push(d_min + (lo as f64 + frac) * step);
     }
     out
@@ -87,20 +77,8 @@ pub struct Rock {
 impl Rock {
     /// Builds a rock of semi-axes `axes` (metres) centred at `centre`, yawed by `yaw` and
     /// tilted by `tilt` (radians), with `facets` random facets.
-    pub fn new<R: Rng>(
-        rng: &mut R,
-        centre: Point3<f64>,
-        axes: [f64; 3],
-        yaw: f64,
-        tilt: f64,
-        facets: usize,
-        albedo: [f32; 3],
-    ) -> Rock {
-        let rot = Rotation3::from_euler_angles(
-            tilt * rng.random_range(-1.0..1.0),
-            tilt * rng.random_range(-1.0..1.0),
-            yaw,
-        );
+    pub fn new<R: Rng>(rng: &mut R, centre: Point3<f64>, axes: [f64; 3], yaw: f64, tilt: f64, facets: usize, albedo: [f32; 3]) -> Rock {
+        let rot = Rotation3::from_euler_angles(tilt * rng.random_range(-1.0..1.0), tilt * rng.random_range(-1.0..1.0), yaw);
         let [a, b, c] = axes;
         let mut planes = Vec::with_capacity(facets + 6);
         let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
@@ -114,14 +92,7 @@ impl Rock {
             planes.push((n, d));
         }
         // Bounding planes keep the polytope bounded whatever the random facets.
-        for (n, d) in [
-            (Vector3::x(), a),
-            (-Vector3::x(), a),
-            (Vector3::y(), b),
-            (-Vector3::y(), b),
-            (Vector3::z(), c),
-            (-Vector3::z(), c),
-        ] {
+        for (n, d) in [(Vector3::x(), a), (-Vector3::x(), a), (Vector3::y(), b), (-Vector3::y(), b), (Vector3::z(), c), (-Vector3::z(), c)] {
             planes.push((n, d * 1.05));
         }
         let planes: Vec<(Vector3<f64>, f64)> = planes
@@ -135,13 +106,7 @@ impl Rock {
         let rad = [ext.min(1.05 * (a * a + b * b + c * c).sqrt()); 3];
         let lo = [centre.x - rad[0], centre.y - rad[1], centre.z - rad[2]];
         let hi = [centre.x + rad[0], centre.y + rad[1], centre.z + rad[2]];
-        Rock {
-            planes,
-            lo,
-            hi,
-            albedo,
-            seed: rng.random(),
-        }
+        Rock { planes, lo, hi, albedo, seed: rng.random() }
     }
 
     /// Exact ray/polytope intersection over `[tmin, tmax]`: the entry parameter and the index
@@ -191,16 +156,9 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         let (k, area, dmin, dmax) = (0.06, 400.0, 0.03, 1.0);
         let ds = sample_golombek_diameters(&mut rng, k, area, dmin, dmax);
-        let covered: f64 = ds
-            .iter()
-            .map(|d| std::f64::consts::PI * d * d / 4.0)
-            .sum::<f64>()
-            / area;
+        let covered: f64 = ds.iter().map(|d| std::f64::consts::PI * d * d / 4.0).sum::<f64>() / area;
         let expect = golombek_cfa(k, dmin) - golombek_cfa(k, dmax);
-        assert!(
-            (covered - expect).abs() / expect < 0.15,
-            "covered {covered}, expected {expect}"
-        );
+        assert!((covered - expect).abs() / expect < 0.15, "covered {covered}, expected {expect}");
         assert!(ds.iter().all(|&d| (dmin..=dmax).contains(&d)));
         assert!((golombek_q(0.06) - (1.79 + 0.152 / 0.06)).abs() < 1e-12);
     }
@@ -208,24 +166,13 @@ mod tests {
     #[test]
     fn rock_ray_hits_are_on_the_boundary() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let rock = Rock::new(
-            &mut rng,
-            Point3::new(0.0, 0.0, 0.0),
-            [0.1, 0.07, 0.05],
-            0.3,
-            0.2,
-            24,
-            [0.2; 3],
-        );
+        let rock = Rock::new(&mut rng, Point3::new(0.0, 0.0, 0.0), [0.1, 0.07, 0.05], 0.3, 0.2, 24, [0.2; 3]);
         assert!(rock.contains(&Point3::origin()));
         let mut hits = 0;
         for i in 0..100 {
             let a = i as f64 * 0.37;
             let o = Point3::new(a.cos(), a.sin(), 0.3);
-            let ray = Ray {
-                origin: o,
-                dir: (Point3::new(0.02 * a.sin(), 0.0, 0.0) - o).normalize(),
-            };
+            let ray = Ray { origin: o, dir: (Point3::new(0.02 * a.sin(), 0.0, 0.0) - o).normalize() };
             if let Some((t, f)) = rock.intersect(&ray, 0.0, 10.0) {
                 hits += 1;
                 let p = ray.at(t);

@@ -109,37 +109,20 @@ impl SceneConfig {
 
     /// Checks the numbers (finite, positive, grid not absurdly large).
     pub fn validate(&self) -> Result<(), SynthError> {
-        let ok = self.extent_m.is_finite()
-            && self.cell_m.is_finite()
-            && self.extent_m > 0.5
-            && self.cell_m > 0.0005
-            && self.cell_m <= 0.05;
+        let ok = self.extent_m.is_finite() && self.cell_m.is_finite() && self.extent_m > 0.5 && self.cell_m > 0.0005 && self.cell_m <= 0.05;
         if !ok {
-            return Err(SynthError::Invalid(format!(
-                "terrain extent {} m / cell {} m out of range (extent > 0.5 m, cell 0.5-50 mm)",
-                self.extent_m, self.cell_m
-            )));
+            return Err(SynthError::Invalid(format!("terrain extent {} m / cell {} m out of range (extent > 0.5 m, cell 0.5-50 mm)", self.extent_m, self.cell_m)));
         }
         let n = (self.extent_m / self.cell_m).round();
         if n > 4096.0 {
-            return Err(SynthError::Invalid(format!(
-                "height field of {n}x{n} vertices is too large (at most 4096 per side)"
-            )));
+            return Err(SynthError::Invalid(format!("height field of {n}x{n} vertices is too large (at most 4096 per side)")));
         }
-        if !(self.tube_field_radius_m.is_finite()
-            && self.tube_field_radius_m > 0.0
-            && self.tube_field_radius_m < self.extent_m / 2.0)
-        {
-            return Err(SynthError::Invalid(format!(
-                "tube field radius {} m must be positive and inside the terrain",
-                self.tube_field_radius_m
-            )));
+        if !(self.tube_field_radius_m.is_finite() && self.tube_field_radius_m > 0.0 && self.tube_field_radius_m < self.extent_m / 2.0) {
+            return Err(SynthError::Invalid(format!("tube field radius {} m must be positive and inside the terrain", self.tube_field_radius_m)));
         }
         if let Some(n) = self.tubes {
             if n > 32 {
-                return Err(SynthError::Invalid(format!(
-                    "{n} tubes per scene is too many (at most 32)"
-                )));
+                return Err(SynthError::Invalid(format!("{n} tubes per scene is too many (at most 32)")));
             }
         }
         Ok(())
@@ -192,11 +175,7 @@ pub struct Scene {
 
 fn linear_to_srgb8(v: f32) -> u8 {
     let v = v.clamp(0.0, 1.0);
-    let s = if v <= 0.0031308 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
+    let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
     (s * 255.0 + 0.5) as u8
 }
 
@@ -222,34 +201,20 @@ impl Scene {
         let params = TerrainParams {
             kind: config.terrain,
             seed: rng.random(),
-            ditch: (
-                rng.random_range(0.0..std::f64::consts::PI),
-                rng.random_range(-0.35..0.35),
-            ),
-            channels: (0..2)
-                .map(|k| {
-                    (
-                        rng.random_range(0.0..std::f64::consts::PI),
-                        (k as f64 - 0.5) * 1.4 + rng.random_range(-0.3..0.3),
-                        rng.random_range(0.05..0.08),
-                    )
-                })
-                .collect(),
+            ditch: (rng.random_range(0.0..std::f64::consts::PI), rng.random_range(-0.35..0.35)),
+            channels: (0..2).map(|k| (rng.random_range(0.0..std::f64::consts::PI), (k as f64 - 0.5) * 1.4 + rng.random_range(-0.3..0.3), rng.random_range(0.05..0.08))).collect(),
         };
         let (x0, y0) = (-half, -half);
         let mut hf = HeightField::flat(n, n, cell, x0, y0, 0.0);
         let mut lin: Vec<[f32; 3]> = vec![[0.0; 3]; n * n];
-        hf.h.par_chunks_mut(n)
-            .zip(lin.par_chunks_mut(n))
-            .enumerate()
-            .for_each(|(j, (hrow, arow))| {
-                let y = y0 + j as f64 * cell;
-                for i in 0..n {
-                    let (h, a) = params.sample(x0 + i as f64 * cell, y);
-                    hrow[i] = h;
-                    arow[i] = a;
-                }
-            });
+        hf.h.par_chunks_mut(n).zip(lin.par_chunks_mut(n)).enumerate().for_each(|(j, (hrow, arow))| {
+            let y = y0 + j as f64 * cell;
+            for i in 0..n {
+                let (h, a) = params.sample(x0 + i as f64 * cell, y);
+                hrow[i] = h;
+                arow[i] = a;
+            }
+        });
         let mut labels = vec![sand::NONE; n * n];
         hf.rebuild();
 
@@ -257,14 +222,7 @@ impl Scene {
         let shape = config.tube_shape.clone();
         let (hl, r) = shape.bounds();
         let n_tubes = config.tubes.unwrap_or_else(|| rng.random_range(5..=6));
-        let mut cases = vec![
-            TubeCase::Unoccluded,
-            TubeCase::Rock,
-            TubeCase::Dust,
-            TubeCase::Dune,
-            TubeCase::SandMound,
-            TubeCase::Unoccluded,
-        ];
+        let mut cases = vec![TubeCase::Unoccluded, TubeCase::Rock, TubeCase::Dust, TubeCase::Dune, TubeCase::SandMound, TubeCase::Unoccluded];
         cases.shuffle(&mut rng);
         let mut tubes: Vec<TubeInstance> = Vec::new();
         let mut info: Vec<TubeInfo> = Vec::new();
@@ -289,9 +247,7 @@ impl Scene {
             // On slopes (ditch walls, channel banks) a lying tube settles along the contour.
             let slope = hf.normal(pos.0, pos.1);
             if slope.z < 0.995 {
-                yaw = slope.y.atan2(slope.x)
-                    + std::f64::consts::FRAC_PI_2
-                    + (yaw - std::f64::consts::PI) * 0.1;
+                yaw = slope.y.atan2(slope.x) + std::f64::consts::FRAC_PI_2 + (yaw - std::f64::consts::PI) * 0.1;
             }
             let roll = rng.random_range(0.0..std::f64::consts::TAU);
             let axis = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
@@ -300,9 +256,7 @@ impl Scene {
             let mut samples: Vec<f64> = Vec::new();
             for si in -4..=4 {
                 for qi in -1..=1 {
-                    let p = Vector3::new(pos.0, pos.1, 0.0)
-                        + axis * (si as f64 / 4.0 * hl)
-                        + perp * (qi as f64 * r * 0.6);
+                    let p = Vector3::new(pos.0, pos.1, 0.0) + axis * (si as f64 / 4.0 * hl) + perp * (qi as f64 * r * 0.6);
                     samples.push(hf.height(p.x, p.y));
                 }
             }
@@ -318,22 +272,13 @@ impl Scene {
             // Edit the height field around the tube: carve the bed, then sand.
             let side = if rng.random::<bool>() { 1.0 } else { -1.0 };
             let dune_top = zc + r * rng.random_range(-0.1..0.35);
-            let mound_s = if rng.random::<bool>() { 1.0 } else { -1.0 }
-                * rng.random_range(0.18..0.33)
-                * 2.0
-                * hl;
+            let mound_s = if rng.random::<bool>() { 1.0 } else { -1.0 } * rng.random_range(0.18..0.33) * 2.0 * hl;
             let mound_q = rng.random_range(-0.01..0.01);
             let mound_rho = rng.random_range(0.035..0.05);
             let mound_h = 2.0 * r + rng.random_range(0.004..0.012);
             let reach = hl + 0.15;
-            let (i0, i1) = (
-                ((pos.0 - reach - x0) / cell).floor().max(0.0) as usize,
-                (((pos.0 + reach - x0) / cell).ceil() as usize).min(n - 1),
-            );
-            let (j0, j1) = (
-                ((pos.1 - reach - y0) / cell).floor().max(0.0) as usize,
-                (((pos.1 + reach - y0) / cell).ceil() as usize).min(n - 1),
-            );
+            let (i0, i1) = (((pos.0 - reach - x0) / cell).floor().max(0.0) as usize, (((pos.0 + reach - x0) / cell).ceil() as usize).min(n - 1));
+            let (j0, j1) = (((pos.1 - reach - y0) / cell).floor().max(0.0) as usize, (((pos.1 + reach - y0) / cell).ceil() as usize).min(n - 1));
             for j in j0..=j1 {
                 for i in i0..=i1 {
                     let (x, y) = (x0 + i as f64 * cell, y0 + j as f64 * cell);
@@ -357,20 +302,8 @@ impl Scene {
                             } else {
                                 (-((qs - 0.9 * r) / 0.05).powi(2)).exp()
                             };
-                            let g = if s.abs() <= hl * 0.8 {
-                                1.0
-                            } else {
-                                (-((s.abs() - hl * 0.8) / 0.05).powi(2)).exp()
-                            };
-                            let ripple = 1.0
-                                + 0.15
-                                    * fbm2(
-                                        (x / 0.03) as f32,
-                                        (y / 0.03) as f32,
-                                        2,
-                                        0.5,
-                                        params.seed ^ 0x3d,
-                                    ) as f64;
+                            let g = if s.abs() <= hl * 0.8 { 1.0 } else { (-((s.abs() - hl * 0.8) / 0.05).powi(2)).exp() };
+                            let ripple = 1.0 + 0.15 * fbm2((x / 0.03) as f32, (y / 0.03) as f32, 2, 0.5, params.seed ^ 0x3d) as f64;
                             let target = old + (dune_top - old) * f * g * ripple;
                             if target > h {
                                 h = target;
@@ -384,18 +317,7 @@ impl Scene {
                             let rr = (ds / (1.6 * mound_rho)).powi(2) + (dq / mound_rho).powi(2);
                             if rr < 1.0 {
                                 let w = (1.0 - rr).powi(2);
-                                let top = base
-                                    + mound_h
-                                        * (1.0
-                                            + 0.05
-                                                * fbm2(
-                                                    (x / 0.02) as f32,
-                                                    (y / 0.02) as f32,
-                                                    2,
-                                                    0.5,
-                                                    params.seed ^ 0x4e,
-                                                )
-                                                    as f64);
+                                let top = base + mound_h * (1.0 + 0.05 * fbm2((x / 0.02) as f32, (y / 0.02) as f32, 2, 0.5, params.seed ^ 0x4e) as f64);
                                 let target = old + (top - old) * w;
                                 if target > h {
                                     h = target;
@@ -411,74 +333,35 @@ impl Scene {
                     if label != sand::NONE && labels[idx] == sand::NONE {
                         labels[idx] = label;
                         let a = lin[idx];
-                        lin[idx] = [
-                            0.25 * a[0] + 0.75 * sand_lin[0],
-                            0.25 * a[1] + 0.75 * sand_lin[1],
-                            0.25 * a[2] + 0.75 * sand_lin[2],
-                        ];
+                        lin[idx] = [0.25 * a[0] + 0.75 * sand_lin[0], 0.25 * a[1] + 0.75 * sand_lin[1], 0.25 * a[2] + 0.75 * sand_lin[2]];
                     }
                 }
             }
             if case == TubeCase::Rock {
                 let dd = rng.random_range(0.08..0.16);
-                let axes = [
-                    dd / 2.0 * rng.random_range(0.9..1.2),
-                    dd / 2.0 * rng.random_range(0.7..1.0),
-                    dd / 2.0 * rng.random_range(0.55..0.8),
-                ];
-                let end = if rng.random::<bool>() { 1.0 } else { -1.0 }
-                    * hl
-                    * rng.random_range(0.55..0.9);
-                let c = Vector3::new(pos.0, pos.1, 0.0)
-                    + axis * end
-                    + perp * (side * (r + axes[1] * 0.45));
+                let axes = [dd / 2.0 * rng.random_range(0.9..1.2), dd / 2.0 * rng.random_range(0.7..1.0), dd / 2.0 * rng.random_range(0.55..0.8)];
+                let end = if rng.random::<bool>() { 1.0 } else { -1.0 } * hl * rng.random_range(0.55..0.9);
+                let c = Vector3::new(pos.0, pos.1, 0.0) + axis * end + perp * (side * (r + axes[1] * 0.45));
                 let gz = hf.height(c.x, c.y);
                 let alb = srgb_to_linear([96, 80, 68]);
                 let yaw_r = rng.random_range(0.0..6.3);
-                case_rocks.push(Rock::new(
-                    &mut rng,
-                    Point3::new(c.x, c.y, gz + axes[2] * 0.45),
-                    axes,
-                    yaw_r,
-                    0.25,
-                    26,
-                    alb,
-                ));
+                case_rocks.push(Rock::new(&mut rng, Point3::new(c.x, c.y, gz + axes[2] * 0.45), axes, yaw_r, 0.25, 26, alb));
             }
-            tubes.push(TubeInstance {
-                t_world_tube: pose,
-                shape: shape.clone(),
-                dust,
-                seed: rng.random(),
-            });
-            info.push(TubeInfo {
-                case,
-                dust,
-                carries_tags: false,
-            });
+            tubes.push(TubeInstance { t_world_tube: pose, shape: shape.clone(), dust, seed: rng.random() });
+            info.push(TubeInfo { case, dust, carries_tags: false });
         }
 
         // Tag mount on one clean tube.
         let mut plates = Vec::new();
         let mut mount_out = None;
         if config.with_tags && !tubes.is_empty() {
-            let k = info
-                .iter()
-                .position(|t| t.case == TubeCase::Unoccluded)
-                .unwrap_or(0);
+            let k = info.iter().position(|t| t.case == TubeCase::Unoccluded).unwrap_or(0);
             info[k].carries_tags = true;
             let c = tubes[k].t_world_tube.translation();
             let axis = tubes[k].t_world_tube.transform_vector(&Vector3::z());
             tubes[k].t_world_tube = Pose::from_parts(mount::carrier_rotation(&axis), c);
             let m = mount::build_mount(&tubes[k].t_world_tube, k)?;
-            mount::cover_with_sand(
-                &m,
-                &mut hf,
-                &mut labels,
-                &mut lin,
-                &tubes[k].t_world_tube,
-                r,
-            );
+            mount::cover_with_sand(&m, &mut hf, &mut labels, &mut lin, &tubes[k].t_world_tube, r);
             plates = m.plates.clone();
             mount_out = Some(m);
         }
@@ -498,17 +381,10 @@ impl Scene {
         if config.terrain == TerrainKind::Riverbed {
             diameters.extend((0..900).map(|_| rng.random_range(0.01..0.05)));
         }
-        let palette: [[u8; 3]; 5] = [
-            [82, 72, 64],
-            [118, 92, 72],
-            [104, 100, 96],
-            [128, 86, 62],
-            [70, 62, 58],
-        ];
+        let palette: [[u8; 3]; 5] = [[82, 72, 64], [118, 92, 72], [104, 100, 96], [128, 86, 62], [70, 62, 58]];
         let mut rocks = Vec::with_capacity(diameters.len() + case_rocks.len());
         for (idx, &d) in diameters.iter().enumerate() {
-            let riverbed_pebble =
-                config.terrain == TerrainKind::Riverbed && idx >= diameters.len() - 900;
+            let riverbed_pebble = config.terrain == TerrainKind::Riverbed && idx >= diameters.len() - 900;
             let (x, y) = loop {
                 let rad = area_r * rng.random::<f64>().sqrt();
                 let a = rng.random_range(0.0..std::f64::consts::TAU);
@@ -517,11 +393,7 @@ impl Scene {
                     break (x, y);
                 }
             };
-            let axes = [
-                d / 2.0 * rng.random_range(0.8..1.2),
-                d / 2.0 * rng.random_range(0.6..1.0),
-                d / 2.0 * rng.random_range(0.35..0.7),
-            ];
+            let axes = [d / 2.0 * rng.random_range(0.8..1.2), d / 2.0 * rng.random_range(0.6..1.0), d / 2.0 * rng.random_range(0.35..0.7)];
             let clear = tubes.iter().all(|t| {
                 let c = t.t_world_tube.translation();
                 let ax = t.t_world_tube.transform_vector(&Vector3::z());
@@ -529,42 +401,21 @@ impl Scene {
                 let s = v.dot(&ax).clamp(-hl, hl);
                 let closest = v - ax * s;
                 closest.norm() > axes[0].max(axes[1]) * 1.1 + r + 0.02
-            }) && mount_out
-                .as_ref()
-                .is_none_or(|m| m.clear_of(x, y, axes[0].max(axes[1]) + 0.02));
+            }) && mount_out.as_ref().is_none_or(|m| m.clear_of(x, y, axes[0].max(axes[1]) + 0.02));
             let colour = palette[rng.random_range(0..palette.len())];
             let shade = rng.random_range(0.85..1.15);
             let alb = srgb_to_linear(colour).map(|c| c * shade);
             let gz = hf.height(x, y);
             let burial = rng.random_range(0.2..0.5);
             let yaw_r = rng.random_range(0.0..6.3);
-            let rock = Rock::new(
-                &mut rng,
-                Point3::new(x, y, gz + axes[2] * (1.0 - 2.0 * burial)),
-                axes,
-                yaw_r,
-                0.3,
-                facets,
-                alb,
-            );
+            let rock = Rock::new(&mut rng, Point3::new(x, y, gz + axes[2] * (1.0 - 2.0 * burial)), axes, yaw_r, 0.3, facets, alb);
             if clear {
                 rocks.push(rock);
             }
         }
         rocks.extend(case_rocks);
 
-        let albedo: Vec<[u8; 4]> = lin
-            .par_iter()
-            .zip(labels.par_iter())
-            .map(|(a, &l)| {
-                [
-                    linear_to_srgb8(a[0]),
-                    linear_to_srgb8(a[1]),
-                    linear_to_srgb8(a[2]),
-                    l,
-                ]
-            })
-            .collect();
+        let albedo: Vec<[u8; 4]> = lin.par_iter().zip(labels.par_iter()).map(|(a, &l)| [linear_to_srgb8(a[0]), linear_to_srgb8(a[1]), linear_to_srgb8(a[2]), l]).collect();
         let mut objects = Objects::new(rocks, tubes, plates);
         let gcell = 0.1;
         let gn = (config.extent_m / gcell).ceil() as usize;
@@ -600,10 +451,7 @@ impl Scene {
     /// Top surface height (terrain, rocks, tubes) at `(x, y)`, metres.
     pub fn top_height(&self, x: f64, y: f64) -> f64 {
         let g = self.hf.height(x, y);
-        let ray = Ray {
-            origin: Point3::new(x, y, g + 2.0),
-            dir: -Vector3::z(),
-        };
+        let ray = Ray { origin: Point3::new(x, y, g + 2.0), dir: -Vector3::z() };
         match self.objects.intersect(&ray, 0.0, 2.0) {
             Some((t, _)) => (g + 2.0 - t).max(g),
             None => g,
@@ -624,9 +472,7 @@ impl Scene {
             }
         });
         let dists = [1usize, 2, 3, 5, 7, 10, 15, 22];
-        let dirs: Vec<(f64, f64)> = (0..8)
-            .map(|k| (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos())
-            .collect();
+        let dirs: Vec<(f64, f64)> = (0..8).map(|k| (k as f64 * std::f64::consts::FRAC_PI_4).sin_cos()).collect();
         let mut vis = vec![1.0f32; n * n];
         vis.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
             for (i, v) in row.iter_mut().enumerate() {

@@ -25,11 +25,7 @@ pub struct SensorOptions {
 
 impl Default for SensorOptions {
     fn default() -> Self {
-        SensorOptions {
-            blur_sigma_px: 0.6,
-            full_well_e: 6000.0,
-            read_noise_e: 6.0,
-        }
+        SensorOptions { blur_sigma_px: 0.6, full_well_e: 6000.0, read_noise_e: 6.0 }
     }
 }
 
@@ -41,58 +37,46 @@ pub fn develop(linear: &mut [f32], w: usize, h: usize, opts: &SensorOptions, see
     let lut: Vec<u8> = (0..4096)
         .map(|i| {
             let v = i as f32 / 4095.0;
-            let s = if v <= 0.0031308 {
-                v * 12.92
-            } else {
-                1.055 * v.powf(1.0 / 2.4) - 0.055
-            };
+            let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
             (s * 255.0 + 0.5).clamp(0.0, 255.0) as u8
         })
         .collect();
     let mut out = vec![0u8; w * h * 3];
-    out.par_chunks_mut(w * 3)
-        .zip(linear.par_chunks(w * 3))
-        .enumerate()
-        .for_each(|(y, (orow, lrow))| {
-            let mut rng =
-                ChaCha8Rng::seed_from_u64(seed ^ (y as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
-            for (o, &v) in orow.iter_mut().zip(lrow) {
-                let mut v = v.max(0.0);
-                if opts.full_well_e > 0.0 {
-                    let e = v * opts.full_well_e;
-                    let sigma = (e + opts.read_noise_e * opts.read_noise_e).sqrt();
-                    let z: f32 = StandardNormal.sample(&mut rng);
-                    v = (e + sigma * z).max(0.0) / opts.full_well_e;
-                }
-                *o = lut[((v.min(1.0) * 4095.0) + 0.5) as usize];
+    out.par_chunks_mut(w * 3).zip(linear.par_chunks(w * 3)).enumerate().for_each(|(y, (orow, lrow))| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (y as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        for (o, &v) in orow.iter_mut().zip(lrow) {
+            let mut v = v.max(0.0);
+            if opts.full_well_e > 0.0 {
+                let e = v * opts.full_well_e;
+                let sigma = (e + opts.read_noise_e * opts.read_noise_e).sqrt();
+                let z: f32 = StandardNormal.sample(&mut rng);
+                v = (e + sigma * z).max(0.0) / opts.full_well_e;
             }
-        });
+            *o = lut[((v.min(1.0) * 4095.0) + 0.5) as usize];
+        }
+    });
     out
 }
 
 /// In-place separable Gaussian blur of an interleaved RGB buffer (kernel radius `⌈3σ⌉`).
 pub fn blur_rgb(buf: &mut [f32], w: usize, h: usize, sigma: f32) {
     let rad = (3.0 * sigma).ceil() as isize;
-    let mut k: Vec<f32> = (-rad..=rad)
-        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
-        .collect();
+    let mut k: Vec<f32> = (-rad..=rad).map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp()).collect();
     let s: f32 = k.iter().sum();
     k.iter_mut().for_each(|v| *v /= s);
     let mut tmp = vec![0.0f32; buf.len()];
-    tmp.par_chunks_mut(w * 3)
-        .zip(buf.par_chunks(w * 3))
-        .for_each(|(orow, irow)| {
-            for x in 0..w as isize {
-                for c in 0..3 {
-                    let mut acc = 0.0;
-                    for (ki, &kv) in k.iter().enumerate() {
-                        let xx = (x + ki as isize - rad).clamp(0, w as isize - 1) as usize;
-                        acc += kv * irow[xx * 3 + c];
-                    }
-                    orow[x as usize * 3 + c] = acc;
+    tmp.par_chunks_mut(w * 3).zip(buf.par_chunks(w * 3)).for_each(|(orow, irow)| {
+        for x in 0..w as isize {
+            for c in 0..3 {
+                let mut acc = 0.0;
+                for (ki, &kv) in k.iter().enumerate() {
+                    let xx = (x + ki as isize - rad).clamp(0, w as isize - 1) as usize;
+                    acc += kv * irow[xx * 3 + c];
                 }
+                orow[x as usize * 3 + c] = acc;
             }
-        });
+        }
+    });
     let tmp_ref = &tmp;
     buf.par_chunks_mut(w * 3).enumerate().for_each(|(y, orow)| {
         for (ki, &kv) in k.iter().enumerate() {
@@ -119,10 +103,7 @@ mod tests {
     fn develop_is_deterministic_and_noise_has_expected_spread() {
         let (w, h) = (64, 64);
         let base = vec![0.2f32; w * h * 3];
-        let opts = SensorOptions {
-            blur_sigma_px: 0.0,
-            ..Default::default()
-        };
+        let opts = SensorOptions { blur_sigma_px: 0.0, ..Default::default() };
         let a = develop(&mut base.clone(), w, h, &opts, 7);
         let b = develop(&mut base.clone(), w, h, &opts, 7);
         let c = develop(&mut base.clone(), w, h, &opts, 8);
@@ -131,14 +112,8 @@ mod tests {
         let mean = a.iter().map(|&v| v as f64).sum::<f64>() / a.len() as f64;
         // sRGB of 0.2 is 0.4845 → 123.5.
         assert!((mean - 123.5).abs() < 1.0, "mean {mean}");
-        let none = SensorOptions {
-            blur_sigma_px: 0.0,
-            full_well_e: 0.0,
-            read_noise_e: 0.0,
-        };
-        assert!(develop(&mut base.clone(), w, h, &none, 1)
-            .iter()
-            .all(|&v| v == 124 || v == 123));
+        let none = SensorOptions { blur_sigma_px: 0.0, full_well_e: 0.0, read_noise_e: 0.0 };
+        assert!(develop(&mut base.clone(), w, h, &none, 1).iter().all(|&v| v == 124 || v == 123));
     }
 
     #[test]

@@ -32,29 +32,12 @@ pub enum Ground {
 /// A scene with one parametric tube (the default model) on flat ground, and `T_world_cam`
 /// such that the tube sits at `t_cam_tube` in the camera frame. `sun` sets the light.
 /// Fails when the camera would be below the ground.
-pub fn single_tube_scene(
-    t_cam_tube: &Pose,
-    ground: Ground,
-    sun: Sun,
-    seed: u64,
-) -> Result<(Scene, Pose), SynthError> {
-    single_tube_scene_with(
-        t_cam_tube,
-        ground,
-        sun,
-        seed,
-        Arc::new(TubeShape::from_model(&TubeModel::default())),
-    )
+pub fn single_tube_scene(t_cam_tube: &Pose, ground: Ground, sun: Sun, seed: u64) -> Result<(Scene, Pose), SynthError> {
+    single_tube_scene_with(t_cam_tube, ground, sun, seed, Arc::new(TubeShape::from_model(&TubeModel::default())))
 }
 
 /// As [`single_tube_scene`] with any tube geometry.
-pub fn single_tube_scene_with(
-    t_cam_tube: &Pose,
-    ground: Ground,
-    sun: Sun,
-    seed: u64,
-    shape: Arc<TubeShape>,
-) -> Result<(Scene, Pose), SynthError> {
+pub fn single_tube_scene_with(t_cam_tube: &Pose, ground: Ground, sun: Sun, seed: u64, shape: Arc<TubeShape>) -> Result<(Scene, Pose), SynthError> {
     let (_hl, r) = shape.bounds();
     let axis_cam = t_cam_tube.transform_vector(&Vector3::z());
     let toward_cam = -t_cam_tube.translation().normalize();
@@ -64,9 +47,7 @@ pub fn single_tube_scene_with(
         n_cam = toward_cam - axis_cam * axis_cam.dot(&toward_cam);
     }
     if n_cam.norm() < 1e-6 {
-        return Err(SynthError::Invalid(
-            "the camera looks along the tube axis: no ground to lay it on".into(),
-        ));
+        return Err(SynthError::Invalid("the camera looks along the tube axis: no ground to lay it on".into()));
     }
     let n_cam = n_cam.normalize();
     // World axes in the camera frame: z = ground normal, x = tube axis, y = z × x.
@@ -77,9 +58,7 @@ pub fn single_tube_scene_with(
     let t_cam_world = Pose::from_parts(Rotation3::from_matrix_unchecked(r_cam_world), origin_cam);
     let t_world_cam = t_cam_world.inverse();
     if t_world_cam.translation().z <= 0.0 {
-        return Err(SynthError::Invalid(
-            "camera is below the ground the tube lies on".into(),
-        ));
+        return Err(SynthError::Invalid("camera is below the ground the tube lies on".into()));
     }
     let t_world_tube = t_world_cam * *t_cam_tube;
     let mut config = SceneConfig::new(TerrainKind::Cfa6, TimeOfDay::Am, false);
@@ -89,42 +68,24 @@ pub fn single_tube_scene_with(
     config.tube_shape = shape.clone();
     let n = 601;
     let hf = HeightField::flat(n, n, 0.01, -3.0, -3.0, 0.0);
-    let params = TerrainParams {
-        kind: TerrainKind::Cfa6,
-        seed: seed as u32,
-        ditch: (0.0, 0.0),
-        channels: Vec::new(),
-    };
+    let params = TerrainParams { kind: TerrainKind::Cfa6, seed: seed as u32, ditch: (0.0, 0.0), channels: Vec::new() };
     let plain = srgb_to_linear(REGOLITH_SRGB);
     let albedo: Vec<[u8; 4]> = (0..n * n)
         .into_par_iter()
         .map(|k| {
             let a = match ground {
                 Ground::Plain => plain,
-                Ground::Textured => {
-                    params
-                        .sample(-3.0 + (k % n) as f64 * 0.01, -3.0 + (k / n) as f64 * 0.01)
-                        .1
-                }
+                Ground::Textured => params.sample(-3.0 + (k % n) as f64 * 0.01, -3.0 + (k / n) as f64 * 0.01).1,
             };
             let enc = |v: f32| -> u8 {
                 let v = v.clamp(0.0, 1.0);
-                let s = if v <= 0.0031308 {
-                    v * 12.92
-                } else {
-                    1.055 * v.powf(1.0 / 2.4) - 0.055
-                };
+                let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
                 (s * 255.0 + 0.5) as u8
             };
             [enc(a[0]), enc(a[1]), enc(a[2]), 0]
         })
         .collect();
-    let tube = TubeInstance {
-        t_world_tube,
-        shape,
-        dust: 0.0,
-        seed: seed as u32,
-    };
+    let tube = TubeInstance { t_world_tube, shape, dust: 0.0, seed: seed as u32 };
     let mut objects = Objects::new(Vec::new(), vec![tube], Vec::new());
     objects.build_grid(-3.0, -3.0, 0.1, 60, 60);
     let mut scene = Scene {
@@ -136,11 +97,7 @@ pub fn single_tube_scene_with(
         hf,
         albedo,
         objects,
-        tube_info: vec![TubeInfo {
-            case: TubeCase::Unoccluded,
-            dust: 0.0,
-            carries_tags: false,
-        }],
+        tube_info: vec![TubeInfo { case: TubeCase::Unoccluded, dust: 0.0, carries_tags: false }],
         mount: None,
         sky: Plane::new(1, 1),
         sky_cell: 0.02,

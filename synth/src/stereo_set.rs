@@ -52,19 +52,10 @@ pub struct StereoSetSpec {
 /// sits on the left camera's +x axis.
 pub fn pair_geometry(rig: &Rig, left: &str, right: &str) -> Result<(Pose, f64), SynthError> {
     let names: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
-    let find = |n: &str| {
-        rig.camera(n).ok_or_else(|| {
-            SynthError::Invalid(format!(
-                "rig has no camera {n:?} (cameras: {})",
-                names.join(", ")
-            ))
-        })
-    };
+    let find = |n: &str| rig.camera(n).ok_or_else(|| SynthError::Invalid(format!("rig has no camera {n:?} (cameras: {})", names.join(", "))));
     let (l, r) = (find(left)?, find(right)?);
     if l.model != r.model {
-        return Err(SynthError::Invalid(format!(
-            "pair {left},{right}: intrinsics differ, the crops would not be rectified"
-        )));
+        return Err(SynthError::Invalid(format!("pair {left},{right}: intrinsics differ, the crops would not be rectified")));
     }
     let t = l.t_rig_cam.inverse() * r.t_rig_cam;
     let tr = t.translation();
@@ -80,17 +71,7 @@ pub fn pair_geometry(rig: &Rig, left: &str, right: &str) -> Result<(Pose, f64), 
 
 /// Exact left disparity `f_x B / Z` from a camera-z depth map (`+inf` where depth is infinite).
 pub fn disparity_from_depth(depth: &Plane<f32>, fx: f64, baseline_m: f64) -> Plane<f32> {
-    let data = depth
-        .data
-        .iter()
-        .map(|&z| {
-            if z.is_finite() && z > 0.0 {
-                (fx * baseline_m / z as f64) as f32
-            } else {
-                f32::INFINITY
-            }
-        })
-        .collect();
+    let data = depth.data.iter().map(|&z| if z.is_finite() && z > 0.0 { (fx * baseline_m / z as f64) as f32 } else { f32::INFINITY }).collect();
     Plane::from_vec(depth.width, depth.height, data)
 }
 
@@ -117,16 +98,8 @@ struct PairView {
 
 /// Plans `n` pair views of a scene: random (stop, height) without repetition (cycling when
 /// there are fewer), each cropped so that one whole tube is inside the left image.
-fn plan_pairs(
-    scene: &Scene,
-    spec: &DatasetSpec,
-    left: &tubeloc_core::RigCamera,
-    n: usize,
-    seed: u64,
-) -> Result<Vec<PairView>, SynthError> {
-    let mut all: Vec<(usize, f64)> = (0..spec.stops)
-        .flat_map(|s| spec.heights.iter().map(move |&h| (s, h)))
-        .collect();
+fn plan_pairs(scene: &Scene, spec: &DatasetSpec, left: &tubeloc_core::RigCamera, n: usize, seed: u64) -> Result<Vec<PairView>, SynthError> {
+    let mut all: Vec<(usize, f64)> = (0..spec.stops).flat_map(|s| spec.heights.iter().map(move |&h| (s, h))).collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     all.shuffle(&mut rng);
     let cam = left.model.scaled(spec.scale);
@@ -136,25 +109,11 @@ fn plan_pairs(
         if views.len() == n {
             break;
         }
-        let t_world_cam = stop_pose(
-            &Point3::origin(),
-            STOP_RADIUS_M,
-            height,
-            stop,
-            spec.stops,
-            scene.stop_offset,
-        )? * left.t_rig_cam;
-        let Some((x0, y0)) =
-            crate::dataset::crop_around_a_tube(scene, &cam, &t_world_cam, crop, &mut rng)
-        else {
+        let t_world_cam = stop_pose(&Point3::origin(), STOP_RADIUS_M, height, stop, spec.stops, scene.stop_offset)? * left.t_rig_cam;
+        let Some((x0, y0)) = crate::dataset::crop_around_a_tube(scene, &cam, &t_world_cam, crop, &mut rng) else {
             continue;
         };
-        views.push(PairView {
-            stop,
-            height,
-            crop_x0: x0 as u32,
-            crop_y0: y0 as u32,
-        });
+        views.push(PairView { stop, height, crop_x0: x0 as u32, crop_y0: y0 as u32 });
     }
     if views.len() < n {
         return Err(SynthError::Invalid(format!("could not find {n} pair views with a whole tube inside a {crop} px crop (scene seed {})", scene.seed)));
@@ -164,27 +123,16 @@ fn plan_pairs(
 
 /// Renders the stereo set into `out` (see the module doc). `overwrite` replaces an existing
 /// folder. `progress(done, total)` is called after every pair.
-pub fn write_stereo_set(
-    spec: &StereoSetSpec,
-    out: &Path,
-    overwrite: bool,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<DatasetSummary, SynthError> {
+pub fn write_stereo_set(spec: &StereoSetSpec, out: &Path, overwrite: bool, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<DatasetSummary, SynthError> {
     spec.base.validate()?;
     if spec.pairs_per_scene == 0 {
-        return Err(SynthError::Invalid(
-            "pairs per scene must be at least 1".into(),
-        ));
+        return Err(SynthError::Invalid("pairs per scene must be at least 1".into()));
     }
     pair_geometry(&paper_rig(), &spec.pair.0, &spec.pair.1)?;
     crate::dataset::write_folder_atomically(out, overwrite, |tmp| write_into(spec, tmp, progress))
 }
 
-fn write_into(
-    spec: &StereoSetSpec,
-    dir: &Path,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<(usize, usize), SynthError> {
+fn write_into(spec: &StereoSetSpec, dir: &Path, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<(usize, usize), SynthError> {
     for sub in ["images", "right", "disparity"] {
         std::fs::create_dir_all(dir.join(sub)).map_err(|e| tubeloc_core::CoreError::io(dir, e))?;
     }
@@ -200,19 +148,14 @@ fn write_into(
         cfg.cell_m = base.terrain_cell_m;
         cfg.tube_shape = base.tube_shape.clone();
         let scene = Scene::generate(&cfg, ss.seed)?;
-        let left = rig
-            .camera(&spec.pair.0)
-            .ok_or_else(|| SynthError::Invalid(format!("no camera {}", spec.pair.0)))?;
+        let left = rig.camera(&spec.pair.0).ok_or_else(|| SynthError::Invalid(format!("no camera {}", spec.pair.0)))?;
         let views = plan_pairs(&scene, base, left, spec.pairs_per_scene, ss.seed ^ 0x57e7e0)?;
         let rendered: Vec<Result<(CocoImage, Vec<CocoAnnotation>), SynthError>> = views
             .par_iter()
             .enumerate()
             .map(|(k, v)| {
                 let r = render_pair(spec, &scene, si, k, v, dir, &rig);
-                progress(
-                    done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
-                    total,
-                );
+                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
                 r
             })
             .collect();
@@ -241,35 +184,15 @@ fn write_into(
     Ok((n_images, n_anns))
 }
 
-fn render_pair(
-    spec: &StereoSetSpec,
-    scene: &Scene,
-    si: usize,
-    k: usize,
-    v: &PairView,
-    dir: &Path,
-    rig: &Rig,
-) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
+fn render_pair(spec: &StereoSetSpec, scene: &Scene, si: usize, k: usize, v: &PairView, dir: &Path, rig: &Rig) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
     let base = &spec.base;
     let ss = &base.scenes[si];
     let (ln, rn) = (&spec.pair.0, &spec.pair.1);
     let (t_left_right, baseline) = pair_geometry(rig, ln, rn)?;
     let image_id = (si as u64 + 1) * 1000 + k as u64 + 1;
-    let lc = rig
-        .camera(ln)
-        .ok_or_else(|| SynthError::Invalid(format!("no camera {ln}")))?;
-    let cam: CameraModel = lc
-        .model
-        .scaled(base.scale)
-        .cropped(v.crop_x0, v.crop_y0, base.crop, base.crop);
-    let t_world_left = stop_pose(
-        &Point3::origin(),
-        STOP_RADIUS_M,
-        v.height,
-        v.stop,
-        base.stops,
-        scene.stop_offset,
-    )? * lc.t_rig_cam;
+    let lc = rig.camera(ln).ok_or_else(|| SynthError::Invalid(format!("no camera {ln}")))?;
+    let cam: CameraModel = lc.model.scaled(base.scale).cropped(v.crop_x0, v.crop_y0, base.crop, base.crop);
+    let t_world_left = stop_pose(&Point3::origin(), STOP_RADIUS_M, v.height, v.stop, base.stops, scene.stop_offset)? * lc.t_rig_cam;
     let t_world_right = t_world_left * t_left_right;
     let mut opts = base.render;
     opts.noise_seed = ss.seed ^ image_id.wrapping_mul(0x2545_f491_4f6c_dd1d);
@@ -277,38 +200,22 @@ fn render_pair(
     opts.noise_seed = ss.seed ^ image_id.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0x5151;
     let out_r = render(scene, &cam, &t_world_right, &opts);
     let truth = tube_truth(&scene.objects, &cam, &t_world_left, &out_l);
-    let stem = format!(
-        "{image_id:06}_{}_{}_{}_s{}_h{}_{ln}{rn}",
-        ss.split,
-        ss.terrain.name(),
-        ss.time.name(),
-        v.stop,
-        v.height
-    );
+    let stem = format!("{image_id:06}_{}_{}_{}_s{}_h{}_{ln}{rn}", ss.split, ss.terrain.name(), ss.time.name(), v.stop, v.height);
     let (file_name, pfm_name) = (format!("{stem}.png"), format!("{stem}.pfm"));
     for (sub, o) in [("images", &out_l), ("right", &out_r)] {
         let path = dir.join(sub).join(&file_name);
-        let png = encode_png(&o.rgb, cam.width, cam.height).map_err(|m| SynthError::Image {
-            path: path.clone(),
-            message: m,
-        })?;
+        let png = encode_png(&o.rgb, cam.width, cam.height).map_err(|m| SynthError::Image { path: path.clone(), message: m })?;
         files::write_atomic(&path, &png)?;
     }
     let disp = disparity_from_depth(&out_l.depth, cam.fx, baseline);
     files::write_atomic(&dir.join("disparity").join(&pfm_name), &encode_pfm(&disp))?;
     let mut extra = Map::new();
-    extra.insert(
-        "camera".into(),
-        serde_json::to_value(&cam).unwrap_or(Value::Null),
-    );
+    extra.insert("camera".into(), serde_json::to_value(&cam).unwrap_or(Value::Null));
     extra.insert("T_world_cam".into(), pose_json(&t_world_left));
     extra.insert("right_file_name".into(), json!(file_name));
     extra.insert("pair".into(), json!([ln, rn]));
     extra.insert("baseline_m".into(), json!(baseline));
-    extra.insert(
-        "right_camera".into(),
-        serde_json::to_value(&cam).unwrap_or(Value::Null),
-    );
+    extra.insert("right_camera".into(), serde_json::to_value(&cam).unwrap_or(Value::Null));
     extra.insert("T_left_right".into(), pose_json(&t_left_right));
     extra.insert("disparity_file_name".into(), json!(pfm_name));
     extra.insert("terrain".into(), json!(ss.terrain.name()));
@@ -321,13 +228,7 @@ fn render_pair(
     extra.insert("scene_seed".into(), json!(ss.seed));
     extra.insert("scale".into(), json!(base.scale));
     extra.insert("crop_origin".into(), json!([v.crop_x0, v.crop_y0]));
-    let image = CocoImage {
-        id: image_id,
-        width: cam.width,
-        height: cam.height,
-        file_name,
-        extra,
-    };
+    let image = CocoImage { id: image_id, width: cam.width, height: cam.height, file_name, extra };
     let anns = crate::dataset::scene_annotations(scene, &truth, image_id, &cam);
     Ok((image, anns))
 }
@@ -350,15 +251,9 @@ mod tests {
             }
         }
         assert_eq!(parts[0], "Pf");
-        let dims: Vec<usize> = parts[1]
-            .split_whitespace()
-            .map(|v| v.parse().unwrap())
-            .collect();
+        let dims: Vec<usize> = parts[1].split_whitespace().map(|v| v.parse().unwrap()).collect();
         let (w, h) = (dims[0], dims[1]);
-        let vals: Vec<f32> = bytes[start..]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
+        let vals: Vec<f32> = bytes[start..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
         let mut p = Plane::<f32>::new(w, h);
         for y in 0..h {
             p.data[y * w..(y + 1) * w].copy_from_slice(&vals[(h - 1 - y) * w..(h - y) * w]);
@@ -372,16 +267,9 @@ mod tests {
     }
 
     fn tiny_spec(seed: u64) -> StereoSetSpec {
-        let mut base = DatasetSpec::preset("tiny", seed)
-            .unwrap()
-            .with_scenes(1)
-            .unwrap();
+        let mut base = DatasetSpec::preset("tiny", seed).unwrap().with_scenes(1).unwrap();
         base.crop = 160;
-        StereoSetSpec {
-            base,
-            pair: ("L20".into(), "R20".into()),
-            pairs_per_scene: 1,
-        }
+        StereoSetSpec { base, pair: ("L20".into(), "R20".into()), pairs_per_scene: 1 }
     }
 
     #[test]
@@ -395,10 +283,7 @@ mod tests {
         assert!(e.contains("no camera \"X9\""), "{e}");
         let mut rig2 = rig.clone();
         rig2.cameras[2].model.fx *= 1.01;
-        assert!(pair_geometry(&rig2, "L20", "R20")
-            .unwrap_err()
-            .to_string()
-            .contains("intrinsics differ"));
+        assert!(pair_geometry(&rig2, "L20", "R20").unwrap_err().to_string().contains("intrinsics differ"));
     }
 
     #[test]
@@ -417,81 +302,42 @@ mod tests {
         assert!((b_m - 0.2).abs() < 1e-12);
         assert_eq!(e["pair"], json!(["L20", "R20"]));
         let t_lr: Pose = serde_json::from_value(e["T_left_right"].clone()).unwrap();
-        let disp_bytes = std::fs::read(
-            a.join("disparity")
-                .join(e["disparity_file_name"].as_str().unwrap()),
-        )
-        .unwrap();
+        let disp_bytes = std::fs::read(a.join("disparity").join(e["disparity_file_name"].as_str().unwrap())).unwrap();
         let disp = decode_pfm(&disp_bytes);
         let left = luma(&a.join("images").join(&img.file_name));
         let right = luma(&a.join("right").join(e["right_file_name"].as_str().unwrap()));
         // Same seed, same bytes.
-        for f in [
-            "annotations.json",
-            &format!("images/{}", img.file_name),
-            &format!("right/{}", img.file_name),
-        ] {
-            assert_eq!(
-                std::fs::read(a.join(f)).unwrap(),
-                std::fs::read(b.join(f)).unwrap(),
-                "{f}"
-            );
+        for f in ["annotations.json", &format!("images/{}", img.file_name), &format!("right/{}", img.file_name)] {
+            assert_eq!(std::fs::read(a.join(f)).unwrap(), std::fs::read(b.join(f)).unwrap(), "{f}");
         }
-        assert_eq!(
-            disp_bytes,
-            std::fs::read(
-                b.join("disparity")
-                    .join(e["disparity_file_name"].as_str().unwrap())
-            )
-            .unwrap()
-        );
+        assert_eq!(disp_bytes, std::fs::read(b.join("disparity").join(e["disparity_file_name"].as_str().unwrap())).unwrap());
 
         // Tube pixels: the point at depth Z = fx B / d lies on the tube surface, and it
         // projects into the right camera at x - d on the same row.
         let model = TubeModel::default();
-        let ann = ds
-            .annotations
-            .iter()
-            .max_by(|p, q| p.area.total_cmp(&q.area))
-            .unwrap();
+        let ann = ds.annotations.iter().max_by(|p, q| p.area.total_cmp(&q.area)).unwrap();
         let t_cam_tube: Pose = serde_json::from_value(ann.extra["T_cam_tube"].clone()).unwrap();
         let mask = match &ann.segmentation {
-            Some(tubeloc_core::Segmentation::CompressedRle { counts, size }) => {
-                tubeloc_core::Rle::from_compressed_string(counts, *size)
-                    .unwrap()
-                    .to_mask()
-                    .unwrap()
-            }
+            Some(tubeloc_core::Segmentation::CompressedRle { counts, size }) => tubeloc_core::Rle::from_compressed_string(counts, *size).unwrap().to_mask().unwrap(),
             _ => panic!("expected RLE"),
         };
-        let (mut n, mut on_surface, mut photo_err, mut shifted_err) =
-            (0usize, 0usize, 0.0f64, 0.0f64);
+        let (mut n, mut on_surface, mut photo_err, mut shifted_err) = (0usize, 0usize, 0.0f64, 0.0f64);
         for y in 2..cam.height as usize - 2 {
             for x in 2..cam.width as usize - 2 {
                 if !mask.get(x, y) {
                     continue;
                 }
                 let d = disp.get(x, y) as f64;
-                assert!(
-                    d.is_finite() && d > 0.0,
-                    "tube pixel ({x},{y}) has disparity {d}"
-                );
+                assert!(d.is_finite() && d > 0.0, "tube pixel ({x},{y}) has disparity {d}");
                 let z = cam.fx * b_m / d;
                 let p_left = cam.unproject_depth(&nalgebra::Point2::new(x as f64, y as f64), z);
                 let p_tube = t_cam_tube.inverse().transform_point(&p_left);
                 let r = (p_tube.x * p_tube.x + p_tube.y * p_tube.y).sqrt();
-                if (r - model.radius_at(p_tube.z)).abs() < 0.5e-3
-                    || p_tube.z.abs() > model.length / 2.0 - 1e-3
-                {
+                if (r - model.radius_at(p_tube.z)).abs() < 0.5e-3 || p_tube.z.abs() > model.length / 2.0 - 1e-3 {
                     on_surface += 1;
                 }
-                let pr = cam
-                    .project(&t_lr.inverse().transform_point(&p_left))
-                    .unwrap();
-                assert!(
-                    (pr.x - (x as f64 - d)).abs() < 1e-6 && (pr.y - y as f64).abs() < 1e-6,
-                    "({x},{y}) -> {pr:?}, d {d}"
-                );
+                let pr = cam.project(&t_lr.inverse().transform_point(&p_left)).unwrap();
+                assert!((pr.x - (x as f64 - d)).abs() < 1e-6 && (pr.y - y as f64).abs() < 1e-6, "({x},{y}) -> {pr:?}, d {d}");
                 let xr = (x as f64 - d).round() as i64;
                 if xr >= 0 && (xr as usize) < right.width {
                     n += 1;
@@ -503,14 +349,8 @@ mod tests {
         }
         eprintln!("tube pixels {n}, on surface {on_surface}, photometric error {:.2} (shifted by 7 px: {:.2})", photo_err / n as f64, shifted_err / n as f64);
         assert!(n > 50, "only {n} tube pixels");
-        assert!(
-            on_surface as f64 > 0.95 * n as f64,
-            "{on_surface} of {n} points on the tube surface"
-        );
+        assert!(on_surface as f64 > 0.95 * n as f64, "{on_surface} of {n} points on the tube surface");
         let (pe, se) = (photo_err / n as f64, shifted_err / n as f64);
-        assert!(
-            pe < 0.5 * se,
-            "right image does not match the disparity: {pe:.2} vs shifted {se:.2}"
-        );
+        assert!(pe < 0.5 * se, "right image does not match the disparity: {pe:.2} vs shifted {se:.2}");
     }
 }

@@ -25,25 +25,17 @@ impl Sun {
     /// Sun for latitude (degrees), day of year (1-365) and local solar time (hours).
     pub fn at(latitude_deg: f64, day_of_year: f64, solar_hour: f64) -> Sun {
         let phi = latitude_deg.to_radians();
-        let decl = (23.44f64).to_radians()
-            * (2.0 * std::f64::consts::PI * (284.0 + day_of_year) / 365.0).sin();
+        let decl = (23.44f64).to_radians() * (2.0 * std::f64::consts::PI * (284.0 + day_of_year) / 365.0).sin();
         let h = (15.0 * (solar_hour - 12.0)).to_radians();
         let sin_el = phi.sin() * decl.sin() + phi.cos() * decl.cos() * h.cos();
         let el = sin_el.clamp(-1.0, 1.0).asin();
-        let az = (-h.sin() * decl.cos())
-            .atan2(phi.cos() * decl.sin() - phi.sin() * decl.cos() * h.cos());
-        Sun {
-            elevation_deg: el.to_degrees(),
-            azimuth_deg: az.to_degrees().rem_euclid(360.0),
-        }
+        let az = (-h.sin() * decl.cos()).atan2(phi.cos() * decl.sin() - phi.sin() * decl.cos() * h.cos());
+        Sun { elevation_deg: el.to_degrees(), azimuth_deg: az.to_degrees().rem_euclid(360.0) }
     }
 
     /// Unit vector toward the sun in the world frame (x east, y north, z up).
     pub fn direction(&self) -> Vector3<f64> {
-        let (el, az) = (
-            self.elevation_deg.to_radians(),
-            self.azimuth_deg.to_radians(),
-        );
+        let (el, az) = (self.elevation_deg.to_radians(), self.azimuth_deg.to_radians());
         Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin())
     }
 }
@@ -56,10 +48,7 @@ mod tests {
     fn noon_and_afternoon_positions() {
         // Summer solstice noon at 34.2 N: elevation 90 - 34.2 + 23.44, due south.
         let s = Sun::at(JPL_LATITUDE_DEG, 172.0, 12.0);
-        assert!(
-            (s.elevation_deg - (90.0 - 34.2 + 23.44)).abs() < 0.1,
-            "{s:?}"
-        );
+        assert!((s.elevation_deg - (90.0 - 34.2 + 23.44)).abs() < 0.1, "{s:?}");
         assert!((s.azimuth_deg - 180.0).abs() < 0.5);
         // Morning sun is in the east, afternoon in the west, symmetric.
         let am = Sun::at(JPL_LATITUDE_DEG, 100.0, 10.0);

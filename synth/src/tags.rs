@@ -50,13 +50,11 @@ impl TagFamily {
         // and then free with the matching destroy function.
         unsafe {
             match self {
-                TagFamily::Tag36h11 => T36.get_or_init(|| {
-                    FamilyTable::copy(sys::tag36h11_create(), sys::tag36h11_destroy)
-                }),
-                TagFamily::Tag25h9 => T25
-                    .get_or_init(|| FamilyTable::copy(sys::tag25h9_create(), sys::tag25h9_destroy)),
-                TagFamily::Tag16h5 => T16
-                    .get_or_init(|| FamilyTable::copy(sys::tag16h5_create(), sys::tag16h5_destroy)),
+                TagFamily::Tag36h11 => {
+                    T36.get_or_init(|| FamilyTable::copy(sys::tag36h11_create(), sys::tag36h11_destroy))
+                }
+                TagFamily::Tag25h9 => T25.get_or_init(|| FamilyTable::copy(sys::tag25h9_create(), sys::tag25h9_destroy)),
+                TagFamily::Tag16h5 => T16.get_or_init(|| FamilyTable::copy(sys::tag16h5_create(), sys::tag16h5_destroy)),
             }
         }
     }
@@ -80,10 +78,7 @@ pub struct FamilyTable {
 }
 
 impl FamilyTable {
-    unsafe fn copy(
-        ptr: *mut sys::apriltag_family_t,
-        destroy: unsafe extern "C" fn(*mut sys::apriltag_family_t),
-    ) -> Self {
+    unsafe fn copy(ptr: *mut sys::apriltag_family_t, destroy: unsafe extern "C" fn(*mut sys::apriltag_family_t)) -> Self {
         let f = &*ptr;
         let n = f.nbits as usize;
         let table = FamilyTable {
@@ -151,12 +146,7 @@ impl TagTexture {
     /// The texture of `id` with a black square of `size_m` metres; `None` for an unknown id.
     pub fn new(family: TagFamily, id: u32, size_m: f64) -> Option<Self> {
         let (n, cells) = tag_bits(family, id)?;
-        Some(TagTexture {
-            cells_per_side: n,
-            cells_at_border: family.table().width_at_border as usize,
-            cells,
-            size_m,
-        })
+        Some(TagTexture { cells_per_side: n, cells_at_border: family.table().width_at_border as usize, cells, size_m })
     }
 
     /// Half the edge of the whole tag including the white ring, metres.
@@ -176,13 +166,7 @@ impl TagTexture {
         if !(0.0..n).contains(&cx) || !(0.0..n).contains(&cy) {
             return None;
         }
-        Some(
-            if self.cells[cy as usize * self.cells_per_side + cx as usize] {
-                1.0
-            } else {
-                0.0
-            },
-        )
+        Some(if self.cells[cy as usize * self.cells_per_side + cx as usize] { 1.0 } else { 0.0 })
     }
 
     /// Area-averaged reflectance over the square of half-width `r` metres around `(u, v)`
@@ -230,10 +214,7 @@ mod tests {
     fn tag36h11_table_matches_known_layout() {
         let t = TagFamily::Tag36h11.table();
         assert_eq!(t.len(), 587);
-        assert_eq!(
-            (t.width_at_border, t.total_width, t.reversed_border),
-            (8, 10, false)
-        );
+        assert_eq!((t.width_at_border, t.total_width, t.reversed_border), (8, 10, false));
         let (n, cells) = tag_bits(TagFamily::Tag36h11, 0).unwrap();
         assert_eq!(n, 10);
         // White outer ring, black border ring.
@@ -254,14 +235,8 @@ mod tests {
         let tex = TagTexture::new(TagFamily::Tag36h11, 3, 0.08).unwrap();
         let cell = 0.01;
         // Centre of the white ring's top-left cell, and of the black ring below-right of it.
-        assert_eq!(
-            tex.sample(-0.05 + 0.5 * cell, -0.05 + 0.5 * cell),
-            Some(1.0)
-        );
-        assert_eq!(
-            tex.sample(-0.04 + 0.5 * cell, -0.04 + 0.5 * cell),
-            Some(0.0)
-        );
+        assert_eq!(tex.sample(-0.05 + 0.5 * cell, -0.05 + 0.5 * cell), Some(1.0));
+        assert_eq!(tex.sample(-0.04 + 0.5 * cell, -0.04 + 0.5 * cell), Some(0.0));
         assert_eq!(tex.sample(0.051, 0.0), None);
         // A box straddling the white/black boundary of the rings by equal parts gives 0.5.
         let v = tex.sample_area(-0.04, -0.03 + 0.5 * cell, 0.002).unwrap();

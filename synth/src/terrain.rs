@@ -43,15 +43,7 @@ impl TerrainKind {
 
     /// Parses a name as written by [`TerrainKind::name`].
     pub fn parse(s: &str) -> Option<TerrainKind> {
-        [
-            TerrainKind::Flagstone,
-            TerrainKind::Cfa6,
-            TerrainKind::Cfa2,
-            TerrainKind::Ditch,
-            TerrainKind::Riverbed,
-        ]
-        .into_iter()
-        .find(|k| k.name() == s)
+        [TerrainKind::Flagstone, TerrainKind::Cfa6, TerrainKind::Cfa2, TerrainKind::Ditch, TerrainKind::Riverbed].into_iter().find(|k| k.name() == s)
     }
 }
 
@@ -73,11 +65,7 @@ pub const REGOLITH_SRGB: [u8; 3] = [158, 118, 88];
 pub const SAND_SRGB: [u8; 3] = [176, 136, 100];
 
 fn mix(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
-    [
-        a[0] + (b[0] - a[0]) * t,
-        a[1] + (b[1] - a[1]) * t,
-        a[2] + (b[2] - a[2]) * t,
-    ]
+    [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t]
 }
 
 /// Parameters of one generated terrain that stay fixed over the scene.
@@ -97,9 +85,7 @@ impl TerrainParams {
     /// Regolith relief common to all kinds, metres.
     fn regolith(&self, x: f32, y: f32) -> f32 {
         let s = self.seed;
-        0.015 * fbm2(x / 0.8, y / 0.8, 2, 0.5, s)
-            + 0.004 * fbm2(x / 0.1, y / 0.1, 2, 0.5, s ^ 0x55)
-            + 0.0015 * value2(x / 0.02, y / 0.02, s ^ 0xaa)
+        0.015 * fbm2(x / 0.8, y / 0.8, 2, 0.5, s) + 0.004 * fbm2(x / 0.1, y / 0.1, 2, 0.5, s ^ 0x55) + 0.0015 * value2(x / 0.02, y / 0.02, s ^ 0xaa)
     }
 
     /// Channel profile for the riverbed: 0 outside, 1 at the bed centre, and the across
@@ -107,16 +93,9 @@ impl TerrainParams {
     fn channel(&self, x: f64, y: f64, angle: f64, offset: f64, width: f64) -> (f64, f64) {
         let (c, s) = (angle.cos(), angle.sin());
         let along = x * c + y * s;
-        let across = -x * s + y * c
-            - offset
-            - 0.25 * (along * 1.3 + self.seed as f64 * 0.01).sin()
-            - 0.1 * (along * 3.1).sin();
+        let across = -x * s + y * c - offset - 0.25 * (along * 1.3 + self.seed as f64 * 0.01).sin() - 0.1 * (along * 3.1).sin();
         let u = (across / (width / 2.0)).abs();
-        let w = if u < 1.0 {
-            0.5 * (1.0 + (std::f64::consts::PI * u).cos())
-        } else {
-            0.0
-        };
+        let w = if u < 1.0 { 0.5 * (1.0 + (std::f64::consts::PI * u).cos()) } else { 0.0 };
         (w, along)
     }
 
@@ -138,16 +117,13 @@ impl TerrainParams {
                 let crack_w = 0.010 + 0.010 * (0.5 + 0.5 * value2(xf / 0.2, yf / 0.2, s ^ 3));
                 let rise = 0.012 + 0.018 * ((id & 0xff) as f32 / 255.0);
                 // Each slab has its own gentle warp (noise seeded by the slab id): no seams inside a slab.
-                let slab_h = rise
-                    + 0.006 * value2(xf / 0.35, yf / 0.35, id)
-                    + 0.0015 * fbm2(xf / 0.05, yf / 0.05, 2, 0.5, s ^ 9);
+                let slab_h = rise + 0.006 * value2(xf / 0.35, yf / 0.35, id) + 0.0015 * fbm2(xf / 0.05, yf / 0.05, 2, 0.5, s ^ 9);
                 let t = ((edge - crack_w * 0.5) / crack_w).clamp(0.0, 1.0);
                 let t = t * t * (3.0 - 2.0 * t);
                 h = h * 0.3 + slab_h * t;
                 let shade = 0.8 + 0.4 * ((id >> 24) as f32 / 255.0);
                 let slab = srgb_to_linear([150, 134, 118]).map(|c| c * shade);
-                let dust =
-                    (0.45 + 0.35 * fbm2(xf / 0.15, yf / 0.15, 3, 0.55, s ^ 0x77)).clamp(0.0, 1.0);
+                let dust = (0.45 + 0.35 * fbm2(xf / 0.15, yf / 0.15, 3, 0.55, s ^ 0x77)).clamp(0.0, 1.0);
                 let top = mix(slab, regolith, dust);
                 let crack = regolith.map(|c| c * 0.45);
                 alb = mix(crack, top, t);
@@ -162,17 +138,9 @@ impl TerrainParams {
                 let u = (across / half).abs();
                 if u < 1.3 {
                     let depth = 0.15;
-                    let prof = if u < 1.0 {
-                        0.5 * (1.0 + (std::f64::consts::PI * u).cos())
-                    } else {
-                        0.0
-                    };
+                    let prof = if u < 1.0 { 0.5 * (1.0 + (std::f64::consts::PI * u).cos()) } else { 0.0 };
                     // Smooth wall plus a small lip of thrown-out soil.
-                    let lip = if u > 0.8 {
-                        0.015 * (1.0 - ((u - 1.05) / 0.25).powi(2)).max(0.0)
-                    } else {
-                        0.0
-                    };
+                    let lip = if u > 0.8 { 0.015 * (1.0 - ((u - 1.05) / 0.25).powi(2)).max(0.0) } else { 0.0 };
                     h += (-depth * prof + lip) as f32;
                     let darker = (0.12 * prof) as f32;
                     alb = alb.map(|c| c * (1.0 - darker));
@@ -182,9 +150,7 @@ impl TerrainParams {
                 for &(angle, offset, depth) in &self.channels {
                     let (w, along) = self.channel(x, y, angle, offset, 0.55);
                     if w > 0.0 {
-                        let ripple = 0.004
-                            * (along * 45.0 + 2.0 * fbm2(xf / 0.2, yf / 0.2, 2, 0.5, s ^ 5) as f64)
-                                .sin();
+                        let ripple = 0.004 * (along * 45.0 + 2.0 * fbm2(xf / 0.2, yf / 0.2, 2, 0.5, s ^ 5) as f64).sin();
                         h += (-depth * w + ripple * w) as f32;
                         let sand = srgb_to_linear(SAND_SRGB);
                         alb = mix(alb, sand.map(|c| c * 0.92), (w as f32 * 1.5).min(1.0));
@@ -197,10 +163,7 @@ impl TerrainParams {
 
     /// Weight in [0, 1] of the riverbed channel floor at `(x, y)` (pebbles gather there).
     pub fn channel_weight(&self, x: f64, y: f64) -> f64 {
-        self.channels
-            .iter()
-            .map(|&(a, o, _)| self.channel(x, y, a, o, 0.55).0)
-            .fold(0.0, f64::max)
+        self.channels.iter().map(|&(a, o, _)| self.channel(x, y, a, o, 0.55).0).fold(0.0, f64::max)
     }
 }
 
@@ -210,22 +173,11 @@ mod tests {
 
     #[test]
     fn kinds_round_trip_names_and_ditch_is_deep() {
-        for k in [
-            TerrainKind::Flagstone,
-            TerrainKind::Cfa6,
-            TerrainKind::Cfa2,
-            TerrainKind::Ditch,
-            TerrainKind::Riverbed,
-        ] {
+        for k in [TerrainKind::Flagstone, TerrainKind::Cfa6, TerrainKind::Cfa2, TerrainKind::Ditch, TerrainKind::Riverbed] {
             assert_eq!(TerrainKind::parse(k.name()), Some(k));
         }
         assert_eq!(TerrainKind::parse("moon"), None);
-        let p = TerrainParams {
-            kind: TerrainKind::Ditch,
-            seed: 1,
-            ditch: (0.0, 0.0),
-            channels: vec![],
-        };
+        let p = TerrainParams { kind: TerrainKind::Ditch, seed: 1, ditch: (0.0, 0.0), channels: vec![] };
         let (h_mid, _) = p.sample(0.0, 0.0);
         let (h_out, _) = p.sample(0.0, 1.5);
         assert!(h_out - h_mid > 0.1, "ditch depth {}", h_out - h_mid);

@@ -9,8 +9,8 @@
 //! that hides most of the hidden part (`"border"` for the part outside the image), or
 //! `"none"` when less than 3 % is hidden.
 
-use crate::objects::Objects;
 use crate::render::{pixel_ray, RenderOutput, SurfaceKind};
+use crate::objects::Objects;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use tubeloc_core::{BinaryMask, CameraModel, Pose};
@@ -78,12 +78,7 @@ pub struct TubeTruth {
 
 /// Pixel rectangle `(u0, v0, u1, v1)` (inclusive, may lie outside the image) covering the
 /// projection of tube `i`'s bounding box, or `None` when part of it is behind the camera.
-pub fn projected_rect(
-    objects: &Objects,
-    i: usize,
-    cam: &CameraModel,
-    t_world_cam: &Pose,
-) -> Option<(i64, i64, i64, i64)> {
+pub fn projected_rect(objects: &Objects, i: usize, cam: &CameraModel, t_world_cam: &Pose) -> Option<(i64, i64, i64, i64)> {
     let tube = &objects.tubes[i];
     let (hl, r) = tube.shape.bounds();
     let t_cam_tube = t_world_cam.inverse() * tube.t_world_tube;
@@ -103,27 +98,15 @@ pub fn projected_rect(
             }
         }
     }
-    Some((
-        u0.floor() as i64 - 1,
-        v0.floor() as i64 - 1,
-        u1.ceil() as i64 + 1,
-        v1.ceil() as i64 + 1,
-    ))
+    Some((u0.floor() as i64 - 1, v0.floor() as i64 - 1, u1.ceil() as i64 + 1, v1.ceil() as i64 + 1))
 }
 
 /// Ground truth of every tube that is at least partly visible in `out`.
-pub fn tube_truth(
-    objects: &Objects,
-    cam: &CameraModel,
-    t_world_cam: &Pose,
-    out: &RenderOutput,
-) -> Vec<TubeTruth> {
+pub fn tube_truth(objects: &Objects, cam: &CameraModel, t_world_cam: &Pose, out: &RenderOutput) -> Vec<TubeTruth> {
     let (w, h) = (out.width as i64, out.height as i64);
     let mut result = Vec::new();
     for i in 0..objects.tubes.len() {
-        let Some((u0, v0, u1, v1)) = projected_rect(objects, i, cam, t_world_cam) else {
-            continue;
-        };
+        let Some((u0, v0, u1, v1)) = projected_rect(objects, i, cam, t_world_cam) else { continue };
         if u1 < 0 || v1 < 0 || u0 >= w || v0 >= h {
             continue;
         }
@@ -149,11 +132,7 @@ pub fn tube_truth(
                     amodal += 1;
                     if inside {
                         let k = out.surface.data[idx] as usize;
-                        let kind = if out.instance.data[idx] != 0 {
-                            SurfaceKind::Tube as usize
-                        } else {
-                            k
-                        };
+                        let kind = if out.instance.data[idx] != 0 { SurfaceKind::Tube as usize } else { k };
                         counts[kind.min(7)] += 1;
                     } else {
                         border += 1;
@@ -175,23 +154,13 @@ pub fn tube_truth(
             let cands = [
                 (border, Occlusion::Border),
                 (counts[SurfaceKind::Rock as usize], Occlusion::Rock),
-                (
-                    counts[SurfaceKind::SandMound as usize],
-                    Occlusion::SandMound,
-                ),
+                (counts[SurfaceKind::SandMound as usize], Occlusion::SandMound),
                 (counts[SurfaceKind::Dune as usize], Occlusion::Dune),
-                (
-                    counts[SurfaceKind::Ground as usize] + counts[SurfaceKind::MountSand as usize],
-                    Occlusion::Terrain,
-                ),
+                (counts[SurfaceKind::Ground as usize] + counts[SurfaceKind::MountSand as usize], Occlusion::Terrain),
                 (counts[SurfaceKind::Tube as usize], Occlusion::Tube),
                 (counts[SurfaceKind::Plate as usize], Occlusion::Mount),
             ];
-            cands
-                .iter()
-                .max_by_key(|c| c.0)
-                .map(|c| c.1)
-                .unwrap_or(Occlusion::None)
+            cands.iter().max_by_key(|c| c.0).map(|c| c.1).unwrap_or(Occlusion::None)
         };
         result.push(TubeTruth {
             tube: i,
@@ -201,12 +170,7 @@ pub fn tube_truth(
             amodal_area: amodal,
             visible_fraction: vis_area as f64 / amodal as f64,
             occlusion,
-            amodal_bbox: [
-                ax0 as f64,
-                ay0 as f64,
-                (ax1 - ax0 + 1) as f64,
-                (ay1 - ay0 + 1) as f64,
-            ],
+            amodal_bbox: [ax0 as f64, ay0 as f64, (ax1 - ax0 + 1) as f64, (ay1 - ay0 + 1) as f64],
             t_cam_tube: t_world_cam.inverse() * objects.tubes[i].t_world_tube,
         });
     }

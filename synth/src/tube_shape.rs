@@ -52,10 +52,7 @@ impl TubeShape {
     pub fn bounds(&self) -> (f64, f64) {
         match self {
             TubeShape::Parametric(s) => {
-                let hl = s
-                    .iter()
-                    .map(|x| x.0.abs().max(x.1.abs()))
-                    .fold(0.0, f64::max);
+                let hl = s.iter().map(|x| x.0.abs().max(x.1.abs())).fold(0.0, f64::max);
                 (hl, s.iter().map(|x| x.2).fold(0.0, f64::max))
             }
             TubeShape::Mesh(b) => (b.half_length, b.max_radius),
@@ -63,13 +60,7 @@ impl TubeShape {
     }
 
     /// Closest hit of the tube-frame ray `o + t d` with `t ∈ [tmin, tmax]`.
-    pub fn intersect(
-        &self,
-        o: &Point3<f64>,
-        d: &Vector3<f64>,
-        tmin: f64,
-        tmax: f64,
-    ) -> Option<TubeHit> {
+    pub fn intersect(&self, o: &Point3<f64>, d: &Vector3<f64>, tmin: f64, tmax: f64) -> Option<TubeHit> {
         match self {
             TubeShape::Parametric(sections) => intersect_sections(sections, o, d, tmin, tmax),
             TubeShape::Mesh(b) => b.intersect(o, d, tmin, tmax),
@@ -77,13 +68,7 @@ impl TubeShape {
     }
 }
 
-fn intersect_sections(
-    sections: &[(f64, f64, f64, TubeMaterial)],
-    o: &Point3<f64>,
-    d: &Vector3<f64>,
-    tmin: f64,
-    tmax: f64,
-) -> Option<TubeHit> {
+fn intersect_sections(sections: &[(f64, f64, f64, TubeMaterial)], o: &Point3<f64>, d: &Vector3<f64>, tmin: f64, tmax: f64) -> Option<TubeHit> {
     let mut best: Option<TubeHit> = None;
     let mut tbest = tmax;
     let a = d.x * d.x + d.y * d.y;
@@ -99,11 +84,7 @@ fn intersect_sections(
                     if z >= z0 && z <= z1 {
                         let (x, y) = (o.x + t * d.x, o.y + t * d.y);
                         tbest = t;
-                        best = Some(TubeHit {
-                            t,
-                            normal: Vector3::new(x / r, y / r, 0.0),
-                            material: mat,
-                        });
+                        best = Some(TubeHit { t, normal: Vector3::new(x / r, y / r, 0.0), material: mat });
                     }
                 }
             }
@@ -115,11 +96,7 @@ fn intersect_sections(
                     let (x, y) = (o.x + t * d.x, o.y + t * d.y);
                     if x * x + y * y <= r * r {
                         tbest = t;
-                        best = Some(TubeHit {
-                            t,
-                            normal: Vector3::new(0.0, 0.0, nz),
-                            material: mat,
-                        });
+                        best = Some(TubeHit { t, normal: Vector3::new(0.0, 0.0, nz), material: mat });
                     }
                 }
             }
@@ -152,44 +129,19 @@ pub struct MeshBvh {
 impl MeshBvh {
     /// Builds the hierarchy (median split on the longest axis, leaves of ≤ 4 triangles).
     pub fn build(mesh: &TubeMesh) -> Self {
-        let mut tris: Vec<[Point3<f64>; 3]> = mesh
-            .triangles
-            .iter()
-            .map(|t| t.map(|i| mesh.vertices[i as usize]))
-            .collect();
+        let mut tris: Vec<[Point3<f64>; 3]> = mesh.triangles.iter().map(|t| t.map(|i| mesh.vertices[i as usize])).collect();
         let mut mats = mesh.materials.clone();
         let mut idx: Vec<usize> = (0..tris.len()).collect();
-        let mut nodes = vec![Node {
-            lo: [0.0; 3],
-            hi: [0.0; 3],
-            start: 0,
-            count: 0,
-        }];
+        let mut nodes = vec![Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 }];
         build_node(&tris, &mut idx, 0, tris.len(), 0, &mut nodes);
         tris = idx.iter().map(|&i| tris[i]).collect();
         mats = idx.iter().map(|&i| mats[i]).collect();
         let half_length = mesh.vertices.iter().map(|p| p.z.abs()).fold(0.0, f64::max);
-        let max_radius = mesh
-            .vertices
-            .iter()
-            .map(|p| (p.x * p.x + p.y * p.y).sqrt())
-            .fold(0.0, f64::max);
-        MeshBvh {
-            tris,
-            mats,
-            nodes,
-            half_length,
-            max_radius,
-        }
+        let max_radius = mesh.vertices.iter().map(|p| (p.x * p.x + p.y * p.y).sqrt()).fold(0.0, f64::max);
+        MeshBvh { tris, mats, nodes, half_length, max_radius }
     }
 
-    fn intersect(
-        &self,
-        o: &Point3<f64>,
-        d: &Vector3<f64>,
-        tmin: f64,
-        tmax: f64,
-    ) -> Option<TubeHit> {
+    fn intersect(&self, o: &Point3<f64>, d: &Vector3<f64>, tmin: f64, tmax: f64) -> Option<TubeHit> {
         let inv = Vector3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
         let mut best: Option<(f64, usize)> = None;
         let mut tbest = tmax;
@@ -222,23 +174,12 @@ impl MeshBvh {
             if n.dot(d) > 0.0 {
                 n = -n;
             }
-            TubeHit {
-                t,
-                normal: n,
-                material: self.mats[k],
-            }
+            TubeHit { t, normal: n, material: self.mats[k] }
         })
     }
 }
 
-fn build_node(
-    tris: &[[Point3<f64>; 3]],
-    idx: &mut [usize],
-    start: usize,
-    end: usize,
-    node: usize,
-    nodes: &mut Vec<Node>,
-) {
+fn build_node(tris: &[[Point3<f64>; 3]], idx: &mut [usize], start: usize, end: usize, node: usize, nodes: &mut Vec<Node>) {
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
     for &i in &idx[start..end] {
         for p in &tris[i] {
@@ -255,26 +196,13 @@ fn build_node(
         nodes[node].count = (end - start) as u32;
         return;
     }
-    let axis = (0..3)
-        .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
-        .unwrap_or(0);
+    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
     let centroid = |i: usize| (tris[i][0][axis] + tris[i][1][axis] + tris[i][2][axis]) / 3.0;
     let mid = (start + end) / 2;
-    idx[start..end]
-        .select_nth_unstable_by(mid - start, |&a, &b| centroid(a).total_cmp(&centroid(b)));
+    idx[start..end].select_nth_unstable_by(mid - start, |&a, &b| centroid(a).total_cmp(&centroid(b)));
     let left = nodes.len();
-    nodes.push(Node {
-        lo: [0.0; 3],
-        hi: [0.0; 3],
-        start: 0,
-        count: 0,
-    });
-    nodes.push(Node {
-        lo: [0.0; 3],
-        hi: [0.0; 3],
-        start: 0,
-        count: 0,
-    });
+    nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
+    nodes.push(Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 });
     nodes[node].start = left as u32;
     nodes[node].count = 0;
     build_node(tris, idx, start, mid, left, nodes);
@@ -282,14 +210,7 @@ fn build_node(
 }
 
 #[inline]
-fn slab(
-    o: &Point3<f64>,
-    inv: &Vector3<f64>,
-    lo: &[f64; 3],
-    hi: &[f64; 3],
-    tmin: f64,
-    tmax: f64,
-) -> bool {
+fn slab(o: &Point3<f64>, inv: &Vector3<f64>, lo: &[f64; 3], hi: &[f64; 3], tmin: f64, tmax: f64) -> bool {
     let (mut t0, mut t1) = (tmin, tmax);
     for k in 0..3 {
         let (mut a, mut b) = ((lo[k] - o[k]) * inv[k], (hi[k] - o[k]) * inv[k]);
@@ -342,17 +263,11 @@ mod tests {
         assert!((h.t - (1.0 - 0.00855)).abs() < 1e-12);
         assert_eq!(h.material, TubeMaterial::Alumina);
         // Along the axis from the seal end: hits the seal cap at z = +0.075.
-        let h = shape
-            .intersect(&Point3::new(0.0, 0.0, 1.0), &-Vector3::z(), 0.0, 10.0)
-            .unwrap();
-        assert!(
-            (h.t - 0.925).abs() < 1e-12 && h.normal.z > 0.99 && h.material == TubeMaterial::Gold
-        );
+        let h = shape.intersect(&Point3::new(0.0, 0.0, 1.0), &-Vector3::z(), 0.0, 10.0).unwrap();
+        assert!((h.t - 0.925).abs() < 1e-12 && h.normal.z > 0.99 && h.material == TubeMaterial::Gold);
         // The step between body and seal: a ray parallel to the axis at r = 0.010 hits the
         // seal's lower cap (z = 0.015) coming from the foot side.
-        let h = shape
-            .intersect(&Point3::new(0.010, 0.0, -0.05), &Vector3::z(), 0.0, 10.0)
-            .unwrap();
+        let h = shape.intersect(&Point3::new(0.010, 0.0, -0.05), &Vector3::z(), 0.0, 10.0).unwrap();
         assert!((h.t - 0.065).abs() < 1e-12 && h.normal.z < -0.99);
         let (hl, r) = shape.bounds();
         assert!((hl - 0.075).abs() < 1e-12 && (r - 0.0115).abs() < 1e-12);
@@ -365,16 +280,10 @@ mod tests {
 f 1 2 3 4\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         let mesh = TubeMesh::parse_obj(obj, std::path::Path::new("box.obj")).unwrap();
         let shape = TubeShape::from_mesh(&mesh);
-        let h = shape
-            .intersect(&Point3::new(0.0, 0.0, 1.0), &-Vector3::z(), 0.0, 10.0)
-            .unwrap();
+        let h = shape.intersect(&Point3::new(0.0, 0.0, 1.0), &-Vector3::z(), 0.0, 10.0).unwrap();
         assert!((h.t - 0.95).abs() < 1e-12 && h.normal.z > 0.99);
-        let h = shape
-            .intersect(&Point3::new(1.0, 0.005, 0.01), &-Vector3::x(), 0.0, 10.0)
-            .unwrap();
+        let h = shape.intersect(&Point3::new(1.0, 0.005, 0.01), &-Vector3::x(), 0.0, 10.0).unwrap();
         assert!((h.t - 0.99).abs() < 1e-12 && h.normal.x > 0.99);
-        assert!(shape
-            .intersect(&Point3::new(1.0, 0.05, 0.01), &-Vector3::x(), 0.0, 10.0)
-            .is_none());
+        assert!(shape.intersect(&Point3::new(1.0, 0.05, 0.01), &-Vector3::x(), 0.0, 10.0).is_none());
     }
 }

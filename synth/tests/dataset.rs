@@ -13,17 +13,10 @@ fn tiny(dir: &Path, seed: u64) -> tubeloc_synth::DatasetSummary {
 fn files_under(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut out = Vec::new();
     for sub in [dir.to_path_buf(), dir.join("images")] {
-        let mut names: Vec<_> = std::fs::read_dir(&sub)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.is_file())
-            .collect();
+        let mut names: Vec<_> = std::fs::read_dir(&sub).unwrap().map(|e| e.unwrap().path()).filter(|p| p.is_file()).collect();
         names.sort();
         for p in names {
-            out.push((
-                p.strip_prefix(dir).unwrap().display().to_string(),
-                std::fs::read(&p).unwrap(),
-            ));
+            out.push((p.strip_prefix(dir).unwrap().display().to_string(), std::fs::read(&p).unwrap()));
         }
     }
     out
@@ -43,35 +36,19 @@ fn tiny_preset_is_complete_exact_and_deterministic() {
     for img in &ds.images {
         let png = image::open(a.join("images").join(&img.file_name)).unwrap();
         assert_eq!((png.width(), png.height()), (img.width, img.height));
-        for key in [
-            "terrain",
-            "time",
-            "height_m",
-            "stop",
-            "camera_name",
-            "split",
-            "scene_seed",
-            "T_world_cam",
-            "camera",
-        ] {
+        for key in ["terrain", "time", "height_m", "stop", "camera_name", "split", "scene_seed", "T_world_cam", "camera"] {
             assert!(img.extra.contains_key(key), "image {} lacks {key}", img.id);
         }
         let cam: CameraModel = serde_json::from_value(img.extra["camera"].clone()).unwrap();
         let t_world_cam: Pose = serde_json::from_value(img.extra["T_world_cam"].clone()).unwrap();
-        let anns: Vec<_> = ds
-            .annotations
-            .iter()
-            .filter(|a| a.image_id == img.id)
-            .collect();
+        let anns: Vec<_> = ds.annotations.iter().filter(|a| a.image_id == img.id).collect();
         // At least one whole tube per crop (the crop rule of the paper protocol).
         assert!(anns.iter().any(|a| {
             let b = a.extra["amodal_bbox"].as_array().unwrap();
             b[0].as_f64().unwrap() >= 0.0 && b[1].as_f64().unwrap() >= 0.0
         }));
         for ann in anns {
-            let Some(Segmentation::CompressedRle { size, counts }) = &ann.segmentation else {
-                panic!("not RLE")
-            };
+            let Some(Segmentation::CompressedRle { size, counts }) = &ann.segmentation else { panic!("not RLE") };
             let rle = tubeloc_core::Rle::from_compressed_string(counts, *size).unwrap();
             assert_eq!(rle.to_compressed_string(), *counts);
             assert_eq!(rle.area() as f64, ann.area);
@@ -81,15 +58,9 @@ fn tiny_preset_is_complete_exact_and_deterministic() {
             // The annotated pose projects into the box when most of the tube is visible.
             let t_cam_tube: Pose = serde_json::from_value(ann.extra["T_cam_tube"].clone()).unwrap();
             if vf > 0.9 {
-                let c = cam
-                    .project(&Point3::from(t_cam_tube.translation()))
-                    .unwrap();
+                let c = cam.project(&Point3::from(t_cam_tube.translation())).unwrap();
                 let [x, y, w, h] = ann.bbox;
-                assert!(
-                    c.x >= x - 1.0 && c.x <= x + w && c.y >= y - 1.0 && c.y <= y + h,
-                    "centre {c:?} outside {:?}",
-                    ann.bbox
-                );
+                assert!(c.x >= x - 1.0 && c.x <= x + w && c.y >= y - 1.0 && c.y <= y + h, "centre {c:?} outside {:?}", ann.bbox);
             }
             let _ = t_world_cam;
         }
@@ -113,46 +84,28 @@ fn tiny_preset_is_complete_exact_and_deterministic() {
 #[test]
 fn bad_input_is_refused_and_writes_nothing() {
     let err = DatasetSpec::preset("moon", 0).unwrap_err().to_string();
-    assert!(
-        err.contains("unknown preset") && err.contains("moon"),
-        "{err}"
-    );
+    assert!(err.contains("unknown preset") && err.contains("moon"), "{err}");
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("ds");
     let mut spec = DatasetSpec::preset("tiny", 0).unwrap();
     spec.crop = 100_000;
-    let err = write_dataset(&spec, &out, (0, 1), false, &|_, _| {})
-        .unwrap_err()
-        .to_string();
+    let err = write_dataset(&spec, &out, (0, 1), false, &|_, _| {}).unwrap_err().to_string();
     assert!(err.contains("crop"), "{err}");
     spec.crop = 64;
     spec.scale = f64::NAN;
-    assert!(write_dataset(&spec, &out, (0, 1), false, &|_, _| {})
-        .unwrap_err()
-        .to_string()
-        .contains("scale"));
+    assert!(write_dataset(&spec, &out, (0, 1), false, &|_, _| {}).unwrap_err().to_string().contains("scale"));
     let spec = DatasetSpec::preset("tiny", 0).unwrap();
     assert!(write_dataset(&spec, &out, (2, 2), false, &|_, _| {}).is_err());
-    assert_eq!(
-        std::fs::read_dir(tmp.path()).unwrap().count(),
-        0,
-        "nothing may be left behind"
-    );
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "nothing may be left behind");
     // An existing output is not overwritten without `overwrite`.
     std::fs::create_dir(&out).unwrap();
-    let err = write_dataset(&spec, &out, (0, 1), false, &|_, _| {})
-        .unwrap_err()
-        .to_string();
+    let err = write_dataset(&spec, &out, (0, 1), false, &|_, _| {}).unwrap_err().to_string();
     assert!(err.contains("already exists"), "{err}");
 }
 
 #[test]
 fn annotations_load_in_pycocotools() {
-    let has = std::process::Command::new("python3")
-        .args(["-c", "import pycocotools"])
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false);
+    let has = std::process::Command::new("python3").args(["-c", "import pycocotools"]).status().map(|s| s.success()).unwrap_or(false);
     if !has {
         if std::env::var_os("CI").is_some() {
             panic!("pycocotools is required when CI is set");
@@ -177,20 +130,7 @@ for a in c.loadAnns(ids):
     assert bb == [float(v) for v in a['bbox']], (bb, a['bbox'])
 print('ok', len(ids))
 "#;
-    let out = std::process::Command::new("python3")
-        .args(["-c", script, d.join("annotations.json").to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "pycocotools failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(
-        String::from_utf8_lossy(&out.stdout)
-            .lines()
-            .any(|l| l.starts_with("ok ")),
-        "{}",
-        String::from_utf8_lossy(&out.stdout)
-    );
+    let out = std::process::Command::new("python3").args(["-c", script, d.join("annotations.json").to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "pycocotools failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).lines().any(|l| l.starts_with("ok ")), "{}", String::from_utf8_lossy(&out.stdout));
 }

@@ -23,12 +23,7 @@ fn label_and_path(s: &str) -> (String, PathBuf) {
         Some((l, p)) if !l.is_empty() && !p.is_empty() => (l.to_string(), PathBuf::from(p)),
         _ => {
             let p = PathBuf::from(s);
-            (
-                p.file_stem()
-                    .map(|x| x.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| s.to_string()),
-                p,
-            )
+            (p.file_stem().map(|x| x.to_string_lossy().into_owned()).unwrap_or_else(|| s.to_string()), p)
         }
     }
 }
@@ -41,72 +36,39 @@ fn med_p90(s: &Summary) -> String {
 }
 
 /// Runs the pose evaluation of each poses file against `gt_path`.
-pub fn run(
-    gt_path: &Path,
-    poses: &[String],
-    truth_field: &str,
-    min_visible: f64,
-    match_mm: f64,
-    out: Option<&Path>,
-) -> Result<()> {
-    let gt = CocoDataset::load(gt_path)
-        .with_context(|| format!("loading ground truth {}", gt_path.display()))?;
+pub fn run(gt_path: &Path, poses: &[String], truth_field: &str, min_visible: f64, match_mm: f64, out: Option<&Path>) -> Result<()> {
+    let gt = CocoDataset::load(gt_path).with_context(|| format!("loading ground truth {}", gt_path.display()))?;
     let mut truths = Vec::new();
     for a in &gt.annotations {
-        let vis = a
-            .extra
-            .get("visible_fraction")
-            .and_then(|v| v.as_f64())
-            .unwrap_or(1.0);
-        let Some(v) = a.extra.get(truth_field) else {
-            continue;
-        };
+        let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
+        let Some(v) = a.extra.get(truth_field) else { continue };
         if vis >= min_visible {
-            let pose: Pose = serde_json::from_value(v.clone()).with_context(|| {
-                format!("{}: annotation {}: {truth_field}", gt_path.display(), a.id)
-            })?;
-            truths.push(TubeTruth {
-                image_id: a.image_id,
-                pose,
-            });
+            let pose: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: {truth_field}", gt_path.display(), a.id))?;
+            truths.push(TubeTruth { image_id: a.image_id, pose });
         }
     }
     if truths.is_empty() {
-        bail!(
-            "{}: no annotation with {truth_field} and visible_fraction >= {min_visible}",
-            gt_path.display()
-        );
+        bail!("{}: no annotation with {truth_field} and visible_fraction >= {min_visible}", gt_path.display());
     }
     let mut cameras = BTreeMap::new();
     for im in &gt.images {
         if let Some(v) = im.extra.get("camera") {
-            let c: CameraModel = serde_json::from_value(v.clone())
-                .with_context(|| format!("{}: image {}: camera", gt_path.display(), im.id))?;
+            let c: CameraModel = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: camera", gt_path.display(), im.id))?;
             cameras.insert(im.id, c);
         }
     }
-    let model =
-        ModelPoints::from_tube(&TubeModel::default(), 0.002).context("sampling the tube model")?;
-    let config = PoseEvalConfig {
-        cameras,
-        ..Default::default()
-    };
+    let model = ModelPoints::from_tube(&TubeModel::default(), 0.002).context("sampling the tube model")?;
+    let config = PoseEvalConfig { cameras, ..Default::default() };
     let mut evals: Vec<(String, PoseEvaluation)> = Vec::new();
     println!("{} truths ({truth_field}, visible_fraction >= {min_visible}); matching: nearest centre within {match_mm} mm", truths.len());
     println!("| poses | converged / all | matched | axis deg med / p90 | perp mm med / p90 | |along| mm med / p90 | centre mm med / p90 | ends right | AR MSSD | AR MSPD |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for spec in poses {
         let (label, path) = label_and_path(spec);
-        let all: Vec<TubeAxisPose> =
-            read_json(&path).with_context(|| format!("reading poses {}", path.display()))?;
-        let est: Vec<TubeEstimate> = all
-            .iter()
-            .filter(|p| p.converged)
-            .map(TubeEstimate::from_axis_pose)
-            .collect();
+        let all: Vec<TubeAxisPose> = read_json(&path).with_context(|| format!("reading poses {}", path.display()))?;
+        let est: Vec<TubeEstimate> = all.iter().filter(|p| p.converged).map(TubeEstimate::from_axis_pose).collect();
         let matching = match_by_centre_distance(&truths, &est, match_mm * 1e-3);
-        let e = evaluate_poses(&truths, &est, &matching, &model, &config)
-            .with_context(|| format!("evaluating {}", path.display()))?;
+        let e = evaluate_poses(&truths, &est, &matching, &model, &config).with_context(|| format!("evaluating {}", path.display()))?;
         let s = &e.summaries;
         println!(
             "| {label} | {} / {} | {} / {} | {} | {} | {} | {} | {:.0}% | {:.3} | {} |",
@@ -120,10 +82,7 @@ pub fn run(
             med_p90(&s.centre_distance_mm),
             e.end_correct_fraction * 100.0,
             e.bop.ar_mssd,
-            e.bop
-                .ar_mspd
-                .map(|v| format!("{v:.3}"))
-                .unwrap_or_else(|| "n/a".into())
+            e.bop.ar_mspd.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into())
         );
         evals.push((label, e));
     }
@@ -143,16 +102,12 @@ pub fn run(
             title: "Tube pose evaluation".into(),
             inputs: std::iter::once(("ground truth".to_string(), gt_path.display().to_string()))
                 .chain(poses.iter().map(|s| ("poses".to_string(), s.clone())))
-                .chain(std::iter::once((
-                    "truths".to_string(),
-                    format!("`{truth_field}`, visible_fraction >= {min_visible}"),
-                )))
+                .chain(std::iter::once(("truths".to_string(), format!("`{truth_field}`, visible_fraction >= {min_visible}"))))
                 .collect(),
             poses: evals,
             ..Default::default()
         };
-        let md = tubeloc_eval::report::write_eval_report(out, &report)
-            .with_context(|| format!("writing the report in {}", out.display()))?;
+        let md = tubeloc_eval::report::write_eval_report(out, &report).with_context(|| format!("writing the report in {}", out.display()))?;
         eprintln!("report: {}", md.display());
     }
     Ok(())

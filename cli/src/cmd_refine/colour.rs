@@ -18,11 +18,7 @@ pub(crate) struct LoadedImage {
 impl LoadedImage {
     /// The colours for the seal-end decision, or `None` when `wanted` is false.
     pub fn colour(&self, wanted: bool) -> Option<ColourImage<'_>> {
-        wanted.then(|| ColourImage {
-            width: self.rgb.width() as usize,
-            height: self.rgb.height() as usize,
-            rgb: self.rgb.as_raw(),
-        })
+        wanted.then(|| ColourImage { width: self.rgb.width() as usize, height: self.rgb.height() as usize, rgb: self.rgb.as_raw() })
     }
 }
 
@@ -30,13 +26,6 @@ impl LoadedImage {
 pub(crate) fn load(path: &Path) -> Result<LoadedImage> {
     let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?;
     let luma = img.to_luma8();
-    let gray = Plane::from_vec(
-        luma.width() as usize,
-        luma.height() as usize,
-        luma.into_raw(),
-    );
-    Ok(LoadedImage {
-        rgb: img.to_rgb8(),
-        gray,
-    })
+    let gray = Plane::from_vec(luma.width() as usize, luma.height() as usize, luma.into_raw());
+    Ok(LoadedImage { rgb: img.to_rgb8(), gray })
 }

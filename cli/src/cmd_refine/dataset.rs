@@ -6,10 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use tubeloc_core::{
-    files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose,
-    TubeDetection,
-};
+use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seed::{axis_state_of, perturbed, reanchored_pose};
 use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
 use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
@@ -28,10 +25,7 @@ impl Work {
     fn mask(&self, h: u32, w: u32) -> Option<tubeloc_core::BinaryMask> {
         match self {
             Work::Detection(d) => d.mask.as_ref().and_then(|m| m.to_mask().ok()),
-            Work::GtSeed(_, _, seg) => seg
-                .as_ref()
-                .and_then(|s| s.to_rle(h, w).ok())
-                .and_then(|r| r.to_mask().ok()),
+            Work::GtSeed(_, _, seg) => seg.as_ref().and_then(|s| s.to_rle(h, w).ok()).and_then(|r| r.to_mask().ok()),
         }
     }
 }
@@ -39,52 +33,27 @@ impl Work {
 /// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`
 /// ([`tubeloc_core::geometry::ground_plane_in_camera`]).
 fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
-    let Some(v) = img.extra.get("T_world_cam") else {
-        return Ok(None);
-    };
-    let t: Pose = serde_json::from_value(v.clone())
-        .with_context(|| format!("image {}: T_world_cam", img.id))?;
+    let Some(v) = img.extra.get("T_world_cam") else { return Ok(None) };
+    let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("image {}: T_world_cam", img.id))?;
     let (normal, offset) = tubeloc_core::geometry::ground_plane_in_camera(&t);
     Ok(Some(GroundPlane { normal, offset }))
 }
 
 fn camera_of(img: &CocoImage) -> Result<CameraModel> {
-    let v = img.extra.get("camera").with_context(|| {
-        format!(
-            "image {} has no \"camera\" (needed in dataset mode)",
-            img.id
-        )
-    })?;
-    let c: CameraModel =
-        serde_json::from_value(v.clone()).with_context(|| format!("image {}: camera", img.id))?;
-    c.validate()
-        .with_context(|| format!("image {}: camera", img.id))?;
+    let v = img.extra.get("camera").with_context(|| format!("image {} has no \"camera\" (needed in dataset mode)", img.id))?;
+    let c: CameraModel = serde_json::from_value(v.clone()).with_context(|| format!("image {}: camera", img.id))?;
+    c.validate().with_context(|| format!("image {}: camera", img.id))?;
     Ok(c)
 }
 
 /// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
 /// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
 /// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
-fn stereo_of(
-    args: &RefineArgs,
-    dir: &std::path::Path,
-    im: &CocoImage,
-    camera: &CameraModel,
-    gray: &Plane<u8>,
-    items: &[Work],
-) -> Result<(super::stereo::StereoRegions, RectifiedPair)> {
-    let field = |k: &str| {
-        im.extra
-            .get(k)
-            .with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id))
-    };
-    let rname = field("right_file_name")?
-        .as_str()
-        .with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
-    let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone())
-        .with_context(|| format!("image {}: right_camera", im.id))?;
-    let t_lr: Pose = serde_json::from_value(field("T_left_right")?.clone())
-        .with_context(|| format!("image {}: T_left_right", im.id))?;
+fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(super::stereo::StereoRegions, RectifiedPair)> {
+    let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
+    let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
+    let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
+    let t_lr: Pose = serde_json::from_value(field("T_left_right")?.clone()).with_context(|| format!("image {}: T_left_right", im.id))?;
     let rpath = dir.join("right").join(rname);
     let right = crate::cmd_stereo::load_gray(&rpath)?;
     let (h, w) = (camera.height, camera.width);
@@ -92,32 +61,14 @@ fn stereo_of(
         .iter()
         .map(|it| match it {
             Work::Detection(d) => super::stereo::region_of(d),
-            Work::GtSeed(st, bbox, _) => StereoRegion {
-                bbox: *bbox,
-                mask: it.mask(h, w),
-                seed_z: Some(st.c.z),
-            },
+            Work::GtSeed(st, bbox, _) => StereoRegion { bbox: *bbox, mask: it.mask(h, w), seed_z: Some(st.c.z) },
         })
         .collect();
-    super::stereo::points_per_region(
-        camera,
-        &rcam,
-        &t_lr,
-        gray,
-        &right,
-        &regions,
-        args.disparities,
-        args.stereo_erode,
-    )
-    .with_context(|| format!("stereo for {}", rpath.display()))
+    super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode).with_context(|| format!("stereo for {}", rpath.display()))
 }
 
 fn parse_pair(s: &str) -> Result<(f64, f64)> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .with_context(|| format!("--gt-seeds {s:?}: expected MM,DEG"))?;
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--gt-seeds {s:?}: expected MM,DEG"))?;
     if v.len() != 2 || v.iter().any(|x| !x.is_finite() || *x < 0.0) {
         bail!("--gt-seeds {s:?}: expected two non-negative numbers MM,DEG");
     }
@@ -143,24 +94,13 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     let mut images: Vec<&CocoImage> = ds
         .images
         .iter()
-        .filter(|im| {
-            args.split
-                .as_ref()
-                .is_none_or(|s| im.extra.get("split").and_then(|v| v.as_str()) == Some(s.as_str()))
-        })
+        .filter(|im| args.split.as_ref().is_none_or(|s| im.extra.get("split").and_then(|v| v.as_str()) == Some(s.as_str())))
         .collect();
     if let Some(n) = args.max_images {
         images.truncate(n);
     }
     if images.is_empty() {
-        bail!(
-            "{}: no images{}",
-            ann.display(),
-            args.split
-                .as_ref()
-                .map(|s| format!(" in split {s:?}"))
-                .unwrap_or_default()
-        );
+        bail!("{}: no images{}", ann.display(), args.split.as_ref().map(|s| format!(" in split {s:?}")).unwrap_or_default());
     }
     // Work per image.
     let mut work: BTreeMap<u64, Vec<Work>> = images.iter().map(|im| (im.id, Vec::new())).collect();
@@ -175,59 +115,26 @@ pub fn run(args: &RefineArgs) -> Result<()> {
         (None, Some(spec)) => {
             let (pos, deg) = parse_pair(spec)?;
             for a in &ds.annotations {
-                let Some(w) = work.get_mut(&a.image_id) else {
-                    continue;
-                };
-                let vis = a
-                    .extra
-                    .get("visible_fraction")
-                    .and_then(|v| v.as_f64())
-                    .unwrap_or(1.0);
-                let Some(v) = a.extra.get("T_cam_tube") else {
-                    continue;
-                };
+                let Some(w) = work.get_mut(&a.image_id) else { continue };
+                let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
+                let Some(v) = a.extra.get("T_cam_tube") else { continue };
                 if vis < args.min_visible {
                     continue;
                 }
-                let t: Pose = serde_json::from_value(v.clone()).with_context(|| {
-                    format!("{}: annotation {}: T_cam_tube", ann.display(), a.id)
-                })?;
-                w.push(Work::GtSeed(
-                    perturbed(
-                        &axis_state_of(&t),
-                        pos,
-                        deg,
-                        args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15),
-                    ),
-                    a.bbox,
-                    a.segmentation.clone(),
-                ));
+                let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", ann.display(), a.id))?;
+                w.push(Work::GtSeed(perturbed(&axis_state_of(&t), pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
             }
         }
         _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
     }
     let det_camera = match &args.detections_camera {
-        Some(p) => Some(
-            CameraModel::load_json(p)
-                .with_context(|| format!("detections camera {}", p.display()))?,
-        ),
+        Some(p) => Some(CameraModel::load_json(p).with_context(|| format!("detections camera {}", p.display()))?),
         None => None,
     };
-    let fixed_ground = if auto_ground {
-        None
-    } else {
-        args.ground.as_deref().map(parse_ground).transpose()?
-    };
+    let fixed_ground = if auto_ground { None } else { args.ground.as_deref().map(parse_ground).transpose()? };
     let bar = ProgressBar::new(images.len() as u64);
-    bar.set_style(
-        ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}")
-            .expect("template"),
-    );
-    let per_image: Vec<(
-        Vec<TubeAxisPose>,
-        Vec<TubeAxisPose>,
-        Vec<(TubeDetection, bool)>,
-    )> = images
+    bar.set_style(ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}").expect("template"));
+    let per_image: Vec<(Vec<TubeAxisPose>, Vec<TubeAxisPose>, Vec<(TubeDetection, bool)>)> = images
         .par_iter()
         .map(|im| -> Result<_> {
             let items = &work[&im.id];
@@ -236,82 +143,43 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 return Ok((Vec::new(), Vec::new(), Vec::new()));
             }
             let camera = camera_of(im)?;
-            let ground = if auto_ground {
-                ground_of(im)?
-            } else {
-                fixed_ground
-            };
+            let ground = if auto_ground { ground_of(im)? } else { fixed_ground };
             let path = {
                 let p = dir.join(&im.file_name);
-                if p.exists() {
-                    p
-                } else {
-                    dir.join("images").join(&im.file_name)
-                }
+                if p.exists() { p } else { dir.join("images").join(&im.file_name) }
             };
             let loaded = super::colour::load(&path)?;
             let colour = loaded.colour(!args.no_colour_ends);
             let gray = &loaded.gray;
             if gray.width != camera.width as usize || gray.height != camera.height as usize {
-                bail!(
-                    "{} is {}x{} but its camera is {}x{}",
-                    path.display(),
-                    gray.width,
-                    gray.height,
-                    camera.width,
-                    camera.height
-                );
+                bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
             }
-            let image = Plane::from_vec(
-                gray.width,
-                gray.height,
-                gray.data.iter().map(|&v| v as f32 / 255.0).collect(),
-            );
+            let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
             let (stereo_pts, depth, pair) = if args.stereo {
                 let (s, r) = stereo_of(args, dir, im, &camera, &gray, items)?;
                 (s.points, Some(s.depth), Some(r))
             } else {
                 (vec![Vec::new(); items.len()], None, None)
             };
-            let depth = depth
-                .as_ref()
-                .filter(|_| args.scene_occlusion)
-                .map(|d| (d, &camera));
+            let depth = depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera));
             // Diagnostics: TUBELOC_DEBUG_STEREO_DIR=D writes each image's stereo points (left
             // camera frame, metres, one list per work item) to D/<image id>.json and, with
             // the scene-occlusion test on, its scene depth map to D/<image id>_depth_f32.bin.
             if let Ok(dbg) = std::env::var("TUBELOC_DEBUG_STEREO_DIR") {
-                let pts: Vec<Vec<[f64; 3]>> = stereo_pts
-                    .iter()
-                    .map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect())
-                    .collect();
-                files::write_json(
-                    &std::path::Path::new(&dbg).join(format!("{}.json", im.id)),
-                    &pts,
-                )?;
+                let pts: Vec<Vec<[f64; 3]>> = stereo_pts.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
+                files::write_json(&std::path::Path::new(&dbg).join(format!("{}.json", im.id)), &pts)?;
                 if let Some((d, _)) = depth {
                     // The scene depth map as raw little-endian f32 (width x height, NaN unknown).
                     let bytes: Vec<u8> = d.data.iter().flat_map(|v| v.to_le_bytes()).collect();
-                    files::write_atomic(
-                        &std::path::Path::new(&dbg).join(format!("{}_depth_f32.bin", im.id)),
-                        &bytes,
-                    )?;
+                    files::write_atomic(&std::path::Path::new(&dbg).join(format!("{}_depth_f32.bin", im.id)), &bytes)?;
                 }
             }
             let masks: Vec<Option<tubeloc_core::BinaryMask>> = if args.mask_term {
-                items
-                    .iter()
-                    .map(|it| it.mask(camera.height, camera.width))
-                    .collect()
+                items.iter().map(|it| it.mask(camera.height, camera.width)).collect()
             } else {
                 vec![None; items.len()]
             };
-            let input = RefineInput {
-                image: &image,
-                camera: &camera,
-                ground,
-                scene: Scene::default(),
-            };
+            let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene::default() };
             let mut poses = Vec::with_capacity(items.len());
             let mut seeds = Vec::new();
             for (k, w) in items.iter().enumerate() {
@@ -324,50 +192,17 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                             }
                         }
                         let d = &d;
-                        let input = RefineInput {
-                            scene: Scene {
-                                depth,
-                                stereo_points: &stereo_pts[k],
-                                mask: masks[k].as_ref().map(|m| (m, &camera)),
-                                ..Scene::default()
-                            },
-                            ..input
-                        };
+                        let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
-                        if let Ok(sd) = tubeloc_refine::seed_from_detection(
-                            d,
-                            &camera,
-                            &refiner.model,
-                            ground.as_ref(),
-                            &stereo_pts[k],
-                        ) {
-                            if let Ok(p) =
-                                TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5)
-                            {
+                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &stereo_pts[k]) {
+                            if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
                                 seeds.push(p);
                             }
                         }
                     }
                     Work::GtSeed(st, _, _) => {
-                        let input = RefineInput {
-                            scene: Scene {
-                                depth,
-                                stereo_points: &stereo_pts[k],
-                                mask: masks[k].as_ref().map(|m| (m, &camera)),
-                                ..Scene::default()
-                            },
-                            ..input
-                        };
-                        poses.push(refiner.refine_seed(
-                            &input,
-                            &Seed {
-                                state: *st,
-                                end_known: true,
-                            },
-                            im.id,
-                            1.0,
-                            None,
-                        ));
+                        let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
                             seeds.push(p);
                         }
@@ -412,8 +247,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             *reasons.entry(format!("{:?}", f.reason)).or_default() += 1;
         }
     }
-    files::write_json(&args.out, &poses)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    files::write_json(&args.out, &poses).with_context(|| format!("writing {}", args.out.display()))?;
     if let Some(s) = &args.seeds_out {
         files::write_json(s, &seeds).with_context(|| format!("writing {}", s.display()))?;
     }

@@ -16,16 +16,7 @@ use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
 /// cameras `lcam`/`rcam`, `t_left_right` mapping right-camera points into the left frame) is
 /// rectified and matched ([`match_regions`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn points_per_region(
-    lcam: &CameraModel,
-    rcam: &CameraModel,
-    t_left_right: &Pose,
-    left: &Plane<u8>,
-    right: &Plane<u8>,
-    regions: &[StereoRegion],
-    num_disparities: usize,
-    erode_px: usize,
-) -> Result<(StereoRegions, RectifiedPair)> {
+pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, RectifiedPair)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
     match_regions(&rect, lcam, left, right, regions, num_disparities, erode_px)
 }
@@ -33,11 +24,7 @@ pub(crate) fn points_per_region(
 /// The stereo region of a detection: its box, its mask (if it decodes) and its template pose's
 /// depth (if any).
 pub(crate) fn region_of(d: &TubeDetection) -> StereoRegion {
-    StereoRegion {
-        bbox: d.bbox,
-        mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()),
-        seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z),
-    }
+    StereoRegion { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) }
 }
 
 /// What SGM gives the refiner: the points of each region (left camera frame, metres), the
@@ -57,41 +44,20 @@ pub(crate) struct StereoRegions {
 /// rectified left image (32 px margin), triangulated and split by region (masks eroded by
 /// `erode_px` first); also the rectified pair (intensities in [0, 1]) with its SGM disparity for
 /// the photometric stage.
-pub(crate) fn match_regions(
-    rect: &StereoRectification,
-    lcam: &CameraModel,
-    left: &Plane<u8>,
-    right: &Plane<u8>,
-    regions: &[StereoRegion],
-    num_disparities: usize,
-    erode_px: usize,
-) -> Result<(StereoRegions, RectifiedPair)> {
+pub(crate) fn match_regions(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, RectifiedPair)> {
     let (rl, rr) = rect.rectify_pair(left, right)?;
     let sr = points_rectified(rect, lcam, &rl, &rr, regions, num_disparities, erode_px)?;
-    let mut pair =
-        RectifiedPair::from_u8(&rl, &rr, rect.rectified.clone(), rect.r_left, rect.baseline);
+    let mut pair = RectifiedPair::from_u8(&rl, &rr, rect.rectified.clone(), rect.r_left, rect.baseline);
     pair.disparity = Some(sr.disparity.clone());
     Ok((sr, pair))
 }
 
 /// [`match_regions`]' points of the rectified pair `rl`/`rr`.
-fn points_rectified(
-    rect: &StereoRectification,
-    lcam: &CameraModel,
-    rl: &Plane<u8>,
-    rr: &Plane<u8>,
-    regions: &[StereoRegion],
-    num_disparities: usize,
-    erode_px: usize,
-) -> Result<StereoRegions> {
+fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u8>, rr: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<StereoRegions> {
     let empty = |n: usize| StereoRegions {
         points: vec![Vec::new(); n],
         depth: Plane::filled(lcam.width as usize, lcam.height as usize, f32::NAN),
-        disparity: Plane::filled(
-            rect.rectified.width as usize,
-            rect.rectified.height as usize,
-            f32::NAN,
-        ),
+        disparity: Plane::filled(rect.rectified.width as usize, rect.rectified.height as usize, f32::NAN),
     };
     if regions.is_empty() {
         return Ok(empty(0));
@@ -107,12 +73,7 @@ fn points_rectified(
             }
         }
         if x1 > x0 && y1 > y0 {
-            rois.push(Roi::new(
-                x0.floor() as i64,
-                y0.floor() as i64,
-                (x1 - x0).ceil() as i64 + 1,
-                (y1 - y0).ceil() as i64 + 1,
-            ));
+            rois.push(Roi::new(x0.floor() as i64, y0.floor() as i64, (x1 - x0).ceil() as i64 + 1, (y1 - y0).ceil() as i64 + 1));
         }
     }
     if rois.is_empty() {
@@ -120,22 +81,10 @@ fn points_rectified(
     }
     let geom = rect.geometry();
     let fb = geom.f * geom.baseline;
-    let params = SgmParams {
-        num_disparities,
-        min_disparity: stereo_stage::min_disparity(regions, fb),
-        ..SgmParams::default()
-    };
+    let params = SgmParams { num_disparities, min_disparity: stereo_stage::min_disparity(regions, fb), ..SgmParams::default() };
     let disp = disparity_regions(rl, rr, &params, &rois, 32).context("matching the regions")?;
-    let pts: Vec<(f32, Point3<f64>)> = rect
-        .points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25))
-        .into_iter()
-        .map(|p| (p.pixel[0], p.point))
-        .collect();
+    let pts: Vec<(f32, Point3<f64>)> = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25)).into_iter().map(|p| (p.pixel[0], p.point)).collect();
     let depth = stereo_stage::depth_map(lcam, pts.iter().map(|(_, p)| p));
     let points = stereo_stage::region_points(lcam, &pts, regions, fb, erode_px);
-    Ok(StereoRegions {
-        points,
-        depth,
-        disparity: disp,
-    })
+    Ok(StereoRegions { points, depth, disparity: disp })
 }

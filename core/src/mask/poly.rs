@@ -13,9 +13,7 @@ pub(super) fn rle_from_polygon(xy: &[f64], h: u32, w: u32) -> Rle {
     let k = xy.len() / 2;
     // C `(int)` casts truncate toward zero; Rust `as i32` does the same (and saturates).
     let mut x: Vec<i32> = (0..k).map(|j| (SCALE * xy[2 * j] + 0.5) as i32).collect();
-    let mut y: Vec<i32> = (0..k)
-        .map(|j| (SCALE * xy[2 * j + 1] + 0.5) as i32)
-        .collect();
+    let mut y: Vec<i32> = (0..k).map(|j| (SCALE * xy[2 * j + 1] + 0.5) as i32).collect();
     if k > 0 {
         x.push(x[0]);
         y.push(y[0]);
@@ -33,21 +31,13 @@ pub(super) fn rle_from_polygon(xy: &[f64], h: u32, w: u32) -> Rle {
             std::mem::swap(&mut ys, &mut ye);
         }
         if dx >= dy {
-            let s = if dx == 0 {
-                f64::NAN
-            } else {
-                (ye - ys) as f64 / dx as f64
-            };
+            let s = if dx == 0 { f64::NAN } else { (ye - ys) as f64 / dx as f64 };
             for d in 0..=dx {
                 let t = if flip { dx - d } else { d };
                 u.push(t + xs);
                 // dx == 0 implies dy == 0: a single point at (xs, ys); C computes ys + NaN*0 there,
                 // which casts to an unspecified int, but the point is never used (no column change).
-                let yy = if dx == 0 {
-                    ys
-                } else {
-                    (ys as f64 + s * t as f64 + 0.5) as i32
-                };
+                let yy = if dx == 0 { ys } else { (ys as f64 + s * t as f64 + 0.5) as i32 };
                 v.push(yy);
             }
         } else {
@@ -108,8 +98,5 @@ pub(super) fn rle_from_polygon(xy: &[f64], h: u32, w: u32) -> Rle {
             }
         }
     }
-    Rle {
-        size: [h, w],
-        counts: b,
-    }
+    Rle { size: [h, w], counts: b }
 }

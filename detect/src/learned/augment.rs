@@ -37,19 +37,8 @@ impl TrainImage {
                 }
             }
         }
-        let fg = labels
-            .iter()
-            .enumerate()
-            .filter(|(_, &l)| l != 0)
-            .map(|(i, _)| i as u32)
-            .collect();
-        TrainImage {
-            width,
-            height,
-            input,
-            labels,
-            fg,
-        }
+        let fg = labels.iter().enumerate().filter(|(_, &l)| l != 0).map(|(i, _)| i as u32).collect();
+        TrainImage { width, height, input, labels, fg }
     }
 
     /// Number of input channels.
@@ -86,48 +75,26 @@ pub struct AugmentConfig {
 
 impl Default for AugmentConfig {
     fn default() -> Self {
-        AugmentConfig {
-            crop: 256,
-            p_object: 0.75,
-            max_angle_deg: 20.0,
-            gain: 0.3,
-            offset: 0.4,
-            noise: 0.15,
-            upright: false,
-            occluders: 0.0,
-        }
+        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false, occluders: 0.0 }
     }
 }
 
 /// Samples one augmented crop: returns `(input, labels)` of `channels * S * S` and `S * S`.
-pub fn sample_crop(
-    img: &TrainImage,
-    cfg: &AugmentConfig,
-    rng: &mut ChaCha8Rng,
-) -> (Vec<f32>, Vec<u16>) {
+pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) -> (Vec<f32>, Vec<u16>) {
     let s = cfg.crop;
     let (w, h) = (img.width, img.height);
     let (mut cx, mut cy) = if !img.fg.is_empty() && rng.random_bool(cfg.p_object) {
         let i = img.fg[rng.random_range(0..img.fg.len())] as usize;
         let j = s as f64 / 3.0;
-        (
-            (i % w) as f64 + rng.random_range(-j..=j),
-            (i / w) as f64 + rng.random_range(-j..=j),
-        )
+        ((i % w) as f64 + rng.random_range(-j..=j), (i / w) as f64 + rng.random_range(-j..=j))
     } else {
-        (
-            rng.random_range(0.0..w as f64),
-            rng.random_range(0.0..h as f64),
-        )
+        (rng.random_range(0.0..w as f64), rng.random_range(0.0..h as f64))
     };
     cx = cx.clamp(0.0, w as f64 - 1.0);
     cy = cy.clamp(0.0, h as f64 - 1.0);
     let quarter = rng.random_range(0..4);
     let quarter = if cfg.upright { 0 } else { quarter };
-    let theta = quarter as f64 * std::f64::consts::FRAC_PI_2
-        + rng
-            .random_range(-cfg.max_angle_deg..=cfg.max_angle_deg)
-            .to_radians();
+    let theta = quarter as f64 * std::f64::consts::FRAC_PI_2 + rng.random_range(-cfg.max_angle_deg..=cfg.max_angle_deg).to_radians();
     let mirror = if rng.random_bool(0.5) { -1.0 } else { 1.0 };
     let (c, sn) = (theta.cos() as f32, theta.sin() as f32);
     let ch = img.channels();
@@ -176,49 +143,19 @@ pub fn sample_crop(
 /// `s / 6`) filled with a flat level per channel or, half the time, a pattern of square blocks
 /// (4 to 8 px) at two levels; its labels become 0. Levels are drawn in `[-2, 2]` normalized
 /// units (the range of sand, shadow and white paint).
-fn add_occluder(
-    input: &mut [f32],
-    labels: &mut [u16],
-    s: usize,
-    channels: usize,
-    rng: &mut ChaCha8Rng,
-) {
+fn add_occluder(input: &mut [f32], labels: &mut [u16], s: usize, channels: usize, rng: &mut ChaCha8Rng) {
     let max_side = (s / 6).max(9);
     let (w, h) = (rng.random_range(8..max_side), rng.random_range(8..max_side));
-    let (x0, y0) = (
-        rng.random_range(0..s.saturating_sub(w).max(1)),
-        rng.random_range(0..s.saturating_sub(h).max(1)),
-    );
-    let levels: [Vec<f32>; 2] = [
-        (0..channels)
-            .map(|_| rng.random_range(-2.0f32..2.0))
-            .collect(),
-        (0..channels)
-            .map(|_| rng.random_range(-2.0f32..2.0))
-            .collect(),
-    ];
-    let block = if rng.random_bool(0.5) {
-        rng.random_range(4..=8)
-    } else {
-        0
-    };
+    let (x0, y0) = (rng.random_range(0..s.saturating_sub(w).max(1)), rng.random_range(0..s.saturating_sub(h).max(1)));
+    let levels: [Vec<f32>; 2] = [(0..channels).map(|_| rng.random_range(-2.0f32..2.0)).collect(), (0..channels).map(|_| rng.random_range(-2.0f32..2.0)).collect()];
+    let block = if rng.random_bool(0.5) { rng.random_range(4..=8) } else { 0 };
     // One random bit per block, drawn up front so the pattern does not depend on the order of
     // the pixel loop.
-    let (bw, bh) = if block > 0 {
-        (w.div_ceil(block), h.div_ceil(block))
-    } else {
-        (1, 1)
-    };
-    let bits: Vec<bool> = (0..bw * bh)
-        .map(|_| block > 0 && rng.random_bool(0.5))
-        .collect();
+    let (bw, bh) = if block > 0 { (w.div_ceil(block), h.div_ceil(block)) } else { (1, 1) };
+    let bits: Vec<bool> = (0..bw * bh).map(|_| block > 0 && rng.random_bool(0.5)).collect();
     for y in y0..(y0 + h).min(s) {
         for x in x0..(x0 + w).min(s) {
-            let bit = if block > 0 {
-                bits[((y - y0) / block) * bw + (x - x0) / block]
-            } else {
-                false
-            };
+            let bit = if block > 0 { bits[((y - y0) / block) * bw + (x - x0) / block] } else { false };
             let level = &levels[bit as usize];
             for (k, &v) in level.iter().enumerate() {
                 input[k * s * s + y * s + x] = v;
@@ -239,14 +176,7 @@ mod tests {
         let (w, h) = (200, 200);
         let input: Vec<f32> = (0..w * h).map(|i| (i / w) as f32).collect();
         let img = TrainImage::new(w, h, input, &[]);
-        let cfg = AugmentConfig {
-            crop: 64,
-            noise: 0.0,
-            gain: 0.0,
-            offset: 0.0,
-            upright,
-            ..Default::default()
-        };
+        let cfg = AugmentConfig { crop: 64, noise: 0.0, gain: 0.0, offset: 0.0, upright, ..Default::default() };
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let flipped = (0..200)
             .filter(|_| {
@@ -271,35 +201,15 @@ mod tests {
         let (w, h) = (120, 120);
         let input: Vec<f32> = (0..w * h).map(|i| (i % w) as f32 * 0.01).collect();
         let img = TrainImage::new(w, h, input, &[vec![1u8; w * h]]);
-        let plain = AugmentConfig {
-            crop: 64,
-            noise: 0.0,
-            gain: 0.0,
-            offset: 0.0,
-            ..Default::default()
-        };
-        let occluded = AugmentConfig {
-            occluders: 1.0,
-            ..plain
-        };
+        let plain = AugmentConfig { crop: 64, noise: 0.0, gain: 0.0, offset: 0.0, ..Default::default() };
+        let occluded = AugmentConfig { occluders: 1.0, ..plain };
         for seed in 0..20 {
             let (a, la) = sample_crop(&img, &plain, &mut ChaCha8Rng::seed_from_u64(seed));
             let (b, lb) = sample_crop(&img, &occluded, &mut ChaCha8Rng::seed_from_u64(seed));
-            let changed: Vec<usize> = (0..64 * 64)
-                .filter(|&i| a[i] != b[i] || la[i] != lb[i])
-                .collect();
+            let changed: Vec<usize> = (0..64 * 64).filter(|&i| a[i] != b[i] || la[i] != lb[i]).collect();
             // At least one 8x8 occluder, and every changed pixel is background in the labels.
-            assert!(
-                changed.len() >= 64,
-                "seed {seed}: {} pixels changed",
-                changed.len()
-            );
-            assert!(
-                changed
-                    .iter()
-                    .all(|&i| lb[i] == 0 && (-2.0..2.0).contains(&b[i])),
-                "seed {seed}"
-            );
+            assert!(changed.len() >= 64, "seed {seed}: {} pixels changed", changed.len());
+            assert!(changed.iter().all(|&i| lb[i] == 0 && (-2.0..2.0).contains(&b[i])), "seed {seed}");
         }
     }
 }

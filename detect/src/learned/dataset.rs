@@ -15,16 +15,9 @@ use tubeloc_core::CocoDataset;
 
 /// Loads every image of a COCO dataset directory with its instance masks, preprocessed.
 /// `limit` keeps only the first `limit` images (by id order in the file).
-pub fn load_coco_dir(
-    dir: &Path,
-    pre: Preprocess,
-    limit: Option<usize>,
-) -> Result<Vec<TrainImage>, LearnedError> {
+pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Result<Vec<TrainImage>, LearnedError> {
     let ann = dir.join("annotations.json");
-    let ds = CocoDataset::load(&ann).map_err(|e| LearnedError::Dataset {
-        path: ann.clone(),
-        msg: e.to_string(),
-    })?;
+    let ds = CocoDataset::load(&ann).map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: e.to_string() })?;
     let n = limit.unwrap_or(usize::MAX).min(ds.images.len());
     ds.images[..n]
         .par_iter()
@@ -33,32 +26,19 @@ pub fn load_coco_dir(
             if !p.exists() {
                 p = dir.join("images").join(&im.file_name);
             }
-            let err = |msg: String| LearnedError::Dataset {
-                path: p.clone(),
-                msg,
-            };
+            let err = |msg: String| LearnedError::Dataset { path: p.clone(), msg };
             let rgb = image::open(&p).map_err(|e| err(e.to_string()))?.to_rgb8();
             let (w, h) = (rgb.width() as usize, rgb.height() as usize);
             if (w, h) != (im.width as usize, im.height as usize) {
-                return Err(err(format!(
-                    "image is {w}x{h} but annotations.json says {}x{}",
-                    im.width, im.height
-                )));
+                return Err(err(format!("image is {w}x{h} but annotations.json says {}x{}", im.width, im.height)));
             }
             let mut masks = Vec::new();
-            for a in ds
-                .annotations
-                .iter()
-                .filter(|a| a.image_id == im.id && a.iscrowd == 0)
-            {
+            for a in ds.annotations.iter().filter(|a| a.image_id == im.id && a.iscrowd == 0) {
                 let Some(seg) = &a.segmentation else { continue };
                 let m = seg
                     .to_rle(im.height, im.width)
                     .and_then(|r| r.to_mask())
-                    .map_err(|e| LearnedError::Dataset {
-                        path: ann.clone(),
-                        msg: format!("annotation {}: {e}", a.id),
-                    })?;
+                    .map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: format!("annotation {}: {e}", a.id) })?;
                 masks.push(m.data);
             }
             Ok(TrainImage::new(w, h, pre.apply(rgb.as_raw(), w, h), &masks))
@@ -67,15 +47,8 @@ pub fn load_coco_dir(
 }
 
 /// Runs the model on a preprocessed training image.
-pub fn detect_image(
-    model: &LearnedModel,
-    img: &TrainImage,
-    cfg: &DecodeConfig,
-) -> Result<Vec<LearnedInstance>, LearnedError> {
-    Ok(decode(
-        &model.predict_with(&img.input, img.width, img.height, cfg)?,
-        cfg,
-    ))
+pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    Ok(decode(&model.predict_with(&img.input, img.width, img.height, cfg)?, cfg))
 }
 
 /// Mask quality of a model on labelled images (see [`mask_scores`]).
@@ -97,10 +70,7 @@ impl MaskScores {
 
     /// Median IoU of the detections matched at IoU 0.5 (0 when none).
     pub fn median_matched_iou(&self) -> f64 {
-        self.matched_iou
-            .get(self.matched_iou.len() / 2)
-            .copied()
-            .unwrap_or(0.0)
+        self.matched_iou.get(self.matched_iou.len() / 2).copied().unwrap_or(0.0)
     }
 }
 
@@ -108,15 +78,8 @@ impl MaskScores {
 /// per image and threshold, each detection in score order takes the unmatched ground truth of
 /// highest IoU if that IoU reaches the threshold; precision made monotone and sampled at 101
 /// recall points as COCO does). A quick validation figure; `tubeloc eval` gives the full one.
-pub fn mask_scores(
-    model: &LearnedModel,
-    images: &[TrainImage],
-    cfg: &DecodeConfig,
-) -> Result<MaskScores, LearnedError> {
-    let dets = images
-        .iter()
-        .map(|img| detect_image(model, img, cfg))
-        .collect::<Result<Vec<_>, _>>()?;
+pub fn mask_scores(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<MaskScores, LearnedError> {
+    let dets = images.iter().map(|img| detect_image(model, img, cfg)).collect::<Result<Vec<_>, _>>()?;
     Ok(score_detections(images, &dets))
 }
 
@@ -146,13 +109,7 @@ pub fn score_detections(images: &[TrainImage], dets: &[Vec<LearnedInstance>]) ->
                             inter[l as usize] += 1;
                         }
                     }
-                    (
-                        d.score,
-                        present
-                            .iter()
-                            .map(|&k| (k, inter[k] as f64 / (area + gt_area[k] - inter[k]) as f64))
-                            .collect(),
-                    )
+                    (d.score, present.iter().map(|&k| (k, inter[k] as f64 / (area + gt_area[k] - inter[k]) as f64)).collect())
                 })
                 .collect();
             (ngt, present.len(), ious)
@@ -167,11 +124,7 @@ pub fn score_detections(images: &[TrainImage], dets: &[Vec<LearnedInstance>]) ->
         for (ngt, _, ious) in &per {
             let mut used = vec![false; ngt + 1];
             for (score, cand) in ious {
-                let best = cand
-                    .iter()
-                    .filter(|(k, _)| !used[*k])
-                    .copied()
-                    .max_by(|a, b| a.1.total_cmp(&b.1));
+                let best = cand.iter().filter(|(k, _)| !used[*k]).copied().max_by(|a, b| a.1.total_cmp(&b.1));
                 let hit = matches!(best, Some((_, iou)) if iou >= thr);
                 if let (true, Some((k, iou))) = (hit, best) {
                     used[k] = true;
@@ -185,19 +138,11 @@ pub fn score_detections(images: &[TrainImage], dets: &[Vec<LearnedInstance>]) ->
         *ap_t = average_precision(&mut all, total_gt);
     }
     matched_iou.sort_by(f64::total_cmp);
-    MaskScores {
-        ap,
-        matched_iou,
-        total_gt,
-    }
+    MaskScores { ap, matched_iou, total_gt }
 }
 
 /// Mask AP at IoU 0.5 ([`mask_scores`]).
-pub fn ap50(
-    model: &LearnedModel,
-    images: &[TrainImage],
-    cfg: &DecodeConfig,
-) -> Result<f64, LearnedError> {
+pub fn ap50(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConfig) -> Result<f64, LearnedError> {
     Ok(mask_scores(model, images, cfg)?.ap[0])
 }
 

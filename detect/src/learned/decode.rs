@@ -74,22 +74,7 @@ pub struct DecodeConfig {
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig {
-            fg_threshold: 0.5,
-            peak_threshold: 0.2,
-            across_weight: 4.0,
-            min_area: 40,
-            min_score: 0.05,
-            same_axis_cells: 2.5,
-            same_tube_fraction: 100.0,
-            mask_logit: 0.0,
-            mask_logit_rel: 0.3,
-            fine_mask: true,
-            mirror_average: true,
-            length_weight: 0.5,
-            mask_logit_weight: 4.0,
-            fill_weight: 1.0,
-        }
+        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0, mask_logit_rel: 0.3, fine_mask: true, mirror_average: true, length_weight: 0.5, mask_logit_weight: 4.0, fill_weight: 1.0 }
     }
 }
 
@@ -113,13 +98,7 @@ fn sigmoid(x: f32) -> f32 {
 /// Decodes the network outputs of one image ([`super::LearnedModel::predict`]) into
 /// instances, sorted by decreasing score.
 pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
-    let (out, ow, oh, width, height) = (
-        &pred.planes[..],
-        pred.out_w,
-        pred.out_h,
-        pred.width,
-        pred.height,
-    );
+    let (out, ow, oh, width, height) = (&pred.planes[..], pred.out_w, pred.out_h, pred.width, pred.height);
     let n = ow * oh;
     assert_eq!(out.len(), HEADS * n, "output plane size");
     let fg: Vec<f32> = out[..n].iter().map(|&v| sigmoid(v)).collect();
@@ -136,12 +115,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             for dy in -1isize..=1 {
                 for dx in -1isize..=1 {
                     let (xx, yy) = (x as isize + dx, y as isize + dy);
-                    if (dx, dy) != (0, 0)
-                        && xx >= 0
-                        && yy >= 0
-                        && (xx as usize) < ow
-                        && (yy as usize) < oh
-                    {
+                    if (dx, dy) != (0, 0) && xx >= 0 && yy >= 0 && (xx as usize) < ow && (yy as usize) < oh {
                         let w = heat[yy as usize * ow + xx as usize];
                         // Ties: the first in raster order wins.
                         if w > v || (w == v && (dy < 0 || (dy == 0 && dx < 0))) {
@@ -208,13 +182,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             let (x, y) = ((p % ow) as f32, (p / ow) as f32);
             let dup = mine.iter().any(|&q| {
                 let (qx, qy) = ((q % ow) as f32, (q / ow) as f32);
-                let near: Vec<usize> = cells
-                    .iter()
-                    .copied()
-                    .filter(|&c| {
-                        ((c % ow) as f32 - qx).abs() <= 2.0 && ((c / ow) as f32 - qy).abs() <= 2.0
-                    })
-                    .collect();
+                let near: Vec<usize> = cells.iter().copied().filter(|&c| ((c % ow) as f32 - qx).abs() <= 2.0 && ((c / ow) as f32 - qy).abs() <= 2.0).collect();
                 let (ux, uy) = direction(&near);
                 let (dx, dy) = (x - qx, y - qy);
                 let along = (dx * ux + dy * uy).abs();
@@ -235,13 +203,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             .iter()
             .map(|&p| {
                 let (px, py) = ((p % ow) as isize, (p / ow) as isize);
-                let near: Vec<usize> = cells
-                    .iter()
-                    .copied()
-                    .filter(|&c| {
-                        ((c % ow) as isize - px).abs() <= 2 && ((c / ow) as isize - py).abs() <= 2
-                    })
-                    .collect();
+                let near: Vec<usize> = cells.iter().copied().filter(|&c| ((c % ow) as isize - px).abs() <= 2 && ((c / ow) as isize - py).abs() <= 2).collect();
                 direction(&near)
             })
             .collect();
@@ -343,13 +305,8 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
         }
         // Network direction and length; centre at the peak when there is one.
         let (dx, dy) = direction(cells);
-        let dir = if dx.abs() >= dy.abs() && dx < 0.0 || dy.abs() > dx.abs() && dy < 0.0 {
-            (-dx, -dy)
-        } else {
-            (dx, dy)
-        };
-        let half = cells.iter().map(|&c| fg[c] * out[4 * n + c]).sum::<f32>()
-            / cells.iter().map(|&c| fg[c]).sum::<f32>().max(1e-6);
+        let dir = if dx.abs() >= dy.abs() && dx < 0.0 || dy.abs() > dx.abs() && dy < 0.0 { (-dx, -dy) } else { (dx, dy) };
+        let half = cells.iter().map(|&c| fg[c] * out[4 * n + c]).sum::<f32>() / cells.iter().map(|&c| fg[c]).sum::<f32>().max(1e-6);
         let pred_len = (half > 0.0).then(|| (2.0 * half * LENGTH_SCALE) as f64);
         let peak_centre = peak.map(|p| {
             let (px, py) = ((p % ow) as isize, (p / ow) as isize);
@@ -365,20 +322,11 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
                     }
                 }
             }
-            [
-                (sx / sw * STRIDE as f32 + 1.5) as f64,
-                (sy / sw * STRIDE as f32 + 1.5) as f64,
-            ]
+            [(sx / sw * STRIDE as f32 + 1.5) as f64, (sy / sw * STRIDE as f32 + 1.5) as f64]
         });
         let u = [dir.0 as f64, dir.1 as f64];
-        let Some(mut axis) = AxisSeed::from_pixels(pix.iter().copied()) else {
-            continue;
-        };
-        let (bx0, by0, bx1, by1) = pix
-            .iter()
-            .fold((f64::MAX, f64::MAX, f64::MIN, f64::MIN), |a, &(x, y)| {
-                (a.0.min(x), a.1.min(y), a.2.max(x), a.3.max(y))
-            });
+        let Some(mut axis) = AxisSeed::from_pixels(pix.iter().copied()) else { continue };
+        let (bx0, by0, bx1, by1) = pix.iter().fold((f64::MAX, f64::MAX, f64::MIN, f64::MIN), |a, &(x, y)| (a.0.min(x), a.1.min(y), a.2.max(x), a.3.max(y)));
         let bbox = [bx0, by0, bx1 - bx0 + 1.0, by1 - by0 + 1.0];
         axis.direction_px = u;
         if let Some(len) = pred_len {
@@ -388,14 +336,12 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             axis.centre_px = c;
         }
         let perp = (-axis.direction_px[1], axis.direction_px[0]);
-        let (lo, hi, alo, ahi) =
-            pix.iter()
-                .fold((f64::MAX, f64::MIN, f64::MAX, f64::MIN), |a, &(x, y)| {
-                    let (rx, ry) = (x - axis.centre_px[0], y - axis.centre_px[1]);
-                    let t = rx * perp.0 + ry * perp.1;
-                    let l = rx * u[0] + ry * u[1];
-                    (a.0.min(t), a.1.max(t), a.2.min(l), a.3.max(l))
-                });
+        let (lo, hi, alo, ahi) = pix.iter().fold((f64::MAX, f64::MIN, f64::MAX, f64::MIN), |a, &(x, y)| {
+            let (rx, ry) = (x - axis.centre_px[0], y - axis.centre_px[1]);
+            let t = rx * perp.0 + ry * perp.1;
+            let l = rx * u[0] + ry * u[1];
+            (a.0.min(t), a.1.max(t), a.2.min(l), a.3.max(l))
+        });
         axis.width_px = (hi - lo + 1.0).max(1.0);
         let lm = ahi - alo + 1.0;
         let mut score = if cfg.mask_logit_weight > 0.0 {
@@ -408,19 +354,12 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
             score *= (lm.min(lp) / lm.max(lp).max(1e-9)).powf(cfg.length_weight as f64);
         }
         if cfg.fill_weight > 0.0 {
-            score *= (pix.len() as f64 / (lm * axis.width_px))
-                .min(1.0)
-                .powf(cfg.fill_weight as f64);
+            score *= (pix.len() as f64 / (lm * axis.width_px)).min(1.0).powf(cfg.fill_weight as f64);
         }
         if score < cfg.min_score as f64 {
             continue;
         }
-        result.push(LearnedInstance {
-            score,
-            mask,
-            bbox,
-            axis,
-        });
+        result.push(LearnedInstance { score, mask, bbox, axis });
     }
     result.sort_by(|a, b| b.score.total_cmp(&a.score));
     result
@@ -450,6 +389,7 @@ fn grown_owner(owner: &[u32], fg: &[f32], ow: usize, oh: usize) -> Vec<u32> {
     grown
 }
 
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -473,14 +413,7 @@ mod tests {
             let p = peak / (1.0 - peak);
             planes[n + row * ow + (xs.start + xs.end) / 2] = p.ln();
         }
-        Prediction {
-            planes,
-            out_w: ow,
-            out_h: oh,
-            width: 256,
-            height: 256,
-            fine: None,
-        }
+        Prediction { planes, out_w: ow, out_h: oh, width: 256, height: 256, fine: None }
     }
 
     #[test]
@@ -490,31 +423,13 @@ mod tests {
         let cfg = DecodeConfig::default();
         let inst = decode(&pred, &cfg);
         assert_eq!(inst.len(), 2);
-        assert!(
-            inst[0].axis.centre_px[1] < 100.0,
-            "the consistent bar ranks first: {:?}",
-            inst[0].axis
-        );
+        assert!(inst[0].axis.centre_px[1] < 100.0, "the consistent bar ranks first: {:?}", inst[0].axis);
         // Length agreement of the second: about 80 / 240, so its score is about (1/3)^0.5 of the first's.
         let ratio = inst[1].score / inst[0].score;
-        assert!(
-            (ratio - (1.0f64 / 3.0).sqrt()).abs() < 0.05,
-            "ratio {ratio}"
-        );
+        assert!((ratio - (1.0f64 / 3.0).sqrt()).abs() < 0.05, "ratio {ratio}");
         // Without the length term both score the same.
-        let flat = decode(
-            &pred,
-            &DecodeConfig {
-                length_weight: 0.0,
-                ..cfg
-            },
-        );
-        assert!(
-            (flat[0].score - flat[1].score).abs() < 1e-9,
-            "{} vs {}",
-            flat[0].score,
-            flat[1].score
-        );
+        let flat = decode(&pred, &DecodeConfig { length_weight: 0.0, ..cfg });
+        assert!((flat[0].score - flat[1].score).abs() < 1e-9, "{} vs {}", flat[0].score, flat[1].score);
     }
 
     #[test]
@@ -523,27 +438,10 @@ mod tests {
         let pred = bars(&[(10, 10..30, 4.0, 0.4, 10.0), (40, 10..30, 1.0, 0.95, 10.0)]);
         let inst = decode(&pred, &DecodeConfig::default());
         assert_eq!(inst.len(), 2);
-        assert!(
-            inst[0].axis.centre_px[1] < 100.0 && inst[0].score > inst[1].score,
-            "{:?}",
-            inst.iter()
-                .map(|i| (i.score, i.axis.centre_px))
-                .collect::<Vec<_>>()
-        );
+        assert!(inst[0].axis.centre_px[1] < 100.0 && inst[0].score > inst[1].score, "{:?}", inst.iter().map(|i| (i.score, i.axis.centre_px)).collect::<Vec<_>>());
         // The session-3 score (peak x mean fg) ranks them the other way round.
-        let old = DecodeConfig {
-            mask_logit_weight: 0.0,
-            length_weight: 0.0,
-            fill_weight: 0.0,
-            ..DecodeConfig::default()
-        };
+        let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..DecodeConfig::default() };
         let inst = decode(&pred, &old);
-        assert!(
-            inst[0].axis.centre_px[1] > 100.0,
-            "{:?}",
-            inst.iter()
-                .map(|i| (i.score, i.axis.centre_px))
-                .collect::<Vec<_>>()
-        );
+        assert!(inst[0].axis.centre_px[1] > 100.0, "{:?}", inst.iter().map(|i| (i.score, i.axis.centre_px)).collect::<Vec<_>>());
     }
 }

@@ -40,9 +40,6 @@ pub enum LearnedError {
 
 impl LearnedError {
     pub(crate) fn bad_model(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
-        LearnedError::BadModel {
-            path: path.into(),
-            msg: msg.into(),
-        }
+        LearnedError::BadModel { path: path.into(), msg: msg.into() }
     }
 }

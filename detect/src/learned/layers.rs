@@ -33,9 +33,7 @@ struct Col2Im {
 }
 
 fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, op: &str) -> Result<&'a [f32]> {
-    let (a, b) = l
-        .contiguous_offsets()
-        .ok_or_else(|| candle_core::Error::Msg(format!("{op}: input must be contiguous")))?;
+    let (a, b) = l.contiguous_offsets().ok_or_else(|| candle_core::Error::Msg(format!("{op}: input must be contiguous")))?;
     Ok(&s.as_slice::<f32>()?[a..b])
 }
 
@@ -72,10 +70,7 @@ impl CustomOp1 for Im2Col {
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
         let dims = arg.dims4()?;
-        Ok(Some(
-            grad.contiguous()?
-                .apply_op1_no_bwd(&Col2Im { k: self.k, dims })?,
-        ))
+        Ok(Some(grad.contiguous()?.apply_op1_no_bwd(&Col2Im { k: self.k, dims })?))
     }
 }
 
@@ -102,8 +97,7 @@ impl CustomOp1 for Col2Im {
                         if oy < 0 || ox < 0 || oy >= h as isize || ox >= w as isize {
                             continue;
                         }
-                        let src = &g[((bi * h + oy as usize) * w + ox as usize) * kkc
-                            + (dy as usize * k + dx as usize) * c..][..c];
+                        let src = &g[((bi * h + oy as usize) * w + ox as usize) * kkc + (dy as usize * k + dx as usize) * c..][..c];
                         d.iter_mut().zip(src).for_each(|(a, v)| *a += v);
                     }
                 }
@@ -124,11 +118,7 @@ pub struct Conv {
 impl Conv {
     /// Creates (or fetches from `vb`) `weight` `(cout, cin, k, k)` and `bias` `(cout)`.
     pub fn new(vb: VarBuilder, cin: usize, cout: usize, k: usize) -> Result<Self> {
-        let weight = vb.get_with_hints(
-            (cout, cin, k, k),
-            "weight",
-            candle_nn::init::DEFAULT_KAIMING_NORMAL,
-        )?;
+        let weight = vb.get_with_hints((cout, cin, k, k), "weight", candle_nn::init::DEFAULT_KAIMING_NORMAL)?;
         let bias = vb.get_with_hints(cout, "bias", candle_nn::init::ZERO)?;
         Ok(Conv { weight, bias, k })
     }
@@ -140,18 +130,9 @@ impl Module for Conv {
         let (b, h, w, c) = x.dims4()?;
         let cout = self.weight.dim(0)?;
         let k = self.k;
-        let wt = self
-            .weight
-            .permute((2, 3, 1, 0))?
-            .reshape((k * k * c, cout))?;
-        let cols = if k == 1 {
-            x.reshape((b, h * w, c))?
-        } else {
-            x.contiguous()?.apply_op1(Im2Col { k })?
-        };
-        cols.broadcast_matmul(&wt)?
-            .broadcast_add(&self.bias)?
-            .reshape((b, h, w, cout))
+        let wt = self.weight.permute((2, 3, 1, 0))?.reshape((k * k * c, cout))?;
+        let cols = if k == 1 { x.reshape((b, h * w, c))? } else { x.contiguous()?.apply_op1(Im2Col { k })? };
+        cols.broadcast_matmul(&wt)?.broadcast_add(&self.bias)?.reshape((b, h, w, cout))
     }
 }
 
@@ -164,10 +145,7 @@ pub fn max_pool2(x: &Tensor) -> Result<Tensor> {
 /// Nearest-neighbour 2x upsampling of `(B, H, W, C)`.
 pub fn upsample2(x: &Tensor) -> Result<Tensor> {
     let (b, h, w, c) = x.dims4()?;
-    x.reshape((b, h, 1, w, 1, c))?
-        .broadcast_as((b, h, 2, w, 2, c))?
-        .contiguous()?
-        .reshape((b, 2 * h, 2 * w, c))
+    x.reshape((b, h, 1, w, 1, c))?.broadcast_as((b, h, 2, w, 2, c))?.contiguous()?.reshape((b, 2 * h, 2 * w, c))
 }
 
 #[cfg(test)]
@@ -177,16 +155,7 @@ mod tests {
     use candle_nn::VarMap;
 
     fn max_diff(a: &Tensor, b: &Tensor) -> f32 {
-        (a - b)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .max(0)
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap()
+        (a - b).unwrap().abs().unwrap().flatten_all().unwrap().max(0).unwrap().to_scalar::<f32>().unwrap()
     }
 
     #[test]
@@ -196,37 +165,18 @@ mod tests {
         for (i, k) in [1usize, 3, 5].into_iter().enumerate() {
             let conv = Conv::new(vb.pp(format!("c{i}")), 3, 4, k).unwrap();
             let bias = Tensor::new(&[0.5f32, -1.0, 2.0, 0.0], &Device::Cpu).unwrap();
-            let conv = Conv {
-                bias: bias.clone(),
-                ..conv
-            };
-            let x =
-                Var::from_tensor(&Tensor::randn(0f32, 1.0, (2, 3, 7, 9), &Device::Cpu).unwrap())
-                    .unwrap();
+            let conv = Conv { bias: bias.clone(), ..conv };
+            let x = Var::from_tensor(&Tensor::randn(0f32, 1.0, (2, 3, 7, 9), &Device::Cpu).unwrap()).unwrap();
             let nhwc = x.permute((0, 2, 3, 1)).unwrap();
             let mine = conv.forward(&nhwc).unwrap().permute((0, 3, 1, 2)).unwrap();
-            let reference = x
-                .conv2d(&conv.weight, k / 2, 1, 1, 1)
-                .unwrap()
-                .broadcast_add(&bias.reshape((1, 4, 1, 1)).unwrap())
-                .unwrap();
+            let reference = x.conv2d(&conv.weight, k / 2, 1, 1, 1).unwrap().broadcast_add(&bias.reshape((1, 4, 1, 1)).unwrap()).unwrap();
             assert_eq!(mine.dims(), reference.dims());
             let d = max_diff(&mine, &reference);
             assert!(d < 1e-4, "k={k}: forward max difference {d}");
             // Input gradient of a weighted sum.
             let wts = Tensor::randn(0f32, 1.0, mine.dims(), &Device::Cpu).unwrap();
-            let g1 = (mine * &wts)
-                .unwrap()
-                .sum_all()
-                .unwrap()
-                .backward()
-                .unwrap();
-            let g2 = (reference * &wts)
-                .unwrap()
-                .sum_all()
-                .unwrap()
-                .backward()
-                .unwrap();
+            let g1 = (mine * &wts).unwrap().sum_all().unwrap().backward().unwrap();
+            let g2 = (reference * &wts).unwrap().sum_all().unwrap().backward().unwrap();
             let d = max_diff(g1.get(&x).unwrap(), g2.get(&x).unwrap());
             assert!(d < 1e-3, "k={k}: input gradient max difference {d}");
         }
@@ -234,17 +184,11 @@ mod tests {
 
     #[test]
     fn pooling_and_upsampling() {
-        let x = Tensor::arange(0f32, 32.0, &Device::Cpu)
-            .unwrap()
-            .reshape((1, 4, 4, 2))
-            .unwrap();
+        let x = Tensor::arange(0f32, 32.0, &Device::Cpu).unwrap().reshape((1, 4, 4, 2)).unwrap();
         let p = max_pool2(&x).unwrap();
         // Channel 0 of the top-left 2x2 block holds 0, 2, 8, 10.
         assert_eq!(p.dims(), &[1, 2, 2, 2]);
-        assert_eq!(
-            p.flatten_all().unwrap().to_vec1::<f32>().unwrap()[..2],
-            [10.0, 11.0]
-        );
+        assert_eq!(p.flatten_all().unwrap().to_vec1::<f32>().unwrap()[..2], [10.0, 11.0]);
         let u = upsample2(&p).unwrap();
         assert_eq!(u.dims(), &[1, 4, 4, 2]);
         let v = u.flatten_all().unwrap().to_vec1::<f32>().unwrap();

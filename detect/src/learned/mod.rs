@@ -30,23 +30,10 @@ pub use soup::weight_average;
 pub use train::{TrainConfig, Trainer};
 
 /// Detects tubes in an interleaved RGB8 image (`width * height * 3` bytes).
-pub fn detect_rgb(
-    model: &LearnedModel,
-    rgb: &[u8],
-    width: usize,
-    height: usize,
-    cfg: &DecodeConfig,
-) -> Result<Vec<LearnedInstance>, LearnedError> {
+pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
     if rgb.len() != width * height * 3 {
-        return Err(LearnedError::Invalid(format!(
-            "RGB buffer has {} bytes, expected {}",
-            rgb.len(),
-            width * height * 3
-        )));
+        return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
     let input = model.meta.preprocess.apply(rgb, width, height);
-    Ok(decode(
-        &model.predict_with(&input, width, height, cfg)?,
-        cfg,
-    ))
+    Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg))
 }

@@ -56,17 +56,8 @@ impl LearnedModel {
     /// As [`LearnedModel::new`], with or without the full-resolution mask branch
     /// ([`NetConfig::fine_mask`]; its output layer starts with small weights, so its
     /// correction starts near 0).
-    pub fn with_fine_mask(
-        preprocess: Preprocess,
-        width: usize,
-        fine_mask: bool,
-        seed: u64,
-    ) -> Result<Self, LearnedError> {
-        let net_cfg = NetConfig {
-            in_channels: preprocess.channels(),
-            width,
-            fine_mask,
-        };
+    pub fn with_fine_mask(preprocess: Preprocess, width: usize, fine_mask: bool, seed: u64) -> Result<Self, LearnedError> {
+        let net_cfg = NetConfig { in_channels: preprocess.channels(), width, fine_mask };
         let varmap = VarMap::new();
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
         let net = TubeNet::new(vb, &net_cfg)?;
@@ -76,13 +67,8 @@ impl LearnedModel {
             let n: usize = shape.iter().product();
             let vals: Vec<f32> = if name.ends_with(".weight") {
                 let fan_in: usize = shape[1..].iter().product();
-                let normal = Normal::new(0.0f32, (2.0 / fan_in as f32).sqrt())
-                    .map_err(|e| LearnedError::Invalid(e.to_string()))?;
-                let gain = if name.starts_with("head") || name.starts_with("fine_out") {
-                    0.1
-                } else {
-                    1.0
-                };
+                let normal = Normal::new(0.0f32, (2.0 / fan_in as f32).sqrt()).map_err(|e| LearnedError::Invalid(e.to_string()))?;
+                let gain = if name.starts_with("head") || name.starts_with("fine_out") { 0.1 } else { 1.0 };
                 (0..n).map(|_| gain * normal.sample(&mut rng)).collect()
             } else if name == "head.bias" {
                 (0..n).map(|i| if i < 2 { -2.2 } else { 0.0 }).collect()
@@ -91,16 +77,7 @@ impl LearnedModel {
             };
             var.set(&Tensor::from_vec(vals, shape, &Device::Cpu)?)?;
         }
-        Ok(LearnedModel {
-            varmap,
-            net,
-            meta: ModelMeta {
-                net: net_cfg,
-                preprocess,
-                steps: 0,
-                notes: String::new(),
-            },
-        })
+        Ok(LearnedModel { varmap, net, meta: ModelMeta { net: net_cfg, preprocess, steps: 0, notes: String::new() } })
     }
 
     /// Raw network outputs for a batch `(B, C, H, W)` (H, W multiples of 32): the stride-4
@@ -117,8 +94,7 @@ impl LearnedModel {
     /// Copies every tensor of `other` whose name and shape this model also has (a warm start,
     /// e.g. adding the fine mask branch to a trained model); returns how many were copied.
     pub fn init_from(&mut self, other: &LearnedModel) -> Result<usize, LearnedError> {
-        let theirs: HashMap<String, candle_core::Var> =
-            sorted_vars(&other.varmap).into_iter().collect();
+        let theirs: HashMap<String, candle_core::Var> = sorted_vars(&other.varmap).into_iter().collect();
         let mut copied = 0;
         for (name, var) in sorted_vars(&self.varmap) {
             if let Some(t) = theirs.get(&name).filter(|t| t.dims() == var.dims()) {
@@ -137,18 +113,14 @@ impl LearnedModel {
     /// 1, so the new model computes what the old one did on the luma of the image, without its
     /// box filter. Returns how many tensors were set.
     pub fn init_from_gray(&mut self, gray: &LearnedModel) -> Result<usize, LearnedError> {
-        if self.meta.preprocess != Preprocess::Rgb
-            || !matches!(gray.meta.preprocess, Preprocess::GrayBox { .. })
-            || self.meta.net.width != gray.meta.net.width
-        {
+        if self.meta.preprocess != Preprocess::Rgb || !matches!(gray.meta.preprocess, Preprocess::GrayBox { .. }) || self.meta.net.width != gray.meta.net.width {
             return Err(LearnedError::Invalid(format!(
                 "init from gray: needs an rgb model and a gray-box model of the same width (have {:?} width {}, {:?} width {})",
                 self.meta.preprocess, self.meta.net.width, gray.meta.preprocess, gray.meta.net.width
             )));
         }
         let mut set = self.init_from(gray)?;
-        let theirs: HashMap<String, candle_core::Var> =
-            sorted_vars(&gray.varmap).into_iter().collect();
+        let theirs: HashMap<String, candle_core::Var> = sorted_vars(&gray.varmap).into_iter().collect();
         const LUMA: [f32; 3] = [0.299, 0.587, 0.114];
         for (name, var) in sorted_vars(&self.varmap) {
             if !(name == "enc0a.weight" || name == "fine_in.weight") {
@@ -166,17 +138,12 @@ impl LearnedModel {
                 for q in 0..cin_g {
                     for (c, l) in LUMA.iter().enumerate() {
                         for t in 0..k2 {
-                            out[((o * 3 * cin_g) + q * 3 + c) * k2 + t] =
-                                l * gv[(o * cin_g + q) * k2 + t];
+                            out[((o * 3 * cin_g) + q * 3 + c) * k2 + t] = l * gv[(o * cin_g + q) * k2 + t];
                         }
                     }
                 }
             }
-            var.set(&candle_core::Tensor::from_vec(
-                out,
-                (cout, 3 * cin_g, kh, kw),
-                &candle_core::Device::Cpu,
-            )?)?;
+            var.set(&candle_core::Tensor::from_vec(out, (cout, 3 * cin_g, kh, kw), &candle_core::Device::Cpu)?)?;
             set += 1;
         }
         Ok(set)
@@ -185,18 +152,10 @@ impl LearnedModel {
     /// Runs the network on one preprocessed image (`channels * width * height` values,
     /// channel-major) of any size: pads to a multiple of 32 with zeros (the normalized mean
     /// gray) and crops the outputs back (see [`Prediction`]).
-    pub fn predict(
-        &self,
-        input: &[f32],
-        width: usize,
-        height: usize,
-    ) -> Result<Prediction, LearnedError> {
+    pub fn predict(&self, input: &[f32], width: usize, height: usize) -> Result<Prediction, LearnedError> {
         let c = self.meta.net.in_channels;
         if width == 0 || height == 0 || input.len() != c * width * height {
-            return Err(LearnedError::Invalid(format!(
-                "input has {} values, expected {c} x {width} x {height}",
-                input.len()
-            )));
+            return Err(LearnedError::Invalid(format!("input has {} values, expected {c} x {width} x {height}", input.len())));
         }
         let a = TubeNet::ALIGN;
         let (pw, ph) = (width.div_ceil(a) * a, height.div_ceil(a) * a);
@@ -215,8 +174,7 @@ impl LearnedModel {
         let mut planes = vec![0f32; HEADS * cw * chh];
         for k in 0..HEADS {
             for y in 0..chh {
-                planes[k * cw * chh + y * cw..][..cw]
-                    .copy_from_slice(&all[k * ow * oh + y * ow..][..cw]);
+                planes[k * cw * chh + y * cw..][..cw].copy_from_slice(&all[k * ow * oh + y * ow..][..cw]);
             }
         }
         let fine = match out.fine {
@@ -230,25 +188,12 @@ impl LearnedModel {
             }
             None => None,
         };
-        Ok(Prediction {
-            planes,
-            out_w: cw,
-            out_h: chh,
-            width,
-            height,
-            fine,
-        })
+        Ok(Prediction { planes, out_w: cw, out_h: chh, width, height, fine })
     }
 
     /// The prediction that `cfg` asks for: [`LearnedModel::predict_mirror_averaged`] with
     /// [`DecodeConfig::mirror_average`], else [`LearnedModel::predict`].
-    pub fn predict_with(
-        &self,
-        input: &[f32],
-        width: usize,
-        height: usize,
-        cfg: &DecodeConfig,
-    ) -> Result<Prediction, LearnedError> {
+    pub fn predict_with(&self, input: &[f32], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Prediction, LearnedError> {
         if cfg.mirror_average {
             self.predict_mirror_averaged(input, width, height)
         } else {
@@ -261,29 +206,18 @@ impl LearnedModel {
     /// outputs are mirrored back (cell `i` of a `4 n` px wide image ↔ cell `n - 1 - i`) and the
     /// axis channel `sin 2θ` changes sign (θ → π − θ); logits, `cos 2θ` and lengths are averaged
     /// as they are. Images whose width is not a multiple of 4 get the plain prediction.
-    pub fn predict_mirror_averaged(
-        &self,
-        input: &[f32],
-        width: usize,
-        height: usize,
-    ) -> Result<Prediction, LearnedError> {
+    pub fn predict_mirror_averaged(&self, input: &[f32], width: usize, height: usize) -> Result<Prediction, LearnedError> {
         let mut p = self.predict(input, width, height)?;
         if width % STRIDE != 0 {
             return Ok(p);
         }
-        let mirrored: Vec<f32> = input
-            .chunks_exact(width)
-            .flat_map(|row| row.iter().rev().copied())
-            .collect();
+        let mirrored: Vec<f32> = input.chunks_exact(width).flat_map(|row| row.iter().rev().copied()).collect();
         let q = self.predict(&mirrored, width, height)?;
         let (cw, n) = (p.out_w, p.out_w * p.out_h);
         for k in 0..HEADS {
             let sign = if k == 3 { -1.0 } else { 1.0 };
             for y in 0..p.out_h {
-                let (a, b) = (
-                    &mut p.planes[k * n + y * cw..][..cw],
-                    &q.planes[k * n + y * cw..][..cw],
-                );
+                let (a, b) = (&mut p.planes[k * n + y * cw..][..cw], &q.planes[k * n + y * cw..][..cw]);
                 for (i, v) in a.iter_mut().enumerate() {
                     *v = 0.5 * (*v + sign * b[cw - 1 - i]);
                 }
@@ -307,27 +241,15 @@ impl LearnedModel {
             let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
             blobs.push((name, var.dims().to_vec(), bytes));
         }
-        let checksum = checksum(
-            blobs
-                .iter()
-                .map(|(n, s, b)| (n.as_str(), s.as_slice(), b.as_slice())),
-        );
+        let checksum = checksum(blobs.iter().map(|(n, s, b)| (n.as_str(), s.as_slice(), b.as_slice())));
         let mut md = HashMap::new();
         md.insert("format".to_string(), FORMAT_NAME.to_string());
         md.insert("format_version".to_string(), FORMAT_VERSION.to_string());
-        md.insert(
-            "meta".to_string(),
-            serde_json::to_string(&self.meta).map_err(|e| LearnedError::Invalid(e.to_string()))?,
-        );
+        md.insert("meta".to_string(), serde_json::to_string(&self.meta).map_err(|e| LearnedError::Invalid(e.to_string()))?);
         md.insert("checksum".to_string(), format!("{checksum:08x}"));
         let views = blobs
             .iter()
-            .map(|(n, s, b)| {
-                Ok((
-                    n.clone(),
-                    safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?,
-                ))
-            })
+            .map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?)))
             .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
             .map_err(|e| LearnedError::Invalid(e.to_string()))?;
         safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))
@@ -336,18 +258,12 @@ impl LearnedModel {
     /// Writes the model atomically to `path`.
     pub fn save(&self, path: &Path) -> Result<(), LearnedError> {
         let bytes = self.to_bytes()?;
-        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io {
-            path: path.to_path_buf(),
-            source: std::io::Error::other(e.to_string()),
-        })
+        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: std::io::Error::other(e.to_string()) })
     }
 
     /// Reads a model file; see [`LearnedModel::from_bytes`].
     pub fn load(path: &Path) -> Result<Self, LearnedError> {
-        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        })?;
+        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: e })?;
         Self::from_bytes(&bytes, path)
     }
 
@@ -356,80 +272,44 @@ impl LearnedModel {
     /// right shape (and no others).
     pub fn from_bytes(bytes: &[u8], origin: &Path) -> Result<Self, LearnedError> {
         let bad = |m: String| LearnedError::bad_model(origin, m);
-        let st = safetensors::SafeTensors::deserialize(bytes)
-            .map_err(|e| bad(format!("not a safetensors file ({e})")))?;
-        let (_, header) =
-            safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
+        let st = safetensors::SafeTensors::deserialize(bytes).map_err(|e| bad(format!("not a safetensors file ({e})")))?;
+        let (_, header) = safetensors::SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
         let md = header.metadata().clone().unwrap_or_default();
         if md.get("format").map(String::as_str) != Some(FORMAT_NAME) {
-            return Err(bad(format!(
-                "not a tubeloc learned model (format {:?})",
-                md.get("format")
-            )));
+            return Err(bad(format!("not a tubeloc learned model (format {:?})", md.get("format"))));
         }
         let ver = md.get("format_version").cloned().unwrap_or_default();
         if ver != FORMAT_VERSION.to_string() {
-            return Err(bad(format!(
-                "format version {ver} but this program reads version {FORMAT_VERSION}"
-            )));
+            return Err(bad(format!("format version {ver} but this program reads version {FORMAT_VERSION}")));
         }
-        let meta: ModelMeta =
-            serde_json::from_str(md.get("meta").map(String::as_str).unwrap_or(""))
-                .map_err(|e| bad(format!("bad meta: {e}")))?;
+        let meta: ModelMeta = serde_json::from_str(md.get("meta").map(String::as_str).unwrap_or(""))
+            .map_err(|e| bad(format!("bad meta: {e}")))?;
         let mut tensors = st.tensors();
         tensors.sort_by(|a, b| a.0.cmp(&b.0));
         for (n, t) in &tensors {
             if t.dtype() != safetensors::Dtype::F32 {
-                return Err(bad(format!(
-                    "tensor {n} has dtype {:?}, expected F32",
-                    t.dtype()
-                )));
+                return Err(bad(format!("tensor {n} has dtype {:?}, expected F32", t.dtype())));
             }
         }
-        let sum = checksum(
-            tensors
-                .iter()
-                .map(|(n, t)| (n.as_str(), t.shape(), t.data())),
-        );
+        let sum = checksum(tensors.iter().map(|(n, t)| (n.as_str(), t.shape(), t.data())));
         let want = md.get("checksum").cloned().unwrap_or_default();
         if format!("{sum:08x}") != want {
-            return Err(bad(format!(
-                "checksum mismatch (file says {want}, data gives {sum:08x}): the file is corrupt"
-            )));
+            return Err(bad(format!("checksum mismatch (file says {want}, data gives {sum:08x}): the file is corrupt")));
         }
-        if meta.net.in_channels != meta.preprocess.channels()
-            || meta.net.width == 0
-            || meta.net.width > 256
-        {
-            return Err(bad(format!(
-                "inconsistent architecture {:?} for preprocessing {:?}",
-                meta.net, meta.preprocess
-            )));
+        if meta.net.in_channels != meta.preprocess.channels() || meta.net.width == 0 || meta.net.width > 256 {
+            return Err(bad(format!("inconsistent architecture {:?} for preprocessing {:?}", meta.net, meta.preprocess)));
         }
-        let mut model =
-            LearnedModel::with_fine_mask(meta.preprocess, meta.net.width, meta.net.fine_mask, 0)?;
+        let mut model = LearnedModel::with_fine_mask(meta.preprocess, meta.net.width, meta.net.fine_mask, 0)?;
         model.meta = meta;
         let vars = sorted_vars(&model.varmap);
         if vars.len() != tensors.len() {
-            return Err(bad(format!(
-                "{} tensors, the architecture has {}",
-                tensors.len(),
-                vars.len()
-            )));
+            return Err(bad(format!("{} tensors, the architecture has {}", tensors.len(), vars.len())));
         }
         for ((name, var), (tn, t)) in vars.iter().zip(&tensors) {
             if name != tn || var.dims() != t.shape() {
-                return Err(bad(format!(
-                    "tensor {tn} {:?} does not match the architecture's {name} {:?}",
-                    t.shape(),
-                    var.dims()
-                )));
+                return Err(bad(format!("tensor {tn} {:?} does not match the architecture's {name} {:?}", t.shape(), var.dims())));
             }
-            let vals: Vec<f32> = t
-                .data()
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
+            let vals: Vec<f32> = t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
             var.set(&Tensor::from_vec(vals, t.shape(), &Device::Cpu)?)?;
         }
         Ok(model)
@@ -457,8 +337,7 @@ pub struct Prediction {
 
 pub(crate) fn sorted_vars(varmap: &VarMap) -> Vec<(String, candle_core::Var)> {
     let data = varmap.data().lock().expect("varmap lock poisoned");
-    let mut v: Vec<(String, candle_core::Var)> =
-        data.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+    let mut v: Vec<(String, candle_core::Var)> = data.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
     v.sort_by(|a, b| a.0.cmp(&b.0));
     v
 }

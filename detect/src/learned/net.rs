@@ -59,11 +59,7 @@ pub struct NetConfig {
 
 impl Default for NetConfig {
     fn default() -> Self {
-        NetConfig {
-            in_channels: 1,
-            width: 12,
-            fine_mask: false,
-        }
+        NetConfig { in_channels: 1, width: 12, fine_mask: false }
     }
 }
 
@@ -89,13 +85,7 @@ pub struct NetOutput {
 /// Bilinear upsampling of a stride-4 plane (`ow x oh`, cell `i` centred on pixel `4i + 1.5`)
 /// to `width x height` pixels, clamped at the borders:
 /// `v(x) = (1 - t) p[⌊u⌋] + t p[⌊u⌋ + 1]` with `u = (x - 1.5) / 4`, `t = u - ⌊u⌋`, per axis.
-pub fn upsample4_bilinear(
-    plane: &[f32],
-    ow: usize,
-    oh: usize,
-    width: usize,
-    height: usize,
-) -> Vec<f32> {
+pub fn upsample4_bilinear(plane: &[f32], ow: usize, oh: usize, width: usize, height: usize) -> Vec<f32> {
     let mut out = Vec::with_capacity(width * height);
     for y in 0..height {
         out.extend((0..width).map(|x| bilinear4_at(plane, ow, oh, x, y)));
@@ -119,9 +109,7 @@ pub fn bilinear4_at(plane: &[f32], ow: usize, oh: usize, x: usize, y: usize) -> 
 /// `(B, C, H, W)` → channels-last `(B, H/2, W/2, 4C)`, channel `(2 dy + dx) C + c`.
 fn space_to_depth(x: &Tensor) -> Result<Tensor> {
     let (b, c, h, w) = x.dims4()?;
-    x.reshape((b, c, h / 2, 2, w / 2, 2))?
-        .permute((0, 2, 4, 3, 5, 1))?
-        .reshape((b, h / 2, w / 2, 4 * c))
+    x.reshape((b, c, h / 2, 2, w / 2, 2))?.permute((0, 2, 4, 3, 5, 1))?.reshape((b, h / 2, w / 2, 4 * c))
 }
 
 impl TubeNet {
@@ -137,10 +125,7 @@ impl TubeNet {
         let mut enc = Vec::new();
         let mut cin = 4 * cfg.in_channels;
         for (l, &c) in widths.iter().enumerate() {
-            enc.push((
-                Conv::new(vb.pp(format!("enc{l}a")), cin, c, 3)?,
-                Conv::new(vb.pp(format!("enc{l}b")), c, c, 3)?,
-            ));
+            enc.push((Conv::new(vb.pp(format!("enc{l}a")), cin, c, 3)?, Conv::new(vb.pp(format!("enc{l}b")), c, c, 3)?));
             cin = c;
         }
         let dec = vec![
@@ -160,13 +145,7 @@ impl TubeNet {
         } else {
             None
         };
-        Ok(TubeNet {
-            enc,
-            dec,
-            head,
-            fine,
-            freeze_coarse: false,
-        })
+        Ok(TubeNet { enc, dec, head, fine, freeze_coarse: false })
     }
 
     /// With `on`, gradients of the loss reach only the fine mask branch (the stride-4 layers
@@ -197,20 +176,13 @@ impl TubeNet {
         }
         let fine = match &self.fine {
             Some([cin, cproj, cmid, cout]) => {
-                let g = (cin.forward(&space_to_depth(x)?)? + upsample2(&cproj.forward(&f)?)?)?
-                    .relu()?;
+                let g = (cin.forward(&space_to_depth(x)?)? + upsample2(&cproj.forward(&f)?)?)?.relu()?;
                 let g = cout.forward(&cmid.forward(&g)?.relu()?)?;
                 // Depth-to-space: (B, H/2, W/2, 2, 2) -> (B, H/2, 2, W/2, 2) -> (B, 1, H, W).
-                let correction = g
-                    .reshape((b, h / 2, w / 2, 2, 2))?
-                    .permute((0, 1, 3, 2, 4))?
-                    .reshape((b, 1, h, w))?;
+                let correction = g.reshape((b, h / 2, w / 2, 2, 2))?.permute((0, 1, 3, 2, 4))?.reshape((b, 1, h, w))?;
                 let fg: Vec<f32> = coarse.narrow(1, 0, 1)?.flatten_all()?.to_vec1()?;
                 let (ow, oh) = (w / STRIDE, h / STRIDE);
-                let base: Vec<f32> = fg
-                    .chunks_exact(ow * oh)
-                    .flat_map(|p| upsample4_bilinear(p, ow, oh, w, h))
-                    .collect();
+                let base: Vec<f32> = fg.chunks_exact(ow * oh).flat_map(|p| upsample4_bilinear(p, ow, oh, w, h)).collect();
                 Some((correction + Tensor::from_vec(base, (b, 1, h, w), x.device())?)?)
             }
             None => None,
@@ -227,19 +199,13 @@ mod tests {
     fn bilinear_upsampling_reproduces_a_ramp_and_clamps_at_the_border() {
         // p[i] = i along x, 10 j along y: interior pixels read (x - 1.5) / 4 + 10 (y - 1.5) / 4.
         let (ow, oh) = (5, 3);
-        let plane: Vec<f32> = (0..oh)
-            .flat_map(|j| (0..ow).map(move |i| i as f32 + 10.0 * j as f32))
-            .collect();
+        let plane: Vec<f32> = (0..oh).flat_map(|j| (0..ow).map(move |i| i as f32 + 10.0 * j as f32)).collect();
         let up = upsample4_bilinear(&plane, ow, oh, 20, 12);
         for y in 0..12 {
             for x in 0..20 {
                 let u = ((x as f32 - 1.5) / 4.0).clamp(0.0, 4.0);
                 let v = ((y as f32 - 1.5) / 4.0).clamp(0.0, 2.0);
-                assert!(
-                    (up[y * 20 + x] - (u + 10.0 * v)).abs() < 1e-5,
-                    "({x}, {y}): {}",
-                    up[y * 20 + x]
-                );
+                assert!((up[y * 20 + x] - (u + 10.0 * v)).abs() < 1e-5, "({x}, {y}): {}", up[y * 20 + x]);
             }
         }
     }

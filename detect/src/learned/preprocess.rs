@@ -32,10 +32,7 @@ impl Preprocess {
         match s {
             "rgb" => Some(Preprocess::Rgb),
             "gray-box" => Some(Preprocess::GrayBox { radius: 1 }),
-            _ => s
-                .strip_prefix("gray-box:")
-                .and_then(|r| r.parse().ok())
-                .map(|radius| Preprocess::GrayBox { radius }),
+            _ => s.strip_prefix("gray-box:").and_then(|r| r.parse().ok()).map(|radius| Preprocess::GrayBox { radius }),
         }
     }
 
@@ -65,9 +62,7 @@ impl Preprocess {
                 let gray: Vec<f32> = rgb
                     .chunks_exact(3)
                     .take(n)
-                    .map(|p| {
-                        (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0
-                    })
+                    .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)
                     .collect();
                 let mut out = box_filter(&gray, width, height, radius);
                 out.iter_mut().for_each(|v| *v = (*v - 0.5) / 0.25);
@@ -87,25 +82,19 @@ pub fn box_filter(src: &[f32], width: usize, height: usize, r: usize) -> Vec<f32
     let clampi = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
     for y in 0..height {
         let row = &src[y * width..(y + 1) * width];
-        let mut s: f32 = (-(r as isize)..=r as isize)
-            .map(|d| row[clampi(d, width)])
-            .sum();
+        let mut s: f32 = (-(r as isize)..=r as isize).map(|d| row[clampi(d, width)]).sum();
         for x in 0..width {
             tmp[y * width + x] = s / k;
-            s += row[clampi(x as isize + r as isize + 1, width)]
-                - row[clampi(x as isize - r as isize, width)];
+            s += row[clampi(x as isize + r as isize + 1, width)] - row[clampi(x as isize - r as isize, width)];
         }
     }
     let mut out = vec![0f32; src.len()];
     for x in 0..width {
         let col = |y: usize| tmp[y * width + x];
-        let mut s: f32 = (-(r as isize)..=r as isize)
-            .map(|d| col(clampi(d, height)))
-            .sum();
+        let mut s: f32 = (-(r as isize)..=r as isize).map(|d| col(clampi(d, height))).sum();
         for y in 0..height {
             out[y * width + x] = s / k;
-            s += col(clampi(y as isize + r as isize + 1, height))
-                - col(clampi(y as isize - r as isize, height));
+            s += col(clampi(y as isize + r as isize + 1, height)) - col(clampi(y as isize - r as isize, height));
         }
     }
     out
@@ -132,10 +121,7 @@ mod tests {
                 assert!((out[y * w + x] - s / 9.0).abs() < 1e-4);
             }
         }
-        assert_eq!(
-            Preprocess::parse("gray-box:2"),
-            Some(Preprocess::GrayBox { radius: 2 })
-        );
+        assert_eq!(Preprocess::parse("gray-box:2"), Some(Preprocess::GrayBox { radius: 2 }));
         assert_eq!(Preprocess::parse("rgb"), Some(Preprocess::Rgb));
         assert_eq!(Preprocess::parse("hsv"), None);
     }

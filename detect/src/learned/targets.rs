@@ -35,16 +35,7 @@ pub fn make_targets(labels: &[u16], s: usize) -> Targets {
             pix[l as usize].push(((i % s) as f64, (i / s) as f64));
         }
     }
-    let seeds: Vec<Option<AxisSeed>> = pix
-        .iter()
-        .map(|p| {
-            if p.len() >= 8 {
-                AxisSeed::from_pixels(p.iter().copied())
-            } else {
-                None
-            }
-        })
-        .collect();
+    let seeds: Vec<Option<AxisSeed>> = pix.iter().map(|p| if p.len() >= 8 { AxisSeed::from_pixels(p.iter().copied()) } else { None }).collect();
     for (i, &l) in labels.iter().enumerate() {
         if l != 0 {
             let (x, y) = (i % s, i / s);

@@ -19,8 +19,8 @@
 use super::augment::{sample_crop, AugmentConfig, TrainImage};
 use super::error::LearnedError;
 use super::model::LearnedModel;
-use super::net::{NetOutput, HEADS, STRIDE};
 use super::optim::AdamW;
+use super::net::{NetOutput, HEADS, STRIDE};
 use super::targets::make_targets;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
@@ -54,15 +54,7 @@ pub struct TrainConfig {
 
 impl Default for TrainConfig {
     fn default() -> Self {
-        TrainConfig {
-            batch: 8,
-            lr: 2e-3,
-            weight_decay: 1e-4,
-            warmup: 100,
-            total_steps: 3000,
-            seed: 0,
-            augment: AugmentConfig::default(),
-        }
+        TrainConfig { batch: 8, lr: 2e-3, weight_decay: 1e-4, warmup: 100, total_steps: 3000, seed: 0, augment: AugmentConfig::default() }
     }
 }
 
@@ -80,21 +72,12 @@ pub struct Batch {
 
 /// Builds a batch of `n` crops, crop `b` drawn with `ChaCha8Rng::seed_from_u64(seed ^ step·1000003 ^ b)`
 /// from image `rng % images.len()` (deterministic, parallel over crops).
-pub fn make_batch(
-    images: &[TrainImage],
-    aug: &AugmentConfig,
-    n: usize,
-    seed: u64,
-    step: u64,
-) -> Result<Batch, LearnedError> {
+pub fn make_batch(images: &[TrainImage], aug: &AugmentConfig, n: usize, seed: u64, step: u64) -> Result<Batch, LearnedError> {
     if images.is_empty() {
         return Err(LearnedError::Invalid("no training images".into()));
     }
     if aug.crop == 0 || aug.crop % 32 != 0 {
-        return Err(LearnedError::Invalid(format!(
-            "crop size {} must be a positive multiple of 32",
-            aug.crop
-        )));
+        return Err(LearnedError::Invalid(format!("crop size {} must be a positive multiple of 32", aug.crop)));
     }
     let s = aug.crop;
     let o = s / STRIDE;
@@ -102,8 +85,7 @@ pub fn make_batch(
     let crops: Vec<_> = (0..n)
         .into_par_iter()
         .map(|b| {
-            let mut rng =
-                ChaCha8Rng::seed_from_u64(seed ^ step.wrapping_mul(1_000_003) ^ ((b as u64) << 48));
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ step.wrapping_mul(1_000_003) ^ ((b as u64) << 48));
             let img = &images[rand::Rng::random_range(&mut rng, 0..images.len())];
             let (input, labels) = sample_crop(img, aug, &mut rng);
             let t = make_targets(&labels, s);
@@ -145,19 +127,10 @@ pub fn loss(net_out: &NetOutput, batch: &Batch) -> Result<Tensor, LearnedError> 
     let l_fg = (bce_logits(&o0, &t0)? * (t0.affine(4.0, 1.0)?))?.mean_all()?;
     let (o1, t1) = (o(1, 1)?, t(1, 1)?);
     let wh = t1.affine(20.0, 1.0)?;
-    let l_heat =
-        ((bce_logits(&o1, &t1)? * &wh)?.sum_all()? / wh.sum_all()?.to_scalar::<f32>()? as f64)?;
+    let l_heat = ((bce_logits(&o1, &t1)? * &wh)?.sum_all()? / wh.sum_all()?.to_scalar::<f32>()? as f64)?;
     let wsum = batch.weight.sum_all()?.to_scalar::<f32>()? as f64 + 1.0;
-    let l_dir = ((o(2, 2)? - t(2, 2)?)?
-        .abs()?
-        .broadcast_mul(&batch.weight)?
-        .sum_all()?
-        / wsum)?;
-    let l_len = ((o(4, 1)? - t(4, 1)?)?
-        .abs()?
-        .broadcast_mul(&batch.weight)?
-        .sum_all()?
-        / wsum)?;
+    let l_dir = ((o(2, 2)? - t(2, 2)?)?.abs()?.broadcast_mul(&batch.weight)?.sum_all()? / wsum)?;
+    let l_len = ((o(4, 1)? - t(4, 1)?)?.abs()?.broadcast_mul(&batch.weight)?.sum_all()? / wsum)?;
     let total = (((l_fg + l_heat)? + l_dir)? + l_len)?;
     Ok(match &net_out.fine {
         Some(f) => (total + bce_logits(f, &batch.mask)?.mean_all()?)?,
@@ -192,13 +165,7 @@ impl Trainer {
         if found {
             t.opt.load_state(&opt)?;
             if t.opt.t != t.model.meta.steps {
-                return Err(LearnedError::bad_model(
-                    &opt,
-                    format!(
-                        "optimizer state is at step {} but the weights at step {}",
-                        t.opt.t, t.model.meta.steps
-                    ),
-                ));
+                return Err(LearnedError::bad_model(&opt, format!("optimizer state is at step {} but the weights at step {}", t.opt.t, t.model.meta.steps)));
             }
         }
         Ok((t, found))
@@ -216,21 +183,14 @@ impl Trainer {
         if k < c.warmup {
             return c.lr * (k + 1) as f64 / c.warmup as f64;
         }
-        let p = ((k - c.warmup) as f64 / (c.total_steps.saturating_sub(c.warmup)).max(1) as f64)
-            .min(1.0);
+        let p = ((k - c.warmup) as f64 / (c.total_steps.saturating_sub(c.warmup)).max(1) as f64).min(1.0);
         c.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * p).cos()))
     }
 
     /// One optimizer step on a fresh batch; returns the batch loss before the step.
     pub fn step(&mut self, images: &[TrainImage]) -> Result<f32, LearnedError> {
         let k = self.model.meta.steps;
-        let batch = make_batch(
-            images,
-            &self.config.augment,
-            self.config.batch,
-            self.config.seed,
-            k,
-        )?;
+        let batch = make_batch(images, &self.config.augment, self.config.batch, self.config.seed, k)?;
         self.opt.lr = self.learning_rate(k);
         let out = self.model.forward(&batch.input)?;
         let l = loss(&out, &batch)?;

@@ -8,12 +8,12 @@
 //! sight.
 
 use crate::line2d::mask::rle_from_box;
+use tubeloc_core::Rle;
 use crate::line2d::matching::RawMatch;
 use crate::line2d::template::Template;
 use nalgebra::{Point2, Rotation3, Vector3};
 use serde_json::json;
 use tubeloc_core::detection::{DetectionSource, TubeDetection};
-use tubeloc_core::Rle;
 use tubeloc_core::{CameraModel, Pose};
 
 /// A Line2D detection in one image.
@@ -46,13 +46,7 @@ pub struct Line2dDetection {
 
 impl Line2dDetection {
     /// Builds the detection of match `m` of template `t` in a `width x height` image.
-    pub fn from_match(
-        m: &RawMatch,
-        t: &Template,
-        camera: &CameraModel,
-        width: usize,
-        height: usize,
-    ) -> Self {
+    pub fn from_match(m: &RawMatch, t: &Template, camera: &CameraModel, width: usize, height: usize) -> Self {
         let (tw, th) = (t.levels[0].width as i64, t.levels[0].height as i64);
         let (w, h) = (width as i64, height as i64);
         let (x0, y0) = ((m.x as i64).clamp(0, w), (m.y as i64).clamp(0, h));
@@ -61,15 +55,7 @@ impl Line2dDetection {
             let (lx, ly) = (x as i64 - m.x as i64, y as i64 - m.y as i64);
             t.mask[(ly * tw + lx) as usize] != 0
         };
-        let mask = rle_from_box(
-            height as u32,
-            width as u32,
-            x0 as u32,
-            x1 as u32,
-            y0 as u32,
-            y1 as u32,
-            inside,
-        );
+        let mask = rle_from_box(height as u32, width as u32, x0 as u32, x1 as u32, y0 as u32, y1 as u32, inside);
         let (mut bx0, mut by0, mut bx1, mut by1) = (i64::MAX, i64::MAX, -1, -1);
         for y in y0..y1 {
             for x in x0..x1 {
@@ -81,43 +67,15 @@ impl Line2dDetection {
                 }
             }
         }
-        let bbox = if bx1 < 0 {
-            [x0 as f64, y0 as f64, 0.0, 0.0]
-        } else {
-            [
-                bx0 as f64,
-                by0 as f64,
-                (bx1 - bx0 + 1) as f64,
-                (by1 - by0 + 1) as f64,
-            ]
-        };
-        let centre_px = [
-            m.x as f64 + t.centre[0] as f64,
-            m.y as f64 + t.centre[1] as f64,
-        ];
+        let bbox = if bx1 < 0 { [x0 as f64, y0 as f64, 0.0, 0.0] } else { [bx0 as f64, by0 as f64, (bx1 - bx0 + 1) as f64, (by1 - by0 + 1) as f64] };
+        let centre_px = [m.x as f64 + t.centre[0] as f64, m.y as f64 + t.centre[1] as f64];
         let t_cam_tube = adjust_pose(&t.t_cam_tube, camera, centre_px);
-        Line2dDetection {
-            template_id: t.id,
-            similarity: m.score,
-            score: m.score / 100.0,
-            contrast: None,
-            x: m.x,
-            y: m.y,
-            bbox,
-            centre_px,
-            t_cam_tube,
-            mask,
-        }
+        Line2dDetection { template_id: t.id, similarity: m.score, score: m.score / 100.0, contrast: None, x: m.x, y: m.y, bbox, centre_px, t_cam_tube, mask }
     }
 
     /// The core detection record (score, coarse pose, template id).
     pub fn to_tube_detection(&self, image_id: u64) -> TubeDetection {
-        let mut d = TubeDetection::new(
-            image_id,
-            self.score as f64,
-            self.bbox,
-            DetectionSource::Line2d,
-        );
+        let mut d = TubeDetection::new(image_id, self.score as f64, self.bbox, DetectionSource::Line2d);
         d.t_cam_tube = Some(self.t_cam_tube);
         d.template_id = Some(self.template_id as u64);
         d.mask = Some(self.mask.clone());
@@ -126,8 +84,7 @@ impl Line2dDetection {
 
     /// A COCO results entry: the [`TubeDetection`] fields plus `segmentation` (compressed RLE).
     pub fn to_coco_json(&self, image_id: u64) -> serde_json::Value {
-        let mut v =
-            serde_json::to_value(self.to_tube_detection(image_id)).unwrap_or_else(|_| json!({}));
+        let mut v = serde_json::to_value(self.to_tube_detection(image_id)).unwrap_or_else(|_| json!({}));
         if let Some(o) = v.as_object_mut() {
             o.insert("similarity".into(), json!(self.similarity));
             if let Some(c) = self.contrast {

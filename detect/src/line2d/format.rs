@@ -61,24 +61,16 @@ impl<'a> R<'a> {
         Ok(s)
     }
     fn f64(&mut self) -> Result<f64, String> {
-        Ok(f64::from_le_bytes(
-            self.take(8)?.try_into().unwrap_or([0; 8]),
-        ))
+        Ok(f64::from_le_bytes(self.take(8)?.try_into().unwrap_or([0; 8])))
     }
     fn f32(&mut self) -> Result<f32, String> {
-        Ok(f32::from_le_bytes(
-            self.take(4)?.try_into().unwrap_or([0; 4]),
-        ))
+        Ok(f32::from_le_bytes(self.take(4)?.try_into().unwrap_or([0; 4])))
     }
     fn u32(&mut self) -> Result<u32, String> {
-        Ok(u32::from_le_bytes(
-            self.take(4)?.try_into().unwrap_or([0; 4]),
-        ))
+        Ok(u32::from_le_bytes(self.take(4)?.try_into().unwrap_or([0; 4])))
     }
     fn u16(&mut self) -> Result<u16, String> {
-        Ok(u16::from_le_bytes(
-            self.take(2)?.try_into().unwrap_or([0; 2]),
-        ))
+        Ok(u16::from_le_bytes(self.take(2)?.try_into().unwrap_or([0; 2])))
     }
     fn u8(&mut self) -> Result<u8, String> {
         Ok(self.take(1)?[0])
@@ -94,15 +86,7 @@ impl TemplateLibrary {
             w.f64(v);
         }
         let v = &p.views;
-        for x in [
-            v.step_deg,
-            v.inplane_step_deg,
-            v.inplane_range_deg,
-            v.dedupe_tol_deg,
-            v.dist_min,
-            v.dist_max,
-            v.dist_step,
-        ] {
+        for x in [v.step_deg, v.inplane_step_deg, v.inplane_range_deg, v.dedupe_tol_deg, v.dist_min, v.dist_max, v.dist_step] {
             w.f64(x);
         }
         w.u32(p.features);
@@ -161,23 +145,14 @@ impl TemplateLibrary {
     /// Reads a library file; refuses wrong magic, version, length or checksum, and invalid
     /// content, with an error naming the file.
     pub fn load(path: &Path) -> Result<TemplateLibrary, Line2dError> {
-        let bytes = std::fs::read(path).map_err(|e| Line2dError::Io {
-            path: path.into(),
-            source: e,
-        })?;
-        Self::from_bytes(&bytes).map_err(|message| Line2dError::Format {
-            path: path.into(),
-            message,
-        })
+        let bytes = std::fs::read(path).map_err(|e| Line2dError::Io { path: path.into(), source: e })?;
+        Self::from_bytes(&bytes).map_err(|message| Line2dError::Format { path: path.into(), message })
     }
 
     /// Parses library bytes; the error text says what is wrong.
     pub fn from_bytes(bytes: &[u8]) -> Result<TemplateLibrary, String> {
         if bytes.len() < HEADER {
-            return Err(format!(
-                "not a tubeloc template library: {} bytes, shorter than the {HEADER}-byte header",
-                bytes.len()
-            ));
+            return Err(format!("not a tubeloc template library: {} bytes, shorter than the {HEADER}-byte header", bytes.len()));
         }
         if &bytes[0..8] != MAGIC {
             return Err("not a tubeloc template library (bad magic)".into());
@@ -194,9 +169,7 @@ impl TemplateLibrary {
         }
         let got = crc32fast::hash(payload);
         if got != crc {
-            return Err(format!(
-                "checksum mismatch (stored {crc:08x}, computed {got:08x}): the file is corrupt"
-            ));
+            return Err(format!("checksum mismatch (stored {crc:08x}, computed {got:08x}): the file is corrupt"));
         }
         parse_payload(payload)
     }
@@ -204,12 +177,7 @@ impl TemplateLibrary {
 
 fn parse_payload(payload: &[u8]) -> Result<TemplateLibrary, String> {
     let mut r = R { b: payload, pos: 0 };
-    let camera = Pinhole {
-        fx: r.f64()?,
-        fy: r.f64()?,
-        cx: r.f64()?,
-        cy: r.f64()?,
-    };
+    let camera = Pinhole { fx: r.f64()?, fy: r.f64()?, cx: r.f64()?, cy: r.f64()? };
     let views = ViewParams {
         step_deg: r.f64()?,
         inplane_step_deg: r.f64()?,
@@ -247,11 +215,7 @@ fn parse_payload(payload: &[u8]) -> Result<TemplateLibrary, String> {
             let nf = r.u32()? as usize;
             let mut feats = Vec::with_capacity(nf.min(1 << 16));
             for _ in 0..nf {
-                let f = Feature {
-                    x: r.u16()?,
-                    y: r.u16()?,
-                    ori: r.u8()?,
-                };
+                let f = Feature { x: r.u16()?, y: r.u16()?, ori: r.u8()? };
                 if f.x >= width || f.y >= height || f.ori as usize >= N_ORI {
                     return Err(format!("template {i}: feature ({}, {}, {}) outside {width}x{height} or bad orientation", f.x, f.y, f.ori));
                 }
@@ -260,40 +224,16 @@ fn parse_payload(payload: &[u8]) -> Result<TemplateLibrary, String> {
             if feats.is_empty() {
                 return Err(format!("template {i}: a level without features"));
             }
-            levels.push(TemplateLevel {
-                width,
-                height,
-                features: feats,
-            });
+            levels.push(TemplateLevel { width, height, features: feats });
         }
         let npx = levels[0].width as usize * levels[0].height as usize;
         let bits = r.take(npx.div_ceil(8))?;
         let mask: Vec<u8> = (0..npx).map(|k| (bits[k / 8] >> (k % 8)) & 1).collect();
         let area = mask.iter().map(|&m| m as u32).sum();
-        templates.push(Template {
-            id,
-            alpha_deg,
-            psi_deg,
-            distance,
-            t_cam_tube,
-            centre,
-            levels,
-            mask,
-            area,
-        });
+        templates.push(Template { id, alpha_deg, psi_deg, distance, t_cam_tube, centre, levels, mask, area });
     }
     if r.pos != payload.len() {
-        return Err(format!(
-            "{} trailing bytes after the last template",
-            payload.len() - r.pos
-        ));
+        return Err(format!("{} trailing bytes after the last template", payload.len() - r.pos));
     }
-    Ok(TemplateLibrary {
-        params: LibraryParams {
-            camera,
-            views,
-            features,
-        },
-        templates,
-    })
+    Ok(TemplateLibrary { params: LibraryParams { camera, views, features }, templates })
 }

@@ -22,10 +22,7 @@ pub struct GradientParams {
 
 impl Default for GradientParams {
     fn default() -> Self {
-        GradientParams {
-            mag_threshold: 30.0,
-            min_votes: 5,
-        }
+        GradientParams { mag_threshold: 30.0, min_votes: 5 }
     }
 }
 
@@ -99,10 +96,8 @@ fn labels(ch: &[Vec<f32>; 3], w: usize, h: usize, thr: f32) -> Vec<u8> {
             let (mut best, mut bgx, mut bgy) = (-1.0f32, 0.0f32, 0.0f32);
             for p in ch {
                 let a = |yy: usize, xx: usize| p[yy * w + xx];
-                let gx = (a(ym, xp) + 2.0 * a(y, xp) + a(yp, xp))
-                    - (a(ym, xm) + 2.0 * a(y, xm) + a(yp, xm));
-                let gy = (a(yp, xm) + 2.0 * a(yp, x) + a(yp, xp))
-                    - (a(ym, xm) + 2.0 * a(ym, x) + a(ym, xp));
+                let gx = (a(ym, xp) + 2.0 * a(y, xp) + a(yp, xp)) - (a(ym, xm) + 2.0 * a(y, xm) + a(yp, xm));
+                let gy = (a(yp, xm) + 2.0 * a(yp, x) + a(yp, xp)) - (a(ym, xm) + 2.0 * a(ym, x) + a(ym, xp));
                 let m = gx * gx + gy * gy;
                 if m > best {
                     best = m;
@@ -158,30 +153,24 @@ pub fn quantize_rgb(rgb: &[u8], width: usize, height: usize, params: &GradientPa
     }
     let ch = smooth_channels(rgb, width, height);
     let lab = labels(&ch, width, height, params.mag_threshold);
-    Plane::from_vec(
-        width,
-        height,
-        majority(&lab, width, height, params.min_votes),
-    )
+    Plane::from_vec(width, height, majority(&lab, width, height, params.min_votes))
 }
 
 /// Halves an interleaved RGB8 image by 2x2 box averaging (odd last row/column dropped).
 pub fn downsample_rgb(rgb: &[u8], width: usize, height: usize) -> (Vec<u8>, usize, usize) {
     let (w2, h2) = (width / 2, height / 2);
     let mut out = vec![0u8; w2 * h2 * 3];
-    out.par_chunks_mut((w2 * 3).max(1))
-        .enumerate()
-        .for_each(|(y, row)| {
-            let r0 = &rgb[(2 * y) * width * 3..];
-            let r1 = &rgb[(2 * y + 1) * width * 3..];
-            for x in 0..w2 {
-                for c in 0..3 {
-                    let i = 2 * x * 3 + c;
-                    let s = r0[i] as u16 + r0[i + 3] as u16 + r1[i] as u16 + r1[i + 3] as u16;
-                    row[x * 3 + c] = ((s + 2) / 4) as u8;
-                }
+    out.par_chunks_mut((w2 * 3).max(1)).enumerate().for_each(|(y, row)| {
+        let r0 = &rgb[(2 * y) * width * 3..];
+        let r1 = &rgb[(2 * y + 1) * width * 3..];
+        for x in 0..w2 {
+            for c in 0..3 {
+                let i = 2 * x * 3 + c;
+                let s = r0[i] as u16 + r0[i + 3] as u16 + r1[i] as u16 + r1[i + 3] as u16;
+                row[x * 3 + c] = ((s + 2) / 4) as u8;
             }
-        });
+        }
+    });
     (out, w2, h2)
 }
 

@@ -5,15 +5,7 @@ use tubeloc_core::Rle;
 
 /// Encodes a mask given by `inside(x, y)` over an `height x width` image as a COCO [`Rle`]
 /// (column-major runs starting with zeros), scanning only columns `x0..x1` and rows `y0..y1`.
-pub fn rle_from_box(
-    height: u32,
-    width: u32,
-    x0: u32,
-    x1: u32,
-    y0: u32,
-    y1: u32,
-    inside: impl Fn(u32, u32) -> bool,
-) -> Rle {
+pub fn rle_from_box(height: u32, width: u32, x0: u32, x1: u32, y0: u32, y1: u32, inside: impl Fn(u32, u32) -> bool) -> Rle {
     {
         let mut counts = Vec::new();
         let mut cur = 0u8;
@@ -39,10 +31,7 @@ pub fn rle_from_box(
         }
         push(0, (width - x1) * height, &mut counts, &mut cur, &mut run);
         counts.push(run);
-        Rle {
-            size: [height, width],
-            counts,
-        }
+        Rle { size: [height, width], counts }
     }
 }
 
@@ -55,13 +44,12 @@ mod tests {
         // 3x4 image (h=3, w=4), foreground at (x=1, y=1) and (x=1, y=2), (x=2, y=0).
         let fg = [(1u32, 1u32), (1, 2), (2, 0)];
         let r = rle_from_box(3, 4, 1, 3, 0, 3, |x, y| fg.contains(&(x, y)));
-        // Column-major sequence: col0 000, col1 011, col2 100, col3 000 -> 4 zeros, 3 ones, 8 zeros...
+        // Column-major sequence: col0 000, col1 011, col2 100, col3 000 -> 4 zeros, 3 ones, 8 zeros... 
         assert_eq!(r.counts, vec![4, 3, 5]);
         assert_eq!(r.area(), 3);
         // Known pycocotools encoding of counts [4, 3, 5] is "435".
         assert_eq!(r.to_compressed_string(), "435");
-        let full =
-            tubeloc_core::BinaryMask::from_fn(4, 3, |x, y| fg.contains(&(x as u32, y as u32)));
+        let full = tubeloc_core::BinaryMask::from_fn(4, 3, |x, y| fg.contains(&(x as u32, y as u32)));
         assert_eq!(r, Rle::from_mask(&full));
     }
 }

@@ -60,19 +60,7 @@ pub struct MatchParams {
 
 impl Default for MatchParams {
     fn default() -> Self {
-        MatchParams {
-            gradient: GradientParams::default(),
-            t0: 4,
-            t1: 8,
-            threshold: 80.0,
-            coarse_threshold: None,
-            nms_iou: 0.3,
-            max_detections: 100,
-            rerank_t: 2,
-            rerank_margin: 15.0,
-            verify: Some(VerifyParams::default()),
-            rerank_area_weight: 0.3,
-        }
+        MatchParams { gradient: GradientParams::default(), t0: 4, t1: 8, threshold: 80.0, coarse_threshold: None, nms_iou: 0.3, max_detections: 100, rerank_t: 2, rerank_margin: 15.0, verify: Some(VerifyParams::default()), rerank_area_weight: 0.3 }
     }
 }
 
@@ -105,27 +93,12 @@ pub struct RawMatch {
 }
 
 /// Computes the image side of the matcher (gradients, spreading, response maps, linearization).
-pub fn prepare_image(
-    rgb: &[u8],
-    width: usize,
-    height: usize,
-    p: &MatchParams,
-) -> Result<PreparedImage, Line2dError> {
+pub fn prepare_image(rgb: &[u8], width: usize, height: usize, p: &MatchParams) -> Result<PreparedImage, Line2dError> {
     if rgb.len() != width * height * 3 {
-        return Err(Line2dError::invalid(
-            "image",
-            format!(
-                "RGB buffer has {} bytes, expected {}",
-                rgb.len(),
-                width * height * 3
-            ),
-        ));
+        return Err(Line2dError::invalid("image", format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
     if width < 2 * p.t1 || height < 2 * p.t1 || p.t0 == 0 || p.t1 == 0 {
-        return Err(Line2dError::invalid(
-            "image",
-            format!("{width}x{height} is too small for T = {}/{}", p.t0, p.t1),
-        ));
+        return Err(Line2dError::invalid("image", format!("{width}x{height} is too small for T = {}/{}", p.t0, p.t1)));
     }
     let m = 2 * p.t1;
     let (wp, hp) = (width.div_ceil(m) * m, height.div_ceil(m) * m);
@@ -135,13 +108,7 @@ pub fn prepare_image(
     let (rgb1, w1, h1) = downsample_rgb(rgb, width, height);
     let q1 = quantize_rgb(&rgb1, w1, h1, &p.gradient);
     let lm1 = linearize(&response_maps(&spread(&q1, p.t1, wp / 2, hp / 2)), p.t1);
-    Ok(PreparedImage {
-        width,
-        height,
-        resp0,
-        lm1,
-        resp_rerank,
-    })
+    Ok(PreparedImage { width, height, resp0, lm1, resp_rerank })
 }
 
 #[inline]
@@ -179,9 +146,7 @@ impl Simd {
     fn detect() -> Simd {
         #[cfg(target_arch = "x86_64")]
         {
-            Simd {
-                avx2: std::is_x86_feature_detected!("avx2"),
-            }
+            Simd { avx2: std::is_x86_feature_detected!("avx2") }
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
@@ -215,13 +180,7 @@ pub fn coarse_scores(lm: &LinearMemories, t: &Template, acc16: &mut Vec<u16>, ac
     coarse_scores_with(Simd::detect(), lm, t, acc16, acc8)
 }
 
-fn coarse_scores_with(
-    simd: Simd,
-    lm: &LinearMemories,
-    t: &Template,
-    acc16: &mut Vec<u16>,
-    acc8: &mut Vec<u8>,
-) {
+fn coarse_scores_with(simd: Simd, lm: &LinearMemories, t: &Template, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>) {
     let n = lm.grid_w * lm.grid_h;
     acc16.clear();
     acc16.resize(n, 0);
@@ -235,13 +194,7 @@ fn coarse_scores_with(
 
 /// Raw level-0 score `E(x, y)` of a template at one position (bounds-checked, no SIMD).
 pub fn fine_score_at(resp: &ResponseMaps, t: &Template, x: usize, y: usize) -> u32 {
-    t.levels[0]
-        .features
-        .iter()
-        .map(|f| {
-            resp.maps[f.ori as usize][(y + f.y as usize) * resp.width + x + f.x as usize] as u32
-        })
-        .sum()
+    t.levels[0].features.iter().map(|f| resp.maps[f.ori as usize][(y + f.y as usize) * resp.width + x + f.x as usize] as u32).sum()
 }
 
 /// Widest fine-search window handled in one pass of lanes (pixels).
@@ -268,23 +221,13 @@ fn add_lanes(acc: &mut [u8; FINE_LANES], map: &[u8], base: usize) {
 /// Raw level-0 scores of 32 consecutive positions of one row: `out[i] = E(x_lo + i, y)`
 /// (lanes whose template would cross the row end hold wrapped sums; callers ignore them).
 #[inline(always)]
-fn fine_lanes(
-    resp: &ResponseMaps,
-    t: &Template,
-    x_lo: usize,
-    y: usize,
-    out: &mut [u16; FINE_LANES],
-) {
+fn fine_lanes(resp: &ResponseMaps, t: &Template, x_lo: usize, y: usize, out: &mut [u16; FINE_LANES]) {
     let w = resp.width;
     *out = [0; FINE_LANES];
     for block in t.levels[0].features.chunks(63) {
         let mut acc = [0u8; FINE_LANES];
         for f in block {
-            add_lanes(
-                &mut acc,
-                &resp.maps[f.ori as usize],
-                (y + f.y as usize) * w + x_lo + f.x as usize,
-            );
+            add_lanes(&mut acc, &resp.maps[f.ori as usize], (y + f.y as usize) * w + x_lo + f.x as usize);
         }
         for (o, &a) in out.iter_mut().zip(&acc) {
             *o += a as u16;
@@ -294,25 +237,13 @@ fn fine_lanes(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn fine_search_avx2(
-    resp: &ResponseMaps,
-    t: &Template,
-    x_lo: usize,
-    x_hi: usize,
-    y_lo: usize,
-    y_hi: usize,
-    row_step: usize,
-) -> (u32, usize, usize) {
+unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
     use std::arch::x86_64::*;
     let w = resp.width;
     let feats = &t.levels[0].features;
     let n_map = resp.maps[0].len();
     // Fast path: every 32-byte load of the window lies inside the maps.
-    let max_off = feats
-        .iter()
-        .map(|f| (y_hi + f.y as usize) * w + x_lo + f.x as usize)
-        .max()
-        .unwrap_or(0);
+    let max_off = feats.iter().map(|f| (y_hi + f.y as usize) * w + x_lo + f.x as usize).max().unwrap_or(0);
     if x_hi - x_lo + 1 > FINE_LANES || max_off + FINE_LANES > n_map {
         return fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step);
     }
@@ -326,8 +257,7 @@ unsafe fn fine_search_avx2(
             let mut acc = _mm256_setzero_si256();
             for f in block {
                 // SAFETY: offset + 32 <= n_map checked above for the largest row y_hi.
-                let ptr =
-                    maps[f.ori as usize & 7].add((y + f.y as usize) * w + x_lo + f.x as usize);
+                let ptr = maps[f.ori as usize & 7].add((y + f.y as usize) * w + x_lo + f.x as usize);
                 acc = _mm256_add_epi8(acc, _mm256_loadu_si256(ptr as *const __m256i));
             }
             let z = _mm256_setzero_si256();
@@ -361,13 +291,7 @@ fn keep_best(row: &[u16], x0: usize, y: usize, best: &mut (u32, usize, usize)) {
 /// `(score, x, y)`; with `row_step = 2` the two skipped rows next to the best one are scored
 /// too.
 #[inline(always)]
-fn scan_rows(
-    x_lo: usize,
-    y_lo: usize,
-    y_hi: usize,
-    row_step: usize,
-    mut score_row: impl FnMut(usize, &mut (u32, usize, usize)),
-) -> (u32, usize, usize) {
+fn scan_rows(x_lo: usize, y_lo: usize, y_hi: usize, row_step: usize, mut score_row: impl FnMut(usize, &mut (u32, usize, usize))) -> (u32, usize, usize) {
     let mut best = (0u32, x_lo, y_lo);
     for y in (y_lo..=y_hi).step_by(row_step) {
         score_row(y, &mut best);
@@ -384,15 +308,7 @@ fn scan_rows(
 }
 
 #[inline(always)]
-fn fine_search_scalar(
-    resp: &ResponseMaps,
-    t: &Template,
-    x_lo: usize,
-    x_hi: usize,
-    y_lo: usize,
-    y_hi: usize,
-    row_step: usize,
-) -> (u32, usize, usize) {
+fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
     let mut row = [0u16; FINE_LANES];
     let score_row = |y: usize, best: &mut (u32, usize, usize)| {
         let mut x0 = x_lo;
@@ -412,15 +328,7 @@ fn fine_search_scalar(
 /// `row_step = 1` the search is exhaustive; with `row_step = 2` every second row is scored,
 /// then the two rows next to the best one. Ties go to the first position in row-major order.
 /// Returns `(E, x, y)`.
-pub fn fine_search(
-    resp: &ResponseMaps,
-    t: &Template,
-    x_lo: usize,
-    x_hi: usize,
-    y_lo: usize,
-    y_hi: usize,
-    row_step: usize,
-) -> (u32, usize, usize) {
+pub fn fine_search(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
     let row_step = row_step.clamp(1, 2);
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
@@ -431,24 +339,11 @@ pub fn fine_search(
 }
 
 /// Raw matches of one template (coarse candidates verified at level 0), before NMS.
-pub fn match_template(
-    img: &PreparedImage,
-    t: &Template,
-    p: &MatchParams,
-    acc16: &mut Vec<u16>,
-    acc8: &mut Vec<u8>,
-) -> Vec<RawMatch> {
+pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>) -> Vec<RawMatch> {
     match_template_impl(img, t, p, acc16, acc8, TAIL_MAX)
 }
 
-fn match_template_impl(
-    img: &PreparedImage,
-    t: &Template,
-    p: &MatchParams,
-    acc16: &mut Vec<u16>,
-    acc8: &mut Vec<u8>,
-    tail_max: usize,
-) -> Vec<RawMatch> {
+fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<RawMatch> {
     let simd = Simd::detect();
     let lm = &img.lm1;
     let l1 = &t.levels[1];
@@ -466,9 +361,7 @@ fn match_template_impl(
     let rmax = (h1 - l1.height as usize) / tt;
     let n1 = l1.features.len();
     let coarse_thr = p.coarse_threshold.unwrap_or(p.threshold);
-    let need1 = (coarse_thr / 100.0 * SIM_MAX as f32 * n1 as f32)
-        .ceil()
-        .max(1.0) as u16;
+    let need1 = (coarse_thr / 100.0 * SIM_MAX as f32 * n1 as f32).ceil().max(1.0) as u16;
     let n0 = l0.features.len() as f32;
     let need0 = (p.threshold / 100.0 * SIM_MAX as f32 * n0).ceil().max(1.0) as u32;
     let gw = lm.grid_w;
@@ -486,12 +379,7 @@ fn match_template_impl(
         }
         let (e, x, y) = fine_search(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, 2);
         if e >= need0 {
-            out.push(RawMatch {
-                template: t.id,
-                x: x as i32,
-                y: y as i32,
-                score: 100.0 * e as f32 / (SIM_MAX as f32 * n0),
-            });
+            out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
         }
     };
     let head = n1.min(63);
@@ -499,10 +387,7 @@ fn match_template_impl(
         // Head block in u8 over all grid positions; the tail only where the head can still
         // reach `need1` (each tail feature adds at most SIM_MAX).
         let tail = &l1.features[head..];
-        let Some(need_head) = need1
-            .checked_sub((SIM_MAX as usize * tail.len()) as u16)
-            .map(|v| v.max(1))
-        else {
+        let Some(need_head) = need1.checked_sub((SIM_MAX as usize * tail.len()) as u16).map(|v| v.max(1)) else {
             return out;
         };
         if need_head > (SIM_MAX as usize * head) as u16 {
@@ -514,12 +399,7 @@ fn match_template_impl(
         add_features_u8(simd, lm, &l1.features[..head], acc8);
         let tails: Vec<(&[u8], usize)> = tail
             .iter()
-            .map(|f| {
-                (
-                    (f.y as usize / tt) * gw + f.x as usize / tt,
-                    lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt),
-                )
-            })
+            .map(|f| ((f.y as usize / tt) * gw + f.x as usize / tt, lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt)))
             .map(|(start, m)| (m, start))
             .collect();
         // Exact score of a valid grid index, or None when it is surely below need1.
@@ -531,39 +411,11 @@ fn match_template_impl(
             let v = h as u16 + tails.iter().map(|&(m, s)| m[s + i] as u16).sum::<u16>();
             (v >= need1).then_some(v)
         };
-        candidates(
-            rmax,
-            cmax,
-            gw,
-            |r| {
-                acc8[r * gw..r * gw + cmax + 1]
-                    .iter()
-                    .copied()
-                    .max()
-                    .unwrap_or(0)
-                    >= need_head
-            },
-            score,
-            &mut fine_at,
-        );
+        candidates(rmax, cmax, gw, |r| acc8[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need_head, score, &mut fine_at);
     } else {
         coarse_scores_with(simd, lm, t, acc16, acc8);
         let score = |i: usize| (acc16[i] >= need1).then_some(acc16[i]);
-        candidates(
-            rmax,
-            cmax,
-            gw,
-            |r| {
-                acc16[r * gw..r * gw + cmax + 1]
-                    .iter()
-                    .copied()
-                    .max()
-                    .unwrap_or(0)
-                    >= need1
-            },
-            score,
-            &mut fine_at,
-        );
+        candidates(rmax, cmax, gw, |r| acc16[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need1, score, &mut fine_at);
     }
     out
 }
@@ -573,12 +425,7 @@ fn match_template_impl(
 const TAIL_MAX: usize = 8;
 
 /// Sums `features` (at most 63) into the u8 grid accumulator `acc` over the linearized memories.
-fn add_features_u8(
-    simd: Simd,
-    lm: &LinearMemories,
-    features: &[crate::line2d::Feature],
-    acc: &mut [u8],
-) {
+fn add_features_u8(simd: Simd, lm: &LinearMemories, features: &[crate::line2d::Feature], acc: &mut [u8]) {
     let n = acc.len();
     let tt = lm.t;
     for f in features {
@@ -587,24 +434,14 @@ fn add_features_u8(
         if start >= n {
             continue;
         }
-        simd.add_u8(
-            &mut acc[..n - start],
-            &lm.memory(f.ori as usize, fx % tt, fy % tt)[start..],
-        );
+        simd.add_u8(&mut acc[..n - start], &lm.memory(f.ori as usize, fx % tt, fy % tt)[start..]);
     }
 }
 
 /// Calls `found(r, c)` for every grid position `(r <= rmax, c <= cmax)` whose score (`score`
 /// returns None below the threshold) is a strict local maximum among its valid 8-neighbours
 /// (ties go to the first in row-major order). `row_may_pass(r)` is a cheap upper-bound test.
-fn candidates(
-    rmax: usize,
-    cmax: usize,
-    gw: usize,
-    row_may_pass: impl Fn(usize) -> bool,
-    score: impl Fn(usize) -> Option<u16>,
-    found: &mut impl FnMut(usize, usize),
-) {
+fn candidates(rmax: usize, cmax: usize, gw: usize, row_may_pass: impl Fn(usize) -> bool, score: impl Fn(usize) -> Option<u16>, found: &mut impl FnMut(usize, usize)) {
     for r in 0..=rmax {
         if !row_may_pass(r) {
             continue;
@@ -637,18 +474,10 @@ pub fn match_all(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchParams) ->
     let mut all: Vec<RawMatch> = lib
         .templates
         .par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new()),
-            |(a16, a8), t| match_template(img, t, p, a16, a8),
-        )
+        .map_init(|| (Vec::new(), Vec::new()), |(a16, a8), t| match_template(img, t, p, a16, a8))
         .flatten()
         .collect();
-    all.sort_by(|a, b| {
-        b.score
-            .total_cmp(&a.score)
-            .then(a.template.cmp(&b.template))
-            .then((a.y, a.x).cmp(&(b.y, b.x)))
-    });
+    all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
     all
 }
 
@@ -669,15 +498,9 @@ pub fn placed_mask_iou(ta: &Template, a: &RawMatch, tb: &Template, b: &RawMatch)
         return 0.0;
     }
     for y in y0..y1 {
-        let ra = &ta.mask
-            [((y - a.y) * aw + (x0 - a.x)) as usize..((y - a.y) * aw + (x1 - a.x)) as usize];
-        let rb = &tb.mask
-            [((y - b.y) * bw + (x0 - b.x)) as usize..((y - b.y) * bw + (x1 - b.x)) as usize];
-        inter += ra
-            .iter()
-            .zip(rb)
-            .map(|(&p, &q)| (p & q) as u32)
-            .sum::<u32>();
+        let ra = &ta.mask[((y - a.y) * aw + (x0 - a.x)) as usize..((y - a.y) * aw + (x1 - a.x)) as usize];
+        let rb = &tb.mask[((y - b.y) * bw + (x0 - b.x)) as usize..((y - b.y) * bw + (x1 - b.x)) as usize];
+        inter += ra.iter().zip(rb).map(|(&p, &q)| (p & q) as u32).sum::<u32>();
     }
     let uni = aa + ab - inter;
     if uni == 0 {
@@ -690,10 +513,7 @@ pub fn placed_mask_iou(ta: &Template, a: &RawMatch, tb: &Template, b: &RawMatch)
 /// Greedy NMS over matches sorted by decreasing score: a match is dropped when its placed
 /// silhouette overlaps an already kept one with IoU above `iou`. Keeps at most `max`.
 pub fn nms(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: usize) -> Vec<RawMatch> {
-    nms_clusters(matches, lib, iou, max)
-        .into_iter()
-        .map(|c| c[0])
-        .collect()
+    nms_clusters(matches, lib, iou, max).into_iter().map(|c| c[0]).collect()
 }
 
 /// At most this many raw matches (the best-scoring) enter NMS.
@@ -701,12 +521,7 @@ pub const MAX_NMS_INPUT: usize = 20_000;
 
 /// NMS returning each kept match (first) with the matches it suppressed (its cluster), in
 /// decreasing score order. A suppressed match joins the first kept match it overlaps.
-pub fn nms_clusters(
-    matches: &[RawMatch],
-    lib: &TemplateLibrary,
-    iou: f32,
-    max: usize,
-) -> Vec<Vec<RawMatch>> {
+pub fn nms_clusters(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: usize) -> Vec<Vec<RawMatch>> {
     let mut clusters: Vec<Vec<RawMatch>> = Vec::new();
     for m in matches.iter().take(MAX_NMS_INPUT) {
         let tm = &lib.templates[m.template as usize];
@@ -714,10 +529,8 @@ pub fn nms_clusters(
             let tk = &lib.templates[c[0].template as usize];
             // Upper bound first: IoU <= min(areas, box overlap) / (sum of areas - that).
             let k = &c[0];
-            let ox = (k.x + tk.levels[0].width as i32).min(m.x + tm.levels[0].width as i32)
-                - k.x.max(m.x);
-            let oy = (k.y + tk.levels[0].height as i32).min(m.y + tm.levels[0].height as i32)
-                - k.y.max(m.y);
+            let ox = (k.x + tk.levels[0].width as i32).min(m.x + tm.levels[0].width as i32) - k.x.max(m.x);
+            let oy = (k.y + tk.levels[0].height as i32).min(m.y + tm.levels[0].height as i32) - k.y.max(m.y);
             if ox <= 0 || oy <= 0 {
                 return false;
             }
@@ -736,25 +549,14 @@ pub fn nms_clusters(
 /// Re-ranks a cluster: among matches within `margin` points of the best, the one with the best
 /// re-ranking score (response maps `rr`, best over +-1 px) wins; returns it with its position
 /// moved to that best pixel and the cluster's best LINE-2D score.
-pub fn rerank(
-    cluster: &[RawMatch],
-    lib: &TemplateLibrary,
-    rr: &ResponseMaps,
-    margin: f32,
-) -> RawMatch {
+pub fn rerank(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32) -> RawMatch {
     rerank_with(cluster, lib, rr, margin, |_, _, _| 0.0)
 }
 
 /// [`rerank`] with a bonus: the key of a candidate placed at `(x, y)` is
 /// `E_rr / (4 n) + bonus(template, x, y)` (fraction of the maximal re-ranking similarity plus
 /// e.g. the weighted verification contrast).
-pub fn rerank_with(
-    cluster: &[RawMatch],
-    lib: &TemplateLibrary,
-    rr: &ResponseMaps,
-    margin: f32,
-    bonus: impl Fn(&Template, i32, i32) -> f32,
-) -> RawMatch {
+pub fn rerank_with(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32, bonus: impl Fn(&Template, i32, i32) -> f32) -> RawMatch {
     let top = cluster[0];
     let mut best = (f64::NEG_INFINITY, top);
     for m in cluster.iter().filter(|m| m.score >= top.score - margin) {
@@ -770,15 +572,7 @@ pub fn rerank_with(
                 let e = fine_score_at(rr, t, x as usize, y as usize) as f64;
                 let key = e / (SIM_MAX as f64 * n) + bonus(t, x, y) as f64;
                 if key > best.0 {
-                    best = (
-                        key,
-                        RawMatch {
-                            template: m.template,
-                            x,
-                            y,
-                            score: top.score,
-                        },
-                    );
+                    best = (key, RawMatch { template: m.template, x, y, score: top.score });
                 }
             }
         }
@@ -799,40 +593,20 @@ pub struct Line2dDetector {
 impl Line2dDetector {
     /// A detector over `library`.
     pub fn new(library: TemplateLibrary, params: MatchParams) -> Result<Self, Line2dError> {
-        if !(0.0..=100.0).contains(&params.threshold)
-            || params
-                .coarse_threshold
-                .is_some_and(|c| !(0.0..=100.0).contains(&c))
-        {
-            return Err(Line2dError::invalid(
-                "threshold",
-                "must be a percentage in 0..=100",
-            ));
+        if !(0.0..=100.0).contains(&params.threshold) || params.coarse_threshold.is_some_and(|c| !(0.0..=100.0).contains(&c)) {
+            return Err(Line2dError::invalid("threshold", "must be a percentage in 0..=100"));
         }
         if params.t0 == 0 || params.t1 == 0 || params.t1 > 64 || params.t0 > 64 {
-            return Err(Line2dError::invalid(
-                "T",
-                "spreading steps must be in 1..=64",
-            ));
+            return Err(Line2dError::invalid("T", "spreading steps must be in 1..=64"));
         }
         let samples = SampleCache::new(library.len());
-        Ok(Line2dDetector {
-            library,
-            params,
-            samples,
-        })
+        Ok(Line2dDetector { library, params, samples })
     }
 
     /// Detects tubes in an interleaved RGB8 image. `camera` gives the intrinsics of this image
     /// (for the coarse pose); without it the library's focal lengths and the image centre are
     /// used. The camera's focal length must match the library's within 2 percent.
-    pub fn detect(
-        &self,
-        rgb: &[u8],
-        width: usize,
-        height: usize,
-        camera: Option<&CameraModel>,
-    ) -> Result<Vec<Line2dDetection>, Line2dError> {
+    pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
         let cam = self.camera_for(width, height, camera)?;
         let img = prepare_image(rgb, width, height, &self.params)?;
         let raw = match_all(&img, &self.library, &self.params);
@@ -849,77 +623,33 @@ impl Line2dDetector {
                     .filter_map(|m| {
                         let t = &self.library.templates[m.template as usize];
                         let c = contrast(&luma, width, height, self.samples.get(t, v), m.x, m.y);
-                        verified_score(m.score, c, v).map(|s| {
-                            (
-                                RawMatch {
-                                    score: 100.0 * s / (1.0 + v.contrast_weight),
-                                    ..m
-                                },
-                                m.score,
-                                c,
-                            )
-                        })
+                        verified_score(m.score, c, v).map(|s| (RawMatch { score: 100.0 * s / (1.0 + v.contrast_weight), ..m }, m.score, c))
                     })
                     .collect();
-                scored.sort_by(|a, b| {
-                    b.0.score
-                        .total_cmp(&a.0.score)
-                        .then(a.0.template.cmp(&b.0.template))
-                        .then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x)))
-                });
-                scored
-                    .into_iter()
-                    .map(|(m, sim, c)| {
-                        sims.insert((m.template, m.x, m.y), (sim, c));
-                        m
-                    })
-                    .collect()
+                scored.sort_by(|a, b| b.0.score.total_cmp(&a.0.score).then(a.0.template.cmp(&b.0.template)).then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x))));
+                scored.into_iter().map(|(m, sim, c)| {
+                    sims.insert((m.template, m.x, m.y), (sim, c));
+                    m
+                }).collect()
             }
         };
-        let clusters = nms_clusters(
-            &raw,
-            &self.library,
-            self.params.nms_iou,
-            self.params.max_detections,
-        );
+        let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
         let luma = self.params.verify.is_some().then(|| luminance(rgb));
         Ok(clusters
             .iter()
             .map(|c| {
                 // Verification picks the cluster (where); the Line2D similarity, re-ranked,
                 // picks the template (pose) within it.
-                let mut by_sim: Vec<RawMatch> = c
-                    .iter()
-                    .map(|m| RawMatch {
-                        score: sims.get(&(m.template, m.x, m.y)).map_or(m.score, |s| s.0),
-                        ..*m
-                    })
-                    .collect();
+                let mut by_sim: Vec<RawMatch> = c.iter().map(|m| RawMatch { score: sims.get(&(m.template, m.x, m.y)).map_or(m.score, |s| s.0), ..*m }).collect();
                 by_sim.sort_by(|a, b| b.score.total_cmp(&a.score));
                 let margin = self.params.rerank_margin;
-                let max_area = by_sim
-                    .iter()
-                    .filter(|m| m.score >= by_sim[0].score - margin)
-                    .map(|m| self.library.templates[m.template as usize].area)
-                    .max()
-                    .unwrap_or(1)
-                    .max(1) as f32;
+                let max_area = by_sim.iter().filter(|m| m.score >= by_sim[0].score - margin).map(|m| self.library.templates[m.template as usize].area).max().unwrap_or(1).max(1) as f32;
                 let aw = self.params.rerank_area_weight;
                 let m = match (&img.resp_rerank, &self.params.verify, &luma) {
-                    (Some(rr), Some(v), Some(l)) if v.rerank_weight > 0.0 => {
-                        rerank_with(&by_sim, &self.library, rr, margin, |t, x, y| {
-                            v.rerank_weight
-                                * contrast(l, width, height, self.samples.get(t, v), x, y)
-                                    .unwrap_or(-1.0)
-                                    .clamp(-1.0, 1.0)
-                                + aw * t.area as f32 / max_area
-                        })
-                    }
-                    (Some(rr), _, _) => {
-                        rerank_with(&by_sim, &self.library, rr, margin, |t, _, _| {
-                            aw * t.area as f32 / max_area
-                        })
-                    }
+                    (Some(rr), Some(v), Some(l)) if v.rerank_weight > 0.0 => rerank_with(&by_sim, &self.library, rr, margin, |t, x, y| {
+                        v.rerank_weight * contrast(l, width, height, self.samples.get(t, v), x, y).unwrap_or(-1.0).clamp(-1.0, 1.0) + aw * t.area as f32 / max_area
+                    }),
+                    (Some(rr), _, _) => rerank_with(&by_sim, &self.library, rr, margin, |t, _, _| aw * t.area as f32 / max_area),
                     _ => by_sim[0],
                 };
                 let t = &self.library.templates[m.template as usize];
@@ -935,18 +665,11 @@ impl Line2dDetector {
 
     /// The camera used for poses: `camera`, checked against the library, or a pinhole with the
     /// library's focal lengths centred on the image.
-    pub fn camera_for(
-        &self,
-        width: usize,
-        height: usize,
-        camera: Option<&CameraModel>,
-    ) -> Result<CameraModel, Line2dError> {
+    pub fn camera_for(&self, width: usize, height: usize, camera: Option<&CameraModel>) -> Result<CameraModel, Line2dError> {
         let k = &self.library.params.camera;
         match camera {
             Some(c) => {
-                let rel = ((c.fx - k.fx) / k.fx)
-                    .abs()
-                    .max(((c.fy - k.fy) / k.fy).abs());
+                let rel = ((c.fx - k.fx) / k.fx).abs().max(((c.fy - k.fy) / k.fy).abs());
                 if rel > 0.02 {
                     return Err(Line2dError::invalid(
                         "camera",
@@ -983,45 +706,23 @@ mod tests {
     fn head_tail_path_equals_full_u16_path() {
         let (w, h) = (320usize, 256usize);
         for features in [40u32, 64, 70] {
-            let mut lp = LibraryParams {
-                features,
-                ..LibraryParams::default()
-            };
-            lp.views = ViewParams {
-                dist_min: 1.6,
-                dist_max: 1.6,
-                step_deg: 30.0,
-                ..ViewParams::default()
-            };
+            let mut lp = LibraryParams { features, ..LibraryParams::default() };
+            lp.views = ViewParams { dist_min: 1.6, dist_max: 1.6, step_deg: 30.0, ..ViewParams::default() };
             lp.camera.cx = w as f64 / 2.0;
             lp.camera.cy = h as f64 / 2.0;
             let lib = TemplateLibrary::build(&TubeModel::default(), &lp, &|_| {}).unwrap();
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-            let mut img: Vec<u8> = (0..w * h * 3)
-                .map(|_| rng.random_range(90..=150u8))
-                .collect();
-            let pose = Pose::from_parts(
-                Rotation3::from_axis_angle(&Vector3::y_axis(), 1.2),
-                Vector3::new(0.02, 0.01, 1.6),
-            );
+            let mut img: Vec<u8> = (0..w * h * 3).map(|_| rng.random_range(90..=150u8)).collect();
+            let pose = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::y_axis(), 1.2), Vector3::new(0.02, 0.01, 1.6));
             draw_tube_rgb(&mut img, w, h, &TubeModel::default(), &lp.camera, &pose);
-            let p = MatchParams {
-                threshold: 55.0,
-                ..MatchParams::default()
-            };
+            let p = MatchParams { threshold: 55.0, ..MatchParams::default() };
             let prep = prepare_image(&img, w, h, &p).unwrap();
             let (mut a16, mut a8) = (Vec::new(), Vec::new());
             let mut total = 0;
             for t in &lib.templates {
                 let fast = match_template_impl(&prep, t, &p, &mut a16, &mut a8, TAIL_MAX);
                 let full = match_template_impl(&prep, t, &p, &mut a16, &mut a8, 0);
-                assert_eq!(
-                    fast,
-                    full,
-                    "template {} ({} level-1 features)",
-                    t.id,
-                    t.levels[1].features.len()
-                );
+                assert_eq!(fast, full, "template {} ({} level-1 features)", t.id, t.levels[1].features.len());
                 total += fast.len();
             }
             assert!(total > 0, "no match at all with {features} features");

@@ -25,13 +25,7 @@ impl MeshShape {
     /// midpoint between the lowest and highest kept vertex, as for the parametric model.
     /// Returns `None` when no triangle is left.
     pub fn from_mesh(mesh: &TubeMesh, exclude: &[TubeMaterial]) -> Option<MeshShape> {
-        let triangles: Vec<[u32; 3]> = mesh
-            .triangles
-            .iter()
-            .zip(&mesh.materials)
-            .filter(|(_, m)| !exclude.contains(m))
-            .map(|(t, _)| *t)
-            .collect();
+        let triangles: Vec<[u32; 3]> = mesh.triangles.iter().zip(&mesh.materials).filter(|(_, m)| !exclude.contains(m)).map(|(t, _)| *t).collect();
         if triangles.is_empty() {
             return None;
         }
@@ -44,15 +38,8 @@ impl MeshShape {
             }
         }
         let mid = 0.5 * (zmin + zmax);
-        let vertices = mesh
-            .vertices
-            .iter()
-            .map(|p| Point3::new(p.x, p.y, p.z - mid))
-            .collect();
-        Some(MeshShape {
-            vertices,
-            triangles,
-        })
+        let vertices = mesh.vertices.iter().map(|p| Point3::new(p.x, p.y, p.z - mid)).collect();
+        Some(MeshShape { vertices, triangles })
     }
 
     /// Length along `z` of the kept triangles, metres.
@@ -71,32 +58,11 @@ impl MeshShape {
 /// Renders the mesh at `t_cam_tube` with pinhole intrinsics `k`; the box is the projection of
 /// the used vertices grown by one pixel (two on the far side), clipped to `clip` when given.
 /// Returns an empty silhouette when a vertex is behind the camera or the box is empty.
-pub fn render_mesh_silhouette(
-    shape: &MeshShape,
-    k: &Pinhole,
-    t_cam_tube: &Pose,
-    clip: Option<(usize, usize)>,
-) -> Silhouette {
-    let empty = Silhouette {
-        x0: 0,
-        y0: 0,
-        width: 0,
-        height: 0,
-        mask: vec![],
-        depth: vec![],
-    };
+pub fn render_mesh_silhouette(shape: &MeshShape, k: &Pinhole, t_cam_tube: &Pose, clip: Option<(usize, usize)>) -> Silhouette {
+    let empty = Silhouette { x0: 0, y0: 0, width: 0, height: 0, mask: vec![], depth: vec![] };
     // Camera-frame vertices and their projections.
-    let cam: Vec<Vector3<f64>> = shape
-        .vertices
-        .iter()
-        .map(|p| t_cam_tube.transform_point(p).coords)
-        .collect();
-    let (mut umin, mut umax, mut vmin, mut vmax) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
+    let cam: Vec<Vector3<f64>> = shape.vertices.iter().map(|p| t_cam_tube.transform_point(p).coords).collect();
+    let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
     let mut proj = vec![(0.0f64, 0.0f64); cam.len()];
     for t in &shape.triangles {
         for &i in t {
@@ -157,12 +123,5 @@ pub fn render_mesh_silhouette(
             }
         }
     }
-    Silhouette {
-        x0: x0 as i32,
-        y0: y0 as i32,
-        width: w,
-        height: h,
-        mask,
-        depth,
-    }
+    Silhouette { x0: x0 as i32, y0: y0 as i32, width: w, height: h, mask, depth }
 }

@@ -82,9 +82,6 @@ pub enum Line2dError {
 
 impl Line2dError {
     pub(crate) fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
-        Line2dError::Invalid {
-            what: what.into(),
-            message: message.into(),
-        }
+        Line2dError::Invalid { what: what.into(), message: message.into() }
     }
 }

@@ -48,11 +48,7 @@ pub struct Pinhole {
 
 /// Smallest positive ray parameter `t` where the ray `o + t d` (tube frame) hits the tube.
 #[inline]
-pub fn intersect_tube(
-    sections: &[(f64, f64, f64)],
-    o: &Vector3<f64>,
-    d: &Vector3<f64>,
-) -> Option<f64> {
+pub fn intersect_tube(sections: &[(f64, f64, f64)], o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
     let mut best = f64::INFINITY;
     let a = d.x * d.x + d.y * d.y;
     let b = 2.0 * (o.x * d.x + o.y * d.y);
@@ -105,28 +101,14 @@ fn section_spans(tube: &TubeModel) -> Vec<(f64, f64, f64)> {
 /// The box is the projection of the tube's bounding cylinder box, grown by one pixel, and
 /// clipped to `[0, clip.0) x [0, clip.1)` when `clip` is given. Returns an empty silhouette
 /// (width or height 0) when the tube is behind the camera or outside the clip region.
-pub fn render_silhouette(
-    tube: &TubeModel,
-    k: &Pinhole,
-    t_cam_tube: &Pose,
-    clip: Option<(usize, usize)>,
-) -> Silhouette {
+pub fn render_silhouette(tube: &TubeModel, k: &Pinhole, t_cam_tube: &Pose, clip: Option<(usize, usize)>) -> Silhouette {
     let sections = section_spans(tube);
     let r = tube.max_radius();
     let h = tube.length / 2.0;
-    let (mut umin, mut umax, mut vmin, mut vmax) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
+    let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
     let mut behind = false;
     for i in 0..8 {
-        let p = Point3::new(
-            if i & 1 == 0 { -r } else { r },
-            if i & 2 == 0 { -r } else { r },
-            if i & 4 == 0 { -h } else { h },
-        );
+        let p = Point3::new(if i & 1 == 0 { -r } else { r }, if i & 2 == 0 { -r } else { r }, if i & 4 == 0 { -h } else { h });
         let pc = t_cam_tube.transform_point(&p);
         if pc.z <= 1e-6 {
             behind = true;
@@ -139,14 +121,7 @@ pub fn render_silhouette(
         vmin = vmin.min(v);
         vmax = vmax.max(v);
     }
-    let empty = Silhouette {
-        x0: 0,
-        y0: 0,
-        width: 0,
-        height: 0,
-        mask: vec![],
-        depth: vec![],
-    };
+    let empty = Silhouette { x0: 0, y0: 0, width: 0, height: 0, mask: vec![], depth: vec![] };
     if behind {
         // A tube straddling the camera plane is not a useful view; callers only render tubes in front.
         return empty;
@@ -179,27 +154,13 @@ pub fn render_silhouette(
             }
         }
     }
-    Silhouette {
-        x0: x0 as i32,
-        y0: y0 as i32,
-        width: w,
-        height: hgt,
-        mask,
-        depth,
-    }
+    Silhouette { x0: x0 as i32, y0: y0 as i32, width: w, height: hgt, mask, depth }
 }
 
 /// Paints the tube at `t_cam_tube` over an interleaved RGB8 image (`w x h`): alumina parts
 /// light grey-white, the seal section gold, with a simple shading across the tube
 /// (`0.75 + 0.25 y/r` of the hit point's tube-frame `y`). For tests, benches and demos.
-pub fn draw_tube_rgb(
-    rgb: &mut [u8],
-    w: usize,
-    h: usize,
-    tube: &TubeModel,
-    k: &Pinhole,
-    t_cam_tube: &Pose,
-) {
+pub fn draw_tube_rgb(rgb: &mut [u8], w: usize, h: usize, tube: &TubeModel, k: &Pinhole, t_cam_tube: &Pose) {
     let sil = render_silhouette(tube, k, t_cam_tube, Some((w, h)));
     let sections = section_spans(tube);
     let inv = t_cam_tube.inverse();
@@ -212,20 +173,12 @@ pub fn draw_tube_rgb(
             }
             let (x, y) = (sil.x0 as usize + xx, sil.y0 as usize + yy);
             let d = rot * Vector3::new((x as f64 - k.cx) / k.fx, (y as f64 - k.cy) / k.fy, 1.0);
-            let Some(t) = intersect_tube(&sections, &o, &d) else {
-                continue;
-            };
+            let Some(t) = intersect_tube(&sections, &o, &d) else { continue };
             let p = o + d * t;
             let zf = p.z + tube.length / 2.0;
-            let gold = tube.sections.iter().any(|s| {
-                s.material == tubeloc_core::TubeMaterial::Gold && zf >= s.z0 && zf <= s.z1
-            });
+            let gold = tube.sections.iter().any(|s| s.material == tubeloc_core::TubeMaterial::Gold && zf >= s.z0 && zf <= s.z1);
             let shade = 0.75 + 0.25 * (p.y / r).clamp(-1.0, 1.0);
-            let c = if gold {
-                [200.0, 165.0, 80.0]
-            } else {
-                [235.0, 232.0, 225.0]
-            };
+            let c = if gold { [200.0, 165.0, 80.0] } else { [235.0, 232.0, 225.0] };
             for ch in 0..3 {
                 rgb[(y * w + x) * 3 + ch] = (c[ch] * shade) as u8;
             }
@@ -241,28 +194,15 @@ mod tests {
     #[test]
     fn side_view_has_expected_size_and_depth() {
         let tube = TubeModel::default();
-        let k = Pinhole {
-            fx: 1000.0,
-            fy: 1000.0,
-            cx: 500.0,
-            cy: 500.0,
-        };
+        let k = Pinhole { fx: 1000.0, fy: 1000.0, cx: 500.0, cy: 500.0 };
         // Tube axis along camera x, 1 m away: length 150 px, body 17.1 px wide.
-        let pose = Pose::from_parts(
-            Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2),
-            Vector3::new(0.0, 0.0, 1.0),
-        );
+        let pose = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2), Vector3::new(0.0, 0.0, 1.0));
         let s = render_silhouette(&tube, &k, &pose, None);
         let row: usize = (500 - s.y0) as usize;
-        let covered: usize = s.mask[row * s.width..(row + 1) * s.width]
-            .iter()
-            .map(|&m| m as usize)
-            .sum();
+        let covered: usize = s.mask[row * s.width..(row + 1) * s.width].iter().map(|&m| m as usize).sum();
         assert!((covered as i64 - 150).abs() <= 1, "length {covered}");
         let col = (500 - s.x0) as usize;
-        let across: usize = (0..s.height)
-            .map(|y| s.mask[y * s.width + col] as usize)
-            .sum();
+        let across: usize = (0..s.height).map(|y| s.mask[y * s.width + col] as usize).sum();
         assert!((across as i64 - 17).abs() <= 1, "width {across}");
         let z = s.depth[row * s.width + col] as f64;
         assert!((z - (1.0 - 0.00855)).abs() < 1e-4, "depth {z}");
@@ -271,25 +211,14 @@ mod tests {
     #[test]
     fn end_on_view_is_a_disc_of_the_near_section() {
         let tube = TubeModel::default();
-        let k = Pinhole {
-            fx: 1000.0,
-            fy: 1000.0,
-            cx: 100.0,
-            cy: 100.0,
-        };
+        let k = Pinhole { fx: 1000.0, fy: 1000.0, cx: 100.0, cy: 100.0 };
         // Seal end (+z) toward the camera: looking along -z of the tube.
-        let pose = Pose::from_parts(
-            Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
-            Vector3::new(0.0, 0.0, 1.0),
-        );
+        let pose = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI), Vector3::new(0.0, 0.0, 1.0));
         let s = render_silhouette(&tube, &k, &pose, None);
         // Silhouette radius = seal radius 11.5 mm at depth 0.925 m -> 12.43 px.
         let area = s.area() as f64;
         let expect = std::f64::consts::PI * (1000.0 * 0.0115 / 0.925f64).powi(2);
-        assert!(
-            (area - expect).abs() / expect < 0.05,
-            "area {area} vs {expect}"
-        );
+        assert!((area - expect).abs() / expect < 0.05, "area {area} vs {expect}");
         let c = ((100 - s.y0) as usize) * s.width + (100 - s.x0) as usize;
         assert!((s.depth[c] as f64 - 0.925).abs() < 1e-4);
     }

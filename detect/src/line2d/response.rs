@@ -51,24 +51,21 @@ pub fn spread(q: &Plane<u8>, t: usize, out_w: usize, out_h: usize) -> Plane<u8> 
     let lo = (t / 2) as isize;
     // Horizontal OR into an out_w-wide buffer of h rows.
     let mut horiz = vec![0u8; out_w * h];
-    horiz
-        .par_chunks_mut(out_w)
-        .enumerate()
-        .for_each(|(y, row)| {
-            let src = q.row(y);
-            for d in -lo..(t as isize - lo) {
-                // row[x] |= src[x + d] for valid x.
-                let x_from = (-d).max(0) as usize;
-                let x_to = ((w as isize - d).min(out_w as isize)).max(0) as usize;
-                if x_from >= x_to {
-                    continue;
-                }
-                let s = &src[(x_from as isize + d) as usize..(x_to as isize + d) as usize];
-                for (o, &v) in row[x_from..x_to].iter_mut().zip(s) {
-                    *o |= v;
-                }
+    horiz.par_chunks_mut(out_w).enumerate().for_each(|(y, row)| {
+        let src = q.row(y);
+        for d in -lo..(t as isize - lo) {
+            // row[x] |= src[x + d] for valid x.
+            let x_from = (-d).max(0) as usize;
+            let x_to = ((w as isize - d).min(out_w as isize)).max(0) as usize;
+            if x_from >= x_to {
+                continue;
             }
-        });
+            let s = &src[(x_from as isize + d) as usize..(x_to as isize + d) as usize];
+            for (o, &v) in row[x_from..x_to].iter_mut().zip(s) {
+                *o |= v;
+            }
+        }
+    });
     let mut out = vec![0u8; out_w * out_h];
     out.par_chunks_mut(out_w).enumerate().for_each(|(y, row)| {
         for d in -lo..(t as isize - lo) {
@@ -145,11 +142,7 @@ pub fn response_maps(spread: &Plane<u8>) -> ResponseMaps {
             lookup(src, dst, &lo[o], &hi[o]);
         });
     });
-    ResponseMaps {
-        width: spread.width,
-        height: spread.height,
-        maps,
-    }
+    ResponseMaps { width: spread.width, height: spread.height, maps }
 }
 
 /// Linearized memories of a level for grid step `t` (the level size must be a multiple of `t`).
@@ -177,10 +170,7 @@ impl LinearMemories {
 
 /// Builds the linearized memories of response maps for grid step `t`.
 pub fn linearize(resp: &ResponseMaps, t: usize) -> LinearMemories {
-    assert!(
-        resp.width % t == 0 && resp.height % t == 0,
-        "level size must be a multiple of T"
-    );
+    assert!(resp.width % t == 0 && resp.height % t == 0, "level size must be a multiple of T");
     let (gw, gh) = (resp.width / t, resp.height / t);
     let n = gw * gh;
     let mut mem = vec![0u8; N_ORI * t * t * n];
@@ -196,12 +186,7 @@ pub fn linearize(resp: &ResponseMaps, t: usize) -> LinearMemories {
             }
         }
     });
-    LinearMemories {
-        t,
-        grid_w: gw,
-        grid_h: gh,
-        mem,
-    }
+    LinearMemories { t, grid_w: gw, grid_h: gh, mem }
 }
 
 #[cfg(test)]
@@ -213,15 +198,8 @@ mod tests {
         let (lo, hi) = lut_halves();
         for o in 0..8u8 {
             for m in 0..=255u8 {
-                let direct = (0..8u8)
-                    .filter(|b| m & (1 << b) != 0)
-                    .map(|b| similarity(o, b))
-                    .max()
-                    .unwrap_or(0);
-                assert_eq!(
-                    lo[o as usize][(m & 15) as usize].max(hi[o as usize][(m >> 4) as usize]),
-                    direct
-                );
+                let direct = (0..8u8).filter(|b| m & (1 << b) != 0).map(|b| similarity(o, b)).max().unwrap_or(0);
+                assert_eq!(lo[o as usize][(m & 15) as usize].max(hi[o as usize][(m >> 4) as usize]), direct);
             }
         }
         // SIMD path agrees with the scalar formula on every mask value.
@@ -229,14 +207,7 @@ mod tests {
         let mut dst = vec![0u8; 1000];
         lookup(&src, &mut dst, &lo[3], &hi[3]);
         for (s, d) in src.iter().zip(&dst) {
-            assert_eq!(
-                *d,
-                (0..8u8)
-                    .filter(|b| s & (1 << b) != 0)
-                    .map(|b| similarity(3, b))
-                    .max()
-                    .unwrap_or(0)
-            );
+            assert_eq!(*d, (0..8u8).filter(|b| s & (1 << b) != 0).map(|b| similarity(3, b)).max().unwrap_or(0));
         }
     }
 

@@ -83,16 +83,7 @@ impl LibraryParams {
 impl Default for LibraryParams {
     fn default() -> Self {
         let c = Self::default_camera();
-        LibraryParams {
-            camera: Pinhole {
-                fx: c.fx,
-                fy: c.fy,
-                cx: c.cx,
-                cy: c.cy,
-            },
-            views: ViewParams::default(),
-            features: 64,
-        }
+        LibraryParams { camera: Pinhole { fx: c.fx, fy: c.fy, cx: c.cx, cy: c.cy }, views: ViewParams::default(), features: 64 }
     }
 }
 
@@ -113,9 +104,7 @@ fn spread_select(pts: &[(i32, i32)], n: usize) -> Vec<usize> {
     if pts.len() <= n {
         return (0..pts.len()).collect();
     }
-    let (sx, sy) = pts
-        .iter()
-        .fold((0i64, 0i64), |a, p| (a.0 + p.0 as i64, a.1 + p.1 as i64));
+    let (sx, sy) = pts.iter().fold((0i64, 0i64), |a, p| (a.0 + p.0 as i64, a.1 + p.1 as i64));
     let (mx, my) = (sx as f64 / pts.len() as f64, sy as f64 / pts.len() as f64);
     let d2c = |p: &(i32, i32)| (p.0 as f64 - mx).powi(2) + (p.1 as f64 - my).powi(2);
     let mut first = 0;
@@ -165,14 +154,8 @@ pub fn mask_features(mask: &[u8], w: usize, h: usize, n: usize) -> Vec<Feature> 
             if interior {
                 continue;
             }
-            let gx = at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)
-                - at(x - 1, y - 1)
-                - 2.0 * at(x - 1, y)
-                - at(x - 1, y + 1);
-            let gy = at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)
-                - at(x - 1, y - 1)
-                - 2.0 * at(x, y - 1)
-                - at(x + 1, y - 1);
+            let gx = at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1) - at(x - 1, y - 1) - 2.0 * at(x - 1, y) - at(x - 1, y + 1);
+            let gy = at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1) - at(x - 1, y - 1) - 2.0 * at(x, y - 1) - at(x + 1, y - 1);
             if gx == 0.0 && gy == 0.0 {
                 continue;
             }
@@ -180,14 +163,7 @@ pub fn mask_features(mask: &[u8], w: usize, h: usize, n: usize) -> Vec<Feature> 
             oris.push(orientation_bin(gx, gy));
         }
     }
-    spread_select(&pts, n)
-        .into_iter()
-        .map(|i| Feature {
-            x: pts[i].0 as u16,
-            y: pts[i].1 as u16,
-            ori: oris[i],
-        })
-        .collect()
+    spread_select(&pts, n).into_iter().map(|i| Feature { x: pts[i].0 as u16, y: pts[i].1 as u16, ori: oris[i] }).collect()
 }
 
 /// Halves a 0/1 mask: a pixel is on when at least 2 of its 4 children are.
@@ -212,14 +188,7 @@ pub fn downsample_mask(mask: &[u8], w: usize, h: usize) -> (Vec<u8>, usize, usiz
 impl Template {
     /// Builds a template from a silhouette rendered with the tube centre at pixel `(cx, cy)`.
     /// Returns `None` when the silhouette is empty or too large for 16-bit coordinates.
-    pub fn from_silhouette(
-        id: u32,
-        view: &ViewSpec,
-        sil: &Silhouette,
-        cx: f64,
-        cy: f64,
-        n_features: usize,
-    ) -> Option<Template> {
+    pub fn from_silhouette(id: u32, view: &ViewSpec, sil: &Silhouette, cx: f64, cy: f64, n_features: usize) -> Option<Template> {
         let (w, h) = (sil.width, sil.height);
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
         for y in 0..h {
@@ -238,8 +207,7 @@ impl Template {
         let (tw, th) = (x1 - x0, y1 - y0);
         let mut mask = vec![0u8; tw * th];
         for y in 0..th {
-            mask[y * tw..(y + 1) * tw]
-                .copy_from_slice(&sil.mask[(y + y0) * w + x0..(y + y0) * w + x1]);
+            mask[y * tw..(y + 1) * tw].copy_from_slice(&sil.mask[(y + y0) * w + x0..(y + y0) * w + x1]);
         }
         let f0 = mask_features(&mask, tw, th, n_features);
         let (m1, w1, h1) = downsample_mask(&mask, tw, th);
@@ -253,21 +221,10 @@ impl Template {
             psi_deg: view.psi_deg as f32,
             distance: view.distance as f32,
             t_cam_tube: view.t_cam_tube,
-            centre: [
-                (cx - (sil.x0 as f64 + x0 as f64)) as f32,
-                (cy - (sil.y0 as f64 + y0 as f64)) as f32,
-            ],
+            centre: [(cx - (sil.x0 as f64 + x0 as f64)) as f32, (cy - (sil.y0 as f64 + y0 as f64)) as f32],
             levels: vec![
-                TemplateLevel {
-                    width: tw as u16,
-                    height: th as u16,
-                    features: f0,
-                },
-                TemplateLevel {
-                    width: w1 as u16,
-                    height: h1 as u16,
-                    features: f1,
-                },
+                TemplateLevel { width: tw as u16, height: th as u16, features: f0 },
+                TemplateLevel { width: w1 as u16, height: h1 as u16, features: f1 },
             ],
             area: mask.iter().map(|&m| m as u32).sum(),
             mask,
@@ -283,46 +240,24 @@ impl Template {
 impl TemplateLibrary {
     /// Renders and extracts all templates of `params` for `tube` (rayon across views).
     /// `progress` is called with the number of templates done so far (from any thread).
-    pub fn build(
-        tube: &TubeModel,
-        params: &LibraryParams,
-        progress: &(dyn Fn(usize) + Sync),
-    ) -> Result<TemplateLibrary, Line2dError> {
-        Self::build_with(params, progress, |k, pose| {
-            render_silhouette(tube, k, pose, None)
-        })
+    pub fn build(tube: &TubeModel, params: &LibraryParams, progress: &(dyn Fn(usize) + Sync)) -> Result<TemplateLibrary, Line2dError> {
+        Self::build_with(params, progress, |k, pose| render_silhouette(tube, k, pose, None))
     }
 
     /// Like [`TemplateLibrary::build`], with silhouettes rendered from a triangle mesh
     /// ([`crate::line2d::mesh`]) instead of the parametric model.
-    pub fn build_from_mesh(
-        shape: &MeshShape,
-        params: &LibraryParams,
-        progress: &(dyn Fn(usize) + Sync),
-    ) -> Result<TemplateLibrary, Line2dError> {
-        Self::build_with(params, progress, |k, pose| {
-            render_mesh_silhouette(shape, k, pose, None)
-        })
+    pub fn build_from_mesh(shape: &MeshShape, params: &LibraryParams, progress: &(dyn Fn(usize) + Sync)) -> Result<TemplateLibrary, Line2dError> {
+        Self::build_with(params, progress, |k, pose| render_mesh_silhouette(shape, k, pose, None))
     }
 
     /// Builds a library with `render(intrinsics, T_cam_tube)` giving each view's silhouette.
-    pub fn build_with(
-        params: &LibraryParams,
-        progress: &(dyn Fn(usize) + Sync),
-        render: impl Fn(&Pinhole, &Pose) -> Silhouette + Sync,
-    ) -> Result<TemplateLibrary, Line2dError> {
+    pub fn build_with(params: &LibraryParams, progress: &(dyn Fn(usize) + Sync), render: impl Fn(&Pinhole, &Pose) -> Silhouette + Sync) -> Result<TemplateLibrary, Line2dError> {
         if params.features == 0 || params.features > 4096 {
-            return Err(Line2dError::invalid(
-                "features",
-                format!("must be in 1..=4096, got {}", params.features),
-            ));
+            return Err(Line2dError::invalid("features", format!("must be in 1..=4096, got {}", params.features)));
         }
         let k = params.camera;
         if !(k.fx > 0.0 && k.fy > 0.0 && k.fx.is_finite() && k.fy.is_finite()) {
-            return Err(Line2dError::invalid(
-                "camera",
-                "focal lengths must be positive",
-            ));
+            return Err(Line2dError::invalid("camera", "focal lengths must be positive"));
         }
         let views = generate_views(&params.views)?;
         let done = std::sync::atomic::AtomicUsize::new(0);
@@ -340,15 +275,9 @@ impl TemplateLibrary {
             t.id = i as u32;
         }
         if templates.is_empty() {
-            return Err(Line2dError::invalid(
-                "library",
-                "no template could be rendered (tube outside every view?)",
-            ));
+            return Err(Line2dError::invalid("library", "no template could be rendered (tube outside every view?)"));
         }
-        Ok(TemplateLibrary {
-            params: params.clone(),
-            templates,
-        })
+        Ok(TemplateLibrary { params: params.clone(), templates })
     }
 
     /// Number of templates.
@@ -388,9 +317,7 @@ mod tests {
         assert_eq!(g.len(), 8);
         for i in 0..8 {
             for j in 0..i {
-                let d = ((g[i].x as f64 - g[j].x as f64).powi(2)
-                    + (g[i].y as f64 - g[j].y as f64).powi(2))
-                .sqrt();
+                let d = ((g[i].x as f64 - g[j].x as f64).powi(2) + (g[i].y as f64 - g[j].y as f64).powi(2)).sqrt();
                 assert!(d >= 5.0, "features {i},{j} only {d} px apart");
             }
         }

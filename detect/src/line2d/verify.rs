@@ -37,14 +37,7 @@ pub struct VerifyParams {
 
 impl Default for VerifyParams {
     fn default() -> Self {
-        VerifyParams {
-            contrast_weight: 0.5,
-            min_contrast: -0.2,
-            ring_inner: 2,
-            ring_outer: 6,
-            samples: 48,
-            rerank_weight: 0.0,
-        }
+        VerifyParams { contrast_weight: 0.5, min_contrast: -0.2, ring_inner: 2, ring_outer: 6, samples: 48, rerank_weight: 0.0 }
     }
 }
 
@@ -61,10 +54,7 @@ pub struct TemplateSamples {
 /// the distance to the nearest pixel with `mask != target` (1 when 8-adjacent to one); 0
 /// elsewhere. Pixels outside the box never count as `!= target`. Two raster passes.
 fn chessboard_distance(mask: &[u8], w: usize, h: usize, target: u8) -> Vec<u8> {
-    let mut d: Vec<u8> = mask
-        .iter()
-        .map(|&m| if m == target { 255 } else { 0 })
-        .collect();
+    let mut d: Vec<u8> = mask.iter().map(|&m| if m == target { 255 } else { 0 }).collect();
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
@@ -145,16 +135,9 @@ pub fn template_samples(t: &Template, p: &VerifyParams) -> TemplateSamples {
         }
     }
     if inside.is_empty() {
-        inside = (0..th)
-            .flat_map(|y| (0..tw).map(move |x| (x, y)))
-            .filter(|&(x, y)| t.mask[y * tw + x] != 0)
-            .map(|(x, y)| (x as i16, y as i16))
-            .collect();
+        inside = (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).filter(|&(x, y)| t.mask[y * tw + x] != 0).map(|(x, y)| (x as i16, y as i16)).collect();
     }
-    TemplateSamples {
-        inside: thin(inside, p.samples),
-        ring: thin(ring, p.samples),
-    }
+    TemplateSamples { inside: thin(inside, p.samples), ring: thin(ring, p.samples) }
 }
 
 /// Per-template samples of a library, computed on first use (only templates that match).
@@ -166,9 +149,7 @@ pub struct SampleCache {
 impl SampleCache {
     /// An empty cache for `n` templates.
     pub fn new(n: usize) -> Self {
-        SampleCache {
-            cells: (0..n).map(|_| std::sync::OnceLock::new()).collect(),
-        }
+        SampleCache { cells: (0..n).map(|_| std::sync::OnceLock::new()).collect() }
     }
 
     /// The samples of `t` (computed once, thread-safe).
@@ -179,21 +160,12 @@ impl SampleCache {
 
 /// Luminance `L = (R + G + B) / 3` of an interleaved RGB8 image.
 pub fn luminance(rgb: &[u8]) -> Vec<u8> {
-    rgb.chunks_exact(3)
-        .map(|c| ((c[0] as u16 + c[1] as u16 + c[2] as u16) / 3) as u8)
-        .collect()
+    rgb.chunks_exact(3).map(|c| ((c[0] as u16 + c[1] as u16 + c[2] as u16) / 3) as u8).collect()
 }
 
 /// Contrast `C` of the samples placed at `(x, y)` in a `w x h` luminance image; `None` when
 /// fewer than a quarter of either sample set falls inside the image.
-pub fn contrast(
-    luma: &[u8],
-    w: usize,
-    h: usize,
-    s: &TemplateSamples,
-    x: i32,
-    y: i32,
-) -> Option<f32> {
+pub fn contrast(luma: &[u8], w: usize, h: usize, s: &TemplateSamples, x: i32, y: i32) -> Option<f32> {
     let mean = |pts: &[(i16, i16)]| -> Option<f32> {
         let (mut sum, mut n) = (0u32, 0usize);
         for &(dx, dy) in pts {
@@ -214,9 +186,7 @@ pub fn contrast(
 /// (`C < min_contrast`, or no contrast measurable while `min_contrast` is finite).
 pub fn verified_score(similarity: f32, c: Option<f32>, p: &VerifyParams) -> Option<f32> {
     match c {
-        Some(c) if c >= p.min_contrast || !p.min_contrast.is_finite() => {
-            Some(similarity / 100.0 + p.contrast_weight * c.clamp(-1.0, 1.0))
-        }
+        Some(c) if c >= p.min_contrast || !p.min_contrast.is_finite() => Some(similarity / 100.0 + p.contrast_weight * c.clamp(-1.0, 1.0)),
         Some(_) => None,
         None if p.min_contrast.is_finite() && p.min_contrast > -1.0 => None,
         None => Some(similarity / 100.0 - p.contrast_weight),
@@ -236,11 +206,7 @@ mod tests {
             distance: 1.0,
             t_cam_tube: tubeloc_core::Pose::identity(),
             centre: [tw as f32 / 2.0, th as f32 / 2.0],
-            levels: vec![TemplateLevel {
-                width: tw as u16,
-                height: th as u16,
-                features: vec![],
-            }],
+            levels: vec![TemplateLevel { width: tw as u16, height: th as u16, features: vec![] }],
             mask: vec![1; tw * th],
             area: (tw * th) as u32,
         }
@@ -254,18 +220,12 @@ mod tests {
         assert_eq!(s.inside.len(), p.samples);
         assert_eq!(s.ring.len(), p.samples);
         for &(x, y) in &s.inside {
-            assert!(
-                x >= 2 && y >= 2 && x < 28 && y < 10,
-                "inside sample ({x},{y}) too close to the border"
-            );
+            assert!(x >= 2 && y >= 2 && x < 28 && y < 10, "inside sample ({x},{y}) too close to the border");
         }
         for &(x, y) in &s.ring {
             // Chebyshev distance outside the rectangle [0, 30) x [0, 12).
             let d = (-x).max(x - 29).max(-y).max(y - 11);
-            assert!(
-                (3..=6).contains(&d),
-                "ring sample ({x},{y}) at distance {d}"
-            );
+            assert!((3..=6).contains(&d), "ring sample ({x},{y}) at distance {d}");
         }
     }
 

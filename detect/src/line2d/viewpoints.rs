@@ -39,15 +39,7 @@ pub struct ViewParams {
 
 impl Default for ViewParams {
     fn default() -> Self {
-        ViewParams {
-            step_deg: 10.0,
-            inplane_step_deg: 10.0,
-            inplane_range_deg: 10.0,
-            dedupe_tol_deg: 6.0,
-            dist_min: 1.0,
-            dist_max: 4.0,
-            dist_step: 0.1,
-        }
+        ViewParams { step_deg: 10.0, inplane_step_deg: 10.0, inplane_range_deg: 10.0, dedupe_tol_deg: 6.0, dist_min: 1.0, dist_max: 4.0, dist_step: 0.1 }
     }
 }
 
@@ -68,43 +60,16 @@ pub struct ViewSpec {
 pub fn geodesic_sphere(n: usize) -> Vec<Vector3<f64>> {
     let p = (1.0 + 5f64.sqrt()) / 2.0;
     let v: Vec<Vector3<f64>> = [
-        (-1.0, p, 0.0),
-        (1.0, p, 0.0),
-        (-1.0, -p, 0.0),
-        (1.0, -p, 0.0),
-        (0.0, -1.0, p),
-        (0.0, 1.0, p),
-        (0.0, -1.0, -p),
-        (0.0, 1.0, -p),
-        (p, 0.0, -1.0),
-        (p, 0.0, 1.0),
-        (-p, 0.0, -1.0),
-        (-p, 0.0, 1.0),
+        (-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0),
+        (0.0, -1.0, p), (0.0, 1.0, p), (0.0, -1.0, -p), (0.0, 1.0, -p),
+        (p, 0.0, -1.0), (p, 0.0, 1.0), (-p, 0.0, -1.0), (-p, 0.0, 1.0),
     ]
     .iter()
     .map(|&(x, y, z)| Vector3::new(x, y, z).normalize())
     .collect();
     let faces = [
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
     ];
     let n = n.max(1);
     let mut out: Vec<Vector3<f64>> = Vec::new();
@@ -131,34 +96,16 @@ fn world_tube() -> Pose {
 fn check(params: &ViewParams) -> Result<(), Line2dError> {
     let ok = |x: f64| x.is_finite() && x > 0.0;
     if !(ok(params.step_deg) && params.step_deg <= 90.0) {
-        return Err(Line2dError::invalid(
-            "step-deg",
-            format!("must be in (0, 90], got {}", params.step_deg),
-        ));
+        return Err(Line2dError::invalid("step-deg", format!("must be in (0, 90], got {}", params.step_deg)));
     }
-    if !ok(params.inplane_step_deg)
-        || !(params.inplane_range_deg.is_finite() && params.inplane_range_deg >= 0.0)
-    {
-        return Err(Line2dError::invalid(
-            "inplane",
-            "step must be > 0 and range >= 0 degrees",
-        ));
+    if !ok(params.inplane_step_deg) || !(params.inplane_range_deg.is_finite() && params.inplane_range_deg >= 0.0) {
+        return Err(Line2dError::invalid("inplane", "step must be > 0 and range >= 0 degrees"));
     }
     if !(params.dedupe_tol_deg.is_finite() && params.dedupe_tol_deg >= 0.0) {
         return Err(Line2dError::invalid("dedupe-tol-deg", "must be >= 0"));
     }
-    if !(ok(params.dist_min)
-        && ok(params.dist_step)
-        && params.dist_max >= params.dist_min
-        && params.dist_max.is_finite())
-    {
-        return Err(Line2dError::invalid(
-            "distances",
-            format!(
-                "need 0 < min <= max and step > 0, got {}:{}:{}",
-                params.dist_min, params.dist_max, params.dist_step
-            ),
-        ));
+    if !(ok(params.dist_min) && ok(params.dist_step) && params.dist_max >= params.dist_min && params.dist_max.is_finite()) {
+        return Err(Line2dError::invalid("distances", format!("need 0 < min <= max and step > 0, got {}:{}:{}", params.dist_min, params.dist_max, params.dist_step)));
     }
     Ok(())
 }
@@ -166,9 +113,7 @@ fn check(params: &ViewParams) -> Result<(), Line2dError> {
 /// The distance grid `min, min + step, ..., <= max` (metres).
 pub fn distances(params: &ViewParams) -> Vec<f64> {
     let n = ((params.dist_max - params.dist_min) / params.dist_step + 1e-6).floor() as usize + 1;
-    (0..n)
-        .map(|i| params.dist_min + i as f64 * params.dist_step)
-        .collect()
+    (0..n).map(|i| params.dist_min + i as f64 * params.dist_step).collect()
 }
 
 /// Unique view rotations `R_cam_tube` (at unit distance) after symmetric deduplication.
@@ -181,20 +126,10 @@ pub fn unique_rotations(params: &ViewParams) -> Result<Vec<Rotation3<f64>>, Line
     let mut kept_axes: Vec<Vector3<f64>> = Vec::new();
     let mut out = Vec::new();
     for v in geodesic_sphere(n).into_iter().filter(|v| v.z >= -1e-9) {
-        let up = if v.x.abs() < 1e-9 && v.y.abs() < 1e-9 {
-            Vector3::y()
-        } else {
-            Vector3::z()
-        };
+        let up = if v.x.abs() < 1e-9 && v.y.abs() < 1e-9 { Vector3::y() } else { Vector3::z() };
         let t_world_cam = Pose::look_at(&Point3::from(v), &Point3::origin(), &up)?;
         for k in -n_roll..=n_roll {
-            let roll = Pose::from_parts(
-                Rotation3::from_axis_angle(
-                    &Vector3::z_axis(),
-                    (k as f64 * params.inplane_step_deg).to_radians(),
-                ),
-                Vector3::zeros(),
-            );
+            let roll = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::z_axis(), (k as f64 * params.inplane_step_deg).to_radians()), Vector3::zeros());
             let t_cam_tube = (t_world_cam * roll).inverse() * t_world_tube;
             let r = t_cam_tube.rotation();
             let a = r.column(2).into_owned();
@@ -237,14 +172,8 @@ mod tests {
             let v = geodesic_sphere(n);
             assert_eq!(v.len(), 10 * n * n + 2);
             // Nearest-neighbour angle close to 63.4 / n degrees.
-            let nn = v[1..]
-                .iter()
-                .map(|q| v[0].angle(q).to_degrees())
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                (nn - 63.43 / n as f64).abs() < 0.25 * 63.43 / n as f64,
-                "n={n} nn={nn}"
-            );
+            let nn = v[1..].iter().map(|q| v[0].angle(q).to_degrees()).fold(f64::INFINITY, f64::min);
+            assert!((nn - 63.43 / n as f64).abs() < 0.25 * 63.43 / n as f64, "n={n} nn={nn}");
         }
     }
 
@@ -253,27 +182,16 @@ mod tests {
         let p = ViewParams::default();
         let rots = unique_rotations(&p).unwrap();
         let total = rots.len() * distances(&p).len();
-        assert!(
-            (5500..=8500).contains(&total),
-            "default library has {total} templates"
-        );
+        assert!((5500..=8500).contains(&total), "default library has {total} templates");
         // Kept axes are at least the tolerance apart.
         for i in 0..rots.len() {
             for j in 0..i {
-                let ang = rots[i]
-                    .matrix()
-                    .column(2)
-                    .angle(&rots[j].matrix().column(2))
-                    .to_degrees();
+                let ang = rots[i].matrix().column(2).angle(&rots[j].matrix().column(2)).to_degrees();
                 assert!(ang >= p.dedupe_tol_deg - 1e-9);
             }
         }
         // With no dedupe, more views survive.
-        let all = unique_rotations(&ViewParams {
-            dedupe_tol_deg: 0.0,
-            ..p.clone()
-        })
-        .unwrap();
+        let all = unique_rotations(&ViewParams { dedupe_tol_deg: 0.0, ..p.clone() }).unwrap();
         assert!(all.len() > rots.len());
         assert_eq!(distances(&p).len(), 31);
     }

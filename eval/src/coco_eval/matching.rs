@@ -35,15 +35,10 @@ pub(crate) fn evaluate_cell(
     let ignore: Vec<bool> = cell
         .gts
         .iter()
-        .map(|g| {
-            g.crowd || g.area < area_rng[0] || g.area > area_rng[1] || extra_ignore(g.ann_index)
-        })
+        .map(|g| g.crowd || g.area < area_rng[0] || g.area > area_rng[1] || extra_ignore(g.ann_index))
         .collect();
     // Stable sort: non-ignored first, each group in file order.
-    let gt_order: Vec<usize> = (0..g_n)
-        .filter(|&g| !ignore[g])
-        .chain((0..g_n).filter(|&g| ignore[g]))
-        .collect();
+    let gt_order: Vec<usize> = (0..g_n).filter(|&g| !ignore[g]).chain((0..g_n).filter(|&g| ignore[g])).collect();
     let gt_ig: Vec<bool> = gt_order.iter().map(|&g| ignore[g]).collect();
     let crowd: Vec<bool> = gt_order.iter().map(|&g| cell.gts[g].crowd).collect();
 

@@ -46,10 +46,7 @@ pub enum EvalError {
 
 impl EvalError {
     pub(crate) fn entry(entry: impl Into<String>, message: impl Into<String>) -> Self {
-        EvalError::Entry {
-            entry: entry.into(),
-            message: message.into(),
-        }
+        EvalError::Entry { entry: entry.into(), message: message.into() }
     }
 }
 
@@ -65,10 +62,7 @@ impl CocoEvaluator {
     /// concatenated) for `iou_type`. Fails on unknown image ids, duplicate annotation ids,
     /// missing or malformed masks, naming the entry.
     pub fn new(gt: &CocoDataset, dt: &[CocoResult], iou_type: IouType) -> Result<Self, EvalError> {
-        Ok(CocoEvaluator {
-            iou_type,
-            prep: prepare::prepare(gt, dt, iou_type)?,
-        })
+        Ok(CocoEvaluator { iou_type, prep: prepare::prepare(gt, dt, iou_type)? })
     }
 
     /// Sorted ground-truth image ids.
@@ -95,9 +89,7 @@ impl CocoEvaluator {
         let a_n = AREA_RNGS.len();
         let iou_thrs = iou_thresholds();
         let rec_thrs = recall_thresholds();
-        let images: Vec<usize> = (0..p.img_ids.len())
-            .filter(|&i| keep_image(p.img_ids[i]))
-            .collect();
+        let images: Vec<usize> = (0..p.img_ids.len()).filter(|&i| keep_image(p.img_ids[i])).collect();
         // evals[s][k * A + a] for the s-th selected image.
         let evals: Vec<Vec<Option<matching::ImgEval>>> = images
             .par_iter()
@@ -105,12 +97,7 @@ impl CocoEvaluator {
                 let mut out = Vec::with_capacity(k_n * a_n);
                 for k in 0..k_n {
                     for rng in AREA_RNGS.iter() {
-                        out.push(matching::evaluate_cell(
-                            &p.cells[i * k_n + k],
-                            *rng,
-                            &iou_thrs,
-                            ignore_gt,
-                        ));
+                        out.push(matching::evaluate_cell(&p.cells[i * k_n + k], *rng, &iou_thrs, ignore_gt));
                     }
                 }
                 out
@@ -118,16 +105,12 @@ impl CocoEvaluator {
             .collect();
 
         let (m_n, r_n, t_n) = (MAX_DETS.len(), NUM_REC_THRS, NUM_IOU_THRS);
-        let combos: Vec<(usize, usize, usize)> = (0..k_n)
-            .flat_map(|k| (0..a_n).flat_map(move |a| (0..m_n).map(move |m| (k, a, m))))
-            .collect();
+        let combos: Vec<(usize, usize, usize)> =
+            (0..k_n).flat_map(|k| (0..a_n).flat_map(move |a| (0..m_n).map(move |m| (k, a, m)))).collect();
         let slices: Vec<_> = combos
             .par_iter()
             .map(|&(k, a, m)| {
-                let e: Vec<&matching::ImgEval> = evals
-                    .iter()
-                    .filter_map(|v| v[k * a_n + a].as_ref())
-                    .collect();
+                let e: Vec<&matching::ImgEval> = evals.iter().filter_map(|v| v[k * a_n + a].as_ref()).collect();
                 accumulate::accumulate_slice(&e, MAX_DETS[m], &rec_thrs)
             })
             .collect();
@@ -184,12 +167,7 @@ pub struct EvalResult {
 impl EvalResult {
     /// `precision[t, r, k, a, m]`.
     pub fn precision_at(&self, t: usize, r: usize, k: usize, a: usize, m: usize) -> f64 {
-        let (rn, kn, an, mn) = (
-            self.rec_thrs.len(),
-            self.cat_ids.len(),
-            AREA_RNGS.len(),
-            MAX_DETS.len(),
-        );
+        let (rn, kn, an, mn) = (self.rec_thrs.len(), self.cat_ids.len(), AREA_RNGS.len(), MAX_DETS.len());
         self.precision[(((t * rn + r) * kn + k) * an + a) * mn + m]
     }
 
@@ -205,10 +183,8 @@ impl EvalResult {
     pub fn pr_curve(&self, t: usize) -> [f64; 101] {
         let mut out = [-1.0; 101];
         for (r, v) in out.iter_mut().enumerate() {
-            let vals: Vec<f64> = (0..self.cat_ids.len())
-                .map(|k| self.precision_at(t, r, k, 0, 2))
-                .filter(|&p| p > -1.0)
-                .collect();
+            let vals: Vec<f64> =
+                (0..self.cat_ids.len()).map(|k| self.precision_at(t, r, k, 0, 2)).filter(|&p| p > -1.0).collect();
             if !vals.is_empty() {
                 *v = vals.iter().sum::<f64>() / vals.len() as f64;
             }
@@ -219,10 +195,7 @@ impl EvalResult {
     /// Recall at IoU threshold index `t`, area "all", 100 detections, averaged over categories
     /// with ground truth (-1 if none).
     pub fn recall_all(&self, t: usize) -> f64 {
-        let vals: Vec<f64> = (0..self.cat_ids.len())
-            .map(|k| self.recall_at(t, k, 0, 2))
-            .filter(|&v| v > -1.0)
-            .collect();
+        let vals: Vec<f64> = (0..self.cat_ids.len()).map(|k| self.recall_at(t, k, 0, 2)).filter(|&v| v > -1.0).collect();
         if vals.is_empty() {
             -1.0
         } else {
@@ -232,11 +205,7 @@ impl EvalResult {
 
     /// The summary exactly as pycocotools' `summarize()` prints it: 12 lines, each ending in `\n`.
     pub fn summary_text(&self) -> String {
-        STATS
-            .iter()
-            .zip(self.stats)
-            .map(|(s, v)| summary::line(s, v) + "\n")
-            .collect()
+        STATS.iter().zip(self.stats).map(|(s, v)| summary::line(s, v) + "\n").collect()
     }
 
     /// `metrics.json`: the 12 numbers with names, the PR curves (one per IoU threshold, area

@@ -61,26 +61,16 @@ enum ResultMode {
     Masks,
 }
 
-pub(crate) fn prepare(
-    gt: &CocoDataset,
-    dt: &[CocoResult],
-    iou_type: IouType,
-) -> Result<Prepared, EvalError> {
+pub(crate) fn prepare(gt: &CocoDataset, dt: &[CocoResult], iou_type: IouType) -> Result<Prepared, EvalError> {
     let mut img_ids: Vec<u64> = gt.images.iter().map(|im| im.id).collect();
     img_ids.sort_unstable();
     img_ids.dedup();
     let mut cat_ids: Vec<u64> = gt.categories.iter().map(|c| c.id).collect();
     cat_ids.sort_unstable();
     cat_ids.dedup();
-    let img_index: HashMap<u64, usize> =
-        img_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
-    let cat_index: HashMap<u64, usize> =
-        cat_ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
-    let sizes: HashMap<u64, (u32, u32)> = gt
-        .images
-        .iter()
-        .map(|im| (im.id, (im.height, im.width)))
-        .collect();
+    let img_index: HashMap<u64, usize> = img_ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+    let cat_index: HashMap<u64, usize> = cat_ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+    let sizes: HashMap<u64, (u32, u32)> = gt.images.iter().map(|im| (im.id, (im.height, im.width))).collect();
     let k_n = cat_ids.len();
 
     // Ground truth per cell, in file order.
@@ -94,10 +84,7 @@ pub(crate) fn prepare(
             ));
         }
         let Some(&i) = img_index.get(&a.image_id) else {
-            return Err(EvalError::entry(
-                format!("annotations[{j}] (id {})", a.id),
-                format!("unknown image_id {}", a.image_id),
-            ));
+            return Err(EvalError::entry(format!("annotations[{j}] (id {})", a.id), format!("unknown image_id {}", a.image_id)));
         };
         if let Some(&k) = cat_index.get(&a.category_id) {
             gt_lists[i * k_n + k].push(j);
@@ -118,10 +105,7 @@ pub(crate) fn prepare(
             ));
         };
         if !r.score.is_finite() {
-            return Err(EvalError::entry(
-                format!("results[{j}] (image_id {})", r.image_id),
-                "non-finite score",
-            ));
+            return Err(EvalError::entry(format!("results[{j}] (image_id {})", r.image_id), "non-finite score"));
         }
         if let Some(&k) = cat_index.get(&r.category_id) {
             dt_lists[i * k_n + k].push(j);
@@ -135,11 +119,7 @@ pub(crate) fn prepare(
             build_cell(gt, dt, &gt_lists[c], &dt_lists[c], (h, w), iou_type, mode)
         })
         .collect();
-    Ok(Prepared {
-        img_ids,
-        cat_ids,
-        cells: cells?,
-    })
+    Ok(Prepared { img_ids, cat_ids, cells: cells? })
 }
 
 fn build_cell(
@@ -153,24 +133,14 @@ fn build_cell(
 ) -> Result<Cell, EvalError> {
     // Stable sort by descending score (np.argsort(-score, kind='mergesort')), then the cap.
     let mut order: Vec<usize> = dt_idx.to_vec();
-    order.sort_by(|&a, &b| {
-        dt[b]
-            .score
-            .partial_cmp(&dt[a].score)
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
+    order.sort_by(|&a, &b| dt[b].score.partial_cmp(&dt[a].score).unwrap_or(std::cmp::Ordering::Equal));
     order.truncate(MAX_DETS[2]);
 
     let gts: Vec<GtItem> = gt_idx
         .iter()
         .map(|&j| {
             let a = &gt.annotations[j];
-            GtItem {
-                ann_index: j,
-                id: a.id,
-                area: a.area,
-                crowd: a.iscrowd != 0,
-            }
+            GtItem { ann_index: j, id: a.id, area: a.area, crowd: a.iscrowd != 0 }
         })
         .collect();
     let crowd: Vec<bool> = gts.iter().map(|g| g.crowd).collect();
@@ -182,29 +152,17 @@ fn build_cell(
         let r = &dt[j];
         let at = || format!("results[{j}] (image_id {})", r.image_id);
         let need_rle = iou_type == IouType::Segm || mode == ResultMode::Masks;
-        let rle = if need_rle {
-            Some(result_rle(r, h, w, mode).map_err(|m| EvalError::entry(at(), m))?)
-        } else {
-            None
-        };
+        let rle = if need_rle { Some(result_rle(r, h, w, mode).map_err(|m| EvalError::entry(at(), m))?) } else { None };
         let bbox = match (r.bbox, &rle) {
             (Some(b), _) => b,
             (None, Some(rle)) if mode == ResultMode::Masks => rle.to_bbox(),
-            _ => {
-                return Err(EvalError::entry(
-                    at(),
-                    "no bbox (the first result has one, so all are read as box results)",
-                ))
-            }
+            _ => return Err(EvalError::entry(at(), "no bbox (the first result has one, so all are read as box results)")),
         };
         let area = match mode {
             ResultMode::Boxes => bbox[2] * bbox[3],
             ResultMode::Masks => rle.as_ref().map(|r| r.area() as f64).unwrap_or(0.0),
         };
-        dts.push(DtItem {
-            score: r.score,
-            area,
-        });
+        dts.push(DtItem { score: r.score, area });
         match iou_type {
             IouType::Segm => dt_rles.extend(rle),
             IouType::Bbox => dt_boxes.push(bbox),
@@ -216,10 +174,7 @@ fn build_cell(
     } else {
         match iou_type {
             IouType::Segm => {
-                let g: Result<Vec<Rle>, EvalError> = gt_idx
-                    .iter()
-                    .map(|&j| gt_rle(&gt.annotations[j], j, h, w))
-                    .collect();
+                let g: Result<Vec<Rle>, EvalError> = gt_idx.iter().map(|&j| gt_rle(&gt.annotations[j], j, h, w)).collect();
                 Rle::iou(&dt_rles, &g?, &crowd)
             }
             IouType::Bbox => {
@@ -237,8 +192,7 @@ fn result_rle(r: &CocoResult, h: u32, w: u32, mode: ResultMode) -> Result<Rle, S
         (Some(seg), _, _) => seg.to_rle(h, w).map_err(|e| e.to_string()),
         (None, ResultMode::Boxes, Some(bb)) => {
             let (x1, y1, x2, y2) = (bb[0], bb[1], bb[0] + bb[2], bb[1] + bb[3]);
-            Rle::from_polygons(&[vec![x1, y1, x1, y2, x2, y2, x2, y1]], h, w)
-                .map_err(|e| e.to_string())
+            Rle::from_polygons(&[vec![x1, y1, x1, y2, x2, y2, x2, y1]], h, w).map_err(|e| e.to_string())
         }
         _ => Err("no segmentation (needed for segm evaluation)".to_string()),
     }
@@ -246,10 +200,7 @@ fn result_rle(r: &CocoResult, h: u32, w: u32, mode: ResultMode) -> Result<Rle, S
 
 fn gt_rle(a: &CocoAnnotation, j: usize, h: u32, w: u32) -> Result<Rle, EvalError> {
     let at = || format!("annotations[{j}] (id {})", a.id);
-    let seg: &Segmentation = a
-        .segmentation
-        .as_ref()
-        .ok_or_else(|| EvalError::entry(at(), "no segmentation (needed for segm evaluation)"))?;
-    seg.to_rle(h, w)
-        .map_err(|e| EvalError::entry(at(), e.to_string()))
+    let seg: &Segmentation =
+        a.segmentation.as_ref().ok_or_else(|| EvalError::entry(at(), "no segmentation (needed for segm evaluation)"))?;
+    seg.to_rle(h, w).map_err(|e| EvalError::entry(at(), e.to_string()))
 }

@@ -18,20 +18,8 @@ pub struct StatSpec {
     pub name: &'static str,
 }
 
-const fn spec(
-    ap: bool,
-    iou_index: Option<usize>,
-    area_index: usize,
-    max_det_index: usize,
-    name: &'static str,
-) -> StatSpec {
-    StatSpec {
-        ap,
-        iou_index,
-        area_index,
-        max_det_index,
-        name,
-    }
+const fn spec(ap: bool, iou_index: Option<usize>, area_index: usize, max_det_index: usize, name: &'static str) -> StatSpec {
+    StatSpec { ap, iou_index, area_index, max_det_index, name }
 }
 
 /// The 12 statistics in pycocotools' order (`_summarizeDets`).
@@ -114,11 +102,7 @@ pub fn pairwise_sum(a: &[f64]) -> f64 {
 /// `' {:<18} {} @[ IoU={:<9} | area={:>6s} | maxDets={:>3d} ] = {:0.3f}'`.
 pub(crate) fn line(s: &StatSpec, value: f64) -> String {
     let thrs = iou_thresholds();
-    let title = if s.ap {
-        "Average Precision"
-    } else {
-        "Average Recall"
-    };
+    let title = if s.ap { "Average Precision" } else { "Average Recall" };
     let kind = if s.ap { "(AP)" } else { "(AR)" };
     let iou = match s.iou_index {
         Some(t) => format!("{:.2}", thrs[t]),

@@ -57,19 +57,14 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
         let img_id = 10 + 3 * i as u64; // non-contiguous ids
         let (w, h) = sizes[i % sizes.len()];
         let terrain = ["sand", "rock", "bedrock"][i % 3];
-        images.push(
-            json!({"id": img_id, "width": w, "height": h, "file_name": format!("{img_id}.png"),
-                           "terrain": terrain, "time": if i % 2 == 0 { "noon" } else { "dusk" }}),
-        );
+        images.push(json!({"id": img_id, "width": w, "height": h, "file_name": format!("{img_id}.png"),
+                           "terrain": terrain, "time": if i % 2 == 0 { "noon" } else { "dusk" }}));
         let n_obj = if i == 0 { 0 } else { rng.random_range(1..5) };
         let no_dets = i == 1;
         for o in 0..n_obj {
             let big = w >= 200 && o == 0;
             let (len, wid) = if big {
-                (
-                    rng.random_range(110.0..170.0),
-                    rng.random_range(70.0..100.0),
-                )
+                (rng.random_range(110.0..170.0), rng.random_range(70.0..100.0))
             } else if o % 3 == 2 {
                 (rng.random_range(4.0..9.0), rng.random_range(2.0..4.0)) // tiny
             } else {
@@ -93,24 +88,14 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
             }
             let bb = rle.to_bbox();
             let occl = ["none", "partial"][rng.random_range(0..2)];
-            anns.push(
-                json!({"id": ann_id, "image_id": img_id, "category_id": cat, "segmentation": seg,
-                             "area": area, "bbox": bb, "iscrowd": crowd as u8, "occlusion": occl}),
-            );
+            anns.push(json!({"id": ann_id, "image_id": img_id, "category_id": cat, "segmentation": seg,
+                             "area": area, "bbox": bb, "iscrowd": crowd as u8, "occlusion": occl}));
             ann_id += 1;
             if no_dets {
                 continue;
             }
             // Detections: near-copies (some duplicated), several inside crowd regions.
-            let copies = if crowd {
-                3
-            } else if rng.random_bool(0.2) {
-                0
-            } else if rng.random_bool(0.2) {
-                2
-            } else {
-                1
-            };
+            let copies = if crowd { 3 } else if rng.random_bool(0.2) { 0 } else if rng.random_bool(0.2) { 2 } else { 1 };
             for _ in 0..copies {
                 let dp = tube_polygon(
                     cx + rng.random_range(-3.0..3.0),
@@ -125,13 +110,7 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
             }
         }
         // False positives, and over 100 detections in image 3.
-        let n_fp = if i == 3 {
-            130
-        } else if no_dets {
-            0
-        } else {
-            rng.random_range(0..4)
-        };
+        let n_fp = if i == 3 { 130 } else if no_dets { 0 } else { rng.random_range(0..4) };
         for _ in 0..n_fp {
             let dp = tube_polygon(
                 rng.random_range(0.0..w as f64),
@@ -140,21 +119,8 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
                 rng.random_range(3.0..12.0),
                 rng.random_range(0.0..3.1),
             );
-            let score = if i == 3 {
-                rng.random_range(0.0..1.0)
-            } else {
-                scores[rng.random_range(0..scores.len())]
-            };
-            dts.push(det(
-                img_id,
-                rng.random_range(1..3),
-                score,
-                &dp,
-                h,
-                w,
-                form,
-                &mut rng,
-            ));
+            let score = if i == 3 { rng.random_range(0.0..1.0) } else { scores[rng.random_range(0..scores.len())] };
+            dts.push(det(img_id, rng.random_range(1..3), score, &dp, h, w, form, &mut rng));
         }
     }
     let gt = json!({
@@ -166,16 +132,7 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn det(
-    img: u64,
-    cat: u64,
-    score: f64,
-    poly: &[f64],
-    h: u32,
-    w: u32,
-    form: DtForm,
-    rng: &mut ChaCha8Rng,
-) -> Value {
+fn det(img: u64, cat: u64, score: f64, poly: &[f64], h: u32, w: u32, form: DtForm, rng: &mut ChaCha8Rng) -> Value {
     let rle = Rle::from_polygons(&[poly.to_vec()], h, w).unwrap();
     let bb = rle.to_bbox();
     let noisy = [
@@ -185,9 +142,7 @@ fn det(
         bb[3] + rng.random_range(-0.5..0.5),
     ];
     match form {
-        DtForm::Mask => {
-            json!({"image_id": img, "category_id": cat, "score": score, "segmentation": seg_value(&Segmentation::from_rle(&rle))})
-        }
+        DtForm::Mask => json!({"image_id": img, "category_id": cat, "score": score, "segmentation": seg_value(&Segmentation::from_rle(&rle))}),
         DtForm::MaskAndBox => json!({"image_id": img, "category_id": cat, "score": score,
                                      "segmentation": seg_value(&Segmentation::from_rle(&rle)), "bbox": noisy}),
         DtForm::Box => json!({"image_id": img, "category_id": cat, "score": score, "bbox": noisy}),
@@ -198,51 +153,21 @@ fn det(
 pub fn cases() -> Vec<Case> {
     let mut out = Vec::new();
     let (gt, dt) = make(1, 14, DtForm::Mask);
-    out.push(Case {
-        name: "segm_masks",
-        gt,
-        dt,
-        iou_type: "segm",
-    });
+    out.push(Case { name: "segm_masks", gt, dt, iou_type: "segm" });
     let (gt, dt) = make(2, 14, DtForm::MaskAndBox);
-    out.push(Case {
-        name: "segm_masks_with_boxes",
-        gt,
-        dt,
-        iou_type: "segm",
-    });
+    out.push(Case { name: "segm_masks_with_boxes", gt, dt, iou_type: "segm" });
     let (gt, dt) = make(3, 14, DtForm::Box);
-    out.push(Case {
-        name: "bbox_boxes",
-        gt,
-        dt,
-        iou_type: "bbox",
-    });
+    out.push(Case { name: "bbox_boxes", gt, dt, iou_type: "bbox" });
     let (gt, dt) = make(4, 10, DtForm::Box);
-    out.push(Case {
-        name: "segm_from_boxes",
-        gt,
-        dt,
-        iou_type: "segm",
-    });
+    out.push(Case { name: "segm_from_boxes", gt, dt, iou_type: "segm" });
     let (gt, dt) = make(5, 10, DtForm::Mask);
-    out.push(Case {
-        name: "bbox_from_masks",
-        gt,
-        dt,
-        iou_type: "bbox",
-    });
+    out.push(Case { name: "bbox_from_masks", gt, dt, iou_type: "bbox" });
     // Few detections, all on one image: most cells have ground truth and no detections.
     let (gt, mut dt) = make(6, 8, DtForm::Mask);
     if let Value::Array(v) = &mut dt {
         v.retain(|d| d["image_id"] == 16);
     }
-    out.push(Case {
-        name: "sparse_detections",
-        gt,
-        dt,
-        iou_type: "segm",
-    });
+    out.push(Case { name: "sparse_detections", gt, dt, iou_type: "segm" });
     out
 }
 
@@ -264,7 +189,5 @@ pub fn have_pycocotools() -> bool {
 
 /// Path of a file under the repository's `scripts/`.
 pub fn script(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scripts")
-        .join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts").join(name)
 }

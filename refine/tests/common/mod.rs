@@ -33,27 +33,15 @@ pub struct Scene {
 /// lens distortion and an off-centre principal point.
 pub fn camera(distorted: bool) -> CameraModel {
     let full = CameraModel::from_hfov(5472, 3648, 77.0);
-    let mut c = if distorted {
-        full.cropped(3900, 500, 1024, 768)
-    } else {
-        full.cropped(2224, 1440, 1024, 768)
-    };
+    let mut c = if distorted { full.cropped(3900, 500, 1024, 768) } else { full.cropped(2224, 1440, 1024, 768) };
     if distorted {
-        c.distortion = Distortion {
-            k1: -0.08,
-            k2: 0.02,
-            p1: 0.0005,
-            p2: -0.0003,
-            k3: 0.0,
-        };
+        c.distortion = Distortion { k1: -0.08, k2: 0.02, p1: 0.0005, p2: -0.0003, k3: 0.0 };
     }
     c
 }
 
 fn hash(ix: i64, iy: i64, seed: u64) -> f64 {
-    let mut h = (ix as u64).wrapping_mul(0x9E3779B97F4A7C15)
-        ^ (iy as u64).wrapping_mul(0xC2B2AE3D27D4EB4F)
-        ^ seed;
+    let mut h = (ix as u64).wrapping_mul(0x9E3779B97F4A7C15) ^ (iy as u64).wrapping_mul(0xC2B2AE3D27D4EB4F) ^ seed;
     h ^= h >> 31;
     h = h.wrapping_mul(0xBF58476D1CE4E5B9);
     h ^= h >> 29;
@@ -85,11 +73,7 @@ fn ground_albedo(p: &Vector3<f64>, seed: u64) -> f64 {
 }
 
 /// Ray from the origin along `d` (unit) vs the tube; returns (t, normal, albedo).
-fn hit_tube(
-    model: &CylinderModel,
-    t: &Truth,
-    d: &Vector3<f64>,
-) -> Option<(f64, Vector3<f64>, f64)> {
+fn hit_tube(model: &CylinderModel, t: &Truth, d: &Vector3<f64>) -> Option<(f64, Vector3<f64>, f64)> {
     let a = t.axis;
     let w = -t.centre;
     let (da, wa) = (d.dot(&a), w.dot(&a));
@@ -137,20 +121,12 @@ fn hit_sphere(c: &Vector3<f64>, r: f64, o: &Vector3<f64>, d: &Vector3<f64>) -> O
 
 /// Random tube pose on the ground in front of a camera looking down at ~45 degrees.
 /// Returns the scene parameters (no image yet).
-pub fn random_truth(
-    rng: &mut ChaCha8Rng,
-    model: &CylinderModel,
-    camera: &CameraModel,
-    dist: (f64, f64),
-) -> (Truth, Vector3<f64>, f64) {
+pub fn random_truth(rng: &mut ChaCha8Rng, model: &CylinderModel, camera: &CameraModel, dist: (f64, f64)) -> (Truth, Vector3<f64>, f64) {
     // Camera tilted down by 45 deg: world up in the camera frame.
     let tilt = rng.random_range(35f64..55.0).to_radians();
     let up = Vector3::new(0.0, -tilt.cos(), -tilt.sin());
     // Pick a pixel near the middle of the crop and a range; the tube centre lies there.
-    let px = Point2::new(
-        rng.random_range(0.35..0.65) * camera.width as f64,
-        rng.random_range(0.35..0.65) * camera.height as f64,
-    );
+    let px = Point2::new(rng.random_range(0.35..0.65) * camera.width as f64, rng.random_range(0.35..0.65) * camera.height as f64);
     let ray = camera.unproject(&px);
     let range = rng.random_range(dist.0..dist.1);
     let centre = ray * range;
@@ -166,103 +142,29 @@ pub fn random_truth(
 }
 
 /// Renders the scene. `rock`: optional occluding sphere (centre, radius), camera frame.
-pub fn render(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    truth: Truth,
-    up: Vector3<f64>,
-    ground_d: f64,
-    rock: Option<(Vector3<f64>, f64)>,
-    seed: u64,
-    noise: f64,
-) -> Scene {
-    render_at(
-        model,
-        camera,
-        truth,
-        up,
-        ground_d,
-        rock,
-        seed,
-        noise,
-        Vector3::zeros(),
-    )
+pub fn render(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: Option<(Vector3<f64>, f64)>, seed: u64, noise: f64) -> Scene {
+    render_at(model, camera, truth, up, ground_d, rock, seed, noise, Vector3::zeros())
 }
 
 /// The right view of a rectified pair: the same scene (given in the left camera frame) seen by
 /// a camera at `(baseline, 0, 0)` with the left camera's orientation and intrinsics; the ground
 /// texture stays attached to the ground. The returned scene is in the right camera's frame.
-pub fn render_right(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    truth: Truth,
-    up: Vector3<f64>,
-    ground_d: f64,
-    seed: u64,
-    noise: f64,
-    baseline: f64,
-) -> Scene {
+pub fn render_right(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, seed: u64, noise: f64, baseline: f64) -> Scene {
     let t = Vector3::new(baseline, 0.0, 0.0);
-    let tr = Truth {
-        centre: truth.centre - t,
-        axis: truth.axis,
-    };
-    render_at(
-        model,
-        camera,
-        tr,
-        up,
-        ground_d - up.dot(&t),
-        None,
-        seed,
-        noise,
-        t,
-    )
+    let tr = Truth { centre: truth.centre - t, axis: truth.axis };
+    render_at(model, camera, tr, up, ground_d - up.dot(&t), None, seed, noise, t)
 }
 
 /// [`render_right`] with an occluding sphere `rock` (centre, radius; left camera frame).
 #[allow(clippy::too_many_arguments, dead_code)]
-pub fn render_right_rock(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    truth: Truth,
-    up: Vector3<f64>,
-    ground_d: f64,
-    rock: (Vector3<f64>, f64),
-    seed: u64,
-    noise: f64,
-    baseline: f64,
-) -> Scene {
+pub fn render_right_rock(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: (Vector3<f64>, f64), seed: u64, noise: f64, baseline: f64) -> Scene {
     let t = Vector3::new(baseline, 0.0, 0.0);
-    let tr = Truth {
-        centre: truth.centre - t,
-        axis: truth.axis,
-    };
-    render_at(
-        model,
-        camera,
-        tr,
-        up,
-        ground_d - up.dot(&t),
-        Some((rock.0 - t, rock.1)),
-        seed,
-        noise,
-        t,
-    )
+    let tr = Truth { centre: truth.centre - t, axis: truth.axis };
+    render_at(model, camera, tr, up, ground_d - up.dot(&t), Some((rock.0 - t, rock.1)), seed, noise, t)
 }
 
 #[allow(clippy::too_many_arguments)]
-fn render_at(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    truth: Truth,
-    up: Vector3<f64>,
-    ground_d: f64,
-    rock: Option<(Vector3<f64>, f64)>,
-    seed: u64,
-    noise: f64,
-    texture_offset: Vector3<f64>,
-) -> Scene {
+fn render_at(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: Option<(Vector3<f64>, f64)>, seed: u64, noise: f64, texture_offset: Vector3<f64>) -> Scene {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let sun = (up * 0.8 + Vector3::new(0.5, 0.1, -0.3)).normalize();
     let mut img = vec![0f32; w * h];
@@ -291,10 +193,7 @@ fn render_at(
                 let p = d * t;
                 let mut lit = 0.35 + 0.65 * up.dot(&sun).max(0.0);
                 // Shadow of the tube: march toward the sun against the tube (shifted ray).
-                let shifted = Truth {
-                    centre: truth.centre - p,
-                    axis: truth.axis,
-                };
+                let shifted = Truth { centre: truth.centre - p, axis: truth.axis };
                 if hit_tube(model, &shifted, &sun).is_some() {
                     lit = 0.35;
                 }
@@ -330,27 +229,12 @@ fn render_at(
     for v in &mut img {
         *v = (*v + nd.sample(&mut rng) as f32).clamp(0.0, 1.0);
     }
-    Scene {
-        camera: camera.clone(),
-        image: Plane::from_vec(w, h, img),
-        depth: Plane::from_vec(w, h, depth),
-        truth,
-        ground_n: up,
-        ground_d,
-        rock,
-    }
+    Scene { camera: camera.clone(), image: Plane::from_vec(w, h, img), depth: Plane::from_vec(w, h, depth), truth, ground_n: up, ground_d, rock }
 }
 
 /// Simulated triangulated stereo points on the visible tube surface: pixels of the tube's
 /// image (every `step` px), depth noise `σ_Z = Z² σ_d / (f B)` along the ray.
-pub fn stereo_points(
-    model: &CylinderModel,
-    scene: &Scene,
-    step: usize,
-    sigma_disp_px: f64,
-    baseline: f64,
-    seed: u64,
-) -> Vec<Point3<f64>> {
+pub fn stereo_points(model: &CylinderModel, scene: &Scene, step: usize, sigma_disp_px: f64, baseline: f64, seed: u64) -> Vec<Point3<f64>> {
     let cam = &scene.camera;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = Normal::new(0.0, 1.0).unwrap();
@@ -358,9 +242,7 @@ pub fn stereo_points(
     for y in (0..cam.height as usize).step_by(step) {
         for x in (0..cam.width as usize).step_by(step) {
             let d = cam.unproject(&Point2::new(x as f64, y as f64));
-            let Some((t, _, _)) = hit_tube(model, &scene.truth, &d) else {
-                continue;
-            };
+            let Some((t, _, _)) = hit_tube(model, &scene.truth, &d) else { continue };
             let z_true = scene.depth.get(x, y) as f64;
             if (t * d.z - z_true).abs() > 1e-6 {
                 continue; // hidden by a rock
@@ -417,32 +299,14 @@ pub fn speed_scene() -> SpeedScene {
     let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (1.1, 1.3));
     let scene = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
     let refiner = Refiner::new(&TubeModel::default(), RefineConfig::default()).unwrap();
-    let r = Rotation3::from_axis_angle(
-        &Unit::new_normalize(Vector3::new(0.3, -0.5, 0.8)),
-        2f64.to_radians(),
-    );
-    let seed = Seed {
-        state: AxisState {
-            c: truth.centre + Vector3::new(0.003, -0.002, 0.003),
-            a: r * truth.axis,
-        },
-        end_known: false,
-    };
-    SpeedScene {
-        scene,
-        refiner,
-        seed,
-    }
+    let r = Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::new(0.3, -0.5, 0.8)), 2f64.to_radians());
+    let seed = Seed { state: AxisState { c: truth.centre + Vector3::new(0.003, -0.002, 0.003), a: r * truth.axis }, end_known: false };
+    SpeedScene { scene, refiner, seed }
 }
 
 impl SpeedScene {
     /// The refiner's input: the image alone (mono, no ground, no scene data).
     pub fn input(&self) -> tubeloc_refine::RefineInput<'_> {
-        tubeloc_refine::RefineInput {
-            image: &self.scene.image,
-            camera: &self.scene.camera,
-            ground: None,
-            scene: tubeloc_refine::Scene::default(),
-        }
+        tubeloc_refine::RefineInput { image: &self.scene.image, camera: &self.scene.camera, ground: None, scene: tubeloc_refine::Scene::default() }
     }
 }
