@@ -28,13 +28,29 @@ pub struct TubeEstimate {
     pub pose: Pose,
     /// Confidence score.
     pub score: f64,
+    /// The estimate's own standard deviations, when it carries a covariance (for the
+    /// covariance consistency of [`crate::pose_summary`]).
+    #[serde(default)]
+    pub std: Option<PoseStd>,
+}
+
+/// Standard deviations of a pose estimate, from its covariance.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseStd {
+    /// Axis direction, radians: `sqrt(σ²_δ1 + σ²_δ2)` (tangent-plane block).
+    pub axis_rad: f64,
+    /// Centre, metres: `sqrt(trace of the 3x3 centre block)`.
+    pub centre_m: f64,
 }
 
 impl TubeEstimate {
     /// The estimate of a refined grasp pose: `T_cam_tube` with +z along its end direction
-    /// (rotation about the axis is arbitrary, which every symmetric metric ignores).
+    /// (rotation about the axis is arbitrary, which every symmetric metric ignores), with the
+    /// pose's standard deviations when its covariance is not zero.
     pub fn from_axis_pose(p: &TubeAxisPose) -> Self {
-        TubeEstimate { image_id: p.image_id, pose: p.to_pose(), score: p.score }
+        let std = PoseStd { axis_rad: p.axis_std_rad(), centre_m: p.centre_std_m() };
+        let std = (std.axis_rad > 0.0 && std.centre_m > 0.0 && std.axis_rad.is_finite() && std.centre_m.is_finite()).then_some(std);
+        TubeEstimate { image_id: p.image_id, pose: p.to_pose(), score: p.score, std }
     }
 }
 

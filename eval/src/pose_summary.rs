@@ -4,6 +4,13 @@
 //! interpolated between order statistics, like numpy's default), and the fraction of pairs with
 //! an error `<=` each threshold: 1/2/5 degrees for angles, 2/5/10 mm for distances,
 //! 5/10/20 pixels for MSPD. Fractions are over matched pairs; BOP recalls are over all truths.
+//!
+//! Covariance consistency: for estimates that carry standard deviations
+//! ([`crate::pose_match::PoseStd`]), the axis angle error over `σ_axis` and the centre distance
+//! over `σ_centre` (σ = square root of the covariance block's trace), summarized at 1/2/3. A
+//! consistent Gaussian covariance puts about 61-68 % of the errors within 1 and 95 % or more
+//! within 2 (2-D isotropic: `1 - e^-1` and `1 - e^-4`; 3-D: 61 % and 99 %; one dominant
+//! direction: 68 % and 95 %); fewer means the covariance is overconfident.
 
 use crate::pose::{pose_axis_error, AxisError, PoseEvalError};
 use crate::pose_bop::{bop_recalls, mspd, mspd_thresholds_640, mssd, mssd_thresholds, ModelPoints, Symmetries};
@@ -19,6 +26,8 @@ pub const ANGLE_THRESHOLDS_DEG: [f64; 3] = [1.0, 2.0, 5.0];
 pub const DISTANCE_THRESHOLDS_MM: [f64; 3] = [2.0, 5.0, 10.0];
 /// Image-distance thresholds of the summaries, pixels.
 pub const PIXEL_THRESHOLDS_PX: [f64; 3] = [5.0, 10.0, 20.0];
+/// Thresholds of the error-over-σ summaries (covariance consistency).
+pub const SIGMA_THRESHOLDS: [f64; 3] = [1.0, 2.0, 3.0];
 
 /// Fraction of values at or below a threshold.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -30,7 +39,7 @@ pub struct Within {
 }
 
 /// Distribution summary of one error; statistics are `None` when there are no values.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
     /// Number of values.
     pub count: usize,
@@ -100,6 +109,12 @@ pub struct PairErrors {
     pub mspd_flip_px: Option<f64>,
     /// Width of the image in pixels (scales the MSPD thresholds), when a camera is known.
     pub image_width: Option<u32>,
+    /// Axis angle error over the estimate's axis standard deviation (when it has one).
+    #[serde(default)]
+    pub axis_error_over_std: Option<f64>,
+    /// Centre distance over the estimate's centre standard deviation (when it has one).
+    #[serde(default)]
+    pub centre_error_over_std: Option<f64>,
 }
 
 /// BOP average recalls and per-threshold recalls.
@@ -150,6 +165,12 @@ pub struct PoseSummaries {
     pub mspd_px: Summary,
     /// MSPD (axial + flip), pixels.
     pub mspd_flip_px: Summary,
+    /// Axis angle error over the estimate's σ (pairs whose estimate has a covariance).
+    #[serde(default)]
+    pub axis_error_over_std: Summary,
+    /// Centre distance over the estimate's σ (pairs whose estimate has a covariance).
+    #[serde(default)]
+    pub centre_error_over_std: Summary,
 }
 
 /// Everything a pose evaluation produces; serializable to JSON.
@@ -214,12 +235,15 @@ pub fn evaluate_poses(
         .map(|m| {
             let (e, g) = (&estimates[m.estimate], &truths[m.truth]);
             let cam = config.cameras.get(&g.image_id).or(config.default_camera.as_ref());
+            let axis = pose_axis_error(&e.pose, &g.pose);
             PairErrors {
                 image_id: g.image_id,
                 estimate: m.estimate,
                 truth: m.truth,
                 score: e.score,
-                axis: pose_axis_error(&e.pose, &g.pose),
+                axis_error_over_std: e.std.map(|s| axis.axis_angle_deg.to_radians() / s.axis_rad),
+                centre_error_over_std: e.std.map(|s| axis.centre_distance_mm * 1e-3 / s.centre_m),
+                axis,
                 mssd_mm: mssd(&e.pose, &g.pose, model, &axial) * 1e3,
                 mssd_flip_mm: mssd(&e.pose, &g.pose, model, &flip) * 1e3,
                 mspd_px: cam.map(|c| mspd(&e.pose, &g.pose, model, &axial, c)),
@@ -238,6 +262,8 @@ pub fn evaluate_poses(
         mssd_flip_mm: summarize(&col(&|p| Some(p.mssd_flip_mm)), &DISTANCE_THRESHOLDS_MM),
         mspd_px: summarize(&col(&|p| p.mspd_px), &PIXEL_THRESHOLDS_PX),
         mspd_flip_px: summarize(&col(&|p| p.mspd_flip_px), &PIXEL_THRESHOLDS_PX),
+        axis_error_over_std: summarize(&col(&|p| p.axis_error_over_std), &SIGMA_THRESHOLDS),
+        centre_error_over_std: summarize(&col(&|p| p.centre_error_over_std), &SIGMA_THRESHOLDS),
     };
     let n = truths.len();
     let diameter_mm = model.diameter * 1e3;

@@ -290,6 +290,24 @@ fn write_pose_section(dir: &Path, e: &EvalReport, r: &mut Report) -> Result<(), 
             p.bop.diameter_mm, p.bop.symmetry_step_deg
         ));
     }
+    if e.poses.iter().any(|(_, p)| p.summaries.axis_error_over_std.count > 0) {
+        r.heading(3, "Covariance consistency");
+        let mut t = Table::new(["poses", "pairs with σ", "axis error / σ median / p90", "≤1/2/3 σ", "centre error / σ median / p90", "≤1/2/3 σ"]);
+        let ratio = |s: &crate::pose_summary::Summary| format!("{} / {}", opt(s.median, ""), opt(s.p90, ""));
+        for (label, p) in &e.poses {
+            let s = &p.summaries;
+            t.row([
+                label.clone(),
+                s.axis_error_over_std.count.to_string(),
+                ratio(&s.axis_error_over_std),
+                within(&s.axis_error_over_std),
+                ratio(&s.centre_error_over_std),
+                within(&s.centre_error_over_std),
+            ]);
+        }
+        r.table(t);
+        r.paragraph("σ is the square root of the trace of the estimate's covariance block (axis tangent, centre). A consistent Gaussian covariance puts about 61-68 % of the errors within 1 σ and 95 % or more within 2 σ; fewer means the covariance is overconfident (seeds carry none).");
+    }
     type Col = fn(&crate::pose_summary::PairErrors) -> Option<f64>;
     let metrics: [(&str, &str, &str, Col); 4] = [
         ("pose_axis_angle", "Axis angle error", "axis angle error (deg)", |p| Some(p.axis.axis_angle_deg)),

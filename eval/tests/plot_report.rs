@@ -29,7 +29,7 @@ fn eval_report_folder_has_linked_plots_and_tables() {
     // A pose evaluation with one exact and one 4 mm-off estimate.
     let p = |x: f64| Pose::from_parts(Rotation3::from_euler_angles(1.2, 0.1, 0.3), Vector3::new(x, 0.0, 1.0));
     let truths = vec![TubeTruth { image_id: 1, pose: p(0.0) }, TubeTruth { image_id: 2, pose: p(0.1) }];
-    let ests = vec![TubeEstimate { image_id: 1, pose: p(0.0), score: 0.9 }, TubeEstimate { image_id: 2, pose: p(0.104), score: 0.8 }];
+    let ests = vec![TubeEstimate { image_id: 1, pose: p(0.0), score: 0.9, std: None }, TubeEstimate { image_id: 2, pose: p(0.104), score: 0.8, std: None }];
     let m = match_by_centre_distance(&truths, &ests, 0.05);
     let model = ModelPoints::from_tube(&TubeModel::default(), 0.004).unwrap();
     let ev = evaluate_poses(&truths, &ests, &m, &model, &PoseEvalConfig::default()).unwrap();

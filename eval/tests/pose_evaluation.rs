@@ -36,7 +36,7 @@ fn greedy_matching_by_distance_and_by_iou() {
         TubeTruth { image_id: 1, pose: pose(0.3, 0.0, 1.0) },
         TubeTruth { image_id: 2, pose: pose(0.0, 0.0, 1.0) },
     ];
-    let est = |img, p: Pose, score| TubeEstimate { image_id: img, pose: p, score };
+    let est = |img, p: Pose, score| TubeEstimate { image_id: img, pose: p, score, std: None };
     let estimates = vec![
         // Low score, closest to truth 0, but truth 0 is taken first and truth 1 is beyond the gate.
         est(1, pose(0.004, 0.0, 1.0), 0.2),
@@ -73,9 +73,9 @@ fn evaluation_recalls_and_summaries_match_hand_computation() {
         TubeTruth { image_id: 8, pose: t2 },
     ];
     let estimates = vec![
-        TubeEstimate { image_id: 7, pose: t0, score: 0.9 },                                        // exact
-        TubeEstimate { image_id: 7, pose: shifted(&t1, Vector3::new(0.0, 0.0, 0.010)), score: 0.8 }, // 10 mm off
-        TubeEstimate { image_id: 8, pose: pose(0.5, 0.5, 3.0), score: 0.7 },                      // far: false positive
+        TubeEstimate { image_id: 7, pose: t0, score: 0.9, std: None },                                        // exact
+        TubeEstimate { image_id: 7, pose: shifted(&t1, Vector3::new(0.0, 0.0, 0.010)), score: 0.8, std: None }, // 10 mm off
+        TubeEstimate { image_id: 8, pose: pose(0.5, 0.5, 3.0), score: 0.7, std: None },                      // far: false positive
     ];
     let m = match_by_centre_distance(&truths, &estimates, 0.05);
     assert_eq!(m.pairs.len(), 2);
@@ -112,7 +112,7 @@ fn mask_iou_matching_uses_core_rle() {
     let rect = |x0: usize, x1: usize| Rle::from_mask(&BinaryMask::from_fn(20, 10, |x, y| x >= x0 && x < x1 && (2..8).contains(&y)));
     let truths = vec![TubeTruth { image_id: 1, pose: pose(0.0, 0.0, 1.0) }, TubeTruth { image_id: 1, pose: pose(0.2, 0.0, 1.0) }];
     let axis = TubeAxisPose::new(1, 0.9, Vector3::new(0.2, 0.0, 1.0), Vector3::new(0.0, 1.0, 0.0), 0.8).unwrap();
-    let estimates = vec![TubeEstimate::from_axis_pose(&axis), TubeEstimate { image_id: 1, pose: pose(0.0, 0.0, 1.0), score: 0.5 }];
+    let estimates = vec![TubeEstimate::from_axis_pose(&axis), TubeEstimate { image_id: 1, pose: pose(0.0, 0.0, 1.0), score: 0.5, std: None }];
     // Truth masks: columns 0..8 and 10..18. Estimate 0 covers 10..16 (IoU 6/8 with truth 1),
     // estimate 1 covers 4..8 (IoU 4/8 with truth 0: below a 0.6 gate, at a 0.5 gate).
     let tm = vec![rect(0, 8), rect(10, 18)];
@@ -125,4 +125,43 @@ fn mask_iou_matching_uses_core_rle() {
     let m = match_by_mask_iou(&truths, &estimates, &tm, &em, 0.5).unwrap();
     assert_eq!(m.pairs.len(), 2);
     assert!(match_by_mask_iou(&truths, &estimates, &tm[..1], &em, 0.5).unwrap_err().to_string().contains("1 truth masks for 2 truths"));
+}
+
+#[test]
+fn covariance_consistency_divides_each_error_by_the_estimates_sigma() {
+    use tubeloc_core::TubeAxisPose;
+    // Truth: tube along camera x at (0, 0, 2). Estimate: 10 mm off along y, axis turned 1 deg
+    // about z, with a covariance saying σ_centre = 5 mm and σ_axis = 0.5 deg: errors of 2 σ.
+    let truth = TubeAxisPose::new(1, 1.0, Vector3::new(0.0, 0.0, 2.0), Vector3::x(), 0.9).unwrap();
+    let turned = Rotation3::from_axis_angle(&Vector3::z_axis(), 1f64.to_radians()) * Vector3::x();
+    let mut est = TubeAxisPose::new(1, 0.9, Vector3::new(0.0, 0.010, 2.0), turned, 0.9).unwrap();
+    let (sc, sa) = (0.005f64, 0.5f64.to_radians());
+    for i in 0..3 {
+        est.covariance[i][i] = sc * sc / 3.0;
+    }
+    for i in 3..5 {
+        est.covariance[i][i] = sa * sa / 2.0;
+    }
+    let truths = vec![TubeTruth { image_id: 1, pose: truth.to_pose() }];
+    let plain = TubeEstimate { std: None, ..TubeEstimate::from_axis_pose(&est) };
+    let estimates = vec![TubeEstimate::from_axis_pose(&est), plain];
+    let model = ModelPoints::from_tube(&TubeModel::default(), 0.005).unwrap();
+    for (k, want) in [(0, Some(2.0)), (1, None)] {
+        let m = match_by_centre_distance(&truths, &estimates[k..=k], 0.05);
+        let ev = evaluate_poses(&truths, &estimates[k..=k], &m, &model, &PoseEvalConfig::default()).unwrap();
+        let p = &ev.pairs[0];
+        match want {
+            Some(z) => {
+                assert!((p.axis_error_over_std.unwrap() - z).abs() < 1e-6, "{:?}", p.axis_error_over_std);
+                // Centre distance 10 mm over 5 mm.
+                assert!((p.centre_error_over_std.unwrap() - z).abs() < 1e-6, "{:?}", p.centre_error_over_std);
+                let s = &ev.summaries.axis_error_over_std;
+                assert_eq!((s.count, s.within[0].fraction, s.within[1].fraction), (1, 0.0, 1.0));
+            }
+            None => {
+                assert_eq!((p.axis_error_over_std, p.centre_error_over_std), (None, None));
+                assert_eq!(ev.summaries.centre_error_over_std.count, 0);
+            }
+        }
+    }
 }
