@@ -306,9 +306,10 @@ fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
 
 /// Normal equations `JᵀWJ`, `JᵀWr` at `st` for the perturbation basis `(u1, u2)` with the
 /// Jacobians of [`crate::jacobian`]; fills `jac` with the image Jacobian of each association
-/// and returns `Σ w r²` and `Σ w`.
+/// and returns `Σ w r²` and `Σ w`. The stereo rows enter `JᵀWJ` scaled by `stereo_info`
+/// (1 in the fit; `1 / stereo_points_per_measurement` for the output covariance).
 #[allow(clippy::too_many_arguments)]
-fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), sp: &SeedPrior, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), sp: &SeedPrior, jac: &mut Vec<Option<Matrix2x5<f64>>>, stereo_info: f64) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
@@ -331,6 +332,7 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         if w <= 0.0 {
             continue;
         }
+        let info = if i >= n_img && i < n_img + n_st { stereo_info } else { 1.0 };
         let j: Vector5<f64> = if i < n_img {
             let Some(ji) = &jac[i] else { continue };
             (ji.transpose() * assoc[i].n) * (assoc[i].scale / sigma_px)
@@ -342,7 +344,7 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         if !j.iter().all(|v| v.is_finite()) {
             continue;
         }
-        h += j * j.transpose() * w;
+        h += j * j.transpose() * (w * info);
         g += j * (w * r);
         wrr += w * r * r;
         wsum += w;
@@ -445,7 +447,7 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
             let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
             let ax = st.a;
             let (u1, u2) = tangent_basis(&ax);
-            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &sp, &mut jbuf);
+            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &sp, &mut jbuf, 1.0);
             let mut accepted = None;
             let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some() || tilt_prior, length_depth) } else { None };
             let limb_part = length_depth.then(|| limb_normal_equations(&assoc, &jbuf, &rbuf, c.0, level.sigma_px));
@@ -550,7 +552,7 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
     let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
-    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, sp, &mut Vec::new());
+    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, sp, &mut Vec::new(), 1.0 / cfg.stereo_points_per_measurement);
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {

@@ -401,3 +401,25 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
         assert!(axis_angle(&p.axis, &t.axis).to_degrees() < 1.5 && (p.centre - t.centre).norm() < 0.02, "axis {:.2} deg, centre {:.1} mm", axis_angle(&p.axis, &t.axis).to_degrees(), (p.centre - t.centre).norm() * 1e3);
     }
 }
+
+#[test]
+fn correlated_stereo_points_widen_the_covariance_not_the_fit() {
+    let (sc, pts) = one_scene();
+    let t = sc.truth;
+    let refine = |k: f64, stereo: &[nalgebra::Point3<f64>]| {
+        let cfg = RefineConfig { stereo_points_per_measurement: k, ..RefineConfig::default() };
+        let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), cfg).unwrap();
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: stereo, ground: None, mask: None } };
+        refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None)
+    };
+    let (one, many) = (refine(1.0, &pts), refine(63.0, &pts));
+    assert!(one.converged && many.converged);
+    assert_eq!((one.centre, one.axis), (many.centre, many.axis), "the fit weighs every point either way");
+    // Dividing the stereo information by 63 widens the centre's sigma (stereo fixes the depth)...
+    assert!(many.centre_std_m() > 1.5 * one.centre_std_m(), "{} vs {}", many.centre_std_m(), one.centre_std_m());
+    // ...but not beyond the fit without stereo points, whose depth only the image constrains.
+    let mono = refine(63.0, &[]);
+    assert_eq!(refine(1.0, &[]).covariance, mono.covariance, "no stereo points: nothing to scale");
+    assert!(many.centre_std_m() <= mono.centre_std_m() * 1.05, "{} vs mono {}", many.centre_std_m(), mono.centre_std_m());
+    assert!(RefineConfig { stereo_points_per_measurement: 0.5, ..RefineConfig::default() }.validate().is_err());
+}
