@@ -511,8 +511,10 @@ impl Refiner {
         if self.config.stereo_edge_polish && !scene.stereo_points.is_empty() && scene.mask.is_none() && best.failure.is_none() {
             // Stereo points fix the distance and tilt but, biased at the tube's outline, also
             // pull it across the image; the edges alone then place it in the image with the
-            // distance and tilt kept (the mono keep-depth mode, forced).
-            let cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
+            // distance and tilt kept (the mono keep-depth mode, forced; no re-placement at the
+            // ground's height, which mask seeds' settings ask for in mono, and no distance from
+            // the ends' length: the stereo distance stands).
+            let cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ground_relief_sigma_m: 0.0, mono_length_depth: false, ..self.config.clone() };
             let mono_scene = Scene { stereo_points: &[], ..scene };
             let polished = fit::fit(&self.model, &cfg, &pyr, 0, &mono_scene, best.state);
             if polished.failure.is_none() {

@@ -423,3 +423,20 @@ fn correlated_stereo_points_widen_the_covariance_not_the_fit() {
     assert!(many.centre_std_m() <= mono.centre_std_m() * 1.05, "{} vs mono {}", many.centre_std_m(), mono.centre_std_m());
     assert!(RefineConfig { stereo_points_per_measurement: 0.5, ..RefineConfig::default() }.validate().is_err());
 }
+
+#[test]
+fn stereo_polish_keeps_the_stereo_distance_over_a_lower_ground() {
+    // The tube lies 20 mm above the given ground plane (terrain relief over the nominal ground).
+    // Settings that re-place mono tubes at the ground's height (as mask seeds use) must not
+    // move a stereo fit there: its distance comes from the stereo points.
+    let (sc, pts) = one_scene();
+    let t = sc.truth;
+    let cfg = RefineConfig { ground_height_known: false, ground_relief_sigma_m: 0.001, ..RefineConfig::default() };
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), cfg).unwrap();
+    let ground = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d - 0.020 };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(ground), scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
+    let p = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None);
+    assert!(p.converged, "{:?}", p.failure);
+    let err = (p.centre - t.centre).norm();
+    assert!(err < 0.004, "centre {:.1} mm off the truth (pulled toward the ground?)", err * 1e3);
+}
