@@ -367,6 +367,11 @@ pub struct Refiner {
     pub config: RefineConfig,
 }
 
+/// Fewest stereo points within the robust threshold for a stereo fit's distance to be trusted
+/// by the edge polish (see [`RefineConfig::stereo_edge_polish`]); a detection's fit with fewer
+/// (and under half of its points) is redone without them ([`Refiner::refine`]).
+pub const MIN_STEREO_INLIERS: usize = 20;
+
 impl Refiner {
     /// A refiner for `tube` with `config`.
     pub fn new(tube: &TubeModel, config: RefineConfig) -> Result<Self, RefineError> {
@@ -396,6 +401,16 @@ impl Refiner {
                 let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
                 let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
                 let pose = r.refine_seed_inner(input, &seed, det.image_id, det.score, Some(det.bbox), ends);
+                // Stereo points that do not support the fit (fewer than `MIN_STEREO_INLIERS`
+                // and under half of them within the robust threshold: mismatched disparities,
+                // e.g. beside the left border) also gave the seed its distance; the detection
+                // is refined again without them (mono, with the ground plane if any).
+                let n_st = input.scene.stereo_points.len();
+                let support = pose.residuals.stereo_points;
+                if n_st > 0 && pose.failure.is_none() && support < MIN_STEREO_INLIERS && 2 * support < n_st {
+                    let mono = RefineInput { scene: Scene { stereo_points: &[], ..input.scene }, ..*input };
+                    return self.refine_with_colour(&mono, det, colour);
+                }
                 match (&mask, det.t_cam_tube.is_none()) {
                     (Some(m), true) => self.checked_against_mask(pose, &seed, m, input.camera),
                     _ => pose,
@@ -511,10 +526,17 @@ impl Refiner {
         if self.config.stereo_edge_polish && !scene.stereo_points.is_empty() && scene.mask.is_none() && best.failure.is_none() {
             // Stereo points fix the distance and tilt but, biased at the tube's outline, also
             // pull it across the image; the edges alone then place it in the image with the
-            // distance and tilt kept (the mono keep-depth mode, forced; no re-placement at the
-            // ground's height, which mask seeds' settings ask for in mono, and no distance from
-            // the ends' length: the stereo distance stands).
-            let cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ground_relief_sigma_m: 0.0, mono_length_depth: false, ..self.config.clone() };
+            // distance and tilt kept (the mono keep-depth mode, forced). Where the stereo points
+            // support the fit (at least `MIN_STEREO_INLIERS` within the robust threshold), the
+            // stereo distance stands: no re-placement at the ground's height, which mask seeds'
+            // settings ask for in mono, and no distance from the ends' length. Without that
+            // support (a tube cut by the left border has only mismatched points) the mono
+            // settings apply, and the ground may place it.
+            let mut cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
+            if best.stats.stereo_points >= MIN_STEREO_INLIERS {
+                cfg.ground_relief_sigma_m = 0.0;
+                cfg.mono_length_depth = false;
+            }
             let mono_scene = Scene { stereo_points: &[], ..scene };
             let polished = fit::fit(&self.model, &cfg, &pyr, 0, &mono_scene, best.state);
             if polished.failure.is_none() {

@@ -440,3 +440,29 @@ fn stereo_polish_keeps_the_stereo_distance_over_a_lower_ground() {
     let err = (p.centre - t.centre).norm();
     assert!(err < 0.004, "centre {:.1} mm off the truth (pulled toward the ground?)", err * 1e3);
 }
+
+/// Mismatched stereo points (here: every point 10 m away along its pixel's ray, as SGM gives
+/// beside the left border) put a mask seed's distance there and support no fit: the detection
+/// is refined as if there were none (mono with the ground plane), not left converged far away.
+#[test]
+fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
+    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    let (sc, _) = one_scene();
+    let model = default_model();
+    let mask = tube_mask(&model, &sc);
+    let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
+    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
+    det.axis_seed = AxisSeed::from_pixels(pixels.iter().copied());
+    det.mask = Some(Rle::from_mask(&mask));
+    let cam = &sc.camera;
+    let junk: Vec<nalgebra::Point3<f64>> = pixels.iter().map(|&(x, y)| nalgebra::Point3::from(cam.unproject(&nalgebra::Point2::new(x, y)).normalize() * 10.0)).collect();
+    let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
+    let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let with_junk = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene { depth: None, stereo_points: &junk, ground: None, mask: None } };
+    let without = RefineInput { scene: FitScene::default(), ..with_junk };
+    let (a, b) = (refiner.refine(&with_junk, &det), refiner.refine(&without, &det));
+    assert!(b.converged, "{:?}", b.failure);
+    assert_eq!((a.centre, a.axis, a.converged), (b.centre, b.axis, b.converged), "the mono pose, not one at 10 m");
+    assert_eq!(a.residuals.stereo_points, 0);
+    assert!((a.centre - sc.truth.centre).norm() < 0.05, "{:.3} m off", (a.centre - sc.truth.centre).norm());
+}
