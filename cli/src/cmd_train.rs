@@ -114,9 +114,9 @@ fn average_models(args: &TrainArgs) -> Result<()> {
     for p in &args.average {
         models.push(LearnedModel::load(p).with_context(|| format!("reading --average model {}", p.display()))?);
     }
-    let names: Vec<String> = args.average.iter().enumerate().map(|(k, p)| format!("model {} = {}", k + 1, p.display())).collect();
-    let mut soup = tubeloc_detect::learned::weight_average(&models).with_context(|| format!("averaging {}", names.join(", ")))?;
     let names: Vec<String> = args.average.iter().map(|p| p.display().to_string()).collect();
+    let numbered: Vec<String> = names.iter().enumerate().map(|(k, n)| format!("model {} = {n}", k + 1)).collect();
+    let mut soup = tubeloc_detect::learned::weight_average(&models).with_context(|| format!("averaging {}", numbered.join(", ")))?;
     soup.meta.notes = format!("uniform weight average of {}", names.join(", "));
     if let Some(d) = &args.val {
         let val = load_coco_dir(d, soup.meta.preprocess, Some(args.val_limit)).with_context(|| format!("loading validation set {}", d.display()))?;

@@ -28,7 +28,7 @@ pub fn weight_average(models: &[LearnedModel]) -> Result<LearnedModel, LearnedEr
             )));
         }
     }
-    let out = LearnedModel::with_fine_mask(
+    let mut out = LearnedModel::with_fine_mask(
         first.meta.preprocess,
         first.meta.net.width,
         first.meta.net.fine_mask,
@@ -49,7 +49,6 @@ pub fn weight_average(models: &[LearnedModel]) -> Result<LearnedModel, LearnedEr
         let mean = (sum.expect("at least one model") / models.len() as f64)?;
         var.set(&mean)?;
     }
-    let mut out = out;
     out.meta = first.meta.clone();
     out.meta.steps = models.iter().map(|m| m.meta.steps).max().unwrap_or(0);
     out.meta.notes = format!(
