@@ -367,10 +367,18 @@ pub struct Refiner {
     pub config: RefineConfig,
 }
 
-/// Fewest stereo points within the robust threshold for a stereo fit's distance to be trusted
-/// by the edge polish (see [`RefineConfig::stereo_edge_polish`]); a detection's fit with fewer
-/// (and under half of its points) is redone without them ([`Refiner::refine`]).
+/// Stereo points within the robust threshold that make a fit's stereo distance trusted
+/// whatever the region's point count ([`stereo_supports_fit`]).
 pub const MIN_STEREO_INLIERS: usize = 20;
+
+/// Whether a fit's stereo points support it: at least [`MIN_STEREO_INLIERS`] of them, or at
+/// least half of the `points`, lie within the robust threshold (`inliers`,
+/// [`tubeloc_core::ResidualStats::stereo_points`]). Without that support (mismatched disparities, e.g. beside
+/// the left border) a detection is refined again without its points ([`Refiner::refine`]) and
+/// the edge polish does not keep their distance ([`RefineConfig::stereo_edge_polish`]).
+pub fn stereo_supports_fit(inliers: usize, points: usize) -> bool {
+    inliers >= MIN_STEREO_INLIERS || 2 * inliers >= points
+}
 
 impl Refiner {
     /// A refiner for `tube` with `config`.
@@ -401,13 +409,10 @@ impl Refiner {
                 let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
                 let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
                 let pose = r.refine_seed_inner(input, &seed, det.image_id, det.score, Some(det.bbox), ends);
-                // Stereo points that do not support the fit (fewer than `MIN_STEREO_INLIERS`
-                // and under half of them within the robust threshold: mismatched disparities,
-                // e.g. beside the left border) also gave the seed its distance; the detection
-                // is refined again without them (mono, with the ground plane if any).
+                // Stereo points that do not support the fit also gave the seed its distance;
+                // the detection is refined again without them (mono, with the ground plane if any).
                 let n_st = input.scene.stereo_points.len();
-                let support = pose.residuals.stereo_points;
-                if n_st > 0 && pose.failure.is_none() && support < MIN_STEREO_INLIERS && 2 * support < n_st {
+                if n_st > 0 && pose.failure.is_none() && !stereo_supports_fit(pose.residuals.stereo_points, n_st) {
                     let mono = RefineInput { scene: Scene { stereo_points: &[], ..input.scene }, ..*input };
                     return self.refine_with_colour(&mono, det, colour);
                 }
@@ -527,13 +532,12 @@ impl Refiner {
             // Stereo points fix the distance and tilt but, biased at the tube's outline, also
             // pull it across the image; the edges alone then place it in the image with the
             // distance and tilt kept (the mono keep-depth mode, forced). Where the stereo points
-            // support the fit (at least `MIN_STEREO_INLIERS` within the robust threshold), the
-            // stereo distance stands: no re-placement at the ground's height, which mask seeds'
-            // settings ask for in mono, and no distance from the ends' length. Without that
-            // support (a tube cut by the left border has only mismatched points) the mono
-            // settings apply, and the ground may place it.
+            // support the fit ([`stereo_supports_fit`]) the stereo distance stands: no
+            // re-placement at the ground's height, which mask seeds' settings ask for in mono,
+            // and no distance from the ends' length. Without that support the mono settings
+            // apply, and the ground may place the tube.
             let mut cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
-            if best.stats.stereo_points >= MIN_STEREO_INLIERS {
+            if stereo_supports_fit(best.stats.stereo_points, scene.stereo_points.len()) {
                 cfg.ground_relief_sigma_m = 0.0;
                 cfg.mono_length_depth = false;
             }
