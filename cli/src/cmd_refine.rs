@@ -33,7 +33,7 @@ use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
-use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, MaskSnap};
+use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, trim_kept_mask, MaskSnap};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
 
 mod colour;
@@ -94,7 +94,7 @@ pub struct RefineArgs {
     /// Also write the detections with each mask snapped to its converged pose's silhouette
     /// (`tubeloc_refine::silhouette`: silhouette ∩ mask dilated by --snap-dilate-px, where it
     /// agrees with the mask); same format as --detections, in the order of --out. Detections
-    /// without a mask, a converged pose or agreement keep their mask.
+    /// without a converged pose or agreement keep their mask, eroded by --snap-kept-erode-px.
     #[arg(long)]
     pub(crate) snapped_out: Option<PathBuf>,
     /// Decide which end is the seal end from the image's edges only. By default the tube's
@@ -108,6 +108,10 @@ pub struct RefineArgs {
     /// --snapped-out: least IoU of the snapped mask with the detector's for the snap to be used.
     #[arg(long, default_value_t = MaskSnap::default().min_agreement)]
     pub(crate) snap_min_agreement: f64,
+    /// --snapped-out: masks that are not snapped are eroded by this many pixels (the
+    /// segmenter's masks are wider than the tube; 0 keeps them as they are).
+    #[arg(long, default_value_t = MaskSnap::default().kept_erode_px)]
+    pub(crate) snap_kept_erode_px: usize,
     /// Right image of a stereo pair (needs --rig).
     #[arg(long)]
     pub(crate) right: Option<PathBuf>,
@@ -259,18 +263,18 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
 }
 
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
-/// (and is the fit's, not a kept seed) and agrees with the mask; otherwise `det` unchanged. Returns whether it was snapped.
+/// (and is the fit's, not a kept seed) and agrees with the mask; otherwise with its mask
+/// trimmed ([`trim_kept_mask`]), or unchanged without a mask. Returns whether it was snapped.
 pub(crate) fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
-    let Some(mask) = det.mask.as_ref().filter(|_| pose.converged && pose.seed_kept.is_none()).and_then(|m| m.to_mask().ok()) else { return false };
-    let silhouette = silhouette_mask(&refiner.model, pose, camera);
-    match snap_mask(&mask, &silhouette, snap) {
-        Some(m) => {
-            det.bbox = m.bbox();
-            det.mask = Some(tubeloc_core::Rle::from_mask(&m));
-            true
-        }
-        None => false,
+    let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return false };
+    let fitted = pose.converged && pose.seed_kept.is_none();
+    let snapped = fitted.then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
+    let was_snapped = snapped.is_some();
+    if let Some(m) = snapped.or_else(|| trim_kept_mask(&mask, snap)) {
+        det.bbox = m.bbox();
+        det.mask = Some(tubeloc_core::Rle::from_mask(&m));
     }
+    was_snapped
 }
 
 impl RefineArgs {
@@ -279,7 +283,7 @@ impl RefineArgs {
         if !(0.0..=1.0).contains(&self.snap_min_agreement) {
             bail!("--snap-min-agreement {}: expected a value in [0, 1]", self.snap_min_agreement);
         }
-        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement })
+        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement, kept_erode_px: self.snap_kept_erode_px })
     }
 
     /// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks

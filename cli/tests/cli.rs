@@ -272,6 +272,17 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
     assert!(mb < 0.8, "coarse masks' mean IoU {mb:.3}");
     assert!(ma > 0.9 && ma > mb + 0.1, "snapped masks' mean IoU {ma:.3}, coarse {mb:.3}");
 
+    // Masks that are not snapped (here: none, since no snap reaches agreement 1) are eroded by
+    // --snap-kept-erode-px within the image, or kept as they are with 0.
+    let mask = |d: &tubeloc_core::TubeDetection| d.mask.as_ref().unwrap().to_mask().unwrap();
+    for (erode, expect) in [("1", 1usize), ("0", 0)] {
+        ok(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--ground", "auto", "--out", p(&poses), "--snapped-out", p(&snapped), "--snap-min-agreement", "1", "--snap-kept-erode-px", erode]);
+        for (b, a) in before.iter().zip(&read(&snapped)) {
+            assert_eq!(mask(a), mask(b).eroded_within_image(expect), "--snap-kept-erode-px {erode}");
+            assert_eq!(a.bbox, mask(a).bbox());
+        }
+    }
+
     // Bad settings and a mode without masks are refused before any work.
     let o = tubeloc(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--out", p(&poses), "--snapped-out", p(&snapped), "--snap-min-agreement", "2"]);
     assert_eq!(o.status.code(), Some(1));

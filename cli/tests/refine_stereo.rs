@@ -82,3 +82,13 @@ fn stereo_term_fixes_the_depth_that_mono_loses() {
 fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
+
+/// `refine` does not depend on `stereo`, so its covariance's count of stereo points per
+/// independent measurement mirrors the default SGM census window by hand; this keeps the two
+/// in step.
+#[test]
+fn stereo_points_per_measurement_is_the_default_census_window() {
+    let sgm = tubeloc_stereo::sgm::SgmParams::default();
+    let refine = tubeloc_refine::RefineConfig::default();
+    assert_eq!(refine.stereo_points_per_measurement, (sgm.census_width * sgm.census_height) as f64, "census window {}x{}", sgm.census_width, sgm.census_height);
+}

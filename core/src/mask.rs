@@ -59,18 +59,26 @@ impl BinaryMask {
     /// The mask dilated by `r` pixels in 4-neighbour steps (an L1 diamond of radius `r`).
     /// Only the set pixels' bounding box grown by `r` is processed.
     pub fn dilated(&self, r: usize) -> BinaryMask {
-        self.morphed(r, true)
+        self.morphed(r, true, true)
     }
 
     /// The mask eroded by `r` pixels in 4-neighbour steps; pixels on the image border are
     /// cleared at each step. Only the set pixels' bounding box is processed.
     pub fn eroded(&self, r: usize) -> BinaryMask {
-        self.morphed(r, false)
+        self.morphed(r, false, true)
     }
 
-    /// `r` steps of 4-neighbour dilation (`grow`) or erosion, within the set pixels' bounding
-    /// box grown by `r + 1` (nothing outside it can change, and it holds no set pixel).
-    fn morphed(&self, r: usize, grow: bool) -> BinaryMask {
+    /// The mask eroded by `r` pixels in 4-neighbour steps, where pixels beyond the image border
+    /// count as set: the border does not erode, so a region cut by the border keeps its edge
+    /// there (a tube cut by the image's edge keeps its pixels on that edge).
+    pub fn eroded_within_image(&self, r: usize) -> BinaryMask {
+        self.morphed(r, false, false)
+    }
+
+    /// `r` steps of 4-neighbour dilation (`grow`) or erosion (which clears the pixels on the
+    /// image border when `border_erodes`), within the set pixels' bounding box grown by `r + 1`
+    /// (nothing outside it can change, and it holds no set pixel).
+    fn morphed(&self, r: usize, grow: bool, border_erodes: bool) -> BinaryMask {
         let mut out = self.clone();
         let [bx, by, bw, bh] = self.bbox();
         if r == 0 || bw == 0.0 {
@@ -86,11 +94,14 @@ impl BinaryMask {
             std::mem::swap(&mut prev, &mut out);
             for y in y0..y1 {
                 for x in x0..x1 {
-                    let n = [x > 0 && prev.get(x - 1, y), prev.get(x + 1, y), y > 0 && prev.get(x, y - 1), prev.get(x, y + 1)];
                     let v = if grow {
+                        let n = [x > 0 && prev.get(x - 1, y), prev.get(x + 1, y), y > 0 && prev.get(x, y - 1), prev.get(x, y + 1)];
                         prev.get(x, y) || n.iter().any(|&b| b)
                     } else {
-                        prev.get(x, y) && x > 0 && y > 0 && x + 1 < w && y + 1 < h && n.iter().all(|&b| b)
+                        // Beyond the border a neighbour counts as clear (border_erodes) or set.
+                        let b = !border_erodes;
+                        let n = [if x > 0 { prev.get(x - 1, y) } else { b }, if x + 1 < w { prev.get(x + 1, y) } else { b }, if y > 0 { prev.get(x, y - 1) } else { b }, if y + 1 < h { prev.get(x, y + 1) } else { b }];
+                        prev.get(x, y) && n.iter().all(|&b| b)
                     };
                     out.data[y * w + x] = v as u8;
                 }

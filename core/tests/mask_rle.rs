@@ -211,6 +211,19 @@ fn erosion_clears_a_pixel_ring() {
 }
 
 #[test]
+fn erosion_within_the_image_keeps_a_border_cut_edge() {
+    // A 6x6 block cut by the left border: the border does not erode, the other sides do.
+    let m = BinaryMask::from_fn(10, 10, |x, y| x < 6 && (2..8).contains(&y));
+    let e = m.eroded_within_image(1);
+    assert_eq!(e.area(), 5 * 4);
+    assert!(e.get(0, 3) && e.get(4, 6) && !e.get(5, 3) && !e.get(0, 2));
+    assert_eq!(m.eroded(1).area(), 4 * 4, "plain erosion clears the border column too");
+    // The whole image set stays set.
+    let full = BinaryMask::from_fn(7, 5, |_, _| true);
+    assert_eq!(full.eroded_within_image(2), full);
+}
+
+#[test]
 fn dilation_grows_a_pixel_into_a_diamond() {
     let m = BinaryMask::from_fn(11, 11, |x, y| x == 5 && y == 5);
     let d = m.dilated(2);
