@@ -45,6 +45,9 @@ pub struct Scene<'a> {
     /// normal (the last inside → outside transition within the search radius) instead of image
     /// edges: the fit then makes the projected silhouette agree with the mask.
     pub mask: Option<(&'a tubeloc_core::BinaryMask, &'a CameraModel)>,
+    /// The detector's image axis as a prior on the axis's direction in the image
+    /// ([`crate::priors::ImageAxisPrior`]; mask seeds, `RefineConfig::mask_axis_sigma_px`).
+    pub image_axis: Option<crate::priors::ImageAxisPrior>,
 }
 
 /// Offset (level pixels along `n`, from the sample's level position) of the mask boundary seen
@@ -256,7 +259,7 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
         let rz = model.radius_at(z.clamp(-half, half));
         out.push(Some((rho - rz) / cfg.stereo_sigma_m));
     }
-    priors::push_residuals(model, st, scene.ground.as_ref(), cfg, sp, out);
+    priors::push_residuals(model, st, scene.ground.as_ref(), scene.image_axis.as_ref(), cfg, sp, out);
 }
 
 /// Threshold of residual `i`: image (`i < n_img`), stereo (`i < n_img + n_st`) or prior
@@ -339,7 +342,7 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         } else if i < n_img + n_st {
             Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
-            priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), cfg, sp, u)
+            priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), scene.image_axis.as_ref(), cfg, sp, u)
         };
         if !j.iter().all(|v| v.is_finite()) {
             continue;

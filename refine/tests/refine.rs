@@ -44,7 +44,7 @@ fn run_batch_at(dist: (f64, f64), n: usize, seed: u64, stereo: bool, distorted: 
         let sc = render(&model, &cam, truth, up, gd, None, seed * 1000 + i as u64, 0.01);
         let pts = if stereo { stereo_points(&model, &sc, 4, 0.25, 0.2, i as u64) } else { vec![] };
         let g = ground.then(|| tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d });
-        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: g, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: g, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None, image_axis: None } };
         let seed_state = perturb(&mut rng, &truth, pos_m, ang_deg);
         if std::env::var("REFINE_DEBUG").is_ok() {
             eprintln!("scene {i}: truth c {:?} a {:?}; seed c {:?} a {:?}", truth.centre.as_slice(), truth.axis.as_slice(), seed_state.c.as_slice(), seed_state.a.as_slice());
@@ -162,7 +162,7 @@ fn flipped_seed_gives_the_same_flip_free_axis_and_end() {
     let (sc, pts) = one_scene();
     let t = sc.truth;
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None, image_axis: None } };
     let a = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None);
     let b = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: -t.axis }, end_known: true }, 0, 1.0, None);
     assert!(a.converged && b.converged, "{:?} {:?}", a.failure, b.failure);
@@ -255,7 +255,7 @@ fn partly_occluded_tube_converges_or_is_flagged() {
     converges_or_is_flagged("occluded", &sc, 50);
     // With the depth map the occluded contour samples are left out.
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: Some((&sc.depth, &sc.camera)), stereo_points: &[], ground: None, mask: None } };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: Some((&sc.depth, &sc.camera)), stereo_points: &[], ground: None, mask: None, image_axis: None } };
     let mut rng = ChaCha8Rng::seed_from_u64(50);
     let st = perturb(&mut rng, &sc.truth, 0.003, 2.0);
     let p = refiner.refine_seed(&input, &Seed { state: st, end_known: false }, 0, 1.0, None);
@@ -280,7 +280,7 @@ fn mask_agreement_seeds_off_by_10mm_5deg_converge_back() {
         let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (0.8, 1.6));
         let sc = render(&model, &cam, truth, up, gd, None, 21_000 + i, 0.01);
         let mask = tube_mask(&model, &sc);
-        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &[], ground: None, mask: Some((&mask, &sc.camera)) } };
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: &[], ground: None, mask: Some((&mask, &sc.camera)), image_axis: None } };
         let seed_state = perturb(&mut rng, &truth, 0.010, 5.0);
         e.seed_pos.push((seed_state.c - truth.centre).norm());
         e.seed_ang.push(axis_angle(&seed_state.a, &truth.axis).to_degrees());
@@ -409,7 +409,7 @@ fn correlated_stereo_points_widen_the_covariance_not_the_fit() {
     let refine = |k: f64, stereo: &[nalgebra::Point3<f64>]| {
         let cfg = RefineConfig { stereo_points_per_measurement: k, ..RefineConfig::default() };
         let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), cfg).unwrap();
-        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: stereo, ground: None, mask: None } };
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: stereo, ground: None, mask: None, image_axis: None } };
         refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None)
     };
     let (one, many) = (refine(1.0, &pts), refine(63.0, &pts));
@@ -434,7 +434,7 @@ fn stereo_polish_keeps_the_stereo_distance_over_a_lower_ground() {
     let cfg = RefineConfig { ground_height_known: false, ground_relief_sigma_m: 0.001, ..RefineConfig::default() };
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), cfg).unwrap();
     let ground = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d - 0.020 };
-    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(ground), scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None } };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(ground), scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None, image_axis: None } };
     let p = refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None);
     assert!(p.converged, "{:?}", p.failure);
     let err = (p.centre - t.centre).norm();
@@ -458,11 +458,54 @@ fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
     let junk: Vec<nalgebra::Point3<f64>> = pixels.iter().map(|&(x, y)| nalgebra::Point3::from(cam.unproject(&nalgebra::Point2::new(x, y)).normalize() * 10.0)).collect();
     let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let with_junk = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene { depth: None, stereo_points: &junk, ground: None, mask: None } };
+    let with_junk = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene { depth: None, stereo_points: &junk, ground: None, mask: None, image_axis: None } };
     let without = RefineInput { scene: FitScene::default(), ..with_junk };
     let (a, b) = (refiner.refine(&with_junk, &det), refiner.refine(&without, &det));
     assert!(b.converged, "{:?}", b.failure);
     assert_eq!((a.centre, a.axis, a.converged), (b.centre, b.axis, b.converged), "the mono pose, not one at 10 m");
     assert_eq!(a.residuals.stereo_points, 0);
     assert!((a.centre - sc.truth.centre).norm() < 0.05, "{:.3} m off", (a.centre - sc.truth.centre).norm());
+}
+
+/// The mask's axis line is a prior on the fitted axis's image direction
+/// (`RefineConfig::mask_axis_sigma_px`): with a mask axis turned 1 degree in the image, a tight
+/// prior keeps the fit on the mask's line, no prior lets the edges bring it back to the truth,
+/// and the default (0.4 px) lets the edges of this clean, fully visible tube win.
+#[test]
+fn mask_axis_prior_holds_the_image_direction_by_its_sigma() {
+    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    let (sc, _) = one_scene();
+    let model = default_model();
+    let mask = tube_mask(&model, &sc);
+    let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
+    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
+    let mut ax = AxisSeed::from_pixels(pixels.iter().copied()).unwrap();
+    let turn = 1f64.to_radians();
+    let [dx, dy] = ax.direction_px;
+    ax.direction_px = [dx * turn.cos() - dy * turn.sin(), dx * turn.sin() + dy * turn.cos()];
+    let mask_dir = nalgebra::Vector2::new(ax.direction_px[0], ax.direction_px[1]);
+    det.axis_seed = Some(ax);
+    det.mask = Some(Rle::from_mask(&mask));
+    let cam = &sc.camera;
+    let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
+    let input = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene::default() };
+    // Image direction of a pose's axis at its centre, and its angle to a unit image direction.
+    let image_angle = |c: Vector3<f64>, a: Vector3<f64>, d: &nalgebra::Vector2<f64>| {
+        let p0 = cam.project(&nalgebra::Point3::from(c)).unwrap();
+        let p1 = cam.project(&nalgebra::Point3::from(c + a * 0.01)).unwrap();
+        (p1 - p0).normalize().dot(d).abs().min(1.0).acos().to_degrees()
+    };
+    let p0 = cam.project(&nalgebra::Point3::from(sc.truth.centre)).unwrap();
+    let true_dir = (cam.project(&nalgebra::Point3::from(sc.truth.centre + sc.truth.axis * 0.01)).unwrap() - p0).normalize();
+    let refine = |sigma_px: f64| Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_axis_sigma_px: sigma_px, ..RefineConfig::default() }).unwrap().refine(&input, &det);
+    let tight = refine(0.02);
+    assert!(tight.converged, "{:?}", tight.failure);
+    assert!(image_angle(tight.centre, tight.axis, &mask_dir) < 0.3, "tight prior: {:.2} deg off the mask's line", image_angle(tight.centre, tight.axis, &mask_dir));
+    for sigma_px in [0.0, RefineConfig::default().mask_axis_sigma_px] {
+        let p = refine(sigma_px);
+        assert!(p.converged, "{:?}", p.failure);
+        let off = image_angle(p.centre, p.axis, &true_dir);
+        assert!(off < 0.5, "sigma {sigma_px} px: {off:.2} deg off the true image axis");
+        assert!(axis_angle(&p.axis, &sc.truth.axis).to_degrees() < 0.5);
+    }
 }
