@@ -9,7 +9,8 @@
 //! Run: `cargo bench -p tubeloc-detect --bench line2d` (set `LINE2D_BENCH_QUICK=1` for a
 //! ~700-template library). The peer part needs `pip install opencv-contrib-python-headless`.
 
-use criterion::{black_box, Criterion};
+use criterion::Criterion;
+use std::hint::black_box;
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
