@@ -50,6 +50,14 @@ pub struct Scene<'a> {
     pub image_axis: Option<crate::priors::ImageAxisPrior>,
 }
 
+/// The image-axis prior of a fit: `Scene::image_axis`, in fits without stereo points only. In
+/// the stereo fit it traded position for axis (calibration stereo set: perpendicular p90 4.12
+/// -> 4.54 mm); the stereo edge polish, which keeps the stereo distance, fits without the
+/// points and uses it (axis p90 2.85 -> 2.19 deg).
+fn image_axis_prior<'s>(scene: &'s Scene) -> Option<&'s crate::priors::ImageAxisPrior> {
+    scene.image_axis.as_ref().filter(|_| scene.stereo_points.is_empty())
+}
+
 /// Offset (level pixels along `n`, from the sample's level position) of the mask boundary seen
 /// from full-resolution pixel `uf` along the outward normal `n`: the outermost inside → outside
 /// transition within `radius_full` pixels, sampled every 0.25 px (nearest pixel).
@@ -259,7 +267,7 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
         let rz = model.radius_at(z.clamp(-half, half));
         out.push(Some((rho - rz) / cfg.stereo_sigma_m));
     }
-    priors::push_residuals(model, st, scene.ground.as_ref(), scene.image_axis.as_ref(), cfg, sp, out);
+    priors::push_residuals(model, st, scene.ground.as_ref(), image_axis_prior(scene), cfg, sp, out);
 }
 
 /// Threshold of residual `i`: image (`i < n_img`), stereo (`i < n_img + n_st`) or prior
@@ -342,7 +350,7 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         } else if i < n_img + n_st {
             Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
         } else {
-            priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), scene.image_axis.as_ref(), cfg, sp, u)
+            priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), image_axis_prior(scene), cfg, sp, u)
         };
         if !j.iter().all(|v| v.is_finite()) {
             continue;

@@ -231,12 +231,13 @@ pub struct RefineConfig {
     /// learned seeds, `--ground auto`): axis 0.63 / 4.06 -> 0.61 / 3.23 degrees (median / p90),
     /// perpendicular 11.2 -> 9.6 mm (median); 0.5: 0.63 / 3.70 degrees.
     pub mask_seed_min_agreement: f64,
-    /// [`Refiner::refine`], detections with a mask and its axis and no template pose, mono (no
-    /// stereo points): the mask's axis line is a prior on the fitted axis's direction in the
-    /// image ([`priors::ImageAxisPrior`]) with the line's ends known to this many pixels; 0
-    /// disables. With stereo points it is not used: on the calibration stereo set (seed 11,
-    /// learned seeds, stereo + ground) it turned axis p90 2.85 -> 2.68 deg but perpendicular
-    /// p90 4.12 -> 4.54 mm.
+    /// [`Refiner::refine`], detections with a mask and its axis and no template pose: the mask's
+    /// axis line is a prior on the fitted axis's direction in the image
+    /// ([`priors::ImageAxisPrior`]) with the line's ends known to this many pixels, with a ground
+    /// plane, in the fits without stereo points (mono, and the stereo edge polish that keeps the
+    /// stereo distance; on the calibration stereo set, seed 11, learned seeds, stereo + ground:
+    /// axis p90 2.85 -> 2.19 deg, perpendicular p90 4.12 -> 4.29 mm; also in the stereo fit
+    /// itself: 2.68 deg, 4.54 mm; stereo without the ground: 11.2 -> 12.9 deg); 0 disables.
     /// The fit's edges and the mask's shape err independently: without the prior the fit left
     /// 207 of 1582 no-tags test axes more than 0.5 deg further from their truth than the mask's
     /// axis, and brought 440 that much closer. 0.4 px was chosen on the generated validation
@@ -423,10 +424,9 @@ impl Refiner {
                 let r = Refiner { model: self.model.clone(), config: cfg };
                 let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
                 let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
-                // The mask's axis line as a prior on the image direction: mono fits only (with
-                // stereo points it traded position for axis on the calibration stereo set).
-                let mono = input.scene.stereo_points.is_empty();
-                let image_axis = match (&det.axis_seed, &mask, det.t_cam_tube.is_none() && mono) {
+                // The mask's axis line as a prior on the image direction, with a ground plane
+                // (used by the fits without stereo points: mono, and the stereo edge polish).
+                let image_axis = match (&det.axis_seed, &mask, det.t_cam_tube.is_none() && has_ground) {
                     (Some(ax), Some(_), true) => priors::ImageAxisPrior::from_image_line(input.camera, ax.centre_px, ax.direction_px, self.config.mask_axis_sigma_px, self.model.length, seed.state.c.norm()),
                     _ => None,
                 };

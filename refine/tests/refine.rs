@@ -470,11 +470,13 @@ fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
 /// The mask's axis line is a prior on the fitted axis's image direction
 /// (`RefineConfig::mask_axis_sigma_px`): with a mask axis turned 1 degree in the image, a tight
 /// prior keeps the fit on the mask's line, no prior lets the edges bring it back to the truth,
-/// and the default (0.4 px) lets the edges of this clean, fully visible tube win.
+/// and the default (0.4 px) lets the edges of this clean, fully visible tube win. With stereo
+/// points and the ground plane the stereo edge polish takes the prior too; without a ground
+/// plane it is not used.
 #[test]
 fn mask_axis_prior_holds_the_image_direction_by_its_sigma() {
     use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
-    let (sc, _) = one_scene();
+    let (sc, pts) = one_scene();
     let model = default_model();
     let mask = tube_mask(&model, &sc);
     let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
@@ -508,4 +510,14 @@ fn mask_axis_prior_holds_the_image_direction_by_its_sigma() {
         assert!(off < 0.5, "sigma {sigma_px} px: {off:.2} deg off the true image axis");
         assert!(axis_angle(&p.axis, &sc.truth.axis).to_degrees() < 0.5);
     }
+    let with_points = |ground: Option<tubeloc_refine::GroundPlane>, sigma_px: f64| {
+        let input = RefineInput { image: &sc.image, camera: cam, ground, scene: FitScene { stereo_points: &pts, ..FitScene::default() } };
+        let p = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_axis_sigma_px: sigma_px, ..RefineConfig::default() }).unwrap().refine(&input, &det);
+        assert!(p.converged && p.residuals.stereo_points > 0, "{:?}", p.failure);
+        p
+    };
+    let polished = with_points(Some(g), 0.02);
+    assert!(image_angle(polished.centre, polished.axis, &mask_dir) < 0.3, "stereo + ground, tight prior: {:.2} deg off the mask's line", image_angle(polished.centre, polished.axis, &mask_dir));
+    let (a, b) = (with_points(None, 0.02), with_points(None, 0.0));
+    assert_eq!((a.centre, a.axis), (b.centre, b.axis), "no ground plane: the prior is not used");
 }
