@@ -1,6 +1,9 @@
 //! Mono refinement speed: one tube per iteration on a rayon pool of one thread, excluding
 //! detection and image loading. The scene is the test renderer's (1024x768, tube at ~1.2 m,
-//! seed 3 mm / 2 deg off the truth).
+//! seed 3 mm / 2 deg off the truth). A second case refines the tube from a mask detection (the
+//! learned segmenter's kind of seed: mask, axis seed, no template pose) with the ground plane,
+//! the path of `tubeloc refine --detections --ground auto` (coarse search, colour-free end
+//! decision, mask check, image-axis prior).
 //!
 //! Run: `cargo bench -p tubeloc-refine --bench refine` (criterion reports the median time per
 //! tube).
@@ -19,6 +22,33 @@ fn bench(c: &mut Criterion) {
     assert!(p.converged, "bench scene does not converge: {:?}", p.failure);
     eprintln!("bench tube: {} iterations, error {:.2} mm", p.residuals.iterations, (p.centre - ss.scene.truth.centre).norm() * 1e3);
     c.bench_function("refine_mono_one_tube_1_thread", |b| b.iter(|| pool.install(|| refiner.refine_seed(&input, seed, 0, 1.0, None))));
+
+    for (name, range) in [("1.2m", (1.1, 1.3)), ("2.5m", (2.4, 2.6))] {
+        let (scene, det) = mask_seed_scene(range);
+        let ground = tubeloc_refine::GroundPlane { normal: scene.ground_n, offset: scene.ground_d };
+        let input = tubeloc_refine::RefineInput { image: &scene.image, camera: &scene.camera, ground: Some(ground), scene: tubeloc_refine::Scene::default() };
+        let p = pool.install(|| refiner.refine(&input, &det));
+        assert!(p.converged, "mask-seed bench does not converge: {:?}", p.failure);
+        eprintln!("mask seed at {name}: {:.0} px long, error {:.2} mm", det.axis_seed.as_ref().unwrap().length_px, (p.centre - scene.truth.centre).norm() * 1e3);
+        c.bench_function(&format!("refine_mono_mask_seed_ground_{name}_1_thread"), |b| b.iter(|| pool.install(|| refiner.refine(&input, &det))));
+    }
+}
+
+/// A rendered tube at a distance drawn from `range` (metres) and the mask detection of its
+/// exact silhouette (the learned segmenter's kind of seed).
+fn mask_seed_scene(range: (f64, f64)) -> (Scene, tubeloc_core::TubeDetection) {
+    use rand::SeedableRng;
+    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    let model = default_model();
+    let cam = camera(false);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    let (truth, up, gd) = random_truth(&mut rng, &model, &cam, range);
+    let scene = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
+    let mask = tube_mask(&model, &scene);
+    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
+    det.axis_seed = AxisSeed::from_pixels((0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)));
+    det.mask = Some(Rle::from_mask(&mask));
+    (scene, det)
 }
 
 criterion_group! {

@@ -113,6 +113,13 @@ impl CylinderModel {
         let dp = d - a * da;
         let qa = dp.dot(&dp);
         let qb = 2.0 * wp.dot(&dp);
+        // Early out: the segment's line passes the axis farther than the widest section's radius
+        // (the test below for r_max fails, hence for every section).
+        let rmax = self.max_radius();
+        let qc_max = wp.dot(&wp) - rmax * rmax;
+        if (qa < 1e-18 && qc_max >= 0.0) || (qa >= 1e-18 && qb * qb - 4.0 * qa * qc_max <= 0.0) {
+            return false;
+        }
         for sec in &self.sections {
             // Interval where the axial coordinate is inside the section.
             let (mut lo, mut hi): (f64, f64) = (0.0, 1.0 - 1e-9);
