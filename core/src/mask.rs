@@ -77,7 +77,12 @@ impl BinaryMask {
 
     /// `r` steps of 4-neighbour dilation (`grow`) or erosion (which clears the pixels on the
     /// image border when `border_erodes`), within the set pixels' bounding box grown by `r + 1`
-    /// (nothing outside it can change, and it holds no set pixel).
+    /// (nothing outside it can change, and it holds no set pixel). `r` steps of 4-neighbour
+    /// morphology reach exactly the pixels within city-block distance `r` (the window is a
+    /// rectangle, so shortest 4-neighbour paths stay inside it), so one two-pass city-block
+    /// distance transform of the window replaces the `r` passes: dilation keeps the pixels
+    /// within `r` of a set pixel, erosion the set pixels farther than `r` from a clear one
+    /// (with `border_erodes`, the pixels beyond the image border count as clear).
     fn morphed(&self, r: usize, grow: bool, border_erodes: bool) -> BinaryMask {
         let mut out = self.clone();
         let [bx, by, bw, bh] = self.bbox();
@@ -89,22 +94,57 @@ impl BinaryMask {
         let y0 = (by as usize).saturating_sub(r + 1);
         let x1 = (bx as usize + bw as usize + r + 1).min(w);
         let y1 = (by as usize + bh as usize + r + 1).min(h);
-        let mut prev = out.clone();
-        for _ in 0..r {
-            std::mem::swap(&mut prev, &mut out);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let v = if grow {
-                        let n = [x > 0 && prev.get(x - 1, y), prev.get(x + 1, y), y > 0 && prev.get(x, y - 1), prev.get(x, y + 1)];
-                        prev.get(x, y) || n.iter().any(|&b| b)
-                    } else {
-                        // Beyond the border a neighbour counts as clear (border_erodes) or set.
-                        let b = !border_erodes;
-                        let n = [if x > 0 { prev.get(x - 1, y) } else { b }, if x + 1 < w { prev.get(x + 1, y) } else { b }, if y > 0 { prev.get(x, y - 1) } else { b }, if y + 1 < h { prev.get(x, y + 1) } else { b }];
-                        prev.get(x, y) && n.iter().all(|&b| b)
-                    };
-                    out.data[y * w + x] = v as u8;
+        let (ww, wh) = (x1 - x0, y1 - y0);
+        const FAR: u32 = u32::MAX / 2;
+        // Sources: the set pixels (dilation) or the clear ones and, with `border_erodes`, the
+        // virtual clear pixels one step beyond the image border (erosion).
+        let mut dist: Vec<u32> = Vec::with_capacity(ww * wh);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let set = self.data[y * w + x] != 0;
+                let d = if set == grow {
+                    0
+                } else if !grow && border_erodes && (x == 0 || y == 0 || x + 1 == w || y + 1 == h) {
+                    1
+                } else {
+                    FAR
+                };
+                dist.push(d);
+            }
+        }
+        for j in 0..wh {
+            for i in 0..ww {
+                let k = j * ww + i;
+                let mut d = dist[k];
+                if i > 0 {
+                    d = d.min(dist[k - 1] + 1);
                 }
+                if j > 0 {
+                    d = d.min(dist[k - ww] + 1);
+                }
+                dist[k] = d;
+            }
+        }
+        for j in (0..wh).rev() {
+            for i in (0..ww).rev() {
+                let k = j * ww + i;
+                let mut d = dist[k];
+                if i + 1 < ww {
+                    d = d.min(dist[k + 1] + 1);
+                }
+                if j + 1 < wh {
+                    d = d.min(dist[k + ww] + 1);
+                }
+                dist[k] = d;
+            }
+        }
+        let r = r as u32;
+        for j in 0..wh {
+            let row = (y0 + j) * w + x0;
+            for i in 0..ww {
+                let d = dist[j * ww + i];
+                let v = if grow { d <= r } else { self.data[row + i] != 0 && d > r };
+                out.data[row + i] = v as u8;
             }
         }
         out

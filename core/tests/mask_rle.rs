@@ -251,6 +251,11 @@ fn windowed_morphology_matches_the_whole_image_reference() {
         for r in 0..5 {
             assert_eq!(m.dilated(r), morph_reference(&m, r, true), "dilate r {r} on {w}x{h}");
             assert_eq!(m.eroded(r), morph_reference(&m, r, false), "erode r {r} on {w}x{h}");
+            // Within the image: as if the image went on with set pixels beyond its border.
+            let pad = r + 1;
+            let padded = BinaryMask::from_fn(w + 2 * pad, h + 2 * pad, |x, y| x < pad || y < pad || x >= w + pad || y >= h + pad || m.get(x - pad, y - pad));
+            let reference = morph_reference(&padded, r, false);
+            assert_eq!(m.eroded_within_image(r), BinaryMask::from_fn(w, h, |x, y| reference.get(x + pad, y + pad)), "erode within the image r {r} on {w}x{h}");
         }
     }
 }

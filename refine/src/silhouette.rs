@@ -80,10 +80,18 @@ pub fn silhouette_mask(model: &CylinderModel, pose: &TubeAxisPose, camera: &Came
         return mask;
     }
     let (xa, xb, ya, yb) = (clip((x0 - 2.0).floor(), w), clip((x1 + 2.0).ceil(), w), clip((y0 - 2.0).floor(), h), clip((y1 + 2.0).ceil(), h));
+    // Rows are tested only within the convex hull of the projected octagonal prism that
+    // circumscribes the tube (octagon radius r_max / cos 22.5°), widened by the same 2 px.
+    let hull = projected_hull(&state, model, camera);
     // A point on each pixel's ray beyond the whole tube: the segment from the camera to it
     // crosses the solid exactly when the ray does.
     let far = 2.0 * (c.norm() + model.length);
     for y in ya..=yb {
+        let (xa, xb) = match hull.as_deref().and_then(|h| hull_row_span(h, y as f64, 2.0)) {
+            Some((lo, hi)) => (xa.max(clip(lo.floor(), w)), xb.min(clip(hi.ceil(), w))),
+            None if hull.is_some() => continue,
+            None => (xa, xb),
+        };
         for x in xa..=xb {
             let d = camera.unproject(&Point2::new(x as f64, y as f64));
             let p = Point3::from(d * (far / d.norm()));
@@ -93,6 +101,60 @@ pub fn silhouette_mask(model: &CylinderModel, pose: &TubeAxisPose, camera: &Came
         }
     }
     mask
+}
+
+/// The convex hull (counter-clockwise, image pixels) of the projections of an octagonal prism
+/// circumscribing the tube at `state`; `None` when a corner does not project.
+fn projected_hull(state: &crate::AxisState, model: &CylinderModel, camera: &CameraModel) -> Option<Vec<Point2<f64>>> {
+    let f = state.frame()?;
+    let (half, r) = (0.5 * model.length, model.max_radius() / std::f64::consts::FRAC_PI_8.cos());
+    let mut pts = Vec::with_capacity(16);
+    for z in [-half, half] {
+        for k in 0..8 {
+            let phi = k as f64 * std::f64::consts::FRAC_PI_4;
+            let p = state.c + state.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * r;
+            pts.push(camera.project(&Point3::from(p))?);
+        }
+    }
+    // Andrew's monotone chain.
+    pts.sort_by(|p, q| p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)));
+    let cross = |o: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+    let mut hull: Vec<Point2<f64>> = Vec::with_capacity(32);
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &Point2<f64>>> = if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
+        for p in iter {
+            while hull.len() >= start + 2 && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(*p);
+        }
+        hull.pop();
+    }
+    Some(hull)
+}
+
+/// The x-extent of the convex polygon `hull` within the horizontal band `|Y - y| ≤ m`, widened
+/// by `m` on each side; `None` when the band misses the polygon.
+fn hull_row_span(hull: &[Point2<f64>], y: f64, m: f64) -> Option<(f64, f64)> {
+    let (ylo, yhi) = (y - m, y + m);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let n = hull.len();
+    for i in 0..n {
+        let (p, q) = (hull[i], hull[(i + 1) % n]);
+        let (a, b) = if p.y <= q.y { (p, q) } else { (q, p) };
+        let (t0, t1) = (ylo.max(a.y), yhi.min(b.y));
+        if t0 > t1 {
+            continue;
+        }
+        for t in [t0, t1] {
+            let x = if b.y - a.y > 1e-12 { a.x + (b.x - a.x) * (t - a.y) / (b.y - a.y) } else { a.x.min(b.x) };
+            let x2 = if b.y - a.y > 1e-12 { x } else { a.x.max(b.x) };
+            lo = lo.min(x.min(x2));
+            hi = hi.max(x.max(x2));
+        }
+    }
+    (lo <= hi).then_some((lo - m, hi + m))
 }
 
 /// Intersection over union of two masks of the same size (0 when both are empty).
@@ -124,10 +186,33 @@ pub fn snap_candidate(mask: &BinaryMask, silhouette: &BinaryMask, dilate_px: usi
         return None;
     }
     let near = mask.dilated(dilate_px);
-    let data: Vec<u8> = silhouette.data.iter().zip(&near.data).map(|(&s, &n)| (s != 0 && n != 0) as u8).collect();
-    let snapped = BinaryMask { width: mask.width, height: mask.height, data };
-    let agreement = mask_iou(&snapped, mask);
+    let mut snapped = BinaryMask::new(mask.width, mask.height);
+    // Only the silhouette's box can be set, and only it and the mask's box hold set pixels.
+    let (sx0, sy0, sx1, sy1) = box_corners(silhouette);
+    for y in sy0..sy1 {
+        for x in sx0..sx1 {
+            let i = y * mask.width + x;
+            snapped.data[i] = (silhouette.data[i] != 0 && near.data[i] != 0) as u8;
+        }
+    }
+    let (mx0, my0, mx1, my1) = box_corners(mask);
+    let (x0, y0, x1, y1) = (sx0.min(mx0), sy0.min(my0), sx1.max(mx1), sy1.max(my1));
+    let (mut inter, mut union) = (0u64, 0u64);
+    for y in y0..y1 {
+        let row = y * mask.width;
+        for (&p, &q) in snapped.data[row + x0..row + x1].iter().zip(&mask.data[row + x0..row + x1]) {
+            inter += (p != 0 && q != 0) as u64;
+            union += (p != 0 || q != 0) as u64;
+        }
+    }
+    let agreement = if union == 0 { 0.0 } else { inter as f64 / union as f64 };
     Some((snapped, agreement))
+}
+
+/// The set pixels' box as half-open `(x0, y0, x1, y1)`; empty `(0, 0, 0, 0)` for an empty mask.
+fn box_corners(m: &BinaryMask) -> (usize, usize, usize, usize) {
+    let [x, y, w, h] = m.bbox();
+    (x as usize, y as usize, (x + w) as usize, (y + h) as usize)
 }
 
 #[cfg(test)]
@@ -206,5 +291,45 @@ mod tests {
         let speck = BinaryMask::from_fn(20, 20, |x, y| (5..9).contains(&x) && (5..9).contains(&y));
         assert!(trim_kept_mask(&speck, &MaskSnap::default()).is_none(), "a 4x4 mask erodes below the least area");
         assert!(trim_kept_mask(&fat, &MaskSnap { kept_erode_px: 0, ..MaskSnap::default() }).is_none());
+    }
+
+    /// The rows' hull culling tests a subset of the bounding box's pixels; no silhouette pixel
+    /// lies outside it: random tubes (0.4-3 m, any direction, some cut by the border) under a
+    /// pinhole and a distorted camera against a brute-force test of every pixel of the image.
+    #[test]
+    fn hull_culled_silhouette_matches_every_pixel_tested() {
+        use tubeloc_core::Distortion;
+        let model = CylinderModel::new(&tubeloc_core::TubeModel::default()).unwrap();
+        let full = CameraModel::from_hfov(5472, 3648, 77.0).cropped(3900, 500, 400, 300);
+        let distorted = CameraModel { distortion: Distortion { k1: -0.08, k2: 0.02, p1: 0.0005, p2: -0.0003, k3: 0.0 }, ..full.clone() };
+        let mut state = 0x9E3779B97F4A7C15u64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut compared = 0;
+        for cam in [&full, &distorted] {
+            for _ in 0..60 {
+                let z = 0.4 + 2.6 * uniform();
+                let (u, v) = (uniform() * 1.2 - 0.1, uniform() * 1.2 - 0.1);
+                let p = cam.unproject(&nalgebra::Point2::new(u * cam.width as f64, v * cam.height as f64));
+                let c = p * (z / p.z);
+                let a = Vector3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
+                let Ok(pose) = TubeAxisPose::new(0, 1.0, c, a.normalize(), 1.0) else { continue };
+                let fast = silhouette_mask(&model, &pose, cam);
+                let far = 2.0 * (c.norm() + model.length);
+                let brute = BinaryMask::from_fn(cam.width as usize, cam.height as usize, |x, y| {
+                    let d = cam.unproject(&nalgebra::Point2::new(x as f64, y as f64));
+                    model.occludes(&pose.centre, &pose.end_direction, &Point3::from(d * (far / d.norm())))
+                });
+                if brute.area() > 0 {
+                    compared += 1;
+                }
+                assert_eq!(fast, brute, "tube at {c:?} axis {a:?}");
+            }
+        }
+        assert!(compared > 60, "only {compared} tubes in view");
     }
 }
