@@ -38,16 +38,12 @@ fn bench(c: &mut Criterion) {
 /// exact silhouette (the learned segmenter's kind of seed).
 fn mask_seed_scene(range: (f64, f64)) -> (Scene, tubeloc_core::TubeDetection) {
     use rand::SeedableRng;
-    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
     let model = default_model();
     let cam = camera(false);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
     let (truth, up, gd) = random_truth(&mut rng, &model, &cam, range);
     let scene = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
-    let mask = tube_mask(&model, &scene);
-    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
-    det.axis_seed = AxisSeed::from_pixels((0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)));
-    det.mask = Some(Rle::from_mask(&mask));
+    let det = mask_detection(&tube_mask(&model, &scene));
     (scene, det)
 }
 

@@ -446,14 +446,11 @@ fn stereo_polish_keeps_the_stereo_distance_over_a_lower_ground() {
 /// is refined as if there were none (mono with the ground plane), not left converged far away.
 #[test]
 fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
-    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
     let (sc, _) = one_scene();
     let model = default_model();
     let mask = tube_mask(&model, &sc);
+    let det = mask_detection(&mask);
     let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
-    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
-    det.axis_seed = AxisSeed::from_pixels(pixels.iter().copied());
-    det.mask = Some(Rle::from_mask(&mask));
     let cam = &sc.camera;
     let junk: Vec<nalgebra::Point3<f64>> = pixels.iter().map(|&(x, y)| nalgebra::Point3::from(cam.unproject(&nalgebra::Point2::new(x, y)).normalize() * 10.0)).collect();
     let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
@@ -475,19 +472,16 @@ fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
 /// plane it is not used.
 #[test]
 fn mask_axis_prior_holds_the_image_direction_by_its_sigma() {
-    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
     let (sc, pts) = one_scene();
     let model = default_model();
     let mask = tube_mask(&model, &sc);
-    let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
-    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
-    let mut ax = AxisSeed::from_pixels(pixels.iter().copied()).unwrap();
+    let mut det = mask_detection(&mask);
+    let mut ax = det.axis_seed.unwrap();
     let turn = 1f64.to_radians();
     let [dx, dy] = ax.direction_px;
     ax.direction_px = [dx * turn.cos() - dy * turn.sin(), dx * turn.sin() + dy * turn.cos()];
     let mask_dir = nalgebra::Vector2::new(ax.direction_px[0], ax.direction_px[1]);
     det.axis_seed = Some(ax);
-    det.mask = Some(Rle::from_mask(&mask));
     let cam = &sc.camera;
     let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
     let input = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene::default() };

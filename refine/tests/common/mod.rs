@@ -280,6 +280,16 @@ pub fn tube_mask(model: &CylinderModel, scene: &Scene) -> tubeloc_core::BinaryMa
     })
 }
 
+/// A learned-segmenter-like detection of `mask`: the mask, its box, and the axis seed of its
+/// pixels (principal axis), score 0.9.
+pub fn mask_detection(mask: &tubeloc_core::BinaryMask) -> tubeloc_core::TubeDetection {
+    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
+    det.axis_seed = AxisSeed::from_pixels((0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)));
+    det.mask = Some(Rle::from_mask(mask));
+    det
+}
+
 /// The mono speed scene of `benches/refine.rs` and `examples/refine_speed.rs`: the renderer's
 /// scene with a tube at 1.1-1.3 m (random seed 21), the default refiner, and a seed 3 mm /
 /// 2 degrees off the truth.
