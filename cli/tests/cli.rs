@@ -302,6 +302,13 @@ fn detect_decoder_config_is_read_and_bad_fields_are_refused() {
     let e = stderr(&o);
     assert!(e.contains("decode.json") && e.contains("unknown field `mask_threshold_typo`"), "{e}");
     assert!(!dir.path().join("d.json").exists(), "no output on error");
+    // Values out of range are refused too, naming the file and the field.
+    std::fs::write(&bad, r#"{"mask_direction_weight": -1}"#).unwrap();
+    let o = tubeloc(&["detect", "--method", "learned", "--image", "absent.png", "--decode-config", p(&bad), "--out", p(&dir.path().join("d.json"))]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("decode.json") && e.contains("mask_direction_weight = -1"), "{e}");
+    assert!(!dir.path().join("d.json").exists(), "no output on error");
 }
 
 #[test]

@@ -88,6 +88,38 @@ impl Default for DecodeConfig {
     }
 }
 
+impl DecodeConfig {
+    /// Checks the ranges: probabilities in `[0, 1]`, weights, distances and exponents `>= 0`,
+    /// thresholds finite. The error names the first field out of range.
+    pub fn validate(&self) -> Result<(), String> {
+        let unit = [("fg_threshold", self.fg_threshold), ("peak_threshold", self.peak_threshold), ("mask_logit_rel", self.mask_logit_rel)];
+        for (name, v) in unit {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(format!("{name} = {v}: expected a value in [0, 1]"));
+            }
+        }
+        let non_negative = [
+            ("across_weight", self.across_weight),
+            ("min_score", self.min_score),
+            ("same_axis_cells", self.same_axis_cells),
+            ("same_tube_fraction", self.same_tube_fraction),
+            ("length_weight", self.length_weight),
+            ("mask_logit_weight", self.mask_logit_weight),
+            ("fill_weight", self.fill_weight),
+            ("mask_direction_weight", self.mask_direction_weight),
+        ];
+        for (name, v) in non_negative {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(format!("{name} = {v}: expected a finite value >= 0"));
+            }
+        }
+        if !self.mask_logit.is_finite() {
+            return Err(format!("mask_logit = {}: expected a finite value", self.mask_logit));
+        }
+        Ok(())
+    }
+}
+
 /// One detected tube.
 #[derive(Clone, Debug)]
 pub struct LearnedInstance {
@@ -489,5 +521,14 @@ mod tests {
         let expect = (6f64.to_radians().sin()).atan2(6f64.to_radians().cos() + 2.0).to_degrees();
         assert!((blend.abs() - expect).abs() < 0.2 && blend.signum() == head.signum(), "blend {blend}, expected {expect}");
         assert_eq!(s0, s2, "the score keeps the head's direction");
+    }
+
+    #[test]
+    fn default_decoder_settings_validate_and_out_of_range_ones_are_named() {
+        assert_eq!(DecodeConfig::default().validate(), Ok(()));
+        let e = DecodeConfig { fg_threshold: 1.5, ..DecodeConfig::default() }.validate().unwrap_err();
+        assert!(e.contains("fg_threshold = 1.5"), "{e}");
+        let e = DecodeConfig { fill_weight: f32::NAN, ..DecodeConfig::default() }.validate().unwrap_err();
+        assert!(e.contains("fill_weight"), "{e}");
     }
 }
