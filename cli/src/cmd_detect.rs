@@ -66,7 +66,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
         Method::Learned => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
             let model = args.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
-            let cfg: tubeloc_detect::learned::DecodeConfig = match &args.decode_config {
+            let cfg = match &args.decode_config {
                 Some(p) => {
                     let cfg: tubeloc_detect::learned::DecodeConfig = tubeloc_core::files::read_json(p).with_context(|| format!("decoder config {}", p.display()))?;
                     cfg.validate().map_err(|e| anyhow::anyhow!("decoder config {}: {e}", p.display()))?;

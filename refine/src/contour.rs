@@ -55,14 +55,19 @@ impl AxisState {
     /// `c ± (L/2) a + r_max (cos φ e1 + sin φ e2)`, `φ = k π/4` (the `-L/2` end first); `None`
     /// when the axis frame is degenerate.
     pub fn bounding_points(&self, model: &CylinderModel) -> Option<[Vector3<f64>; 16]> {
+        self.prism_points(model, model.max_radius())
+    }
+
+    /// [`AxisState::bounding_points`] at radius `radius` (metres) instead of `r_max`: the
+    /// corners of an octagonal prism along the tube (circumradius `radius`).
+    pub fn prism_points(&self, model: &CylinderModel, radius: f64) -> Option<[Vector3<f64>; 16]> {
         let half = 0.5 * model.length;
-        let rmax = model.max_radius();
         let f = self.frame()?;
         let mut out = [Vector3::zeros(); 16];
         for (i, z) in [-half, half].into_iter().enumerate() {
             for k in 0..8 {
                 let phi = k as f64 * std::f64::consts::FRAC_PI_4;
-                out[8 * i + k] = self.c + self.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * rmax;
+                out[8 * i + k] = self.c + self.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * radius;
             }
         }
         Some(out)

@@ -76,50 +76,57 @@ impl ImageAxisPrior {
     }
 }
 
+/// One prior row of the fit, in the order of the module doc.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum PriorRow<'a> {
+    /// Centre height over the ground (`None` residual unless `ground_height_known`).
+    GroundHeight(&'a GroundPlane),
+    /// Axis parallel to the ground.
+    GroundTilt(&'a GroundPlane),
+    /// Distance of the centre from the camera against the seed's.
+    SeedDistance,
+    /// Axis tilt toward the camera against the seed's, with `sin σ`.
+    SeedTilt(f64),
+    /// Axis in the detector's image line's interpretation plane.
+    ImageAxis(&'a ImageAxisPrior),
+}
+
+/// The prior rows that apply, in order: the single list both [`push_residuals`] and
+/// [`jacobian_row`] follow.
+fn prior_rows<'a>(ground: Option<&'a GroundPlane>, image_axis: Option<&'a ImageAxisPrior>, cfg: &RefineConfig, sp: &SeedPrior) -> impl Iterator<Item = PriorRow<'a>> {
+    let ground_rows = ground.into_iter().flat_map(|g| [PriorRow::GroundHeight(g), PriorRow::GroundTilt(g)]);
+    let distance = (cfg.seed_distance_sigma_frac > 0.0).then_some(PriorRow::SeedDistance);
+    ground_rows.chain(distance).chain(sp.tilt_sin_sigma.map(PriorRow::SeedTilt)).chain(image_axis.map(PriorRow::ImageAxis))
+}
+
 /// Appends the prior residuals at `st` to `out` (order: see the module doc).
 pub(crate) fn push_residuals(model: &CylinderModel, st: &AxisState, ground: Option<&GroundPlane>, image_axis: Option<&ImageAxisPrior>, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
-    let seed_dist = sp.dist;
-    if let Some(g) = ground {
-        out.push(cfg.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m));
-        out.push(Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()));
-    }
-    if cfg.seed_distance_sigma_frac > 0.0 {
-        out.push(Some((st.c.norm() - seed_dist) / (cfg.seed_distance_sigma_frac * seed_dist)));
-    }
-    if let Some(ss) = sp.tilt_sin_sigma {
-        out.push(Some((st.a.dot(&sp.ray) - sp.tilt) / ss));
-    }
-    if let Some(p) = image_axis {
-        out.push(Some(st.a.dot(&p.normal) / p.sigma));
+    for row in prior_rows(ground, image_axis, cfg, sp) {
+        out.push(match row {
+            PriorRow::GroundHeight(g) => cfg.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m),
+            PriorRow::GroundTilt(g) => Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()),
+            PriorRow::SeedDistance => Some((st.c.norm() - sp.dist) / (cfg.seed_distance_sigma_frac * sp.dist)),
+            PriorRow::SeedTilt(ss) => Some((st.a.dot(&sp.ray) - sp.tilt) / ss),
+            PriorRow::ImageAxis(p) => Some(st.a.dot(&p.normal) / p.sigma),
+        });
     }
 }
 
 /// Jacobian row of prior residual `k` (its index among the priors, order of [`push_residuals`])
 /// for the perturbation basis `u = (u1, u2)` of the axis (parameters: centre x, y, z, axis
-/// along u1, u2).
+/// along u1, u2); zero for an index past the last prior.
 pub(crate) fn jacobian_row(k: usize, st: &AxisState, ground: Option<&GroundPlane>, image_axis: Option<&ImageAxisPrior>, cfg: &RefineConfig, sp: &SeedPrior, u: (&Vector3<f64>, &Vector3<f64>)) -> Vector5<f64> {
-    // The image-axis prior is the last row when present.
-    let n_before = 2 * ground.is_some() as usize + (cfg.seed_distance_sigma_frac > 0.0) as usize + sp.tilt_sin_sigma.is_some() as usize;
-    if let (Some(p), true) = (image_axis, k == n_before) {
-        return Vector5::new(0.0, 0.0, 0.0, p.normal.dot(u.0), p.normal.dot(u.1)) / p.sigma;
-    }
-    let mut k = k;
-    match (ground, k) {
-        (Some(gp), 0) => Vector5::new(gp.normal.x, gp.normal.y, gp.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
-        (Some(gp), 1) => Vector5::new(0.0, 0.0, 0.0, gp.normal.dot(u.0), gp.normal.dot(u.1)) / cfg.ground_tilt_sigma_deg.to_radians(),
-        _ => {
-            if ground.is_some() {
-                k -= 2;
-            }
-            if cfg.seed_distance_sigma_frac > 0.0 && k == 0 {
-                let d = st.c.norm();
-                let ch = st.c / d.max(1e-12);
-                Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * sp.dist)
-            } else {
-                let ss = sp.tilt_sin_sigma.unwrap_or(1.0);
-                Vector5::new(0.0, 0.0, 0.0, sp.ray.dot(u.0), sp.ray.dot(u.1)) / ss
-            }
+    let axis_row = |n: &Vector3<f64>, sigma: f64| Vector5::new(0.0, 0.0, 0.0, n.dot(u.0), n.dot(u.1)) / sigma;
+    match prior_rows(ground, image_axis, cfg, sp).nth(k) {
+        Some(PriorRow::GroundHeight(g)) => Vector5::new(g.normal.x, g.normal.y, g.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
+        Some(PriorRow::GroundTilt(g)) => axis_row(&g.normal, cfg.ground_tilt_sigma_deg.to_radians()),
+        Some(PriorRow::SeedDistance) => {
+            let ch = st.c / st.c.norm().max(1e-12);
+            Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * sp.dist)
         }
+        Some(PriorRow::SeedTilt(ss)) => axis_row(&sp.ray, ss),
+        Some(PriorRow::ImageAxis(p)) => axis_row(&p.normal, p.sigma),
+        None => Vector5::zeros(),
     }
 }
 

@@ -103,28 +103,21 @@ pub fn silhouette_mask(model: &CylinderModel, pose: &TubeAxisPose, camera: &Came
     mask
 }
 
-/// The convex hull (counter-clockwise, image pixels) of the projections of an octagonal prism
-/// circumscribing the tube at `state`; `None` when a corner does not project.
+/// The convex hull (image pixels, Andrew's monotone chain) of the projected corners of the
+/// octagonal prism circumscribing the tube at `state` (circumradius `r_max / cos 22.5°`);
+/// `None` when a corner does not project.
 fn projected_hull(state: &crate::AxisState, model: &CylinderModel, camera: &CameraModel) -> Option<Vec<Point2<f64>>> {
-    let f = state.frame()?;
-    let (half, r) = (0.5 * model.length, model.max_radius() / std::f64::consts::FRAC_PI_8.cos());
-    let mut pts = Vec::with_capacity(16);
-    for z in [-half, half] {
-        for k in 0..8 {
-            let phi = k as f64 * std::f64::consts::FRAC_PI_4;
-            let p = state.c + state.a * z + (f.e1 * phi.cos() + f.e2 * phi.sin()) * r;
-            pts.push(camera.project(&Point3::from(p))?);
-        }
-    }
-    // Andrew's monotone chain.
+    let corners = state.prism_points(model, model.max_radius() / std::f64::consts::FRAC_PI_8.cos())?;
+    let mut pts = corners.iter().map(|p| camera.project(&Point3::from(*p))).collect::<Option<Vec<_>>>()?;
     pts.sort_by(|p, q| p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)));
-    let cross = |o: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
-    let mut hull: Vec<Point2<f64>> = Vec::with_capacity(32);
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &Point2<f64>>> = if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
-        for p in iter {
-            while hull.len() >= start + 2 && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], p) <= 0.0 {
+    let turns_left = |o: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x) > 0.0;
+    let mut hull: Vec<Point2<f64>> = Vec::with_capacity(2 * pts.len());
+    // Lower chain left to right, then upper chain right to left.
+    let reversed: Vec<Point2<f64>> = pts.iter().rev().copied().collect();
+    for chain in [&pts, &reversed] {
+        let base = hull.len();
+        for p in chain {
+            while hull.len() >= base + 2 && !turns_left(&hull[hull.len() - 2], &hull[hull.len() - 1], p) {
                 hull.pop();
             }
             hull.push(*p);
@@ -139,20 +132,17 @@ fn projected_hull(state: &crate::AxisState, model: &CylinderModel, camera: &Came
 fn hull_row_span(hull: &[Point2<f64>], y: f64, m: f64) -> Option<(f64, f64)> {
     let (ylo, yhi) = (y - m, y + m);
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    let n = hull.len();
-    for i in 0..n {
-        let (p, q) = (hull[i], hull[(i + 1) % n]);
-        let (a, b) = if p.y <= q.y { (p, q) } else { (q, p) };
+    for (i, p) in hull.iter().enumerate() {
+        let q = hull[(i + 1) % hull.len()];
+        let (a, b) = if p.y <= q.y { (*p, q) } else { (q, *p) };
         let (t0, t1) = (ylo.max(a.y), yhi.min(b.y));
         if t0 > t1 {
             continue;
         }
-        for t in [t0, t1] {
-            let x = if b.y - a.y > 1e-12 { a.x + (b.x - a.x) * (t - a.y) / (b.y - a.y) } else { a.x.min(b.x) };
-            let x2 = if b.y - a.y > 1e-12 { x } else { a.x.max(b.x) };
-            lo = lo.min(x.min(x2));
-            hi = hi.max(x.max(x2));
-        }
+        // The edge's part within the band: its ends at t0 and t1 (a level edge: both ends).
+        let xs = if b.y - a.y > 1e-12 { [t0, t1].map(|t| a.x + (b.x - a.x) * (t - a.y) / (b.y - a.y)) } else { [a.x, b.x] };
+        lo = lo.min(xs[0].min(xs[1]));
+        hi = hi.max(xs[0].max(xs[1]));
     }
     (lo <= hi).then_some((lo - m, hi + m))
 }
