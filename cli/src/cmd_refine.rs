@@ -112,6 +112,10 @@ pub struct RefineArgs {
     /// segmenter's masks are wider than the tube; 0 keeps them as they are).
     #[arg(long, default_value_t = MaskSnap::default().kept_erode_px)]
     pub(crate) snap_kept_erode_px: usize,
+    /// --snapped-out: masks of fewer pixels than this are not snapped (they are trimmed like
+    /// the masks that disagree with their pose; 0 snaps every mask).
+    #[arg(long, default_value_t = MaskSnap::default().min_area_px)]
+    pub(crate) snap_min_area_px: u64,
     /// Right image of a stereo pair (needs --rig).
     #[arg(long)]
     pub(crate) right: Option<PathBuf>,
@@ -283,7 +287,7 @@ impl RefineArgs {
         if !(0.0..=1.0).contains(&self.snap_min_agreement) {
             bail!("--snap-min-agreement {}: expected a value in [0, 1]", self.snap_min_agreement);
         }
-        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement, kept_erode_px: self.snap_kept_erode_px })
+        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement, kept_erode_px: self.snap_kept_erode_px, min_area_px: self.snap_min_area_px })
     }
 
     /// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks

@@ -150,6 +150,19 @@ impl BinaryMask {
         out
     }
 
+    /// The `w x h` window whose top-left pixel is `(x0, y0)`: pixel `(x, y)` of the result is
+    /// pixel `(x0 + x, y0 + y)` of `self` (clear where that lies outside `self`).
+    pub fn crop(&self, x0: usize, y0: usize, w: usize, h: usize) -> BinaryMask {
+        let mut out = BinaryMask::new(w, h);
+        let xs = x0.min(self.width)..(x0 + w).min(self.width);
+        for y in y0..(y0 + h).min(self.height) {
+            let src = &self.data[y * self.width + xs.start..y * self.width + xs.end];
+            let dst = (y - y0) * w;
+            out.data[dst..dst + src.len()].copy_from_slice(src);
+        }
+        out
+    }
+
     /// Number of set pixels.
     pub fn area(&self) -> u64 {
         self.data.iter().filter(|&&v| v != 0).count() as u64

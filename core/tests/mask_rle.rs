@@ -259,3 +259,19 @@ fn windowed_morphology_matches_the_whole_image_reference() {
         }
     }
 }
+
+#[test]
+fn a_crop_is_the_window_and_clear_beyond_the_mask() {
+    let m = BinaryMask::from_fn(9, 7, |x, y| (x * 7 + y * 3) % 5 == 0);
+    let c = m.crop(2, 3, 4, 3);
+    assert_eq!((c.width, c.height), (4, 3));
+    for y in 0..3 {
+        for x in 0..4 {
+            assert_eq!(c.get(x, y), m.get(x + 2, y + 3), "pixel ({x}, {y})");
+        }
+    }
+    // A window hanging over the right and bottom edges, and one wholly outside.
+    let over = m.crop(6, 5, 6, 4);
+    assert!((0..4).all(|y| (0..6).all(|x| over.get(x, y) == m.get(x + 6, y + 5))));
+    assert_eq!(m.crop(20, 20, 3, 3), BinaryMask::new(3, 3));
+}

@@ -458,8 +458,7 @@ impl Refiner {
         if !(pose.converged && tau > 0.0) {
             return pose;
         }
-        let sil = silhouette::silhouette_mask(&self.model, &pose, camera);
-        let Some((_, iou)) = silhouette::snap_candidate(mask, &sil, silhouette::MaskSnap::default().dilate_px) else { return pose };
+        let Some(iou) = silhouette::mask_agreement(mask, &self.model, &pose, camera, silhouette::MaskSnap::default().dilate_px) else { return pose };
         if iou >= tau {
             return pose;
         }
