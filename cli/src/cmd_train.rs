@@ -117,7 +117,8 @@ fn average_models(args: &TrainArgs) -> Result<()> {
     let names: Vec<String> = args.average.iter().map(|p| p.display().to_string()).collect();
     let numbered: Vec<String> = names.iter().enumerate().map(|(k, n)| format!("model {} = {n}", k + 1)).collect();
     let mut soup = tubeloc_detect::learned::weight_average(&models).with_context(|| format!("averaging {}", numbered.join(", ")))?;
-    soup.meta.notes = format!("uniform weight average of {}", names.join(", "));
+    // The library names the count and the first model's notes; the files come from here.
+    soup.meta.notes = format!("{} (files: {})", soup.meta.notes, names.join(", "));
     if let Some(d) = &args.val {
         let val = load_coco_dir(d, soup.meta.preprocess, Some(args.val_limit)).with_context(|| format!("loading validation set {}", d.display()))?;
         eprintln!("val AP50 {:.4} ({} images of {})", ap50(&soup, &val, &DecodeConfig::default())?, val.len(), d.display());
