@@ -34,7 +34,7 @@ use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
 use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, trim_kept_mask, MaskSnap};
-use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene};
+use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene, SeedKind, SeedSettings};
 
 mod colour;
 mod dataset;
@@ -306,19 +306,24 @@ impl RefineArgs {
         !self.photo_centre_only && !has_ground
     }
 
-    /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]); with a ground
-    /// plane the rims' tilt change has the ground tilt prior's deviation.
-    pub(crate) fn photo_stage(&self, ground: Option<&GroundPlane>, refiner: &Refiner) -> PhotoStage {
+    /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]) for a pose
+    /// refined from a seed of `kind`; with a ground plane the two-view fit's tilt prior and the
+    /// rims' tilt change have the deviation of that kind's ground tilt prior
+    /// ([`SeedSettings::ground_tilt_sigma_deg`]), as in the fit before them: mask seeds are taken
+    /// to lie parallel to the ground (`mask_seed_tilt_sigma_deg`), other seeds may tilt
+    /// (`ground_tilt_sigma_deg`).
+    pub(crate) fn photo_stage(&self, ground: Option<&GroundPlane>, refiner: &Refiner, kind: SeedKind) -> PhotoStage {
         let has_ground = ground.is_some();
+        let tilt_sigma_deg = SeedSettings::new(&refiner.config, kind, has_ground).ground_tilt_sigma_deg;
         PhotoStage {
             two_view: self.two_view.then_some(self.two_view_settings),
-            ground: ground.map(|g| (g.normal, refiner.config.ground_tilt_sigma_deg)),
+            ground: ground.map(|g| (g.normal, tilt_sigma_deg)),
             range_m: self.photo_range_mm * 1e-3,
             min_zncc: self.photo_min_zncc,
             ends: self.photo_moves_ends(has_ground),
             occlusion: self.scene_occlusion,
             rim_max_epipolar_deg: self.rim_max_epipolar_deg,
-            rim_tilt_prior_deg: has_ground.then_some(refiner.config.ground_tilt_sigma_deg),
+            rim_tilt_prior_deg: has_ground.then_some(tilt_sigma_deg),
         }
     }
 }
@@ -369,8 +374,8 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
-        let stage = args.photo_stage(ground.as_ref(), &refiner);
-        for p in poses.iter_mut() {
+        for (p, d) in poses.iter_mut().zip(&dets) {
+            let stage = args.photo_stage(ground.as_ref(), &refiner, SeedKind::of(d));
             stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
         }
     }

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seed::{axis_state_of, perturbed, reanchored_pose};
 use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
-use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
+use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed, SeedKind};
 
 /// What to refine in one image: detections, or seeds made from exact poses.
 enum Work {
@@ -210,8 +210,12 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 }
             }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
-                let stage = args.photo_stage(ground.as_ref(), &refiner);
-                for p in poses.iter_mut() {
+                for (p, w) in poses.iter_mut().zip(items.iter()) {
+                    let kind = match w {
+                        Work::Detection(d) => SeedKind::of(d),
+                        Work::GtSeed(..) => SeedKind::Explicit,
+                    };
+                    let stage = args.photo_stage(ground.as_ref(), &refiner, kind);
                     tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
                 }
             }
