@@ -205,6 +205,10 @@ pub struct RefineConfig {
     /// parallel to the ground (tilt error 0.7 degrees at the median against the truth on the
     /// paper preset) while its distance is off by centimetres, so a fitted tilt follows the
     /// wrong foreshortened length (3 degrees: axis error 1.31 -> 2.99 degrees median).
+    /// The CLI's stereo stages after the fit (photometric ends, rims, two-view contour fit) use
+    /// it too for these seeds (session 9; they used `ground_tilt_sigma_deg`, and the stereo
+    /// axis p90 on three calibration stereo sets went 2.56 -> 1.24 deg). It assumes the tubes
+    /// lie parallel to the given ground plane: raise it on sloped terrain.
     pub mask_seed_tilt_sigma_deg: f64,
     /// [`Refiner::refine`], mask and box seeds: `end_limb_weight` used (instead of
     /// `detection_end_limb_weight`, which is for template poses whose ends may be flipped).
