@@ -284,6 +284,16 @@ mod tests {
         CameraModel::from_hfov(640, 480, 40.0)
     }
 
+    /// A reproducible stream of uniform numbers in [0, 1) (xorshift64 from `state`, nonzero).
+    fn uniform_stream(mut state: u64) -> impl FnMut() -> f64 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
     fn pose(c: Vector3<f64>, a: Vector3<f64>) -> TubeAxisPose {
         TubeAxisPose::new(0, 1.0, c, a.normalize(), 1.0).unwrap()
     }
@@ -371,13 +381,7 @@ mod tests {
     fn windowed_silhouette_and_agreement_match_the_whole_image() {
         let model = CylinderModel::new(&tubeloc_core::TubeModel::default()).unwrap();
         let cam = CameraModel::from_hfov(400, 300, 50.0);
-        let mut state = 0x2545F4914F6CDD1Du64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut uniform = uniform_stream(0x2545F4914F6CDD1D);
         let mut compared = 0;
         for _ in 0..40 {
             let z = 0.3 + 1.2 * uniform();
@@ -410,13 +414,7 @@ mod tests {
         let model = CylinderModel::new(&tubeloc_core::TubeModel::default()).unwrap();
         let full = CameraModel::from_hfov(5472, 3648, 77.0).cropped(3900, 500, 400, 300);
         let distorted = CameraModel { distortion: Distortion { k1: -0.08, k2: 0.02, p1: 0.0005, p2: -0.0003, k3: 0.0 }, ..full.clone() };
-        let mut state = 0x9E3779B97F4A7C15u64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut uniform = uniform_stream(0x9E3779B97F4A7C15);
         let mut compared = 0;
         for cam in [&full, &distorted] {
             for _ in 0..60 {
