@@ -33,6 +33,7 @@ use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
+use tubeloc_refine::hidden_end::{anchor_visible_end, HiddenEnd};
 use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, trim_kept_mask, MaskSnap};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene, SeedKind, SeedSettings};
 
@@ -102,6 +103,13 @@ pub struct RefineArgs {
     /// body (`tubeloc_refine::seal_end`; grey images: the seal is the darker section).
     #[arg(long)]
     pub(crate) no_colour_ends: bool,
+    /// With stereo, leave the centres of tubes with one end hidden where the fit put them. By
+    /// default a mask detection whose mask covers under 90 % of its fitted tube's length, with
+    /// something nearer than the tube (or the image border) beyond exactly one mask end, is
+    /// moved along its axis until its other end meets the mask's end there
+    /// (`tubeloc_refine::hidden_end`; the pose's `end_anchored` says so).
+    #[arg(long)]
+    pub(crate) no_hidden_end: bool,
     /// --snapped-out: the silhouette is kept within this many pixels of the detector's mask.
     #[arg(long, default_value_t = MaskSnap::default().dilate_px)]
     pub(crate) snap_dilate_px: usize,
@@ -266,6 +274,16 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
     Refiner::new(&tube, config).context("building the refiner")
 }
 
+/// With a scene depth map (stereo) and unless `--no-hidden-end`: `pose`, refined from the mask
+/// detection `det`, moved along its axis onto its visible end when its other end is hidden
+/// ([`anchor_visible_end`]). Template-pose detections are left alone (their masks are the
+/// template's silhouette, not what is visible).
+pub(crate) fn anchor_hidden_end(args: &RefineArgs, pose: &mut TubeAxisPose, det: &TubeDetection, depth: Option<&Plane<f32>>, refiner: &Refiner, camera: &CameraModel) {
+    let (Some(depth), false, None) = (depth, args.no_hidden_end, &det.t_cam_tube) else { return };
+    let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return };
+    anchor_visible_end(pose, refiner.model.length, &mask, depth, camera, &HiddenEnd::default());
+}
+
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
 /// (and is the fit's, not a kept seed) and agrees with the mask; otherwise with its mask
 /// trimmed ([`trim_kept_mask`]), or unchanged without a mask. Returns whether it was snapped.
@@ -378,6 +396,9 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
             let stage = args.photo_stage(ground.as_ref(), &refiner, SeedKind::of(d));
             stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
         }
+    }
+    for (p, d) in poses.iter_mut().zip(&dets) {
+        anchor_hidden_end(&args, p, d, depth.as_ref(), &refiner, &camera);
     }
     for (i, p) in poses.iter().enumerate() {
         let c = p.centre * 1e3;

@@ -105,6 +105,80 @@ fn mask_detections_in_stereo_with_ground_stay_parallel_to_it() {
     ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "4"]);
     let ann = read(&set.join("annotations.json"));
     let images: std::collections::BTreeMap<u64, &Value> = ann["images"].as_array().unwrap().iter().map(|i| (i["id"].as_u64().unwrap(), i)).collect();
+    let (dets, truths) = mask_detections(&ann);
+    assert!(dets.len() >= 6, "only {} tubes at least half visible", dets.len());
+    let det_path = tmp.path().join("dets.json");
+    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
+    let out = tmp.path().join("poses.json");
+    ok(&["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()]);
+    let poses = read(&out);
+    let (mut errors, mut matched) = (Vec::new(), 0);
+    for p in poses.as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true)) {
+        let id = p["image_id"].as_u64().unwrap();
+        let (c, a) = (vec3(&p["centre"]), vec3(&p["axis"]));
+        let Some((_, _, ta, _)) = truths.iter().filter(|t| t.0 == id).min_by(|x, y| dist(&x.1, &c).total_cmp(&dist(&y.1, &c))).filter(|t| dist(&t.1, &c) < 0.05) else { continue };
+        matched += 1;
+        // Upward normal of the world ground (z = 0) in the camera frame: R_world_cam^T z.
+        let rot = images[&id]["T_world_cam"]["rotation"].as_array().unwrap();
+        let up = [0, 1, 2].map(|i| rot[2][i].as_f64().unwrap());
+        let tilt = (a[0] * up[0] + a[1] * up[1] + a[2] * up[2]).abs().asin().to_degrees();
+        let true_tilt = (ta[0] * up[0] + ta[1] * up[1] + ta[2] * up[2]).abs().asin().to_degrees();
+        assert!((tilt - true_tilt).abs() < 0.5, "image {id}: fitted tilt {tilt:.2} deg against the truth's {true_tilt:.2}");
+        errors.push((a[0] * ta[0] + a[1] * ta[1] + a[2] * ta[2]).abs().min(1.0).acos().to_degrees());
+    }
+    assert!(matched * 4 >= dets.len() * 3, "{matched} of {} tubes refined within 50 mm", dets.len());
+    assert!(median(&mut errors) < 0.5, "axis error median {:.2} deg", median(&mut errors));
+}
+
+/// Tubes with one end hidden (by a rock, a sand mound or the image border) refined in stereo from
+/// their visible masks: the fit alone centres them on what is visible, half the hidden length off
+/// along the axis; the visible-end anchoring (`tubeloc_refine::hidden_end`, on by default) puts
+/// them back.
+#[test]
+fn tubes_with_a_hidden_end_are_anchored_at_the_visible_one() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let set = tmp.path().join("st");
+    ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "6"]);
+    let ann = read(&set.join("annotations.json"));
+    let (dets, truths) = mask_detections(&ann);
+    let det_path = tmp.path().join("dets.json");
+    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
+    // |along-axis centre error| (mm) of the partly hidden tubes, and how many poses were anchored.
+    let along = |extra: &[&str]| {
+        let out = tmp.path().join("poses.json");
+        let args = ["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()];
+        ok(&[&args[..], extra].concat());
+        let poses = read(&out);
+        let mut errs = Vec::new();
+        let mut anchored = 0;
+        for p in poses.as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true)) {
+            anchored += p.get("end_anchored").is_some_and(|v| v.is_string()) as usize;
+            let (id, c) = (p["image_id"].as_u64().unwrap(), vec3(&p["centre"]));
+            let Some((_, tc, ta, vis)) = truths.iter().filter(|t| t.0 == id).min_by(|x, y| dist(&x.1, &c).total_cmp(&dist(&y.1, &c))).filter(|t| dist(&t.1, &c) < 0.08) else { continue };
+            if *vis < 0.85 {
+                errs.push(1e3 * ((c[0] - tc[0]) * ta[0] + (c[1] - tc[1]) * ta[1] + (c[2] - tc[2]) * ta[2]).abs());
+            }
+        }
+        (errs, anchored)
+    };
+    let (fit_alone, none) = along(&["--no-hidden-end"]);
+    let (anchored, moved) = along(&[]);
+    assert_eq!(none, 0, "--no-hidden-end moved poses");
+    assert!(moved >= 1, "no pose anchored");
+    assert!(fit_alone.len() >= 3 && anchored.len() == fit_alone.len(), "partly hidden tubes found: {} without, {} with", fit_alone.len(), anchored.len());
+    let worst = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    assert!(worst(&anchored) < 10.0, "along-axis errors {anchored:.1?} mm (fit alone {fit_alone:.1?})");
+    for (a, f) in anchored.iter().zip(&fit_alone) {
+        assert!(*a <= f + 1.0, "a tube moved away: {a:.1} mm against {f:.1} mm by the fit alone");
+    }
+}
+
+/// Mask detections of the learned segmenter's kind from a stereo set's annotations: each tube at
+/// least half visible gets its visible mask and an axis seed turned 2 degrees and moved 2 px off
+/// its true image axis. Returns the detections and, per detection, its image id, true centre and
+/// axis (camera frame) and visible fraction.
+fn mask_detections(ann: &Value) -> (Vec<Value>, Vec<(u64, [f64; 3], [f64; 3], f64)>) {
+    let images: std::collections::BTreeMap<u64, &Value> = ann["images"].as_array().unwrap().iter().map(|i| (i["id"].as_u64().unwrap(), i)).collect();
     let mut dets = Vec::new();
     let mut truths = Vec::new();
     for a in ann["annotations"].as_array().unwrap() {
@@ -127,28 +201,7 @@ fn mask_detections_in_stereo_with_ground_stay_parallel_to_it() {
             "image_id": a["image_id"], "category_id": 1, "score": 0.9, "bbox": bbox, "segmentation": a["segmentation"],
             "axis_seed": {"centre_px": [p0[0] - 2.0 * dir[1], p0[1] + 2.0 * dir[0]], "direction_px": dir, "length_px": n * 3.0, "width_px": 2.0 * 0.0075 * fx / c[2]}
         }));
-        truths.push((a["image_id"].as_u64().unwrap(), c, axis));
+        truths.push((a["image_id"].as_u64().unwrap(), c, axis, a["visible_fraction"].as_f64().unwrap()));
     }
-    assert!(dets.len() >= 6, "only {} tubes at least half visible", dets.len());
-    let det_path = tmp.path().join("dets.json");
-    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
-    let out = tmp.path().join("poses.json");
-    ok(&["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()]);
-    let poses = read(&out);
-    let (mut errors, mut matched) = (Vec::new(), 0);
-    for p in poses.as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true)) {
-        let id = p["image_id"].as_u64().unwrap();
-        let (c, a) = (vec3(&p["centre"]), vec3(&p["axis"]));
-        let Some((_, _, ta)) = truths.iter().filter(|t| t.0 == id).min_by(|x, y| dist(&x.1, &c).total_cmp(&dist(&y.1, &c))).filter(|t| dist(&t.1, &c) < 0.05) else { continue };
-        matched += 1;
-        // Upward normal of the world ground (z = 0) in the camera frame: R_world_cam^T z.
-        let rot = images[&id]["T_world_cam"]["rotation"].as_array().unwrap();
-        let up = [0, 1, 2].map(|i| rot[2][i].as_f64().unwrap());
-        let tilt = (a[0] * up[0] + a[1] * up[1] + a[2] * up[2]).abs().asin().to_degrees();
-        let true_tilt = (ta[0] * up[0] + ta[1] * up[1] + ta[2] * up[2]).abs().asin().to_degrees();
-        assert!((tilt - true_tilt).abs() < 0.5, "image {id}: fitted tilt {tilt:.2} deg against the truth's {true_tilt:.2}");
-        errors.push((a[0] * ta[0] + a[1] * ta[1] + a[2] * ta[2]).abs().min(1.0).acos().to_degrees());
-    }
-    assert!(matched * 4 >= dets.len() * 3, "{matched} of {} tubes refined within 50 mm", dets.len());
-    assert!(median(&mut errors) < 0.5, "axis error median {:.2} deg", median(&mut errors));
+    (dets, truths)
 }

@@ -94,6 +94,11 @@ pub struct TubeAxisPose {
     /// the covariance is the fit's widened by the fit-to-seed difference.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed_kept: Option<String>,
+    /// Set when the centre was moved along the axis because one end is hidden (stereo: the
+    /// scene's depth shows an occluder or the image border beyond it), saying which end and by
+    /// how much; the covariance is the fit's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub end_anchored: Option<String>,
 }
 
 /// The canonical sign of an undirected axis: the first component (x, y, z order) with magnitude
@@ -151,6 +156,7 @@ impl TubeAxisPose {
             converged: true,
             failure: None,
             seed_kept: None,
+            end_anchored: None,
         })
     }
 

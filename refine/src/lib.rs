@@ -14,6 +14,7 @@ pub mod duplicates;
 pub mod edges;
 pub mod error;
 pub mod fit;
+pub mod hidden_end;
 pub mod jacobian;
 pub mod model;
 mod mono;

@@ -161,6 +161,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             } else {
                 (vec![Vec::new(); items.len()], None, None)
             };
+            let scene_depth = depth.as_ref();
             let depth = depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera));
             // Diagnostics: TUBELOC_DEBUG_STEREO_DIR=D writes each image's stereo points (left
             // camera frame, metres, one list per work item) to D/<image id>.json and, with
@@ -217,6 +218,11 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     };
                     let stage = args.photo_stage(ground.as_ref(), &refiner, kind);
                     tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
+                }
+            }
+            for (p, w) in poses.iter_mut().zip(items.iter()) {
+                if let Work::Detection(d) = w {
+                    super::anchor_hidden_end(args, p, d, scene_depth, &refiner, &camera);
                 }
             }
             let snapped = match args.snapped_out {
