@@ -391,14 +391,15 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    // Before the stereo stages, so that their two-view fit starts from the anchored centre.
+    for (p, d) in poses.iter_mut().zip(&dets) {
+        anchor_hidden_end(&args, p, d, depth.as_ref(), &refiner, &camera);
+    }
     if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
         for (p, d) in poses.iter_mut().zip(&dets) {
             let stage = args.photo_stage(ground.as_ref(), &refiner, SeedKind::of(d));
             stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
         }
-    }
-    for (p, d) in poses.iter_mut().zip(&dets) {
-        anchor_hidden_end(&args, p, d, depth.as_ref(), &refiner, &camera);
     }
     for (i, p) in poses.iter().enumerate() {
         let c = p.centre * 1e3;

@@ -206,10 +206,11 @@ pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Recti
     let moved = tv.map(|t| t.state).or(moved)?;
     let shift = moved.c.norm() - st.c.norm();
     let (c, a) = (r1.transpose() * moved.c, r1.transpose() * moved.a);
-    let mut p = TubeAxisPose::new(pose.image_id, pose.score, c, a, pose.end_confidence).ok()?;
-    p.covariance = pose.covariance;
-    p.residuals = pose.residuals;
-    *pose = p;
+    // The new centre and axis; covariance, residuals and `end_anchored` stay the fit's. A kept
+    // seed (`seed_kept`) is the detector's no longer.
+    let p = TubeAxisPose::new(pose.image_id, pose.score, c, a, pose.end_confidence).ok()?;
+    (pose.centre, pose.axis, pose.end_direction) = (p.centre, p.axis, p.end_direction);
+    pose.seed_kept = None;
     Some(shift)
 }
 

@@ -210,6 +210,12 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     }
                 }
             }
+            // Before the stereo stages, so that their two-view fit starts from the anchored centre.
+            for (p, w) in poses.iter_mut().zip(items.iter()) {
+                if let Work::Detection(d) = w {
+                    super::anchor_hidden_end(args, p, d, scene_depth, &refiner, &camera);
+                }
+            }
             if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
                 for (p, w) in poses.iter_mut().zip(items.iter()) {
                     let kind = match w {
@@ -218,11 +224,6 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     };
                     let stage = args.photo_stage(ground.as_ref(), &refiner, kind);
                     tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
-                }
-            }
-            for (p, w) in poses.iter_mut().zip(items.iter()) {
-                if let Work::Detection(d) = w {
-                    super::anchor_hidden_end(args, p, d, scene_depth, &refiner, &camera);
                 }
             }
             let snapped = match args.snapped_out {
