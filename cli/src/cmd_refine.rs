@@ -274,14 +274,24 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
     Refiner::new(&tube, config).context("building the refiner")
 }
 
-/// With a scene depth map (stereo) and unless `--no-hidden-end`: `pose`, refined from the mask
-/// detection `det`, moved along its axis onto its visible end when its other end is hidden
-/// ([`anchor_visible_end`]). Template-pose detections are left alone (their masks are the
-/// template's silhouette, not what is visible).
-pub(crate) fn anchor_hidden_end(args: &RefineArgs, pose: &mut TubeAxisPose, det: &TubeDetection, depth: Option<&Plane<f32>>, refiner: &Refiner, camera: &CameraModel) {
-    let (Some(depth), false, None) = (depth, args.no_hidden_end, &det.t_cam_tube) else { return };
-    let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return };
-    anchor_visible_end(pose, refiner.model.length, &mask, depth, camera, &HiddenEnd::default());
+/// The stages after the fit of one pose, in order: with a scene depth map (stereo) and unless
+/// `--no-hidden-end`, a pose refined from a mask detection `det` is moved along its axis onto its
+/// visible end when its other end is hidden ([`anchor_visible_end`]; template-pose detections'
+/// masks are the template's silhouette, not what is visible); then, with a rectified `pair`, the
+/// photometric / rims / two-view stage with the settings of the pose's seed kind
+/// ([`RefineArgs::photo_stage`]; `det` is `None` for an explicit seed). The anchoring comes
+/// first so that the two-view fit starts from the anchored centre.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn after_fit(args: &RefineArgs, pose: &mut TubeAxisPose, det: Option<&TubeDetection>, depth: Option<&Plane<f32>>, pair: Option<&RectifiedPair>, ground: Option<&GroundPlane>, refiner: &Refiner, camera: &CameraModel) {
+    if let (Some(depth), Some(d), false) = (depth, det, args.no_hidden_end) {
+        if let (None, Some(mask)) = (&d.t_cam_tube, d.mask.as_ref().and_then(|m| m.to_mask().ok())) {
+            anchor_visible_end(pose, refiner.model.length, &mask, depth, camera, &HiddenEnd::default());
+        }
+    }
+    if let (Some(pair), true) = (pair, args.photo_range_mm > 0.0) {
+        let kind = det.map_or(SeedKind::Explicit, SeedKind::of);
+        stereo_stage::photo_refine(pose, &refiner.model, pair, &args.photo_stage(ground, refiner, kind));
+    }
 }
 
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
@@ -391,15 +401,8 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    // Before the stereo stages, so that their two-view fit starts from the anchored centre.
     for (p, d) in poses.iter_mut().zip(&dets) {
-        anchor_hidden_end(&args, p, d, depth.as_ref(), &refiner, &camera);
-    }
-    if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
-        for (p, d) in poses.iter_mut().zip(&dets) {
-            let stage = args.photo_stage(ground.as_ref(), &refiner, SeedKind::of(d));
-            stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
-        }
+        after_fit(&args, p, Some(d), depth.as_ref(), pair.as_ref(), ground.as_ref(), &refiner, &camera);
     }
     for (i, p) in poses.iter().enumerate() {
         let c = p.centre * 1e3;

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seed::{axis_state_of, perturbed, reanchored_pose};
 use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
-use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed, SeedKind};
+use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
 
 /// What to refine in one image: detections, or seeds made from exact poses.
 enum Work {
@@ -210,21 +210,12 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     }
                 }
             }
-            // Before the stereo stages, so that their two-view fit starts from the anchored centre.
             for (p, w) in poses.iter_mut().zip(items.iter()) {
-                if let Work::Detection(d) = w {
-                    super::anchor_hidden_end(args, p, d, scene_depth, &refiner, &camera);
-                }
-            }
-            if let (Some(pair), true) = (&pair, args.photo_range_mm > 0.0) {
-                for (p, w) in poses.iter_mut().zip(items.iter()) {
-                    let kind = match w {
-                        Work::Detection(d) => SeedKind::of(d),
-                        Work::GtSeed(..) => SeedKind::Explicit,
-                    };
-                    let stage = args.photo_stage(ground.as_ref(), &refiner, kind);
-                    tubeloc_refine::stereo_stage::photo_refine(p, &refiner.model, pair, &stage);
-                }
+                let det = match w {
+                    Work::Detection(d) => Some(d),
+                    Work::GtSeed(..) => None,
+                };
+                super::after_fit(args, p, det, scene_depth, pair.as_ref(), ground.as_ref(), &refiner, &camera);
             }
             let snapped = match args.snapped_out {
                 Some(_) => items
