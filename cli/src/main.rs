@@ -92,6 +92,8 @@ pub(crate) fn run_words(words: &[String]) -> anyhow::Result<()> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Per-tube buffers are reused rather than mapped and returned to the kernel each time.
+    tubeloc_core::heap::keep_freed_memory();
     let result = dispatch(cli.command);
     match result {
         Ok(code) => ExitCode::from(code),

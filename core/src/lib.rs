@@ -11,6 +11,7 @@ pub mod error;
 pub mod coco;
 pub mod files;
 pub mod geometry;
+pub mod heap;
 pub mod mask;
 pub mod plane;
 pub mod pose;

@@ -175,6 +175,10 @@ impl BinaryMask {
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0usize, 0usize);
         for y in 0..self.height {
             let row = &self.data[y * self.width..(y + 1) * self.width];
+            // Empty rows (most of an image-sized mask) are skipped by an OR that vectorizes.
+            if row.iter().fold(0u8, |acc, &v| acc | v) == 0 {
+                continue;
+            }
             if let Some(first) = row.iter().position(|&v| v != 0) {
                 let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
                 x0 = x0.min(first);

@@ -5,6 +5,8 @@
 //! the path of `tubeloc refine --detections --ground auto` (coarse search, colour-free end
 //! decision, mask check, image-axis prior).
 //!
+//! The allocator keeps freed memory as `tubeloc` does ([`tubeloc_core::heap`]).
+//!
 //! Run: `cargo bench -p tubeloc-refine --bench refine` (criterion reports the median time per
 //! tube).
 
@@ -15,6 +17,8 @@ use common::*;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn bench(c: &mut Criterion) {
+    // As the `tubeloc` binary does (`tubeloc_core::heap`).
+    assert!(tubeloc_core::heap::keep_freed_memory());
     let ss = speed_scene();
     let (refiner, seed, input) = (&ss.refiner, &ss.seed, ss.input());
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();

@@ -159,7 +159,8 @@ pub fn build_pyramid_with(image: &Plane<f32>, camera: &CameraModel, rect: (usize
         }
         let smooth = GradientLevel { camera: cam.clone(), width: cur.width, height: cur.height, scale, grad: gradients(&blur(&cur)), smoothed: None };
         if k == 0 && !blur_level0 {
-            out.push(GradientLevel { grad: gradients(&cur), smoothed: Some(Box::new(smooth.clone())), ..smooth });
+            let sharp = GradientLevel { camera: cam.clone(), width: cur.width, height: cur.height, scale, grad: gradients(&cur), smoothed: None };
+            out.push(GradientLevel { smoothed: Some(Box::new(smooth)), ..sharp });
         } else {
             out.push(smooth);
         }
