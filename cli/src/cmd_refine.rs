@@ -33,7 +33,7 @@ use nalgebra::{Point3, Vector3};
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
-use tubeloc_refine::hidden_end::{anchor_visible_end, HiddenEnd};
+use tubeloc_refine::hidden_end::{anchor_visible_end, unseen_length_variance, widen_along_axis, HiddenEnd};
 use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, trim_kept_mask, MaskSnap};
 use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene, SeedKind, SeedSettings};
 
@@ -283,16 +283,24 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
 /// first so that the two-view fit starts from the anchored centre.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn after_fit(args: &RefineArgs, pose: &mut TubeAxisPose, det: Option<&TubeDetection>, depth: Option<&Plane<f32>>, pair: Option<&RectifiedPair>, ground: Option<&GroundPlane>, refiner: &Refiner, camera: &CameraModel) {
-    if let (Some(depth), Some(d), false) = (depth, det, args.no_hidden_end) {
-        if let (None, Some(mask)) = (&d.t_cam_tube, d.mask.as_ref().and_then(|m| m.to_mask().ok())) {
-            anchor_visible_end(pose, refiner.model.length, &mask, depth, camera, &HiddenEnd::default());
-        }
+    // The mask of a mask seed (the learned segmenter's kind; not a template pose's).
+    let mask = det.filter(|d| d.t_cam_tube.is_none()).and_then(|d| d.mask.as_ref()).and_then(|m| m.to_mask().ok());
+    if let (Some(depth), Some(mask), false) = (depth, &mask, args.no_hidden_end) {
+        anchor_visible_end(pose, refiner.model.length, mask, depth, camera, &HiddenEnd::default());
     }
     if let (Some(pair), true) = (pair, args.photo_range_mm > 0.0) {
         let kind = det.map_or(SeedKind::Explicit, SeedKind::of);
         stereo_stage::photo_refine(pose, &refiner.model, pair, &args.photo_stage(ground, refiner, kind));
     }
+    // The centre's along-axis freedom over the part of the tube the mask does not show.
+    if let Some(v) = mask.as_ref().and_then(|m| unseen_length_variance(pose, refiner.model.length, m, camera, UNSEEN_ANCHOR_PX)) {
+        widen_along_axis(pose, v);
+    }
 }
+
+/// The uncertainty (pixels along the axis) of a visible end that anchors a tube
+/// ([`unseen_length_variance`]): the detector's mask ends within about this of the tube's.
+const UNSEEN_ANCHOR_PX: f64 = 3.0;
 
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
 /// (and is the fit's, not a kept seed) and agrees with the mask; otherwise with its mask

@@ -18,6 +18,10 @@
 //! exactly one end hidden the tube is moved along its axis until its visible end's projection
 //! meets the mask's end there: by `-(ℓ/2 - t₊) L / ℓ` metres (seal end visible) or
 //! `+(t₋ + ℓ/2) L / ℓ` (foot end visible), `L` the tube's length. Otherwise nothing changes.
+//!
+//! Whether anchored or not, the fit's covariance does not know how far the centre may slide
+//! along the axis where the mask shows only part of the tube; [`unseen_length_variance`] and
+//! [`widen_along_axis`] add that to the centre's covariance (any mask seed, mono or stereo).
 
 use nalgebra::{Point2, Point3, Vector2};
 use tubeloc_core::{BinaryMask, CameraModel, Plane, TubeAxisPose};
@@ -93,6 +97,45 @@ pub fn anchor_visible_end(pose: &mut TubeAxisPose, length_m: f64, mask: &BinaryM
     let which = if shift < 0.0 { "foot" } else { "seal" };
     pose.end_anchored = Some(format!("the {which} end is hidden: moved {:.1} mm along the axis to meet the mask's other end", shift.abs() * 1e3));
     Some(shift)
+}
+
+/// How far the mask lets the centre slide along the axis: the variance (m²) of the centre's
+/// along-axis position that the fit's covariance does not hold, for `pose` and the detector's
+/// `mask` (module docs for `ℓ`, `t₋`, `t₊`).
+///
+/// The mask covers the fraction `f = (min(t₊, ℓ/2) - max(t₋, -ℓ/2)) / ℓ` of the projected
+/// tube. Where an end is hidden the edges do not say where the tube ends, and the centre can
+/// sit anywhere over the hidden length `h = (1 - f) L`: the variance of a uniform spread,
+/// `h² / 12`. A tube anchored at its visible end ([`anchor_visible_end`]) keeps that end's
+/// uncertainty instead, `(anchor_px · L / ℓ)²`. `None` when the pose did not converge, the
+/// mask is empty or of another size, or the tube projects shorter than 10 px.
+pub fn unseen_length_variance(pose: &TubeAxisPose, length_m: f64, mask: &BinaryMask, camera: &CameraModel, anchor_px: f64) -> Option<f64> {
+    if !pose.converged || mask.width != camera.width as usize || mask.height != camera.height as usize {
+        return None;
+    }
+    let half = pose.end_direction * (0.5 * length_m);
+    let p0 = camera.project(&Point3::from(pose.centre - half))?;
+    let p1 = camera.project(&Point3::from(pose.centre + half))?;
+    let ell = (p1 - p0).norm();
+    if !(ell >= 10.0) {
+        return None;
+    }
+    if pose.end_anchored.is_some() {
+        return Some((anchor_px * length_m / ell).powi(2));
+    }
+    let (t_lo, t_hi) = mask_span(mask, &Point2::from((p0.coords + p1.coords) * 0.5), &((p1 - p0) / ell))?;
+    let f = ((t_hi.min(0.5 * ell) - t_lo.max(-0.5 * ell)) / ell).clamp(0.0, 1.0);
+    Some(((1.0 - f) * length_m).powi(2) / 12.0)
+}
+
+/// Adds `variance` (m²) along the axis to `pose`'s centre covariance: `Σ_c += v a aᵀ`.
+pub fn widen_along_axis(pose: &mut TubeAxisPose, variance: f64) {
+    let a = pose.axis;
+    for i in 0..3 {
+        for j in 0..3 {
+            pose.covariance[i][j] += variance * a[i] * a[j];
+        }
+    }
 }
 
 /// The 1st and 99th percentiles of the mask pixels' positions along `u` from `mid` (pixels);
@@ -184,6 +227,35 @@ mod tests {
         let whole = BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= px(-0.5 * len) && (x as f64) <= x_hi && (y as f64 - cam.cy).abs() <= 8.0);
         let mut pose = TubeAxisPose::new(0, 1.0, truth, Vector3::x(), 0.9).unwrap();
         assert_eq!(anchor_visible_end(&mut pose, len, &whole, &depth, &cam, &HiddenEnd::default()), None);
+    }
+
+    /// The centre's unseen along-axis spread: half the tube masked gives the uniform variance
+    /// of the hidden half, a whole mask next to none, an anchored tube its end's few pixels; the
+    /// widening adds along the axis only.
+    #[test]
+    fn the_unseen_length_widens_the_centre_along_the_axis() {
+        let cam = CameraModel::from_hfov(400, 300, 40.0);
+        let len = 0.15;
+        let px = |x: f64| cam.project(&Point3::new(x, 0.0, 1.0)).unwrap().x;
+        let band = |x0: f64, x1: f64| BinaryMask::from_fn(400, 300, move |x, y| (x as f64) >= px(x0) && (x as f64) <= px(x1) && (y as f64 - cam.cy).abs() <= 8.0);
+        let pose = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), Vector3::x(), 0.9).unwrap();
+        let half = unseen_length_variance(&pose, len, &band(0.0, 0.5 * len), &cam, 3.0).unwrap();
+        let expected = (0.5 * len).powi(2) / 12.0;
+        assert!((half.sqrt() - expected.sqrt()).abs() < 0.002, "σ {} vs {}", half.sqrt(), expected.sqrt());
+        let whole = unseen_length_variance(&pose, len, &band(-0.5 * len, 0.5 * len), &cam, 3.0).unwrap();
+        assert!(whole.sqrt() < 0.002, "whole tube masked: σ {}", whole.sqrt());
+        let ell = px(0.5 * len) - px(-0.5 * len);
+        let mut anchored = pose.clone();
+        anchored.end_anchored = Some("test".into());
+        let v = unseen_length_variance(&anchored, len, &band(0.0, 0.5 * len), &cam, 3.0).unwrap();
+        assert!((v.sqrt() - 3.0 * len / ell).abs() < 1e-9);
+        assert_eq!(unseen_length_variance(&pose, len, &BinaryMask::new(40, 30), &cam, 3.0), None, "a mask of another size");
+        let mut widened = pose.clone();
+        widen_along_axis(&mut widened, half);
+        assert!((widened.covariance[0][0] - pose.covariance[0][0] - half).abs() < 1e-15);
+        for (i, j) in [(1, 1), (2, 2), (0, 1), (3, 3), (4, 4)] {
+            assert_eq!(widened.covariance[i][j], pose.covariance[i][j], "entry {i},{j}");
+        }
     }
 
     /// The image border hides the seal end: the foot end anchors.
