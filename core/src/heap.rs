@@ -18,8 +18,9 @@ pub const HEAP_KEEP_FREE_BYTES: usize = 32 << 20;
 /// Asks the C allocator to keep freed memory for reuse: blocks up to
 /// [`HEAP_BLOCK_MAX_BYTES`] come from the heap, and freed heap tops of up to
 /// [`HEAP_KEEP_FREE_BYTES`] are not returned to the kernel. `tubeloc locate` on a 5472 x 3648
-/// image peaks at the same memory (3534 MiB) with and without it. Call it once at program start (the `tubeloc` binary and the refinement benchmark
-/// do). Returns false where it does not apply (not glibc) or `mallopt` refused.
+/// image peaks at the same memory (3534 MiB) with and without it. Call it once at program
+/// start (the `tubeloc` binary and the refinement benchmark do). Returns false where it does
+/// not apply (not glibc) or `mallopt` refused.
 pub fn keep_freed_memory() -> bool {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     {
