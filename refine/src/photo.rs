@@ -66,8 +66,9 @@ fn front_depth(model: &CylinderModel, st: &AxisState, r: &Vector3<f64>) -> Optio
 /// Searches the centre's distance along its viewing ray within `±range_m` (see the module
 /// docs). `camera` is the rectified left camera (no distortion) of the rectified images
 /// `left`/`right` (intensities, any scale); `st` is in that camera's frame; `fb` is
-/// `f · B` in pixel metres. `None` when fewer than 30 pixels are covered or the correlation is
-/// undefined (flat images).
+/// `f · B` in pixel metres. All shifts are scored on the covered pixels whose match stays
+/// inside the right image over the whole search. `None` when fewer than 30 pixels, or fewer
+/// than half of the covered ones, are so used, or the correlation is undefined (flat images).
 pub fn photometric_depth(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64) -> Option<PhotoDepth> {
     photometric_depth_visible(model, camera, left, right, fb, st, range_m, None)
 }
@@ -87,20 +88,21 @@ pub struct Occluders<'a> {
 /// [`photometric_depth`] leaving out the pixels hidden by `occluders`.
 #[allow(clippy::too_many_arguments)]
 pub fn photometric_depth_visible(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, fb: f64, st: &AxisState, range_m: f64, occluders: Option<&Occluders>) -> Option<PhotoDepth> {
-    let px = covered_pixels(model, camera, left, st, fb, occluders)?;
+    let covered = covered_pixels(model, camera, left, st, fb, occluders)?;
     let w = left.width as f64;
     let dist = st.c.norm();
+    // Every shift is scored on the same pixels: those whose match stays inside the right image
+    // over the whole search (its column `x - f B / (s Z)` grows with `s`). A set that changed
+    // with the shift, at a tube cut by the right image's border, would favour the shifts that
+    // keep or drop the border pixels rather than those that align the views.
+    let reach = range_m + 2e-3;
+    let (s_lo, s_hi) = ((dist - reach) / dist, (dist + reach) / dist);
+    let px: Vec<_> = covered.iter().copied().filter(|&(x, _, _, z)| x as f64 - fb / (s_lo * z) >= 0.0 && x as f64 - fb / (s_hi * z) <= w - 1.0).collect();
     // ZNCC for a centre shift `s_m` along the ray (scale (dist + s_m) / dist).
     let zncc = |s_m: f64| -> Option<f64> {
         let s = (dist + s_m) / dist;
-        let mut pairs = Vec::with_capacity(px.len());
-        for &(x, y, l, z) in &px {
-            let xr = x as f64 - fb / (s * z);
-            if xr >= 0.0 && xr <= w - 1.0 {
-                pairs.push((l as f64, right.sample_bilinear(xr as f32, y) as f64));
-            }
-        }
-        zncc_of(&pairs, px.len())
+        let pairs: Vec<(f64, f64)> = px.iter().map(|&(x, y, l, z)| (l as f64, right.sample_bilinear((x as f64 - fb / (s * z)) as f32, y) as f64)).collect();
+        zncc_of(&pairs, covered.len())
     };
     let scan = |lo: f64, hi: f64, step: f64| -> Option<(f64, f64)> {
         let k = ((hi - lo) / step).round() as i64;
@@ -153,8 +155,12 @@ pub fn photometric_ends_visible(model: &CylinderModel, camera: &CameraModel, lef
         let a = qp - qm;
         (a.norm() > 1e-6 && qm.z > 0.0 && qp.z > 0.0).then(|| AxisState { c: 0.5 * (qm + qp), a: a.normalize() })
     };
-    let pix = covered_pixels(model, camera, left, st, fb, occluders)?;
+    let covered = covered_pixels(model, camera, left, st, fb, occluders)?;
     let w = left.width as f64;
+    // As in [`photometric_depth_visible`], every hypothesis is scored on the same pixels: those
+    // whose match stays inside the right image for front depths within the search's reach.
+    let reach = range_m + 2.5e-3;
+    let pix: Vec<_> = covered.iter().copied().filter(|&(x, _, _, z)| z > reach && x as f64 - fb / (z - reach) >= 0.0 && x as f64 - fb / (z + reach) <= w - 1.0).collect();
     let mut pairs = Vec::with_capacity(pix.len());
     let mut score = |dm: f64, dp: f64| -> Option<f64> {
         let s = state_of(dm, dp)?;
@@ -163,11 +169,9 @@ pub fn photometric_ends_visible(model: &CylinderModel, camera: &CameraModel, lef
             let r = Vector3::new((x as f64 - camera.cx) / camera.fx, (y as f64 - camera.cy) / camera.fy, 1.0);
             let z = front_depth(model, &s, &r).unwrap_or(z0 * s.c.norm() / st.c.norm());
             let xr = x as f64 - fb / z;
-            if xr >= 0.0 && xr <= w - 1.0 {
-                pairs.push((l as f64, right.sample_bilinear(xr as f32, y) as f64));
-            }
+            pairs.push((l as f64, right.sample_bilinear(xr.clamp(0.0, w - 1.0) as f32, y) as f64));
         }
-        zncc_of(&pairs, pix.len())
+        zncc_of(&pairs, covered.len())
     };
     let mut best: Option<(f64, f64, f64)> = None;
     let mut grid = |c: (f64, f64), r: f64, step: f64, best: &mut Option<(f64, f64, f64)>| {

@@ -160,3 +160,46 @@ fn rims_in_both_views_recover_the_tilt_of_a_tube_along_the_rows() {
         assert!(after < 1.2, "seed {seed}: axis {before:.2} -> {after:.2} deg ({:?} samples, rms {:.2} px)", re.samples, re.rms_px);
     }
 }
+
+/// A tube whose match leaves the right image: both views cropped at the same column, so that
+/// just under half of the tube's pixels are matched inside the right view at the true distance
+/// (more of them at larger distances). Scoring each shift on the pixels it happens to match
+/// inside would allow only the farther shifts and return a wrong distance; the search must
+/// either recover the distance or give no answer.
+#[test]
+
+/// A tube whose match leaves the right image: both views cropped at the same column, for every
+/// third column across the tube's match. Scoring each shift on the pixels it happens to match
+/// inside the right view allowed, where about half of the tube is cut, only the shifts that
+/// keep enough pixels inside, and returned a wrong distance (36 mm off for seed 502). Every
+/// shift is now scored on the same pixels: each crop gives the distance within 3 mm (0.15 px of
+/// disparity at 2.2 m) or no answer.
+#[test]
+fn photometric_depth_of_a_tube_cut_by_the_right_image_border_is_right_or_absent() {
+    let model = default_model();
+    let (mut answered, mut absent) = (0, 0);
+    for (seed, l, r) in good_seeds(500, 3) {
+        let t = AxisState { c: l.truth.centre, a: l.truth.axis };
+        let fb = l.camera.fx * BASELINE;
+        let start = shifted(&t, 0.009);
+        // The columns of the tube's match in the right view.
+        let mask = tube_mask(&model, &l);
+        let d = fb / t.c.z;
+        let xs: Vec<f64> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, _)| x as f64 - d).collect();
+        let (lo, hi) = (xs.iter().copied().fold(f64::MAX, f64::min).max(1.0) as usize, xs.iter().copied().fold(f64::MIN, f64::max) as usize);
+        for x0 in (lo..hi).step_by(3) {
+            let (w, h) = (l.image.width - x0, l.image.height);
+            let crop = |p: &tubeloc_core::Plane<f32>| tubeloc_core::Plane::from_vec(w, h, (0..h).flat_map(|y| p.row(y)[x0..].to_vec()).collect());
+            let cam = l.camera.cropped(x0 as u32, 0, w as u32, h as u32);
+            match photometric_depth(&model, &cam, &crop(&l.image), &crop(&r.image), fb, &start, 0.03) {
+                Some(pd) => {
+                    let err = (shifted(&start, pd.shift_m).c - t.c).norm();
+                    assert!(err < 3e-3, "seed {seed}, right view from column {x0}: centre error {:.1} mm (zncc {:.3}, {} px)", err * 1e3, pd.zncc, pd.pixels);
+                    answered += 1;
+                }
+                None => absent += 1,
+            }
+        }
+    }
+    assert!(answered >= 20 && absent >= 20, "{answered} crops answered, {absent} not: the border did not cut the tubes");
+}
