@@ -10,7 +10,8 @@
 //!    by terrain, time, height and occlusion) — the paper's Tables I and II.
 //! 5. `poses/<detector>/<split>`: refinement of the detections and pose errors against the
 //!    renderer's exact poses (coarse seeds vs mono refinement), with histograms.
-//! 6. `stereo`: a small synthetic stereo set, refined with and without the stereo term.
+//! 6. `stereo`: a small synthetic stereo set, refined with and without the stereo term, evaluated
+//!    on all tubes and on the tubes in both views.
 //! 7. `fullres`: `tubeloc locate` on one full-resolution 5472x3648 image in a child process,
 //!    with its peak memory.
 //! 8. `report.md`: everything above with the paper's figures beside ours.
@@ -299,7 +300,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         let sdir = out.join("stereo");
         let set = sdir.join("set");
         let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
-        st.run("stereo", &[sdir.join("gt_seeds/eval/pose_metrics.json"), sdir.join("learned/eval/pose_metrics.json")], || {
+        st.run("stereo", &[sdir.join("gt_seeds/eval/pose_metrics.json"), sdir.join("learned/eval/pose_metrics.json"), sdir.join("learned/eval_both_views/pose_metrics.json")], || {
             crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--seed", "3", "--force"]))?;
             let gt = set.join("annotations.json");
             let dets = sdir.join("learned_detections.json");
@@ -329,6 +330,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
                     labels.push(format!("{mode}={}", s(&poses)));
                 }
                 let mut w = words(&["eval", "--gt", &s(&gt), "--out", &s(&dir.join("eval")), "--poses"]);
+                w.extend(labels.iter().cloned());
+                crate::run_words(&w)?;
+                // Only the tubes both cameras see: the others get mono poses from a stereo run.
+                let mut w = words(&["eval", "--gt", &s(&gt), "--in-both-views", "--out", &s(&dir.join("eval_both_views")), "--poses"]);
                 w.extend(labels);
                 crate::run_words(&w)?;
             }
@@ -472,6 +477,10 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         let p = out.join("stereo").join(name).join("eval/report.md");
         if let Some(t) = crate::figures::pose_table(&p) {
             let _ = writeln!(r, "### Synthetic stereo set (L20/R20, 1024 crops at half resolution), {what} ([report with histograms](stereo/{name}/eval/report.md))\n\n{t}");
+        }
+        let p = out.join("stereo").join(name).join("eval_both_views/report.md");
+        if let Some(t) = crate::figures::pose_table(&p) {
+            let _ = writeln!(r, "### The same, tubes in both views only (axis at least half inside the right image, `tubeloc eval --in-both-views`) ([report with histograms](stereo/{name}/eval_both_views/report.md))\n\n{t}");
         }
     }
     if st.result("stereo").is_some() {

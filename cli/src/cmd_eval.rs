@@ -28,6 +28,12 @@ pub struct EvalArgs {
     /// ground-truth tubes evaluated.
     #[arg(long, default_value_t = 0.5)]
     min_visible: f64,
+    /// Pose evaluation of a stereo dataset: keep only the truths whose axis lies at least half
+    /// inside the right image (`images[].right_camera`, `images[].T_left_right`; 21 points along
+    /// the axis), the tubes that both cameras see. Tubes outside the right view get mono poses
+    /// from a stereo refinement (no stereo points).
+    #[arg(long)]
+    in_both_views: bool,
     /// Pose evaluation: gate of the greedy matching on the centre distance, millimetres.
     #[arg(long, default_value_t = 50.0)]
     match_mm: f64,
@@ -51,7 +57,7 @@ pub struct EvalArgs {
 /// Runs the evaluation, prints the summary (and breakdown table), writes the JSON files.
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !args.poses.is_empty() {
-        return poses::run(&args.gt, &args.poses, &args.truth_field, args.min_visible, args.match_mm, args.out.as_deref());
+        return poses::run(&args.gt, &args.poses, &poses::TruthFilter { field: &args.truth_field, min_visible: args.min_visible, in_both_views: args.in_both_views }, args.match_mm, args.out.as_deref());
     }
     let gt = CocoDataset::load(&args.gt).with_context(|| format!("loading ground truth {}", args.gt.display()))?;
     let mut dt = Vec::new();

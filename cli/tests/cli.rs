@@ -195,6 +195,9 @@ fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
     let o = tubeloc(&["eval", "--gt", p(&ds.join("annotations.json")), "--truth-field", "T_cam_tube_laser", "--poses", p(&poses)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("no annotation with T_cam_tube_laser"), "{}", stderr(&o));
+    let o = tubeloc(&["eval", "--gt", p(&ds.join("annotations.json")), "--in-both-views", "--poses", p(&poses)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("has no right_camera and T_left_right (--in-both-views needs a stereo dataset)"), "{}", stderr(&o));
 }
 
 #[test]

@@ -68,6 +68,16 @@ fn stereo_term_fixes_the_depth_that_mono_loses() {
         }
     }
     assert!(depth_st.len() >= 8, "only {} tubes with stereo points", depth_st.len());
+    // The tubes outside the right crop (mono poses) are left out of the truths by --in-both-views.
+    let truths = |extra: &[&str]| {
+        let out = tmp.path().join(format!("eval{}", extra.len()));
+        ok(&[&["eval", "--gt", set.join("annotations.json").to_str().unwrap(), "--poses", tmp.path().join("st0.json").to_str().unwrap(), "--out", out.to_str().unwrap()], extra].concat());
+        let m = read(&out.join("pose_metrics.json"));
+        assert_eq!(m["in_both_views"].as_bool(), Some(!extra.is_empty()));
+        m["poses"][0]["n_truths"].as_u64().unwrap()
+    };
+    let (all, both) = (truths(&[]), truths(&["--in-both-views"]));
+    assert!(both >= 1 && both < all, "{both} of {all} truths in both views");
     let (ds, dm, cs, z) = (median(&mut depth_st), median(&mut depth_mono), median(&mut centre_st), median(&mut zs));
     // SGM's disparity on these ~15 px wide tubes is off by about half a pixel (tube pixels of the
     // stereo crate's evaluation): depth error Z² · 0.5 px / (f B); allow 0.75 px.

@@ -35,20 +35,66 @@ fn med_p90(s: &Summary) -> String {
     }
 }
 
+/// Which annotations are truths: those with a pose in `field`, a `visible_fraction` of at least
+/// `min_visible` and, with `in_both_views`, an axis at least half inside the right image.
+pub struct TruthFilter<'a> {
+    /// Annotation field of the true pose (`T_cam_tube` or `T_cam_tube_tags`).
+    pub field: &'a str,
+    /// Least `visible_fraction`.
+    pub min_visible: f64,
+    /// Keep only tubes whose axis is at least half inside the right image.
+    pub in_both_views: bool,
+}
+
+/// Fraction of 21 points along the tube axis at `pose` (left camera frame) that project inside
+/// the right image of `camera`, with `t_left_right` mapping right-camera points into the left
+/// camera's frame.
+fn right_view_fraction(pose: &Pose, length: f64, t_left_right: &Pose, camera: &CameraModel) -> f64 {
+    let (c, a) = (pose.translation(), pose.rotation().column(2).into_owned());
+    let to_right = t_left_right.inverse();
+    let inside = (0..21)
+        .filter(|k| {
+            let p = to_right.transform_point(&nalgebra::Point3::from(c + a * (length * (*k as f64 / 20.0 - 0.5))));
+            camera.project(&p).is_some_and(|u| u.x >= 0.0 && u.y >= 0.0 && u.x <= camera.width as f64 - 1.0 && u.y <= camera.height as f64 - 1.0)
+        })
+        .count();
+    inside as f64 / 21.0
+}
+
 /// Runs the pose evaluation of each poses file against `gt_path`.
-pub fn run(gt_path: &Path, poses: &[String], truth_field: &str, min_visible: f64, match_mm: f64, out: Option<&Path>) -> Result<()> {
+pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64, out: Option<&Path>) -> Result<()> {
+    let (truth_field, min_visible) = (filter.field, filter.min_visible);
     let gt = CocoDataset::load(gt_path).with_context(|| format!("loading ground truth {}", gt_path.display()))?;
+    let mut right_views = BTreeMap::new();
+    if filter.in_both_views {
+        for im in &gt.images {
+            let (Some(c), Some(t)) = (im.extra.get("right_camera"), im.extra.get("T_left_right")) else {
+                bail!("{}: image {} has no right_camera and T_left_right (--in-both-views needs a stereo dataset)", gt_path.display(), im.id);
+            };
+            let c: CameraModel = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {}: right_camera", gt_path.display(), im.id))?;
+            let t: Pose = serde_json::from_value(t.clone()).with_context(|| format!("{}: image {}: T_left_right", gt_path.display(), im.id))?;
+            right_views.insert(im.id, (c, t));
+        }
+    }
+    let length = TubeModel::default().length;
     let mut truths = Vec::new();
     for a in &gt.annotations {
         let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
         let Some(v) = a.extra.get(truth_field) else { continue };
         if vis >= min_visible {
             let pose: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: {truth_field}", gt_path.display(), a.id))?;
+            if filter.in_both_views {
+                let (c, t) = right_views.get(&a.image_id).with_context(|| format!("{}: annotation {}: no image {}", gt_path.display(), a.id, a.image_id))?;
+                if right_view_fraction(&pose, length, t, c) < 0.5 {
+                    continue;
+                }
+            }
             truths.push(TubeTruth { image_id: a.image_id, pose });
         }
     }
+    let in_both = if filter.in_both_views { ", at least half in the right view" } else { "" };
     if truths.is_empty() {
-        bail!("{}: no annotation with {truth_field} and visible_fraction >= {min_visible}", gt_path.display());
+        bail!("{}: no annotation with {truth_field} and visible_fraction >= {min_visible}{in_both}", gt_path.display());
     }
     let mut cameras = BTreeMap::new();
     for im in &gt.images {
@@ -60,7 +106,7 @@ pub fn run(gt_path: &Path, poses: &[String], truth_field: &str, min_visible: f64
     let model = ModelPoints::from_tube(&TubeModel::default(), 0.002).context("sampling the tube model")?;
     let config = PoseEvalConfig { cameras, ..Default::default() };
     let mut evals: Vec<(String, PoseEvaluation)> = Vec::new();
-    println!("{} truths ({truth_field}, visible_fraction >= {min_visible}); matching: nearest centre within {match_mm} mm", truths.len());
+    println!("{} truths ({truth_field}, visible_fraction >= {min_visible}{in_both}); matching: nearest centre within {match_mm} mm", truths.len());
     println!("| poses | converged / all | matched | axis deg med / p90 | perp mm med / p90 | |along| mm med / p90 | centre mm med / p90 | ends right | AR MSSD | AR MSPD |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for spec in poses {
@@ -97,12 +143,12 @@ pub fn run(gt_path: &Path, poses: &[String], truth_field: &str, min_visible: f64
             })
             .collect();
         let p = out.join("pose_metrics.json");
-        write_json(&p, &serde_json::json!({ "gt": gt_path, "truth_field": truth_field, "min_visible": min_visible, "match_mm": match_mm, "poses": metrics })).with_context(|| format!("writing {}", p.display()))?;
+        write_json(&p, &serde_json::json!({ "gt": gt_path, "truth_field": truth_field, "min_visible": min_visible, "in_both_views": filter.in_both_views, "match_mm": match_mm, "poses": metrics })).with_context(|| format!("writing {}", p.display()))?;
         let report = tubeloc_eval::report::EvalReport {
             title: "Tube pose evaluation".into(),
             inputs: std::iter::once(("ground truth".to_string(), gt_path.display().to_string()))
                 .chain(poses.iter().map(|s| ("poses".to_string(), s.clone())))
-                .chain(std::iter::once(("truths".to_string(), format!("`{truth_field}`, visible_fraction >= {min_visible}"))))
+                .chain(std::iter::once(("truths".to_string(), format!("`{truth_field}`, visible_fraction >= {min_visible}{in_both}"))))
                 .collect(),
             poses: evals,
             ..Default::default()
