@@ -161,13 +161,6 @@ fn rims_in_both_views_recover_the_tilt_of_a_tube_along_the_rows() {
     }
 }
 
-/// A tube whose match leaves the right image: both views cropped at the same column, so that
-/// just under half of the tube's pixels are matched inside the right view at the true distance
-/// (more of them at larger distances). Scoring each shift on the pixels it happens to match
-/// inside would allow only the farther shifts and return a wrong distance; the search must
-/// either recover the distance or give no answer.
-#[test]
-
 /// A tube whose match leaves the right image: both views cropped at the same column, for every
 /// third column across the tube's match. Scoring each shift on the pixels it happens to match
 /// inside the right view allowed, where about half of the tube is cut, only the shifts that
