@@ -78,6 +78,14 @@ fn stereo_term_fixes_the_depth_that_mono_loses() {
     };
     let (all, both) = (truths(&[]), truths(&["--in-both-views"]));
     assert!(both >= 1 && both < all, "{both} of {all} truths in both views");
+    // The run says how many of its poses are mono for want of stereo points.
+    let st0 = tmp.path().join("st0_again.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(["refine", "--dataset", set.to_str().unwrap(), "--gt-seeds", "10,5", "--seed", "0", "--stereo", "--out", st0.to_str().unwrap()]).output().expect("running tubeloc");
+    assert!(o.status.success());
+    let without = read(&st0).as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true) && p["residuals"]["stereo_points"].as_u64() == Some(0)).count();
+    assert!(without >= 1, "every tube has stereo points");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains(&format!("{without} converged poses have no stereo points")), "{stderr}");
     let (ds, dm, cs, z) = (median(&mut depth_st), median(&mut depth_mono), median(&mut centre_st), median(&mut zs));
     // SGM's disparity on these ~15 px wide tubes is off by about half a pixel (tube pixels of the
     // stereo crate's evaluation): depth error Z² · 0.5 px / (f B); allow 0.75 px.

@@ -263,5 +263,9 @@ pub fn run(args: &RefineArgs) -> Result<()> {
         reasons,
         out.display()
     );
+    let without_points = poses.iter().filter(|p| p.converged && p.residuals.stereo_points == 0).count();
+    if args.stereo && without_points > 0 {
+        eprintln!("{without_points} converged poses have no stereo points (outside the right camera's view, or unmatched): they are mono poses");
+    }
     Ok(())
 }
