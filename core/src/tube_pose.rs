@@ -80,7 +80,8 @@ pub struct TubeAxisPose {
     pub end_direction: Vector3<f64>,
     /// Confidence in `end_direction`, in [0, 1] (0.5 = no evidence either way).
     pub end_confidence: f64,
-    /// 5x5 covariance over centre (m²) and axis tangent (rad²), row-major.
+    /// 5x5 covariance over centre (m²) and axis tangent (rad²), row-major. For mask seeds
+    /// `tubeloc refine` adds the centre's along-axis freedom over the tube's unseen length.
     pub covariance: [[f64; 5]; 5],
     /// Residual statistics.
     pub residuals: ResidualStats,
@@ -96,7 +97,8 @@ pub struct TubeAxisPose {
     pub seed_kept: Option<String>,
     /// Set when the centre was moved along the axis because one end is hidden (stereo: the
     /// scene's depth shows an occluder or the image border beyond it), saying which end and by
-    /// how much; the covariance is the fit's.
+    /// how much; the centre's along-axis variance is then the visible end's few pixels
+    /// (`tubeloc refine`, `tubeloc_refine::hidden_end::unseen_length_variance`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub end_anchored: Option<String>,
 }
