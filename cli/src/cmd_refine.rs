@@ -194,6 +194,13 @@ pub struct RefineArgs {
     /// orientation is used as a prior, since the terrain has relief).
     #[arg(long, allow_hyphen_values = true)]
     pub(crate) ground: Option<String>,
+    /// Stereo with a ground plane: keep the given plane's height for every tube. By default each
+    /// tube's plane is moved to the median height of the matched terrain beside it (the 300
+    /// terrain points nearest its box, within 160 px, outside every tube's mask), which places
+    /// the tubes that get no stereo points of their own (outside the right camera's view) on
+    /// the terrain instead of the nominal ground.
+    #[arg(long)]
+    pub(crate) no_local_ground: bool,
     /// Refiner configuration JSON (fields of RefineConfig; missing fields keep their defaults).
     #[arg(long)]
     pub(crate) config: Option<PathBuf>,
@@ -219,13 +226,13 @@ pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
 /// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
 /// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
 /// `--stereo-erode`) or box (see [`stereo`]).
-fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection]) -> Result<(CameraModel, stereo::StereoRegions, RectifiedPair)> {
+fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection], ground: Option<&GroundPlane>) -> Result<(CameraModel, stereo::StereoRegions, RectifiedPair)> {
     let right_path = args.right.as_ref().context("--rig needs --right")?;
     let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
     let right = crate::cmd_stereo::load_gray(right_path)?;
     let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
     let regions: Vec<StereoRegion> = dets.iter().map(stereo::region_of).collect();
-    let (per, pair) = stereo::match_regions(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode)
+    let (per, pair) = stereo::match_regions(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode, ground)
         .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
     Ok((lcam, per, pair))
 }
@@ -338,6 +345,12 @@ impl RefineArgs {
     /// Whether the photometric stage moves each end along its own ray (distance and tilt)
     /// rather than the centre alone: not with `--photo-centre-only`, and not with a ground
     /// plane, whose tilt prior fixes the tilt better.
+    /// The ground plane of each tube: its local ground ([`stereo::StereoRegions::local_grounds`])
+    /// unless `--no-local-ground` or there is none, else `ground`.
+    pub(crate) fn tube_grounds(&self, ground: Option<GroundPlane>, local: &[Option<tubeloc_refine::local_ground::LocalGround>]) -> Vec<Option<GroundPlane>> {
+        local.iter().map(|l| l.filter(|_| !self.no_local_ground).map(|l| l.plane).or(ground)).collect()
+    }
+
     pub(crate) fn photo_moves_ends(&self, has_ground: bool) -> bool {
         !self.photo_centre_only && !has_ground
     }
@@ -384,17 +397,18 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     let loaded = colour::load(image_path)?;
     let colour = loaded.colour(!args.no_colour_ends);
     let gray = &loaded.gray;
-    let (camera, stereo, depth, pair) = match &args.rig {
+    let (camera, stereo, depth, pair, grounds) = match &args.rig {
         Some(rig) => {
-            let (c, s, p) = stereo_points(&args, &gray, rig, &dets)?;
-            (c, s.points, Some(s.depth), Some(p))
+            let (c, s, p) = stereo_points(&args, &gray, rig, &dets, ground.as_ref().filter(|_| !args.no_local_ground))?;
+            let grounds = args.tube_grounds(ground, &s.local_grounds);
+            (c, s.points, Some(s.depth), Some(p), grounds)
         }
         None => {
             if args.right.is_some() {
                 bail!("--right needs --rig (the pair's calibration)");
             }
             let p = args.camera.as_ref().context("--camera is required without --rig")?;
-            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None, None)
+            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None, None, vec![ground; dets.len()])
         }
     };
     if gray.width != camera.width as usize || gray.height != camera.height as usize {
@@ -404,13 +418,13 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     let bar = indicatif::ProgressBar::new(dets.len() as u64);
     let mut poses = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
-        let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None, image_axis: None } };
+        let input = RefineInput { image: &image, camera: &camera, ground: grounds[i], scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None, image_axis: None } };
         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
         bar.inc(1);
     }
     bar.finish_and_clear();
-    for (p, d) in poses.iter_mut().zip(&dets) {
-        after_fit(&args, p, Some(d), depth.as_ref(), pair.as_ref(), ground.as_ref(), &refiner, &camera);
+    for ((p, d), g) in poses.iter_mut().zip(&dets).zip(&grounds) {
+        after_fit(&args, p, Some(d), depth.as_ref(), pair.as_ref(), g.as_ref(), &refiner, &camera);
     }
     for (i, p) in poses.iter().enumerate() {
         let c = p.centre * 1e3;

@@ -194,6 +194,40 @@ fn tubes_with_a_hidden_end_are_anchored_at_the_visible_one() {
     }
 }
 
+/// Tubes outside the right camera's view get no stereo points of their own and are placed on
+/// the ground plane along their rays. With `--ground auto` that plane is the nominal ground
+/// (world z = 0), centimetres off the terrain's relief; the local ground (on by default) moves
+/// it to the matched terrain beside each tube, and those tubes land nearer their true centres.
+#[test]
+fn tubes_outside_the_right_view_sit_on_the_terrain_beside_them() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let set = tmp.path().join("st");
+    ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "7"]);
+    let ann = read(&set.join("annotations.json"));
+    let (dets, truths) = mask_detections(&ann);
+    let det_path = tmp.path().join("dets.json");
+    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
+    // Centre errors (mm) of the converged poses without stereo points, by (image, truth).
+    let errors = |extra: &[&str]| {
+        let out = tmp.path().join("poses.json");
+        let args = ["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()];
+        ok(&[&args[..], extra].concat());
+        let mut errs = std::collections::BTreeMap::new();
+        for p in read(&out).as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true) && p["residuals"]["stereo_points"].as_u64() == Some(0)) {
+            let (id, c) = (p["image_id"].as_u64().unwrap(), vec3(&p["centre"]));
+            let Some(k) = (0..truths.len()).filter(|&k| truths[k].0 == id).min_by(|&x, &y| dist(&truths[x].1, &c).total_cmp(&dist(&truths[y].1, &c))).filter(|&k| dist(&truths[k].1, &c) < 0.08) else { continue };
+            errs.insert(k, 1e3 * dist(&truths[k].1, &c));
+        }
+        errs
+    };
+    let (nominal, local) = (errors(&["--no-local-ground"]), errors(&[]));
+    eprintln!("no stereo points, centre error mm: nominal ground {nominal:.1?}, local {local:.1?}");
+    let both: Vec<(f64, f64)> = nominal.iter().filter_map(|(k, n)| local.get(k).map(|l| (*n, *l))).collect();
+    assert!(both.len() >= 2, "tubes without stereo points found in both runs: {both:?}");
+    assert!(both.iter().all(|(n, _)| *n > 20.0), "the nominal ground is already close: {both:?}");
+    assert!(both.iter().all(|(n, l)| *l < 10.0 && l < n), "(nominal, local) centre errors {both:?} mm");
+}
+
 /// Mask detections of the learned segmenter's kind from a stereo set's annotations: each tube at
 /// least half visible gets its visible mask and an axis seed turned 2 degrees and moved 2 px off
 /// its true image axis. Returns the detections and, per detection, its image id, true centre and

@@ -16,6 +16,7 @@ pub mod error;
 pub mod fit;
 pub mod hidden_end;
 pub mod jacobian;
+pub mod local_ground;
 pub mod model;
 mod mono;
 pub mod priors;

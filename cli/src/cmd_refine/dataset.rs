@@ -49,7 +49,7 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
 /// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
 /// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
 /// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
-fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work]) -> Result<(super::stereo::StereoRegions, RectifiedPair)> {
+fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work], ground: Option<&GroundPlane>) -> Result<(super::stereo::StereoRegions, RectifiedPair)> {
     let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
     let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
@@ -64,7 +64,7 @@ fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &
             Work::GtSeed(st, bbox, _) => StereoRegion { bbox: *bbox, mask: it.mask(h, w), seed_z: Some(st.c.z) },
         })
         .collect();
-    super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode).with_context(|| format!("stereo for {}", rpath.display()))
+    super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode, ground).with_context(|| format!("stereo for {}", rpath.display()))
 }
 
 fn parse_pair(s: &str) -> Result<(f64, f64)> {
@@ -155,11 +155,12 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
             }
             let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
-            let (stereo_pts, depth, pair) = if args.stereo {
-                let (s, r) = stereo_of(args, dir, im, &camera, &gray, items)?;
-                (s.points, Some(s.depth), Some(r))
+            let (stereo_pts, depth, pair, grounds) = if args.stereo {
+                let (s, r) = stereo_of(args, dir, im, &camera, &gray, items, ground.as_ref().filter(|_| !args.no_local_ground))?;
+                let grounds = args.tube_grounds(ground, &s.local_grounds);
+                (s.points, Some(s.depth), Some(r), grounds)
             } else {
-                (vec![Vec::new(); items.len()], None, None)
+                (vec![Vec::new(); items.len()], None, None, vec![ground; items.len()])
             };
             let scene_depth = depth.as_ref();
             let depth = depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera));
@@ -193,16 +194,16 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                             }
                         }
                         let d = &d;
-                        let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        let input = RefineInput { ground: grounds[k], scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
-                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, ground.as_ref(), &stereo_pts[k]) {
+                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, grounds[k].as_ref(), &stereo_pts[k]) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
                                 seeds.push(p);
                             }
                         }
                     }
                     Work::GtSeed(st, _, _) => {
-                        let input = RefineInput { scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        let input = RefineInput { ground: grounds[k], scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
                         poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
                             seeds.push(p);
@@ -210,12 +211,12 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     }
                 }
             }
-            for (p, w) in poses.iter_mut().zip(items.iter()) {
+            for ((p, w), g) in poses.iter_mut().zip(items.iter()).zip(&grounds) {
                 let det = match w {
                     Work::Detection(d) => Some(d),
                     Work::GtSeed(..) => None,
                 };
-                super::after_fit(args, p, det, scene_depth, pair.as_ref(), ground.as_ref(), &refiner, &camera);
+                super::after_fit(args, p, det, scene_depth, pair.as_ref(), g.as_ref(), &refiner, &camera);
             }
             let snapped = match args.snapped_out {
                 Some(_) => items

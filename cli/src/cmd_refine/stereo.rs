@@ -9,16 +9,18 @@
 use anyhow::{Context, Result};
 use nalgebra::{Point2, Point3};
 use tubeloc_core::{CameraModel, Plane, Pose, TubeDetection};
+use tubeloc_refine::local_ground::{self, LocalGround, LocalGroundConfig};
 use tubeloc_refine::stereo_stage::{self, RectifiedPair, StereoRegion};
+use tubeloc_refine::GroundPlane;
 use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
 
 /// Stereo points (left camera frame, metres) per region: the pair (`left`/`right` images of
 /// cameras `lcam`/`rcam`, `t_left_right` mapping right-camera points into the left frame) is
 /// rectified and matched ([`match_regions`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, RectifiedPair)> {
+pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
-    match_regions(&rect, lcam, left, right, regions, num_disparities, erode_px)
+    match_regions(&rect, lcam, left, right, regions, num_disparities, erode_px, ground)
 }
 
 /// The stereo region of a detection: its box, its mask (if it decodes) and its template pose's
@@ -38,27 +40,38 @@ pub(crate) struct StereoRegions {
     pub depth: Plane<f32>,
     /// Disparity of the rectified left image (NaN where not matched), pixels.
     pub disparity: Plane<f32>,
+    /// Per region, the given ground plane moved to the height of the matched terrain beside
+    /// it ([`local_ground::local_grounds`]); all `None` without a ground plane.
+    pub local_grounds: Vec<Option<LocalGround>>,
 }
 
 /// The pair rectified under `rect`, matched with SGM in the regions' boxes mapped into the
 /// rectified left image (32 px margin), triangulated and split by region (masks eroded by
 /// `erode_px` first); also the rectified pair (intensities in [0, 1]) with its SGM disparity for
-/// the photometric stage.
-pub(crate) fn match_regions(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<(StereoRegions, RectifiedPair)> {
+/// the photometric stage. With a `ground` plane, also each region's local ground; a region
+/// whose box lies where the left image cannot be matched (left of the nominal ground's
+/// disparity, near the left border) gets a 64 px wide strip of terrain matched just right of
+/// that column for it.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn match_regions(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
     let (rl, rr) = rect.rectify_pair(left, right)?;
-    let sr = points_rectified(rect, lcam, &rl, &rr, regions, num_disparities, erode_px)?;
+    let sr = points_rectified(rect, lcam, &rl, &rr, regions, num_disparities, erode_px, ground)?;
     let mut pair = RectifiedPair::from_u8(&rl, &rr, rect.rectified.clone(), rect.r_left, rect.baseline);
     pair.disparity = Some(sr.disparity.clone());
     Ok((sr, pair))
 }
 
 /// [`match_regions`]' points of the rectified pair `rl`/`rr`.
-fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u8>, rr: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize) -> Result<StereoRegions> {
+#[allow(clippy::too_many_arguments)]
+fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u8>, rr: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<StereoRegions> {
     let empty = |n: usize| StereoRegions {
         points: vec![Vec::new(); n],
         depth: Plane::filled(lcam.width as usize, lcam.height as usize, f32::NAN),
         disparity: Plane::filled(rect.rectified.width as usize, rect.rectified.height as usize, f32::NAN),
+        local_grounds: vec![None; n],
     };
+    let geom = rect.geometry();
+    let fb = geom.f * geom.baseline;
     if regions.is_empty() {
         return Ok(empty(0));
     }
@@ -74,17 +87,28 @@ fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u
         }
         if x1 > x0 && y1 > y0 {
             rois.push(Roi::new(x0.floor() as i64, y0.floor() as i64, (x1 - x0).ceil() as i64 + 1, (y1 - y0).ceil() as i64 + 1));
+            // Terrain for the local ground where the box (grown by the 32 px margin) has
+            // fewer than 64 columns that can be matched.
+            let centre = Point2::new(x + 0.5 * w, y + 0.5 * h);
+            if let Some(d) = ground.and_then(|g| local_ground::nominal_disparity(g, &lcam.unproject(&centre), fb)) {
+                let first = (1.05 * d + 2.0).ceil();
+                if x1 + 32.0 < first + 64.0 && first >= 0.0 && first + 32.0 <= rect.rectified.width as f64 {
+                    rois.push(Roi::new(first as i64, y0.floor() as i64, 32, (y1 - y0).ceil() as i64 + 1));
+                }
+            }
         }
     }
     if rois.is_empty() {
         return Ok(empty(regions.len()));
     }
-    let geom = rect.geometry();
-    let fb = geom.f * geom.baseline;
     let params = SgmParams { num_disparities, min_disparity: stereo_stage::min_disparity(regions, fb), ..SgmParams::default() };
     let disp = disparity_regions(rl, rr, &params, &rois, 32).context("matching the regions")?;
     let pts: Vec<(f32, Point3<f64>)> = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25)).into_iter().map(|p| (p.pixel[0], p.point)).collect();
     let depth = stereo_stage::depth_map(lcam, pts.iter().map(|(_, p)| p));
     let points = stereo_stage::region_points(lcam, &pts, regions, fb, erode_px);
-    Ok(StereoRegions { points, depth, disparity: disp })
+    let local_grounds = match ground {
+        Some(g) => local_ground::local_grounds(lcam, &pts, regions, g, fb, &LocalGroundConfig::default()),
+        None => vec![None; regions.len()],
+    };
+    Ok(StereoRegions { points, depth, disparity: disp, local_grounds })
 }
