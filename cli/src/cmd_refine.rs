@@ -6,7 +6,8 @@
 //! With `--right R.png --rig rig.json` the pair is rectified, matched with SGM in the detection
 //! regions and triangulated; the points inside each detection's box (or mask) add the stereo
 //! term. `--ground nx,ny,nz,d` (camera frame, `n·X = d` on the ground, `n` pointing up) places
-//! mask/box seeds on the ground. `--overlay` draws the fitted contours (green: converged,
+//! mask/box seeds on the ground; in stereo each tube's plane is first moved to the height of
+//! the matched terrain beside it (`tubeloc_refine::local_ground`, `--no-local-ground`). `--overlay` draws the fitted contours (green: converged,
 //! red: failed).
 //!
 //! Dataset mode (`--dataset DIR`, module [`dataset`]): every image of a COCO dataset directory
