@@ -157,19 +157,11 @@ fn mask_detections_in_stereo_with_ground_stay_parallel_to_it() {
 /// them back.
 #[test]
 fn tubes_with_a_hidden_end_are_anchored_at_the_visible_one() {
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let set = tmp.path().join("st");
-    ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "6"]);
-    let ann = read(&set.join("annotations.json"));
-    let (dets, truths) = mask_detections(&ann);
-    let det_path = tmp.path().join("dets.json");
-    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
+    let ms = MaskSet::new("6");
+    let truths = &ms.truths;
     // |along-axis centre error| (mm) of the partly hidden tubes, and how many poses were anchored.
     let along = |extra: &[&str]| {
-        let out = tmp.path().join("poses.json");
-        let args = ["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()];
-        ok(&[&args[..], extra].concat());
-        let poses = read(&out);
+        let poses = ms.refine(extra);
         let mut errs = Vec::new();
         let mut anchored = 0;
         for p in poses.as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true)) {
@@ -200,20 +192,12 @@ fn tubes_with_a_hidden_end_are_anchored_at_the_visible_one() {
 /// it to the matched terrain beside each tube, and those tubes land nearer their true centres.
 #[test]
 fn tubes_outside_the_right_view_sit_on_the_terrain_beside_them() {
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let set = tmp.path().join("st");
-    ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "7"]);
-    let ann = read(&set.join("annotations.json"));
-    let (dets, truths) = mask_detections(&ann);
-    let det_path = tmp.path().join("dets.json");
-    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
+    let ms = MaskSet::new("7");
+    let truths = &ms.truths;
     // Centre errors (mm) of the converged poses without stereo points, by (image, truth).
     let errors = |extra: &[&str]| {
-        let out = tmp.path().join("poses.json");
-        let args = ["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()];
-        ok(&[&args[..], extra].concat());
         let mut errs = std::collections::BTreeMap::new();
-        for p in read(&out).as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true) && p["residuals"]["stereo_points"].as_u64() == Some(0)) {
+        for p in ms.refine(extra).as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true) && p["residuals"]["stereo_points"].as_u64() == Some(0)) {
             let (id, c) = (p["image_id"].as_u64().unwrap(), vec3(&p["centre"]));
             let Some(k) = (0..truths.len()).filter(|&k| truths[k].0 == id).min_by(|&x, &y| dist(&truths[x].1, &c).total_cmp(&dist(&truths[y].1, &c))).filter(|&k| dist(&truths[k].1, &c) < 0.08) else { continue };
             errs.insert(k, 1e3 * dist(&truths[k].1, &c));
@@ -226,6 +210,36 @@ fn tubes_outside_the_right_view_sit_on_the_terrain_beside_them() {
     assert!(both.len() >= 2, "tubes without stereo points found in both runs: {both:?}");
     assert!(both.iter().all(|(n, _)| *n > 20.0), "the nominal ground is already close: {both:?}");
     assert!(both.iter().all(|(n, l)| *l < 10.0 && l < n), "(nominal, local) centre errors {both:?} mm");
+}
+
+/// A rendered stereo set (2 scenes x 3 pairs, 384 px, `seed`) with the mask detections of
+/// [`mask_detections`] written beside it.
+struct MaskSet {
+    tmp: tempfile::TempDir,
+    set: std::path::PathBuf,
+    dets: std::path::PathBuf,
+    /// Per detection: image id, true centre and axis (camera frame), visible fraction.
+    truths: Vec<(u64, [f64; 3], [f64; 3], f64)>,
+}
+
+impl MaskSet {
+    fn new(seed: &str) -> Self {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let set = tmp.path().join("st");
+        ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", seed]);
+        let (dets, truths) = mask_detections(&read(&set.join("annotations.json")));
+        let det_path = tmp.path().join("dets.json");
+        std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
+        MaskSet { tmp, set, dets: det_path, truths }
+    }
+
+    /// The poses of `tubeloc refine --stereo --ground auto` on the set, with `extra` options.
+    fn refine(&self, extra: &[&str]) -> Value {
+        let out = self.tmp.path().join("poses.json");
+        let args = ["refine", "--dataset", self.set.to_str().unwrap(), "--detections", self.dets.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()];
+        ok(&[&args[..], extra].concat());
+        read(&out)
+    }
 }
 
 /// Mask detections of the learned segmenter's kind from a stereo set's annotations: each tube at
