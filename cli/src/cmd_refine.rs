@@ -7,8 +7,8 @@
 //! regions and triangulated; the points inside each detection's box (or mask) add the stereo
 //! term. `--ground nx,ny,nz,d` (camera frame, `n·X = d` on the ground, `n` pointing up) places
 //! mask/box seeds on the ground; in stereo each tube's plane is first moved to the height of
-//! the matched terrain beside it (`tubeloc_refine::local_ground`, `--no-local-ground`). `--overlay` draws the fitted contours (green: converged,
-//! red: failed).
+//! the matched terrain beside it (`tubeloc_refine::local_ground`, `--no-local-ground`).
+//! `--overlay` draws the fitted contours (green: converged, red: failed).
 //!
 //! Dataset mode (`--dataset DIR`, module [`dataset`]): every image of a COCO dataset directory
 //! (optionally one `--split`), each with the camera of its `images[].camera` and, with
@@ -343,15 +343,15 @@ impl RefineArgs {
         eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
         Ok(())
     }
+    /// The ground plane the stereo matcher measures local grounds against: `ground`, unless
+    /// `--no-local-ground` (then none, and no terrain is matched for it).
+    pub(crate) fn local_ground_reference<'a>(&self, ground: Option<&'a GroundPlane>) -> Option<&'a GroundPlane> {
+        ground.filter(|_| !self.no_local_ground)
+    }
+
     /// Whether the photometric stage moves each end along its own ray (distance and tilt)
     /// rather than the centre alone: not with `--photo-centre-only`, and not with a ground
     /// plane, whose tilt prior fixes the tilt better.
-    /// The ground plane of each tube: its local ground ([`stereo::StereoRegions::local_grounds`])
-    /// unless `--no-local-ground` or there is none, else `ground`.
-    pub(crate) fn tube_grounds(&self, ground: Option<GroundPlane>, local: &[Option<tubeloc_refine::local_ground::LocalGround>]) -> Vec<Option<GroundPlane>> {
-        local.iter().map(|l| l.filter(|_| !self.no_local_ground).map(|l| l.plane).or(ground)).collect()
-    }
-
     pub(crate) fn photo_moves_ends(&self, has_ground: bool) -> bool {
         !self.photo_centre_only && !has_ground
     }
@@ -400,8 +400,8 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     let gray = &loaded.gray;
     let (camera, stereo, depth, pair, grounds) = match &args.rig {
         Some(rig) => {
-            let (c, s, p) = stereo_points(&args, &gray, rig, &dets, ground.as_ref().filter(|_| !args.no_local_ground))?;
-            let grounds = args.tube_grounds(ground, &s.local_grounds);
+            let (c, s, p) = stereo_points(&args, &gray, rig, &dets, args.local_ground_reference(ground.as_ref()))?;
+            let grounds = s.tube_grounds(ground);
             (c, s.points, Some(s.depth), Some(p), grounds)
         }
         None => {

@@ -121,18 +121,12 @@ fn stereo_points_per_measurement_is_the_default_census_window() {
 /// seeds turned 2 degrees and moved 2 px off the true image axis.
 #[test]
 fn mask_detections_in_stereo_with_ground_stay_parallel_to_it() {
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let set = tmp.path().join("st");
-    ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "2", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "4"]);
-    let ann = read(&set.join("annotations.json"));
+    let ms = MaskSet::new("4");
+    let ann = read(&ms.set.join("annotations.json"));
     let images: std::collections::BTreeMap<u64, &Value> = ann["images"].as_array().unwrap().iter().map(|i| (i["id"].as_u64().unwrap(), i)).collect();
-    let (dets, truths) = mask_detections(&ann);
-    assert!(dets.len() >= 6, "only {} tubes at least half visible", dets.len());
-    let det_path = tmp.path().join("dets.json");
-    std::fs::write(&det_path, serde_json::to_vec(&dets).unwrap()).unwrap();
-    let out = tmp.path().join("poses.json");
-    ok(&["refine", "--dataset", set.to_str().unwrap(), "--detections", det_path.to_str().unwrap(), "--stereo", "--ground", "auto", "--out", out.to_str().unwrap()]);
-    let poses = read(&out);
+    let truths = &ms.truths;
+    assert!(truths.len() >= 6, "only {} tubes at least half visible", truths.len());
+    let poses = ms.refine(&[]);
     let (mut errors, mut matched) = (Vec::new(), 0);
     for p in poses.as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true)) {
         let id = p["image_id"].as_u64().unwrap();
@@ -147,7 +141,7 @@ fn mask_detections_in_stereo_with_ground_stay_parallel_to_it() {
         assert!((tilt - true_tilt).abs() < 0.5, "image {id}: fitted tilt {tilt:.2} deg against the truth's {true_tilt:.2}");
         errors.push((a[0] * ta[0] + a[1] * ta[1] + a[2] * ta[2]).abs().min(1.0).acos().to_degrees());
     }
-    assert!(matched * 4 >= dets.len() * 3, "{matched} of {} tubes refined within 50 mm", dets.len());
+    assert!(matched * 4 >= truths.len() * 3, "{matched} of {} tubes refined within 50 mm", truths.len());
     assert!(median(&mut errors) < 0.5, "axis error median {:.2} deg", median(&mut errors));
 }
 

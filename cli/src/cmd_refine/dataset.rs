@@ -156,8 +156,8 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             }
             let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
             let (stereo_pts, depth, pair, grounds) = if args.stereo {
-                let (s, r) = stereo_of(args, dir, im, &camera, &gray, items, ground.as_ref().filter(|_| !args.no_local_ground))?;
-                let grounds = args.tube_grounds(ground, &s.local_grounds);
+                let (s, r) = stereo_of(args, dir, im, &camera, &gray, items, args.local_ground_reference(ground.as_ref()))?;
+                let grounds = s.tube_grounds(ground);
                 (s.points, Some(s.depth), Some(r), grounds)
             } else {
                 (vec![Vec::new(); items.len()], None, None, vec![ground; items.len()])

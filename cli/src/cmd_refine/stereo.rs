@@ -45,6 +45,13 @@ pub(crate) struct StereoRegions {
     pub local_grounds: Vec<Option<LocalGround>>,
 }
 
+impl StereoRegions {
+    /// The ground plane of each region: its local ground where there is one, else `ground`.
+    pub(crate) fn tube_grounds(&self, ground: Option<GroundPlane>) -> Vec<Option<GroundPlane>> {
+        self.local_grounds.iter().map(|l| l.map(|l| l.plane).or(ground)).collect()
+    }
+}
+
 /// The pair rectified under `rect`, matched with SGM in the regions' boxes mapped into the
 /// rectified left image (32 px margin), triangulated and split by region (masks eroded by
 /// `erode_px` first); also the rectified pair (intensities in [0, 1]) with its SGM disparity for
