@@ -39,10 +39,11 @@ fn p(path: &Path) -> String {
     path.display().to_string()
 }
 
-/// The ground plane `n·X = d` (camera frame, n up) of the world plane z = 0 seen from a camera
-/// at `T_world_cam`: `n = R_world_camᵀ ẑ`, `d = -t_z`, as "nx,ny,nz,d".
-fn ground_of(t_world_cam: &Pose) -> String {
-    let (n, d) = tubeloc_core::geometry::ground_plane_in_camera(t_world_cam);
+/// The ground plane `n·X = d` (camera frame, n up) of the world plane z = `h` (the image's
+/// `ground_height_m`) seen from a camera at `T_world_cam`: `n = R_world_camᵀ ẑ`, `d = h - t_z`,
+/// as "nx,ny,nz,d".
+fn ground_of(t_world_cam: &Pose, h: f64) -> String {
+    let (n, d) = tubeloc_core::geometry::ground_plane_at_height(t_world_cam, h);
     format!("{},{},{},{d}", n.x, n.y, n.z)
 }
 
@@ -124,7 +125,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
     }
     if let Some(v) = first.extra.get("T_world_cam") {
         let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), first.id))?;
-        w.extend(["--ground".to_string(), ground_of(&t)]);
+        let h = first.extra.get("ground_height_m").and_then(|v| v.as_f64()).unwrap_or(0.0);
+        w.extend(["--ground".to_string(), ground_of(&t, h)]);
     }
     eprintln!("\n== demo: locate: tubeloc {}", w.join(" "));
     let t = Instant::now();

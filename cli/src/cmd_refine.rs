@@ -191,8 +191,10 @@ pub struct RefineArgs {
     #[arg(long, default_value_t = 0)]
     pub(crate) stereo_erode: usize,
     /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres; with
-    /// --dataset, "auto" takes it from images[].T_world_cam (ground = world z = 0; only its
-    /// orientation is used as a prior, since the terrain has relief).
+    /// --dataset, "auto" takes it from images[].T_world_cam and images[].ground_height_m (ground
+    /// = world z = ground_height_m, the median terrain height within the capture stops, written
+    /// by `tubeloc synth`; z = 0 where absent). The terrain has relief about it: its tilt is a
+    /// prior, its height places mask seeds in mono.
     #[arg(long, allow_hyphen_values = true)]
     pub(crate) ground: Option<String>,
     /// Stereo with a ground plane: keep the given plane's height for every tube. By default each

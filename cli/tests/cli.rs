@@ -201,6 +201,32 @@ fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
 }
 
 #[test]
+fn ground_auto_takes_each_images_nominal_ground_height_and_refuses_a_bad_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("dataset");
+    ok(&["synth", "--preset", "tiny", "--out", p(&ds)]);
+    let ann = ds.join("annotations.json");
+    let mut gt: Value = serde_json::from_str(&std::fs::read_to_string(&ann).unwrap()).unwrap();
+    for im in gt["images"].as_array().unwrap() {
+        let h = im["ground_height_m"].as_f64().unwrap_or(f64::NAN);
+        // The tiny preset's no-tags scene is flagstone: its slabs stand 1.2-3.6 cm proud of z = 0.
+        let range = if im["terrain"] == "flagstone" { 0.01..0.04 } else { -0.01..0.01 };
+        assert!(range.contains(&h), "image {}: {} terrain, ground_height_m {h}", im["id"], im["terrain"]);
+    }
+    let poses = dir.path().join("poses.json");
+    ok(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--ground", "auto", "--out", p(&poses)]);
+    assert!(poses.exists());
+    let id = gt["images"][1]["id"].clone();
+    gt["images"][1]["ground_height_m"] = Value::from("high");
+    std::fs::write(&ann, serde_json::to_string(&gt).unwrap()).unwrap();
+    std::fs::remove_file(&poses).unwrap();
+    let o = tubeloc(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--ground", "auto", "--out", p(&poses)]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains(&format!("image {id}: ground_height_m must be a finite number of metres, got \"high\"")), "{}", stderr(&o));
+    assert!(!poses.exists(), "nothing is written on bad input");
+}
+
+#[test]
 fn demo_runs_the_whole_pipeline_and_reports_measured_figures() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");

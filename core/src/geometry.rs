@@ -10,9 +10,15 @@ use nalgebra::Vector3;
 /// With `X_w = R X + t`: `z_w = (Rᵀ ẑ) · X + t_z = 0`, so `n = Rᵀ ẑ` and `d = -t_z`; the
 /// camera's height above the ground is `-d`.
 pub fn ground_plane_in_camera(t_world_cam: &Pose) -> (Vector3<f64>, f64) {
+    ground_plane_at_height(t_world_cam, 0.0)
+}
+
+/// The horizontal ground plane `z_world = h` (metres) in the camera frame of a camera at pose
+/// `T_world_cam`: `(n, d)` as in [`ground_plane_in_camera`], with `d = h - t_z`.
+pub fn ground_plane_at_height(t_world_cam: &Pose, h: f64) -> (Vector3<f64>, f64) {
     let n = t_world_cam.rotation().transpose() * Vector3::z();
     let norm = n.norm();
-    (n / norm, -t_world_cam.translation().z / norm)
+    (n / norm, (h - t_world_cam.translation().z) / norm)
 }
 
 #[cfg(test)]
@@ -35,5 +41,10 @@ mod tests {
         // A point 0.1 m above the ground is 0.1 m along the normal.
         let x = t_cam_world.transform_point(&Point3::new(1.0, 1.0, 0.1));
         assert!((n.dot(&x.coords) - d - 0.1).abs() < 1e-9);
+        // The plane z = 0.02 holds the points 2 cm up, and lies 2 cm nearer the camera.
+        let (n2, d2) = ground_plane_at_height(&t, 0.02);
+        assert!((n2 - n).norm() < 1e-12 && (d2 - (d + 0.02)).abs() < 1e-12);
+        let x = t_cam_world.transform_point(&Point3::new(-1.0, 3.0, 0.02));
+        assert!((n2.dot(&x.coords) - d2).abs() < 1e-9);
     }
 }

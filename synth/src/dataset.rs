@@ -360,6 +360,7 @@ fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: 
     extra.insert("terrain".into(), json!(ss.terrain.name()));
     extra.insert("time".into(), json!(ss.time.name()));
     extra.insert("height_m".into(), json!(v.height));
+    extra.insert("ground_height_m".into(), json!(scene.nominal_ground_height(STOP_RADIUS_M)));
     extra.insert("stop".into(), json!(v.stop));
     extra.insert("camera_name".into(), json!(rc.name));
     extra.insert("split".into(), json!(ss.split));

@@ -506,6 +506,32 @@ impl Scene {
         self.sky.sample_bilinear(u, v)
     }
 
+    /// The scene's nominal ground height (world z, metres): the median terrain height over
+    /// the disc of `radius_m` around the origin (the datasets use the ring of capture stops,
+    /// [`crate::rig::STOP_RADIUS_M`]). It is the level of a plane fitted robustly to the
+    /// terrain the cameras see, which is what a rover's own estimate of its workspace's ground
+    /// gives; world z = 0 is only the height field's datum (on flagstone the bottom of the
+    /// cracks, 1-3 cm under the slabs). Rocks and tubes are not terrain and do not count.
+    pub fn nominal_ground_height(&self, radius_m: f64) -> f64 {
+        let hf = &self.hf;
+        let mut heights: Vec<f32> = Vec::new();
+        for j in 0..hf.ny {
+            let y = hf.y0 + j as f64 * hf.cell;
+            for i in 0..hf.nx {
+                let x = hf.x0 + i as f64 * hf.cell;
+                if x * x + y * y <= radius_m * radius_m {
+                    heights.push(hf.h[j * hf.nx + i]);
+                }
+            }
+        }
+        if heights.is_empty() {
+            return hf.height(0.0, 0.0);
+        }
+        let mid = heights.len() / 2;
+        let (_, m, _) = heights.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        *m as f64
+    }
+
     /// `T_world_tube` of every tube.
     pub fn tube_poses(&self) -> Vec<Pose> {
         self.objects.tubes.iter().map(|t| t.t_world_tube).collect()

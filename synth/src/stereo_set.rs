@@ -221,6 +221,7 @@ fn render_pair(spec: &StereoSetSpec, scene: &Scene, si: usize, k: usize, v: &Pai
     extra.insert("terrain".into(), json!(ss.terrain.name()));
     extra.insert("time".into(), json!(ss.time.name()));
     extra.insert("height_m".into(), json!(v.height));
+    extra.insert("ground_height_m".into(), json!(scene.nominal_ground_height(STOP_RADIUS_M)));
     extra.insert("stop".into(), json!(v.stop));
     extra.insert("camera_name".into(), json!(ln));
     extra.insert("split".into(), json!(ss.split));

@@ -30,12 +30,18 @@ impl Work {
     }
 }
 
-/// The ground plane `world z = 0` in the camera frame of an image with `T_world_cam`
-/// ([`tubeloc_core::geometry::ground_plane_in_camera`]).
+/// The nominal ground plane in the camera frame of an image with `T_world_cam`: world
+/// `z = ground_height_m` (the image's field, written by `tubeloc synth`: the median terrain
+/// height within the capture stops), or world `z = 0` for datasets without it
+/// ([`tubeloc_core::geometry::ground_plane_at_height`]).
 fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
     let Some(v) = img.extra.get("T_world_cam") else { return Ok(None) };
     let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("image {}: T_world_cam", img.id))?;
-    let (normal, offset) = tubeloc_core::geometry::ground_plane_in_camera(&t);
+    let h = match img.extra.get("ground_height_m") {
+        None => 0.0,
+        Some(v) => v.as_f64().filter(|h| h.is_finite()).with_context(|| format!("image {}: ground_height_m must be a finite number of metres, got {v}", img.id))?,
+    };
+    let (normal, offset) = tubeloc_core::geometry::ground_plane_at_height(&t, h);
     Ok(Some(GroundPlane { normal, offset }))
 }
 
