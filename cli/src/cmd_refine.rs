@@ -421,7 +421,7 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     let bar = indicatif::ProgressBar::new(dets.len() as u64);
     let mut poses = Vec::with_capacity(dets.len());
     for (i, d) in dets.iter().enumerate() {
-        let input = RefineInput { image: &image, camera: &camera, ground: grounds[i], scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None, image_axis: None } };
+        let input = RefineInput { image: &image, camera: &camera, ground: grounds[i], scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None, image_axis: None, shown: None } };
         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
         bar.inc(1);
     }

@@ -48,6 +48,11 @@ pub struct Scene<'a> {
     /// The detector's image axis as a prior on the axis's direction in the image
     /// ([`crate::priors::ImageAxisPrior`]; mask seeds, `RefineConfig::mask_axis_sigma_px`).
     pub image_axis: Option<crate::priors::ImageAxisPrior>,
+    /// The part of the image where the detector's mask shows the tube (the mask grown by
+    /// `RefineConfig::mask_visibility_px`) and the full-resolution camera: contour points that
+    /// project inside the image but outside it are hidden (by rocks or sand) and are not
+    /// associated with edges.
+    pub shown: Option<(&'a tubeloc_core::BinaryMask, &'a CameraModel)>,
 }
 
 /// The image-axis prior of a fit: `Scene::image_axis`, in fits without stereo points only. In
@@ -145,6 +150,14 @@ fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vect
                 if z.is_finite() && z > 0.0 && z < x.z - model.occlusion_margin() {
                     return false;
                 }
+            }
+        }
+    }
+    if let Some((shown, cam)) = scene.shown {
+        if let Some(u) = cam.project(x) {
+            let (ix, iy) = (u.x.round(), u.y.round());
+            if ix >= 0.0 && iy >= 0.0 && (ix as usize) < shown.width && (iy as usize) < shown.height && !shown.get(ix as usize, iy as usize) {
+                return false;
             }
         }
     }

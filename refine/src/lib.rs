@@ -251,6 +251,11 @@ pub struct RefineConfig {
     /// 0.3, 0.4, 0.5, 0.6 and 1 by the mean axis p90: mono axis median / p90 from 0.52-0.55 /
     /// 2.48-3.35 deg to 0.41-0.52 / 1.87-2.08 deg (`refine/README.md`, session 8).
     pub mask_axis_sigma_px: f64,
+    /// [`Refiner::refine`], mask seeds without stereo points: contour points more than this
+    /// many pixels outside the detection's mask are hidden ([`fit::Scene::shown`]), so that
+    /// the fit of a tube partly hidden by a rock or sand does not take the occluder's outline
+    /// for the tube's; 0 disables.
+    pub mask_visibility_px: usize,
 }
 
 impl Default for RefineConfig {
@@ -311,6 +316,7 @@ impl Default for RefineConfig {
             mask_seed_relief_sigma_m: 0.001,
             mask_seed_min_agreement: 0.6,
             mask_axis_sigma_px: 0.4,
+            mask_visibility_px: 8,
         }
     }
 }
@@ -436,7 +442,10 @@ impl Refiner {
                     (Some(ax), Some(_), true) => priors::ImageAxisPrior::from_image_line(input.camera, ax.centre_px, ax.direction_px, self.config.mask_axis_sigma_px, self.model.length, seed.state.c.norm()),
                     _ => None,
                 };
-                let with_prior = RefineInput { scene: Scene { image_axis, ..input.scene }, ..*input };
+                // The mask shows which part of the tube is visible (mono: no depth map).
+                let mono_mask = det.t_cam_tube.is_none() && input.scene.stereo_points.is_empty() && self.config.mask_visibility_px > 0;
+                let shown = mask.as_ref().filter(|_| mono_mask).map(|m| m.dilated(self.config.mask_visibility_px));
+                let with_prior = RefineInput { scene: Scene { image_axis, shown: shown.as_ref().map(|m| (m, input.camera)), ..input.scene }, ..*input };
                 let pose = r.refine_seed_inner(&with_prior, &seed, det.image_id, det.score, Some(det.bbox), ends);
                 // Stereo points that do not support the fit also gave the seed its distance;
                 // the detection is refined again without them (mono, with the ground plane if any).
