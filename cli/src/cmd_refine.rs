@@ -12,7 +12,8 @@
 //!
 //! Dataset mode (`--dataset DIR`, module [`dataset`]): every image of a COCO dataset directory
 //! (optionally one `--split`), each with the camera of its `images[].camera` and, with
-//! `--ground auto`, the ground plane of its `images[].T_world_cam`; seeds from `--detections`
+//! `--ground auto`, the nominal ground plane of its `images[].T_world_cam` and
+//! `images[].ground_height_m`; seeds from `--detections`
 //! (matched by image id) or from the exact annotation poses (`--gt-seeds MM,DEG`); images in
 //! parallel; one JSON array of poses, each with its `image_id`. With `--stereo` (a
 //! `tubeloc synth stereo` folder) each image's right image (`images[].right_file_name` under

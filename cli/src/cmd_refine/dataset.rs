@@ -93,8 +93,9 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     }
     let auto_ground = args.ground.as_deref() == Some("auto");
     if auto_ground {
-        // World z = 0 of the tripod pose is the nominal ground, but the terrain has relief:
-        // trust its orientation (tubes lie parallel to it), not its height.
+        // The nominal ground (world z = ground_height_m of the tripod pose) is the terrain's
+        // level, but the terrain has relief about it: its orientation is a prior (tubes lie
+        // parallel to it), its height is not a constraint (mask seeds' settings weigh it).
         refiner.config.ground_height_known = false;
     }
     let mut images: Vec<&CocoImage> = ds
