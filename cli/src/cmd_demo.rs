@@ -39,14 +39,6 @@ fn p(path: &Path) -> String {
     path.display().to_string()
 }
 
-/// The ground plane `n·X = d` (camera frame, n up) of the world plane z = `h` (the image's
-/// `ground_height_m`) seen from a camera at `T_world_cam`: `n = R_world_camᵀ ẑ`, `d = h - t_z`,
-/// as "nx,ny,nz,d".
-fn ground_of(t_world_cam: &Pose, h: f64) -> String {
-    let (n, d) = tubeloc_core::geometry::ground_plane_at_height(t_world_cam, h);
-    format!("{},{},{},{d}", n.x, n.y, n.z)
-}
-
 /// Runs `tubeloc demo`.
 pub fn run(a: DemoArgs) -> Result<()> {
     let t0 = Instant::now();
@@ -123,10 +115,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
         Some(("learned", _)) => w.extend(words(&["--detector", "learned", "--model", &p(&model)])),
         _ => w.extend(words(&["--detector", "line2d", "--templates", &p(&lib)])),
     }
-    if let Some(v) = first.extra.get("T_world_cam") {
-        let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: image {}: T_world_cam", gt_path.display(), first.id))?;
-        let h = first.extra.get("ground_height_m").and_then(|v| v.as_f64()).unwrap_or(0.0);
-        w.extend(["--ground".to_string(), ground_of(&t, h)]);
+    // The image's nominal ground, as `tubeloc refine --ground auto` takes it: "nx,ny,nz,d".
+    if let Some(g) = crate::cmd_refine::ground_of(first).with_context(|| gt_path.display().to_string())? {
+        w.extend(["--ground".to_string(), format!("{},{},{},{}", g.normal.x, g.normal.y, g.normal.z, g.offset)]);
     }
     eprintln!("\n== demo: locate: tubeloc {}", w.join(" "));
     let t = Instant::now();

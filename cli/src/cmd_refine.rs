@@ -41,6 +41,7 @@ use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene, See
 
 mod colour;
 mod dataset;
+pub(crate) use dataset::ground_of;
 mod stereo;
 
 /// Arguments of `tubeloc refine`.

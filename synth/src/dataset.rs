@@ -291,11 +291,12 @@ fn write_into(spec: &DatasetSpec, dir: &Path, shard: (usize, usize), progress: &
         cfg.tube_shape = spec.tube_shape.clone();
         let scene = Scene::generate(&cfg, ss.seed)?;
         let views = plan_views(&scene, spec, ss.images, ss.seed ^ 0x71e3)?;
+        let ground_height = scene.nominal_ground_height(STOP_RADIUS_M);
         let rendered: Vec<Result<(CocoImage, Vec<CocoAnnotation>), SynthError>> = views
             .par_iter()
             .enumerate()
             .map(|(k, v)| {
-                let r = render_view(spec, &scene, ss, si, k, v, dir, &rig);
+                let r = render_view(spec, &scene, ground_height, ss, si, k, v, dir, &rig);
                 progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
                 r
             })
@@ -340,8 +341,10 @@ fn write_into(spec: &DatasetSpec, dir: &Path, shard: (usize, usize), progress: &
     Ok((n_images, n_anns))
 }
 
+/// Renders view `v` of `scene`; `ground_height`: the scene's nominal ground height
+/// ([`Scene::nominal_ground_height`]), written as the image's `ground_height_m`.
 #[allow(clippy::too_many_arguments)]
-fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: usize, v: &View, dir: &Path, rig: &tubeloc_core::Rig) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
+fn render_view(spec: &DatasetSpec, scene: &Scene, ground_height: f64, ss: &SceneSpec, si: usize, k: usize, v: &View, dir: &Path, rig: &tubeloc_core::Rig) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
     let image_id = (si as u64 + 1) * 1000 + k as u64 + 1;
     let rc = &rig.cameras[v.camera];
     let cam: CameraModel = rc.model.scaled(spec.scale).cropped(v.crop_x0, v.crop_y0, spec.crop, spec.crop);
@@ -360,7 +363,7 @@ fn render_view(spec: &DatasetSpec, scene: &Scene, ss: &SceneSpec, si: usize, k: 
     extra.insert("terrain".into(), json!(ss.terrain.name()));
     extra.insert("time".into(), json!(ss.time.name()));
     extra.insert("height_m".into(), json!(v.height));
-    extra.insert("ground_height_m".into(), json!(scene.nominal_ground_height(STOP_RADIUS_M)));
+    extra.insert("ground_height_m".into(), json!(ground_height));
     extra.insert("stop".into(), json!(v.stop));
     extra.insert("camera_name".into(), json!(rc.name));
     extra.insert("split".into(), json!(ss.split));

@@ -148,13 +148,14 @@ fn write_into(spec: &StereoSetSpec, dir: &Path, progress: &(dyn Fn(usize, usize)
         cfg.cell_m = base.terrain_cell_m;
         cfg.tube_shape = base.tube_shape.clone();
         let scene = Scene::generate(&cfg, ss.seed)?;
+        let ground_height = scene.nominal_ground_height(STOP_RADIUS_M);
         let left = rig.camera(&spec.pair.0).ok_or_else(|| SynthError::Invalid(format!("no camera {}", spec.pair.0)))?;
         let views = plan_pairs(&scene, base, left, spec.pairs_per_scene, ss.seed ^ 0x57e7e0)?;
         let rendered: Vec<Result<(CocoImage, Vec<CocoAnnotation>), SynthError>> = views
             .par_iter()
             .enumerate()
             .map(|(k, v)| {
-                let r = render_pair(spec, &scene, si, k, v, dir, &rig);
+                let r = render_pair(spec, &scene, ground_height, si, k, v, dir, &rig);
                 progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
                 r
             })
@@ -184,7 +185,8 @@ fn write_into(spec: &StereoSetSpec, dir: &Path, progress: &(dyn Fn(usize, usize)
     Ok((n_images, n_anns))
 }
 
-fn render_pair(spec: &StereoSetSpec, scene: &Scene, si: usize, k: usize, v: &PairView, dir: &Path, rig: &Rig) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
+#[allow(clippy::too_many_arguments)]
+fn render_pair(spec: &StereoSetSpec, scene: &Scene, ground_height: f64, si: usize, k: usize, v: &PairView, dir: &Path, rig: &Rig) -> Result<(CocoImage, Vec<CocoAnnotation>), SynthError> {
     let base = &spec.base;
     let ss = &base.scenes[si];
     let (ln, rn) = (&spec.pair.0, &spec.pair.1);
@@ -221,7 +223,7 @@ fn render_pair(spec: &StereoSetSpec, scene: &Scene, si: usize, k: usize, v: &Pai
     extra.insert("terrain".into(), json!(ss.terrain.name()));
     extra.insert("time".into(), json!(ss.time.name()));
     extra.insert("height_m".into(), json!(v.height));
-    extra.insert("ground_height_m".into(), json!(scene.nominal_ground_height(STOP_RADIUS_M)));
+    extra.insert("ground_height_m".into(), json!(ground_height));
     extra.insert("stop".into(), json!(v.stop));
     extra.insert("camera_name".into(), json!(ln));
     extra.insert("split".into(), json!(ss.split));

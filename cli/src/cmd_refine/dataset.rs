@@ -34,7 +34,7 @@ impl Work {
 /// `z = ground_height_m` (the image's field, written by `tubeloc synth`: the median terrain
 /// height within the capture stops), or world `z = 0` for datasets without it
 /// ([`tubeloc_core::geometry::ground_plane_at_height`]).
-fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
+pub(crate) fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
     let Some(v) = img.extra.get("T_world_cam") else { return Ok(None) };
     let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("image {}: T_world_cam", img.id))?;
     let h = match img.extra.get("ground_height_m") {
