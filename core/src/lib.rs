@@ -23,7 +23,7 @@ pub use camera::{CameraModel, Distortion};
 pub use coco::{CocoAnnotation, CocoCategory, CocoDataset, CocoImage, CocoResult, Segmentation};
 pub use detection::{AxisSeed, DetectionSource, TubeDetection};
 pub use error::CoreError;
-pub use mask::{BinaryMask, Rle};
+pub use mask::{BinaryMask, MaskWindow, Rle};
 pub use plane::Plane;
 pub use pose::Pose;
 pub use rig::{Rig, RigCamera};

@@ -75,19 +75,38 @@ impl BinaryMask {
         self.morphed(r, false, false)
     }
 
+    /// The mask dilated by `r` pixels as [`BinaryMask::dilated`], kept only within the set
+    /// pixels' bounding box grown by `r + 1` (clipped to the image): nothing outside that
+    /// window is set, so the image-sized copy is not made.
+    pub fn dilated_window(&self, r: usize) -> MaskWindow {
+        self.morphed_window(r, true, true)
+    }
+
     /// `r` steps of 4-neighbour dilation (`grow`) or erosion (which clears the pixels on the
-    /// image border when `border_erodes`), within the set pixels' bounding box grown by `r + 1`
-    /// (nothing outside it can change, and it holds no set pixel). `r` steps of 4-neighbour
-    /// morphology reach exactly the pixels within city-block distance `r` (the window is a
-    /// rectangle, so shortest 4-neighbour paths stay inside it), so one two-pass city-block
-    /// distance transform of the window replaces the `r` passes: dilation keeps the pixels
-    /// within `r` of a set pixel, erosion the set pixels farther than `r` from a clear one
-    /// (with `border_erodes`, the pixels beyond the image border count as clear).
+    /// image border when `border_erodes`) of the whole mask: [`BinaryMask::morphed_window`]
+    /// written over a copy of `self`.
     fn morphed(&self, r: usize, grow: bool, border_erodes: bool) -> BinaryMask {
+        let win = self.morphed_window(r, grow, border_erodes);
         let mut out = self.clone();
+        let ww = win.mask.width;
+        for (j, row) in win.mask.data.chunks_exact(ww.max(1)).enumerate().take(win.mask.height) {
+            let at = (win.y0 + j) * self.width + win.x0;
+            out.data[at..at + ww].copy_from_slice(row);
+        }
+        out
+    }
+
+    /// `r` steps of 4-neighbour dilation (`grow`) or erosion within the set pixels' bounding
+    /// box grown by `r + 1` (clipped to the image): nothing outside it can change, and it holds
+    /// no set pixel. A step sets (dilation) or keeps (erosion) a pixel when its 4-neighbourhood
+    /// has one set pixel (dilation) or is all set (erosion), so `r` steps reach exactly the
+    /// pixels within city-block distance `r`. The window is padded by one pixel: clear, except
+    /// beyond the image border in an erosion without `border_erodes`, where it counts as set
+    /// (the border does not erode). Each step is a few byte-wise ORs or ANDs of whole rows.
+    fn morphed_window(&self, r: usize, grow: bool, border_erodes: bool) -> MaskWindow {
         let [bx, by, bw, bh] = self.bbox();
-        if r == 0 || bw == 0.0 {
-            return out;
+        if bw == 0.0 {
+            return MaskWindow { x0: 0, y0: 0, mask: BinaryMask::new(0, 0) };
         }
         let (w, h) = (self.width, self.height);
         let x0 = (bx as usize).saturating_sub(r + 1);
@@ -95,59 +114,39 @@ impl BinaryMask {
         let x1 = (bx as usize + bw as usize + r + 1).min(w);
         let y1 = (by as usize + bh as usize + r + 1).min(h);
         let (ww, wh) = (x1 - x0, y1 - y0);
-        const FAR: u32 = u32::MAX / 2;
-        // Sources: the set pixels (dilation) or the clear ones and, with `border_erodes`, the
-        // virtual clear pixels one step beyond the image border (erosion).
-        let mut dist: Vec<u32> = Vec::with_capacity(ww * wh);
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let set = self.data[y * w + x] != 0;
-                let d = if set == grow {
-                    0
-                } else if !grow && border_erodes && (x == 0 || y == 0 || x + 1 == w || y + 1 == h) {
-                    1
+        let pw = ww + 2;
+        let pad = |image_border: bool| (!grow && !border_erodes && image_border) as u8;
+        let mut cur = vec![pad(y0 == 0); pw * (wh + 2)];
+        cur[(wh + 1) * pw..].fill(pad(y1 == h));
+        for j in 0..wh {
+            let row = &mut cur[(j + 1) * pw..(j + 2) * pw];
+            row[0] = pad(x0 == 0);
+            row[pw - 1] = pad(x1 == w);
+            row[1..=ww].copy_from_slice(&self.data[(y0 + j) * w + x0..][..ww]);
+        }
+        let mut next = cur.clone();
+        for _ in 0..r {
+            for j in 1..=wh {
+                let (up, mid, down) = (&cur[(j - 1) * pw + 1..][..ww], &cur[j * pw..][..pw], &cur[(j + 1) * pw + 1..][..ww]);
+                let (left, centre, right) = (&mid[..ww], &mid[1..=ww], &mid[2..]);
+                let out = &mut next[j * pw + 1..][..ww];
+                if grow {
+                    for i in 0..ww {
+                        out[i] = centre[i] | left[i] | right[i] | up[i] | down[i];
+                    }
                 } else {
-                    FAR
-                };
-                dist.push(d);
-            }
-        }
-        for j in 0..wh {
-            for i in 0..ww {
-                let k = j * ww + i;
-                let mut d = dist[k];
-                if i > 0 {
-                    d = d.min(dist[k - 1] + 1);
+                    for i in 0..ww {
+                        out[i] = centre[i] & left[i] & right[i] & up[i] & down[i];
+                    }
                 }
-                if j > 0 {
-                    d = d.min(dist[k - ww] + 1);
-                }
-                dist[k] = d;
             }
+            std::mem::swap(&mut cur, &mut next);
         }
-        for j in (0..wh).rev() {
-            for i in (0..ww).rev() {
-                let k = j * ww + i;
-                let mut d = dist[k];
-                if i + 1 < ww {
-                    d = d.min(dist[k + 1] + 1);
-                }
-                if j + 1 < wh {
-                    d = d.min(dist[k + ww] + 1);
-                }
-                dist[k] = d;
-            }
+        let mut data = Vec::with_capacity(ww * wh);
+        for j in 1..=wh {
+            data.extend_from_slice(&cur[j * pw + 1..][..ww]);
         }
-        let r = r as u32;
-        for j in 0..wh {
-            let row = (y0 + j) * w + x0;
-            for i in 0..ww {
-                let d = dist[j * ww + i];
-                let v = if grow { d <= r } else { self.data[row + i] != 0 && d > r };
-                out.data[row + i] = v as u8;
-            }
-        }
-        out
+        MaskWindow { x0, y0, mask: BinaryMask { width: ww, height: wh, data } }
     }
 
     /// The `w x h` window whose top-left pixel is `(x0, y0)`: pixel `(x, y)` of the result is
@@ -175,8 +174,10 @@ impl BinaryMask {
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0usize, 0usize);
         for y in 0..self.height {
             let row = &self.data[y * self.width..(y + 1) * self.width];
-            // Empty rows (most of an image-sized mask) are skipped by an OR that vectorizes.
-            if row.iter().fold(0u8, |acc, &v| acc | v) == 0 {
+            // Empty rows (most of an image-sized mask) are skipped by an OR of 16-byte words.
+            let mut words = row.chunks_exact(16);
+            let any = words.by_ref().fold(0u128, |acc, c| acc | u128::from_ne_bytes(c.try_into().unwrap_or([0; 16])));
+            if any == 0 && words.remainder().iter().all(|&v| v == 0) {
                 continue;
             }
             if let Some(first) = row.iter().position(|&v| v != 0) {
@@ -191,6 +192,26 @@ impl BinaryMask {
             return [0.0; 4];
         }
         [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64]
+    }
+}
+
+/// A window of an image-sized mask: pixel `(x, y)` of `mask` is image pixel
+/// `(x0 + x, y0 + y)`, and every image pixel outside the window is clear.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MaskWindow {
+    /// Image column of the window's first column.
+    pub x0: usize,
+    /// Image row of the window's first row.
+    pub y0: usize,
+    /// The window's pixels.
+    pub mask: BinaryMask,
+}
+
+impl MaskWindow {
+    /// Whether image pixel `(x, y)` is set (false outside the window).
+    #[inline]
+    pub fn get(&self, x: usize, y: usize) -> bool {
+        x >= self.x0 && y >= self.y0 && self.mask.get(x - self.x0, y - self.y0)
     }
 }
 

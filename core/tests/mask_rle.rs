@@ -249,7 +249,12 @@ fn windowed_morphology_matches_the_whole_image_reference() {
         let sparse = next(5) + 7;
         let m = BinaryMask::from_fn(w, h, |x, y| (x as f64 - cx).hypot(y as f64 - cy) < rad || (x * 7 + y * 3) % (sparse * 3) == 0);
         for r in 0..5 {
-            assert_eq!(m.dilated(r), morph_reference(&m, r, true), "dilate r {r} on {w}x{h}");
+            let dilated = morph_reference(&m, r, true);
+            assert_eq!(m.dilated(r), dilated, "dilate r {r} on {w}x{h}");
+            // The window: the same pixels, none set outside it.
+            let win = m.dilated_window(r);
+            assert!((0..h + 2).all(|y| (0..w + 2).all(|x| win.get(x, y) == dilated.get(x, y))), "dilated window r {r} on {w}x{h}");
+            assert!(win.x0 + win.mask.width <= w && win.y0 + win.mask.height <= h);
             assert_eq!(m.eroded(r), morph_reference(&m, r, false), "erode r {r} on {w}x{h}");
             // Within the image: as if the image went on with set pixels beyond its border.
             let pad = r + 1;

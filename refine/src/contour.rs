@@ -90,6 +90,23 @@ pub struct AxisFrame {
     pub d: f64,
 }
 
+/// The derivative of an [`AxisFrame`] along one fit parameter: each field the derivative of
+/// the frame's field of the same name (metres or unit-vector components per unit of the
+/// parameter).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameDerivative {
+    /// `∂c`.
+    pub c: Vector3<f64>,
+    /// `∂a`.
+    pub a: Vector3<f64>,
+    /// `∂e₁`.
+    pub e1: Vector3<f64>,
+    /// `∂e₂`.
+    pub e2: Vector3<f64>,
+    /// `∂d`, metres per unit.
+    pub d: f64,
+}
+
 /// Which contour curve a sample lies on.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SampleKind {
@@ -153,6 +170,35 @@ impl ContourSample {
                 let n = f.e1 * cs + f.e2 * sn;
                 let x = f.c + f.a * z + n * s.r;
                 Some(SamplePoint { x: Point3::from(x), out: (n + f.a * end).normalize(), tangent: f.e2 * cs - f.e1 * sn })
+            }
+        }
+    }
+
+    /// `∂X/∂θ_k`, the derivative of the sample's point `X` at frame `f` along one parameter,
+    /// from the frame's derivative `df` along it. `X` is linear in the frame's vectors:
+    /// - limb: `X = c + t a + r (α e₁ + s β e₂)`, `α = -r/d`, `β = √(1 - α²)`, side `s`, so
+    ///   `∂X = ∂c + t ∂a + r (α ∂e₁ + s β ∂e₂ + (e₁ - s (α/β) e₂) ∂α)` with `∂α = (r/d²) ∂d`;
+    /// - rim: `X = c + z a + r (cos φ e₁ + sin φ e₂)`, so
+    ///   `∂X = ∂c + z ∂a + r (cos φ ∂e₁ + sin φ ∂e₂)`.
+    ///
+    /// `None` where [`ContourSample::eval`] has no point.
+    #[inline]
+    pub fn point_derivative(&self, model: &CylinderModel, f: &AxisFrame, df: &FrameDerivative) -> Option<Vector3<f64>> {
+        let s = model.sections[self.section];
+        match self.kind {
+            SampleKind::Limb { side, t } => {
+                let alpha = -s.r / f.d;
+                if alpha.abs() >= 1.0 {
+                    return None;
+                }
+                let beta = (1.0 - alpha * alpha).sqrt();
+                let d_alpha = s.r / (f.d * f.d) * df.d;
+                let dn = df.e1 * alpha + df.e2 * (side * beta) + (f.e1 - f.e2 * (side * alpha / beta)) * d_alpha;
+                Some(df.c + df.a * t + dn * s.r)
+            }
+            SampleKind::Rim { end, cos: cs, sin: sn, .. } => {
+                let z = if end < 0.0 { s.z0 } else { s.z1 };
+                Some(df.c + df.a * z + (df.e1 * cs + df.e2 * sn) * s.r)
             }
         }
     }

@@ -22,7 +22,7 @@ use crate::model::CylinderModel;
 use crate::robust::{mad_scale, tukey_rho, tukey_weight};
 use crate::seed::GroundPlane;
 use crate::RefineConfig;
-use crate::jacobian::{stereo_row, PerturbedFrames};
+use crate::jacobian::{stereo_row, FrameDerivatives};
 use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
 use crate::priors::{self, SeedPrior};
 use nalgebra::{Matrix2x5, Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
@@ -52,7 +52,7 @@ pub struct Scene<'a> {
     /// `RefineConfig::mask_visibility_px`) and the full-resolution camera: contour points that
     /// project inside the image but outside it are hidden (by rocks or sand) and are not
     /// associated with edges.
-    pub shown: Option<(&'a tubeloc_core::BinaryMask, &'a CameraModel)>,
+    pub shown: Option<(&'a tubeloc_core::MaskWindow, &'a CameraModel)>,
 }
 
 /// The image-axis prior of a fit: `Scene::image_axis`, in fits without stereo points only. In
@@ -156,7 +156,7 @@ fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vect
     if let Some((shown, cam)) = scene.shown {
         if let Some(u) = cam.project(x) {
             let (ix, iy) = (u.x.round(), u.y.round());
-            if ix >= 0.0 && iy >= 0.0 && (ix as usize) < shown.width && (iy as usize) < shown.height && !shown.get(ix as usize, iy as usize) {
+            if ix >= 0.0 && iy >= 0.0 && ix < cam.width as f64 && iy < cam.height as f64 && !shown.get(ix as usize, iy as usize) {
                 return false;
             }
         }
@@ -337,14 +337,9 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
-    let pf = PerturbedFrames::new(st, u.0, u.1);
-    let f0 = st.frame();
+    let fd = FrameDerivatives::new(st, u.0, u.1);
     for a in assoc {
-        let j = match (&pf, &f0) {
-            (Some(pf), Some(f0)) => a.sample.eval(model, f0).and_then(|p| pf.image_jacobian(model, &a.sample, cam, &p.x)),
-            _ => None,
-        };
-        jac.push(j);
+        jac.push(fd.as_ref().and_then(|fd| a.sample.eval(model, fd.base()).and_then(|p| fd.image_jacobian(model, &a.sample, cam, &p.x))));
     }
     let mut h = Matrix5::zeros();
     let mut g = Vector5::zeros();

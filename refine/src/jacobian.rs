@@ -5,14 +5,15 @@
 //! - `∂π/∂X` is analytic (pinhole with OpenCV distortion):
 //!   `∂u/∂X = diag(fx, fy) · D(x, y) · [[1/Z, 0, -x/Z], [0, 1/Z, -y/Z]]`, `x = X/Z`, `y = Y/Z`,
 //!   `D` the 2x2 Jacobian of the distortion ([`tubeloc_core::camera::Distortion::jacobian`]).
-//! - `∂X/∂θ` by central differences of the 3D contour point over axis frames that are computed
-//!   once per iteration for the ten perturbed states (no projection, no allocation per sample).
+//! - `∂X/∂θ` from the derivatives of the axis frame (central differences over the ten
+//!   perturbed states, once per iteration), in which each contour point is linear
+//!   ([`ContourSample::point_derivative`]; no projection, no allocation per sample).
 //!
 //! Stereo residuals `s = (ρ - R(z)) / σ_s` (see [`crate::fit`]) are analytic:
 //! `∂ρ/∂c = -p̂ᵀ`, `∂ρ/∂δk = -z (p̂ · u_k)` with `p̂` the unit radial vector of the point;
 //! the ground priors are linear: `∂g1/∂c = nᵀ/σ_g`, `∂g2/∂δk = (n · u_k)/σ_t`.
 
-use crate::contour::{AxisFrame, AxisState, ContourSample};
+use crate::contour::{AxisFrame, AxisState, ContourSample, FrameDerivative};
 use crate::model::CylinderModel;
 use nalgebra::{Matrix2x3, Matrix2x5, Point3, Vector3};
 use tubeloc_core::CameraModel;
@@ -33,25 +34,38 @@ pub fn projection_jacobian(cam: &CameraModel, p: &Point3<f64>) -> Option<Matrix2
     Some(Matrix2x3::new(a00 * iz, a01 * iz, -(a00 * x + a01 * y) * iz, a10 * iz, a11 * iz, -(a10 * x + a11 * y) * iz))
 }
 
-/// The axis frames of the ten states `θ ± STEP e_k` around `st` in the basis `(u1, u2)`.
-pub struct PerturbedFrames {
-    plus: [AxisFrame; 5],
-    minus: [AxisFrame; 5],
+/// The derivatives of the axis frame at `st` along the five parameters θ in the basis
+/// `(u1, u2)`, by central differences of the frames of the ten states `θ ± STEP e_k`,
+/// computed once per iteration; each sample's `∂X/∂θ` follows from them
+/// ([`ContourSample::point_derivative`]) without evaluating it at the ten states.
+pub struct FrameDerivatives {
+    /// The frame at θ.
+    base: AxisFrame,
+    /// `∂frame/∂θ_k`.
+    deriv: [FrameDerivative; 5],
 }
 
-impl PerturbedFrames {
-    /// `None` when any perturbed state has no frame (camera on the axis line).
+impl FrameDerivatives {
+    /// `None` when the state or a perturbed state has no frame (camera on the axis line).
     pub fn new(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>) -> Option<Self> {
-        let mut plus = [st.frame()?; 5];
-        let mut minus = plus;
-        for k in 0..5 {
+        let base = st.frame()?;
+        let zero = Vector3::zeros();
+        let mut deriv = [FrameDerivative { c: zero, a: zero, e1: zero, e2: zero, d: 0.0 }; 5];
+        for (k, dk) in deriv.iter_mut().enumerate() {
             let mut d = [0.0; 5];
             d[k] = STEP;
-            plus[k] = st.updated(&d, u1, u2).frame()?;
+            let plus = st.updated(&d, u1, u2).frame()?;
             d[k] = -STEP;
-            minus[k] = st.updated(&d, u1, u2).frame()?;
+            let minus = st.updated(&d, u1, u2).frame()?;
+            let h = 0.5 / STEP;
+            *dk = FrameDerivative { c: (plus.c - minus.c) * h, a: (plus.a - minus.a) * h, e1: (plus.e1 - minus.e1) * h, e2: (plus.e2 - minus.e2) * h, d: (plus.d - minus.d) * h };
         }
-        Some(PerturbedFrames { plus, minus })
+        Some(FrameDerivatives { base, deriv })
+    }
+
+    /// The frame at θ.
+    pub fn base(&self) -> &AxisFrame {
+        &self.base
     }
 
     /// Image Jacobian `∂u/∂θ` (2x5, level pixels per unit of θ) of one contour sample whose
@@ -60,10 +74,8 @@ impl PerturbedFrames {
     pub fn image_jacobian(&self, model: &CylinderModel, s: &ContourSample, cam: &CameraModel, x: &Point3<f64>) -> Option<Matrix2x5<f64>> {
         let pj = projection_jacobian(cam, x)?;
         let mut j = Matrix2x5::zeros();
-        for k in 0..5 {
-            let xp = s.eval(model, &self.plus[k])?.x;
-            let xm = s.eval(model, &self.minus[k])?.x;
-            let col = pj * ((xp - xm) / (2.0 * STEP));
+        for (k, df) in self.deriv.iter().enumerate() {
+            let col = pj * s.point_derivative(model, &self.base, df)?;
             j[(0, k)] = col.x;
             j[(1, k)] = col.y;
         }
@@ -99,7 +111,7 @@ mod tests {
         cam.distortion = Distortion { k1: -0.1, k2: 0.03, p1: 0.001, p2: -0.0005, k3: 0.0 };
         let st = AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() };
         let (u1, u2) = tubeloc_core::tube_pose::tangent_basis(&st.a);
-        let pf = PerturbedFrames::new(&st, &u1, &u2).unwrap();
+        let pf = FrameDerivatives::new(&st, &u1, &u2).unwrap();
         let f = st.frame().unwrap();
         let samples = build_samples(&model, &st, &cam, 20.0);
         assert!(samples.len() > 10);

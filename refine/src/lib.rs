@@ -444,7 +444,8 @@ impl Refiner {
                 };
                 // The mask shows which part of the tube is visible (mono: no depth map).
                 let mono_mask = det.t_cam_tube.is_none() && input.scene.stereo_points.is_empty() && self.config.mask_visibility_px > 0;
-                let shown = mask.as_ref().filter(|_| mono_mask).map(|m| m.dilated(self.config.mask_visibility_px));
+                let of_image = |m: &&BinaryMask| m.width == input.camera.width as usize && m.height == input.camera.height as usize;
+                let shown = mask.as_ref().filter(|_| mono_mask).filter(of_image).map(|m| m.dilated_window(self.config.mask_visibility_px));
                 let with_prior = RefineInput { scene: Scene { image_axis, shown: shown.as_ref().map(|m| (m, input.camera)), ..input.scene }, ..*input };
                 let pose = r.refine_seed_inner(&with_prior, &seed, det.image_id, det.score, Some(det.bbox), ends);
                 // Stereo points that do not support the fit also gave the seed its distance;
