@@ -75,34 +75,40 @@ fn binom(a: f32, b: f32, c: f32, d: f32, e: f32) -> f32 {
     ((a + e) + 4.0 * (b + d) + 6.0 * c) * (1.0 / 16.0)
 }
 
+/// Appends the binomial blur `[1 4 6 4 1]/16` of `row` (clamped at its ends) to `out`; the
+/// interior without index clamping, so that it vectorizes.
+fn binom_row(row: &[f32], out: &mut Vec<f32>) {
+    let w = row.len();
+    let at = |x: isize| row[x.clamp(0, w as isize - 1) as usize];
+    let clamped = |x: usize| {
+        let xi = x as isize;
+        binom(at(xi - 2), at(xi - 1), row[x], at(xi + 1), at(xi + 2))
+    };
+    if w <= 4 {
+        out.extend((0..w).map(clamped));
+        return;
+    }
+    out.extend((0..2).map(clamped));
+    out.extend(row.windows(5).map(|v| binom(v[0], v[1], v[2], v[3], v[4])));
+    out.extend((w - 2..w).map(clamped));
+}
+
 /// Separable binomial blur `[1 4 6 4 1]/16` with clamped borders (interior loops without
-/// index clamping, so that they vectorize).
+/// index clamping, so that they vectorize; the buffers are filled row by row, not zeroed
+/// first).
 fn blur(p: &Plane<f32>) -> Plane<f32> {
     let (w, h) = (p.width, p.height);
     let cl = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
-    let mut tmp = vec![0f32; w * h];
+    let mut tmp = Vec::with_capacity(w * h);
     for y in 0..h {
-        let row = p.row(y);
-        let out = &mut tmp[y * w..(y + 1) * w];
-        for x in (0..w.min(2)).chain(w.saturating_sub(2).max(2)..w) {
-            let xi = x as isize;
-            out[x] = binom(row[cl(xi - 2, w)], row[cl(xi - 1, w)], row[x], row[cl(xi + 1, w)], row[cl(xi + 2, w)]);
-        }
-        if w > 4 {
-            for (o, win) in out[2..w - 2].iter_mut().zip(row.windows(5)) {
-                *o = binom(win[0], win[1], win[2], win[3], win[4]);
-            }
-        }
+        binom_row(p.row(y), &mut tmp);
     }
-    let mut data = vec![0f32; w * h];
+    let mut data = Vec::with_capacity(w * h);
     for y in 0..h {
         let yi = y as isize;
         let r = |k: isize| &tmp[cl(yi + k, h) * w..(cl(yi + k, h) + 1) * w];
         let (r0, r1, r2, r3, r4) = (r(-2), r(-1), r(0), r(1), r(2));
-        let out = &mut data[y * w..(y + 1) * w];
-        for x in 0..w {
-            out[x] = binom(r0[x], r1[x], r2[x], r3[x], r4[x]);
-        }
+        data.extend((0..w).map(|x| binom(r0[x], r1[x], r2[x], r3[x], r4[x])));
     }
     Plane::from_vec(w, h, data)
 }
@@ -110,23 +116,20 @@ fn blur(p: &Plane<f32>) -> Plane<f32> {
 /// Central-difference gradients `(∂x, ∂y)` (one-sided at the borders), interleaved.
 fn gradients(p: &Plane<f32>) -> Vec<[f32; 2]> {
     let (w, h) = (p.width, p.height);
-    let mut g = vec![[0f32; 2]; w * h];
+    let mut g = Vec::with_capacity(w * h);
     for y in 0..h {
         let row = p.row(y);
         let up = p.row(y.saturating_sub(1));
         let dn = p.row((y + 1).min(h - 1));
         let sy = if y == 0 || y == h - 1 { 1.0 } else { 0.5 };
-        let out = &mut g[y * w..(y + 1) * w];
-        for x in 0..w {
-            out[x][1] = (dn[x] - up[x]) * sy;
+        let gy = |x: usize| (dn[x] - up[x]) * sy;
+        if w < 2 {
+            g.extend((0..w).map(|x| [0.0, gy(x)]));
+            continue;
         }
-        if w >= 2 {
-            out[0][0] = row[1] - row[0];
-            out[w - 1][0] = row[w - 1] - row[w - 2];
-            for (o, win) in out[1..w - 1].iter_mut().zip(row.windows(3)) {
-                o[0] = 0.5 * (win[2] - win[0]);
-            }
-        }
+        g.push([row[1] - row[0], gy(0)]);
+        g.extend(row.windows(3).enumerate().map(|(i, v)| [0.5 * (v[2] - v[0]), gy(i + 1)]));
+        g.push([row[w - 1] - row[w - 2], gy(w - 1)]);
     }
     g
 }
@@ -222,9 +225,32 @@ impl GradientLevel {
         let mut buf = [0f32; 129];
         let m = (2 * radius + 1).min(129);
         let r = (m as isize - 1) / 2;
-        for (i, v) in buf.iter_mut().take(m).enumerate() {
-            let k = i as f64 - r as f64;
-            *v = self.directional(&(p + n * k), n);
+        // Where the whole segment lies at least one pixel inside the right and bottom borders,
+        // no tap needs the border clamps of [`GradientLevel::gradient`] (the same values).
+        let (first, last) = (p - n * r as f64, p + n * r as f64);
+        let (xmax, ymax) = (self.width as f64 - 1.0 - 1e-3, self.height as f64 - 1.0 - 1e-3);
+        if first.x.min(last.x) >= 0.0 && first.y.min(last.y) >= 0.0 && first.x.max(last.x) < xmax && first.y.max(last.y) < ymax {
+            let (w, nx, ny) = (self.width, n.x as f32, n.y as f32);
+            for (i, v) in buf.iter_mut().take(m).enumerate() {
+                let q = p + n * (i as f64 - r as f64);
+                let (x, y) = (q.x as f32, q.y as f32);
+                let (x0, y0) = (x as usize, y as usize);
+                let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+                let i = y0 * w + x0;
+                let (a, b, c, d) = (self.grad[i], self.grad[i + 1], self.grad[i + w], self.grad[i + w + 1]);
+                let mut g = [0f32; 2];
+                for k in 0..2 {
+                    let top = a[k] + (b[k] - a[k]) * fx;
+                    let bot = c[k] + (d[k] - c[k]) * fx;
+                    g[k] = top + (bot - top) * fy;
+                }
+                *v = g[0] * nx + g[1] * ny;
+            }
+        } else {
+            for (i, v) in buf.iter_mut().take(m).enumerate() {
+                let k = i as f64 - r as f64;
+                *v = self.directional(&(p + n * k), n);
+            }
         }
         let mut hits = EdgeHits::default();
         let mut cand: [(usize, f32); 16] = [(0, 0.0); 16];
