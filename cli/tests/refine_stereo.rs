@@ -89,6 +89,9 @@ fn stereo_term_fixes_the_depth_that_mono_loses() {
     let without = read(&tmp.path().join("st0.json")).as_array().unwrap().iter().filter(|p| p["converged"].as_bool() == Some(true) && p["residuals"]["stereo_points"].as_u64() == Some(0)).count();
     assert!(without >= 1, "every tube has stereo points");
     assert!(stderr_st0.contains(&format!("{without} converged poses have no stereo points")), "{stderr_st0}");
+    // And how long the fits took, over every seed it refined.
+    let n_poses = read(&tmp.path().join("st0.json")).as_array().unwrap().len();
+    assert!(stderr_st0.contains("refinement time per seed") && stderr_st0.contains(&format!(" over {n_poses} seeds on ")), "{stderr_st0}");
     let (ds, dm, cs, z) = (median(&mut depth_st), median(&mut depth_mono), median(&mut centre_st), median(&mut zs));
     // SGM's disparity on these ~15 px wide tubes is off by about half a pixel (tube pixels of the
     // stereo crate's evaluation): depth error Z² · 0.5 px / (f B); allow 0.75 px.

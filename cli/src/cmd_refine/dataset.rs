@@ -141,13 +141,14 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     let fixed_ground = if auto_ground { None } else { args.ground.as_deref().map(parse_ground).transpose()? };
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}").expect("template"));
-    let per_image: Vec<(Vec<TubeAxisPose>, Vec<TubeAxisPose>, Vec<(TubeDetection, bool)>)> = images
+    type ImageResult = (Vec<TubeAxisPose>, Vec<TubeAxisPose>, Vec<(TubeDetection, bool)>, Vec<f64>);
+    let per_image: Vec<ImageResult> = images
         .par_iter()
         .map(|im| -> Result<_> {
             let items = &work[&im.id];
             if items.is_empty() {
                 bar.inc(1);
-                return Ok((Vec::new(), Vec::new(), Vec::new()));
+                return Ok((Vec::new(), Vec::new(), Vec::new(), Vec::new()));
             }
             let camera = camera_of(im)?;
             let ground = if auto_ground { ground_of(im)? } else { fixed_ground };
@@ -191,6 +192,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene::default() };
             let mut poses = Vec::with_capacity(items.len());
             let mut seeds = Vec::new();
+            let mut fit_ms = Vec::with_capacity(items.len());
             for (k, w) in items.iter().enumerate() {
                 match w {
                     Work::Detection(d) => {
@@ -202,7 +204,9 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                         }
                         let d = &d;
                         let input = RefineInput { ground: grounds[k], scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        let t0 = std::time::Instant::now();
                         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
+                        fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
                         if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, grounds[k].as_ref(), &stereo_pts[k]) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
                                 seeds.push(p);
@@ -211,7 +215,9 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     }
                     Work::GtSeed(st, _, _) => {
                         let input = RefineInput { ground: grounds[k], scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
+                        let t0 = std::time::Instant::now();
                         poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
+                        fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
                         if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
                             seeds.push(p);
                         }
@@ -241,15 +247,16 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 None => Vec::new(),
             };
             bar.inc(1);
-            Ok((poses, seeds, snapped))
+            Ok((poses, seeds, snapped, fit_ms))
         })
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
-    let (mut poses, mut seeds, mut snapped) = (Vec::new(), Vec::new(), Vec::new());
-    for (p, s, m) in per_image {
+    let (mut poses, mut seeds, mut snapped, mut fit_ms) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (p, s, m, t) in per_image {
         poses.extend(p);
         seeds.extend(s);
         snapped.extend(m);
+        fit_ms.extend(t);
     }
     let mut reasons: BTreeMap<String, usize> = BTreeMap::new();
     for p in &poses {
@@ -271,6 +278,11 @@ pub fn run(args: &RefineArgs) -> Result<()> {
         reasons,
         out.display()
     );
+    fit_ms.sort_by(f64::total_cmp);
+    use tubeloc_eval::pose_summary::percentile;
+    if let (Some(median), Some(p90)) = (percentile(&fit_ms, 50.0), percentile(&fit_ms, 90.0)) {
+        eprintln!("refinement time per seed (the fit alone, without loading, stereo matching or the stages after it): median {median:.2} ms, p90 {p90:.2} ms over {} seeds on {} threads", fit_ms.len(), rayon::current_num_threads());
+    }
     let without_points = poses.iter().filter(|p| p.converged && p.residuals.stereo_points == 0).count();
     if args.stereo && without_points > 0 {
         eprintln!("{without_points} converged poses have no stereo points (outside the right camera's view, or unmatched): they are mono poses");
