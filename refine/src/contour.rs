@@ -90,22 +90,10 @@ pub struct AxisFrame {
     pub d: f64,
 }
 
-/// The derivative of an [`AxisFrame`] along one fit parameter: each field the derivative of
-/// the frame's field of the same name (metres or unit-vector components per unit of the
-/// parameter).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FrameDerivative {
-    /// `∂c`.
-    pub c: Vector3<f64>,
-    /// `∂a`.
-    pub a: Vector3<f64>,
-    /// `∂e₁`.
-    pub e1: Vector3<f64>,
-    /// `∂e₂`.
-    pub e2: Vector3<f64>,
-    /// `∂d`, metres per unit.
-    pub d: f64,
-}
+/// The derivative of an [`AxisFrame`] along one fit parameter, in a frame's fields: each the
+/// derivative of the field of the same name (`∂c`, `∂a`, `∂e₁`, `∂e₂` per unit of the
+/// parameter, `∂d` in metres per unit); the vectors are not unit vectors.
+pub type FrameDerivative = AxisFrame;
 
 /// Which contour curve a sample lies on.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -150,6 +138,15 @@ pub struct SamplePoint {
     pub tangent: Vector3<f64>,
 }
 
+/// The limb's outward normal `n = α e₁ ± β e₂` of a section of radius `r` whose axis passes
+/// `d` from the camera: `α = -r/d`, `β = √(1 - α²)`; `None` when the camera is inside the
+/// cylinder (`|α| ≥ 1`).
+#[inline]
+fn limb_coefficients(r: f64, d: f64) -> Option<(f64, f64)> {
+    let alpha = -r / d;
+    (alpha.abs() < 1.0).then(|| (alpha, (1.0 - alpha * alpha).sqrt()))
+}
+
 impl ContourSample {
     /// Evaluates the sample at the axis frame `f` of the given model.
     #[inline]
@@ -157,11 +154,7 @@ impl ContourSample {
         let s = model.sections[self.section];
         match self.kind {
             SampleKind::Limb { side, t } => {
-                let alpha = -s.r / f.d;
-                if alpha.abs() >= 1.0 {
-                    return None;
-                }
-                let beta = (1.0 - alpha * alpha).sqrt();
+                let (alpha, beta) = limb_coefficients(s.r, f.d)?;
                 let n = f.e1 * alpha + f.e2 * (side * beta);
                 Some(SamplePoint { x: Point3::from(f.c + f.a * t + n * s.r), out: n, tangent: f.a })
             }
@@ -187,11 +180,7 @@ impl ContourSample {
         let s = model.sections[self.section];
         match self.kind {
             SampleKind::Limb { side, t } => {
-                let alpha = -s.r / f.d;
-                if alpha.abs() >= 1.0 {
-                    return None;
-                }
-                let beta = (1.0 - alpha * alpha).sqrt();
+                let (alpha, beta) = limb_coefficients(s.r, f.d)?;
                 let d_alpha = s.r / (f.d * f.d) * df.d;
                 let dn = df.e1 * alpha + df.e2 * (side * beta) + (f.e1 - f.e2 * (side * alpha / beta)) * d_alpha;
                 Some(df.c + df.a * t + dn * s.r)

@@ -49,8 +49,7 @@ impl FrameDerivatives {
     /// `None` when the state or a perturbed state has no frame (camera on the axis line).
     pub fn new(st: &AxisState, u1: &Vector3<f64>, u2: &Vector3<f64>) -> Option<Self> {
         let base = st.frame()?;
-        let zero = Vector3::zeros();
-        let mut deriv = [FrameDerivative { c: zero, a: zero, e1: zero, e2: zero, d: 0.0 }; 5];
+        let mut deriv = [base; 5];
         for (k, dk) in deriv.iter_mut().enumerate() {
             let mut d = [0.0; 5];
             d[k] = STEP;
