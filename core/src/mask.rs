@@ -171,28 +171,56 @@ impl BinaryMask {
     /// indices: `x` is the first set column, `w` the number of columns spanned); all zero when
     /// the mask is empty. Identical to `Rle::from_mask(self).to_bbox()`.
     pub fn bbox(&self) -> [f64; 4] {
-        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0usize, 0usize);
-        for y in 0..self.height {
-            let row = &self.data[y * self.width..(y + 1) * self.width];
-            // Empty rows (most of an image-sized mask) are skipped by an OR of 16-byte words.
-            let mut words = row.chunks_exact(16);
-            let any = words.by_ref().fold(0u128, |acc, c| acc | u128::from_ne_bytes(c.try_into().unwrap_or([0; 16])));
-            if any == 0 && words.remainder().iter().all(|&v| v == 0) {
-                continue;
-            }
-            if let Some(first) = row.iter().position(|&v| v != 0) {
-                let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
-                x0 = x0.min(first);
-                x1 = x1.max(last);
-                y0 = y0.min(y);
-                y1 = y1.max(y);
-            }
-        }
-        if x0 == usize::MAX {
+        let w = self.width;
+        if w == 0 {
             return [0.0; 4];
+        }
+        let row = |y: usize| &self.data[y * w..(y + 1) * w];
+        // The first and last rows with a set pixel, then, on the rows between, only the parts
+        // left and right of the columns found so far are searched (word by word).
+        let Some(y0) = (0..self.height).find(|&y| first_set(row(y)).is_some()) else { return [0.0; 4] };
+        let y1 = (y0..self.height).rev().find(|&y| first_set(row(y)).is_some()).unwrap_or(y0);
+        let (mut x0, mut x1) = (w, 0);
+        for y in y0..=y1 {
+            let r = row(y);
+            if let Some(x) = first_set(&r[..x0]) {
+                x0 = x;
+            }
+            let from = (x1 + 1).min(w).max(x0);
+            if let Some(x) = last_set(&r[from..]) {
+                x1 = from + x;
+            }
         }
         [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64]
     }
+}
+
+/// Index of the first nonzero byte of `s`, read eight bytes at a time.
+fn first_set(s: &[u8]) -> Option<usize> {
+    let mut words = s.chunks_exact(8);
+    for (i, c) in words.by_ref().enumerate() {
+        let v = u64::from_le_bytes(c.try_into().unwrap_or([0; 8]));
+        if v != 0 {
+            return Some(8 * i + (v.trailing_zeros() / 8) as usize);
+        }
+    }
+    let base = s.len() - words.remainder().len();
+    words.remainder().iter().position(|&b| b != 0).map(|p| base + p)
+}
+
+/// Index of the last nonzero byte of `s`, read eight bytes at a time.
+fn last_set(s: &[u8]) -> Option<usize> {
+    let whole = s.len() - s.len() % 8;
+    if let Some(p) = s[whole..].iter().rposition(|&b| b != 0) {
+        return Some(whole + p);
+    }
+    for (i, c) in s[..whole].chunks_exact(8).enumerate().rev() {
+        let v = u64::from_le_bytes(c.try_into().unwrap_or([0; 8]));
+        if v != 0 {
+            return Some(8 * i + 7 - (v.leading_zeros() / 8) as usize);
+        }
+    }
+    None
 }
 
 /// A window of an image-sized mask: pixel `(x, y)` of `mask` is image pixel

@@ -280,3 +280,37 @@ fn a_crop_is_the_window_and_clear_beyond_the_mask() {
     assert!((0..4).all(|y| (0..6).all(|x| over.get(x, y) == m.get(x + 6, y + 5))));
     assert_eq!(m.crop(20, 20, 3, 3), BinaryMask::new(3, 3));
 }
+
+/// `BinaryMask::bbox` (word-wise search) equals the box of a pixel-by-pixel scan, on widths
+/// that are and are not multiples of 8, with blobs touching each border and single pixels.
+#[test]
+fn bbox_matches_a_pixel_scan() {
+    use std::num::Wrapping;
+    let mut s = Wrapping(0x9e3779b97f4a7c15u64);
+    let mut next = move |n: usize| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s.0 % n as u64) as usize
+    };
+    for case in 0..300 {
+        let (w, h) = (1 + next(70), 1 + next(40));
+        let m = match case % 3 {
+            0 => BinaryMask::from_fn(w, h, |x, y| x == next(w).min(x) && y == next(h).min(y) && next(9) == 0),
+            1 => {
+                let (cx, cy, r) = (next(w) as f64, next(h) as f64, next(12) as f64);
+                BinaryMask::from_fn(w, h, |x, y| (x as f64 - cx).hypot(y as f64 - cy) <= r)
+            }
+            _ => {
+                let (x, y) = (next(w), next(h));
+                BinaryMask::from_fn(w, h, |i, j| i == x && j == y)
+            }
+        };
+        let set: Vec<(usize, usize)> = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).filter(|&(x, y)| m.get(x, y)).collect();
+        let expect = match (set.iter().map(|p| p.0).min(), set.iter().map(|p| p.0).max(), set.iter().map(|p| p.1).min(), set.iter().map(|p| p.1).max()) {
+            (Some(x0), Some(x1), Some(y0), Some(y1)) => [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64],
+            _ => [0.0; 4],
+        };
+        assert_eq!(m.bbox(), expect, "case {case}: {w}x{h}, {} set pixels", set.len());
+    }
+}
