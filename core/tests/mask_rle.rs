@@ -235,14 +235,7 @@ fn dilation_grows_a_pixel_into_a_diamond() {
 /// border and scattered pixels included.
 #[test]
 fn windowed_morphology_matches_the_whole_image_reference() {
-    use std::num::Wrapping;
-    let mut s = Wrapping(0x2545f4914f6cdd1du64);
-    let mut next = move |n: usize| {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s.0 % n as u64) as usize
-    };
+    let mut next = uniform_below(0x2545f4914f6cdd1d);
     for _ in 0..40 {
         let (w, h) = (1 + next(39), 1 + next(39));
         let (cx, cy, rad) = (next(w) as f64, next(h) as f64, 0.5 + next(8) as f64);
@@ -285,14 +278,7 @@ fn a_crop_is_the_window_and_clear_beyond_the_mask() {
 /// that are and are not multiples of 8, with blobs touching each border and single pixels.
 #[test]
 fn bbox_matches_a_pixel_scan() {
-    use std::num::Wrapping;
-    let mut s = Wrapping(0x9e3779b97f4a7c15u64);
-    let mut next = move |n: usize| {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s.0 % n as u64) as usize
-    };
+    let mut next = uniform_below(0x9e3779b97f4a7c15);
     for case in 0..300 {
         let (w, h) = (1 + next(70), 1 + next(40));
         let m = match case % 3 {
@@ -312,5 +298,16 @@ fn bbox_matches_a_pixel_scan() {
             _ => [0.0; 4],
         };
         assert_eq!(m.bbox(), expect, "case {case}: {w}x{h}, {} set pixels", set.len());
+    }
+}
+
+/// A reproducible stream of integers, `next(n)` in `0..n` (xorshift64 from `seed`, nonzero).
+fn uniform_below(seed: u64) -> impl FnMut(usize) -> usize {
+    let mut s = seed;
+    move |n| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s % n as u64) as usize
     }
 }
