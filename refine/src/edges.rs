@@ -205,8 +205,14 @@ impl GradientLevel {
         let (fx, fy) = (x - x0 as f32, y - y0 as f32);
         let x1 = (x0 + 1).min(w - 1) - x0;
         let y1 = if y0 + 1 < h { w } else { 0 };
-        let i = y0 * w + x0;
-        let (a, b, c, d) = (self.grad[i], self.grad[i + x1], self.grad[i + y1], self.grad[i + y1 + x1]);
+        self.taps(y0 * w + x0, x1, y1, fx, fy)
+    }
+
+    /// The bilinear blend of the gradient at `grad[i]`, its right neighbour `grad[i + dx]`
+    /// and the two below them (`+ dy`), with fractions `fx`, `fy`.
+    #[inline(always)]
+    fn taps(&self, i: usize, dx: usize, dy: usize, fx: f32, fy: f32) -> [f32; 2] {
+        let (a, b, c, d) = (self.grad[i], self.grad[i + dx], self.grad[i + dy], self.grad[i + dy + dx]);
         let mut out = [0f32; 2];
         for k in 0..2 {
             let top = a[k] + (b[k] - a[k]) * fx;
@@ -235,15 +241,7 @@ impl GradientLevel {
                 let q = p + n * (i as f64 - r as f64);
                 let (x, y) = (q.x as f32, q.y as f32);
                 let (x0, y0) = (x as usize, y as usize);
-                let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-                let i = y0 * w + x0;
-                let (a, b, c, d) = (self.grad[i], self.grad[i + 1], self.grad[i + w], self.grad[i + w + 1]);
-                let mut g = [0f32; 2];
-                for k in 0..2 {
-                    let top = a[k] + (b[k] - a[k]) * fx;
-                    let bot = c[k] + (d[k] - c[k]) * fx;
-                    g[k] = top + (bot - top) * fy;
-                }
+                let g = self.taps(y0 * w + x0, 1, w, x - x0 as f32, y - y0 as f32);
                 *v = g[0] * nx + g[1] * ny;
             }
         } else {

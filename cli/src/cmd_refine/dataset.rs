@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
+use tubeloc_eval::pose_summary::percentile;
 use tubeloc_refine::seed::{axis_state_of, perturbed, reanchored_pose};
 use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
 use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
@@ -279,7 +280,6 @@ pub fn run(args: &RefineArgs) -> Result<()> {
         out.display()
     );
     fit_ms.sort_by(f64::total_cmp);
-    use tubeloc_eval::pose_summary::percentile;
     if let (Some(median), Some(p90)) = (percentile(&fit_ms, 50.0), percentile(&fit_ms, 90.0)) {
         eprintln!("refinement time per seed (the fit alone, without loading, stereo matching or the stages after it): median {median:.2} ms, p90 {p90:.2} ms over {} seeds on {} threads", fit_ms.len(), rayon::current_num_threads());
     }
