@@ -256,6 +256,15 @@ pub struct RefineConfig {
     /// the fit of a tube partly hidden by a rock or sand does not take the occluder's outline
     /// for the tube's; 0 disables.
     pub mask_visibility_px: usize,
+    /// [`Refiner::refine_with_colour`], mask seeds in a colour (or grey) image: the mask's image
+    /// axis is turned end to end before the fit when its colours put the gold seal section
+    /// behind it, `ρ ≤ −mask_seed_end_colour_corr` ([`seal_end::seal_end_along_axis`], a
+    /// correlation in [−1, 1]); a value above 1 disables. A mask axis has no end of its own,
+    /// and a fit started with the ends swapped lays the wider seal and foot sections over the
+    /// wrong parts of the tube and settles turned and displaced along the axis before the end
+    /// decision ([`Refiner::refine_seed`]) can swap them back. See `refine/README.md` (session
+    /// 14) for the choice.
+    pub mask_seed_end_colour_corr: f64,
 }
 
 impl Default for RefineConfig {
@@ -317,6 +326,7 @@ impl Default for RefineConfig {
             mask_seed_min_agreement: 0.6,
             mask_axis_sigma_px: 0.4,
             mask_visibility_px: 8,
+            mask_seed_end_colour_corr: 0.3,
         }
     }
 }
@@ -356,7 +366,8 @@ impl RefineConfig {
             && self.mask_seed_end_limb_weight >= 0.0
             && self.mask_seed_relief_sigma_m >= 0.0
             && (0.0..=1.0).contains(&self.mask_seed_min_agreement)
-            && self.mask_axis_sigma_px >= 0.0;
+            && self.mask_axis_sigma_px >= 0.0
+            && self.mask_seed_end_colour_corr >= 0.0;
         if ok {
             Ok(())
         } else {
@@ -427,6 +438,9 @@ impl Refiner {
     /// section and the body (kept to the detection's mask), their colours decide which end is
     /// the seal end ([`seal_end`]) instead of the edges, and set `end_confidence`.
     pub fn refine_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> TubeAxisPose {
+        let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
+        let turned = colour.zip(mask.as_ref()).and_then(|(image, m)| self.seed_turned_by_colour(det, m, image));
+        let det = turned.as_ref().unwrap_or(det);
         match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
             Ok(seed) => {
                 // Detector seeds are worse than explicit ones in kind-specific ways
@@ -434,7 +448,6 @@ impl Refiner {
                 let has_ground = input.ground.is_some() || input.scene.ground.is_some();
                 let cfg = SeedSettings::new(&self.config, SeedKind::of(det), has_ground).config(&self.config);
                 let r = Refiner { model: self.model.clone(), config: cfg };
-                let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
                 let ends = colour.map(|image| EndColour { image, visible: mask.as_ref() });
                 // The mask's axis line as a prior on the image direction, with a ground plane
                 // (used by the fits without stereo points: mono, and the stereo edge polish).
@@ -462,6 +475,22 @@ impl Refiner {
             }
             Err(e) => failed(det.image_id, det.score, None, FailureReason::BadSeed, e.to_string()),
         }
+    }
+
+    /// `det` with its mask axis turned end to end when the colours under `mask` put the seal
+    /// end behind it ([`RefineConfig::mask_seed_end_colour_corr`]); `None` keeps `det` (a
+    /// template pose, no axis seed, too little or no colour evidence, or the axis already
+    /// points to the seal end).
+    fn seed_turned_by_colour(&self, det: &TubeDetection, mask: &BinaryMask, image: &ColourImage) -> Option<TubeDetection> {
+        if det.t_cam_tube.is_some() {
+            return None;
+        }
+        let ax = det.axis_seed?;
+        let rho = seal_end::seal_end_along_axis(mask, &ax, image)?;
+        (rho <= -self.config.mask_seed_end_colour_corr).then(|| {
+            let [dx, dy] = ax.direction_px;
+            TubeDetection { axis_seed: Some(tubeloc_core::AxisSeed { direction_px: [-dx, -dy], ..ax }), ..det.clone() }
+        })
     }
 
     /// A converged fit of a mask seed whose silhouette disagrees with the detector's mask

@@ -21,7 +21,7 @@
 use crate::model::CylinderModel;
 use crate::silhouette::silhouette_mask;
 use nalgebra::Point2;
-use tubeloc_core::{BinaryMask, CameraModel, TubeAxisPose};
+use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, TubeAxisPose};
 
 /// An interleaved 8-bit RGB image, row-major, `width x height x 3` bytes.
 #[derive(Clone, Copy, Debug)]
@@ -125,10 +125,65 @@ pub fn end_confidence(evidence: &SealEndEvidence) -> f64 {
     1.0 / (1.0 + (-evidence.contrast.abs() / CONFIDENCE_SCALE).exp())
 }
 
+/// Fewest mask pixels for [`seal_end_along_axis`].
+const MIN_MASK_PIXELS: usize = 20;
+
+/// Which way along a mask's image axis the seal end lies, from the colours under the mask and
+/// no pose: the correlation, over the mask's pixels `u`, between the coordinate along the axis
+/// seed, `t = (u − centre_px) · direction_px`, and the yellowness `Y = (R + G)/2 − B`,
+///
+/// `ρ = cov(t, Y) / sqrt(var(t) var(Y))`,
+///
+/// in [−1, 1], positive when `direction_px` points toward the gold seal end. In a monochrome
+/// image (R = G = B on every mask pixel) the darkness `−(R + G + B)/3` replaces `Y` (the gold
+/// section is the darker). It orients a mask seed before the fit
+/// ([`crate::RefineConfig::mask_seed_end_colour_corr`]), whose image axis has no end of its
+/// own. `None` when the sizes differ, the mask has fewer than 20 pixels, or `t` or the colour
+/// is constant over it.
+pub fn seal_end_along_axis(mask: &BinaryMask, axis: &AxisSeed, image: &ColourImage) -> Option<f64> {
+    let (w, h) = (image.width, image.height);
+    if mask.width != w || mask.height != h || image.rgb.len() != w * h * 3 {
+        return None;
+    }
+    let [bx, by, bw, bh] = mask.bbox();
+    let (x0, y0) = (bx as usize, by as usize);
+    let (x1, y1) = (x0 + bw as usize, y0 + bh as usize);
+    let [cx, cy] = axis.centre_px;
+    let [dx, dy] = axis.direction_px;
+    // Sums of t, t², and of the yellowness and grey with their squares and products with t.
+    let (mut n, mut st, mut stt) = (0usize, 0.0, 0.0);
+    let (mut sy, mut syy, mut sty) = (0.0, 0.0, 0.0);
+    let (mut sg, mut sgg, mut stg) = (0.0, 0.0, 0.0);
+    let mut coloured = false;
+    for y in y0..y1 {
+        let row = &mask.data[y * w..(y + 1) * w];
+        for x in (x0..x1).filter(|&x| row[x] != 0) {
+            let px = &image.rgb[3 * (y * w + x)..3 * (y * w + x) + 3];
+            coloured |= px[0] != px[1] || px[1] != px[2];
+            let (r, g, b) = (px[0] as f64, px[1] as f64, px[2] as f64);
+            let t = (x as f64 - cx) * dx + (y as f64 - cy) * dy;
+            let (yel, grey) = (0.5 * (r + g) - b, (r + g + b) / 3.0);
+            n += 1;
+            (st, stt) = (st + t, stt + t * t);
+            (sy, syy, sty) = (sy + yel, syy + yel * yel, sty + t * yel);
+            (sg, sgg, stg) = (sg + grey, sgg + grey * grey, stg + t * grey);
+        }
+    }
+    if n < MIN_MASK_PIXELS {
+        return None;
+    }
+    let nf = n as f64;
+    let vt = stt - st * st / nf;
+    // Darkness −grey: its covariance with t is minus grey's, its variance grey's.
+    let (cov, vc) = if coloured { (sty - st * sy / nf, syy - sy * sy / nf) } else { (-(stg - st * sg / nf), sgg - sg * sg / nf) };
+    let den = (vt * vc).sqrt();
+    (den > 1e-9 * nf).then(|| (cov / den).clamp(-1.0, 1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector3;
+    use nalgebra::{Point3, Vector3};
     use tubeloc_core::TubeModel;
 
     /// A tube across the view at 1 m painted as the real one: the seal section gold
@@ -196,5 +251,36 @@ mod tests {
         // A wrongly sized image gives no evidence rather than a panic.
         let small = ColourImage { width: 10, height: 10, rgb: &rgb[..300] };
         assert!(seal_end_evidence(&model, &pose, &cam, &small, None).is_none());
+    }
+
+    #[test]
+    fn the_mask_axis_correlates_with_the_gold_end_in_colour_and_in_grey() {
+        let cam = CameraModel::from_hfov(640, 480, 40.0);
+        let model = CylinderModel::new(&TubeModel::default()).unwrap();
+        let axis = Vector3::new(1.0, 0.2, 0.1).normalize();
+        let truth = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), axis, 0.5).unwrap();
+        let rgb = painted(&model, &truth, &cam);
+        let grey: Vec<u8> = rgb.chunks(3).flat_map(|p| [((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8; 3]).collect();
+        let mask = silhouette_mask(&model, &truth, &cam);
+        let pixels = (0..480).flat_map(|y| (0..640).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64));
+        let ax = AxisSeed::from_pixels(pixels).unwrap();
+        // Orient the seed toward the projected seal end.
+        let p0 = cam.project(&Point3::from(truth.centre)).unwrap();
+        let p1 = cam.project(&Point3::from(truth.centre + axis * 0.05)).unwrap();
+        let s = if (p1 - p0).dot(&nalgebra::Vector2::from(ax.direction_px)) >= 0.0 { 1.0 } else { -1.0 };
+        let toward = AxisSeed { direction_px: [s * ax.direction_px[0], s * ax.direction_px[1]], ..ax };
+        let away = AxisSeed { direction_px: [-toward.direction_px[0], -toward.direction_px[1]], ..ax };
+        for rgb in [&rgb, &grey] {
+            let image = ColourImage { width: 640, height: 480, rgb };
+            let rho = seal_end_along_axis(&mask, &toward, &image).expect("evidence");
+            assert!(rho > 0.5, "{rho}");
+            let back = seal_end_along_axis(&mask, &away, &image).unwrap();
+            assert!((back + rho).abs() < 1e-9, "{back} {rho}");
+        }
+        // Too few pixels, or an image of another size: no evidence.
+        let tiny = BinaryMask::from_fn(640, 480, |x, y| mask.get(x, y) && x < 640 && (x + y) % 97 == 0 && y % 13 == 0);
+        assert!(tiny.area() < 20);
+        assert!(seal_end_along_axis(&tiny, &toward, &ColourImage { width: 640, height: 480, rgb: &rgb }).is_none());
+        assert!(seal_end_along_axis(&mask, &toward, &ColourImage { width: 10, height: 10, rgb: &rgb[..300] }).is_none());
     }
 }

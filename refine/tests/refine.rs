@@ -355,6 +355,31 @@ fn mask_seed_whose_fit_disagrees_with_its_mask_keeps_the_seed() {
     assert!(var.sqrt() >= 0.99 * (fit.centre - seed.state.c).norm(), "covariance {var}");
 }
 
+/// The scene's grey rendering coloured like the real tube: the pixels of `mask` gold on the
+/// seal section (or, `gold_at_seal` false, on the same length at the foot end) and white-ish
+/// elsewhere, scaled by the rendered shading; the ground sand-coloured. RGB bytes.
+fn painted(sc: &Scene, model: &tubeloc_refine::CylinderModel, mask: &tubeloc_core::BinaryMask, gold_at_seal: bool) -> Vec<u8> {
+    let t = sc.truth;
+    let (w, h) = (sc.camera.width as usize, sc.camera.height as usize);
+    let seal_z0 = model.sections.last().unwrap().z0;
+    let mut rgb = Vec::with_capacity(w * h * 3);
+    for y in 0..h {
+        for x in 0..w {
+            let v = sc.image.get(x, y).clamp(0.0, 1.0);
+            let r = sc.camera.unproject(&nalgebra::Point2::new(x as f64, y as f64));
+            let z = (r.dot(&t.axis) * r.dot(&t.centre) - r.dot(&r) * t.centre.dot(&t.axis)) / (r.dot(&r) - r.dot(&t.axis).powi(2));
+            let gold = if gold_at_seal { z >= seal_z0 } else { z <= -seal_z0 };
+            let tint: [f32; 3] = match (mask.get(x, y), gold) {
+                (false, _) => [1.0, 0.85, 0.7],
+                (true, true) => [1.0, 0.8, 0.3],
+                (true, false) => [1.0, 1.0, 0.98],
+            };
+            rgb.extend(tint.iter().map(|k| (255.0 * v * k) as u8));
+        }
+    }
+    rgb
+}
+
 /// The colour end decision: a template seed that points the wrong way round (seal end
 /// claimed at the foot) on an image where the seal section is gold and the body white comes
 /// back with the true seal end and a high confidence; painted the other way round (gold at the
@@ -367,28 +392,7 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
     let model = default_model();
     let t = sc.truth;
     let (w, h) = (sc.camera.width as usize, sc.camera.height as usize);
-    let seal_z0 = model.sections.last().unwrap().z0;
     let mask = tube_mask(&model, &sc);
-    // Colour the grey rendering: tube pixels of the gold part gold, of the rest white-ish,
-    // scaled by the rendered shading; the ground sand-coloured.
-    let paint = |gold_at_seal: bool| -> Vec<u8> {
-        let mut rgb = Vec::with_capacity(w * h * 3);
-        for y in 0..h {
-            for x in 0..w {
-                let v = sc.image.get(x, y).clamp(0.0, 1.0);
-                let r = sc.camera.unproject(&nalgebra::Point2::new(x as f64, y as f64));
-                let z = (r.dot(&t.axis) * r.dot(&t.centre) - r.dot(&r) * t.centre.dot(&t.axis)) / (r.dot(&r) - r.dot(&t.axis).powi(2));
-                let gold = if gold_at_seal { z >= seal_z0 } else { z <= -seal_z0 };
-                let tint: [f32; 3] = match (mask.get(x, y), gold) {
-                    (false, _) => [1.0, 0.85, 0.7],
-                    (true, true) => [1.0, 0.8, 0.3],
-                    (true, false) => [1.0, 1.0, 0.98],
-                };
-                rgb.extend(tint.iter().map(|k| (255.0 * v * k) as u8));
-            }
-        }
-        rgb
-    };
     // A template pose with the ends swapped (a half turn about x turns +z around).
     let flip = nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
     let true_rot = nalgebra::Rotation3::rotation_between(&Vector3::z(), &t.axis).unwrap();
@@ -397,7 +401,7 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
     let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene::default() };
     for gold_at_seal in [true, false] {
-        let rgb = paint(gold_at_seal);
+        let rgb = painted(&sc, &model, &mask, gold_at_seal);
         let colour = ColourImage { width: w, height: h, rgb: &rgb };
         let p = refiner.refine_with_colour(&input, &det, Some(&colour));
         assert!(p.converged, "{:?}", p.failure);
@@ -406,6 +410,46 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
         assert!(p.end_confidence > 0.9, "end confidence {}", p.end_confidence);
         assert!(axis_angle(&p.axis, &t.axis).to_degrees() < 1.5 && (p.centre - t.centre).norm() < 0.02, "axis {:.2} deg, centre {:.1} mm", axis_angle(&p.axis, &t.axis).to_degrees(), (p.centre - t.centre).norm() * 1e3);
     }
+}
+
+/// A mask seed has no end of its own: its image axis pointing to the foot is turned toward the
+/// gold seal section before the fit, so the fit is exactly the one from the axis pointing the
+/// right way, with the true seal end; with the turn disabled the wrong-way seed is fitted as
+/// it comes.
+#[test]
+fn mask_seed_is_turned_toward_the_gold_end_before_the_fit() {
+    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    use tubeloc_refine::seal_end::ColourImage;
+    let (sc, _) = one_scene();
+    let model = default_model();
+    let t = sc.truth;
+    let mask = tube_mask(&model, &sc);
+    let rgb = painted(&sc, &model, &mask, true);
+    let colour = ColourImage { width: mask.width, height: mask.height, rgb: &rgb };
+    let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
+    let ax = AxisSeed::from_pixels(pixels.iter().copied()).unwrap();
+    // The image direction toward the seal end, and the seeds pointing along and against it.
+    let p0 = sc.camera.project(&nalgebra::Point3::from(t.centre)).unwrap();
+    let p1 = sc.camera.project(&nalgebra::Point3::from(t.centre + t.axis * 0.05)).unwrap();
+    let sign = if (p1 - p0).dot(&nalgebra::Vector2::from(ax.direction_px)) >= 0.0 { 1.0 } else { -1.0 };
+    let seed_toward = |s: f64| {
+        let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
+        det.axis_seed = Some(AxisSeed { direction_px: [s * sign * ax.direction_px[0], s * sign * ax.direction_px[1]], ..ax });
+        det.mask = Some(Rle::from_mask(&mask));
+        det
+    };
+    let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
+    let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(g), scene: FitScene::default() };
+    let on = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
+    let right = on.refine_with_colour(&input, &seed_toward(1.0), Some(&colour));
+    let turned = on.refine_with_colour(&input, &seed_toward(-1.0), Some(&colour));
+    assert!(right.converged && turned.converged, "{:?} {:?}", right.failure, turned.failure);
+    assert_eq!((turned.centre, turned.axis, turned.end_direction), (right.centre, right.axis, right.end_direction));
+    assert!(turned.end_direction.dot(&t.axis) > 0.99, "end {:?}, truth {:?}", turned.end_direction, t.axis);
+    // Disabled, the seed pointing the wrong way starts the fit (whatever it then decides).
+    let off = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_seed_end_colour_corr: 2.0, ..RefineConfig::default() }).unwrap();
+    let as_given = off.refine_with_colour(&input, &seed_toward(-1.0), Some(&colour));
+    assert!(as_given.centre != right.centre || as_given.axis != right.axis, "the wrong-way seed gave the same fit without the turn: the test shows nothing");
 }
 
 #[test]
