@@ -477,6 +477,15 @@ impl Refiner {
         }
     }
 
+    /// The seed [`Refiner::refine_with_colour`] starts from: the detection's
+    /// ([`seed_from_detection`]), a mask seed's image axis first turned to the seal end by its
+    /// mask's colours when `colour` is given ([`RefineConfig::mask_seed_end_colour_corr`]).
+    pub fn seed_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> Result<Seed, RefineError> {
+        let mask = colour.and(det.mask.as_ref()).and_then(|m| m.to_mask().ok());
+        let turned = colour.zip(mask.as_ref()).and_then(|(image, m)| self.seed_turned_by_colour(det, m, image));
+        seed_from_detection(turned.as_ref().unwrap_or(det), input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points)
+    }
+
     /// `det` with its mask axis turned end to end when the colours under `mask` put the seal
     /// end behind it ([`RefineConfig::mask_seed_end_colour_corr`]); `None` keeps `det` (a
     /// template pose, no axis seed, too little or no colour evidence, or the axis already

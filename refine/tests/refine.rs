@@ -446,6 +446,14 @@ fn mask_seed_is_turned_toward_the_gold_end_before_the_fit() {
     assert!(right.converged && turned.converged, "{:?} {:?}", right.failure, turned.failure);
     assert_eq!((turned.centre, turned.axis, turned.end_direction), (right.centre, right.axis, right.end_direction));
     assert!(turned.end_direction.dot(&t.axis) > 0.99, "end {:?}, truth {:?}", turned.end_direction, t.axis);
+    // The seed it starts from (what `tubeloc refine --seeds-out` writes) is the turned one;
+    // without colours, the detection's own.
+    let seed_of = |det: &TubeDetection| tubeloc_refine::seed_from_detection(det, &sc.camera, &model, Some(&g), &[]).unwrap().state;
+    let started = on.seed_with_colour(&input, &seed_toward(-1.0), Some(&colour)).unwrap().state;
+    assert_eq!((started.c, started.a), (seed_of(&seed_toward(1.0)).c, seed_of(&seed_toward(1.0)).a));
+    let grey_start = on.seed_with_colour(&input, &seed_toward(-1.0), None).unwrap().state;
+    assert_eq!((grey_start.c, grey_start.a), (seed_of(&seed_toward(-1.0)).c, seed_of(&seed_toward(-1.0)).a));
+    assert!(grey_start.a.dot(&started.a) < -0.99);
     // Disabled, the seed pointing the wrong way starts the fit (whatever it then decides).
     let off = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_seed_end_colour_corr: 2.0, ..RefineConfig::default() }).unwrap();
     let as_given = off.refine_with_colour(&input, &seed_toward(-1.0), Some(&colour));

@@ -208,7 +208,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                         let t0 = std::time::Instant::now();
                         poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
                         fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                        if let Ok(sd) = tubeloc_refine::seed_from_detection(d, &camera, &refiner.model, grounds[k].as_ref(), &stereo_pts[k]) {
+                        if let (true, Ok(sd)) = (args.seeds_out.is_some(), refiner.seed_with_colour(&input, d, colour.as_ref())) {
                             if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
                                 seeds.push(p);
                             }
