@@ -77,7 +77,8 @@ pub struct RefineArgs {
     #[arg(long, requires = "dataset")]
     pub(crate) detections_camera: Option<PathBuf>,
     /// Dataset mode: also write the seeds as poses (JSON array of TubeAxisPose), to evaluate the
-    /// seeds alone.
+    /// seeds alone: those the fit starts from, a mask seed's axis already turned to the seal end
+    /// by its mask's colours (unless --no-colour-ends; `Refiner::seed_with_colour`).
     #[arg(long, requires = "dataset")]
     pub(crate) seeds_out: Option<PathBuf>,
     /// Camera model JSON of the image (ignored for the left image when --rig is given).

@@ -206,18 +206,31 @@ mod tests {
         rgb
     }
 
-    #[test]
-    fn the_gold_section_marks_the_seal_end_in_colour_and_in_grey() {
+    /// A 640 x 480 camera and a tube at 1 m, turned across the view ([`painted`]), in colour and
+    /// in grey (each pixel's mean).
+    struct PaintedScene {
+        cam: CameraModel,
+        model: CylinderModel,
+        axis: Vector3<f64>,
+        truth: TubeAxisPose,
+        rgb: Vec<u8>,
+        grey: Vec<u8>,
+    }
+
+    fn painted_scene() -> PaintedScene {
         let cam = CameraModel::from_hfov(640, 480, 40.0);
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
         let axis = Vector3::new(1.0, 0.2, 0.1).normalize();
         let truth = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), axis, 0.5).unwrap();
         let rgb = painted(&model, &truth, &cam);
+        let grey = rgb.chunks(3).flat_map(|p| [((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8; 3]).collect();
+        PaintedScene { cam, model, axis, truth, rgb, grey }
+    }
+
+    #[test]
+    fn the_gold_section_marks_the_seal_end_in_colour_and_in_grey() {
+        let PaintedScene { cam, model, axis, truth, rgb, grey } = painted_scene();
         let image = ColourImage { width: 640, height: 480, rgb: &rgb };
-        let grey: Vec<u8> = rgb.chunks(3).flat_map(|p| {
-            let g = ((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8;
-            [g, g, g]
-        }).collect();
         let grey_image = ColourImage { width: 640, height: 480, rgb: &grey };
         for (img, mono) in [(&image, false), (&grey_image, true)] {
             // A pose pointing the wrong way is flipped, with high confidence.
@@ -255,12 +268,7 @@ mod tests {
 
     #[test]
     fn the_mask_axis_correlates_with_the_gold_end_in_colour_and_in_grey() {
-        let cam = CameraModel::from_hfov(640, 480, 40.0);
-        let model = CylinderModel::new(&TubeModel::default()).unwrap();
-        let axis = Vector3::new(1.0, 0.2, 0.1).normalize();
-        let truth = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), axis, 0.5).unwrap();
-        let rgb = painted(&model, &truth, &cam);
-        let grey: Vec<u8> = rgb.chunks(3).flat_map(|p| [((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8; 3]).collect();
+        let PaintedScene { cam, model, axis, truth, rgb, grey } = painted_scene();
         let mask = silhouette_mask(&model, &truth, &cam);
         let pixels = (0..480).flat_map(|y| (0..640).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64));
         let ax = AxisSeed::from_pixels(pixels).unwrap();
