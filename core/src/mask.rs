@@ -178,8 +178,8 @@ impl BinaryMask {
         let row = |y: usize| &self.data[y * w..(y + 1) * w];
         // The first and last rows with a set pixel, then, on the rows between, only the parts
         // left and right of the columns found so far are searched (word by word).
-        let Some(y0) = (0..self.height).find(|&y| first_set(row(y)).is_some()) else { return [0.0; 4] };
-        let y1 = (y0..self.height).rev().find(|&y| first_set(row(y)).is_some()).unwrap_or(y0);
+        let Some(y0) = (0..self.height).find(|&y| any_set(row(y))) else { return [0.0; 4] };
+        let y1 = (y0..self.height).rev().find(|&y| any_set(row(y))).unwrap_or(y0);
         let (mut x0, mut x1) = (w, 0);
         for y in y0..=y1 {
             let r = row(y);
@@ -193,6 +193,18 @@ impl BinaryMask {
         }
         [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64]
     }
+}
+
+/// Whether any byte of `s` is nonzero, 32 bytes per test (four words OR-ed).
+fn any_set(s: &[u8]) -> bool {
+    let mut blocks = s.chunks_exact(32);
+    for b in blocks.by_ref() {
+        let word = |i: usize| u64::from_le_bytes(b[i..i + 8].try_into().unwrap_or([0; 8]));
+        if word(0) | word(8) | word(16) | word(24) != 0 {
+            return true;
+        }
+    }
+    blocks.remainder().iter().any(|&v| v != 0)
 }
 
 /// Index of the first nonzero byte of `s`, read eight bytes at a time.

@@ -19,7 +19,7 @@
 //! one and the difference of mean grey levels, body minus seal, is used instead.
 
 use crate::model::CylinderModel;
-use crate::silhouette::silhouette_mask;
+use crate::silhouette::{silhouette_mask, PixelRays};
 use nalgebra::Point2;
 use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, TubeAxisPose};
 
@@ -70,24 +70,19 @@ pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &Ca
     if seal == body {
         return None;
     }
-    let sil = silhouette_mask(model, pose, camera);
-    let near = match visible {
-        Some(m) if m.width == w && m.height == h => Some(m.dilated(2)),
-        _ => None,
-    };
     let (c, a) = (pose.centre, pose.end_direction);
     let ca = c.dot(&a);
     // Sums of yellowness and grey per section, and whether any pixel had colour.
     let (mut ys, mut gs, mut ns) = (0.0, 0.0, 0usize);
     let (mut yb, mut gb, mut nb) = (0.0, 0.0, 0usize);
     let mut coloured = false;
-    for (i, _) in sil.data.iter().enumerate().filter(|(i, &v)| v != 0 && near.as_ref().is_none_or(|m| m.data[*i] != 0)) {
+    let mut add = |i: usize| {
         let (x, y) = (i % w, i / w);
         let r = camera.unproject(&Point2::new(x as f64, y as f64));
         let (rr, ra, rc) = (r.dot(&r), r.dot(&a), r.dot(&c));
         let den = rr - ra * ra;
         if den.abs() < 1e-12 {
-            continue;
+            return;
         }
         let z = (ra * rc - rr * ca) / den;
         let px = &image.rgb[3 * i..3 * i + 3];
@@ -99,6 +94,29 @@ pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &Ca
             (ys, gs, ns) = (ys + yellow, gs + grey, ns + 1);
         } else if z >= body.z0 && z <= body.z1 - 0.005 {
             (yb, gb, nb) = (yb + yellow, gb + grey, nb + 1);
+        }
+    };
+    match visible {
+        // The silhouette's pixels within 2 px of the mask, in image order: only the grown
+        // mask's pixels are tested (the same test as the silhouette's, [`PixelRays`]).
+        Some(m) if m.width == w && m.height == h => {
+            let near = m.dilated_window(2);
+            if let Some(rays) = PixelRays::new(model, pose, camera) {
+                for y in 0..near.mask.height {
+                    for x in (0..near.mask.width).filter(|&x| near.mask.data[y * near.mask.width + x] != 0) {
+                        let (ix, iy) = (near.x0 + x, near.y0 + y);
+                        if rays.hit(ix, iy) {
+                            add(iy * w + ix);
+                        }
+                    }
+                }
+            }
+        }
+        _ => {
+            let sil = silhouette_mask(model, pose, camera);
+            for (i, _) in sil.data.iter().enumerate().filter(|(_, &v)| v != 0) {
+                add(i);
+            }
         }
     }
     if ns < MIN_PIXELS || nb < MIN_PIXELS {
@@ -290,5 +308,17 @@ mod tests {
         assert!(tiny.area() < 20);
         assert!(seal_end_along_axis(&tiny, &toward, &ColourImage { width: 640, height: 480, rgb: &rgb }).is_none());
         assert!(seal_end_along_axis(&mask, &toward, &ColourImage { width: 10, height: 10, rgb: &rgb[..300] }).is_none());
+    }
+
+    #[test]
+    fn a_mask_covering_the_silhouette_gives_the_evidence_of_no_mask() {
+        // Only the grown mask's pixels are tested when a mask is given; the silhouette within
+        // it is the whole silhouette here, so the sums (same pixels, same order) are identical.
+        let PaintedScene { cam, model, truth, rgb, .. } = painted_scene();
+        let image = ColourImage { width: 640, height: 480, rgb: &rgb };
+        let sil = silhouette_mask(&model, &truth, &cam);
+        let bare = seal_end_evidence(&model, &truth, &cam, &image, None).unwrap();
+        assert_eq!(seal_end_evidence(&model, &truth, &cam, &image, Some(&sil)), Some(bare));
+        assert!(bare.seal_pixels > 100 && bare.body_pixels > 100, "{bare:?}");
     }
 }

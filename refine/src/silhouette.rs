@@ -158,13 +158,8 @@ pub fn silhouette_mask_raster(model: &CylinderModel, pose: &TubeAxisPose, camera
         None if hull.is_some() => None,
         None => Some((xa, xb)),
     };
-    // A point on each pixel's ray beyond the whole tube: the segment from the camera to it
-    // crosses the solid exactly when the ray does.
-    let far = 2.0 * (c.norm() + model.length);
-    let hit = |x: usize, y: usize| {
-        let d = camera.unproject(&Point2::new(x as f64, y as f64));
-        model.occludes(&c, &a, &Point3::from(d * (far / d.norm())))
-    };
+    let rays = PixelRays { model, camera, c, a, far: PixelRays::far(model, &c) };
+    let hit = |x: usize, y: usize| rays.hit(x, y);
     let at = |x: usize, y: usize| (y - window.y0) * window.width + x - window.x0;
     match raster {
         Raster::EveryPixel => {
@@ -199,6 +194,40 @@ pub fn silhouette_mask_raster(model: &CylinderModel, pose: &TubeAxisPose, camera
         }
     }
     mask
+}
+
+/// The test [`silhouette_mask`] makes of each pixel it rasters, for one pose: whether the
+/// viewing ray through the pixel's centre meets the solid tube.
+pub struct PixelRays<'a> {
+    model: &'a CylinderModel,
+    camera: &'a CameraModel,
+    c: nalgebra::Vector3<f64>,
+    a: nalgebra::Vector3<f64>,
+    far: f64,
+}
+
+impl<'a> PixelRays<'a> {
+    /// The rays of `camera` against the tube at `pose`; `None` when a bounding point of the
+    /// tube does not project (behind the camera), where [`silhouette_mask`] is empty.
+    pub fn new(model: &'a CylinderModel, pose: &TubeAxisPose, camera: &'a CameraModel) -> Option<Self> {
+        let (c, a) = (pose.centre, pose.end_direction);
+        let bounds = crate::AxisState { c, a }.bounding_points(model)?;
+        bounds.iter().all(|p| camera.project(&Point3::from(*p)).is_some()).then_some(PixelRays { model, camera, c, a, far: Self::far(model, &c) })
+    }
+
+    /// Distance along a unit ray beyond the whole tube centred at `c`.
+    fn far(model: &CylinderModel, c: &nalgebra::Vector3<f64>) -> f64 {
+        2.0 * (c.norm() + model.length)
+    }
+
+    /// Whether the ray through pixel `(x, y)` meets the solid: the segment from the camera to a
+    /// point of the ray beyond the whole tube crosses the solid exactly when the ray does
+    /// ([`CylinderModel::occludes`]).
+    #[inline]
+    pub fn hit(&self, x: usize, y: usize) -> bool {
+        let d = self.camera.unproject(&Point2::new(x as f64, y as f64));
+        self.model.occludes(&self.c, &self.a, &Point3::from(d * (self.far / d.norm())))
+    }
 }
 
 /// The agreement that [`snap_mask`] tests, `IoU(silhouette ∩ dilate(mask, dilate_px), mask)`
