@@ -249,7 +249,10 @@ pub struct RefineConfig {
     /// axis, and brought 440 that much closer. 0.4 px was chosen on the generated validation
     /// sets (val9, val21; both cross-split models, learned seeds, `--ground auto`) among 0.25,
     /// 0.3, 0.4, 0.5, 0.6 and 1 by the mean axis p90: mono axis median / p90 from 0.52-0.55 /
-    /// 2.48-3.35 deg to 0.41-0.52 / 1.87-2.08 deg (`refine/README.md`, session 8).
+    /// 2.48-3.35 deg to 0.41-0.52 / 1.87-2.08 deg (`refine/README.md`, session 8). Session 14,
+    /// once mask seeds start at their seal end ([`RefineConfig::mask_seed_end_colour_corr`]):
+    /// 0.5 px, chosen the same way among 0.3, 0.4, 0.5, 0.6, 0.8 and 1 on the seed-21 set and
+    /// val9 (no-tags model, mono + ground): mean axis p90 1.31 -> 1.16 deg.
     pub mask_axis_sigma_px: f64,
     /// [`Refiner::refine`], mask seeds without stereo points: contour points more than this
     /// many pixels outside the detection's mask are hidden ([`fit::Scene::shown`]), so that
@@ -324,7 +327,7 @@ impl Default for RefineConfig {
             mask_seed_length_depth: false,
             mask_seed_relief_sigma_m: 0.001,
             mask_seed_min_agreement: 0.6,
-            mask_axis_sigma_px: 0.4,
+            mask_axis_sigma_px: 0.5,
             mask_visibility_px: 8,
             mask_seed_end_colour_corr: 0.3,
         }
