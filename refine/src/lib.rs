@@ -442,7 +442,7 @@ impl Refiner {
     /// the seal end ([`seal_end`]) instead of the edges, and set `end_confidence`.
     pub fn refine_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> TubeAxisPose {
         let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
-        let turned = colour.zip(mask.as_ref()).and_then(|(image, m)| self.seed_turned_by_colour(det, m, image));
+        let turned = self.seed_turned_by_colour(det, mask.as_ref(), colour);
         let det = turned.as_ref().unwrap_or(det);
         match seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
             Ok(seed) => {
@@ -485,15 +485,17 @@ impl Refiner {
     /// mask's colours when `colour` is given ([`RefineConfig::mask_seed_end_colour_corr`]).
     pub fn seed_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> Result<Seed, RefineError> {
         let mask = colour.and(det.mask.as_ref()).and_then(|m| m.to_mask().ok());
-        let turned = colour.zip(mask.as_ref()).and_then(|(image, m)| self.seed_turned_by_colour(det, m, image));
+        let turned = self.seed_turned_by_colour(det, mask.as_ref(), colour);
         seed_from_detection(turned.as_ref().unwrap_or(det), input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points)
     }
 
-    /// `det` with its mask axis turned end to end when the colours under `mask` put the seal
-    /// end behind it ([`RefineConfig::mask_seed_end_colour_corr`]); `None` keeps `det` (a
-    /// template pose, no axis seed, too little or no colour evidence, or the axis already
+    /// `det` with its mask axis turned end to end when the colours of `image` under `mask` (the
+    /// detection's, decoded) put the seal end behind it
+    /// ([`RefineConfig::mask_seed_end_colour_corr`]); `None` keeps `det` (no colour image or
+    /// mask, a template pose, no axis seed, too little colour evidence, or the axis already
     /// points to the seal end).
-    fn seed_turned_by_colour(&self, det: &TubeDetection, mask: &BinaryMask, image: &ColourImage) -> Option<TubeDetection> {
+    fn seed_turned_by_colour(&self, det: &TubeDetection, mask: Option<&BinaryMask>, image: Option<&ColourImage>) -> Option<TubeDetection> {
+        let (mask, image) = (mask?, image?);
         if det.t_cam_tube.is_some() {
             return None;
         }

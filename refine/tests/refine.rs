@@ -418,7 +418,7 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
 /// it comes.
 #[test]
 fn mask_seed_is_turned_toward_the_gold_end_before_the_fit() {
-    use tubeloc_core::{AxisSeed, DetectionSource, Rle, TubeDetection};
+    use tubeloc_core::{AxisSeed, TubeDetection};
     use tubeloc_refine::seal_end::ColourImage;
     let (sc, _) = one_scene();
     let model = default_model();
@@ -426,18 +426,13 @@ fn mask_seed_is_turned_toward_the_gold_end_before_the_fit() {
     let mask = tube_mask(&model, &sc);
     let rgb = painted(&sc, &model, &mask, true);
     let colour = ColourImage { width: mask.width, height: mask.height, rgb: &rgb };
-    let pixels: Vec<(f64, f64)> = (0..mask.height).flat_map(|y| (0..mask.width).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64)).collect();
-    let ax = AxisSeed::from_pixels(pixels.iter().copied()).unwrap();
+    let base = mask_detection(&mask);
+    let ax = base.axis_seed.unwrap();
     // The image direction toward the seal end, and the seeds pointing along and against it.
     let p0 = sc.camera.project(&nalgebra::Point3::from(t.centre)).unwrap();
     let p1 = sc.camera.project(&nalgebra::Point3::from(t.centre + t.axis * 0.05)).unwrap();
     let sign = if (p1 - p0).dot(&nalgebra::Vector2::from(ax.direction_px)) >= 0.0 { 1.0 } else { -1.0 };
-    let seed_toward = |s: f64| {
-        let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Learned);
-        det.axis_seed = Some(AxisSeed { direction_px: [s * sign * ax.direction_px[0], s * sign * ax.direction_px[1]], ..ax });
-        det.mask = Some(Rle::from_mask(&mask));
-        det
-    };
+    let seed_toward = |s: f64| TubeDetection { axis_seed: Some(AxisSeed { direction_px: [s * sign * ax.direction_px[0], s * sign * ax.direction_px[1]], ..ax }), ..base.clone() };
     let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
     let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(g), scene: FitScene::default() };
     let on = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
