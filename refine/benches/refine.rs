@@ -29,26 +29,12 @@ fn bench(c: &mut Criterion) {
 
     for (name, range) in [("1.2m", (1.1, 1.3)), ("2.5m", (2.4, 2.6))] {
         let (scene, det) = mask_seed_scene(range);
-        let ground = tubeloc_refine::GroundPlane { normal: scene.ground_n, offset: scene.ground_d };
-        let input = tubeloc_refine::RefineInput { image: &scene.image, camera: &scene.camera, ground: Some(ground), scene: tubeloc_refine::Scene::default() };
+        let input = scene.ground_input();
         let p = pool.install(|| refiner.refine(&input, &det));
         assert!(p.converged, "mask-seed bench does not converge: {:?}", p.failure);
         eprintln!("mask seed at {name}: {:.0} px long, error {:.2} mm", det.axis_seed.as_ref().unwrap().length_px, (p.centre - scene.truth.centre).norm() * 1e3);
         c.bench_function(&format!("refine_mono_mask_seed_ground_{name}_1_thread"), |b| b.iter(|| pool.install(|| refiner.refine(&input, &det))));
     }
-}
-
-/// A rendered tube at a distance drawn from `range` (metres) and the mask detection of its
-/// exact silhouette (the learned segmenter's kind of seed).
-fn mask_seed_scene(range: (f64, f64)) -> (Scene, tubeloc_core::TubeDetection) {
-    use rand::SeedableRng;
-    let model = default_model();
-    let cam = camera(false);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
-    let (truth, up, gd) = random_truth(&mut rng, &model, &cam, range);
-    let scene = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
-    let det = mask_detection(&tube_mask(&model, &scene));
-    (scene, det)
 }
 
 criterion_group! {

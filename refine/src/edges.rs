@@ -200,8 +200,8 @@ impl GradientLevel {
         let (w, h) = (self.width, self.height);
         let x = x.clamp(0.0, (w - 1) as f32);
         let y = y.clamp(0.0, (h - 1) as f32);
-        // Non-negative after the clamp: truncation is the floor.
-        let (x0, y0) = (x as usize, y as usize);
+        // Non-negative after the clamp: truncation is the floor (through i32: one instruction).
+        let (x0, y0) = (x as i32 as usize, y as i32 as usize);
         let (fx, fy) = (x - x0 as f32, y - y0 as f32);
         let x1 = (x0 + 1).min(w - 1) - x0;
         let y1 = if y0 + 1 < h { w } else { 0 };
@@ -228,8 +228,16 @@ impl GradientLevel {
     /// each at least `rel_strength` times the strongest; offsets refined by a parabola through
     /// the neighbours.
     pub fn search_all(&self, p: &Point2<f64>, n: &Vector2<f64>, radius: usize, min_strength: f32, polarity: i8, rel_strength: f32) -> EdgeHits {
-        let mut buf = [0f32; 129];
         let m = (2 * radius + 1).min(129);
+        // The usual radii (up to 16) zero a short buffer only.
+        let mut short = [0f32; 33];
+        let mut long: [f32; 129];
+        let buf: &mut [f32] = if m <= short.len() {
+            &mut short[..m]
+        } else {
+            long = [0f32; 129];
+            &mut long[..m]
+        };
         let r = (m as isize - 1) / 2;
         // Where the whole segment lies at least one pixel inside the right and bottom borders,
         // no tap needs the border clamps of [`GradientLevel::gradient`] (the same values).
@@ -237,15 +245,17 @@ impl GradientLevel {
         let (xmax, ymax) = (self.width as f64 - 1.0 - 1e-3, self.height as f64 - 1.0 - 1e-3);
         if first.x.min(last.x) >= 0.0 && first.y.min(last.y) >= 0.0 && first.x.max(last.x) < xmax && first.y.max(last.y) < ymax {
             let (w, nx, ny) = (self.width, n.x as f32, n.y as f32);
-            for (i, v) in buf.iter_mut().take(m).enumerate() {
+            for (i, v) in buf.iter_mut().enumerate() {
                 let q = p + n * (i as f64 - r as f64);
                 let (x, y) = (q.x as f32, q.y as f32);
-                let (x0, y0) = (x as usize, y as usize);
+                // Non-negative and below the level's size: truncation is the floor, and the
+                // conversion through i32 is a single instruction (to usize it is not).
+                let (x0, y0) = (x as i32 as usize, y as i32 as usize);
                 let g = self.taps(y0 * w + x0, 1, w, x - x0 as f32, y - y0 as f32);
                 *v = g[0] * nx + g[1] * ny;
             }
         } else {
-            for (i, v) in buf.iter_mut().take(m).enumerate() {
+            for (i, v) in buf.iter_mut().enumerate() {
                 let k = i as f64 - r as f64;
                 *v = self.directional(&(p + n * k), n);
             }

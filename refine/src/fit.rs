@@ -363,10 +363,21 @@ fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam:
         if !j.iter().all(|v| v.is_finite()) {
             continue;
         }
-        h += j * j.transpose() * (w * info);
+        // The upper triangle of `j jᵀ (w info)`, mirrored below: the same products.
+        let s = w * info;
+        for a in 0..5 {
+            for b in a..5 {
+                h[(a, b)] += j[a] * j[b] * s;
+            }
+        }
         g += j * (w * r);
         wrr += w * r * r;
         wsum += w;
+    }
+    for a in 0..5 {
+        for b in 0..a {
+            h[(a, b)] = h[(b, a)];
+        }
     }
     (h, g, wrr, wsum)
 }
@@ -524,9 +535,52 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     // unsmoothed one), the score that ranks hypotheses and ends on the level fitted.
     let mut r = finish(model, cfg, levels[0].smooth(), scene, st, &sp, iterations, mono);
     if levels[0].smoothed.is_some() {
-        r.score = finish(model, cfg, &levels[0], scene, st, &sp, iterations, mono).score;
+        r.score = Evaluation::new(model, cfg, &levels[0], scene, &st, &sp).score;
     }
     r
+}
+
+/// The fitted contour's edges at the finest level, as [`finish`] and the unsmoothed level's
+/// score see them: fine-search associations (no limb polarity), their residuals, and the
+/// inlier counts and score of [`FitResult`].
+struct Evaluation<'a> {
+    level: Level<'a>,
+    assoc: Vec<Assoc>,
+    /// Visible samples inside the level, and wherever they project.
+    visible: usize,
+    total: usize,
+    /// Residuals (normalized) of `assoc`, the stereo points and the priors.
+    r: Vec<Option<f64>>,
+    /// Image residuals within `inlier_px`: count and sum of squares (full-resolution pixels²).
+    inliers: usize,
+    inlier_ss: f64,
+    /// [`FitResult::score`].
+    score: f64,
+}
+
+impl<'a> Evaluation<'a> {
+    fn new(model: &CylinderModel, cfg: &RefineConfig, lv: &'a GradientLevel, scene: &Scene, st: &AxisState, sp: &SeedPrior) -> Self {
+        let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
+        let samples = build_samples_capped(model, st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
+        let polarity = vec![0i8; samples.len()];
+        let (assoc, visible, total) = associate(model, st, &samples, &level, scene, cfg, &polarity, 1.0);
+        let mut r = Vec::new();
+        residuals(model, st, &assoc, &lv.camera, level.sigma_px, scene, cfg, sp, &mut r);
+        let n_img = assoc.len();
+        let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
+        let tau = cfg.inlier_px / to_px;
+        let (mut inliers, mut inlier_ss, mut score) = (0usize, 0.0, 0.0);
+        for v in r[..n_img].iter().flatten() {
+            if v.abs() < tau {
+                inliers += 1;
+                inlier_ss += (v * to_px).powi(2);
+            }
+            score += (v / tau).powi(2).min(1.0);
+        }
+        score += (visible.saturating_sub(n_img)) as f64;
+        let score = if visible > 0 { score / visible as f64 } else { 1.0 };
+        Evaluation { level, assoc, visible, total, r, inliers, inlier_ss, score }
+    }
 }
 
 /// Final statistics and covariance at the finest level.
@@ -534,27 +588,8 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
 /// the in-image fraction is not checked.
 #[allow(clippy::too_many_arguments)]
 fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, sp: &SeedPrior, iterations: usize, mono: bool) -> FitResult {
-    let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
-    let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
-    let polarity = vec![0i8; samples.len()];
-    let (assoc, visible, total) = associate(model, &st, &samples, &level, scene, cfg, &polarity, 1.0);
-    let mut r = Vec::new();
-    residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, sp, &mut r);
+    let Evaluation { level, assoc, visible, total, r, inliers: inl, inlier_ss: ss, score } = Evaluation::new(model, cfg, lv, scene, &st, sp);
     let n_img = assoc.len();
-    let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
-    let tau = cfg.inlier_px / to_px;
-    let mut inl = 0usize;
-    let mut ss = 0.0;
-    let mut score = 0.0;
-    for v in r[..n_img].iter().flatten() {
-        if v.abs() < tau {
-            inl += 1;
-            ss += (v * to_px).powi(2);
-        }
-        score += (v / tau).powi(2).min(1.0);
-    }
-    score += (visible.saturating_sub(n_img)) as f64;
-    let score = if visible > 0 { score / visible as f64 } else { 1.0 };
     let stereo: Vec<f64> = r[n_img..(n_img + scene.stereo_points.len()).min(r.len())].iter().flatten().map(|v| v * cfg.stereo_sigma_m).collect();
     let stereo_in: Vec<f64> = stereo.iter().copied().filter(|v| v.abs() < 3.0 * cfg.stereo_sigma_m.max(1e-4) * 3.0).collect();
     let stats = ResidualStats {

@@ -67,29 +67,56 @@ struct Tap {
     y: i32,
     nx: f32,
     ny: f32,
+    /// Index of `(x, y)` in the level's gradient plane relative to the taps' box corner,
+    /// `(y - y_min) width + x - x_min`.
+    at: u32,
 }
 
-fn taps(pts: &[(Point2<f64>, Vector2<f64>)]) -> Vec<Tap> {
-    pts.iter().map(|(u, n)| Tap { x: u.x.round() as i32, y: u.y.round() as i32, nx: n.x as f32, ny: n.y as f32 }).collect()
+/// The rounded samples and their pixel box `(x_min, y_min, x_max, y_max)`.
+struct Taps {
+    taps: Vec<Tap>,
+    bounds: (i32, i32, i32, i32),
 }
 
-/// Mean edge support of the projected samples shifted by `(dx, dy)` level pixels.
-fn support(lv: &GradientLevel, pts: &[Tap], dx: i32, dy: i32) -> f64 {
-    let (w, h) = (lv.width as i32, lv.height as i32);
-    let mut s = 0.0f32;
-    for t in pts {
-        let (x, y) = (t.x + dx, t.y + dy);
-        if x < 0 || y < 0 || x >= w || y >= h {
-            continue;
-        }
-        let g = lv.grad[(y * w + x) as usize];
-        s += (g[0] * t.nx + g[1] * t.ny).abs();
+fn taps(pts: &[(Point2<f64>, Vector2<f64>)], width: usize) -> Taps {
+    let mut taps: Vec<Tap> = pts.iter().map(|(u, n)| Tap { x: u.x.round() as i32, y: u.y.round() as i32, nx: n.x as f32, ny: n.y as f32, at: 0 }).collect();
+    let bounds = taps.iter().fold((i32::MAX, i32::MAX, i32::MIN, i32::MIN), |b, t| (b.0.min(t.x), b.1.min(t.y), b.2.max(t.x), b.3.max(t.y)));
+    for t in &mut taps {
+        t.at = ((t.y - bounds.1) as i64 * width as i64 + (t.x - bounds.0) as i64).clamp(0, u32::MAX as i64) as u32;
     }
-    s as f64 / pts.len().max(1) as f64
+    Taps { taps, bounds }
+}
+
+/// Mean edge support of the projected samples shifted by `(dx, dy)` level pixels. Where the
+/// shifted box lies inside the level, the taps are read without the per-tap bounds test (the
+/// same sum, in the same order).
+fn support(lv: &GradientLevel, pts: &Taps, dx: i32, dy: i32) -> f64 {
+    let (w, h) = (lv.width as i32, lv.height as i32);
+    let (x0, y0, x1, y1) = pts.bounds;
+    let mut s = 0.0f32;
+    if x0 + dx >= 0 && y0 + dy >= 0 && x1 + dx < w && y1 + dy < h {
+        // Every shifted tap `(x + dx, y + dy)` is inside: its index is `at` past the shifted
+        // box's corner.
+        let grad = &lv.grad[(y0 + dy) as usize * w as usize + (x0 + dx) as usize..];
+        for t in &pts.taps {
+            let g = grad[t.at as usize];
+            s += (g[0] * t.nx + g[1] * t.ny).abs();
+        }
+    } else {
+        for t in &pts.taps {
+            let (x, y) = (t.x + dx, t.y + dy);
+            if x < 0 || y < 0 || x >= w || y >= h {
+                continue;
+            }
+            let g = lv.grad[(y * w + x) as usize];
+            s += (g[0] * t.nx + g[1] * t.ny).abs();
+        }
+    }
+    s as f64 / pts.taps.len().max(1) as f64
 }
 
 /// Best translation on the grid, then ±1 around it: `(score, dx, dy)`.
-fn best_shift(lv: &GradientLevel, pts: &[Tap], spec: &SearchSpec) -> (f64, i32, i32) {
+fn best_shift(lv: &GradientLevel, pts: &Taps, spec: &SearchSpec) -> (f64, i32, i32) {
     let step = spec.step_px.max(1);
     let r = spec.radius_px.max(0) / step * step;
     let mut best = (f64::MIN, 0, 0);
@@ -181,7 +208,7 @@ pub fn coarse_search(model: &CylinderModel, lv: &GradientLevel, seed: &AxisState
         if pts.len() < 8 {
             continue;
         }
-        let (score, dx, dy) = best_shift(lv, &taps(&pts), spec);
+        let (score, dx, dy) = best_shift(lv, &taps(&pts, lv.width), spec);
         // Over a ground of unknown height the seed's depth is the better guess than its height.
         if let Some(moved) = shifted(&st, lv, Vector2::new(dx as f64, dy as f64), ground.filter(|_| height_known)) {
             out.push(Hypothesis { state: moved, score });

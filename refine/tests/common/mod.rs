@@ -320,3 +320,29 @@ impl SpeedScene {
         tubeloc_refine::RefineInput { image: &self.scene.image, camera: &self.scene.camera, ground: None, scene: tubeloc_refine::Scene::default() }
     }
 }
+
+/// The mask-seed speed scene of `benches/refine.rs` and `examples/refine_speed.rs`: a rendered
+/// tube at a distance drawn from `range` (metres, random seed 21) and the mask detection of its
+/// exact silhouette (the learned segmenter's kind of seed: mask, axis seed, no template pose).
+pub fn mask_seed_scene(range: (f64, f64)) -> (Scene, tubeloc_core::TubeDetection) {
+    let model = default_model();
+    let cam = camera(false);
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let (truth, up, gd) = random_truth(&mut rng, &model, &cam, range);
+    let scene = render(&model, &cam, truth, up, gd, None, 4242, 0.01);
+    let det = mask_detection(&tube_mask(&model, &scene));
+    (scene, det)
+}
+
+impl Scene {
+    /// The ground plane the tube rests on (camera frame).
+    pub fn ground(&self) -> tubeloc_refine::GroundPlane {
+        tubeloc_refine::GroundPlane { normal: self.ground_n, offset: self.ground_d }
+    }
+
+    /// The refiner's input for a mask seed: the image with the scene's ground plane (the path of
+    /// `tubeloc refine --detections --ground auto`).
+    pub fn ground_input(&self) -> tubeloc_refine::RefineInput<'_> {
+        tubeloc_refine::RefineInput { image: &self.image, camera: &self.camera, ground: Some(self.ground()), scene: tubeloc_refine::Scene::default() }
+    }
+}
