@@ -433,10 +433,11 @@ pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], 
     };
     // Stages (level, search radius): the coarsest level with the wide search, the finer ones
     // with the fine search; when the coarsest level is full resolution (narrow tubes), it is
-    // run again with the fine search (fewer shading and texture edges within reach).
+    // run again with the fine search (fewer shading and texture edges within reach), in mono
+    // fits: no stereo points, no depth map (see [`RefineConfig::fine_polish`]).
     let fine = cfg.fine_search_radius_px.min(cfg.search_radius_px);
     let mut stages: Vec<(usize, usize)> = (0..=top).rev().map(|li| (li, if li == top { cfg.search_radius_px } else { fine })).collect();
-    if top == 0 && cfg.fine_polish && fine < cfg.search_radius_px {
+    if top == 0 && cfg.fine_polish && scene.stereo_points.is_empty() && scene.depth.is_none() && fine < cfg.search_radius_px {
         stages.push((0, fine));
     }
     for (si, &(li, radius)) in stages.iter().enumerate() {

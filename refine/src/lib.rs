@@ -51,10 +51,15 @@ pub struct RefineConfig {
     pub search_radius_px: usize,
     /// Half length of the edge search at the finer levels (at most `search_radius_px`).
     pub fine_search_radius_px: usize,
-    /// When the coarsest level is full resolution, run it once more with the fine search radius.
-    /// Off by default: on a paper-preset subset it took the mono in-plane axis error from 1.10
-    /// to 0.92 degrees (median, 10 mm / 5 degree seeds) but the exact-seed perpendicular error
-    /// p90 from 2.8 to 6.2 mm.
+    /// When the coarsest level is full resolution (narrow tubes), run it once more with the fine
+    /// search radius, in mono fits (no stereo points and no depth map; not in the stereo edge
+    /// polish, so stereo refinements are as before). On by default since session 17: chosen on
+    /// three generated validation sets (seed-21 and seed-33 no-tags halves, val9; learned seeds
+    /// from the with-tags cross-split model, mono + `--ground auto`), mono axis p90 1.09 / 1.36 /
+    /// 1.17 -> 1.05 / 1.36 / 1.02 deg, and on the seed-21 set from exact-pose seeds 2.80 ->
+    /// 2.43 deg, perpendicular p90 1.23 -> 1.09 mm (`refine/README.md`, session 17). Session 2
+    /// had left it off: on a paper-preset subset of that code it took the exact-seed
+    /// perpendicular p90 from 2.8 to 6.2 mm.
     pub fine_polish: bool,
     /// Smooth the full-resolution level before differentiating for the fit even for narrow
     /// tubes (those fitted at full resolution alone; wider ones always are smoothed, as are the
@@ -275,7 +280,7 @@ impl Default for RefineConfig {
         RefineConfig {
             search_radius_px: 8,
             fine_search_radius_px: 5,
-            fine_polish: false,
+            fine_polish: true,
             blur_full_resolution: false,
             sample_spacing_px: 3.0,
             max_samples: 200,
@@ -617,7 +622,7 @@ impl Refiner {
             // re-placement at the ground's height, which mask seeds' settings ask for in mono,
             // and no distance from the ends' length. Without that support the mono settings
             // apply, and the ground may place the tube.
-            let mut cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, ..self.config.clone() };
+            let mut cfg = RefineConfig { mono_width_sigma_px: f64::INFINITY, seed_search: false, decide_end: false, fine_polish: false, ..self.config.clone() };
             if stereo_supports_fit(best.stats.stereo_points, scene.stereo_points.len()) {
                 cfg.ground_relief_sigma_m = 0.0;
                 cfg.mono_length_depth = false;
