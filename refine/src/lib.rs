@@ -264,6 +264,17 @@ pub struct RefineConfig {
     /// the fit of a tube partly hidden by a rock or sand does not take the occluder's outline
     /// for the tube's; 0 disables.
     pub mask_visibility_px: usize,
+    /// [`Refiner::refine`] with a ground plane (`RefineInput::ground`) and no stereo points: a
+    /// Line2D template pose seeds the fit by its image axis ([`seed::template_image_axis`]),
+    /// placed on the ground like a learned mask's axis and refined with the mask seeds'
+    /// settings ([`seed_policy::SeedKind::MaskOrBox`]; the template's silhouette is its mask),
+    /// instead of by the template's own distance and tilt, which are those of the nearest
+    /// template view. Session 17, Line2D detections on two generated validation sets (seed-21
+    /// no-tags half, val9), mono + `--ground auto`: tubes matched within 50 mm 338 -> 836 of
+    /// 1425 and 117 -> 351 of 363, axis median / p90 2.04 / 17.4 -> 0.73 / 5.7 deg and 3.05 /
+    /// 29.6 -> 0.69 / 8.7 deg, perpendicular median 16.7 -> 5.2 mm and 17.2 -> 5.4 mm
+    /// (`refine/README.md`, session 17). Off: the template pose is the seed.
+    pub template_seed_as_image_axis: bool,
     /// [`Refiner::refine_with_colour`], mask seeds in a colour (or grey) image: the mask's image
     /// axis is turned end to end before the fit when its colours put the gold seal section
     /// behind it, `ρ ≤ −mask_seed_end_colour_corr` ([`seal_end::seal_end_along_axis`], a
@@ -335,6 +346,7 @@ impl Default for RefineConfig {
             mask_axis_sigma_px: 0.5,
             mask_visibility_px: 8,
             mask_seed_end_colour_corr: 0.3,
+            template_seed_as_image_axis: true,
         }
     }
 }
@@ -446,6 +458,8 @@ impl Refiner {
     /// section and the body (kept to the detection's mask), their colours decide which end is
     /// the seal end ([`seal_end`]) instead of the edges, and set `end_confidence`.
     pub fn refine_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> TubeAxisPose {
+        let axis = self.template_as_image_axis(input, det);
+        let det = axis.as_ref().unwrap_or(det);
         let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
         let turned = self.seed_turned_by_colour(det, mask.as_ref(), colour);
         let det = turned.as_ref().unwrap_or(det);
@@ -489,6 +503,8 @@ impl Refiner {
     /// ([`seed_from_detection`]), a mask seed's image axis first turned to the seal end by its
     /// mask's colours when `colour` is given ([`RefineConfig::mask_seed_end_colour_corr`]).
     pub fn seed_with_colour(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> Result<Seed, RefineError> {
+        let axis = self.template_as_image_axis(input, det);
+        let det = axis.as_ref().unwrap_or(det);
         let mask = colour.and(det.mask.as_ref()).and_then(|m| m.to_mask().ok());
         let turned = self.seed_turned_by_colour(det, mask.as_ref(), colour);
         seed_from_detection(turned.as_ref().unwrap_or(det), input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points)
@@ -510,6 +526,14 @@ impl Refiner {
             let [dx, dy] = ax.direction_px;
             TubeDetection { axis_seed: Some(tubeloc_core::AxisSeed { direction_px: [-dx, -dy], ..ax }), ..det.clone() }
         })
+    }
+
+    /// The detection with its template pose replaced by the pose's image axis
+    /// ([`seed::template_image_axis`]) where [`RefineConfig::template_seed_as_image_axis`]
+    /// applies: a template pose, a ground plane in `input`, no stereo points.
+    fn template_as_image_axis(&self, input: &RefineInput, det: &TubeDetection) -> Option<TubeDetection> {
+        let applies = self.config.template_seed_as_image_axis && input.ground.is_some() && input.scene.stereo_points.is_empty();
+        applies.then(|| seed::template_image_axis(det, input.camera, &self.model)).flatten()
     }
 
     /// A converged fit of a mask seed whose silhouette disagrees with the detector's mask

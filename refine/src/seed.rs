@@ -18,6 +18,31 @@ use crate::model::CylinderModel;
 use nalgebra::{Point2, Point3, Vector3};
 use tubeloc_core::{CameraModel, Pose, TubeDetection};
 
+/// A template pose's image axis as an axis seed ([`tubeloc_core::AxisSeed`], as a learned mask's
+/// axis), the detection otherwise unchanged and without its pose: `centre_px` the projected
+/// centre, `direction_px` the image direction from the foot end `c - a L/2` to the seal end
+/// `c + a L/2` (so the template's end claim stays in the direction's sign), `length_px` their
+/// image distance and `width_px = f · 2 r_body / Z`. `None` when the detection has no template
+/// pose, a point does not project, or the tube is seen end-on (under a pixel long).
+///
+/// With a ground plane the refiner places such a seed on the ground ([`seed_from_detection`]),
+/// which beats the template's own distance and tilt (those of the nearest template view; see
+/// [`crate::RefineConfig::template_seed_as_image_axis`]).
+pub fn template_image_axis(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel) -> Option<TubeDetection> {
+    let t = det.t_cam_tube.as_ref()?;
+    let (c, a) = (t.translation(), t.transform_vector(&Vector3::z()).normalize());
+    let [u, u0, u1] = [c, c - a * (0.5 * model.length), c + a * (0.5 * model.length)].map(|x| camera.project(&Point3::from(x)));
+    let (u, u0, u1) = (u?, u0?, u1?);
+    let d = u1 - u0;
+    let length_px = d.norm();
+    if !(length_px >= 1.0 && c.z > 0.0) {
+        return None;
+    }
+    let width_px = 0.5 * (camera.fx + camera.fy) * 2.0 * model.body_radius() / c.z;
+    let axis_seed = tubeloc_core::AxisSeed { centre_px: [u.x, u.y], direction_px: [d.x / length_px, d.y / length_px], length_px, width_px };
+    Some(TubeDetection { t_cam_tube: None, axis_seed: Some(axis_seed), ..det.clone() })
+}
+
 /// The ground as a plane in the camera frame: points `X` with `normal · X = offset`, `normal`
 /// a unit vector pointing up (away from the ground, toward the sky), metres.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -178,6 +203,32 @@ pub fn seed_from_detection(det: &TubeDetection, camera: &CameraModel, model: &Cy
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn template_image_axis_keeps_the_pixel_the_seal_end_and_the_size() {
+        let cam = CameraModel::from_hfov(1024, 1024, 40.0);
+        let model = CylinderModel::new(&tubeloc_core::TubeModel::default()).unwrap();
+        let (c, a) = (Vector3::new(0.1, 0.2, 2.0), Vector3::new(1.0, 0.2, -0.3).normalize());
+        let rot = nalgebra::Rotation3::rotation_between(&Vector3::z(), &a).unwrap();
+        let mut det = TubeDetection::new(3, 0.8, [500.0, 500.0, 40.0, 20.0], tubeloc_core::DetectionSource::Line2d);
+        det.t_cam_tube = Some(Pose::from_parts(rot, c));
+        let ax = template_image_axis(&det, &cam, &model).unwrap();
+        assert!(ax.t_cam_tube.is_none() && ax.bbox == det.bbox && ax.image_id == 3);
+        let s = ax.axis_seed.unwrap();
+        let u = cam.project(&Point3::from(c)).unwrap();
+        assert!((s.centre_px[0] - u.x).abs() < 1e-9 && (s.centre_px[1] - u.y).abs() < 1e-9);
+        // Toward the seal end (+a), and as long as the projected tube.
+        let seal = cam.project(&Point3::from(c + a * 0.05)).unwrap() - u;
+        assert!(seal.x * s.direction_px[0] + seal.y * s.direction_px[1] > 0.0);
+        let ends = cam.project(&Point3::from(c + a * (0.5 * model.length))).unwrap() - cam.project(&Point3::from(c - a * (0.5 * model.length))).unwrap();
+        assert!((s.length_px - ends.norm()).abs() < 1e-9);
+        assert!((s.width_px - cam.fx * 2.0 * model.body_radius() / c.z).abs() < 1e-9);
+        // End-on (under a pixel long): no axis; no template pose: no axis.
+        det.t_cam_tube = Some(Pose::from_parts(nalgebra::Rotation3::rotation_between(&Vector3::z(), &c.normalize()).unwrap(), c));
+        assert!(template_image_axis(&det, &cam, &model).is_none());
+        det.t_cam_tube = None;
+        assert!(template_image_axis(&det, &cam, &model).is_none());
+    }
 
     #[test]
     fn reanchored_pose_projects_to_the_same_pixel_at_the_same_distance() {

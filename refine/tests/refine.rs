@@ -634,3 +634,42 @@ fn fine_polish_changes_mono_fits_and_leaves_stereo_ones_alone() {
     assert_eq!(stereo_compared, 4);
     assert!(mono_changed >= 1, "the fine polish changed no mono fit of a narrow tube");
 }
+
+/// A Line2D template pose on a ground plane (`RefineConfig::template_seed_as_image_axis`): the
+/// nearest template view puts the tube at the right pixel but at the template's distance and
+/// tilt. Seeded by its image axis, placed on the ground, the fit lands on the tube; from the
+/// template pose itself it keeps much of the distance error.
+#[test]
+fn template_poses_on_the_ground_are_seeded_by_their_image_axis() {
+    use nalgebra::Rotation3;
+    use tubeloc_core::{DetectionSource, Pose, Rle, TubeDetection};
+    let model = default_model();
+    let cam = camera(false);
+    let refiner = |on: bool| Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { template_seed_as_image_axis: on, ..RefineConfig::default() }).unwrap();
+    let (with, without) = (refiner(true), refiner(false));
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let (mut on, mut off) = (vec![], vec![]);
+    for i in 0..6 {
+        let (truth, up, gd) = random_truth(&mut rng, &model, &cam, (1.5, 2.5));
+        let sc = render(&model, &cam, truth, up, gd, None, 41_000 + i, 0.01);
+        // The template: the same pixel 8 % further away, the axis turned by 6 degrees.
+        let c = truth.centre * 1.08;
+        let turn = Unit::new_normalize(Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)));
+        let a = Rotation3::from_axis_angle(&turn, 6f64.to_radians()) * truth.axis;
+        let rot = Rotation3::rotation_between(&Vector3::z(), &a).unwrap();
+        let mask = tube_mask(&model, &sc);
+        let mut det = TubeDetection::new(0, 0.9, mask.bbox(), DetectionSource::Line2d);
+        det.t_cam_tube = Some(Pose::from_parts(rot, c));
+        det.mask = Some(Rle::from_mask(&mask));
+        for (r, errs) in [(&with, &mut on), (&without, &mut off)] {
+            let p = r.refine(&sc.ground_input(), &det);
+            assert!(p.centre.iter().all(|v| v.is_finite()));
+            errs.push(if p.converged { (p.centre - truth.centre).norm() } else { f64::INFINITY });
+        }
+    }
+    let (m_on, _) = med_p90(&mut on);
+    let (m_off, _) = med_p90(&mut off);
+    eprintln!("template seeds on the ground: centre error median {:.1} mm by the image axis, {:.1} mm from the template pose", m_on * 1e3, m_off * 1e3);
+    assert!(m_on < 0.005, "median centre error {m_on} m from the image axis");
+    assert!(m_on < 0.5 * m_off, "image axis {m_on} m vs template pose {m_off} m");
+}
