@@ -29,8 +29,8 @@ use tubeloc_core::{CameraModel, Pose, TubeDetection};
 /// which beats the template's own distance and tilt (those of the nearest template view; see
 /// [`crate::RefineConfig::template_seed_as_image_axis`]).
 pub fn template_image_axis(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel) -> Option<TubeDetection> {
-    let t = det.t_cam_tube.as_ref()?;
-    let (c, a) = (t.translation(), t.transform_vector(&Vector3::z()).normalize());
+    let AxisState { c, a } = axis_state_of(det.t_cam_tube.as_ref()?);
+    let a = a.normalize();
     let [u, u0, u1] = [c, c - a * (0.5 * model.length), c + a * (0.5 * model.length)].map(|x| camera.project(&Point3::from(x)));
     let (u, u0, u1) = (u?, u0?, u1?);
     let d = u1 - u0;
