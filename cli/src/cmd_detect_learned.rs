@@ -46,6 +46,17 @@ pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64,
     Ok(out)
 }
 
+/// Parses a tube-range band "NEAR:FAR" (metres, 0 < NEAR < FAR) or "off" (no working scale).
+pub fn parse_range_band(s: &str) -> Result<Option<tubeloc_detect::scale::RangeBand>> {
+    if s == "off" {
+        return Ok(None);
+    }
+    let (a, b) = s.split_once(':').with_context(|| format!("--range-m {s:?}: expected NEAR:FAR in metres, or off"))?;
+    let band = tubeloc_detect::scale::RangeBand { near_m: a.trim().parse().with_context(|| format!("--range-m {s:?}: NEAR is not a number"))?, far_m: b.trim().parse().with_context(|| format!("--range-m {s:?}: FAR is not a number"))? };
+    band.validate().map_err(|m| anyhow::anyhow!("--range-m {s:?}: {m}"))?;
+    Ok(Some(band))
+}
+
 /// Images to process: `(image_id, path)`.
 pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -> Result<Vec<(u64, PathBuf)>> {
     match (image, dataset) {

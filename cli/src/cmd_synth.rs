@@ -25,6 +25,8 @@ pub struct SynthArgs {
 pub enum SynthCommand {
     /// Render synthetic tubes with shadows onto a real photograph of known camera and ground plane.
     Composite(crate::cmd_synth_composite::CompositeArgs),
+    /// Composites of rendered tubes on the real rover frames of one split (by sol), as a COCO set.
+    Real(crate::cmd_synth_real::RealArgs),
     /// Render a calibration set: a tag board seen by a rig's cameras, with exact corners.
     Calib(crate::cmd_synth_calib::SynthCalibArgs),
     /// Render stereo pairs (both cameras of a rig pair, same crop) with exact disparity maps.
@@ -77,6 +79,7 @@ fn parse_shard(s: &str) -> Result<(usize, usize)> {
 pub fn run(a: SynthArgs) -> Result<()> {
     match a.command {
         Some(SynthCommand::Composite(c)) => crate::cmd_synth_composite::run(c),
+        Some(SynthCommand::Real(c)) => crate::cmd_synth_real::run(c),
         Some(SynthCommand::Calib(c)) => crate::cmd_synth_calib::run(c),
         Some(SynthCommand::Stereo(c)) => crate::cmd_synth_stereo::run(c),
         None => run_dataset(a.dataset),

@@ -63,7 +63,7 @@ pub fn run(a: CompositeArgs) -> Result<()> {
         Some(p) => TubeShape::from_mesh(&TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?),
         None => TubeShape::from_model(&TubeModel::default()),
     };
-    let cfg = CompositeConfig { ground: (nalgebra::Vector3::new(g[0], g[1], g[2]), g[3]), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape) };
+    let cfg = CompositeConfig { ground: (nalgebra::Vector3::new(g[0], g[1], g[2]), g[3]), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0 };
     let c = composite(img.as_raw(), &cam, &cfg)?;
     let stem = a.background.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "composite".into());
     let file_name = format!("{stem}_composite.png");

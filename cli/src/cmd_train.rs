@@ -6,7 +6,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use tubeloc_detect::learned::augment::AugmentConfig;
-use tubeloc_detect::learned::dataset::{ap50, load_coco_dir};
+use tubeloc_detect::learned::dataset::{ap50, load_coco_dir, load_coco_dir_at_scale};
 use tubeloc_detect::learned::{DecodeConfig, LearnedModel, Preprocess, TrainConfig, Trainer};
 
 /// Arguments of `tubeloc train`.
@@ -66,9 +66,21 @@ pub struct TrainArgs {
     /// Train only the fine mask branch; the other layers keep the --init model's weights.
     #[arg(long, requires = "init")]
     pub freeze_coarse: bool,
-    /// Input preprocessing: gray-box (paper), gray-box:R, or rgb.
-    #[arg(long, default_value = "gray-box")]
-    pub preprocess: String,
+    /// Input preprocessing: gray-norm (grey, normalized by the image's own percentiles: one
+    /// model for grey and colour cameras), gray-box (paper), gray-box:R, or rgb. With --init,
+    /// the init model's unless given (a one-channel model may change between gray-box and
+    /// gray-norm).
+    #[arg(long)]
+    pub preprocess: Option<String>,
+    /// Camera-like appearance randomization of every crop (tone curve, blur, vignetting,
+    /// sensor noise).
+    #[arg(long)]
+    pub photometric: bool,
+    /// Train each image at its working scale (from its camera and ground plane, as inference
+    /// resamples it; `tubeloc synth real` sets carry both): the tube-range band "NEAR:FAR" in
+    /// metres, or "off".
+    #[arg(long, default_value = "1:4")]
+    pub range_m: String,
     /// Base width of the network.
     #[arg(long, default_value_t = 8)]
     pub width: usize,
@@ -167,7 +179,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
     if !args.average.is_empty() {
         return average_models(&args);
     }
-    let pre = Preprocess::parse(&args.preprocess).with_context(|| format!("unknown --preprocess {:?} (gray-box, gray-box:R, rgb)", args.preprocess))?;
+    let pre_arg = args.preprocess.as_deref().unwrap_or("gray-box");
+    let pre = Preprocess::parse(pre_arg).with_context(|| format!("unknown --preprocess {pre_arg:?} (gray-norm, gray-box, gray-box:R, rgb)"))?;
+    let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
     if !(0.0..=1.0).contains(&args.occluders) {
         bail!("--occluders {} is not a probability (0 to 1)", args.occluders);
     }
@@ -187,12 +201,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let pre = match (&args.resume, &init) {
         (Some(p), _) => LearnedModel::load(p).with_context(|| format!("resuming from {}", p.display()))?.meta.preprocess,
         (None, Some(_)) if args.init_rgb => Preprocess::Rgb,
+        (None, Some(m)) if args.preprocess.is_some() && m.meta.preprocess.channels() == pre.channels() => pre,
         (None, Some(m)) => m.meta.preprocess,
         (None, None) => pre,
     };
     let mut images = Vec::new();
     for d in &dirs {
-        let mut v = load_coco_dir(d, pre, args.train_limit).with_context(|| format!("loading training set {}", d.display()))?;
+        let mut v = load_coco_dir_at_scale(d, pre, args.train_limit, band).with_context(|| format!("loading training set {}", d.display()))?;
         eprintln!("{}: {} images", d.display(), v.len());
         images.append(&mut v);
     }
@@ -200,7 +215,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         bail!("no training images");
     }
     let val = match &args.val {
-        Some(d) => load_coco_dir(d, pre, Some(args.val_limit)).with_context(|| format!("loading validation set {}", d.display()))?,
+        Some(d) => load_coco_dir_at_scale(d, pre, Some(args.val_limit), band).with_context(|| format!("loading validation set {}", d.display()))?,
         None => Vec::new(),
     };
     let pixels: usize = images.iter().map(|i| i.width * i.height).sum();
@@ -211,7 +226,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lr: args.lr,
         total_steps: total,
         seed: args.seed,
-        augment: AugmentConfig { crop: args.crop, upright: args.upright, occluders: args.occluders, ..Default::default() },
+        augment: AugmentConfig { crop: args.crop, upright: args.upright, occluders: args.occluders, photometric: args.photometric, ..Default::default() },
         ..Default::default()
     };
     let mut trainer = match &args.resume {

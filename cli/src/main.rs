@@ -17,6 +17,7 @@ mod cmd_refine;
 mod cmd_synth_calib;
 mod cmd_synth_stereo;
 mod cmd_synth_composite;
+mod cmd_synth_real;
 mod cmd_train;
 mod cmd_demo;
 mod cmd_locate;

@@ -45,6 +45,15 @@ pub struct CompositeConfig {
     pub seed: u64,
     /// Tube geometry.
     pub tube_shape: Arc<TubeShape>,
+    /// Distance band from the camera centre, metres, within which tube centres are placed
+    /// (`None`: anywhere on the ground in the lower two thirds of the image).
+    pub range_m: Option<(f64, f64)>,
+    /// Sun direction as a unit vector in the camera frame (toward the sun); overrides
+    /// `sun_az_el_deg` when set (PDS labels give it this way).
+    pub sun_cam: Option<Vector3<f64>>,
+    /// Gain on the tubes' shaded radiance (1 = matched to the photo's exposure); appearance
+    /// randomization for training sets.
+    pub tube_gain: f32,
 }
 
 /// The result: composited sRGB image, ground truth, and the frames used.
@@ -97,8 +106,16 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
         return Err(SynthError::Invalid(format!("background has {} bytes, camera expects {w}x{h} RGB", background.len())));
     }
     let (az, el) = cfg.sun_az_el_deg;
-    if !(az.is_finite() && el.is_finite() && el > 0.0 && el <= 90.0) {
+    if cfg.sun_cam.is_none() && !(az.is_finite() && el.is_finite() && el > 0.0 && el <= 90.0) {
         return Err(SynthError::Invalid(format!("sun elevation {el} must be in (0, 90] degrees and azimuth finite")));
+    }
+    if !(cfg.tube_gain.is_finite() && cfg.tube_gain > 0.0) {
+        return Err(SynthError::Invalid(format!("tube gain {} must be finite and > 0", cfg.tube_gain)));
+    }
+    if let Some((r0, r1)) = cfg.range_m {
+        if !(r0.is_finite() && r1.is_finite() && r0 >= 0.0 && r1 > r0) {
+            return Err(SynthError::Invalid(format!("range band {r0}..{r1} m must be finite with 0 <= near < far")));
+        }
     }
     if !(0.0..=1.0).contains(&cfg.dust) {
         return Err(SynthError::Invalid(format!("dust {} must be in [0, 1]", cfg.dust)));
@@ -109,15 +126,27 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
     let fwd = Vector3::new(fwd.x, fwd.y, 0.0);
     let fwd = if fwd.norm() > 1e-9 { fwd.normalize() } else { Vector3::y() };
     let right = Vector3::new(fwd.y, -fwd.x, 0.0);
-    let (a, e) = (az.to_radians(), el.to_radians());
-    let sun = (fwd * a.cos() + right * a.sin()) * e.cos() + Vector3::z() * e.sin();
+    let sun = match cfg.sun_cam {
+        Some(s) => {
+            let s = t_ground_cam.transform_vector(&s);
+            if !(s.norm().is_finite() && s.z / s.norm() > 1e-3) {
+                return Err(SynthError::Invalid(format!("sun direction {s:?} (ground frame) must point above the ground")));
+            }
+            s.normalize()
+        }
+        None => {
+            let (a, e) = (az.to_radians(), el.to_radians());
+            (fwd * a.cos() + right * a.sin()) * e.cos() + Vector3::z() * e.sin()
+        }
+    };
+    let cam_centre = t_ground_cam.translation();
 
     // Place tubes at random pixels of the lower two thirds whose whole tube projects inside.
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let (hl, r) = cfg.tube_shape.bounds();
     let mut objects = Objects::new(Vec::new(), Vec::new(), Vec::new());
     let mut tries = 0;
-    while objects.tubes.len() < cfg.tubes && tries < 2000 {
+    while objects.tubes.len() < cfg.tubes && tries < 20000 {
         tries += 1;
         let (u, v) = (rng.random_range(0.0..w as f64), rng.random_range(h as f64 / 3.0..h as f64));
         let (ray, _) = pixel_ray(cam, &t_ground_cam, u, v);
@@ -126,6 +155,12 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
         }
         let t = -ray.origin.z / ray.dir.z;
         let p = ray.at(t);
+        if let Some((r0, r1)) = cfg.range_m {
+            let r = (p.coords - cam_centre).norm();
+            if r < r0 || r > r1 {
+                continue;
+            }
+        }
         if objects.tubes.iter().any(|o| (o.t_world_tube.translation().xy() - p.coords.xy()).norm() < 2.0 * hl + 0.03) {
             continue;
         }
@@ -152,7 +187,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
     let reg = srgb_to_linear(REGOLITH_SRGB);
     let (e_sun, e_sky) = (1.0f32, 0.25f32);
     let cos_sun = sun.z as f32;
-    let exposure = median / (((reg[0] + reg[1] + reg[2]) / 3.0) * (e_sun * cos_sun + e_sky));
+    let exposure = cfg.tube_gain * median / (((reg[0] + reg[1] + reg[2]) / 3.0) * (e_sun * cos_sun + e_sky));
     let shadow_factor = e_sky / (e_sun * cos_sun + e_sky);
 
     let mut rgb = vec![0u8; w * h * 3];

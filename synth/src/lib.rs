@@ -26,6 +26,7 @@ pub mod mount;
 pub mod noise;
 pub mod objects;
 pub mod ray;
+pub mod real_set;
 pub mod render;
 pub mod rig;
 pub mod rock;

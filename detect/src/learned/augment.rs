@@ -23,6 +23,9 @@ pub struct TrainImage {
     pub labels: Vec<u16>,
     /// Indices of labelled pixels (crop centres are drawn near them).
     pub fg: Vec<u32>,
+    /// Working scale of the image ([`crate::scale`]): crops sample the source every
+    /// `1 / scale` pixels, as inference resamples the image by `scale`.
+    pub scale: f32,
 }
 
 impl TrainImage {
@@ -38,7 +41,7 @@ impl TrainImage {
             }
         }
         let fg = labels.iter().enumerate().filter(|(_, &l)| l != 0).map(|(i, _)| i as u32).collect();
-        TrainImage { width, height, input, labels, fg }
+        TrainImage { width, height, input, labels, fg, scale: 1.0 }
     }
 
     /// Number of input channels.
@@ -71,11 +74,15 @@ pub struct AugmentConfig {
     /// become background in the labels (random erasing; 0 = off). They stand for things the
     /// training scenes do not show: other objects beside and over the tubes.
     pub occluders: f64,
+    /// Camera-like appearance changes on every crop: a tone curve (gamma 0.6-1.6 on the
+    /// normalized range), Gaussian blur (σ up to 1.3 px, half the crops), vignetting (up to
+    /// 1 normalized unit darker in the corners) and sensor noise. Off by default.
+    pub photometric: bool,
 }
 
 impl Default for AugmentConfig {
     fn default() -> Self {
-        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false, occluders: 0.0 }
+        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false, occluders: 0.0, photometric: false }
     }
 }
 
@@ -103,8 +110,8 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
     let half = s as f32 / 2.0;
     for y in 0..s {
         for x in 0..s {
-            let dx = mirror as f32 * (x as f32 - half + 0.5);
-            let dy = y as f32 - half + 0.5;
+            let dx = mirror as f32 * (x as f32 - half + 0.5) / img.scale;
+            let dy = (y as f32 - half + 0.5) / img.scale;
             let sx = cx as f32 + c * dx - sn * dy;
             let sy = cy as f32 + sn * dx + c * dy;
             let (nx, ny) = (sx.round(), sy.round());
@@ -131,12 +138,58 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
     for v in input.iter_mut() {
         *v = *v * gain + offset + if sigma > 0.0 { normal.sample(rng) } else { 0.0 };
     }
+    if cfg.photometric {
+        photometric(&mut input, s, ch, rng);
+    }
     if cfg.occluders > 0.0 && rng.random_bool(cfg.occluders) {
         for _ in 0..rng.random_range(1..=3) {
             add_occluder(&mut input, &mut labels, s, ch, rng);
         }
     }
     (input, labels)
+}
+
+/// The camera-like changes of [`AugmentConfig::photometric`] on an `s x s` crop.
+fn photometric(input: &mut [f32], s: usize, channels: usize, rng: &mut ChaCha8Rng) {
+    // Tone curve: gamma on u = (x + 4) / 8 in [0, 1].
+    let gamma = (rng.random_range(-0.5f32..0.5)).exp2().clamp(0.6, 1.6);
+    for v in input.iter_mut() {
+        let u = ((*v + 4.0) / 8.0).clamp(0.0, 1.0);
+        *v = u.powf(gamma) * 8.0 - 4.0;
+    }
+    if rng.random_bool(0.5) {
+        let sigma = rng.random_range(0.3f32..1.3);
+        let taps: Vec<f32> = (-3i32..=3).map(|k| (-(k * k) as f32 / (2.0 * sigma * sigma)).exp()).collect();
+        let sum: f32 = taps.iter().sum();
+        let taps: Vec<f32> = taps.iter().map(|t| t / sum).collect();
+        let mut tmp = vec![0f32; s * s];
+        for c in 0..channels {
+            let p = &mut input[c * s * s..(c + 1) * s * s];
+            for y in 0..s {
+                for x in 0..s {
+                    tmp[y * s + x] = (-3i32..=3).map(|k| p[y * s + (x as i32 + k).clamp(0, s as i32 - 1) as usize] * taps[(k + 3) as usize]).sum();
+                }
+            }
+            for y in 0..s {
+                for x in 0..s {
+                    p[y * s + x] = (-3i32..=3).map(|k| tmp[(y as i32 + k).clamp(0, s as i32 - 1) as usize * s + x] * taps[(k + 3) as usize]).sum();
+                }
+            }
+        }
+    }
+    let vig = rng.random_range(0.0f32..1.0);
+    let (cx, cy) = (rng.random_range(0.3f32..0.7) * s as f32, rng.random_range(0.3f32..0.7) * s as f32);
+    let noise = rng.random_range(0.0f32..0.25);
+    let normal = Normal::new(0.0f32, noise.max(1e-6)).expect("finite sigma");
+    let r2 = 2.0 * (s as f32 * 0.5) * (s as f32 * 0.5);
+    for c in 0..channels {
+        for y in 0..s {
+            for x in 0..s {
+                let d2 = ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) / r2;
+                input[c * s * s + y * s + x] += -vig * d2 + normal.sample(rng);
+            }
+        }
+    }
 }
 
 /// Paints one occluder into an `s x s` crop of `channels` planes: a rectangle (sides 8 px to

@@ -16,6 +16,26 @@ use tubeloc_core::CocoDataset;
 /// Loads every image of a COCO dataset directory with its instance masks, preprocessed.
 /// `limit` keeps only the first `limit` images (by id order in the file).
 pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Result<Vec<TrainImage>, LearnedError> {
+    load_coco_dir_at_scale(dir, pre, limit, None)
+}
+
+/// The working scale of a dataset image ([`crate::scale::working_scale`]) from its `camera`
+/// and optional `ground` (`{"normal": [nx, ny, nz], "d": d}`, `n · X = d`, n up, camera frame)
+/// fields; 1 without a camera.
+pub fn image_working_scale(im: &tubeloc_core::CocoImage, band: crate::scale::RangeBand) -> f64 {
+    let Some(cam) = im.extra.get("camera").and_then(|c| serde_json::from_value::<tubeloc_core::CameraModel>(c.clone()).ok()) else { return 1.0 };
+    let ground = im.extra.get("ground").and_then(|g| {
+        let n = g.get("normal")?.as_array()?;
+        let d = g.get("d")?.as_f64()?;
+        Some((nalgebra::Vector3::new(n.first()?.as_f64()?, n.get(1)?.as_f64()?, n.get(2)?.as_f64()?), d))
+    });
+    crate::scale::working_scale(&cam, ground, band)
+}
+
+/// [`load_coco_dir`] with each image's working scale set from its camera and ground
+/// ([`image_working_scale`]) when `band` is given, so that training crops see tubes at the
+/// scale inference resamples them to.
+pub fn load_coco_dir_at_scale(dir: &Path, pre: Preprocess, limit: Option<usize>, band: Option<crate::scale::RangeBand>) -> Result<Vec<TrainImage>, LearnedError> {
     let ann = dir.join("annotations.json");
     let ds = CocoDataset::load(&ann).map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: e.to_string() })?;
     let n = limit.unwrap_or(usize::MAX).min(ds.images.len());
@@ -27,8 +47,8 @@ pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Resul
                 p = dir.join("images").join(&im.file_name);
             }
             let err = |msg: String| LearnedError::Dataset { path: p.clone(), msg };
-            let rgb = image::open(&p).map_err(|e| err(e.to_string()))?.to_rgb8();
-            let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+            let rgb = crate::input::load(&p).map_err(err)?;
+            let (w, h) = (rgb.width, rgb.height);
             if (w, h) != (im.width as usize, im.height as usize) {
                 return Err(err(format!("image is {w}x{h} but annotations.json says {}x{}", im.width, im.height)));
             }
@@ -41,13 +61,20 @@ pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Resul
                     .map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: format!("annotation {}: {e}", a.id) })?;
                 masks.push(m.data);
             }
-            Ok(TrainImage::new(w, h, pre.apply(rgb.as_raw(), w, h), &masks))
+            let mut t = TrainImage::new(w, h, pre.apply(&rgb.rgb, w, h), &masks);
+            if let Some(band) = band {
+                t.scale = image_working_scale(im, band) as f32;
+            }
+            Ok(t)
         })
         .collect()
 }
 
 /// Runs the model on a preprocessed training image.
 pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    if img.scale != 1.0 {
+        return super::detect_planes_at_scale(model, img.input.clone(), img.width, img.height, img.scale as f64, cfg);
+    }
     Ok(decode(&model.predict_with(&img.input, img.width, img.height, cfg)?, cfg))
 }
 

@@ -37,3 +37,55 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
     let input = model.meta.preprocess.apply(rgb, width, height);
     Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg))
 }
+
+/// Detects tubes in an interleaved RGB8 image at working scale `s` ([`crate::scale`]): the
+/// image is preprocessed at its own size, its planes resampled by `s`, the network run and
+/// decoded there, and every instance mapped back to the original pixels (mask by nearest
+/// sampling, box from the mapped mask, axis centre by `p = (p' + ½) / s - ½`, lengths by
+/// `1 / s`). `s = 1` is [`detect_rgb`]. Instances whose mask vanishes on the way back are
+/// dropped.
+pub fn detect_rgb_at_scale(model: &LearnedModel, rgb: &[u8], width: usize, height: usize, s: f64, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    if rgb.len() != width * height * 3 {
+        return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
+    }
+    let input = model.meta.preprocess.apply(rgb, width, height);
+    detect_planes_at_scale(model, input, width, height, s, cfg)
+}
+
+/// [`detect_rgb_at_scale`] on preprocessed input planes (`channels * width * height`).
+pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usize, height: usize, s: f64, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    if !(s.is_finite() && s > 0.0) {
+        return Err(LearnedError::Invalid(format!("working scale {s} must be finite and > 0")));
+    }
+    if s == 1.0 {
+        return Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg));
+    }
+    let (nw, nh) = crate::scale::scaled_size(width, height, s);
+    let c = model.meta.preprocess.channels();
+    let scaled = crate::scale::resample_planes(&input, c, width, height, nw, nh);
+    drop(input);
+    let found = decode(&model.predict_with(&scaled, nw, nh, cfg)?, cfg);
+    let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
+    Ok(found
+        .into_iter()
+        .filter_map(|i| {
+            let data = crate::scale::mask_back(&i.mask.data, nw, nh, width, height);
+            let bm = tubeloc_core::BinaryMask { width, height, data };
+            if bm.data.iter().all(|&v| v == 0) {
+                return None;
+            }
+            let bbox = bm.bbox();
+            let mut axis = i.axis;
+            axis.centre_px = crate::scale::point_back(axis.centre_px, sx, sy);
+            let (dx, dy) = (axis.direction_px[0] / sx, axis.direction_px[1] / sy);
+            let dn = (dx * dx + dy * dy).sqrt();
+            if dn > 0.0 {
+                axis.direction_px = [dx / dn, dy / dn];
+            }
+            let sm = (sx * sy).sqrt();
+            axis.length_px /= sm;
+            axis.width_px /= sm;
+            Some(LearnedInstance { score: i.score, mask: tubeloc_core::Plane { width, height, data: bm.data }, bbox, axis })
+        })
+        .collect())
+}

@@ -18,6 +18,11 @@ pub enum Preprocess {
     },
     /// The three RGB channels unchanged (3 channels).
     Rgb,
+    /// Grayscale normalized by the image's own robust statistics (1 channel): with `v` the
+    /// luminance in `[0, 1]` and `p_k` its `k`-th percentile over the whole image,
+    /// `(v - p_50) / (0.5 max(p_98 - p_2, 0.02))`, clamped to `[-6, 6]`. Grey and colour
+    /// cameras, dark 12-bit frames and bright ones give the network the same kind of input.
+    GrayNorm,
 }
 
 impl Default for Preprocess {
@@ -31,6 +36,7 @@ impl Preprocess {
     pub fn parse(s: &str) -> Option<Preprocess> {
         match s {
             "rgb" => Some(Preprocess::Rgb),
+            "gray-norm" => Some(Preprocess::GrayNorm),
             "gray-box" => Some(Preprocess::GrayBox { radius: 1 }),
             _ => s.strip_prefix("gray-box:").and_then(|r| r.parse().ok()).map(|radius| Preprocess::GrayBox { radius }),
         }
@@ -39,7 +45,7 @@ impl Preprocess {
     /// Number of input channels the network gets.
     pub fn channels(&self) -> usize {
         match self {
-            Preprocess::GrayBox { .. } => 1,
+            Preprocess::GrayBox { .. } | Preprocess::GrayNorm => 1,
             Preprocess::Rgb => 3,
         }
     }
@@ -68,8 +74,33 @@ impl Preprocess {
                 out.iter_mut().for_each(|v| *v = (*v - 0.5) / 0.25);
                 out
             }
+            Preprocess::GrayNorm => gray_norm(rgb, n),
         }
     }
+}
+
+/// [`Preprocess::GrayNorm`] of interleaved RGB8: luminance `0.299 R + 0.587 G + 0.114 B`,
+/// percentiles from a 1024-bin histogram.
+pub fn gray_norm(rgb: &[u8], n: usize) -> Vec<f32> {
+    let lum: Vec<f32> = rgb.chunks_exact(3).take(n).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0).collect();
+    let mut hist = [0u32; 1024];
+    for &v in &lum {
+        hist[((v * 1023.0).round() as usize).min(1023)] += 1;
+    }
+    let pct = |q: f64| -> f32 {
+        let target = (q * lum.len() as f64).ceil().max(1.0) as u64;
+        let mut acc = 0u64;
+        for (i, &c) in hist.iter().enumerate() {
+            acc += c as u64;
+            if acc >= target {
+                return i as f32 / 1023.0;
+            }
+        }
+        1.0
+    };
+    let (p2, p50, p98) = (pct(0.02), pct(0.5), pct(0.98));
+    let inv = 1.0 / (0.5 * (p98 - p2).max(0.02));
+    lum.into_iter().map(|v| ((v - p50) * inv).clamp(-6.0, 6.0)).collect()
 }
 
 /// Mean over a `(2r+1)^2` window with clamped (replicated) borders; separable running sums.

@@ -1,0 +1,134 @@
+//! `tubeloc synth real`: composites of rendered tubes on real rover frames, split by sol.
+//!
+//! Validation and test sets use the frames with PDS camera models (grey Navcam and MER
+//! frames: the ground and the sun of the frame) plus the colour Mastcam frames of the same
+//! split under the documented assumed mast view; training sets use every background of the
+//! training split under random assumed views, with appearance randomization.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde_json::json;
+use std::path::PathBuf;
+use std::sync::Arc;
+use tubeloc_core::{files, TubeModel};
+use tubeloc_synth::dataset::write_folder_atomically;
+use tubeloc_synth::real_set::{assemble, render_sample, split_views, RealSetConfig, RealSplit};
+use tubeloc_synth::TubeShape;
+
+/// Which frames go into the set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RealKind {
+    /// Grey frames with PDS camera models (validation and test) or grey backgrounds (training).
+    Grey,
+    /// Colour frames under an assumed view.
+    Colour,
+    /// Both.
+    All,
+}
+
+/// Arguments of `tubeloc synth real`.
+#[derive(Args)]
+pub struct RealArgs {
+    /// The real data folder (holding MANIFEST.tsv, backgrounds/ and with_cameras/).
+    #[arg(long, default_value = "../shared/data/real_mars")]
+    pub data: PathBuf,
+    /// Part of the data: `train` (backgrounds, random assumed views), `val` or `test`.
+    #[arg(long)]
+    pub split: RealSplit,
+    /// Grey, colour or all frames.
+    #[arg(long, value_enum, default_value = "all")]
+    pub kind: RealKind,
+    /// Composites per frame.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub per_view: u32,
+    /// Tubes per composite, "MIN:MAX" (0 gives negative frames).
+    #[arg(long, default_value = "1:4")]
+    pub tubes: String,
+    /// Distance band of the tubes from the camera, metres, "NEAR:FAR".
+    #[arg(long, default_value = "1.5:5")]
+    pub range_m: String,
+    /// Smallest frame side used (the 256 px frames binned on board show tubes 1-3 px wide).
+    #[arg(long, default_value_t = 500)]
+    pub min_size: u32,
+    /// Appearance randomization for training: dust 0-0.6, tube gain 0.6-1.4, JPEG quality
+    /// 55-95 (default for `--split train`; validation and test sets are clean PNGs).
+    #[arg(long)]
+    pub randomize: Option<bool>,
+    /// Keep at most this many frames (in file order), e.g. for a small CI set.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Master seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Replace an existing output folder.
+    #[arg(long)]
+    pub force: bool,
+    /// Output folder (images/, annotations.json).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn pair<T: std::str::FromStr>(s: &str, what: &str) -> Result<(T, T)> {
+    let (a, b) = s.split_once(':').with_context(|| format!("--{what} {s:?}: expected MIN:MAX"))?;
+    match (a.trim().parse::<T>(), b.trim().parse::<T>()) {
+        (Ok(a), Ok(b)) => Ok((a, b)),
+        _ => bail!("--{what} {s:?}: expected two numbers MIN:MAX"),
+    }
+}
+
+/// Runs `tubeloc synth real`.
+pub fn run(a: RealArgs) -> Result<()> {
+    let tubes: (usize, usize) = pair(&a.tubes, "tubes")?;
+    let range: (f64, f64) = pair(&a.range_m, "range-m")?;
+    if tubes.0 > tubes.1 || tubes.1 > 20 {
+        bail!("--tubes {}: need MIN <= MAX <= 20", a.tubes);
+    }
+    if !(range.0.is_finite() && range.1.is_finite() && range.0 >= 0.0 && range.1 > range.0) {
+        bail!("--range-m {}: need 0 <= NEAR < FAR, finite", a.range_m);
+    }
+    let mut views = split_views(&a.data, a.split, a.kind != RealKind::Colour, a.kind != RealKind::Grey, a.min_size, a.seed)?;
+    if let Some(n) = a.limit {
+        views.truncate(n);
+    }
+    if views.is_empty() {
+        bail!("no frames of split {:?} and kind {:?} in {}", a.split, a.kind, a.data.display());
+    }
+    let randomize = a.randomize.unwrap_or(a.split == RealSplit::Train);
+    let cfg = RealSetConfig {
+        tubes,
+        per_view: a.per_view as usize,
+        range_m: range,
+        dust: if randomize { (0.0, 0.6) } else { (0.0, 0.2) },
+        tube_gain: if randomize { (0.6, 1.4) } else { (1.0, 1.0) },
+        jpeg_quality: randomize.then_some((55, 95)),
+        seed: a.seed,
+        tube_shape: Arc::new(TubeShape::from_model(&TubeModel::default())),
+    };
+    let jobs: Vec<(usize, usize)> = (0..views.len()).flat_map(|v| (0..cfg.per_view).map(move |k| (v, k))).collect();
+    let pb = ProgressBar::new(jobs.len() as u64);
+    pb.set_style(ProgressStyle::with_template("composite {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
+    let summary = write_folder_atomically(&a.out, a.force, |tmp| {
+        std::fs::create_dir_all(tmp.join("images")).map_err(|e| tubeloc_core::CoreError::io(tmp, e))?;
+        let samples: Vec<_> = jobs
+            .par_iter()
+            .enumerate()
+            .map(|(i, &(v, k))| {
+                let s = render_sample(&views[v], k, i as u64 + 1, &cfg)?;
+                if let Some(s) = &s {
+                    files::write_atomic(&tmp.join("images").join(&s.file_name), &s.bytes)?;
+                }
+                pb.inc(1);
+                Ok(s.map(|s| (s.image, s.annotations)))
+            })
+            .collect::<Result<Vec<_>, tubeloc_synth::SynthError>>()?;
+        let samples: Vec<_> = samples.into_iter().flatten().collect();
+        let ds = assemble(samples, json!({"description": "tubeloc composites on real rover frames", "split": format!("{:?}", a.split).to_lowercase(), "seed": a.seed, "range_m": [range.0, range.1]}));
+        files::write_json(&tmp.join("annotations.json"), &ds)?;
+        Ok((ds.images.len(), ds.annotations.len()))
+    })?;
+    pb.finish_and_clear();
+    eprintln!("{} composites, {} tubes ({} frames, {} skipped where the range band is not in view) -> {}", summary.images, summary.annotations, views.len(), jobs.len() - summary.images, summary.out.display());
+    Ok(())
+}

@@ -1,0 +1,131 @@
+//! Rover camera images of any format as the detectors' input: 8-bit sRGB, interleaved RGB.
+//!
+//! Every detector and the training loader go through [`rgb8_of`], so training and inference
+//! see the same conversion:
+//! - 8-bit grey, grey + alpha, RGB and RGBA (alpha dropped; grey replicated to three channels);
+//! - 16-bit containers hold data of some real bit depth (12-bit for rover EDRs). The depth is
+//!   taken as the bits of the largest value, at least 8 (`b = max(8, ⌈log2(max + 1)⌉)`), and
+//!   values map to `v · 255 / (2^b - 1)`: 12-bit data fill the 8-bit range instead of being
+//!   divided by 257 into the bottom sixteenth;
+//! - 32-bit float images are taken as `[0, 1]`.
+//!
+//! [`InputInfo`] says what was found, and [`InputInfo::warning`] flags inputs that cannot give
+//! detections (a flat image), so that an empty result is never silent.
+
+use std::path::Path;
+
+/// What an input image was, before conversion.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct InputInfo {
+    /// Channels in the file (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).
+    pub channels: u8,
+    /// Bits per channel of the container (8, 16 or 32).
+    pub container_bits: u8,
+    /// Bits of the data found in the container (the largest value's), used for the mapping.
+    pub data_bits: u8,
+    /// Whether the image is grey (one channel, or three equal channels).
+    pub grey: bool,
+    /// Standard deviation of the 8-bit luminance, DN.
+    pub luminance_std: f64,
+}
+
+impl InputInfo {
+    /// A warning for inputs on which no detector can find anything, or `None`.
+    pub fn warning(&self) -> Option<String> {
+        (self.luminance_std < 0.5).then(|| format!("the image is flat (luminance standard deviation {:.2} DN after conversion to 8 bits): nothing can be detected in it", self.luminance_std))
+    }
+}
+
+/// An image converted for the detectors.
+#[derive(Clone, Debug)]
+pub struct DetectorInput {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Interleaved sRGB bytes, `width * height * 3`.
+    pub rgb: Vec<u8>,
+    /// What the source was.
+    pub info: InputInfo,
+}
+
+/// Bits needed for `max` (at least 8, at most `container`).
+fn data_bits(max: u32, container: u8) -> u8 {
+    let bits = 32 - max.leading_zeros();
+    (bits as u8).clamp(8, container)
+}
+
+/// Converts a decoded image (see the module doc).
+pub fn rgb8_of(img: &image::DynamicImage) -> DetectorInput {
+    use image::DynamicImage as D;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let channels = img.color().channel_count();
+    let (rgb, container_bits, bits): (Vec<u8>, u8, u8) = match img {
+        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
+            let wide = img.to_rgb16();
+            let max = wide.as_raw().iter().copied().max().unwrap_or(0) as u32;
+            let b = data_bits(max, 16);
+            let scale = 255.0 / ((1u32 << b) - 1) as f32;
+            (wide.as_raw().iter().map(|&v| (v as f32 * scale).round().min(255.0) as u8).collect(), 16, b)
+        }
+        D::ImageRgb32F(_) | D::ImageRgba32F(_) => {
+            let f = img.to_rgb32f();
+            (f.as_raw().iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect(), 32, 8)
+        }
+        _ => (img.to_rgb8().into_raw(), 8, 8),
+    };
+    let grey = channels <= 2 || rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2]);
+    let n = (w * h).max(1) as f64;
+    let (mut s, mut s2) = (0.0f64, 0.0f64);
+    for p in rgb.chunks_exact(3) {
+        let l = 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64;
+        s += l;
+        s2 += l * l;
+    }
+    let var = (s2 / n - (s / n) * (s / n)).max(0.0);
+    let info = InputInfo { channels, container_bits, data_bits: bits, grey, luminance_std: var.sqrt() };
+    DetectorInput { width: w, height: h, rgb, info }
+}
+
+/// Reads an image file (PNG, JPEG) and converts it (see the module doc). The error names the
+/// file.
+pub fn load(path: &Path) -> Result<DetectorInput, String> {
+    let img = image::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(rgb8_of(&img))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{ImageBuffer, Luma, Rgb, Rgba};
+
+    #[test]
+    fn twelve_bit_data_fill_the_eight_bit_range() {
+        let img = ImageBuffer::<Luma<u16>, _>::from_fn(4, 1, |x, _| Luma([[0u16, 1000, 2000, 4095][x as usize]]));
+        let c = rgb8_of(&image::DynamicImage::ImageLuma16(img));
+        assert_eq!(c.info.data_bits, 12);
+        assert_eq!(c.info.container_bits, 16);
+        assert!(c.info.grey);
+        let grey: Vec<u8> = c.rgb.chunks(3).map(|p| p[0]).collect();
+        assert_eq!(grey, vec![0, 62, 125, 255]);
+    }
+
+    #[test]
+    fn full_sixteen_bit_and_eight_bit_agree() {
+        let img8 = ImageBuffer::<Rgb<u8>, _>::from_fn(3, 2, |x, y| Rgb([(x * 80) as u8, (y * 100) as u8, 7]));
+        let img16 = ImageBuffer::<Rgb<u16>, _>::from_fn(3, 2, |x, y| Rgb([(x * 80 * 257) as u16, (y * 100 * 257) as u16, 7 * 257]));
+        let a = rgb8_of(&image::DynamicImage::ImageRgb8(img8));
+        let b = rgb8_of(&image::DynamicImage::ImageRgb16(img16));
+        assert_eq!(b.info.data_bits, 16);
+        assert_eq!(a.rgb, b.rgb);
+        assert!(!a.info.grey);
+    }
+
+    #[test]
+    fn alpha_is_dropped_and_flat_images_warn() {
+        let img = ImageBuffer::<Rgba<u8>, _>::from_pixel(5, 5, Rgba([10, 20, 30, 0]));
+        let c = rgb8_of(&image::DynamicImage::ImageRgba8(img));
+        assert_eq!(&c.rgb[..3], &[10, 20, 30]);
+        assert!(c.info.warning().is_some());
+    }
+}

@@ -1,0 +1,235 @@
+//! Camera-aware working scale: detectors run at the pixel scale they were built for.
+//!
+//! A tube's body (diameter `D` = 17.1 mm) seen at range `r` by a camera of focal length `f`
+//! pixels is `w = f D / r` pixels wide. The detectors were built for tubes about
+//! [`WORKING_TUBE_WIDTH_PX`] wide (the paper rig's half-resolution crops at 1-2.5 m show
+//! 12-25 px). An image is resampled by `s = WORKING_TUBE_WIDTH_PX / w(r)`, with `r` the
+//! expected range of the tubes:
+//! - with a ground plane `n · X = d` (camera frame, `n` up, metres): the median distance of the
+//!   ground seen by a grid of pixels, over those pixels whose ground point lies within the
+//!   range band (the band's far end when none does);
+//! - without one: the geometric mean of the range band.
+//!
+//! Factors within [`DEAD_BAND`] of 1 are taken as 1 (the image is used as it is), and `s` is
+//! clamped to `[1/4, 4]`. Results found on the resampled image are mapped back to the
+//! original pixels: a point `p'` maps to `p = (p' + ½) / s - ½` (pixel centres at integers).
+
+use nalgebra::Vector3;
+use tubeloc_core::CameraModel;
+
+/// Image width of a tube's body at the detectors' working scale, pixels.
+pub const WORKING_TUBE_WIDTH_PX: f64 = 16.0;
+/// Diameter of the tube's body, metres (`data/tube.toml`).
+pub const TUBE_BODY_DIAMETER_M: f64 = 0.0171;
+/// Scale factors in `[1 / DEAD_BAND, DEAD_BAND]` are treated as 1.
+pub const DEAD_BAND: f64 = 1.4;
+
+/// Distances from the camera at which tubes are expected, metres.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RangeBand {
+    /// Nearest range, metres (> 0).
+    pub near_m: f64,
+    /// Farthest range, metres (> near).
+    pub far_m: f64,
+}
+
+impl Default for RangeBand {
+    /// 1-4 m: what a rover's arm camera or mast camera sees of the ground it can reach.
+    fn default() -> Self {
+        RangeBand { near_m: 1.0, far_m: 4.0 }
+    }
+}
+
+impl RangeBand {
+    /// Checks `0 < near < far`, both finite.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.near_m.is_finite() && self.far_m.is_finite() && self.near_m > 0.0 && self.far_m > self.near_m {
+            Ok(())
+        } else {
+            Err(format!("range band {}..{} m: need 0 < near < far, finite", self.near_m, self.far_m))
+        }
+    }
+}
+
+/// The expected range of tubes in the image, metres (see the module doc).
+pub fn expected_range_m(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, band: RangeBand) -> f64 {
+    let Some((n, d)) = ground else { return (band.near_m * band.far_m).sqrt() };
+    let nn = n.norm();
+    if !(nn > 1e-12 && nn.is_finite() && d.is_finite()) {
+        return (band.near_m * band.far_m).sqrt();
+    }
+    let (n, d) = (n / nn, d / nn);
+    let mut ranges = Vec::with_capacity(32 * 32);
+    for j in 0..32 {
+        for i in 0..32 {
+            let u = (i as f64 + 0.5) / 32.0 * cam.width as f64 - 0.5;
+            let v = (j as f64 + 0.5) / 32.0 * cam.height as f64 - 0.5;
+            let (x, y) = cam.normalize(&nalgebra::Point2::new(u, v));
+            let ray = Vector3::new(x, y, 1.0).normalize();
+            let den = n.dot(&ray);
+            if den.abs() < 1e-9 {
+                continue;
+            }
+            let t = d / den;
+            if t > 0.0 && t >= band.near_m && t <= band.far_m {
+                ranges.push(t);
+            }
+        }
+    }
+    if ranges.is_empty() {
+        return band.far_m;
+    }
+    ranges.sort_by(f64::total_cmp);
+    ranges[ranges.len() / 2]
+}
+
+/// The factor by which to resample the image so that tubes are about
+/// [`WORKING_TUBE_WIDTH_PX`] wide (see the module doc).
+pub fn working_scale(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, band: RangeBand) -> f64 {
+    let r = expected_range_m(cam, ground, band);
+    let f = (cam.fx * cam.fy).sqrt();
+    let s = WORKING_TUBE_WIDTH_PX / (f * TUBE_BODY_DIAMETER_M / r);
+    if !s.is_finite() {
+        return 1.0;
+    }
+    let s = s.clamp(0.25, 4.0);
+    if (1.0 / DEAD_BAND..=DEAD_BAND).contains(&s) {
+        1.0
+    } else {
+        s
+    }
+}
+
+/// Size of an image of `width x height` resampled by `s` (at least 1 x 1).
+pub fn scaled_size(width: usize, height: usize, s: f64) -> (usize, usize) {
+    (((width as f64 * s).round() as usize).max(1), ((height as f64 * s).round() as usize).max(1))
+}
+
+/// Bilinear resampling of `channels` channel-major planes from `width x height` to
+/// `nw x nh`: output pixel `(x', y')` reads the source at `((x' + ½) w / nw - ½, ...)`,
+/// clamped to the border. When shrinking by more than 2 the source is first box-averaged so
+/// that every source pixel contributes.
+pub fn resample_planes(src: &[f32], channels: usize, width: usize, height: usize, nw: usize, nh: usize) -> Vec<f32> {
+    use rayon::prelude::*;
+    let n = width * height;
+    let (sx, sy) = (width as f32 / nw as f32, height as f32 / nh as f32);
+    let (kx, ky) = ((sx / 2.0).floor().max(1.0) as usize, (sy / 2.0).floor().max(1.0) as usize);
+    if kx > 1 || ky > 1 {
+        // Box-average to at most twice the target first.
+        let (bw, bh) = (width / kx, height / ky);
+        let mut boxed = vec![0f32; channels * bw * bh];
+        for c in 0..channels {
+            let p = &src[c * n..(c + 1) * n];
+            boxed[c * bw * bh..(c + 1) * bw * bh].par_chunks_mut(bw).enumerate().for_each(|(y, row)| {
+                for (x, o) in row.iter_mut().enumerate() {
+                    let mut acc = 0.0;
+                    for yy in y * ky..(y + 1) * ky {
+                        acc += p[yy * width + x * kx..yy * width + (x + 1) * kx].iter().sum::<f32>();
+                    }
+                    *o = acc / (kx * ky) as f32;
+                }
+            });
+        }
+        return resample_planes(&boxed, channels, bw, bh, nw, nh);
+    }
+    let xs: Vec<(usize, usize, f32)> = (0..nw)
+        .map(|x| {
+            let fx = ((x as f32 + 0.5) * sx - 0.5).clamp(0.0, (width - 1) as f32);
+            let x0 = fx.floor() as usize;
+            (x0, (x0 + 1).min(width - 1), fx - x0 as f32)
+        })
+        .collect();
+    let mut out = vec![0f32; channels * nw * nh];
+    for c in 0..channels {
+        let p = &src[c * n..(c + 1) * n];
+        out[c * nw * nh..(c + 1) * nw * nh].par_chunks_mut(nw).enumerate().for_each(|(y, row)| {
+            let fy = ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (height - 1) as f32);
+            let y0 = fy.floor() as usize;
+            let (y1, ty) = ((y0 + 1).min(height - 1), fy - y0 as f32);
+            let (r0, r1) = (&p[y0 * width..(y0 + 1) * width], &p[y1 * width..(y1 + 1) * width]);
+            for (o, &(x0, x1, tx)) in row.iter_mut().zip(&xs) {
+                let a = r0[x0] + (r0[x1] - r0[x0]) * tx;
+                let b = r1[x0] + (r1[x1] - r1[x0]) * tx;
+                *o = a + (b - a) * ty;
+            }
+        });
+    }
+    out
+}
+
+/// Maps a mask found on a `nw x nh` resampled image back to the original `width x height`:
+/// each original pixel takes the mask value at its centre's position in the resampled image
+/// (nearest), so the mask keeps its area up to the resampling.
+pub fn mask_back(mask: &[u8], nw: usize, nh: usize, width: usize, height: usize) -> Vec<u8> {
+    let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
+    let xs: Vec<usize> = (0..width).map(|x| (((x as f64 + 0.5) * sx - 0.5).round().max(0.0) as usize).min(nw - 1)).collect();
+    let mut out = vec![0u8; width * height];
+    for y in 0..height {
+        let yy = (((y as f64 + 0.5) * sy - 0.5).round().max(0.0) as usize).min(nh - 1);
+        let src = &mask[yy * nw..(yy + 1) * nw];
+        for (o, &xx) in out[y * width..(y + 1) * width].iter_mut().zip(&xs) {
+            *o = src[xx];
+        }
+    }
+    out
+}
+
+/// Maps a point `(u', v')` of the image resampled by `(sx, sy)` back to original pixels.
+pub fn point_back(p: [f64; 2], sx: f64, sy: f64) -> [f64; 2] {
+    [(p[0] + 0.5) / sx - 0.5, (p[1] + 0.5) / sy - 0.5]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn navcam() -> CameraModel {
+        CameraModel { width: 1024, height: 1024, fx: 1226.0, fy: 1226.0, cx: 511.5, cy: 511.5, distortion: Default::default() }
+    }
+
+    #[test]
+    fn navcam_tubes_are_scaled_up_to_the_working_width() {
+        // Camera 1.97 m above the ground, looking 30 degrees down.
+        let p = 30f64.to_radians();
+        let up = Vector3::new(0.0, -p.cos(), -p.sin());
+        let cam = navcam();
+        let r = expected_range_m(&cam, Some((up, -1.97)), RangeBand::default());
+        // The image centre sees the ground at 1.97 / sin 30 = 3.94 m; the median over the band is nearer.
+        assert!(r > 2.5 && r < 4.0, "{r}");
+        let s = working_scale(&cam, Some((up, -1.97)), RangeBand::default());
+        let w = 1226.0 * TUBE_BODY_DIAMETER_M / r;
+        assert!((s * w - WORKING_TUBE_WIDTH_PX).abs() < 1e-9, "s {s} w {w}");
+        assert!(s > 2.0);
+    }
+
+    #[test]
+    fn paper_half_resolution_crops_stay_at_scale_one() {
+        let cam = CameraModel { width: 1024, height: 1024, fx: 1722.0, fy: 1722.0, cx: 511.5, cy: 511.5, distortion: Default::default() };
+        assert_eq!(working_scale(&cam, None, RangeBand::default()), 1.0);
+    }
+
+    #[test]
+    fn resampling_a_ramp_keeps_it_linear_and_masks_map_back() {
+        let (w, h) = (8, 4);
+        let src: Vec<f32> = (0..w * h).map(|i| (i % w) as f32).collect();
+        let up = resample_planes(&src, 1, w, h, 24, 12);
+        // Output pixel x' reads source (x' + 0.5) / 3 - 0.5.
+        for x in 3..20 {
+            let expect = (x as f32 + 0.5) / 3.0 - 0.5;
+            assert!((up[5 * 24 + x] - expect).abs() < 1e-5, "{x}: {}", up[5 * 24 + x]);
+        }
+        let mut mask = vec![0u8; 24 * 12];
+        for y in 0..12 {
+            for x in 6..12 {
+                mask[y * 24 + x] = 1;
+            }
+        }
+        let back = mask_back(&mask, 24, 12, w, h);
+        assert_eq!(&back[0..8], &[0, 0, 1, 1, 0, 0, 0, 0]);
+        assert_eq!(point_back([7.0, 1.0], 3.0, 3.0), [2.0, 0.0]);
+        let down = resample_planes(&up, 1, 24, 12, 8, 4);
+        for x in 1..7 {
+            assert!((down[2 * 8 + x] - x as f32).abs() < 0.2, "{x}: {}", down[2 * 8 + x]);
+        }
+    }
+}

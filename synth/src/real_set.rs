@@ -1,0 +1,386 @@
+//! Composite sets on real rover frames: rendered tubes with shadows on real photographs, as a
+//! COCO dataset, for training and for measuring detectors on real imagery.
+//!
+//! Two kinds of view:
+//! - **PDS geometry** ([`views_from_cameras_json`]): frames whose CAHV/CAHVOR camera model was
+//!   linearized by `cahv_to_pinhole.py`. The ground is the site frame's level plane at the
+//!   camera's height (`up_cam = R_cam_from_site · (0, 0, -1)`, site z points down), the sun is
+//!   the label's solar direction in the camera frame. The composite's shadows and light match
+//!   the frame.
+//! - **Assumed geometry** ([`AssumedView`]): backgrounds without a camera model get a pinhole
+//!   with a given horizontal field of view, a mast height, a pitch below the horizon and a roll;
+//!   the sun is drawn at random above the horizon.
+//!
+//! Grey backgrounds give grey composites (luminance `0.299 R + 0.587 G + 0.114 B`, saved as
+//! 8-bit grey like the camera's own product); colour backgrounds stay colour.
+
+use crate::composite::{composite, CompositeConfig};
+use crate::dataset::{annotation_from_truth, pose_json, tube_category};
+use crate::tube_shape::TubeShape;
+use crate::SynthError;
+use nalgebra::{Matrix3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde_json::{json, Map, Value};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tubeloc_core::{CameraModel, CocoDataset, CocoImage};
+
+/// A real frame with the geometry a composite needs.
+#[derive(Clone, Debug)]
+pub struct RealView {
+    /// The photograph.
+    pub image: PathBuf,
+    /// Sol of the frame (for splits), when known.
+    pub sol: Option<i64>,
+    /// Camera (linear pinhole) of the photograph, its size included.
+    pub camera: CameraModel,
+    /// Unit up direction of the ground in the camera frame.
+    pub up_cam: Vector3<f64>,
+    /// Height of the camera centre above the ground, metres.
+    pub height_m: f64,
+    /// Unit direction toward the sun in the camera frame, when known.
+    pub sun_cam: Option<Vector3<f64>>,
+    /// Where the geometry came from (`pds` or `assumed`).
+    pub geometry: &'static str,
+}
+
+impl RealView {
+    /// The ground plane in the camera frame as `(n, d)` with `n` the unit up normal and
+    /// `n · X = d` (metres): `d = -height`.
+    pub fn ground(&self) -> (Vector3<f64>, f64) {
+        (self.up_cam, -self.height_m)
+    }
+}
+
+/// Reads the views of `cameras.json` (as written by `cahv_to_pinhole.py`); image paths are
+/// relative to the file's folder. Frames of a CAHVORE (fisheye) model are left out: a pinhole
+/// does not describe them. Each entry needs `image`, `image_width`, `image_height`, `fx`, `fy`,
+/// `cx`, `cy`, `R_cam_from_site` and `camera_height_m`; `sun_direction_camera` is optional.
+pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError> {
+    let err = |m: String| SynthError::Invalid(format!("{}: {m}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let list: Vec<Value> = serde_json::from_str(&text).map_err(|e| err(format!("not a JSON list of cameras: {e}")))?;
+    let root = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for (k, e) in list.iter().enumerate() {
+        let ctx = |m: &str| err(format!("entry {k}: {m}"));
+        if e.get("model_type").and_then(Value::as_str) == Some("CAHVORE") {
+            continue;
+        }
+        let num = |key: &str| e.get(key).and_then(Value::as_f64).filter(|v| v.is_finite()).ok_or_else(|| ctx(&format!("missing or non-finite `{key}`")));
+        let vec3 = |v: &Value| -> Option<Vector3<f64>> {
+            let a = v.as_array()?;
+            (a.len() == 3).then_some(())?;
+            Some(Vector3::new(a[0].as_f64()?, a[1].as_f64()?, a[2].as_f64()?))
+        };
+        let image = e.get("image").and_then(Value::as_str).ok_or_else(|| ctx("missing `image`"))?;
+        let rows = e.get("R_cam_from_site").and_then(Value::as_array).filter(|r| r.len() == 3).ok_or_else(|| ctx("missing `R_cam_from_site` (3x3)"))?;
+        let rows: Vec<Vector3<f64>> = rows.iter().map(vec3).collect::<Option<_>>().ok_or_else(|| ctx("`R_cam_from_site` is not 3x3 numbers"))?;
+        let r = Matrix3::from_rows(&[rows[0].transpose(), rows[1].transpose(), rows[2].transpose()]);
+        let up_cam = (r * Vector3::new(0.0, 0.0, -1.0)).normalize();
+        let camera = CameraModel {
+            width: num("image_width")? as u32,
+            height: num("image_height")? as u32,
+            fx: num("fx")?,
+            fy: num("fy")?,
+            cx: num("cx")?,
+            cy: num("cy")?,
+            distortion: Default::default(),
+        };
+        camera.validate().map_err(|e| ctx(&e.to_string()))?;
+        let height_m = num("camera_height_m")?;
+        if height_m <= 0.0 {
+            return Err(ctx(&format!("camera height {height_m} m must be > 0")));
+        }
+        let sun_cam = e.get("sun_direction_camera").and_then(vec3).map(|v| v.normalize());
+        let sol = e.get("sol").and_then(Value::as_i64);
+        out.push(RealView { image: root.join(image), sol, camera, up_cam, height_m, sun_cam, geometry: "pds" });
+    }
+    Ok(out)
+}
+
+/// An assumed camera for a background without a camera model.
+#[derive(Clone, Copy, Debug)]
+pub struct AssumedView {
+    /// Horizontal field of view, degrees.
+    pub hfov_deg: f64,
+    /// Camera height above the ground, metres.
+    pub height_m: f64,
+    /// Angle of the optical axis below the horizon, degrees.
+    pub pitch_deg: f64,
+    /// Roll about the optical axis, degrees.
+    pub roll_deg: f64,
+}
+
+impl AssumedView {
+    /// The documented view of the colour test frames: a mast camera 1.9 m above the ground,
+    /// looking 30 degrees down, with a 20 degree field of view (the ground at the image centre
+    /// is 3.8 m away).
+    pub const MAST: AssumedView = AssumedView { hfov_deg: 20.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// A random view for training: field of view 15-50 degrees, height 0.8-2.2 m, pitch
+    /// 15-60 degrees, roll ±4 degrees.
+    pub fn random(rng: &mut ChaCha8Rng) -> AssumedView {
+        AssumedView { hfov_deg: rng.random_range(15.0..50.0), height_m: rng.random_range(0.8..2.2), pitch_deg: rng.random_range(15.0..60.0), roll_deg: rng.random_range(-4.0..4.0) }
+    }
+
+    /// The view for an image of `width x height` pixels at `image`; the sun is drawn from
+    /// `rng` (elevation 20-75 degrees, any azimuth).
+    pub fn view(&self, image: PathBuf, width: u32, height: u32, sol: Option<i64>, rng: &mut ChaCha8Rng) -> RealView {
+        let camera = CameraModel::from_hfov(width, height, self.hfov_deg);
+        let (p, r) = (self.pitch_deg.to_radians(), self.roll_deg.to_radians());
+        // Up in a camera pitched down by p: (0, -cos p, -sin p); roll turns it about z.
+        let up = Vector3::new(0.0, -p.cos(), -p.sin());
+        let up_cam = Vector3::new(r.cos() * up.x - r.sin() * up.y, r.sin() * up.x + r.cos() * up.y, up.z);
+        // Sun: elevation e above the ground, azimuth a about the up axis.
+        let (a, e) = (rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(20f64..75.0).to_radians());
+        let fwd = (Vector3::z() - up_cam * up_cam.z).normalize();
+        let side = up_cam.cross(&fwd);
+        let sun_cam = Some(((fwd * a.cos() + side * a.sin()) * e.cos() + up_cam * e.sin()).normalize());
+        RealView { image, sol, camera, up_cam, height_m: self.height_m, sun_cam, geometry: "assumed" }
+    }
+}
+
+/// Options of a composite set.
+#[derive(Clone, Debug)]
+pub struct RealSetConfig {
+    /// Tubes per composite, drawn uniformly from this inclusive range (0 = a negative frame).
+    pub tubes: (usize, usize),
+    /// Composites per view (each with its own seed).
+    pub per_view: usize,
+    /// Distance band of the tube centres from the camera, metres.
+    pub range_m: (f64, f64),
+    /// Dust level range of the tubes, [0, 1].
+    pub dust: (f32, f32),
+    /// Range of the gain on the tubes' radiance (1 = matched exposure).
+    pub tube_gain: (f32, f32),
+    /// Save as JPEG with a quality drawn from this range (`None`: PNG).
+    pub jpeg_quality: Option<(u8, u8)>,
+    /// Master seed.
+    pub seed: u64,
+    /// Tube geometry.
+    pub tube_shape: Arc<TubeShape>,
+}
+
+/// One rendered composite: its file name, encoded bytes and COCO entries.
+pub struct RealSample {
+    /// File name under `images/`.
+    pub file_name: String,
+    /// Encoded PNG or JPEG bytes.
+    pub bytes: Vec<u8>,
+    /// The COCO image entry.
+    pub image: CocoImage,
+    /// The COCO annotations (ids local to the sample, renumbered by [`assemble`]).
+    pub annotations: Vec<tubeloc_core::CocoAnnotation>,
+}
+
+fn is_grey(rgb: &[u8]) -> bool {
+    rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
+}
+
+/// Renders composite `k` (0-based) of `view`; returns `Ok(None)` when the tubes do not fit in
+/// the range band of this view (e.g. a frame looking over the horizon).
+pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) -> Result<Option<RealSample>, SynthError> {
+    let err = |m: String| SynthError::Invalid(format!("{}: {m}", view.image.display()));
+    let img = image::open(&view.image).map_err(|e| err(e.to_string()))?.to_rgb8();
+    if (img.width(), img.height()) != (view.camera.width, view.camera.height) {
+        return Err(err(format!("image is {}x{} but its camera is {}x{}", img.width(), img.height(), view.camera.width, view.camera.height)));
+    }
+    let grey = is_grey(img.as_raw());
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (k as u64) << 48);
+    let tubes = rng.random_range(cfg.tubes.0..=cfg.tubes.1);
+    let dust = rng.random_range(cfg.dust.0..=cfg.dust.1);
+    let tube_gain = rng.random_range(cfg.tube_gain.0..=cfg.tube_gain.1);
+    let seed: u64 = rng.random();
+    let (n, d) = view.ground();
+    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some(cfg.range_m), sun_cam: view.sun_cam, tube_gain };
+    let c = match composite(img.as_raw(), &view.camera, &cc) {
+        Ok(c) => c,
+        Err(SynthError::Invalid(m)) if m.starts_with("could place only") => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    let (w, h) = (view.camera.width, view.camera.height);
+    let stem = view.image.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "frame".into());
+    let quality = cfg.jpeg_quality.map(|(a, b)| rng.random_range(a..=b));
+    let ext = if quality.is_some() { "jpg" } else { "png" };
+    let file_name = format!("{id:06}_{stem}_{k}.{ext}");
+    let bytes = encode(&c.output.rgb, w, h, grey, quality).map_err(err)?;
+    let mut extra = Map::new();
+    extra.insert("camera".into(), serde_json::to_value(&view.camera).unwrap_or(Value::Null));
+    extra.insert("ground".into(), json!({"normal": [n.x, n.y, n.z], "d": d}));
+    extra.insert("T_world_cam".into(), pose_json(&c.t_ground_cam));
+    extra.insert("background".into(), json!(view.image.display().to_string()));
+    extra.insert("geometry".into(), json!(view.geometry));
+    extra.insert("grey".into(), json!(grey));
+    if let Some(s) = view.sol {
+        extra.insert("sol".into(), json!(s));
+    }
+    let image = CocoImage { id, width: w, height: h, file_name: file_name.clone(), extra };
+    let annotations = c.truth.iter().enumerate().map(|(j, t)| annotation_from_truth(j as u64 + 1, id, &view.camera, t, Map::from_iter([("dust".to_string(), json!(dust))]))).collect();
+    Ok(Some(RealSample { file_name, bytes, image, annotations }))
+}
+
+/// Encodes an sRGB composite as PNG or JPEG, grey (luminance) when `grey`.
+pub fn encode(rgb: &[u8], w: u32, h: u32, grey: bool, jpeg_quality: Option<u8>) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    let (data, ct): (Vec<u8>, image::ExtendedColorType) = if grey {
+        (rgb.chunks_exact(3).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32).round().clamp(0.0, 255.0) as u8).collect(), image::ExtendedColorType::L8)
+    } else {
+        (rgb.to_vec(), image::ExtendedColorType::Rgb8)
+    };
+    let mut buf = Vec::new();
+    match jpeg_quality {
+        Some(q) => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, q).write_image(&data, w, h, ct).map_err(|e| e.to_string())?,
+        None => image::codecs::png::PngEncoder::new(&mut buf).write_image(&data, w, h, ct).map_err(|e| e.to_string())?,
+    }
+    Ok(buf)
+}
+
+/// Puts samples together into one COCO dataset (annotation ids renumbered from 1, in order).
+pub fn assemble(samples: Vec<(CocoImage, Vec<tubeloc_core::CocoAnnotation>)>, info: Value) -> CocoDataset {
+    let mut images = Vec::new();
+    let mut annotations = Vec::new();
+    for (im, anns) in samples {
+        for mut a in anns {
+            a.id = annotations.len() as u64 + 1;
+            annotations.push(a);
+        }
+        images.push(im);
+    }
+    CocoDataset { info: Some(info), licenses: None, images, annotations, categories: vec![tube_category()], extra: Map::new() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn assumed_view_up_is_unit_and_pitched() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let v = AssumedView::MAST.view(PathBuf::from("x.png"), 500, 400, None, &mut rng);
+        assert!((v.up_cam.norm() - 1.0).abs() < 1e-12);
+        // Looking 30 degrees down: the optical axis makes 30 degrees with the ground.
+        assert!((v.up_cam.z + 30f64.to_radians().sin()).abs() < 1e-12, "{:?}", v.up_cam);
+        let s = v.sun_cam.unwrap();
+        assert!(s.dot(&v.up_cam) > 20f64.to_radians().sin() - 1e-9);
+    }
+}
+
+/// Which part of the real data a frame belongs to. Frames are split by sol so that no scene
+/// is in two parts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum RealSplit {
+    /// Training backgrounds.
+    Train,
+    /// Choosing settings.
+    Val,
+    /// Reporting, once per change.
+    Test,
+}
+
+impl std::str::FromStr for RealSplit {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "train" => Ok(RealSplit::Train),
+            "val" => Ok(RealSplit::Val),
+            "test" => Ok(RealSplit::Test),
+            _ => Err(format!("unknown split {s:?}: expected train, val or test")),
+        }
+    }
+}
+
+/// Sols of the frames with PDS camera models used for validation (MSL Navcam sols 38 and 100).
+pub const VAL_SOLS: [i64; 2] = [38, 100];
+/// Sols of the frames with PDS camera models used for testing (MSL Navcam 53, 344, 372, 688,
+/// 729, 3192, 3423; MER-1 Navcam 5086, Pancam 5105, Hazcam 5104).
+pub const TEST_SOLS: [i64; 10] = [53, 344, 372, 688, 729, 3192, 3423, 5086, 5104, 5105];
+
+/// The split of a frame from its sol: within one sol of a validation or test sol of the
+/// camera-model frames it goes there (whatever the camera: another camera may see the same
+/// scene); otherwise sols with `(sol / 10) % 5 == 0` are test, `== 1` validation, the rest
+/// training (the colour frames, which have no camera models). Frames of unknown sol train.
+pub fn split_of_sol(sol: Option<i64>) -> RealSplit {
+    let Some(s) = sol else { return RealSplit::Train };
+    if VAL_SOLS.iter().any(|v| (v - s).abs() <= 1) {
+        return RealSplit::Val;
+    }
+    if TEST_SOLS.iter().any(|v| (v - s).abs() <= 1) {
+        return RealSplit::Test;
+    }
+    match (s / 10) % 5 {
+        0 => RealSplit::Test,
+        1 => RealSplit::Val,
+        _ => RealSplit::Train,
+    }
+}
+
+/// One row of the real data's `MANIFEST.tsv`: a file (relative to the data folder), its folder
+/// kind (`backgrounds`, `negatives_val`, ...), group and sol.
+#[derive(Clone, Debug)]
+pub struct ManifestEntry {
+    /// Path relative to the data folder.
+    pub file: PathBuf,
+    /// Top-level folder (`backgrounds`, `negatives_val`, `with_cameras`).
+    pub split: String,
+    /// Group (e.g. `msl_navcam_1024`, `msl_mastcam_marsdata`).
+    pub group: String,
+    /// Sol, when known.
+    pub sol: Option<i64>,
+}
+
+/// Reads `MANIFEST.tsv` (tab-separated with a header naming `file`, `split`, `group`, `sol`).
+pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, SynthError> {
+    let err = |m: String| SynthError::Invalid(format!("{}: {m}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().ok_or_else(|| err("empty file".into()))?.split('\t').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).ok_or_else(|| err(format!("no `{name}` column")));
+    let (cf, cs, cg, csol) = (col("file")?, col("split")?, col("group")?, col("sol")?);
+    let mut out = Vec::new();
+    for (i, line) in lines.enumerate() {
+        let f: Vec<&str> = line.split('\t').collect();
+        if f.len() <= cf.max(cs).max(cg).max(csol) {
+            return Err(err(format!("line {}: {} columns, expected {}", i + 2, f.len(), header.len())));
+        }
+        out.push(ManifestEntry { file: PathBuf::from(f[cf]), split: f[cs].to_string(), group: f[cg].to_string(), sol: f[csol].trim().parse().ok() });
+    }
+    Ok(out)
+}
+
+/// The frames of `split` in the real data folder `data` (holding `MANIFEST.tsv`,
+/// `backgrounds/` and `with_cameras/`), with their views. Validation and test: the grey frames
+/// with PDS camera models and the colour Mastcam backgrounds under [`AssumedView::MAST`], frames
+/// whose smaller side is below `min_size` left out. Training: every background of the split
+/// under a random assumed view drawn with `seed` (the Navcam backgrounds that are also
+/// camera-model frames fall in validation or test by their sol).
+pub fn split_views(data: &Path, split: RealSplit, grey: bool, colour: bool, min_size: u32, seed: u64) -> Result<Vec<RealView>, SynthError> {
+    let manifest = read_manifest(&data.join("MANIFEST.tsv"))?;
+    let mut out = Vec::new();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
+    if split != RealSplit::Train && grey {
+        for v in views_from_cameras_json(&data.join("with_cameras").join("cameras.json"))? {
+            if split_of_sol(v.sol) == split && v.camera.width.min(v.camera.height) >= min_size {
+                out.push(v);
+            }
+        }
+    }
+    for e in &manifest {
+        if e.split != "backgrounds" || split_of_sol(e.sol) != split {
+            continue;
+        }
+        let is_colour = e.group.contains("mastcam");
+        if (is_colour && !colour) || (!is_colour && !grey) || (!is_colour && split != RealSplit::Train) {
+            continue;
+        }
+        let path = data.join(&e.file);
+        let (w, h) = image::image_dimensions(&path).map_err(|er| SynthError::Invalid(format!("{}: {er}", path.display())))?;
+        if w.min(h) < min_size && split != RealSplit::Train {
+            continue;
+        }
+        let view = if split == RealSplit::Train { AssumedView::random(&mut rng) } else { AssumedView::MAST };
+        out.push(view.view(path, w, h, e.sol, &mut rng));
+    }
+    Ok(out)
+}
