@@ -44,7 +44,7 @@ pub struct HiddenEnd {
 impl Default for HiddenEnd {
     /// Chosen on the three calibration stereo sets (seeds 11-13) with learned detections,
     /// stereo + ground: fraction 0.9 among 0.8 / 0.9 / 1.0 and margin 5 mm among 5 / 10 / 20 mm
-    /// (`refine/README.md`, session 9).
+    /// (`docs/design/0022-hidden-end-and-unseen-length.md`).
     fn default() -> Self {
         HiddenEnd { max_visible_fraction: 0.9, occluder_margin_m: 0.005, gap_px: (3, 12), half_width_px: 3, min_depth_pixels: 5 }
     }

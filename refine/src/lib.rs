@@ -53,13 +53,13 @@ pub struct RefineConfig {
     pub fine_search_radius_px: usize,
     /// When the coarsest level is full resolution (narrow tubes), run it once more with the fine
     /// search radius, in mono fits (no stereo points and no depth map; not in the stereo edge
-    /// polish, so stereo refinements are as before). On by default since session 17: chosen on
+    /// polish, so stereo refinements are unaffected). On by default: chosen on
     /// three generated validation sets (seed-21 and seed-33 no-tags halves, val9; learned seeds
     /// from the with-tags cross-split model, mono + `--ground auto`), mono axis p90 1.09 / 1.36 /
     /// 1.17 -> 1.05 / 1.36 / 1.02 deg, and on the seed-21 set from exact-pose seeds 2.80 ->
-    /// 2.43 deg, perpendicular p90 1.23 -> 1.09 mm (`refine/README.md`, session 17). Session 2
-    /// had left it off: on a paper-preset subset of that code it took the exact-seed
-    /// perpendicular p90 from 2.8 to 6.2 mm.
+    /// 2.43 deg, perpendicular p90 1.23 -> 1.09 mm (`docs/design/0018-fine-polish-in-mono.md`).
+    /// Before narrow tubes were fitted on unsmoothed gradients it took the exact-seed
+    /// perpendicular p90 on a paper-preset subset from 2.8 to 6.2 mm.
     pub fine_polish: bool,
     /// Smooth the full-resolution level before differentiating for the fit even for narrow
     /// tubes (those fitted at full resolution alone; wider ones always are smoothed, as are the
@@ -123,7 +123,8 @@ pub struct RefineConfig {
     /// 63 is the area of the default SGM census window (9 x 7 px), within which two pixels'
     /// matching costs share most of their census bits. Checked on a calibration stereo set
     /// (`tubeloc synth stereo --seed 11`, not the benchmark's seed 3): stereo + ground median
-    /// axis error / σ 1.61 -> 0.64, centre 3.02 -> 1.19 (`refine/README.md`).
+    /// axis error / σ 1.61 -> 0.64, centre 3.02 -> 1.19
+    /// (`docs/design/0024-stereo-covariance-census-window.md`).
     pub stereo_points_per_measurement: f64,
     /// A sample is an inlier when its edge lies within this many full-resolution pixels.
     pub inlier_px: f64,
@@ -213,8 +214,8 @@ pub struct RefineConfig {
     /// paper preset) while its distance is off by centimetres, so a fitted tilt follows the
     /// wrong foreshortened length (3 degrees: axis error 1.31 -> 2.99 degrees median).
     /// The CLI's stereo stages after the fit (photometric ends, rims, two-view contour fit) use
-    /// it too for these seeds (session 9; they used `ground_tilt_sigma_deg`, and the stereo
-    /// axis p90 on three calibration stereo sets went 2.56 -> 1.24 deg). It assumes the tubes
+    /// it too for these seeds (instead of `ground_tilt_sigma_deg`: the stereo axis p90 on
+    /// three calibration stereo sets went 2.56 -> 1.24 deg). It assumes the tubes
     /// lie parallel to the given ground plane: raise it on sloped terrain.
     pub mask_seed_tilt_sigma_deg: f64,
     /// [`Refiner::refine`], mask and box seeds: `end_limb_weight` used (instead of
@@ -254,8 +255,8 @@ pub struct RefineConfig {
     /// axis, and brought 440 that much closer. 0.4 px was chosen on the generated validation
     /// sets (val9, val21; both cross-split models, learned seeds, `--ground auto`) among 0.25,
     /// 0.3, 0.4, 0.5, 0.6 and 1 by the mean axis p90: mono axis median / p90 from 0.52-0.55 /
-    /// 2.48-3.35 deg to 0.41-0.52 / 1.87-2.08 deg (`refine/README.md`, session 8). Session 14,
-    /// once mask seeds start at their seal end ([`RefineConfig::mask_seed_end_colour_corr`]):
+    /// 2.48-3.35 deg to 0.41-0.52 / 1.87-2.08 deg (`docs/design/0015-mask-axis-prior.md`).
+    /// Once mask seeds start at their seal end ([`RefineConfig::mask_seed_end_colour_corr`]):
     /// 0.5 px, chosen the same way among 0.3, 0.4, 0.5, 0.6, 0.8 and 1 on the seed-21 set and
     /// val9 (no-tags model, mono + ground): mean axis p90 1.31 -> 1.16 deg.
     pub mask_axis_sigma_px: f64,
@@ -269,11 +270,11 @@ pub struct RefineConfig {
     /// placed on the ground like a learned mask's axis and refined with the mask seeds'
     /// settings ([`seed_policy::SeedKind::MaskOrBox`]; the template's silhouette is its mask),
     /// instead of by the template's own distance and tilt, which are those of the nearest
-    /// template view. Session 17, Line2D detections on two generated validation sets (seed-21
+    /// template view. Line2D detections on two generated validation sets (seed-21
     /// no-tags half, val9), mono + `--ground auto`: tubes matched within 50 mm 338 -> 836 of
     /// 1425 and 117 -> 351 of 363, axis median / p90 2.04 / 17.4 -> 0.73 / 5.7 deg and 3.05 /
     /// 29.6 -> 0.69 / 8.7 deg, perpendicular median 16.7 -> 5.2 mm and 17.2 -> 5.4 mm
-    /// (`refine/README.md`, session 17). Off: the template pose is the seed.
+    /// (`docs/design/0019-line2d-seeds-by-image-axis.md`). Off: the template pose is the seed.
     pub template_seed_as_image_axis: bool,
     /// [`Refiner::refine_with_colour`], mask seeds in a colour (or grey) image: the mask's image
     /// axis is turned end to end before the fit when its colours put the gold seal section
@@ -281,8 +282,8 @@ pub struct RefineConfig {
     /// correlation in [−1, 1]); a value above 1 disables. A mask axis has no end of its own,
     /// and a fit started with the ends swapped lays the wider seal and foot sections over the
     /// wrong parts of the tube and settles turned and displaced along the axis before the end
-    /// decision ([`Refiner::refine_seed`]) can swap them back. See `refine/README.md` (session
-    /// 14) for the choice.
+    /// decision ([`Refiner::refine_seed`]) can swap them back. See
+    /// `docs/design/0016-seal-end-from-colour.md` for the choice.
     pub mask_seed_end_colour_corr: f64,
 }
 

@@ -41,11 +41,11 @@ impl Default for MaskSnap {
     /// `r = 4 px`, `τ = 0.6`: chosen on two generated validation sets (val9, val21; never the
     /// test splits), learned masks IoU-snapped to mono-refined poses: segm AP50 0.726 -> 0.770
     /// and 0.810 -> 0.824, AR 0.312 -> 0.458 and 0.346 -> 0.500.
-    /// `kept_erode_px = 1` (session 8), chosen on the same sets with the two cross-split RGB
+    /// `kept_erode_px = 1`, chosen on the same sets with the two cross-split RGB
     /// models among 0, 1, 1.5, 2, 2.5 px (disk radii; 1 is the 4-neighbour step): the unsnapped
     /// masks cover 1.1-1.5 times the tube's area at the median; mean of snapped AP50 and AR over
     /// both sets and models 0.7350 -> 0.7398.
-    /// `min_area_px = 500` (session 9), chosen on the same sets and models among 0, 300, 400,
+    /// `min_area_px = 500`, chosen on the same sets and models among 0, 300, 400,
     /// 450, 500, 600, 700 and 800 px: among masks under 600 px, snapping lost 12 matches at
     /// IoU 0.5 and won 3; mean snapped AP50 0.8819 -> 0.8896 and AR 0.6006 -> 0.6021 (a plateau
     /// from 450 to 700 px).

@@ -1,5 +1,5 @@
 //! The stereo stages around the fit, on core types (no rectification or matching here: the
-//! caller rectifies the pair and runs SGM, see DESIGN.md's crate graph):
+//! caller rectifies the pair and runs SGM; this crate depends on `tubeloc-core` alone):
 //! - per-region stereo points ([`StereoRegion`], [`region_points`]) for [`crate::Scene::stereo_points`];
 //! - the scene depth map ([`depth_map`]) for [`crate::Scene::depth`];
 //! - after the fit, the photometric / rims stage ([`photo_refine`]) on a [`RectifiedPair`].

@@ -26,7 +26,7 @@
 //! distance, from every covered pixel, is better than the edges'), and with a ground plane the
 //! tilt `(n·a)/σ_θ`. The foot / seal limbs are left out by default (`end_limb_weight = 0`).
 //!
-//! Measured (refine/README.md): the fit lowers the stereo medians (axis, perpendicular and
+//! Measured (design record 0020): the fit lowers the stereo medians (axis, perpendicular and
 //! centre error) but leaves the axis p90 where it was: a tilt error of a few degrees moves the
 //! ends' disparity by only ~0.2-0.3 px, and from such a start the edges (like the rims) often
 //! hold the tilt where it is; the photometric stage sees it better.

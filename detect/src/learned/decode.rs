@@ -490,7 +490,7 @@ mod tests {
         let inst = decode(&pred, &DecodeConfig::default());
         assert_eq!(inst.len(), 2);
         assert!(inst[0].axis.centre_px[1] < 100.0 && inst[0].score > inst[1].score, "{:?}", inst.iter().map(|i| (i.score, i.axis.centre_px)).collect::<Vec<_>>());
-        // The session-3 score (peak x mean fg) ranks them the other way round.
+        // A peak x mean fg score ranks them the other way round.
         let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..DecodeConfig::default() };
         let inst = decode(&pred, &old);
         assert!(inst[0].axis.centre_px[1] > 100.0, "{:?}", inst.iter().map(|i| (i.score, i.axis.centre_px)).collect::<Vec<_>>());

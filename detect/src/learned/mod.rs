@@ -1,7 +1,8 @@
 //! The learned tube segmenter: a small CNN trained from scratch on CPU (candle).
 //!
-//! See `README.md` beside this file for the framework probe (candle vs burn) and the figures
-//! behind the choice. Pipeline: [`preprocess`] (gray + box filter by default) →
+//! See `README.md` beside this file (maintainer guide) and
+//! `docs/design/0003-candle-with-own-convolution.md` for the choice of candle.
+//! Pipeline: [`preprocess`] (gray + box filter by default) →
 //! [`net::TubeNet`] (stride-4 foreground, centre heatmap, axis angle, half-length) →
 //! [`decode`] (instances with mask, score and [`tubeloc_core::AxisSeed`]). Training:
 //! [`augment`] crops, [`targets`], [`train::Trainer`]; weights: [`model::LearnedModel`]
