@@ -41,6 +41,14 @@ pub struct DetectArgs {
     /// External COCO results to pass through (`--method external`).
     #[arg(long)]
     pub results: Option<PathBuf>,
+    /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up, metres) for the learned
+    /// detector's working scale (with `--camera`); dataset images use their own `ground`.
+    #[arg(long, allow_hyphen_values = true)]
+    pub ground: Option<String>,
+    /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
+    /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
+    #[arg(long, default_value = "1:4")]
+    pub range_m: String,
     /// Output detections (JSON list of COCO results with seeds).
     #[arg(long)]
     pub out: PathBuf,
@@ -74,7 +82,9 @@ pub fn run(args: DetectArgs) -> Result<()> {
                 }
                 None => Default::default(),
             };
-            crate::cmd_detect_learned::run_learned(&model, &images, &cfg)?
+            let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
+            let scales = crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_deref(), band)?;
+            crate::cmd_detect_learned::run_learned(&model, &images, &scales, &cfg)?
         }
         Method::External => {
             let results = args.results.as_deref().context("--method external needs --results FILE")?;

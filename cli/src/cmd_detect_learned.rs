@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{AxisSeed, BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation, TubeDetection};
-use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel};
+use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
 
 /// One output entry: a COCO result with the detection's seed fields.
 #[derive(Serialize)]
@@ -77,8 +77,45 @@ pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -
     }
 }
 
-/// Runs the learned model over images; returns the output entries.
-pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
+/// Parses a ground plane "nx,ny,nz,d" (`n·X = d`, camera frame, metres): four finite numbers
+/// and a non-zero normal; returns the unit normal and `d` scaled with it.
+pub fn parse_ground(s: &str) -> Result<(nalgebra::Vector3<f64>, f64)> {
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--ground {s:?}: expected four comma-separated numbers nx,ny,nz,d"))?;
+    if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
+        bail!("--ground {s:?}: expected four finite comma-separated numbers nx,ny,nz,d");
+    }
+    let n = nalgebra::Vector3::new(v[0], v[1], v[2]);
+    if n.norm() < 1e-9 {
+        bail!("--ground {s:?}: the normal (nx, ny, nz) is zero");
+    }
+    Ok((n / n.norm(), v[3] / n.norm()))
+}
+
+/// The working scale of each image ([`tubeloc_detect::scale`]): from each dataset image's
+/// `camera` and `ground`, or for one image from `--camera` and `--ground`; 1 without a camera
+/// or with the band "off".
+pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera: Option<&Path>, ground: Option<&str>, band: Option<tubeloc_detect::scale::RangeBand>) -> Result<Vec<f64>> {
+    let Some(band) = band else { return Ok(vec![1.0; images.len()]) };
+    if let Some(d) = dataset {
+        let ann = d.join("annotations.json");
+        let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+        let by_id: std::collections::HashMap<u64, &tubeloc_core::CocoImage> = ds.images.iter().map(|im| (im.id, im)).collect();
+        return Ok(images.iter().map(|(id, _)| by_id.get(id).map_or(1.0, |im| tubeloc_detect::learned::dataset::image_working_scale(im, band))).collect());
+    }
+    let ground = ground.map(parse_ground).transpose()?;
+    let Some(cam) = camera else {
+        if ground.is_some() {
+            bail!("--ground needs --camera (the working scale comes from the camera's focal length)");
+        }
+        return Ok(vec![1.0; images.len()]);
+    };
+    let cam = tubeloc_core::CameraModel::load_json(cam).with_context(|| format!("reading camera {}", cam.display()))?;
+    Ok(vec![tubeloc_detect::scale::working_scale(&cam, ground, band); images.len()])
+}
+
+/// Runs the learned model over images, each at its working scale (`scales[i]`, 1 = as it
+/// is); returns the output entries.
+pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], scales: &[f64], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
     if !model_path.exists() {
         bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model_path.display());
     }
@@ -87,10 +124,14 @@ pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], cfg: &DecodeCon
     pb.set_style(ProgressStyle::with_template("detect {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
     let per: Vec<Vec<DetectionOut>> = images
         .iter()
-        .map(|(id, p)| {
-            let rgb = image::open(p).with_context(|| format!("reading image {}", p.display()))?.to_rgb8();
-            let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-            let inst = detect_rgb(&model, rgb.as_raw(), w, h, cfg).with_context(|| format!("detecting in {}", p.display()))?;
+        .zip(scales)
+        .map(|((id, p), &s)| {
+            let input = tubeloc_detect::input::load(p).map_err(|e| anyhow::anyhow!("reading image {e}"))?;
+            let (w, h) = (input.width, input.height);
+            if let Some(warn) = input.info.warning() {
+                pb.suspend(|| eprintln!("warning: {}: {warn}", p.display()));
+            }
+            let inst = detect_rgb_at_scale(&model, &input.rgb, w, h, s, cfg).with_context(|| format!("detecting in {}", p.display()))?;
             pb.inc(1);
             Ok(inst
                 .into_par_iter()

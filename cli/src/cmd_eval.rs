@@ -48,6 +48,21 @@ pub struct EvalArgs {
     /// Output folder for metrics.json (and breakdown.json / breakdown.md with --by).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Fit the probability that a detection is a tube from its score (Platt scaling on the
+    /// detections' outcomes at IoU 0.5) and write it, with the threshold for
+    /// `--target-precision`, to this JSON file (for `locate --calibration`).
+    #[arg(long, value_name = "OUT.json")]
+    calibrate: Option<PathBuf>,
+    /// Precision the `--calibrate` threshold is chosen for.
+    #[arg(long, default_value_t = 0.95)]
+    target_precision: f64,
+    /// Check a fitted calibration on these (held-out) detections: reliability diagram,
+    /// expected calibration error, precision and recall at its threshold.
+    #[arg(long, value_name = "CAL.json", conflicts_with = "calibrate")]
+    calibration: Option<PathBuf>,
+    /// Free text stored in the `--calibrate` file's `fitted_on`.
+    #[arg(long, default_value = "")]
+    fitted_on: String,
     /// Break the metrics down by an image attribute (terrain, time, split...) or an annotation
     /// attribute (occlusion, dust...); repeatable.
     #[arg(long = "by", num_args = 1..)]
@@ -76,6 +91,42 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         breakdowns.push(breakdown::breakdown(&evaluator, &gt, attr).with_context(|| format!("breakdown by {attr}"))?);
     }
     spinner.finish_and_clear();
+    if !(args.target_precision > 0.0 && args.target_precision <= 1.0) {
+        anyhow::bail!("--target-precision {} must be in (0, 1]", args.target_precision);
+    }
+    let calibration = match (&args.calibrate, &args.calibration) {
+        (Some(_), _) => {
+            let outcomes: Vec<(f64, bool)> = evaluator.outcomes_at_iou50().into_iter().map(|(_, s, y)| (s, y)).collect();
+            let (a, b) = tubeloc_eval::calibration::fit_platt(&outcomes);
+            let mut c = tubeloc_core::ScoreCalibration { a, b, threshold: 1.0, target_precision: args.target_precision, fitted_on: args.fitted_on.clone() };
+            let probs: Vec<(f64, bool)> = outcomes.iter().map(|&(s, y)| (c.probability(s), y)).collect();
+            c.threshold = tubeloc_eval::calibration::choose_threshold(&probs, args.target_precision);
+            Some(c)
+        }
+        (None, Some(p)) => {
+            let c: tubeloc_core::ScoreCalibration = tubeloc_core::files::read_json(p).with_context(|| format!("reading calibration {}", p.display()))?;
+            c.validate().map_err(|e| anyhow::anyhow!("calibration {}: {e}", p.display()))?;
+            Some(c)
+        }
+        (None, None) => None,
+    };
+    let calibration_report = calibration.as_ref().map(|c| {
+        let outcomes = evaluator.outcomes_at_iou50();
+        let probs: Vec<(f64, bool)> = outcomes.iter().map(|&(_, s, y)| (c.probability(s), y)).collect();
+        let (bins, ece) = tubeloc_eval::calibration::reliability(&probs, 10);
+        let kept: Vec<&(f64, bool)> = probs.iter().filter(|p| p.0 >= c.threshold).collect();
+        let tp = kept.iter().filter(|p| p.1).count();
+        let gt_n = gt.annotations.iter().filter(|a| a.iscrowd == 0).count();
+        let precision = if kept.is_empty() { f64::NAN } else { tp as f64 / kept.len() as f64 };
+        let recall = if gt_n == 0 { f64::NAN } else { tp as f64 / gt_n as f64 };
+        let fp_per_image = (kept.len() - tp) as f64 / gt.images.len().max(1) as f64;
+        eprintln!("calibration a {:.4} b {:.4} threshold {:.4}: ECE {ece:.4}; kept {} of {} detections, precision {precision:.4}, recall {recall:.4}, false positives per image {fp_per_image:.4}", c.a, c.b, c.threshold, kept.len(), probs.len());
+        serde_json::json!({"calibration": c, "ece": ece, "bins": bins, "kept": kept.len(), "detections": probs.len(), "precision_at_threshold": precision, "recall_at_threshold": recall, "false_positives_per_image": fp_per_image})
+    });
+    if let (Some(c), Some(p)) = (&calibration, &args.calibrate) {
+        write_json(p, c).with_context(|| format!("writing {}", p.display()))?;
+        eprintln!("calibration -> {}", p.display());
+    }
 
     print!("{}", result.summary_text());
     let table = breakdown::markdown_table(&breakdowns);
@@ -93,6 +144,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             write_json(&p, &breakdown::to_json(&breakdowns)).with_context(|| format!("writing {}", p.display()))?;
             let p = out.join("breakdown.md");
             write_atomic(&p, table.as_bytes()).with_context(|| format!("writing {}", p.display()))?;
+        }
+        if let Some(cr) = &calibration_report {
+            let p = out.join("calibration.json");
+            write_json(&p, cr).with_context(|| format!("writing {}", p.display()))?;
         }
         let report = report_of(&args, &result, &breakdowns);
         let md = tubeloc_eval::report::write_eval_report(out, &report).with_context(|| format!("writing the report in {}", out.display()))?;

@@ -6,6 +6,7 @@
 //! and +z along the axis toward the seal end.
 
 pub mod camera;
+pub mod confidence;
 pub mod detection;
 pub mod error;
 pub mod coco;
@@ -20,6 +21,7 @@ pub mod tube;
 pub mod tube_pose;
 
 pub use camera::{CameraModel, Distortion};
+pub use confidence::ScoreCalibration;
 pub use coco::{CocoAnnotation, CocoCategory, CocoDataset, CocoImage, CocoResult, Segmentation};
 pub use detection::{AxisSeed, DetectionSource, TubeDetection};
 pub use error::CoreError;

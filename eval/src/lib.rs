@@ -24,6 +24,7 @@
 //! # Ok::<(), tubeloc_eval::coco_eval::EvalError>(())
 //! ```
 pub mod breakdown;
+pub mod calibration;
 pub mod coco_eval;
 pub mod pose;
 pub mod pose_bop;

@@ -179,6 +179,9 @@ fn is_grey(rgb: &[u8]) -> bool {
     rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
 }
 
+/// Narrowest tube body placed in a composite, pixels (the body is 17.1 mm across).
+pub const MIN_TUBE_WIDTH_PX: f64 = 3.5;
+
 /// Renders composite `k` (0-based) of `view`; returns `Ok(None)` when the tubes do not fit in
 /// the range band of this view (e.g. a frame looking over the horizon).
 pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) -> Result<Option<RealSample>, SynthError> {
@@ -194,7 +197,12 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     let tube_gain = rng.random_range(cfg.tube_gain.0..=cfg.tube_gain.1);
     let seed: u64 = rng.random();
     let (n, d) = view.ground();
-    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some(cfg.range_m), sun_cam: view.sun_cam, tube_gain };
+    // No tube narrower than MIN_TUBE_WIDTH_PX: the band ends where the body gets that thin.
+    let far = cfg.range_m.1.min((view.camera.fx * view.camera.fy).sqrt() * 0.0171 / MIN_TUBE_WIDTH_PX);
+    if far <= cfg.range_m.0 {
+        return Ok(None);
+    }
+    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some((cfg.range_m.0, far)), sun_cam: view.sun_cam, tube_gain };
     let c = match composite(img.as_raw(), &view.camera, &cc) {
         Ok(c) => c,
         Err(SynthError::Invalid(m)) if m.starts_with("could place only") => return Ok(None),

@@ -70,6 +70,29 @@ impl CocoEvaluator {
         &self.prep.img_ids
     }
 
+    /// Every detection's outcome at IoU 0.5 (area "all", at most 100 detections per image,
+    /// COCO's greedy matching): `(image_id, score, true positive)`. Detections matched to
+    /// ignored (crowd) ground truth are left out. This is what a score's calibration is fitted
+    /// on ([`crate::calibration`]).
+    pub fn outcomes_at_iou50(&self) -> Vec<(u64, f64, bool)> {
+        let p = &self.prep;
+        let k_n = p.cat_ids.len();
+        let iou_thrs = iou_thresholds();
+        let all = AREA_RNGS[0];
+        let mut out = Vec::new();
+        for (i, &img) in p.img_ids.iter().enumerate() {
+            for k in 0..k_n {
+                let Some(e) = matching::evaluate_cell(&p.cells[i * k_n + k], all, &iou_thrs, &|_| false) else { continue };
+                for (d, &score) in e.dt_scores.iter().enumerate() {
+                    if !e.dt_ignore[d] {
+                        out.push((img, score, e.dt_matched[d] != 0));
+                    }
+                }
+            }
+        }
+        out
+    }
+
     /// Evaluates all images.
     pub fn evaluate(&self) -> EvalResult {
         self.evaluate_with(&|_| true, &|_| false)
