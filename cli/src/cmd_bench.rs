@@ -40,6 +40,8 @@ pub enum Part {
     Fullres,
     /// Tag-pair ground truth on the with-tags split against the exact poses.
     Tags,
+    /// Real imagery: composites on real test frames and false positives on real negatives.
+    Real,
 }
 
 /// Arguments of `tubeloc bench`.
@@ -75,6 +77,16 @@ pub struct BenchArgs {
     /// Scenes of the synthetic stereo set.
     #[arg(long, default_value_t = 4)]
     pub stereo_scenes: usize,
+    /// The real rover data (`MANIFEST.tsv`, `backgrounds/`, `negatives_val/`, `with_cameras/`)
+    /// for the real stage.
+    #[arg(long, default_value = "../shared/data/real_mars")]
+    pub real_data: PathBuf,
+    /// Real stage: use at most this many frames per set (default: all).
+    #[arg(long)]
+    pub real_frames: Option<usize>,
+    /// Real stage: score calibration JSON (default: the one beside the model).
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
     /// Redo every stage even if recorded as done.
     #[arg(long)]
     pub fresh: bool,
@@ -374,7 +386,18 @@ pub fn run(a: BenchArgs) -> Result<()> {
         st.run("fullres", &[fdir.join("poses.json")], || fullres(&dataset, &fdir))?;
     }
 
-    // 8. Report.
+    // 8. Real imagery.
+    if !a.skip.contains(&Part::Real) {
+        let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+        let calibration = crate::cmd_detect_learned::load_calibration(a.calibration.as_deref(), &model)?;
+        let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4 };
+        st.run("real", &[out.join("real").join("report.md")], || {
+            crate::cmd_bench_real::run(&stage, &out)?;
+            Ok(json!({}))
+        })?;
+    }
+
+    // 9. Report.
     let report = write_report(&out, &st, &n_img)?;
     eprintln!("\nbench finished in {:.0} s (this run); report: {}", t0.elapsed().as_secs_f64(), report.display());
     Ok(())
@@ -489,6 +512,9 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
     if let Some(Value::Object(t)) = st.result("tags") {
         let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n");
         r += &crate::figures::tag_table(t);
+    }
+    if let Ok(real) = std::fs::read_to_string(out.join("real").join("report.md")) {
+        let _ = writeln!(r, "\n{real}");
     }
     let _ = writeln!(r, "\n## Timings and memory\n\n| stage | wall s | peak RSS of the bench process so far, MiB |\n|---|---|---|");
     for (name, v) in &st.done {

@@ -31,6 +31,26 @@ pub fn default_model() -> PathBuf {
     candidates.into_iter().find(|p| p.exists()).unwrap_or(built)
 }
 
+/// The score calibration of a model: `path` when given, else `<model>.calibration.json` beside
+/// the model (`data/models/tubenet.calibration.json` for the shipped one), else the identity
+/// (probability = score, threshold 0.5) with a warning.
+pub fn load_calibration(path: Option<&Path>, model: &Path) -> Result<tubeloc_core::ScoreCalibration> {
+    let p = match path {
+        Some(p) => p.to_path_buf(),
+        None => {
+            let beside = model.with_extension("calibration.json");
+            if !beside.exists() {
+                eprintln!("warning: no score calibration beside {} ({}): probabilities are the raw scores", model.display(), beside.display());
+                return Ok(tubeloc_core::ScoreCalibration::identity());
+            }
+            beside
+        }
+    };
+    let c: tubeloc_core::ScoreCalibration = tubeloc_core::files::read_json(&p).with_context(|| format!("reading score calibration {}", p.display()))?;
+    c.validate().map_err(|e| anyhow::anyhow!("score calibration {}: {e}", p.display()))?;
+    Ok(c)
+}
+
 /// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`), by id;
 /// images without one are left out.
 pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {

@@ -22,6 +22,7 @@ mod cmd_train;
 mod cmd_demo;
 mod cmd_locate;
 mod cmd_bench;
+mod cmd_bench_real;
 mod memory;
 mod figures;
 

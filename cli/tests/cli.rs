@@ -143,7 +143,7 @@ fn bench_runs_on_a_tiny_dataset_and_resumes() {
     let s = Scene::new("2", "384");
     let out = s.path("bench");
     let (ds, lib) = (s.path("dataset"), s.path("lib.tlt"));
-    let args = ["bench", "--dataset", p(&ds), "--templates", p(&lib), "--skip", "learned,poses,stereo,fullres,tags", "--out", p(&out)];
+    let args = ["bench", "--dataset", p(&ds), "--templates", p(&lib), "--skip", "learned,poses,stereo,fullres,tags,real", "--out", p(&out)];
     ok(&args);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("Table I: Line2D"), "{report}");

@@ -1,0 +1,167 @@
+//! The real stage of `tubeloc bench`: detectors and `locate` on real rover frames.
+//!
+//! (a) Composites on the real **test** frames (split by sol, `tubeloc synth real`): grey
+//!     frames with their PDS camera models (ground and sun of the frame), and colour Mastcam
+//!     frames under the documented assumed mast view ([`AssumedView::MAST`]); learned
+//!     detection at the working scale, COCO AP50 / AR, and the reliability of the calibrated
+//!     probability on these held-out detections.
+//! (b) False positives per frame on `negatives_val` (real frames without tubes, never used for
+//!     training or choosing settings): learned detections kept at the calibration's
+//!     threshold, under an assumed camera per frame kind (grey Navcam: 45 degree field of view,
+//!     1.9 m high, 30 degrees down; colour: the mast view).
+//! Results go to `<out>/real/report.md` and `<out>/real/summary.json`.
+
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tubeloc_core::{files, CocoDataset, ScoreCalibration};
+use tubeloc_detect::learned::DecodeConfig;
+use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
+use tubeloc_synth::real_set::AssumedView;
+
+/// Options of the real stage.
+pub struct RealStage {
+    /// The real data folder (`../shared/data/real_mars`).
+    pub data: PathBuf,
+    /// Learned model.
+    pub model: PathBuf,
+    /// Score calibration (probability and threshold).
+    pub calibration: ScoreCalibration,
+    /// Keep at most this many frames per set (small runs, e.g. in CI).
+    pub frames: Option<usize>,
+    /// Composites per grey test frame.
+    pub per_grey_frame: u32,
+}
+
+/// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
+fn negative_view(grey: bool) -> AssumedView {
+    if grey {
+        AssumedView { hfov_deg: 45.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 }
+    } else {
+        AssumedView::MAST
+    }
+}
+
+fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<()> {
+    if out.join("annotations.json").exists() {
+        return Ok(());
+    }
+    crate::cmd_synth_real::run(crate::cmd_synth_real::RealArgs {
+        data: data.to_path_buf(),
+        split: split.parse().map_err(|e: String| anyhow::anyhow!(e))?,
+        kind,
+        per_view,
+        tubes: "1:4".into(),
+        range_m: "1.5:5".into(),
+        min_size,
+        randomize: Some(false),
+        limit: frames,
+        seed,
+        force: true,
+        out: out.to_path_buf(),
+    })
+}
+
+/// Detects with the learned model at each image's working scale and evaluates: returns the
+/// summary numbers.
+fn detect_eval(set: &Path, model: &Path, cal: &ScoreCalibration, out: &Path) -> Result<Value> {
+    std::fs::create_dir_all(out)?;
+    let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
+    let band = Some(tubeloc_detect::scale::RangeBand::default());
+    let scales = crate::cmd_detect_learned::working_scales(&images, Some(set), None, None, band)?;
+    let t = Instant::now();
+    let dets = crate::cmd_detect_learned::run_learned(model, &images, &scales, &DecodeConfig::default())?;
+    let ms = t.elapsed().as_secs_f64() * 1e3 / images.len().max(1) as f64;
+    let path = out.join("detections.json");
+    files::write_json(&path, &dets)?;
+    let gt = CocoDataset::load(&set.join("annotations.json"))?;
+    let dt = tubeloc_core::coco::load_results(&path, &gt)?;
+    let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
+    let r = ev.evaluate();
+    let probs: Vec<(f64, bool)> = ev.outcomes_at_iou50().iter().map(|&(_, s, y)| (cal.probability(s), y)).collect();
+    let (bins, ece) = tubeloc_eval::calibration::reliability(&probs, 10);
+    let kept: Vec<_> = probs.iter().filter(|p| p.0 >= cal.threshold).collect();
+    let tp = kept.iter().filter(|p| p.1).count();
+    let n_gt = gt.annotations.len();
+    Ok(json!({
+        "images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8],
+        "ms_per_image": ms, "ece": ece, "reliability": bins,
+        "kept": kept.len(), "precision_at_threshold": if kept.is_empty() { f64::NAN } else { tp as f64 / kept.len() as f64 },
+        "recall_at_threshold": tp as f64 / n_gt.max(1) as f64,
+    }))
+}
+
+/// Learned detections kept at the threshold on each real negative frame.
+fn negatives(data: &Path, model: &Path, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+    let dir = data.join("negatives_val");
+    let mut paths: Vec<PathBuf> = Vec::new();
+    for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
+        let sub = sub?.path();
+        if sub.is_dir() {
+            for f in std::fs::read_dir(&sub)? {
+                let f = f?.path();
+                if f.extension().is_some_and(|e| e == "png" || e == "jpg" || e == "jpeg") {
+                    paths.push(f);
+                }
+            }
+        }
+    }
+    paths.sort();
+    if let Some(n) = frames {
+        // Spread the subset over the folders.
+        let step = (paths.len() as f64 / n.max(1) as f64).max(1.0);
+        paths = (0..n.min(paths.len())).map(|i| paths[(i as f64 * step) as usize].clone()).collect();
+    }
+    let m = tubeloc_detect::learned::LearnedModel::load(model).with_context(|| format!("loading {}", model.display()))?;
+    let mut per_frame = Vec::new();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+    for p in &paths {
+        let input = tubeloc_detect::input::load(p).map_err(|e| anyhow::anyhow!(e))?;
+        let view = negative_view(input.info.grey).view(p.clone(), input.width as u32, input.height as u32, None, &mut rng);
+        let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
+        let found = tubeloc_detect::learned::detect_rgb_at_scale(&m, &input.rgb, input.width, input.height, s, &DecodeConfig::default())?;
+        let kept = found.iter().filter(|i| cal.probability(i.score) >= cal.threshold).count();
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": input.info.grey, "scale": s, "detections": found.len(), "kept": kept}));
+    }
+    let n = per_frame.len().max(1) as f64;
+    let kept: u64 = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum();
+    let all: u64 = per_frame.iter().filter_map(|f| f["detections"].as_u64()).sum();
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept as f64 / n, "detections_per_frame": all as f64 / n, "per_frame": per_frame}))
+}
+
+/// Runs the real stage into `<out>/real`; returns the report's markdown section.
+pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
+    if !stage.data.join("MANIFEST.tsv").exists() {
+        bail!("{}: no MANIFEST.tsv (the real data folder, ../shared/data/real_mars)", stage.data.display());
+    }
+    let dir = out.join("real");
+    std::fs::create_dir_all(&dir)?;
+    let grey_set = dir.join("test_grey");
+    let colour_set = dir.join("test_colour");
+    composite_set(&stage.data, "test", crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, 500, stage.frames, 22, &grey_set)?;
+    composite_set(&stage.data, "test", crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &colour_set)?;
+    let grey = detect_eval(&grey_set, &stage.model, &stage.calibration, &dir.join("learned_grey"))?;
+    let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
+    let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
+    let summary = json!({"model": stage.model, "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "negatives": neg});
+    files::write_json(&dir.join("summary.json"), &summary)?;
+    let mut md = String::new();
+    writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the test sols (`tubeloc synth real --split test`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.display()).ok();
+    writeln!(md, "| set | images | tubes | AP50 | AR | ms / image | precision / recall at P >= {:.3} | ECE |", stage.calibration.threshold).ok();
+    writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|").ok();
+    for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
+        writeln!(md, "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.3} / {:.3} | {:.3} |", v["images"], v["tubes"], v["ap50"].as_f64().unwrap_or(f64::NAN), v["ar"].as_f64().unwrap_or(f64::NAN), v["ms_per_image"].as_f64().unwrap_or(f64::NAN), v["precision_at_threshold"].as_f64().unwrap_or(f64::NAN), v["recall_at_threshold"].as_f64().unwrap_or(f64::NAN), v["ece"].as_f64().unwrap_or(f64::NAN)).ok();
+    }
+    writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it).\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(md, "Reliability of the calibrated probability on the grey test detections (bins of 0.1: mean predicted / observed / count):\n").ok();
+    if let Some(bins) = grey["reliability"].as_array() {
+        for b in bins.iter().filter(|b| b["count"].as_u64().unwrap_or(0) > 0) {
+            writeln!(md, "- [{:.1}, {:.1}): {:.3} / {:.3} / {}", b["lo"].as_f64().unwrap_or(0.0), b["hi"].as_f64().unwrap_or(0.0), b["mean_probability"].as_f64().unwrap_or(f64::NAN), b["frequency"].as_f64().unwrap_or(f64::NAN), b["count"]).ok();
+        }
+    }
+    files::write_atomic(&dir.join("report.md"), md.as_bytes())?;
+    Ok(md)
+}

@@ -1,0 +1,97 @@
+//! Real imagery: composite sets on real rover frames split by sol, and the bench's real stage
+//! at a small size. These need `../shared/data/real_mars` beside the repository.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tubeloc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
+}
+
+fn ok(args: &[&str]) -> Output {
+    let o = tubeloc(args);
+    assert!(o.status.success(), "tubeloc {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr));
+    o
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+fn real_data() -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
+    assert!(d.join("MANIFEST.tsv").exists(), "{} is missing: these tests need ../shared/data beside the repository", d.display());
+    d
+}
+
+const TEST_SOLS: [i64; 10] = [53, 344, 372, 688, 729, 3192, 3423, 5086, 5104, 5105];
+
+#[test]
+fn test_composites_use_the_frames_geometry_and_only_test_sols() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("grey");
+    ok(&["synth", "real", "--data", p(&real_data()), "--split", "test", "--kind", "grey", "--per-view", "1", "--limit", "2", "--tubes", "2:2", "--out", p(&out)]);
+    let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("annotations.json")).unwrap()).unwrap();
+    let images = gt["images"].as_array().unwrap();
+    assert!(!images.is_empty());
+    for im in images {
+        assert_eq!(im["geometry"], "pds", "{im}");
+        assert_eq!(im["grey"], true);
+        let sol = im["sol"].as_i64().unwrap();
+        assert!(TEST_SOLS.iter().any(|t| (t - sol).abs() <= 1), "sol {sol} is not a test sol");
+        // The ground lies below the camera: n up, n.X = d with d = -height < 0.
+        let d = im["ground"]["d"].as_f64().unwrap();
+        assert!((-2.5..-0.5).contains(&d), "{d}");
+        let file = out.join("images").join(im["file_name"].as_str().unwrap());
+        let decoded = image::open(&file).unwrap();
+        assert_eq!(decoded.color(), image::ColorType::L8, "grey frames give grey composites");
+    }
+    let anns = gt["annotations"].as_array().unwrap();
+    assert_eq!(anns.len(), 2 * images.len());
+    for a in anns {
+        // Tubes lie 1.5-5 m from the camera.
+        let t = &a["T_cam_tube"]["translation"];
+        let r = (0..3).map(|k| t[k].as_f64().unwrap().powi(2)).sum::<f64>().sqrt();
+        assert!((1.4..5.2).contains(&r), "tube at {r} m");
+    }
+}
+
+#[test]
+fn training_backgrounds_hold_no_frame_of_a_validation_or_test_sol() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("train");
+    ok(&["synth", "real", "--data", p(&real_data()), "--split", "train", "--per-view", "1", "--limit", "25", "--out", p(&out)]);
+    let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("annotations.json")).unwrap()).unwrap();
+    let images = gt["images"].as_array().unwrap();
+    assert!(images.len() >= 12, "{} composites", images.len());
+    for im in images {
+        assert_eq!(im["geometry"], "assumed");
+        if let Some(sol) = im["sol"].as_i64() {
+            assert!(![38, 100].iter().chain(TEST_SOLS.iter()).any(|t| (t - sol).abs() <= 1), "training frame of sol {sol}");
+        }
+    }
+    let bad = tubeloc(&["synth", "real", "--data", p(&real_data()), "--split", "dev", "--out", p(&dir.path().join("x"))]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown split"));
+}
+
+#[test]
+fn bench_real_stage_runs_at_a_small_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("dataset");
+    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
+    let out = dir.path().join("bench");
+    ok(&["bench", "--dataset", p(&ds), "--skip", "line2d,learned,poses,stereo,fullres,tags", "--real-data", p(&real_data()), "--real-frames", "2", "--out", p(&out)]);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("## Real imagery"), "{report}");
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/summary.json")).unwrap()).unwrap();
+    for set in ["grey", "colour"] {
+        let v = &summary["learned"][set];
+        assert!(v["images"].as_u64().unwrap() >= 1, "{set}: {v}");
+        let ap = v["ap50"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&ap), "{set}: AP50 {ap}");
+    }
+    assert_eq!(summary["negatives"]["frames"], 2);
+    assert!(summary["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
+}
