@@ -1,8 +1,9 @@
 //! Detection on real photos (AprilRobotics test data) against the reference C detector's
-//! corners. Skips when ../shared/data is absent.
+//! corners (`test/test_detection.c`: pjpeg decoding, decimation 1, no edge refinement).
+//! Skips with a message when ../shared/data is absent, fails then under CI.
 
 use std::path::{Path, PathBuf};
-use tubeloc_calib::{detect::C_TO_OPENCV_PX, DetectorConfig, TagDetector};
+use tubeloc_calib::{detect::C_TO_OPENCV_PX, DetectorConfig, TagDetection, TagDetector};
 
 fn data_dir() -> Option<PathBuf> {
     let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/apriltag/apriltag_test_data");
@@ -22,56 +23,227 @@ fn parse_reference(text: &str) -> Vec<(u32, [[f64; 2]; 4])> {
         .collect()
 }
 
-#[test]
-fn corners_agree_with_reference_detector_on_real_photos() {
-    let Some(dir) = data_dir() else {
-        eprintln!("skipping: ../shared/data/apriltag/apriltag_test_data is absent");
-        return;
-    };
-    let mut det = TagDetector::new(DetectorConfig::default()).unwrap();
-    let (mut matched, mut total) = (0usize, 0usize);
-    let (mut errs, mut sx, mut sy) = (Vec::new(), 0.0, 0.0);
-    let mut names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "jpg")).collect();
+/// Real photos in `dir` as (name, image-crate grey, pjpeg grey, reference).
+struct Photo {
+    name: String,
+    image_crate: image::GrayImage,
+    pjpeg: image::GrayImage,
+    reference: Vec<(u32, [[f64; 2]; 4])>,
+}
+
+/// Decodes a JPEG with the C library's own decoder (pjpeg, compiled into apriltag-sys), first
+/// component, as the reference test program (`test/test_detection.c`) does.
+fn decode_pjpeg(bytes: &[u8]) -> image::GrayImage {
+    #[repr(C)]
+    struct Pjpeg {
+        _p: [u8; 0],
+    }
+    extern "C" {
+        fn pjpeg_create_from_buffer(buf: *mut u8, buflen: std::ffi::c_int, flags: u32, error: *mut std::ffi::c_int) -> *mut Pjpeg;
+        fn pjpeg_destroy(pj: *mut Pjpeg);
+        fn pjpeg_to_u8_baseline(pj: *mut Pjpeg) -> *mut apriltag_sys::image_u8;
+    }
+    let mut buf = bytes.to_vec();
+    let mut err = 0;
+    // SAFETY: `buf` outlives the call; the decoder copies what it keeps. The returned image and
+    // decoder state are freed below after copying the pixels out row by row.
+    unsafe {
+        let pj = pjpeg_create_from_buffer(buf.as_mut_ptr(), buf.len() as _, 0, &mut err);
+        assert!(!pj.is_null() && err == 0, "pjpeg error {err}");
+        let im = pjpeg_to_u8_baseline(pj);
+        let (w, h, s) = ((*im).width as usize, (*im).height as usize, (*im).stride as usize);
+        let mut out = image::GrayImage::new(w as u32, h as u32);
+        for y in 0..h {
+            let row = std::slice::from_raw_parts((*im).buf.add(y * s), w);
+            out.as_mut()[y * w..(y + 1) * w].copy_from_slice(row);
+        }
+        apriltag_sys::image_u8_destroy(im);
+        pjpeg_destroy(pj);
+        out
+    }
+}
+
+fn load_photos(dir: &Path) -> Vec<Photo> {
+    let mut names: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "jpg")).collect();
     names.sort();
-    assert_eq!(names.len(), 3);
-    for img_path in names {
-        let reference = parse_reference(&std::fs::read_to_string(img_path.with_extension("txt")).unwrap());
-        let img = image::open(&img_path).unwrap().to_luma8();
-        let found = det.detect_image(&img).unwrap();
-        total += reference.len();
-        for (id, rc) in &reference {
-            // Reference corners are in the C convention (pixel centres at +0.5); ours at integers.
-            let err = |d: &tubeloc_calib::TagDetection, k: usize| (d.corners[k][0] - C_TO_OPENCV_PX - rc[k][0], d.corners[k][1] - C_TO_OPENCV_PX - rc[k][1]);
-            let best = found.iter().filter(|d| d.id == *id).min_by(|a, b| {
-                let ea: f64 = (0..4).map(|k| { let e = err(a, k); e.0.hypot(e.1) }).sum();
-                let eb: f64 = (0..4).map(|k| { let e = err(b, k); e.0.hypot(e.1) }).sum();
-                ea.total_cmp(&eb)
-            });
-            let Some(d) = best else { continue };
+    names
+        .iter()
+        .map(|p| Photo {
+            name: p.file_name().unwrap().to_string_lossy().into_owned(),
+            image_crate: image::open(p).unwrap().to_luma8(),
+            pjpeg: decode_pjpeg(&std::fs::read(p).unwrap()),
+            reference: parse_reference(&std::fs::read_to_string(p.with_extension("txt")).unwrap()),
+        })
+        .collect()
+}
+
+/// Agreement of one detector setting with the reference over all photos.
+#[derive(Debug, Default)]
+struct Agreement {
+    reference: usize,
+    found: usize,
+    matched: usize,
+    /// Per-corner distances of matched tags (after `shift`), sorted.
+    errs: Vec<f64>,
+    mean: (f64, f64),
+}
+
+impl Agreement {
+    fn quantile(&self, q: f64) -> f64 {
+        self.errs[((self.errs.len() - 1) as f64 * q).round() as usize]
+    }
+}
+
+/// Runs `config` on every photo (pjpeg or image-crate pixels) and matches detections to the
+/// reference by id, the nearest within 2 px per corner; `shift` is added to the reference.
+fn agreement(photos: &[Photo], config: &DetectorConfig, pjpeg: bool, shift: f64) -> Agreement {
+    let mut det = TagDetector::new(config.clone()).unwrap();
+    let mut a = Agreement::default();
+    let (mut sx, mut sy) = (0.0, 0.0);
+    for p in photos {
+        let found = det.detect_image(if pjpeg { &p.pjpeg } else { &p.image_crate }).unwrap();
+        a.found += found.len();
+        a.reference += p.reference.len();
+        for (id, rc) in &p.reference {
+            let err = |d: &TagDetection, k: usize| (d.corners[k][0] - rc[k][0] - shift, d.corners[k][1] - rc[k][1] - shift);
+            let sum = |d: &TagDetection| -> f64 { (0..4).map(|k| { let e = err(d, k); e.0.hypot(e.1) }).sum() };
+            let Some(d) = found.iter().filter(|d| d.id == *id).min_by(|x, y| sum(x).total_cmp(&sum(y))) else { continue };
             let e: Vec<(f64, f64)> = (0..4).map(|k| err(d, k)).collect();
             if e.iter().all(|(x, y)| x.hypot(*y) < 2.0) {
-                matched += 1;
+                a.matched += 1;
                 for (x, y) in e {
-                    errs.push(x.hypot(y));
+                    a.errs.push(x.hypot(y));
                     sx += x;
                     sy += y;
                 }
             }
         }
-        assert!(found.len() <= reference.len() + 1, "{}: {} detections vs {} reference", img_path.display(), found.len(), reference.len());
     }
-    errs.sort_by(f64::total_cmp);
-    let n = errs.len() as f64;
-    let (median, p90) = (errs[errs.len() / 2], errs[errs.len() * 9 / 10]);
-    let (mx, my) = (sx / n, sy / n);
-    eprintln!("real photos: {matched}/{total} reference tags matched; per-corner error median {median:.3} px, 90th percentile {p90:.3} px, mean offset ({mx:.3}, {my:.3}) px");
-    // The reference was decoded with the C library's own JPEG decoder (pjpeg) and a newer
-    // AprilTag release; the image crate decodes slightly different pixels, so corners scatter by
-    // a few tenths of a pixel. Tolerance: all but 2 tags matched, median corner error < 0.5 px,
-    // and no systematic offset (|mean| < 0.15 px per axis, which checks the pixel convention).
-    assert!(matched + 2 >= total, "{matched}/{total}");
-    assert!(median < 0.5 && p90 < 1.0, "median {median} p90 {p90}");
-    assert!(mx.abs() < 0.15 && my.abs() < 0.15, "mean offset {mx} {my}");
+    a.errs.sort_by(f64::total_cmp);
+    let n = a.errs.len().max(1) as f64;
+    a.mean = (sx / n, sy / n);
+    a
+}
+
+
+/// The measurement behind docs/design/0026: every combination of JPEG decoder, encoding, edge
+/// refinement and decimation against the reference corners, as a markdown table.
+/// `cargo test --release -p tubeloc-calib --test detect_real -- --ignored --nocapture settings_table`
+#[test]
+#[ignore = "measurement (prints a table); needs ../shared/data"]
+fn settings_table_on_real_photos() {
+    let dir = data_dir().expect("../shared/data/apriltag/apriltag_test_data");
+    let photos = load_photos(&dir);
+    println!("| decoder | encoding | refine_edges | decimate | found | reference matched | median px | p90 px | max px | corners <= 0.1 px | mean offset px |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for pjpeg in [false, true] {
+        for linearize_srgb in [true, false] {
+            for refine_edges in [true, false] {
+                for decimation in [1.0, 2.0] {
+                    let cfg = DetectorConfig { linearize_srgb, refine_edges, decimation, ..Default::default() };
+                    let a = agreement(&photos, &cfg, pjpeg, C_TO_OPENCV_PX);
+                    let within = a.errs.iter().filter(|e| **e <= 0.1).count() as f64 / a.errs.len().max(1) as f64;
+                    println!(
+                        "| {} | {} | {} | {} | {} | {}/{} | {:.3} | {:.3} | {:.3} | {:.0} % | ({:+.3}, {:+.3}) |",
+                        if pjpeg { "pjpeg" } else { "image crate" },
+                        if linearize_srgb { "srgb" } else { "linear" },
+                        if refine_edges { "on" } else { "off" },
+                        decimation,
+                        a.found,
+                        a.matched,
+                        a.reference,
+                        a.quantile(0.5),
+                        a.quantile(0.9),
+                        a.quantile(1.0),
+                        within * 100.0,
+                        a.mean.0,
+                        a.mean.1
+                    );
+                }
+            }
+        }
+    }
+    // Pixel-centre convention of the reference: the C settings of the reference program on its
+    // own decoder's pixels, with and without the half-pixel shift.
+    let cfg = DetectorConfig { linearize_srgb: false, refine_edges: false, ..Default::default() };
+    for shift in [C_TO_OPENCV_PX, 0.0] {
+        let a = agreement(&photos, &cfg, true, shift);
+        println!("reference shifted by {shift:+.1} px: {}/{} matched, median {:.4} px, max {:.4} px, mean offset ({:+.4}, {:+.4})", a.matched, a.reference, a.quantile(0.5), a.quantile(1.0), a.mean.0, a.mean.1);
+    }
+    // Decoder difference: grey levels of the image crate vs pjpeg.
+    for p in &photos {
+        let d: Vec<i32> = p.image_crate.as_raw().iter().zip(p.pjpeg.as_raw()).map(|(a, b)| *a as i32 - *b as i32).collect();
+        let differ = d.iter().filter(|v| **v != 0).count();
+        let maxd = d.iter().map(|v| v.abs()).max().unwrap();
+        println!("{}: image crate vs pjpeg grey levels differ in {:.1} % of pixels, max |diff| {maxd}", p.name, 100.0 * differ as f64 / d.len() as f64);
+    }
+}
+
+/// The photos, or `None` (with a message) when ../shared/data is absent; under CI the data
+/// must be there.
+fn photos_or_skip(test: &str) -> Option<Vec<Photo>> {
+    match data_dir() {
+        Some(dir) => Some(load_photos(&dir)),
+        None if std::env::var_os("CI").is_some() => panic!("CI is set but ../shared/data/apriltag/apriltag_test_data is absent (see ../shared/data/README.md)"),
+        None => {
+            eprintln!("\n*** SKIPPED {test}: ../shared/data/apriltag/apriltag_test_data is absent ***\n");
+            None
+        }
+    }
+}
+
+fn report(label: &str, a: &Agreement) -> f64 {
+    let within = a.errs.iter().filter(|e| **e <= 0.1).count() as f64 / a.errs.len() as f64;
+    eprintln!(
+        "{label}: {} found, {}/{} reference tags matched; per-corner error median {:.3} px, 90th percentile {:.3} px, max {:.3} px, {:.0} % within 0.1 px, mean offset ({:+.3}, {:+.3}) px",
+        a.found,
+        a.matched,
+        a.reference,
+        a.quantile(0.5),
+        a.quantile(0.9),
+        a.quantile(1.0),
+        within * 100.0,
+        a.mean.0,
+        a.mean.1
+    );
+    within
+}
+
+/// The default detector on the reference's own pixels (the C library's JPEG decoder) finds
+/// every reference tag at the reference's corners: the settings and the pixel convention
+/// (reference + `C_TO_OPENCV_PX`) are the reference's.
+#[test]
+fn default_detector_reproduces_the_reference_on_its_pixels() {
+    let Some(photos) = photos_or_skip("default_detector_reproduces_the_reference_on_its_pixels") else { return };
+    assert_eq!(photos.len(), 3);
+    let a = agreement(&photos, &DetectorConfig::default(), true, C_TO_OPENCV_PX);
+    let within = report("real photos, pjpeg pixels, default settings", &a);
+    // Measured: 47 found, 47/47 matched, median 0.000 px, max 0.141 px, 99 % within 0.1 px
+    // (the one corner beyond is the AprilTag 3.2 vs newer release difference).
+    assert!(a.found >= a.reference && a.matched == a.reference, "{a:?}");
+    assert!(a.quantile(0.5) < 0.01 && a.quantile(1.0) < 0.15 && within >= 0.95, "{a:?}");
+    assert!(a.mean.0.abs() < 0.01 && a.mean.1.abs() < 0.01, "mean offset {:?}", a.mean);
+}
+
+/// The default detector on the image crate's decoding of the same JPEGs (what `tubeloc calib
+/// detect` sees). The decoders differ by up to 14 grey levels in 11-18 % of the pixels, which
+/// loses one of the 47 tags (not a decoding threshold: `max_hamming 3` does not bring it back)
+/// and moves a tenth of the corners by more than 0.1 px.
+#[test]
+fn default_detector_agrees_with_the_reference_on_image_crate_pixels() {
+    let Some(photos) = photos_or_skip("default_detector_agrees_with_the_reference_on_image_crate_pixels") else { return };
+    let a = agreement(&photos, &DetectorConfig::default(), false, C_TO_OPENCV_PX);
+    let within = report("real photos, image crate pixels, default settings", &a);
+    // Measured: 46 found, 46/47 matched, median 0.001 px, 90th percentile 0.089 px, max
+    // 0.305 px, 92 % within 0.1 px, no false detection.
+    assert!(a.matched + 1 >= a.reference && a.found == a.matched, "{a:?}");
+    assert!(a.quantile(0.5) < 0.01 && a.quantile(0.9) <= 0.1 && a.quantile(1.0) < 0.35 && within >= 0.9, "{a:?}");
+    assert!(a.mean.0.abs() < 0.02 && a.mean.1.abs() < 0.02, "mean offset {:?}", a.mean);
+    // The previous defaults lose tags on real photos: linearizing as sRGB (the old CLI
+    // default) finds 26 of 47, edge refinement moves the corners by a median 0.33 px.
+    let srgb = agreement(&photos, &DetectorConfig { linearize_srgb: true, ..Default::default() }, false, C_TO_OPENCV_PX);
+    let refined = agreement(&photos, &DetectorConfig { refine_edges: true, ..Default::default() }, false, C_TO_OPENCV_PX);
+    assert!(srgb.found < a.found && refined.quantile(0.5) > 0.2, "srgb {srgb:?} refined {refined:?}");
 }
 
 #[test]
@@ -84,3 +256,4 @@ fn bad_options_and_buffers_are_rejected() {
     // A blank image has no tags.
     assert!(det.detect_raw(64, 64, 64, &[128u8; 64 * 64]).unwrap().is_empty());
 }
+

@@ -358,7 +358,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         let tdir = out.join("tags");
         st.run("tags", &[tdir.join("annotations.json")], || {
             write_split(&dataset, "with-tags", a.images_per_split, &tdir)?;
-            crate::run_words(&words(&["calib", "groundtruth", "--dataset", &s(&tdir)]))?;
+            crate::run_words(&words(&["calib", "groundtruth", "--dataset", &s(&tdir), "--encoding", "srgb", "--refine-edges"]))?;
             crate::figures::tag_pose_errors(&tdir.join("annotations.json"))
         })?;
     }

@@ -29,19 +29,25 @@ pub struct DetectorArgs {
     /// Detector threads.
     #[arg(long, default_value_t = 2)]
     pub threads: u8,
-    /// Disable edge refinement.
+    /// Snap quad edges to strong gradients (off by default, as in the reference detector's
+    /// corners; can help when decimating).
     #[arg(long)]
+    pub refine_edges: bool,
+    /// Accepted for old scripts: edge refinement is off unless --refine-edges.
+    #[arg(long, hide = true, conflicts_with = "refine_edges")]
     pub no_refine_edges: bool,
-    /// Encoding of the images: `srgb` (camera PNG/JPEG, linearized before detection, which
-    /// removes a ~0.3 px inward corner bias) or `linear` (raw sensor data, used as is).
-    #[arg(long, default_value = "srgb", value_parser = ["srgb", "linear"])]
+    /// Encoding of the images: `linear` (camera photos and raw data, 8-bit values used as
+    /// they are, as the reference C detector does; chosen on real photos, docs/design/0026) or
+    /// `srgb` (images rendered in linear light and sRGB-encoded, like `tubeloc synth` scenes:
+    /// linearized first, which removes a ~0.3 px inward corner bias there).
+    #[arg(long, default_value = "linear", value_parser = ["srgb", "linear"])]
     pub encoding: String,
 }
 
 impl DetectorArgs {
     fn detector(&self) -> Result<TagDetector> {
         let families = self.family.iter().map(|f| TagFamily::from_name(f.trim())).collect::<Result<Vec<_>, _>>()?;
-        Ok(TagDetector::new(DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: !self.no_refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)
+        Ok(TagDetector::new(DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: self.refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)
     }
 }
 
@@ -252,4 +258,26 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
         bail!("no mount tag found in any image of {}", Path::new(&a.dataset).display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cmd {
+        #[command(flatten)]
+        detector: DetectorArgs,
+    }
+
+    /// The command line's detector defaults are the library's (docs/design/0026); only the
+    /// thread count differs, which does not change the detections.
+    #[test]
+    fn detector_defaults_are_the_library_defaults() {
+        let det = Cmd::parse_from(["calib"]).detector.detector().unwrap();
+        assert_eq!(*det.config(), DetectorConfig { threads: 2, ..Default::default() });
+        let det = Cmd::parse_from(["calib", "--encoding", "srgb", "--refine-edges"]).detector.detector().unwrap();
+        assert!(det.config().linearize_srgb && det.config().refine_edges);
+    }
 }

@@ -64,7 +64,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 2. The paper's ground truth: tube poses from the AprilTag pair on the tagged tube.
     // A scene may show no tag pair (tags hidden or out of the crops): reported, not fatal.
-    if let Err(e) = step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset)]), &mut log) {
+    if let Err(e) = step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset), "--encoding", "srgb", "--refine-edges"]), &mut log) {
         eprintln!("demo: no tag-pair ground truth: {e:#}");
     }
     let tags = crate::figures::tag_pose_errors(&gt_path)?;

@@ -165,7 +165,7 @@ fn calib_groundtruth_adds_tag_pair_poses_close_to_the_exact_ones() {
     let dir = tempfile::tempdir().unwrap();
     let ds = dir.path().join("dataset");
     ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.5", "--resolution", "768", "--seed", "3", "--out", p(&ds)]);
-    let o = ok(&["calib", "groundtruth", "--dataset", p(&ds)]);
+    let o = ok(&["calib", "groundtruth", "--dataset", p(&ds), "--encoding", "srgb", "--refine-edges"]);
     let gt: Value = serde_json::from_str(&std::fs::read_to_string(ds.join("annotations.json")).unwrap()).unwrap();
     let mut posed = 0;
     for a in gt["annotations"].as_array().unwrap() {
