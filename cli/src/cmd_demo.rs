@@ -110,18 +110,35 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let rig_path = out.join("rig.json");
     files::write_json(&rig_path, &rig)?;
     let image = dataset.join("images").join(&first.file_name);
-    let mut w = words(&["locate", "--rig", &p(&rig_path), "--image", &p(&image), "--out", &p(&out.join("locate/poses.json"))]);
-    match detectors.last() {
-        Some(("learned", _)) => w.extend(words(&["--detector", "learned", "--model", &p(&model)])),
-        _ => w.extend(words(&["--detector", "line2d", "--templates", &p(&lib)])),
-    }
-    // The image's nominal ground, as `tubeloc refine --ground auto` takes it: "nx,ny,nz,d".
-    if let Some(g) = crate::cmd_refine::ground_of(first).with_context(|| gt_path.display().to_string())? {
-        w.extend(["--ground".to_string(), format!("{},{},{},{}", g.normal.x, g.normal.y, g.normal.z, g.offset)]);
-    }
-    eprintln!("\n== demo: locate: tubeloc {}", w.join(" "));
+    let (detector, model_arg, templates) = match detectors.last() {
+        Some(("learned", _)) => (crate::cmd_locate::Detector::Learned, Some(model.clone()), None),
+        _ => (crate::cmd_locate::Detector::Line2d, None, Some(lib.clone())),
+    };
+    // The image's nominal ground, as `tubeloc refine --ground auto` takes it (normalized as
+    // `--ground nx,ny,nz,d` is).
+    let ground = match crate::cmd_refine::ground_of(first).with_context(|| gt_path.display().to_string())? {
+        Some(g) => Some(tubeloc_core::GroundPlane::new(g.normal, g.offset).with_context(|| format!("{}: image {}: ground", gt_path.display(), first.id))?),
+        None => None,
+    };
+    let locate = crate::cmd_locate::LocateArgs {
+        rig: rig_path.clone(),
+        image,
+        right: None,
+        camera_name: None,
+        pair: None,
+        detector,
+        model: model_arg,
+        templates,
+        results: None,
+        results_images: None,
+        ground,
+        up: None,
+        out: out.join("locate/poses.json"),
+        overlay: None,
+    };
+    eprintln!("\n== demo: locate on {}", locate.image.display());
     let t = Instant::now();
-    crate::run_words(&w).context("demo step \"locate\"")?;
+    crate::cmd_locate::run(locate).context("demo step \"locate\"")?;
     log.push(("locate (first image)".into(), t.elapsed().as_secs_f64()));
 
     let report = build_report(&a, &log, &detectors.iter().map(|d| d.0).collect::<Vec<_>>(), &tags, out);
