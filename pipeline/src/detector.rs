@@ -92,7 +92,7 @@ impl TubeDetector for Line2dTubeDetector {
         let rgb = image.to_rgb8();
         let (w, h) = (rgb.width() as usize, rgb.height() as usize);
         let dets = self.detector.detect(rgb.as_raw(), w, h, Some(camera)).map_err(|e| PipelineError::Detect(e.to_string()))?;
-        Ok(dets.iter().map(|d| canonical(d.to_tube_detection(image_id))).collect())
+        Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
     }
 }
 

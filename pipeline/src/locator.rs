@@ -96,7 +96,8 @@ pub struct LocateOutput {
     pub tubes: Vec<LocatedTube>,
     /// Rejected detections, best score first.
     pub rejected: Vec<RejectedTube>,
-    /// The detections that seeded the refinement, as the detector gave them.
+    /// The detections that seeded the refinement, as the detector gave them (the refinement
+    /// takes each in its file form, [`crate::detector::canonical`]).
     pub detections: Vec<TubeDetection>,
     /// How many converged poses were merged into a better pose of the same tube.
     pub merged: usize,
@@ -243,7 +244,10 @@ impl Locator {
         let detections = self.detect(input.image)?;
         let detect_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let refined = self.refine_items(input, &px, &detections)?;
+        // Each detection is refined in the form it has in a detections file, so that `locate`
+        // and `detect` + `refine` give the same poses.
+        let seeds: Vec<TubeDetection> = detections.iter().cloned().map(crate::detector::canonical).collect();
+        let refined = self.refine_items(input, &px, &seeds)?;
         let refine_s = t1.elapsed().as_secs_f64();
         let mut poses = refined.poses;
         poses.sort_by(|x, y| y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score)));
