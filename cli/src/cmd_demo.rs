@@ -12,6 +12,8 @@ use clap::Args;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
+use crate::cmd_refine::GroundArg;
 use tubeloc_core::{files, CameraModel, CocoDataset, Pose};
 
 /// Arguments of `tubeloc demo`.
@@ -94,7 +96,14 @@ pub fn run(a: DemoArgs) -> Result<()> {
         step(&format!("detect ({det})"), w, &mut log)?;
         step(&format!("evaluate detections ({det})"), words(&["eval", "--gt", &p(&gt_path), "--dt", &p(&dets), "--out", &p(&out.join(format!("eval_{det}")))]), &mut log)?;
         let (poses, seeds) = (out.join(format!("{det}_poses.json")), out.join(format!("{det}_seeds.json")));
-        step(&format!("refine ({det} seeds)"), words(&["refine", "--dataset", &p(&dataset), "--detections", &p(&dets), "--ground", "auto", "--out", &p(&poses), "--seeds-out", &p(&seeds)]), &mut log)?;
+        // Refinement through the pipeline, as `tubeloc refine --dataset D --detections F --ground auto`.
+        let mut job = DatasetJob::new(dataset.clone(), DatasetSeeds::Detections(dets.clone()), poses.clone());
+        job.ground = Some(GroundArg::Auto);
+        job.seeds_out = Some(seeds.clone());
+        eprintln!("\n== demo: refine ({det} seeds) in {}", dataset.display());
+        let t = Instant::now();
+        refine_dataset(&job).with_context(|| format!("demo step \"refine ({det} seeds)\""))?;
+        log.push((format!("refine ({det} seeds)"), t.elapsed().as_secs_f64()));
         pose_inputs.push(format!("{det}-coarse={}", p(&seeds)));
         pose_inputs.push(format!("{det}-refined={}", p(&poses)));
     }

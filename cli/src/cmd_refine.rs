@@ -38,7 +38,7 @@ use tubeloc_pipeline::{CameraSelection, ExternalDetections, GroundPlane, LocateI
 use tubeloc_refine::silhouette::MaskSnap;
 use tubeloc_refine::RefineConfig;
 
-mod dataset;
+pub(crate) mod dataset;
 pub(crate) use dataset::ground_of;
 
 /// `--ground`: a plane "nx,ny,nz,d", or "auto" (dataset mode: each image's nominal ground).
@@ -228,6 +228,16 @@ pub struct RefineArgs {
     pub(crate) tube: Option<PathBuf>,
 }
 
+/// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks were
+/// snapped.
+pub(crate) fn write_snapped(path: Option<&std::path::Path>, snapped: &[(TubeDetection, bool)]) -> Result<()> {
+    let Some(path) = path else { return Ok(()) };
+    let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
+    files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
+    Ok(())
+}
+
 /// The refiner's configuration and tube model of the arguments (config and tube model files).
 fn refine_parts(args: &RefineArgs) -> Result<(RefineConfig, TubeModel)> {
     let config = match &args.config {
@@ -250,15 +260,6 @@ impl RefineArgs {
         Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement, kept_erode_px: self.snap_kept_erode_px, min_area_px: self.snap_min_area_px })
     }
 
-    /// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks
-    /// were snapped.
-    pub(crate) fn write_snapped(&self, snapped: &[(TubeDetection, bool)]) -> Result<()> {
-        let Some(path) = &self.snapped_out else { return Ok(()) };
-        let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
-        files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
-        Ok(())
-    }
     /// The pipeline settings of the arguments (refiner, stereo, stages after the fit, snapping).
     pub(crate) fn settings(&self) -> Result<LocatorSettings> {
         let (refine, tube) = refine_parts(self)?;
@@ -365,7 +366,7 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
                 (d, s)
             })
             .collect();
-        args.write_snapped(&snapped)?;
+        write_snapped(args.snapped_out.as_deref(), &snapped)?;
     }
     if let Some(o) = &args.overlay {
         let png = tubeloc_pipeline::overlay::png_bytes(&locator.overlay(&image, &poses)).context("cannot encode PNG")?;

@@ -70,16 +70,93 @@ fn parse_pair(s: &str) -> Result<(f64, f64)> {
     if v.len() != 2 || v.iter().any(|x| !x.is_finite() || *x < 0.0) {
         bail!("--gt-seeds {s:?}: expected two non-negative numbers MM,DEG");
     }
-    Ok((v[0] * 1e-3, v[1]))
+    Ok((v[0], v[1]))
 }
 
-/// Runs the dataset mode.
+/// Where the seeds of a dataset refinement come from.
+#[derive(Clone, Debug)]
+pub(crate) enum DatasetSeeds {
+    /// A detections file (COCO results with seeds), matched to the images by image id.
+    Detections(PathBuf),
+    /// The annotations' exact poses perturbed by `pos_mm` (uniform per coordinate) and
+    /// `deg` (axis turn), random seed `seed`, for tubes at least `min_visible` visible.
+    Gt { pos_mm: f64, deg: f64, seed: u64, min_visible: f64 },
+}
+
+/// A refinement over a COCO dataset directory (`tubeloc refine --dataset`), as `demo` and
+/// `bench` run it without going through command-line words.
+#[derive(Clone, Debug)]
+pub(crate) struct DatasetJob {
+    /// The dataset directory (annotations.json + images/).
+    pub dataset: PathBuf,
+    /// Only images of this split.
+    pub split: Option<String>,
+    /// Only the first N images.
+    pub max_images: Option<usize>,
+    /// The seeds.
+    pub seeds: DatasetSeeds,
+    /// The camera the detections' template poses were computed with, if not each image's.
+    pub detections_camera: Option<PathBuf>,
+    /// The ground plane: one plane, or each image's nominal ground.
+    pub ground: Option<GroundArg>,
+    /// Add the stereo term with each image's right image.
+    pub stereo: bool,
+    /// Fit to the seeds' mask boundaries instead of the image edges.
+    pub mask_term: bool,
+    /// Refiner and stage settings.
+    pub settings: tubeloc_pipeline::LocatorSettings,
+    /// Output poses.
+    pub out: PathBuf,
+    /// Output seeds (as poses).
+    pub seeds_out: Option<PathBuf>,
+    /// Output detections with snapped masks.
+    pub snapped_out: Option<PathBuf>,
+}
+
+impl DatasetJob {
+    /// The job with the shipped settings: refine every image of `dataset` from `seeds`, poses
+    /// to `out`.
+    pub fn new(dataset: PathBuf, seeds: DatasetSeeds, out: PathBuf) -> Self {
+        DatasetJob { dataset, split: None, max_images: None, seeds, detections_camera: None, ground: None, stereo: false, mask_term: false, settings: Default::default(), out, seeds_out: None, snapped_out: None }
+    }
+}
+
+/// Runs the dataset mode of the arguments.
 pub fn run(args: &RefineArgs) -> Result<()> {
-    let dir = args.dataset.as_ref().context("--dataset")?;
+    let seeds = match (&args.detections, &args.gt_seeds) {
+        (Some(p), None) => DatasetSeeds::Detections(p.clone()),
+        (None, Some(spec)) => {
+            let (pos_mm, deg) = parse_pair(spec)?;
+            DatasetSeeds::Gt { pos_mm, deg, seed: args.seed, min_visible: args.min_visible }
+        }
+        _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
+    };
+    let job = DatasetJob {
+        dataset: args.dataset.clone().context("--dataset")?,
+        split: args.split.clone(),
+        max_images: args.max_images,
+        seeds,
+        detections_camera: args.detections_camera.clone(),
+        ground: args.ground,
+        stereo: args.stereo,
+        mask_term: args.mask_term,
+        settings: args.settings()?,
+        out: args.out.clone(),
+        seeds_out: args.seeds_out.clone(),
+        snapped_out: args.snapped_out.clone(),
+    };
+    refine_dataset(&job)
+}
+
+/// Runs a dataset refinement: images in parallel, each through the pipeline's
+/// [`refine_frame`]; writes the poses (and seeds, snapped detections) and reports the fit time
+/// per seed on stderr.
+pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
+    let dir = &args.dataset;
     let ann = dir.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-    let mut settings = args.settings()?;
-    if args.snapped_out.is_some() && args.detections.is_none() {
+    let mut settings = args.settings.clone();
+    if args.snapped_out.is_some() && !matches!(args.seeds, DatasetSeeds::Detections(_)) {
         bail!("--snapped-out needs --detections (the masks to snap)");
     }
     let auto_ground = args.ground == Some(GroundArg::Auto);
@@ -104,28 +181,27 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     }
     // Work per image.
     let mut work: BTreeMap<u64, Vec<Work>> = images.iter().map(|im| (im.id, Vec::new())).collect();
-    match (&args.detections, &args.gt_seeds) {
-        (Some(p), None) => {
+    match &args.seeds {
+        DatasetSeeds::Detections(p) => {
             for d in tubeloc_core::detection::read_coco_results(p)? {
                 if let Some(w) = work.get_mut(&d.image_id) {
                     w.push(Work::Detection(d));
                 }
             }
         }
-        (None, Some(spec)) => {
-            let (pos, deg) = parse_pair(spec)?;
+        DatasetSeeds::Gt { pos_mm, deg, seed, min_visible } => {
+            let (pos, deg) = (pos_mm * 1e-3, *deg);
             for a in &ds.annotations {
                 let Some(w) = work.get_mut(&a.image_id) else { continue };
                 let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
                 let Some(v) = a.extra.get("T_cam_tube") else { continue };
-                if vis < args.min_visible {
+                if vis < *min_visible {
                     continue;
                 }
                 let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", ann.display(), a.id))?;
-                w.push(Work::GtSeed(perturbed(&axis_state_of(&t), pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
+                w.push(Work::GtSeed(perturbed(&axis_state_of(&t), pos, deg, seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
             }
         }
-        _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
     }
     let det_camera = match &args.detections_camera {
         Some(p) => Some(CameraModel::load_json(p).with_context(|| format!("detections camera {}", p.display()))?),
@@ -183,7 +259,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
             if let (Ok(dbg), true) = (std::env::var("TUBELOC_DEBUG_STEREO_DIR"), args.stereo) {
                 let pts: Vec<Vec<[f64; 3]>> = refined.stereo_points.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
                 files::write_json(&std::path::Path::new(&dbg).join(format!("{}.json", im.id)), &pts)?;
-                if let (Some(d), true) = (&refined.scene_depth, args.scene_occlusion) {
+                if let (Some(d), true) = (&refined.scene_depth, settings.stages.scene_occlusion) {
                     // The scene depth map as raw little-endian f32 (width x height, NaN unknown).
                     let bytes: Vec<u8> = d.data.iter().flat_map(|v| v.to_le_bytes()).collect();
                     files::write_atomic(&std::path::Path::new(&dbg).join(format!("{}_depth_f32.bin", im.id)), &bytes)?;
@@ -227,7 +303,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     if let Some(s) = &args.seeds_out {
         files::write_json(s, &seeds).with_context(|| format!("writing {}", s.display()))?;
     }
-    args.write_snapped(&snapped)?;
+    super::write_snapped(args.snapped_out.as_deref(), &snapped)?;
     let out: PathBuf = args.out.clone();
     eprintln!(
         "{} images, {} poses ({} converged; failures {:?}) -> {}",
