@@ -2,6 +2,7 @@
 //! ground plane and with a stereo pair.
 
 #[path = "../../refine/tests/common/mod.rs"]
+#[allow(clippy::too_many_arguments)]
 mod common;
 
 use image::{DynamicImage, GrayImage, Luma};
