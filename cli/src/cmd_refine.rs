@@ -10,6 +10,10 @@
 //! the matched terrain beside it (`tubeloc_refine::local_ground`, `--no-local-ground`).
 //! `--overlay` draws the fitted contours (green: converged, red: failed).
 //!
+//! The work (stereo matching, the fits, the stages after them and the snap-or-trim policy of
+//! `--snapped-out`) is the pipeline's ([`tubeloc_pipeline`]: `Locator::refine_frame` for one
+//! image, `refine_frame` per image of a dataset); this module reads and writes the files.
+//!
 //! Dataset mode (`--dataset DIR`, module [`dataset`]): every image of a COCO dataset directory
 //! (optionally one `--split`), each with the camera of its `images[].camera` and, with
 //! `--ground auto`, the nominal ground plane of its `images[].T_world_cam` and
@@ -18,7 +22,7 @@
 //! parallel; one JSON array of poses, each with its `image_id`. With `--stereo` (a
 //! `tubeloc synth stereo` folder) each image's right image (`images[].right_file_name` under
 //! `right/`) and pair geometry (`right_camera`, `T_left_right`) are read, the pair is rectified
-//! and matched with SGM in the tubes' regions (module [`stereo`]); the triangulated points in each
+//! and matched with SGM in the tubes' regions ([`tubeloc_pipeline::stereo`]); the triangulated points in each
 //! detection's mask or box (for `--gt-seeds`: the annotation's mask, standing in for a
 //! segmenter's) feed the stereo term, and after the fit the photometric stage
 //! (`tubeloc_refine::photo`, `--photo-range-mm`) moves both ends of each converged axis along

@@ -78,6 +78,7 @@ pub struct RejectedTube {
 
 /// Wall times of the stages of one [`Locator::locate`] call, seconds.
 #[derive(Clone, Debug, Default, Serialize)]
+#[non_exhaustive]
 pub struct Timings {
     /// Detection.
     pub detect_s: f64,
@@ -91,6 +92,7 @@ pub struct Timings {
 
 /// What [`Locator::locate`] found.
 #[derive(Clone, Debug)]
+#[non_exhaustive]
 pub struct LocateOutput {
     /// Located tubes (converged fits), one per physical tube, best score first.
     pub tubes: Vec<LocatedTube>,
@@ -181,6 +183,8 @@ impl Locator {
     }
 
     /// Detects with this locator's detector (COCO image id 0) and checks the masks' sizes.
+    /// (A detector working at its own pixel scale wraps the detector: it resamples the image
+    /// for the camera and maps its detections back to the image's pixels before they return.)
     pub fn detect(&self, image: &DynamicImage) -> Result<Vec<TubeDetection>> {
         self.check_size(image, "image", &self.camera)?;
         let dets = self.detector.detect(image, &self.camera.model, 0)?;
