@@ -16,6 +16,8 @@
 //!    with its peak memory.
 //! 8. `report.md`: everything above with the paper's figures beside ours.
 
+use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
+use crate::cmd_refine::GroundArg;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::{json, Value};
@@ -288,11 +290,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
                     std::fs::create_dir_all(&dir)?;
                     let (poses, seeds, snapped) = (dir.join("poses.json"), dir.join("seeds.json"), dir.join("snapped.json"));
                     let t = Instant::now();
-                    let mut w = words(&["refine", "--dataset", &s(&split_dir(sp)), "--detections", &s(&dets), "--ground", "auto", "--out", &s(&poses), "--seeds-out", &s(&seeds)]);
-                    if snap {
-                        w.extend(words(&["--snapped-out", &s(&snapped)]));
-                    }
-                    crate::run_words(&w)?;
+                    let mut job = DatasetJob::new(split_dir(sp), DatasetSeeds::Detections(dets.clone()), poses.clone());
+                    job.ground = Some(GroundArg::Auto);
+                    job.seeds_out = Some(seeds.clone());
+                    job.snapped_out = snap.then(|| snapped.clone());
+                    refine_dataset(&job)?;
                     let secs = t.elapsed().as_secs_f64();
                     crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval"))]))?;
                     if snap {
@@ -318,7 +320,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
             let dets = sdir.join("learned_detections.json");
             crate::run_words(&words(&["detect", "--method", "learned", "--model", &s(&model), "--dataset", &s(&set), "--out", &s(&dets)]))?;
             let mut r = serde_json::Map::new();
-            for (name, seed_words) in [("gt_seeds", words(&["--gt-seeds", "10,5"])), ("learned", words(&["--detections", &s(&dets)]))] {
+            let gt_seeds = DatasetSeeds::Gt { pos_mm: 10.0, deg: 5.0, seed: 0, min_visible: 0.5 };
+            for (name, seeds) in [("gt_seeds", gt_seeds), ("learned", DatasetSeeds::Detections(dets.clone()))] {
                 let dir = sdir.join(name);
                 std::fs::create_dir_all(&dir)?;
                 let seeds_of = |ground: bool| dir.join(if ground { "seeds_ground.json" } else { "seeds.json" });
@@ -327,17 +330,17 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 // knows its cameras' height and tilt, and mono seeds need it for their tilt.
                 for (mode, stereo, ground) in [("mono", false, false), ("stereo", true, false), ("mono_ground", false, true), ("stereo_ground", true, true)] {
                     let poses = dir.join(format!("poses_{mode}.json"));
-                    let mut w = words(&["refine", "--dataset", &s(&set), "--out", &s(&poses)]);
-                    w.extend(seed_words.iter().cloned());
+                    let mut job = DatasetJob::new(set.clone(), seeds.clone(), poses.clone());
                     if stereo {
                         // The stereo runs' seeds (depth from the stereo points) are the coarse rows.
-                        w.extend(words(&["--stereo", "--seeds-out", &s(&seeds_of(ground))]));
+                        job.stereo = true;
+                        job.seeds_out = Some(seeds_of(ground));
                     }
                     if ground {
-                        w.extend(words(&["--ground", "auto"]));
+                        job.ground = Some(GroundArg::Auto);
                     }
                     let t = Instant::now();
-                    crate::run_words(&w)?;
+                    refine_dataset(&job)?;
                     r.insert(format!("{name}/{mode}_seconds"), json!(t.elapsed().as_secs_f64()));
                     labels.push(format!("{mode}={}", s(&poses)));
                 }

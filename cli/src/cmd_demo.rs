@@ -12,6 +12,8 @@ use clap::Args;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
+use crate::cmd_refine::GroundArg;
 use tubeloc_core::{files, CameraModel, CocoDataset, Pose};
 
 /// Arguments of `tubeloc demo`.
@@ -94,7 +96,14 @@ pub fn run(a: DemoArgs) -> Result<()> {
         step(&format!("detect ({det})"), w, &mut log)?;
         step(&format!("evaluate detections ({det})"), words(&["eval", "--gt", &p(&gt_path), "--dt", &p(&dets), "--out", &p(&out.join(format!("eval_{det}")))]), &mut log)?;
         let (poses, seeds) = (out.join(format!("{det}_poses.json")), out.join(format!("{det}_seeds.json")));
-        step(&format!("refine ({det} seeds)"), words(&["refine", "--dataset", &p(&dataset), "--detections", &p(&dets), "--ground", "auto", "--out", &p(&poses), "--seeds-out", &p(&seeds)]), &mut log)?;
+        // Refinement through the pipeline, as `tubeloc refine --dataset D --detections F --ground auto`.
+        let mut job = DatasetJob::new(dataset.clone(), DatasetSeeds::Detections(dets.clone()), poses.clone());
+        job.ground = Some(GroundArg::Auto);
+        job.seeds_out = Some(seeds.clone());
+        eprintln!("\n== demo: refine ({det} seeds) in {}", dataset.display());
+        let t = Instant::now();
+        refine_dataset(&job).with_context(|| format!("demo step \"refine ({det} seeds)\""))?;
+        log.push((format!("refine ({det} seeds)"), t.elapsed().as_secs_f64()));
         pose_inputs.push(format!("{det}-coarse={}", p(&seeds)));
         pose_inputs.push(format!("{det}-refined={}", p(&poses)));
     }
@@ -110,18 +119,35 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let rig_path = out.join("rig.json");
     files::write_json(&rig_path, &rig)?;
     let image = dataset.join("images").join(&first.file_name);
-    let mut w = words(&["locate", "--rig", &p(&rig_path), "--image", &p(&image), "--out", &p(&out.join("locate/poses.json"))]);
-    match detectors.last() {
-        Some(("learned", _)) => w.extend(words(&["--detector", "learned", "--model", &p(&model)])),
-        _ => w.extend(words(&["--detector", "line2d", "--templates", &p(&lib)])),
-    }
-    // The image's nominal ground, as `tubeloc refine --ground auto` takes it: "nx,ny,nz,d".
-    if let Some(g) = crate::cmd_refine::ground_of(first).with_context(|| gt_path.display().to_string())? {
-        w.extend(["--ground".to_string(), format!("{},{},{},{}", g.normal.x, g.normal.y, g.normal.z, g.offset)]);
-    }
-    eprintln!("\n== demo: locate: tubeloc {}", w.join(" "));
+    let (detector, model_arg, templates) = match detectors.last() {
+        Some(("learned", _)) => (crate::cmd_locate::Detector::Learned, Some(model.clone()), None),
+        _ => (crate::cmd_locate::Detector::Line2d, None, Some(lib.clone())),
+    };
+    // The image's nominal ground, as `tubeloc refine --ground auto` takes it (normalized as
+    // `--ground nx,ny,nz,d` is).
+    let ground = match crate::cmd_refine::ground_of(first).with_context(|| gt_path.display().to_string())? {
+        Some(g) => Some(tubeloc_core::GroundPlane::new(g.normal, g.offset).with_context(|| format!("{}: image {}: ground", gt_path.display(), first.id))?),
+        None => None,
+    };
+    let locate = crate::cmd_locate::LocateArgs {
+        rig: rig_path.clone(),
+        image,
+        right: None,
+        camera_name: None,
+        pair: None,
+        detector,
+        model: model_arg,
+        templates,
+        results: None,
+        results_images: None,
+        ground,
+        up: None,
+        out: out.join("locate/poses.json"),
+        overlay: None,
+    };
+    eprintln!("\n== demo: locate on {}", locate.image.display());
     let t = Instant::now();
-    crate::run_words(&w).context("demo step \"locate\"")?;
+    crate::cmd_locate::run(locate).context("demo step \"locate\"")?;
     log.push(("locate (first image)".into(), t.elapsed().as_secs_f64()));
 
     let report = build_report(&a, &log, &detectors.iter().map(|d| d.0).collect::<Vec<_>>(), &tags, out);

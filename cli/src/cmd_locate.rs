@@ -1,19 +1,21 @@
 //! `tubeloc locate`: the main job. One image (or a stereo pair) and a rig file in, grasp-ready
 //! tube poses out.
 //!
-//! It chains the same subcommands a user runs — `detect` (learned by default, or Line2D, or
-//! external results), then `refine` (mono, or with stereo when `--right` is given) — and then
-//! adds a grasp frame to every pose, prints one line per tube and writes one JSON document
-//! (schema `tubeloc.locate.v1`, documented in the README). Intermediate files (the camera of the
-//! chosen rig camera, the detections) are kept next to the output as `<stem>.detections.json`
-//! so that a run can be inspected and re-refined.
+//! Reading files, building the detector and writing the outputs happen here; the pipeline itself
+//! (detect -> (stereo) -> refine -> stages after the fit -> duplicate merging -> grasp frames)
+//! is [`tubeloc_pipeline::Locator`]. The run writes one JSON document (schema
+//! `tubeloc.locate.v1`, documented in the README; it also holds the camera model and the
+//! detections that seeded the refinement) and the overlay PNG, each atomically, both before
+//! anything is printed; a failing run writes neither.
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use nalgebra::Vector3;
 use serde::Serialize;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{files, Pose, Rig, TubeAxisPose};
+use tubeloc_core::{files, CameraModel, CocoResult, Pose, Rig, TubeDetection};
+use tubeloc_pipeline::{detector, CameraSelection, ExternalDetections, GroundPlane, LearnedDetector, Line2dTubeDetector, LocateInput, LocatedTube, Locator, LocatorSettings, TubeDetector};
 
 /// Detector that seeds the refinement.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -54,17 +56,23 @@ pub struct LocateArgs {
     /// Line2D template library (`--detector line2d`).
     #[arg(long)]
     pub templates: Option<PathBuf>,
-    /// External COCO results (`--detector external`).
+    /// External COCO results (`--detector external`). Entries are selected by the image's file
+    /// name: by an entry's own "file_name" field, or through --results-images; results for a
+    /// single image id are taken whole.
     #[arg(long)]
     pub results: Option<PathBuf>,
+    /// With --results: a COCO file whose images[] (id, file_name) tell which results belong to
+    /// --image (e.g. the dataset's annotations.json).
+    #[arg(long, requires = "results")]
+    pub results_images: Option<PathBuf>,
     /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres: places seeds on
     /// the ground and gives the grasp approach direction.
     #[arg(long, allow_hyphen_values = true)]
-    pub ground: Option<String>,
+    pub ground: Option<GroundPlane>,
     /// Up direction "ux,uy,uz" in the camera frame for the grasp approach when no --ground is
     /// given (default: -y, i.e. the camera is roughly level).
-    #[arg(long, allow_hyphen_values = true)]
-    pub up: Option<String>,
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_up)]
+    pub up: Option<Vector3<f64>>,
     /// Output poses (JSON, schema tubeloc.locate.v1).
     #[arg(long)]
     pub out: PathBuf,
@@ -73,66 +81,45 @@ pub struct LocateArgs {
     pub overlay: Option<PathBuf>,
 }
 
-/// One located tube: the refined pose plus grasp frames.
-#[derive(Serialize, Debug)]
-pub struct LocatedTube {
-    /// The refined pose (camera frame), flattened into this object.
-    #[serde(flatten)]
-    pub pose: TubeAxisPose,
-    /// Grasp frame in the camera frame (approach +z, fingers close along +y, +x the axis).
-    #[serde(rename = "T_cam_grasp")]
-    pub t_cam_grasp: Pose,
-    /// Grasp frame in the rig frame (`T_rig_cam · T_cam_grasp`).
-    #[serde(rename = "T_rig_grasp")]
-    pub t_rig_grasp: Pose,
+/// `--up ux,uy,uz`: three finite numbers, not all zero (normalized).
+fn parse_up(s: &str) -> std::result::Result<Vector3<f64>, String> {
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("{s:?}: expected three numbers ux,uy,uz"))?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("{s:?}: expected three finite numbers ux,uy,uz"));
+    }
+    let n = Vector3::new(v[0], v[1], v[2]);
+    if n.norm() < 1e-9 {
+        return Err(format!("{s:?}: the vector is zero"));
+    }
+    Ok(n.normalize())
 }
 
 /// The document `tubeloc locate` writes.
 #[derive(Serialize, Debug)]
-pub struct LocateOutput {
+pub struct LocateDoc<'a> {
     /// Schema name and version: `tubeloc.locate.v1`.
     pub schema: &'static str,
     /// The input image.
-    pub image: PathBuf,
+    pub image: &'a Path,
     /// The right image, when stereo was used.
-    pub right_image: Option<PathBuf>,
+    pub right_image: Option<&'a Path>,
     /// Rig camera of `image`.
-    pub camera: String,
+    pub camera: &'a str,
     /// Detector that seeded the refinement.
-    pub detector: String,
+    pub detector: &'a str,
     /// Up direction used for the grasp frames, unit vector in the camera frame.
     pub up_cam: Vector3<f64>,
     /// Pose of the camera in the rig frame.
     #[serde(rename = "T_rig_cam")]
     pub t_rig_cam: Pose,
-    /// Located tubes, best score first; failed fits are kept with `converged: false`.
-    pub tubes: Vec<LocatedTube>,
+    /// Located tubes, best score first, then the rejected detections (`converged: false`).
+    pub tubes: Vec<&'a LocatedTube>,
     /// Run statistics: wall time (s) and peak resident memory (MiB) of the whole run.
     pub run: serde_json::Value,
-}
-
-fn parse_vec3(flag: &str, s: &str) -> Result<Vector3<f64>> {
-    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("{flag} {s:?}: expected three numbers x,y,z"))?;
-    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-        bail!("{flag} {s:?}: expected three finite numbers x,y,z");
-    }
-    let n = Vector3::new(v[0], v[1], v[2]);
-    if n.norm() < 1e-9 {
-        bail!("{flag} {s:?}: the vector is zero");
-    }
-    Ok(n.normalize())
-}
-
-/// The up direction for grasp frames: the ground normal when given, else `--up`, else -y.
-fn up_direction(a: &LocateArgs) -> Result<Vector3<f64>> {
-    if let Some(g) = &a.ground {
-        let first3 = g.splitn(4, ',').take(3).collect::<Vec<_>>().join(",");
-        return parse_vec3("--ground", &first3);
-    }
-    match &a.up {
-        Some(u) => parse_vec3("--up", u),
-        None => Ok(-Vector3::y()),
-    }
+    /// The model of the camera that took `image`.
+    pub camera_model: &'a CameraModel,
+    /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
+    pub detections: &'a [TubeDetection],
 }
 
 fn sidecar(out: &Path, suffix: &str) -> PathBuf {
@@ -140,8 +127,50 @@ fn sidecar(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}"))
 }
 
-fn s(p: &Path) -> String {
-    p.display().to_string()
+/// External results for `--image`: read, selected by the image's file name, converted.
+fn external_detections(a: &LocateArgs, size: (u32, u32)) -> Result<ExternalDetections> {
+    let path = a.results.as_ref().context("--detector external needs --results coco_results.json")?;
+    let text = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let list: Vec<CocoResult> = serde_json::from_slice(&text).with_context(|| format!("{}: not a COCO results list", path.display()))?;
+    let names = match &a.results_images {
+        Some(p) => {
+            let ds = tubeloc_core::CocoDataset::load(p).with_context(|| format!("reading {}", p.display()))?;
+            Some(ds.images.iter().map(|im| (im.id, im.file_name.clone())).collect())
+        }
+        None => None,
+    };
+    let image_name = a.image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let origin = path.display().to_string();
+    let list = detector::select_results_for_image(list, &image_name, names.as_ref(), &origin)?;
+    let dets = list
+        .iter()
+        .enumerate()
+        .map(|(k, r)| detector::detection_from_coco_result(r, Some(size), &format!("{origin}: entry {k} (image {})", r.image_id)))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    Ok(ExternalDetections::new(dets, origin))
+}
+
+/// The detector of the arguments.
+fn detector_of(a: &LocateArgs, size: (u32, u32)) -> Result<Box<dyn TubeDetector>> {
+    Ok(match a.detector {
+        Detector::Learned => {
+            let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+            if !model.exists() {
+                bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model.display());
+            }
+            Box::new(LearnedDetector::load(&model, Default::default())?)
+        }
+        Detector::Line2d => {
+            let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
+            let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).with_context(|| format!("reading {}", lib.display()))?;
+            Box::new(Line2dTubeDetector::new(tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default())?))
+        }
+        Detector::External => Box::new(external_detections(a, size)?),
+    })
+}
+
+fn open_image(p: &Path) -> Result<image::DynamicImage> {
+    image::open(p).with_context(|| format!("cannot read image {}", p.display()))
 }
 
 /// Runs `tubeloc locate`; returns the number of converged tubes.
@@ -153,107 +182,81 @@ pub fn run(a: LocateArgs) -> Result<usize> {
             let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
             Some((l.trim().to_string(), r.trim().to_string()))
         }
-        None => rig.stereo_pairs.first().cloned(),
+        None => None,
     };
-    let cam_name = match (&a.camera_name, &pair) {
-        (Some(n), _) => n.clone(),
-        (None, Some((l, _))) => l.clone(),
-        (None, None) => rig.cameras.first().map(|c| c.name.clone()).with_context(|| format!("{}: the rig has no cameras", a.rig.display()))?,
-    };
-    let rig_cam = rig.camera(&cam_name).with_context(|| format!("{}: no camera named {cam_name:?}", a.rig.display()))?;
-    if a.right.is_some() {
-        match &pair {
-            Some((l, _)) if *l == cam_name => {}
-            Some((l, r)) => bail!("--right: the image's camera {cam_name:?} is not the left camera of pair {l},{r}"),
-            None => bail!("--right: {} has no stereo pair; pass --pair LEFT,RIGHT", a.rig.display()),
-        }
-    }
+    let selection = CameraSelection { camera: a.camera_name.clone(), pair };
     let (w, h) = image::image_dimensions(&a.image).with_context(|| format!("reading {}", a.image.display()))?;
-    if (w, h) != (rig_cam.model.width, rig_cam.model.height) {
-        bail!("{} is {w}x{h} but rig camera {cam_name:?} in {} is {}x{}", a.image.display(), a.rig.display(), rig_cam.model.width, rig_cam.model.height);
+    let detector = detector_of(&a, (w, h))?;
+    let detector_name = detector.name().to_string();
+    let locator = Locator::new(&rig, &selection, detector, LocatorSettings::default()).with_context(|| a.rig.display().to_string())?;
+    let cam = locator.camera().clone();
+    if (w, h) != (cam.model.width, cam.model.height) {
+        bail!("{} is {w}x{h} but rig camera {:?} in {} is {}x{}", a.image.display(), cam.name, a.rig.display(), cam.model.width, cam.model.height);
     }
-    let up = up_direction(&a)?;
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let camera_path = sidecar(&a.out, "camera.json");
-    files::write_json(&camera_path, &rig_cam.model).with_context(|| format!("writing {}", camera_path.display()))?;
+    let image = open_image(&a.image)?;
+    let right = a.right.as_deref().map(open_image).transpose()?;
+    let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground, up: a.up };
+    let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", a.image.display()))?;
 
-    // 1. Detect.
-    let dets = sidecar(&a.out, "detections.json");
-    let mut w = vec!["detect".to_string(), "--image".into(), s(&a.image), "--out".into(), s(&dets)];
-    match a.detector {
-        Detector::Learned => {
-            w.extend(["--method".into(), "learned".into()]);
-            if let Some(m) = &a.model {
-                w.extend(["--model".into(), s(m)]);
-            }
-        }
-        Detector::Line2d => {
-            let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
-            w.extend(["--method".into(), "line2d".into(), "--templates".into(), s(lib), "--camera".into(), s(&camera_path)]);
-        }
-        Detector::External => {
-            let r = a.results.as_ref().context("--detector external needs --results coco_results.json")?;
-            w.extend(["--method".into(), "external".into(), "--results".into(), s(r)]);
+    // Outputs: the overlay, then the poses, each written atomically; nothing printed before.
+    let overlay_path = a.overlay.clone().unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
+    let tubes: Vec<&LocatedTube> = found.all_tubes().collect();
+    let overlay = locator.overlay(&image, tubes.iter().map(|t| &t.pose));
+    let png = tubeloc_pipeline::overlay::png_bytes(&overlay).context("encoding the overlay PNG")?;
+    let doc = LocateDoc {
+        schema: "tubeloc.locate.v1",
+        image: &a.image,
+        right_image: a.right.as_deref(),
+        camera: &cam.name,
+        detector: &detector_name,
+        up_cam: found.up_cam,
+        t_rig_cam: cam.t_rig_cam,
+        tubes,
+        run: serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb()}),
+        camera_model: &cam.model,
+        detections: &found.detections,
+    };
+    let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
+    for p in [&a.out, &overlay_path] {
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
     }
-    crate::run_words(&w).context("detection")?;
+    files::write_atomic(&overlay_path, &png).with_context(|| format!("writing {}", overlay_path.display()))?;
+    if let Err(e) = files::write_atomic(&a.out, &json) {
+        let _ = std::fs::remove_file(&overlay_path);
+        return Err(e).with_context(|| format!("writing {}", a.out.display()));
+    }
 
-    // 2. Refine (mono or stereo).
-    let raw_poses = sidecar(&a.out, "refined.json");
-    let overlay = a.overlay.clone().unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
-    let mut w = vec!["refine".to_string(), "--image".into(), s(&a.image), "--detections".into(), s(&dets), "--out".into(), s(&raw_poses), "--overlay".into(), s(&overlay)];
-    match &a.right {
-        Some(r) => {
-            let (l, rr) = pair.clone().context("stereo needs a pair")?;
-            w.extend(["--right".into(), s(r), "--rig".into(), s(&a.rig), "--pair".into(), format!("{l},{rr}")]);
-        }
-        None => w.extend(["--camera".into(), s(&camera_path)]),
-    }
-    if let Some(g) = &a.ground {
-        w.extend(["--ground".into(), g.clone()]);
-    }
-    crate::run_words(&w).context("refinement")?;
+    let converged = found.tubes.len();
+    print_summary(&a.image, &found, converged);
+    eprintln!("poses -> {} (overlay {})", a.out.display(), overlay_path.display());
+    Ok(converged)
+}
 
-    // 3. One pose per physical tube, grasp frames, summary, output.
-    let mut poses: Vec<TubeAxisPose> = files::read_json(&raw_poses)?;
-    poses.sort_by(|x, y| y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score)));
-    let merged = tubeloc_refine::duplicates::merge_duplicates(&mut poses, &tubeloc_core::TubeModel::default());
-    let tubes: Vec<LocatedTube> = poses
-        .into_iter()
-        .map(|pose| {
-            let t_cam_grasp = pose.grasp_frame(&up);
-            LocatedTube { t_rig_grasp: rig_cam.t_rig_cam * t_cam_grasp, t_cam_grasp, pose }
-        })
-        .collect();
-    let converged = tubes.iter().filter(|t| t.pose.converged).count();
-    println!("{}: {} tube(s) located, {} detection(s) rejected, {merged} duplicate(s) merged", a.image.display(), converged, tubes.len() - converged);
-    for (i, t) in tubes.iter().enumerate() {
+/// One line per tube on stdout; a closed pipe ends the printing quietly (the files are written).
+fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged: usize) {
+    let mut out = std::io::stdout().lock();
+    let mut lines = vec![format!("{}: {} tube(s) located, {} detection(s) rejected, {} duplicate(s) merged", image.display(), converged, found.rejected.len(), found.merged)];
+    for (i, t) in found.all_tubes().enumerate() {
         let p = &t.pose;
         let c = p.centre * 1e3;
         let g = t.t_rig_grasp.translation() * 1e3;
-        match &p.failure {
-            None => println!(
+        lines.push(match &p.failure {
+            None => format!(
                 "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}",
                 c.x, c.y, c.z, g.x, g.y, g.z, p.axis.x, p.axis.y, p.axis.z, p.centre_std_m() * 1e3, p.axis_std_rad().to_degrees(), p.end_confidence, p.score
             ),
-            Some(f) => println!("  tube {i}: rejected ({:?}): {}", f.reason, f.message),
+            Some(f) => format!("  tube {i}: rejected ({:?}): {}", f.reason, f.message),
+        });
+    }
+    for l in lines {
+        if let Err(e) = writeln!(out, "{l}") {
+            if e.kind() != std::io::ErrorKind::BrokenPipe {
+                eprintln!("warning: printing the summary: {e}");
+            }
+            return;
         }
     }
-    let doc = LocateOutput {
-        schema: "tubeloc.locate.v1",
-        image: a.image.clone(),
-        right_image: a.right.clone(),
-        camera: cam_name,
-        detector: format!("{:?}", a.detector).to_lowercase(),
-        up_cam: up,
-        t_rig_cam: rig_cam.t_rig_cam,
-        tubes,
-        run: serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb()}),
-    };
-    files::write_json(&a.out, &doc).with_context(|| format!("writing {}", a.out.display()))?;
-    let _ = std::fs::remove_file(&raw_poses);
-    eprintln!("poses -> {} (overlay {})", a.out.display(), overlay.display());
-    Ok(converged)
+    let _ = out.flush();
 }

@@ -10,6 +10,10 @@
 //! the matched terrain beside it (`tubeloc_refine::local_ground`, `--no-local-ground`).
 //! `--overlay` draws the fitted contours (green: converged, red: failed).
 //!
+//! The work (stereo matching, the fits, the stages after them and the snap-or-trim policy of
+//! `--snapped-out`) is the pipeline's ([`tubeloc_pipeline`]: `Locator::refine_frame` for one
+//! image, `refine_frame` per image of a dataset); this module reads and writes the files.
+//!
 //! Dataset mode (`--dataset DIR`, module [`dataset`]): every image of a COCO dataset directory
 //! (optionally one `--split`), each with the camera of its `images[].camera` and, with
 //! `--ground auto`, the nominal ground plane of its `images[].T_world_cam` and
@@ -18,7 +22,7 @@
 //! parallel; one JSON array of poses, each with its `image_id`. With `--stereo` (a
 //! `tubeloc synth stereo` folder) each image's right image (`images[].right_file_name` under
 //! `right/`) and pair geometry (`right_camera`, `T_left_right`) are read, the pair is rectified
-//! and matched with SGM in the tubes' regions (module [`stereo`]); the triangulated points in each
+//! and matched with SGM in the tubes' regions ([`tubeloc_pipeline::stereo`]); the triangulated points in each
 //! detection's mask or box (for `--gt-seeds`: the annotation's mask, standing in for a
 //! segmenter's) feed the stereo term, and after the fit the photometric stage
 //! (`tubeloc_refine::photo`, `--photo-range-mm`) moves both ends of each converged axis along
@@ -31,18 +35,31 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use nalgebra::{Point3, Vector3};
-use std::path::{Path, PathBuf};
-use tubeloc_core::{files, CameraModel, Plane, TubeAxisPose, TubeDetection, TubeModel};
-use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair, StereoRegion};
-use tubeloc_refine::hidden_end::{anchor_visible_end, unseen_length_variance, widen_along_axis, HiddenEnd};
-use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, trim_kept_mask, MaskSnap};
-use tubeloc_refine::{GroundPlane, RefineConfig, RefineInput, Refiner, Scene, SeedKind, SeedSettings};
+use std::io::Write as _;
+use std::path::PathBuf;
+use tubeloc_core::{files, CameraModel, Pose, Rig, RigCamera, TubeDetection, TubeModel};
+use tubeloc_pipeline::{CameraSelection, ExternalDetections, GroundPlane, LocateInput, Locator, LocatorSettings, StageSettings};
+use tubeloc_refine::silhouette::MaskSnap;
+use tubeloc_refine::RefineConfig;
 
-mod colour;
-mod dataset;
+pub(crate) mod dataset;
 pub(crate) use dataset::ground_of;
-mod stereo;
+
+/// `--ground`: a plane "nx,ny,nz,d", or "auto" (dataset mode: each image's nominal ground).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GroundArg {
+    /// Each image's nominal ground from its `T_world_cam` and `ground_height_m`.
+    Auto,
+    /// One plane for every image.
+    Plane(GroundPlane),
+}
+
+fn parse_ground_arg(s: &str) -> std::result::Result<GroundArg, String> {
+    if s == "auto" {
+        return Ok(GroundArg::Auto);
+    }
+    s.parse::<GroundPlane>().map(GroundArg::Plane).map_err(|e| e.to_string())
+}
 
 /// Arguments of `tubeloc refine`.
 #[derive(Args, Debug)]
@@ -198,8 +215,8 @@ pub struct RefineArgs {
     /// = world z = ground_height_m, the median terrain height within the capture stops, written
     /// by `tubeloc synth`; z = 0 where absent). The terrain has relief about it: its tilt is a
     /// prior, its height places mask seeds in mono.
-    #[arg(long, allow_hyphen_values = true)]
-    pub(crate) ground: Option<String>,
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_ground_arg)]
+    pub(crate) ground: Option<GroundArg>,
     /// Stereo with a ground plane: keep the given plane's height for every tube. By default each
     /// tube's plane is moved to the median height of the matched terrain beside it (the 300
     /// terrain points nearest its box, within 160 px, outside every tube's mask), which places
@@ -215,67 +232,18 @@ pub struct RefineArgs {
     pub(crate) tube: Option<PathBuf>,
 }
 
-pub(crate) fn parse_ground(s: &str) -> Result<GroundPlane> {
-    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().with_context(|| format!("--ground {s:?}: expected nx,ny,nz,d"))?;
-    if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
-        bail!("--ground {s:?}: expected 4 finite numbers nx,ny,nz,d");
-    }
-    let n = Vector3::new(v[0], v[1], v[2]);
-    let norm = n.norm();
-    if norm < 1e-9 {
-        bail!("--ground {s:?}: the normal is zero");
-    }
-    Ok(GroundPlane { normal: n / norm, offset: v[3] / norm })
-}
-
-
-/// Stereo points (left camera frame) per detection: SGM in the detections' regions of the
-/// rectified pair, triangulated, kept where they project into the detection's mask (eroded by
-/// `--stereo-erode`) or box (see [`stereo`]).
-fn stereo_points(args: &RefineArgs, left: &Plane<u8>, rig_path: &Path, dets: &[TubeDetection], ground: Option<&GroundPlane>) -> Result<(CameraModel, stereo::StereoRegions, RectifiedPair)> {
-    let right_path = args.right.as_ref().context("--rig needs --right")?;
-    let (_, lcam, rect) = crate::cmd_stereo::rectification_from_rig(rig_path, args.pair.as_deref())?;
-    let right = crate::cmd_stereo::load_gray(right_path)?;
-    let left_path = args.image.as_deref().unwrap_or(Path::new("left image"));
-    let regions: Vec<StereoRegion> = dets.iter().map(stereo::region_of).collect();
-    let (per, pair) = stereo::match_regions(&rect, &lcam, left, &right, &regions, args.disparities, args.stereo_erode, ground)
-        .with_context(|| format!("stereo {} / {}", left_path.display(), right_path.display()))?;
-    Ok((lcam, per, pair))
-}
-
-/// Draws the fitted contour of each pose into an RGB copy of the image.
-fn overlay(path: &Path, gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: &[TubeAxisPose]) -> Result<()> {
-    let (w, h) = (gray.width as u32, gray.height as u32);
-    let mut img = image::RgbImage::from_fn(w, h, |x, y| {
-        let v = gray.get(x as usize, y as usize);
-        image::Rgb([v, v, v])
-    });
-    for p in poses {
-        let col = if p.converged { [40, 230, 60] } else { [240, 40, 40] };
-        for u in refiner.contour_pixels(cam, p, 0.5) {
-            let (x, y) = (u.x.round(), u.y.round());
-            if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
-                img.put_pixel(x as u32, y as u32, image::Rgb(col));
-            }
-        }
-        if let Some(c) = cam.project(&Point3::from(p.centre)) {
-            for k in -3i64..=3 {
-                for (x, y) in [(c.x.round() as i64 + k, c.y.round() as i64), (c.x.round() as i64, c.y.round() as i64 + k)] {
-                    if x >= 0 && y >= 0 && x < w as i64 && y < h as i64 {
-                        img.put_pixel(x as u32, y as u32, image::Rgb(col));
-                    }
-                }
-            }
-        }
-    }
-    let mut buf = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut buf, image::ImageFormat::Png).context("cannot encode PNG")?;
-    files::write_atomic(path, &buf.into_inner())?;
+/// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks were
+/// snapped.
+pub(crate) fn write_snapped(path: Option<&std::path::Path>, snapped: &[(TubeDetection, bool)]) -> Result<()> {
+    let Some(path) = path else { return Ok(()) };
+    let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
+    files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
     Ok(())
 }
 
-/// The refiner of the arguments (config and tube model files).
-pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
+/// The refiner's configuration and tube model of the arguments (config and tube model files).
+fn refine_parts(args: &RefineArgs) -> Result<(RefineConfig, TubeModel)> {
     let config = match &args.config {
         Some(p) => files::read_json::<RefineConfig>(p).with_context(|| format!("refine config {}", p.display()))?,
         None => RefineConfig::default(),
@@ -284,50 +252,7 @@ pub(crate) fn refiner_of(args: &RefineArgs) -> Result<Refiner> {
         Some(p) => TubeModel::load(p).with_context(|| format!("tube model {}", p.display()))?,
         None => TubeModel::default(),
     };
-    Refiner::new(&tube, config).context("building the refiner")
-}
-
-/// The stages after the fit of one pose, in order: with a scene depth map (stereo) and unless
-/// `--no-hidden-end`, a pose refined from a mask detection `det` is moved along its axis onto its
-/// visible end when its other end is hidden ([`anchor_visible_end`]; template-pose detections'
-/// masks are the template's silhouette, not what is visible); then, with a rectified `pair`, the
-/// photometric / rims / two-view stage with the settings of the pose's seed kind
-/// ([`RefineArgs::photo_stage`]; `det` is `None` for an explicit seed). The anchoring comes
-/// first so that the two-view fit starts from the anchored centre.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn after_fit(args: &RefineArgs, pose: &mut TubeAxisPose, det: Option<&TubeDetection>, depth: Option<&Plane<f32>>, pair: Option<&RectifiedPair>, ground: Option<&GroundPlane>, refiner: &Refiner, camera: &CameraModel) {
-    // The mask of a mask seed (the learned segmenter's kind; not a template pose's).
-    let mask = det.filter(|d| d.t_cam_tube.is_none()).and_then(|d| d.mask.as_ref()).and_then(|m| m.to_mask().ok());
-    if let (Some(depth), Some(mask), false) = (depth, &mask, args.no_hidden_end) {
-        anchor_visible_end(pose, refiner.model.length, mask, depth, camera, &HiddenEnd::default());
-    }
-    if let (Some(pair), true) = (pair, args.photo_range_mm > 0.0) {
-        let kind = det.map_or(SeedKind::Explicit, SeedKind::of);
-        stereo_stage::photo_refine(pose, &refiner.model, pair, &args.photo_stage(ground, refiner, kind));
-    }
-    // The centre's along-axis freedom over the part of the tube the mask does not show.
-    if let Some(v) = mask.as_ref().and_then(|m| unseen_length_variance(pose, refiner.model.length, m, camera, UNSEEN_ANCHOR_PX)) {
-        widen_along_axis(pose, v);
-    }
-}
-
-/// The uncertainty (pixels along the axis) of a visible end that anchors a tube
-/// ([`unseen_length_variance`]): the detector's mask ends within about this of the tube's.
-const UNSEEN_ANCHOR_PX: f64 = 3.0;
-
-/// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
-/// (and is the fit's, not a kept seed) and agrees with the mask; otherwise with its mask
-/// trimmed ([`trim_kept_mask`]), or unchanged without a mask. Returns whether it was snapped.
-pub(crate) fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
-    let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return false };
-    let fitted = pose.converged && pose.seed_kept.is_none();
-    let snapped = fitted.then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
-    let was_snapped = snapped.is_some();
-    if let Some(m) = snapped.or_else(|| trim_kept_mask(&mask, snap)) {
-        det.bbox = m.bbox();
-        det.mask = Some(tubeloc_core::Rle::from_mask(&m));
-    }
-    was_snapped
+    Ok((config, tube))
 }
 
 impl RefineArgs {
@@ -339,47 +264,28 @@ impl RefineArgs {
         Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement, kept_erode_px: self.snap_kept_erode_px, min_area_px: self.snap_min_area_px })
     }
 
-    /// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks
-    /// were snapped.
-    pub(crate) fn write_snapped(&self, snapped: &[(TubeDetection, bool)]) -> Result<()> {
-        let Some(path) = &self.snapped_out else { return Ok(()) };
-        let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
-        files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
-        Ok(())
-    }
-    /// The ground plane the stereo matcher measures local grounds against: `ground`, unless
-    /// `--no-local-ground` (then none, and no terrain is matched for it).
-    pub(crate) fn local_ground_reference<'a>(&self, ground: Option<&'a GroundPlane>) -> Option<&'a GroundPlane> {
-        ground.filter(|_| !self.no_local_ground)
-    }
-
-    /// Whether the photometric stage moves each end along its own ray (distance and tilt)
-    /// rather than the centre alone: not with `--photo-centre-only`, and not with a ground
-    /// plane, whose tilt prior fixes the tilt better.
-    pub(crate) fn photo_moves_ends(&self, has_ground: bool) -> bool {
-        !self.photo_centre_only && !has_ground
-    }
-
-    /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]) for a pose
-    /// refined from a seed of `kind`; with a ground plane the two-view fit's tilt prior and the
-    /// rims' tilt change have the deviation of that kind's ground tilt prior
-    /// ([`SeedSettings::ground_tilt_sigma_deg`]), as in the fit before them: mask seeds are taken
-    /// to lie parallel to the ground (`mask_seed_tilt_sigma_deg`), other seeds may tilt
-    /// (`ground_tilt_sigma_deg`).
-    pub(crate) fn photo_stage(&self, ground: Option<&GroundPlane>, refiner: &Refiner, kind: SeedKind) -> PhotoStage {
-        let has_ground = ground.is_some();
-        let tilt_sigma_deg = SeedSettings::new(&refiner.config, kind, has_ground).ground_tilt_sigma_deg;
-        PhotoStage {
-            two_view: self.two_view.then_some(self.two_view_settings),
-            ground: ground.map(|g| (g.normal, tilt_sigma_deg)),
-            range_m: self.photo_range_mm * 1e-3,
-            min_zncc: self.photo_min_zncc,
-            ends: self.photo_moves_ends(has_ground),
-            occlusion: self.scene_occlusion,
-            rim_max_epipolar_deg: self.rim_max_epipolar_deg,
-            rim_tilt_prior_deg: has_ground.then_some(tilt_sigma_deg),
-        }
+    /// The pipeline settings of the arguments (refiner, stereo, stages after the fit, snapping).
+    pub(crate) fn settings(&self) -> Result<LocatorSettings> {
+        let (refine, tube) = refine_parts(self)?;
+        let mut stages = StageSettings::default();
+        stages.disparities = self.disparities;
+        stages.stereo_erode_px = self.stereo_erode;
+        stages.local_ground = !self.no_local_ground;
+        stages.scene_occlusion = self.scene_occlusion;
+        stages.hidden_end = !self.no_hidden_end;
+        stages.photo_range_mm = self.photo_range_mm;
+        stages.photo_min_zncc = self.photo_min_zncc;
+        stages.photo_centre_only = self.photo_centre_only;
+        stages.rim_max_epipolar_deg = self.rim_max_epipolar_deg;
+        stages.two_view = self.two_view.then_some(self.two_view_settings);
+        stages.snap = self.mask_snap()?;
+        let mut s = LocatorSettings::default();
+        s.refine = refine;
+        s.tube = tube;
+        s.colour_ends = !self.no_colour_ends;
+        s.stages = stages;
+        s.merge_duplicates = false;
+        Ok(s)
     }
 }
 
@@ -391,73 +297,84 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     if args.dataset.is_some() {
         return dataset::run(&args);
     }
-    let refiner = refiner_of(&args)?;
-    let snap = args.mask_snap()?;
-    let ground = args.ground.as_deref().map(parse_ground).transpose()?;
+    let settings = args.settings()?;
+    let ground = match args.ground {
+        Some(GroundArg::Auto) => bail!("--ground auto needs --dataset (each image's nominal ground); give nx,ny,nz,d"),
+        Some(GroundArg::Plane(g)) => Some(g),
+        None => None,
+    };
     let det_path = args.detections.as_ref().context("--detections is required without --dataset")?;
     let image_path = args.image.as_ref().context("--image is required without --dataset")?;
     let mut dets = tubeloc_core::detection::read_coco_results(det_path)?;
     if let Some(id) = args.image_id {
         dets.retain(|d| d.image_id == id);
     }
-    let loaded = colour::load(image_path)?;
-    let colour = loaded.colour(!args.no_colour_ends);
-    let gray = &loaded.gray;
-    let (camera, stereo, depth, pair, grounds) = match &args.rig {
-        Some(rig) => {
-            let (c, s, p) = stereo_points(&args, &gray, rig, &dets, args.local_ground_reference(ground.as_ref()))?;
-            let grounds = s.tube_grounds(ground);
-            (c, s.points, Some(s.depth), Some(p), grounds)
+    // The camera(s): the rig's pair (stereo), or --camera alone.
+    let (rig, selection) = match &args.rig {
+        Some(p) => {
+            let rig = Rig::load_json(p).with_context(|| format!("rig {}", p.display()))?;
+            let pair = match &args.pair {
+                Some(s) => Some(s.split_once(',').map(|(l, r)| (l.trim().to_string(), r.trim().to_string())).with_context(|| format!("--pair {s:?}: expected LEFT,RIGHT"))?),
+                None => Some(rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", p.display()))?),
+            };
+            if args.right.is_none() {
+                bail!("--rig needs --right");
+            }
+            (rig, CameraSelection { camera: None, pair })
         }
         None => {
             if args.right.is_some() {
                 bail!("--right needs --rig (the pair's calibration)");
             }
             let p = args.camera.as_ref().context("--camera is required without --rig")?;
-            (CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?, vec![Vec::new(); dets.len()], None, None, vec![ground; dets.len()])
+            let model = CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?;
+            (Rig { cameras: vec![RigCamera { name: "camera".into(), model, t_rig_cam: Pose::identity() }], stereo_pairs: Vec::new() }, CameraSelection::default())
         }
     };
-    if gray.width != camera.width as usize || gray.height != camera.height as usize {
-        bail!("{} is {}x{} but the camera is {}x{}", image_path.display(), gray.width, gray.height, camera.width, camera.height);
-    }
-    let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
-    let bar = indicatif::ProgressBar::new(dets.len() as u64);
-    let mut poses = Vec::with_capacity(dets.len());
-    for (i, d) in dets.iter().enumerate() {
-        let input = RefineInput { image: &image, camera: &camera, ground: grounds[i], scene: Scene { depth: depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera)), stereo_points: &stereo[i], ground: None, mask: None, image_axis: None, shown: None } };
-        poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    for ((p, d), g) in poses.iter_mut().zip(&dets).zip(&grounds) {
-        after_fit(&args, p, Some(d), depth.as_ref(), pair.as_ref(), g.as_ref(), &refiner, &camera);
-    }
+    let detector = Box::new(ExternalDetections::new(Vec::new(), det_path.display().to_string()));
+    let locator = Locator::new(&rig, &selection, detector, settings)?;
+    let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?;
+    let right = match &args.right {
+        Some(r) => Some(image::open(r).with_context(|| format!("cannot read image {}", r.display()))?),
+        None => None,
+    };
+    let input = LocateInput { image: &image, right: right.as_ref(), ground, up: None };
+    let refined = locator.refine_frame(&input, &dets).with_context(|| format!("refining {}", image_path.display()))?;
+    let poses = refined.poses;
+    let camera = &locator.camera().model;
+    let mut stdout = std::io::stdout().lock();
     for (i, p) in poses.iter().enumerate() {
         let c = p.centre * 1e3;
         let status = match &p.failure {
             None => "ok".to_string(),
             Some(f) => format!("FAILED {:?}: {}", f.reason, f.message),
         };
-        println!(
+        let line = format!(
             "tube {i} (image {}, score {:.2}): centre [{:.1}, {:.1}, {:.1}] mm, axis [{:.3}, {:.3}, {:.3}], end conf {:.2}, rms {:.2} px, {}/{} inliers, {} stereo pts: {status}",
-            p.image_id, p.score, c.x, c.y, c.z, p.axis.x, p.axis.y, p.axis.z, p.end_confidence, p.residuals.rms_px, p.residuals.inliers, p.residuals.count, stereo[i].len()
+            p.image_id, p.score, c.x, c.y, c.z, p.axis.x, p.axis.y, p.axis.z, p.end_confidence, p.residuals.rms_px, p.residuals.inliers, p.residuals.count, refined.stereo_points.get(i).map_or(0, Vec::len)
         );
+        if writeln!(stdout, "{line}").is_err() {
+            break;
+        }
     }
+    drop(stdout);
     files::write_json(&args.out, &poses).with_context(|| format!("writing {}", args.out.display()))?;
     if args.snapped_out.is_some() {
+        let snap = locator.settings().stages.snap;
         let snapped: Vec<(TubeDetection, bool)> = dets
             .iter()
             .zip(&poses)
             .map(|(d, p)| {
                 let mut d = d.clone();
-                let s = snapped_detection(&mut d, p, &refiner, &camera, &snap);
+                let s = tubeloc_pipeline::stages::snapped_detection(&mut d, p, locator.refiner(), camera, &snap);
                 (d, s)
             })
             .collect();
-        args.write_snapped(&snapped)?;
+        write_snapped(args.snapped_out.as_deref(), &snapped)?;
     }
     if let Some(o) = &args.overlay {
-        overlay(o, &gray, &refiner, &camera, &poses).with_context(|| format!("writing {}", o.display()))?;
+        let png = tubeloc_pipeline::overlay::png_bytes(&locator.overlay(&image, &poses)).context("cannot encode PNG")?;
+        files::write_atomic(o, &png).with_context(|| format!("writing {}", o.display()))?;
     }
     eprintln!("{} poses ({} converged) -> {}", poses.len(), poses.iter().filter(|p| p.converged).count(), args.out.display());
     Ok(())

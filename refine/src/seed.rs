@@ -43,23 +43,9 @@ pub fn template_image_axis(det: &TubeDetection, camera: &CameraModel, model: &Cy
     Some(TubeDetection { t_cam_tube: None, axis_seed: Some(axis_seed), ..det.clone() })
 }
 
-/// The ground as a plane in the camera frame: points `X` with `normal · X = offset`, `normal`
-/// a unit vector pointing up (away from the ground, toward the sky), metres.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct GroundPlane {
-    /// Unit upward normal, camera frame.
-    pub normal: Vector3<f64>,
-    /// Signed offset: `normal · X = offset` on the ground.
-    pub offset: f64,
-}
-
-impl GroundPlane {
-    /// The plane through `point` with upward normal `normal` (normalized here).
-    pub fn from_point_normal(point: &Vector3<f64>, normal: &Vector3<f64>) -> Self {
-        let n = normal.normalize();
-        GroundPlane { normal: n, offset: n.dot(point) }
-    }
-}
+/// The ground plane in the camera frame (`normal · X = offset`, normal up, metres); defined in
+/// `tubeloc-core` so that every crate and command shares one sign convention.
+pub use tubeloc_core::GroundPlane;
 
 /// A seed for the fit: pose parameters and whether the axis sign is known to point at the seal.
 #[derive(Clone, Copy, Debug, PartialEq)]

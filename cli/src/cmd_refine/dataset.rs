@@ -1,16 +1,16 @@
 //! `tubeloc refine --dataset DIR`: refine in every image of a COCO dataset directory.
 
-use super::{parse_ground, refiner_of, RefineArgs};
+use super::{GroundArg, RefineArgs};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Plane, Pose, Segmentation, TubeAxisPose, TubeDetection};
+use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, Pose, Segmentation, TubeAxisPose, TubeDetection};
 use tubeloc_eval::pose_summary::percentile;
-use tubeloc_refine::seed::{axis_state_of, perturbed, reanchored_pose};
-use tubeloc_refine::stereo_stage::{RectifiedPair, StereoRegion};
-use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Scene, Seed};
+use tubeloc_pipeline::{refine_frame, Frame, FrameOptions, GroundPlane, SeedItem, StereoView};
+use tubeloc_refine::seed::{axis_state_of, perturbed};
+use tubeloc_refine::{AxisState, Refiner};
 
 /// What to refine in one image: detections, or seeds made from exact poses.
 enum Work {
@@ -53,25 +53,16 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
     Ok(c)
 }
 
-/// Stereo points per work item of an image (`--stereo`): the right image and the pair geometry
-/// from `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`);
-/// regions are the detections' masks or boxes, or the annotations' masks for exact seeds.
-fn stereo_of(args: &RefineArgs, dir: &std::path::Path, im: &CocoImage, camera: &CameraModel, gray: &Plane<u8>, items: &[Work], ground: Option<&GroundPlane>) -> Result<(super::stereo::StereoRegions, RectifiedPair)> {
+/// The right view of an image (`--stereo`): the right image and the pair geometry from
+/// `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`).
+fn right_view_of(dir: &std::path::Path, im: &CocoImage) -> Result<(image::DynamicImage, CameraModel, Pose)> {
     let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
     let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
     let t_lr: Pose = serde_json::from_value(field("T_left_right")?.clone()).with_context(|| format!("image {}: T_left_right", im.id))?;
     let rpath = dir.join("right").join(rname);
-    let right = crate::cmd_stereo::load_gray(&rpath)?;
-    let (h, w) = (camera.height, camera.width);
-    let regions: Vec<StereoRegion> = items
-        .iter()
-        .map(|it| match it {
-            Work::Detection(d) => super::stereo::region_of(d),
-            Work::GtSeed(st, bbox, _) => StereoRegion { bbox: *bbox, mask: it.mask(h, w), seed_z: Some(st.c.z) },
-        })
-        .collect();
-    super::stereo::points_per_region(camera, &rcam, &t_lr, gray, &right, &regions, args.disparities, args.stereo_erode, ground).with_context(|| format!("stereo for {}", rpath.display()))
+    let right = image::open(&rpath).with_context(|| format!("cannot read image {}", rpath.display()))?;
+    Ok((right, rcam, t_lr))
 }
 
 fn parse_pair(s: &str) -> Result<(f64, f64)> {
@@ -79,26 +70,104 @@ fn parse_pair(s: &str) -> Result<(f64, f64)> {
     if v.len() != 2 || v.iter().any(|x| !x.is_finite() || *x < 0.0) {
         bail!("--gt-seeds {s:?}: expected two non-negative numbers MM,DEG");
     }
-    Ok((v[0] * 1e-3, v[1]))
+    Ok((v[0], v[1]))
 }
 
-/// Runs the dataset mode.
+/// Where the seeds of a dataset refinement come from.
+#[derive(Clone, Debug)]
+pub(crate) enum DatasetSeeds {
+    /// A detections file (COCO results with seeds), matched to the images by image id.
+    Detections(PathBuf),
+    /// The annotations' exact poses perturbed by `pos_mm` (uniform per coordinate) and
+    /// `deg` (axis turn), random seed `seed`, for tubes at least `min_visible` visible.
+    Gt { pos_mm: f64, deg: f64, seed: u64, min_visible: f64 },
+}
+
+/// A refinement over a COCO dataset directory (`tubeloc refine --dataset`), as `demo` and
+/// `bench` run it without going through command-line words.
+#[derive(Clone, Debug)]
+pub(crate) struct DatasetJob {
+    /// The dataset directory (annotations.json + images/).
+    pub dataset: PathBuf,
+    /// Only images of this split.
+    pub split: Option<String>,
+    /// Only the first N images.
+    pub max_images: Option<usize>,
+    /// The seeds.
+    pub seeds: DatasetSeeds,
+    /// The camera the detections' template poses were computed with, if not each image's.
+    pub detections_camera: Option<PathBuf>,
+    /// The ground plane: one plane, or each image's nominal ground.
+    pub ground: Option<GroundArg>,
+    /// Add the stereo term with each image's right image.
+    pub stereo: bool,
+    /// Fit to the seeds' mask boundaries instead of the image edges.
+    pub mask_term: bool,
+    /// Refiner and stage settings.
+    pub settings: tubeloc_pipeline::LocatorSettings,
+    /// Output poses.
+    pub out: PathBuf,
+    /// Output seeds (as poses).
+    pub seeds_out: Option<PathBuf>,
+    /// Output detections with snapped masks.
+    pub snapped_out: Option<PathBuf>,
+}
+
+impl DatasetJob {
+    /// The job with the shipped settings: refine every image of `dataset` from `seeds`, poses
+    /// to `out`.
+    pub fn new(dataset: PathBuf, seeds: DatasetSeeds, out: PathBuf) -> Self {
+        DatasetJob { dataset, split: None, max_images: None, seeds, detections_camera: None, ground: None, stereo: false, mask_term: false, settings: Default::default(), out, seeds_out: None, snapped_out: None }
+    }
+}
+
+/// Runs the dataset mode of the arguments.
 pub fn run(args: &RefineArgs) -> Result<()> {
-    let dir = args.dataset.as_ref().context("--dataset")?;
+    let seeds = match (&args.detections, &args.gt_seeds) {
+        (Some(p), None) => DatasetSeeds::Detections(p.clone()),
+        (None, Some(spec)) => {
+            let (pos_mm, deg) = parse_pair(spec)?;
+            DatasetSeeds::Gt { pos_mm, deg, seed: args.seed, min_visible: args.min_visible }
+        }
+        _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
+    };
+    let job = DatasetJob {
+        dataset: args.dataset.clone().context("--dataset")?,
+        split: args.split.clone(),
+        max_images: args.max_images,
+        seeds,
+        detections_camera: args.detections_camera.clone(),
+        ground: args.ground,
+        stereo: args.stereo,
+        mask_term: args.mask_term,
+        settings: args.settings()?,
+        out: args.out.clone(),
+        seeds_out: args.seeds_out.clone(),
+        snapped_out: args.snapped_out.clone(),
+    };
+    refine_dataset(&job)
+}
+
+/// Runs a dataset refinement: images in parallel, each through the pipeline's
+/// [`refine_frame`]; writes the poses (and seeds, snapped detections) and reports the fit time
+/// per seed on stderr.
+pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
+    let dir = &args.dataset;
     let ann = dir.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-    let mut refiner = refiner_of(args)?;
-    let snap = args.mask_snap()?;
-    if args.snapped_out.is_some() && args.detections.is_none() {
+    let mut settings = args.settings.clone();
+    if args.snapped_out.is_some() && !matches!(args.seeds, DatasetSeeds::Detections(_)) {
         bail!("--snapped-out needs --detections (the masks to snap)");
     }
-    let auto_ground = args.ground.as_deref() == Some("auto");
+    let auto_ground = args.ground == Some(GroundArg::Auto);
     if auto_ground {
         // The nominal ground (world z = ground_height_m of the tripod pose) is the terrain's
         // level, but the terrain has relief about it: its orientation is a prior (tubes lie
         // parallel to it), its height is not a constraint (mask seeds' settings weigh it).
-        refiner.config.ground_height_known = false;
+        settings.refine.ground_height_known = false;
     }
+    let refiner = Refiner::new(&settings.tube, settings.refine.clone()).context("building the refiner")?;
+    let snap = settings.stages.snap;
     let mut images: Vec<&CocoImage> = ds
         .images
         .iter()
@@ -112,34 +181,37 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     }
     // Work per image.
     let mut work: BTreeMap<u64, Vec<Work>> = images.iter().map(|im| (im.id, Vec::new())).collect();
-    match (&args.detections, &args.gt_seeds) {
-        (Some(p), None) => {
+    match &args.seeds {
+        DatasetSeeds::Detections(p) => {
             for d in tubeloc_core::detection::read_coco_results(p)? {
                 if let Some(w) = work.get_mut(&d.image_id) {
                     w.push(Work::Detection(d));
                 }
             }
         }
-        (None, Some(spec)) => {
-            let (pos, deg) = parse_pair(spec)?;
+        DatasetSeeds::Gt { pos_mm, deg, seed, min_visible } => {
+            let (pos, deg) = (pos_mm * 1e-3, *deg);
             for a in &ds.annotations {
                 let Some(w) = work.get_mut(&a.image_id) else { continue };
                 let vis = a.extra.get("visible_fraction").and_then(|v| v.as_f64()).unwrap_or(1.0);
                 let Some(v) = a.extra.get("T_cam_tube") else { continue };
-                if vis < args.min_visible {
+                if vis < *min_visible {
                     continue;
                 }
                 let t: Pose = serde_json::from_value(v.clone()).with_context(|| format!("{}: annotation {}: T_cam_tube", ann.display(), a.id))?;
-                w.push(Work::GtSeed(perturbed(&axis_state_of(&t), pos, deg, args.seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
+                w.push(Work::GtSeed(perturbed(&axis_state_of(&t), pos, deg, seed ^ a.id.wrapping_mul(0x9E37_79B9_7F4A_7C15)), a.bbox, a.segmentation.clone()));
             }
         }
-        _ => bail!("dataset mode needs exactly one of --detections or --gt-seeds"),
     }
     let det_camera = match &args.detections_camera {
         Some(p) => Some(CameraModel::load_json(p).with_context(|| format!("detections camera {}", p.display()))?),
         None => None,
     };
-    let fixed_ground = if auto_ground { None } else { args.ground.as_deref().map(parse_ground).transpose()? };
+    let fixed_ground = match args.ground {
+        Some(GroundArg::Plane(g)) => Some(g),
+        _ => None,
+    };
+    let opts = FrameOptions { mask_term: args.mask_term, seeds: args.seeds_out.is_some(), detections_camera: det_camera };
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("refine {bar:30} {pos}/{len} images {elapsed}<{eta}").expect("template"));
     type ImageResult = (Vec<TubeAxisPose>, Vec<TubeAxisPose>, Vec<(TubeDetection, bool)>, Vec<f64>);
@@ -157,81 +229,43 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                 let p = dir.join(&im.file_name);
                 if p.exists() { p } else { dir.join("images").join(&im.file_name) }
             };
-            let loaded = super::colour::load(&path)?;
-            let colour = loaded.colour(!args.no_colour_ends);
-            let gray = &loaded.gray;
-            if gray.width != camera.width as usize || gray.height != camera.height as usize {
-                bail!("{} is {}x{} but its camera is {}x{}", path.display(), gray.width, gray.height, camera.width, camera.height);
+            let image = image::open(&path).with_context(|| format!("cannot read image {}", path.display()))?;
+            if image.width() != camera.width || image.height() != camera.height {
+                bail!("{} is {}x{} but its camera is {}x{}", path.display(), image.width(), image.height(), camera.width, camera.height);
             }
-            let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
-            let (stereo_pts, depth, pair, grounds) = if args.stereo {
-                let (s, r) = stereo_of(args, dir, im, &camera, &gray, items, args.local_ground_reference(ground.as_ref()))?;
-                let grounds = s.tube_grounds(ground);
-                (s.points, Some(s.depth), Some(r), grounds)
-            } else {
-                (vec![Vec::new(); items.len()], None, None, vec![ground; items.len()])
+            let right = if args.stereo { Some(right_view_of(dir, im)?) } else { None };
+            let (h, w) = (camera.height, camera.width);
+            let seeds: Vec<SeedItem> = items
+                .iter()
+                .map(|it| match it {
+                    Work::Detection(d) => SeedItem::Detection(d.clone()),
+                    Work::GtSeed(st, bbox, _) => SeedItem::Explicit { state: *st, bbox: *bbox, mask: it.mask(h, w) },
+                })
+                .collect();
+            let frame = Frame {
+                image: &image,
+                camera: &camera,
+                image_id: im.id,
+                ground,
+                stereo: right.as_ref().map(|(img, rcam, t)| StereoView { right: img, right_camera: rcam, t_left_right: *t }),
             };
-            let scene_depth = depth.as_ref();
-            let depth = depth.as_ref().filter(|_| args.scene_occlusion).map(|d| (d, &camera));
+            let refined = refine_frame(&refiner, &settings, &frame, &seeds, &opts).with_context(|| match &right {
+                Some(_) => format!("refining {} (stereo, {})", path.display(), dir.join("right").display()),
+                None => format!("refining {}", path.display()),
+            })?;
             // Diagnostics: TUBELOC_DEBUG_STEREO_DIR=D writes each image's stereo points (left
             // camera frame, metres, one list per work item) to D/<image id>.json and, with
             // the scene-occlusion test on, its scene depth map to D/<image id>_depth_f32.bin.
-            if let Ok(dbg) = std::env::var("TUBELOC_DEBUG_STEREO_DIR") {
-                let pts: Vec<Vec<[f64; 3]>> = stereo_pts.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
+            if let (Ok(dbg), true) = (std::env::var("TUBELOC_DEBUG_STEREO_DIR"), args.stereo) {
+                let pts: Vec<Vec<[f64; 3]>> = refined.stereo_points.iter().map(|v| v.iter().map(|p| [p.x, p.y, p.z]).collect()).collect();
                 files::write_json(&std::path::Path::new(&dbg).join(format!("{}.json", im.id)), &pts)?;
-                if let Some((d, _)) = depth {
+                if let (Some(d), true) = (&refined.scene_depth, settings.stages.scene_occlusion) {
                     // The scene depth map as raw little-endian f32 (width x height, NaN unknown).
                     let bytes: Vec<u8> = d.data.iter().flat_map(|v| v.to_le_bytes()).collect();
                     files::write_atomic(&std::path::Path::new(&dbg).join(format!("{}_depth_f32.bin", im.id)), &bytes)?;
                 }
             }
-            let masks: Vec<Option<tubeloc_core::BinaryMask>> = if args.mask_term {
-                items.iter().map(|it| it.mask(camera.height, camera.width)).collect()
-            } else {
-                vec![None; items.len()]
-            };
-            let input = RefineInput { image: &image, camera: &camera, ground, scene: Scene::default() };
-            let mut poses = Vec::with_capacity(items.len());
-            let mut seeds = Vec::new();
-            let mut fit_ms = Vec::with_capacity(items.len());
-            for (k, w) in items.iter().enumerate() {
-                match w {
-                    Work::Detection(d) => {
-                        let mut d = d.clone();
-                        if let (Some(from), Some(t)) = (&det_camera, &d.t_cam_tube) {
-                            if let Some(t) = reanchored_pose(t, from, &camera) {
-                                d.t_cam_tube = Some(t);
-                            }
-                        }
-                        let d = &d;
-                        let input = RefineInput { ground: grounds[k], scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
-                        let t0 = std::time::Instant::now();
-                        poses.push(refiner.refine_with_colour(&input, d, colour.as_ref()));
-                        fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                        if let (true, Ok(sd)) = (args.seeds_out.is_some(), refiner.seed_with_colour(&input, d, colour.as_ref())) {
-                            if let Ok(p) = TubeAxisPose::new(im.id, d.score, sd.state.c, sd.state.a, 0.5) {
-                                seeds.push(p);
-                            }
-                        }
-                    }
-                    Work::GtSeed(st, _, _) => {
-                        let input = RefineInput { ground: grounds[k], scene: Scene { depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, &camera)), ..Scene::default() }, ..input };
-                        let t0 = std::time::Instant::now();
-                        poses.push(refiner.refine_seed(&input, &Seed { state: *st, end_known: true }, im.id, 1.0, None));
-                        fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                        if let Ok(p) = TubeAxisPose::new(im.id, 1.0, st.c, st.a, 0.5) {
-                            seeds.push(p);
-                        }
-                    }
-                }
-            }
-            for ((p, w), g) in poses.iter_mut().zip(items.iter()).zip(&grounds) {
-                let det = match w {
-                    Work::Detection(d) => Some(d),
-                    Work::GtSeed(..) => None,
-                };
-                super::after_fit(args, p, det, scene_depth, pair.as_ref(), g.as_ref(), &refiner, &camera);
-            }
+            let (poses, seeds, fit_ms) = (refined.poses, refined.seeds, refined.fit_ms);
             let snapped = match args.snapped_out {
                 Some(_) => items
                     .iter()
@@ -239,7 +273,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
                     .filter_map(|(w, p)| match w {
                         Work::Detection(d) => {
                             let mut d = d.clone();
-                            let s = super::snapped_detection(&mut d, p, &refiner, &camera, &snap);
+                            let s = tubeloc_pipeline::stages::snapped_detection(&mut d, p, &refiner, &camera, &snap);
                             Some((d, s))
                         }
                         Work::GtSeed(..) => None,
@@ -269,7 +303,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
     if let Some(s) = &args.seeds_out {
         files::write_json(s, &seeds).with_context(|| format!("writing {}", s.display()))?;
     }
-    args.write_snapped(&snapped)?;
+    super::write_snapped(args.snapped_out.as_deref(), &snapped)?;
     let out: PathBuf = args.out.clone();
     eprintln!(
         "{} images, {} poses ({} converged; failures {:?}) -> {}",

@@ -1,4 +1,5 @@
-//! Stereo for the refiner (wiring only; the computation is in [`tubeloc_refine::stereo_stage`]):
+//! Stereo for the refiner (the SGM call; the computation on its points is in
+//! [`tubeloc_refine::stereo_stage`]):
 //! rectify a pair, match with SGM only in the regions of the tubes, triangulate, and split the
 //! points by region ([`stereo_stage::region_points`]); the scene depth map and the rectified
 //! pair for the photometric / rims stage ([`stereo_stage::photo_refine`]).
@@ -6,7 +7,7 @@
 //! The disparity window is centred on the seeds ([`stereo_stage::min_disparity`]) and spans
 //! `num_disparities` pixels.
 
-use anyhow::{Context, Result};
+use crate::error::Result;
 use nalgebra::{Point2, Point3};
 use tubeloc_core::{CameraModel, Plane, Pose, TubeDetection};
 use tubeloc_refine::local_ground::{self, LocalGround, LocalGroundConfig};
@@ -18,20 +19,20 @@ use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
 /// cameras `lcam`/`rcam`, `t_left_right` mapping right-camera points into the left frame) is
 /// rectified and matched ([`match_regions`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
-    let rect = StereoRectification::new(lcam, rcam, t_left_right).context("rectifying the pair")?;
+pub fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
+    let rect = StereoRectification::new(lcam, rcam, t_left_right)?;
     match_regions(&rect, lcam, left, right, regions, num_disparities, erode_px, ground)
 }
 
 /// The stereo region of a detection: its box, its mask (if it decodes) and its template pose's
 /// depth (if any).
-pub(crate) fn region_of(d: &TubeDetection) -> StereoRegion {
+pub fn region_of(d: &TubeDetection) -> StereoRegion {
     StereoRegion { bbox: d.bbox, mask: d.mask.as_ref().and_then(|m| m.to_mask().ok()), seed_z: d.t_cam_tube.as_ref().map(|t| t.translation().z) }
 }
 
 /// What SGM gives the refiner: the points of each region (left camera frame, metres), the
 /// scene depth map of the left image and the rectified disparity map.
-pub(crate) struct StereoRegions {
+pub struct StereoRegions {
     /// Points per region (left camera frame, metres).
     pub points: Vec<Vec<Point3<f64>>>,
     /// Depth `Z` (metres, left camera frame) per left-image pixel where SGM matched (NaN
@@ -47,7 +48,7 @@ pub(crate) struct StereoRegions {
 
 impl StereoRegions {
     /// The ground plane of each region: its local ground where there is one, else `ground`.
-    pub(crate) fn tube_grounds(&self, ground: Option<GroundPlane>) -> Vec<Option<GroundPlane>> {
+    pub fn tube_grounds(&self, ground: Option<GroundPlane>) -> Vec<Option<GroundPlane>> {
         self.local_grounds.iter().map(|l| l.map(|l| l.plane).or(ground)).collect()
     }
 }
@@ -60,7 +61,7 @@ impl StereoRegions {
 /// disparity, near the left border) gets a 64 px wide strip of terrain matched just right of
 /// that column for it.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn match_regions(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
+pub fn match_regions(rect: &StereoRectification, lcam: &CameraModel, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
     let (rl, rr) = rect.rectify_pair(left, right)?;
     let sr = points_rectified(rect, lcam, &rl, &rr, regions, num_disparities, erode_px, ground)?;
     let mut pair = RectifiedPair::from_u8(&rl, &rr, rect.rectified.clone(), rect.r_left, rect.baseline);
@@ -109,7 +110,7 @@ fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u
         return Ok(empty(regions.len()));
     }
     let params = SgmParams { num_disparities, min_disparity: stereo_stage::min_disparity(regions, fb), ..SgmParams::default() };
-    let disp = disparity_regions(rl, rr, &params, &rois, 32).context("matching the regions")?;
+    let disp = disparity_regions(rl, rr, &params, &rois, 32)?;
     let pts: Vec<(f32, Point3<f64>)> = rect.points_in_left_camera(&tubeloc_stereo::triangulate(&disp, &geom, 0.25)).into_iter().map(|p| (p.pixel[0], p.point)).collect();
     let depth = stereo_stage::depth_map(lcam, pts.iter().map(|(_, p)| p));
     let points = stereo_stage::region_points(lcam, &pts, regions, fb, erode_px);

@@ -1,0 +1,239 @@
+//! Detectors a [`crate::Locator`] is built with: the learned segmenter, Line2D template
+//! matching, or detections made elsewhere. Each turns one in-memory image into
+//! [`TubeDetection`]s (seeds for the refiner) in the image's pixel frame.
+
+use crate::error::{PipelineError, Result};
+use image::DynamicImage;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
+use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel};
+use tubeloc_detect::line2d::Line2dDetector;
+
+/// A tube detector: one image (with the camera that took it) in, detections out.
+pub trait TubeDetector: Send + Sync {
+    /// Short name of the detector (`learned`, `line2d`, `external`), as reported in outputs.
+    fn name(&self) -> &str;
+    /// Detections in `image` (taken by `camera`, whose size it has), with COCO image id
+    /// `image_id`. Boxes, masks and axis seeds are in the image's pixels (pixel centres at
+    /// integer coordinates); template poses in `camera`'s frame, metres.
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, image_id: u64) -> Result<Vec<TubeDetection>>;
+    /// Where the detections come from, for error messages (a results file, a model file).
+    fn origin(&self) -> String {
+        self.name().to_string()
+    }
+}
+
+/// The learned instance segmenter (masks and image axis seeds).
+pub struct LearnedDetector {
+    model: LearnedModel,
+    decode: DecodeConfig,
+    origin: String,
+}
+
+impl LearnedDetector {
+    /// A detector with a loaded model and decoder settings; `origin` names the model (e.g. its
+    /// file) in error messages.
+    pub fn new(model: LearnedModel, decode: DecodeConfig, origin: impl Into<String>) -> Self {
+        LearnedDetector { model, decode, origin: origin.into() }
+    }
+
+    /// Loads the weights at `path` (safetensors, `tubeloc train`'s format).
+    pub fn load(path: &std::path::Path, decode: DecodeConfig) -> Result<Self> {
+        let model = LearnedModel::load(path).map_err(|e| PipelineError::Detect(format!("loading model {}: {e}", path.display())))?;
+        Ok(Self::new(model, decode, path.display().to_string()))
+    }
+}
+
+impl TubeDetector for LearnedDetector {
+    fn name(&self) -> &str {
+        "learned"
+    }
+
+    fn origin(&self) -> String {
+        self.origin.clone()
+    }
+
+    fn detect(&self, image: &DynamicImage, _camera: &CameraModel, image_id: u64) -> Result<Vec<TubeDetection>> {
+        let rgb = image.to_rgb8();
+        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+        let inst = detect_rgb(&self.model, rgb.as_raw(), w, h, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
+        Ok(inst
+            .into_par_iter()
+            .map(|i| {
+                let mask = BinaryMask { width: w, height: h, data: i.mask.data };
+                let mut det = TubeDetection::new(image_id, i.score, i.bbox, DetectionSource::Learned);
+                det.axis_seed = Some(i.axis);
+                det.mask = Some(Rle::from_mask(&mask));
+                det
+            })
+            .collect())
+    }
+}
+
+/// Line2D template matching with a library built for the camera (coarse template poses).
+pub struct Line2dTubeDetector {
+    detector: Line2dDetector,
+}
+
+impl Line2dTubeDetector {
+    /// A detector around a Line2D detector (library and matching parameters).
+    pub fn new(detector: Line2dDetector) -> Self {
+        Line2dTubeDetector { detector }
+    }
+}
+
+impl TubeDetector for Line2dTubeDetector {
+    fn name(&self) -> &str {
+        "line2d"
+    }
+
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, image_id: u64) -> Result<Vec<TubeDetection>> {
+        let rgb = image.to_rgb8();
+        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+        let dets = self.detector.detect(rgb.as_raw(), w, h, Some(camera)).map_err(|e| PipelineError::Detect(e.to_string()))?;
+        Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
+    }
+}
+
+/// A detection in the form it has after a round trip through a detections file: the template
+/// pose's rotation is taken through its 3x3 matrix, as [`Pose`]'s JSON form stores it, so that
+/// refining in-memory detections and refining `tubeloc detect`'s file give the same poses to
+/// the bit.
+pub fn canonical(mut det: TubeDetection) -> TubeDetection {
+    if let Some(t) = det.t_cam_tube {
+        if let Ok(p) = Pose::try_from_matrix(&t.rotation(), t.translation()) {
+            det.t_cam_tube = Some(p);
+        }
+    }
+    det
+}
+
+/// Detections made elsewhere (a COCO results file from another detector, or a detections
+/// file), handed to the pipeline as they are.
+pub struct ExternalDetections {
+    detections: Vec<TubeDetection>,
+    origin: String,
+}
+
+impl ExternalDetections {
+    /// Detections for the image(s) the locator will see; `origin` names their file in error
+    /// messages.
+    pub fn new(detections: Vec<TubeDetection>, origin: impl Into<String>) -> Self {
+        ExternalDetections { detections, origin: origin.into() }
+    }
+
+    /// The detections.
+    pub fn detections(&self) -> &[TubeDetection] {
+        &self.detections
+    }
+}
+
+impl TubeDetector for ExternalDetections {
+    fn name(&self) -> &str {
+        "external"
+    }
+
+    fn origin(&self) -> String {
+        self.origin.clone()
+    }
+
+    /// The stored detections, whatever their image id (`image_id` is not applied).
+    fn detect(&self, _image: &DynamicImage, _camera: &CameraModel, _image_id: u64) -> Result<Vec<TubeDetection>> {
+        Ok(self.detections.clone())
+    }
+}
+
+/// A plain COCO results entry as a detection: the mask's principal axis becomes the axis seed
+/// (the box diagonal when there is no mask). Polygon masks need the image size `(width,
+/// height)`. `context` names the entry in errors.
+pub fn detection_from_coco_result(r: &CocoResult, size: Option<(u32, u32)>, context: &str) -> Result<TubeDetection> {
+    let bad = |m: String| PipelineError::Input(format!("{context}: {m}"));
+    let mask = match &r.segmentation {
+        None => None,
+        Some(seg) => {
+            let (h, w) = match seg {
+                Segmentation::CompressedRle { size, .. } | Segmentation::UncompressedRle { size, .. } => (size[0], size[1]),
+                Segmentation::Polygons(_) => size.map(|(w, h)| (h, w)).ok_or_else(|| bad("polygon mask needs the image size (--image or --dataset)".into()))?,
+            };
+            Some(seg.to_rle(h, w).and_then(|x| x.to_mask()).map_err(|e| bad(e.to_string()))?)
+        }
+    };
+    let bbox = match (r.bbox, &mask) {
+        (Some(b), _) => b,
+        (None, Some(m)) => m.bbox(),
+        (None, None) => return Err(bad("neither bbox nor segmentation".into())),
+    };
+    let mut det = TubeDetection::new(r.image_id, r.score, bbox, DetectionSource::External);
+    det.category_id = r.category_id;
+    det.axis_seed = Some(match &mask {
+        Some(m) => {
+            let px = m.data.iter().enumerate().filter(|(_, &v)| v != 0).map(|(i, _)| ((i % m.width) as f64, (i / m.width) as f64));
+            AxisSeed::from_pixels(px).unwrap_or_else(|| det.axis_seed_from_bbox())
+        }
+        None => det.axis_seed_from_bbox(),
+    });
+    det.mask = mask.as_ref().map(Rle::from_mask);
+    det.validate().map_err(|e| bad(e.to_string()))?;
+    Ok(det)
+}
+
+/// The entries of a COCO results list that belong to the image named `image_name` (a file
+/// name; only its last path component counts):
+/// - entries that carry a `file_name` field are matched by it;
+/// - otherwise, with `names` (image id to file name, e.g. a COCO dataset's `images[]`), the
+///   entries whose image id names this file;
+/// - otherwise, all entries when they hold a single image id.
+///
+/// Fails when nothing matches, or when the entries hold several images and cannot be told
+/// apart. `origin` names the results in errors.
+pub fn select_results_for_image(results: Vec<CocoResult>, image_name: &str, names: Option<&BTreeMap<u64, String>>, origin: &str) -> Result<Vec<CocoResult>> {
+    let base = |s: &str| std::path::Path::new(s).file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_else(|| s.to_string());
+    let want = base(image_name);
+    let ids: std::collections::BTreeSet<u64> = results.iter().map(|r| r.image_id).collect();
+    let named = |r: &CocoResult| r.extra.get("file_name").and_then(|v| v.as_str()).map(base);
+    if results.iter().any(|r| named(r).is_some()) {
+        let kept: Vec<CocoResult> = results.into_iter().filter(|r| named(r).as_deref() == Some(want.as_str())).collect();
+        if kept.is_empty() {
+            return Err(PipelineError::Input(format!("{origin}: no entry has file_name {want:?}")));
+        }
+        return Ok(kept);
+    }
+    if let Some(names) = names {
+        let mine: std::collections::BTreeSet<u64> = names.iter().filter(|(_, n)| base(n) == want).map(|(id, _)| *id).collect();
+        if mine.is_empty() {
+            return Err(PipelineError::Input(format!("{origin}: no image named {want:?} in the image list")));
+        }
+        let kept: Vec<CocoResult> = results.into_iter().filter(|r| mine.contains(&r.image_id)).collect();
+        if kept.is_empty() && ids.len() > 1 {
+            return Err(PipelineError::Input(format!("{origin}: no entry for image {want:?} (image ids {mine:?})")));
+        }
+        return Ok(kept);
+    }
+    if ids.len() > 1 {
+        let shown: Vec<String> = ids.iter().take(8).map(u64::to_string).collect();
+        return Err(PipelineError::Input(format!(
+            "{origin}: the results hold detections for {} images (image ids {}{}); select {want:?}'s: give each entry a \"file_name\", or pass the image list (--results-images annotations.json)",
+            ids.len(),
+            shown.join(", "),
+            if ids.len() > 8 { ", ..." } else { "" }
+        )));
+    }
+    Ok(results)
+}
+
+/// Checks that every detection's mask has the image's size (`width x height` pixels).
+/// `origin` names the detections in the error, which also gives the detection's index.
+pub fn check_mask_sizes(dets: &[TubeDetection], width: u32, height: u32, origin: &str) -> Result<()> {
+    for (k, d) in dets.iter().enumerate() {
+        if let Some(m) = &d.mask {
+            if m.size != [height, width] {
+                return Err(PipelineError::Input(format!(
+                    "{origin}: detection {k} (image {}): its mask is {}x{} but the image is {width}x{height}",
+                    d.image_id, m.size[1], m.size[0]
+                )));
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,199 @@
+//! One image's refinement: seeds (detections or explicit seeds) -> (stereo points) -> the
+//! cylinder fit -> the stages after the fit. [`crate::Locator`] runs it for `locate`;
+//! dataset-wide refinement (`tubeloc refine --dataset`) runs it per image.
+
+use crate::error::{PipelineError, Result};
+use crate::settings::LocatorSettings;
+use crate::stages::after_fit;
+use crate::stereo::{points_per_region, region_of};
+use image::DynamicImage;
+use nalgebra::Point3;
+use tubeloc_core::{BinaryMask, CameraModel, Plane, Pose, TubeAxisPose, TubeDetection};
+use tubeloc_refine::seal_end::ColourImage;
+use tubeloc_refine::seed::reanchored_pose;
+use tubeloc_refine::stereo_stage::StereoRegion;
+use tubeloc_refine::{AxisState, GroundPlane, RefineInput, Refiner, Scene, Seed};
+
+/// One image to refine in, with what is known about it.
+#[derive(Clone, Copy)]
+pub struct Frame<'a> {
+    /// The (left) image; its size must be `camera`'s. Colour images give the seal-end colours.
+    pub image: &'a DynamicImage,
+    /// The camera that took `image`.
+    pub camera: &'a CameraModel,
+    /// COCO image id given to the poses of explicit seeds and to their seeds.
+    pub image_id: u64,
+    /// Ground plane in `camera`'s frame (`n · X = d`, n up, metres), if known.
+    pub ground: Option<GroundPlane>,
+    /// The right image of a stereo pair, if any: adds the stereo term and the stereo stages.
+    pub stereo: Option<StereoView<'a>>,
+}
+
+/// The right view of a stereo pair.
+#[derive(Clone, Copy)]
+pub struct StereoView<'a> {
+    /// The right image (its grey levels are matched).
+    pub right: &'a DynamicImage,
+    /// The right camera.
+    pub right_camera: &'a CameraModel,
+    /// `T_left_right`: maps right-camera points into the left camera's frame, metres.
+    pub t_left_right: Pose,
+}
+
+/// What to refine: a detection, or an explicit seed (e.g. a perturbed exact pose).
+#[derive(Clone, Debug)]
+pub enum SeedItem {
+    /// A detector's detection (mask / box / template pose seed).
+    Detection(TubeDetection),
+    /// An explicit seed: centre and axis (camera frame, metres; the axis toward the seal end),
+    /// with a box `[x, y, w, h]` (pixels) and an optional mask of the image's size that stand
+    /// in for a detector's region (stereo points, mask term).
+    Explicit {
+        /// Centre and axis.
+        state: AxisState,
+        /// Region box, pixels.
+        bbox: [f64; 4],
+        /// Region mask.
+        mask: Option<BinaryMask>,
+    },
+}
+
+impl SeedItem {
+    fn detection(&self) -> Option<&TubeDetection> {
+        match self {
+            SeedItem::Detection(d) => Some(d),
+            SeedItem::Explicit { .. } => None,
+        }
+    }
+
+    fn mask(&self) -> Option<BinaryMask> {
+        match self {
+            SeedItem::Detection(d) => d.mask.as_ref().and_then(|m| m.to_mask().ok()),
+            SeedItem::Explicit { mask, .. } => mask.clone(),
+        }
+    }
+}
+
+/// Per-run options of [`refine_frame`] beyond the settings (dataset evaluation uses them).
+#[derive(Clone, Debug, Default)]
+pub struct FrameOptions {
+    /// Fit the silhouette to each seed's mask boundary instead of the image edges (an upper
+    /// bound with exact masks).
+    pub mask_term: bool,
+    /// Also return the seed each fit started from, as a pose.
+    pub seeds: bool,
+    /// The camera detections' template poses were computed with, when not the image's own:
+    /// they are re-anchored to the image's camera before the fit (same pixel, same distance).
+    pub detections_camera: Option<CameraModel>,
+}
+
+/// The result of [`refine_frame`].
+#[derive(Clone, Debug, Default)]
+pub struct FrameRefinement {
+    /// One pose per seed item, in order (camera frame, metres).
+    pub poses: Vec<TubeAxisPose>,
+    /// With [`FrameOptions::seeds`], the seeds the fits started from (camera frame).
+    pub seeds: Vec<TubeAxisPose>,
+    /// Time of each fit alone (without loading, stereo matching or the stages after it),
+    /// milliseconds, one per seed item.
+    pub fit_ms: Vec<f64>,
+    /// Stereo points (left camera frame, metres) per seed item; empty without stereo.
+    pub stereo_points: Vec<Vec<Point3<f64>>>,
+    /// The SGM scene depth (metres per left-image pixel, NaN unknown), with stereo.
+    pub scene_depth: Option<Plane<f32>>,
+}
+
+/// The grey levels (the refiner's input) and the colours (the seal-end decision) of an image.
+pub(crate) struct FramePixels {
+    pub gray: Plane<u8>,
+    pub rgb: image::RgbImage,
+}
+
+impl FramePixels {
+    pub fn of(image: &DynamicImage) -> Self {
+        let luma = image.to_luma8();
+        FramePixels { gray: Plane::from_vec(luma.width() as usize, luma.height() as usize, luma.into_raw()), rgb: image.to_rgb8() }
+    }
+
+    fn colour(&self, wanted: bool) -> Option<ColourImage<'_>> {
+        wanted.then(|| ColourImage { width: self.rgb.width() as usize, height: self.rgb.height() as usize, rgb: self.rgb.as_raw() })
+    }
+}
+
+/// Refines every seed item of one frame: stereo points per item (with a right view), the fit
+/// (sequential over the items), then the stages after the fit ([`after_fit`]).
+pub fn refine_frame(refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, items: &[SeedItem], opts: &FrameOptions) -> Result<FrameRefinement> {
+    refine_pixels(refiner, settings, frame, &FramePixels::of(frame.image), items, opts)
+}
+
+pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, px: &FramePixels, items: &[SeedItem], opts: &FrameOptions) -> Result<FrameRefinement> {
+    let camera = frame.camera;
+    let gray = &px.gray;
+    if gray.width != camera.width as usize || gray.height != camera.height as usize {
+        return Err(PipelineError::Input(format!("the image is {}x{} but its camera is {}x{}", gray.width, gray.height, camera.width, camera.height)));
+    }
+    let st = &settings.stages;
+    let colour = px.colour(settings.colour_ends);
+    let ground = frame.ground;
+    let (stereo_pts, depth, pair, grounds) = match &frame.stereo {
+        Some(view) => {
+            let right = view.right.to_luma8();
+            let right = Plane::from_vec(right.width() as usize, right.height() as usize, right.into_raw());
+            let (h, w) = (camera.height, camera.width);
+            let regions: Vec<StereoRegion> = items
+                .iter()
+                .map(|it| match it {
+                    SeedItem::Detection(d) => region_of(d),
+                    SeedItem::Explicit { state, bbox, mask } => StereoRegion { bbox: *bbox, mask: mask.clone().filter(|m| m.width == w as usize && m.height == h as usize), seed_z: Some(state.c.z) },
+                })
+                .collect();
+            let reference = ground.as_ref().filter(|_| st.local_ground);
+            let (s, r) = points_per_region(camera, view.right_camera, &view.t_left_right, gray, &right, &regions, st.disparities, st.stereo_erode_px, reference)?;
+            let grounds = s.tube_grounds(ground);
+            (s.points, Some(s.depth), Some(r), grounds)
+        }
+        None => (vec![Vec::new(); items.len()], None, None, vec![ground; items.len()]),
+    };
+    let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
+    let occlusion_depth = depth.as_ref().filter(|_| st.scene_occlusion).map(|d| (d, camera));
+    let masks: Vec<Option<BinaryMask>> = if opts.mask_term { items.iter().map(SeedItem::mask).collect() } else { vec![None; items.len()] };
+    let base = RefineInput { image: &image, camera, ground, scene: Scene::default() };
+    let mut out = FrameRefinement { poses: Vec::with_capacity(items.len()), fit_ms: Vec::with_capacity(items.len()), ..Default::default() };
+    for (k, item) in items.iter().enumerate() {
+        let input = RefineInput { ground: grounds[k], scene: Scene { depth: occlusion_depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, camera)), ..Scene::default() }, ..base };
+        match item {
+            SeedItem::Detection(d) => {
+                let mut d = d.clone();
+                if let (Some(from), Some(t)) = (&opts.detections_camera, &d.t_cam_tube) {
+                    if let Some(t) = reanchored_pose(t, from, camera) {
+                        d.t_cam_tube = Some(t);
+                    }
+                }
+                let t0 = std::time::Instant::now();
+                out.poses.push(refiner.refine_with_colour(&input, &d, colour.as_ref()));
+                out.fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+                if let (true, Ok(sd)) = (opts.seeds, refiner.seed_with_colour(&input, &d, colour.as_ref())) {
+                    if let Ok(p) = TubeAxisPose::new(frame.image_id, d.score, sd.state.c, sd.state.a, 0.5) {
+                        out.seeds.push(p);
+                    }
+                }
+            }
+            SeedItem::Explicit { state, .. } => {
+                let t0 = std::time::Instant::now();
+                out.poses.push(refiner.refine_seed(&input, &Seed { state: *state, end_known: true }, frame.image_id, 1.0, None));
+                out.fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+                if opts.seeds {
+                    if let Ok(p) = TubeAxisPose::new(frame.image_id, 1.0, state.c, state.a, 0.5) {
+                        out.seeds.push(p);
+                    }
+                }
+            }
+        }
+    }
+    for ((p, item), g) in out.poses.iter_mut().zip(items).zip(&grounds) {
+        after_fit(st, p, item.detection(), depth.as_ref(), pair.as_ref(), g.as_ref(), refiner, camera);
+    }
+    out.stereo_points = if frame.stereo.is_some() { stereo_pts } else { Vec::new() };
+    out.scene_depth = depth;
+    Ok(out)
+}

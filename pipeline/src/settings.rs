@@ -1,0 +1,94 @@
+//! Settings of a [`crate::Locator`] run: the refiner's, the stereo matcher's and those of the
+//! stages after the fit.
+
+use tubeloc_core::TubeModel;
+use tubeloc_refine::silhouette::MaskSnap;
+use tubeloc_refine::two_view::TwoViewConfig;
+use tubeloc_refine::RefineConfig;
+
+/// Everything a [`crate::Locator`] is tuned by. `Default` gives the shipped defaults (those of
+/// `tubeloc locate` and `tubeloc refine`). New settings (e.g. a working scale for detection, or
+/// a tube-probability threshold) are added as fields with defaults; the struct is
+/// `#[non_exhaustive]`, so build it with `LocatorSettings::default()` and assign fields.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct LocatorSettings {
+    /// The refiner's configuration (the cylinder fit).
+    pub refine: RefineConfig,
+    /// The tube model (default: the built-in model of `data/tube.toml`).
+    pub tube: TubeModel,
+    /// Decide which end is the seal end from the image's colours where the fitted pose shows
+    /// enough of both sections (`tubeloc_refine::seal_end`); `false`: from the edges only.
+    pub colour_ends: bool,
+    /// Stereo matching and the stages after the fit.
+    pub stages: StageSettings,
+    /// Merge converged poses of the same physical tube ([`tubeloc_refine::duplicates`]) in
+    /// [`crate::Locator::locate`] (Line2D fires several times on one tube).
+    pub merge_duplicates: bool,
+}
+
+impl Default for LocatorSettings {
+    fn default() -> Self {
+        LocatorSettings { refine: RefineConfig::default(), tube: TubeModel::default(), colour_ends: true, stages: StageSettings::default(), merge_duplicates: true }
+    }
+}
+
+/// Settings of stereo matching and of the stages after the fit (see
+/// [`crate::stages::after_fit`] for their order).
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct StageSettings {
+    /// Number of disparities searched by SGM (multiple of 16); the window starts at the
+    /// disparity of the farthest seed + 0.5 m.
+    pub disparities: usize,
+    /// Erode each detection mask by this many pixels before keeping its stereo points.
+    pub stereo_erode_px: usize,
+    /// With stereo and a ground plane, move each tube's plane to the matched terrain beside it
+    /// ([`tubeloc_refine::local_ground`]).
+    pub local_ground: bool,
+    /// Stereo: leave out contour points (and photometric pixels) whose SGM scene depth lies in
+    /// front of the cylinder (rocks or sand over the tube).
+    pub scene_occlusion: bool,
+    /// Stereo: anchor tubes of mask seeds with one end hidden at their visible end
+    /// ([`tubeloc_refine::hidden_end`]).
+    pub hidden_end: bool,
+    /// Stereo photometric stage: search range along the viewing rays, millimetres (0 disables
+    /// the photometric / rims / two-view stage).
+    pub photo_range_mm: f64,
+    /// Photometric stage: least ZNCC for its depth to be applied.
+    pub photo_min_zncc: f64,
+    /// Photometric stage: move only the centre along its ray (otherwise each end moves along
+    /// its own ray when there is no ground plane).
+    pub photo_centre_only: bool,
+    /// Rims stage: only for axes whose image direction lies within this angle of the epipolar
+    /// lines, degrees (90: all; 0: never).
+    pub rim_max_epipolar_deg: f64,
+    /// The last stereo stage, the fit of the whole contour in both rectified views; `None`
+    /// turns it off.
+    pub two_view: Option<TwoViewConfig>,
+    /// Uncertainty (pixels along the axis) of a visible end that anchors a tube, in the
+    /// centre's along-axis widening over the unseen part of the tube
+    /// ([`tubeloc_refine::hidden_end::unseen_length_variance`]).
+    pub unseen_anchor_px: f64,
+    /// How masks are snapped to their fitted silhouettes ([`crate::stages::snapped_detection`]).
+    pub snap: MaskSnap,
+}
+
+impl Default for StageSettings {
+    fn default() -> Self {
+        StageSettings {
+            disparities: 256,
+            stereo_erode_px: 0,
+            local_ground: true,
+            scene_occlusion: true,
+            hidden_end: true,
+            photo_range_mm: 30.0,
+            photo_min_zncc: 0.5,
+            photo_centre_only: false,
+            rim_max_epipolar_deg: 90.0,
+            two_view: Some(TwoViewConfig::default()),
+            unseen_anchor_px: 3.0,
+            snap: MaskSnap::default(),
+        }
+    }
+}

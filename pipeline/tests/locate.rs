@@ -1,0 +1,95 @@
+//! The pipeline on rendered scenes: `Locator::locate` returns the rendered tube, mono with a
+//! ground plane and with a stereo pair.
+
+#[path = "../../refine/tests/common/mod.rs"]
+#[allow(clippy::too_many_arguments)]
+mod common;
+
+use image::{DynamicImage, GrayImage, Luma};
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use tubeloc_core::{DetectionSource, Plane, Pose, Rig, RigCamera, TubeDetection};
+use tubeloc_pipeline::{CameraSelection, ExternalDetections, GroundPlane, LocateInput, Locator, LocatorSettings, PipelineError, TubeDetector};
+
+fn to_image(p: &Plane<f32>) -> DynamicImage {
+    DynamicImage::ImageLuma8(GrayImage::from_fn(p.width as u32, p.height as u32, |x, y| Luma([(p.get(x as usize, y as usize).clamp(0.0, 1.0) * 255.0).round() as u8])))
+}
+
+fn rig(cam: &tubeloc_core::CameraModel, baseline: f64) -> Rig {
+    let right = Pose::from_parts(nalgebra::Rotation3::identity(), Vector3::new(baseline, 0.0, 0.0));
+    Rig {
+        cameras: vec![
+            RigCamera { name: "L".into(), model: cam.clone(), t_rig_cam: Pose::identity() },
+            RigCamera { name: "R".into(), model: cam.clone(), t_rig_cam: right },
+        ],
+        stereo_pairs: vec![("L".into(), "R".into())],
+    }
+}
+
+fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.normalize().dot(&b.normalize()).abs().min(1.0).acos().to_degrees()
+}
+
+#[test]
+fn locate_returns_the_rendered_tube_mono_and_stereo() {
+    let model = common::default_model();
+    let cam = common::camera(false);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let (truth, up, gd) = common::random_truth(&mut rng, &model, &cam, (1.2, 1.6));
+    let baseline = 0.05;
+    let left = common::render(&model, &cam, truth, up, gd, None, 11, 0.01);
+    let right = common::render_right(&model, &cam, truth, up, gd, 11, 0.01, baseline);
+    let mask = common::tube_mask(&model, &left);
+    let det: TubeDetection = common::mask_detection(&mask);
+    assert_eq!(det.source, DetectionSource::Learned);
+    let (li, ri) = (to_image(&left.image), to_image(&right.image));
+    let ground = GroundPlane::new(up, gd).unwrap();
+    let locator = Locator::new(&rig(&cam, baseline), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det], "test")), LocatorSettings::default()).unwrap();
+    assert_eq!(locator.camera().name, "L");
+
+    // Mono with the ground plane.
+    let mono = locator.locate(&LocateInput { image: &li, right: None, ground: Some(ground), up: None }).unwrap();
+    assert_eq!((mono.tubes.len(), mono.rejected.len()), (1, 0));
+    let t = &mono.tubes[0];
+    let (dc, da) = ((t.pose.centre - truth.centre).norm(), angle_deg(&t.pose.axis, &truth.axis));
+    assert!(dc < 0.02 && da < 2.0, "mono: centre {:.1} mm, axis {da:.2} deg off", dc * 1e3);
+    assert_eq!(mono.up_cam, ground.normal);
+    assert_eq!(mono.timings.fit_ms.len(), 1);
+    // The grasp frame: origin at the centre, +x along the axis, approach against up.
+    assert!((t.t_cam_grasp.translation() - t.pose.centre).norm() < 1e-12);
+    let r = t.t_cam_grasp.rotation();
+    assert!(r.column(0).dot(&t.pose.axis).abs() > 1.0 - 1e-9 && r.column(2).dot(&ground.normal) < 0.0);
+
+    // Stereo: the pair's points and the stereo stages.
+    let st = locator.locate(&LocateInput { image: &li, right: Some(&ri), ground: Some(ground), up: None }).unwrap();
+    assert_eq!(st.tubes.len(), 1);
+    let t = &st.tubes[0];
+    let (dc, da) = ((t.pose.centre - truth.centre).norm(), angle_deg(&t.pose.axis, &truth.axis));
+    assert!(t.pose.residuals.stereo_points > 0, "no stereo points");
+    assert!(dc < 0.01 && da < 1.0, "stereo: centre {:.1} mm, axis {da:.2} deg off", dc * 1e3);
+
+    // `refine` with the same detections gives the poses `locate` refined, before merging.
+    let (poses, fit_ms) = locator.refine(&LocateInput { image: &li, right: None, ground: Some(ground), up: None }, &mono.detections).unwrap();
+    assert_eq!(fit_ms.len(), 1);
+    assert_eq!(poses[0], mono.tubes[0].pose);
+}
+
+#[test]
+fn wrong_sizes_are_refused_naming_the_detection() {
+    let cam = common::camera(false);
+    let img = DynamicImage::ImageLuma8(GrayImage::new(cam.width, cam.height));
+    let mut det = TubeDetection::new(3, 0.9, [10.0, 10.0, 20.0, 5.0], DetectionSource::External);
+    det.mask = Some(tubeloc_core::Rle::from_mask(&tubeloc_core::BinaryMask::new(64, 48)));
+    let detector = ExternalDetections::new(vec![det], "results.json");
+    assert_eq!(detector.name(), "external");
+    let locator = Locator::new(&rig(&cam, 0.2), &CameraSelection::default(), Box::new(detector), LocatorSettings::default()).unwrap();
+    let e = locator.locate(&LocateInput::mono(&img)).unwrap_err();
+    assert!(matches!(e, PipelineError::Input(_)));
+    let msg = e.to_string();
+    assert!(msg.contains("results.json") && msg.contains("detection 0") && msg.contains("64x48"), "{msg}");
+    // An image that is not the camera's size.
+    let small = DynamicImage::ImageLuma8(GrayImage::new(64, 48));
+    let msg = locator.locate(&LocateInput::mono(&small)).unwrap_err().to_string();
+    assert!(msg.contains("64x48") && msg.contains("\"L\""), "{msg}");
+}
