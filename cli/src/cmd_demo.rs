@@ -142,6 +142,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
         results_images: None,
         ground,
         up: None,
+        calibration: None,
+        min_probability: None,
+        range_m: "1:4".into(),
         out: out.join("locate/poses.json"),
         overlay: None,
     };

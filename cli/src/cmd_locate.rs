@@ -73,12 +73,33 @@ pub struct LocateArgs {
     /// given (default: -y, i.e. the camera is roughly level).
     #[arg(long, allow_hyphen_values = true, value_parser = parse_up)]
     pub up: Option<Vector3<f64>>,
+    /// Score calibration JSON (probability of a tube and acceptance threshold; `tubeloc eval
+    /// --calibrate` writes one). Default for the learned detector: the one beside the model
+    /// (`data/models/tubenet.calibration.json`); other detectors: none (probability = score).
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Accept tubes whose probability is at least this (default: the calibration's threshold,
+    /// chosen for precision >= 0.95 on real validation composites).
+    #[arg(long, value_parser = probability)]
+    pub min_probability: Option<f64>,
+    /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
+    /// the working scale of this band (or of --ground), or "off" (the image as it is).
+    #[arg(long, default_value = "1:4")]
+    pub range_m: String,
     /// Output poses (JSON, schema tubeloc.locate.v1).
     #[arg(long)]
     pub out: PathBuf,
     /// Overlay PNG with the fitted contours (default: `<out stem>.overlay.png` next to --out).
     #[arg(long)]
     pub overlay: Option<PathBuf>,
+}
+
+/// A probability in [0, 1].
+fn probability(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
+        _ => Err(format!("{s:?}: expected a probability in [0, 1]")),
+    }
 }
 
 /// `--up ux,uy,uz`: three finite numbers, not all zero (normalized).
@@ -112,14 +133,26 @@ pub struct LocateDoc<'a> {
     /// Pose of the camera in the rig frame.
     #[serde(rename = "T_rig_cam")]
     pub t_rig_cam: Pose,
-    /// Located tubes, best score first, then the rejected detections (`converged: false`).
-    pub tubes: Vec<&'a LocatedTube>,
+    /// Located tubes, best score first, then the rejected detections (`status` says why).
+    pub tubes: Vec<TubeOut<'a>>,
+    /// The probability threshold tubes were accepted at.
+    pub min_probability: f64,
     /// Run statistics: wall time (s) and peak resident memory (MiB) of the whole run.
     pub run: serde_json::Value,
     /// The model of the camera that took `image`.
     pub camera_model: &'a CameraModel,
     /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
     pub detections: &'a [TubeDetection],
+}
+
+/// One tube of the document: the pose, grasp frames and probability, and what became of it.
+#[derive(Serialize, Debug)]
+pub struct TubeOut<'a> {
+    /// The tube.
+    #[serde(flatten)]
+    pub tube: &'a LocatedTube,
+    /// `located` (handed to the planner), `fit_failed` or `low_probability`.
+    pub status: &'static str,
 }
 
 fn sidecar(out: &Path, suffix: &str) -> PathBuf {
@@ -158,7 +191,9 @@ fn detector_of(a: &LocateArgs, size: (u32, u32)) -> Result<Box<dyn TubeDetector>
             if !model.exists() {
                 bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model.display());
             }
-            Box::new(LearnedDetector::load(&model, Default::default())?)
+            let mut d = LearnedDetector::load(&model, Default::default())?;
+            d.range = crate::cmd_detect_learned::parse_range_band(&a.range_m)?;
+            Box::new(d)
         }
         Detector::Line2d => {
             let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
@@ -188,7 +223,17 @@ pub fn run(a: LocateArgs) -> Result<usize> {
     let (w, h) = image::image_dimensions(&a.image).with_context(|| format!("reading {}", a.image.display()))?;
     let detector = detector_of(&a, (w, h))?;
     let detector_name = detector.name().to_string();
-    let locator = Locator::new(&rig, &selection, detector, LocatorSettings::default()).with_context(|| a.rig.display().to_string())?;
+    let mut settings = LocatorSettings::default();
+    settings.calibration = match (&a.calibration, a.detector) {
+        (Some(p), _) => crate::cmd_detect_learned::load_calibration(Some(p), Path::new(""))?,
+        (None, Detector::Learned) => crate::cmd_detect_learned::load_calibration(None, &a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model))?,
+        (None, _) => settings.calibration,
+    };
+    if let Some(p) = a.min_probability {
+        settings.calibration.threshold = p;
+    }
+    let min_probability = settings.calibration.threshold;
+    let locator = Locator::new(&rig, &selection, detector, settings).with_context(|| a.rig.display().to_string())?;
     let cam = locator.camera().clone();
     if (w, h) != (cam.model.width, cam.model.height) {
         bail!("{} is {w}x{h} but rig camera {:?} in {} is {}x{}", a.image.display(), cam.name, a.rig.display(), cam.model.width, cam.model.height);
@@ -200,8 +245,13 @@ pub fn run(a: LocateArgs) -> Result<usize> {
 
     // Outputs: the overlay, then the poses, each written atomically; nothing printed before.
     let overlay_path = a.overlay.clone().unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
-    let tubes: Vec<&LocatedTube> = found.all_tubes().collect();
-    let overlay = locator.overlay(&image, tubes.iter().map(|t| &t.pose));
+    let tubes: Vec<TubeOut> = found
+        .tubes
+        .iter()
+        .map(|t| TubeOut { tube: t, status: "located" })
+        .chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() }))
+        .collect();
+    let overlay = locator.overlay(&image, tubes.iter().map(|t| &t.tube.pose));
     let png = tubeloc_pipeline::overlay::png_bytes(&overlay).context("encoding the overlay PNG")?;
     let doc = LocateDoc {
         schema: "tubeloc.locate.v1",
@@ -212,6 +262,7 @@ pub fn run(a: LocateArgs) -> Result<usize> {
         up_cam: found.up_cam,
         t_rig_cam: cam.t_rig_cam,
         tubes,
+        min_probability,
         run: serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb()}),
         camera_model: &cam.model,
         detections: &found.detections,
@@ -238,14 +289,22 @@ pub fn run(a: LocateArgs) -> Result<usize> {
 fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged: usize) {
     let mut out = std::io::stdout().lock();
     let mut lines = vec![format!("{}: {} tube(s) located, {} detection(s) rejected, {} duplicate(s) merged", image.display(), converged, found.rejected.len(), found.merged)];
+    let low: Vec<Option<(f64, f64)>> = found.tubes.iter().map(|_| None).chain(found.rejected.iter().map(|r| match r.reason {
+        tubeloc_pipeline::Rejection::LowProbability { probability, threshold } => Some((probability, threshold)),
+        _ => None,
+    })).collect();
     for (i, t) in found.all_tubes().enumerate() {
         let p = &t.pose;
+        if let Some((pr, th)) = low[i] {
+            lines.push(format!("  tube {i}: rejected (probability of a tube {pr:.3} < {th:.3}), score {:.2}", p.score));
+            continue;
+        }
         let c = p.centre * 1e3;
         let g = t.t_rig_grasp.translation() * 1e3;
         lines.push(match &p.failure {
             None => format!(
-                "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}",
-                c.x, c.y, c.z, g.x, g.y, g.z, p.axis.x, p.axis.y, p.axis.z, p.centre_std_m() * 1e3, p.axis_std_rad().to_degrees(), p.end_confidence, p.score
+                "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}, P(tube) {:.3}",
+                c.x, c.y, c.z, g.x, g.y, g.z, p.axis.x, p.axis.y, p.axis.z, p.centre_std_m() * 1e3, p.axis_std_rad().to_degrees(), p.end_confidence, p.score, t.probability
             ),
             Some(f) => format!("  tube {i}: rejected ({:?}): {}", f.reason, f.message),
         });

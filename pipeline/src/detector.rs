@@ -7,7 +7,9 @@ use image::DynamicImage;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
-use tubeloc_detect::learned::{detect_rgb, DecodeConfig, LearnedModel};
+use tubeloc_core::GroundPlane;
+use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
+use tubeloc_detect::scale::RangeBand;
 use tubeloc_detect::line2d::Line2dDetector;
 
 /// A tube detector: one image (with the camera that took it) in, detections out.
@@ -16,26 +18,31 @@ pub trait TubeDetector: Send + Sync {
     fn name(&self) -> &str;
     /// Detections in `image` (taken by `camera`, whose size it has), with COCO image id
     /// `image_id`. Boxes, masks and axis seeds are in the image's pixels (pixel centres at
-    /// integer coordinates); template poses in `camera`'s frame, metres.
-    fn detect(&self, image: &DynamicImage, camera: &CameraModel, image_id: u64) -> Result<Vec<TubeDetection>>;
+    /// integer coordinates); template poses in `camera`'s frame, metres. `ground` (camera
+    /// frame), when known, sets the working scale of detectors built for one pixel scale.
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>>;
     /// Where the detections come from, for error messages (a results file, a model file).
     fn origin(&self) -> String {
         self.name().to_string()
     }
 }
 
-/// The learned instance segmenter (masks and image axis seeds).
+/// The learned instance segmenter (masks and image axis seeds), run at its working scale
+/// ([`tubeloc_detect::scale`]): the image is resampled so that tubes in the range band (or on
+/// the ground plane) are about 16 px wide, and results are mapped back.
 pub struct LearnedDetector {
     model: LearnedModel,
     decode: DecodeConfig,
     origin: String,
+    /// Distances of the tubes from the camera for the working scale; `None`: the image as it is.
+    pub range: Option<RangeBand>,
 }
 
 impl LearnedDetector {
     /// A detector with a loaded model and decoder settings; `origin` names the model (e.g. its
     /// file) in error messages.
     pub fn new(model: LearnedModel, decode: DecodeConfig, origin: impl Into<String>) -> Self {
-        LearnedDetector { model, decode, origin: origin.into() }
+        LearnedDetector { model, decode, origin: origin.into(), range: Some(RangeBand::default()) }
     }
 
     /// Loads the weights at `path` (safetensors, `tubeloc train`'s format).
@@ -54,10 +61,14 @@ impl TubeDetector for LearnedDetector {
         self.origin.clone()
     }
 
-    fn detect(&self, image: &DynamicImage, _camera: &CameraModel, image_id: u64) -> Result<Vec<TubeDetection>> {
-        let rgb = image.to_rgb8();
-        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-        let inst = detect_rgb(&self.model, rgb.as_raw(), w, h, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
+        let input = tubeloc_detect::input::rgb8_of(image);
+        let (w, h) = (input.width, input.height);
+        let s = match self.range {
+            Some(band) => tubeloc_detect::scale::working_scale(camera, ground.map(|g| (g.normal, g.offset)), band),
+            None => 1.0,
+        };
+        let inst = detect_rgb_at_scale(&self.model, &input.rgb, w, h, s, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
         Ok(inst
             .into_par_iter()
             .map(|i| {
@@ -88,7 +99,7 @@ impl TubeDetector for Line2dTubeDetector {
         "line2d"
     }
 
-    fn detect(&self, image: &DynamicImage, camera: &CameraModel, image_id: u64) -> Result<Vec<TubeDetection>> {
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, _ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
         let rgb = image.to_rgb8();
         let (w, h) = (rgb.width() as usize, rgb.height() as usize);
         let dets = self.detector.detect(rgb.as_raw(), w, h, Some(camera)).map_err(|e| PipelineError::Detect(e.to_string()))?;
@@ -139,7 +150,7 @@ impl TubeDetector for ExternalDetections {
     }
 
     /// The stored detections, whatever their image id (`image_id` is not applied).
-    fn detect(&self, _image: &DynamicImage, _camera: &CameraModel, _image_id: u64) -> Result<Vec<TubeDetection>> {
+    fn detect(&self, _image: &DynamicImage, _camera: &CameraModel, _ground: Option<&GroundPlane>, _image_id: u64) -> Result<Vec<TubeDetection>> {
         Ok(self.detections.clone())
     }
 }

@@ -57,6 +57,9 @@ pub struct LocatedTube {
     /// The grasp frame in the rig frame (`T_rig_cam · T_cam_grasp`).
     #[serde(rename = "T_rig_grasp")]
     pub t_rig_grasp: Pose,
+    /// Probability that this is a tube: the detector's score through the score calibration
+    /// ([`LocatorSettings::calibration`]), fitted on real validation composites.
+    pub probability: f64,
 }
 
 /// Why a detection did not become a located tube.
@@ -65,6 +68,23 @@ pub struct LocatedTube {
 pub enum Rejection {
     /// The fit failed; the pose's `failure` has the reason and a message.
     FitFailed(FailureReason),
+    /// The fit converged but the probability of a tube is below the acceptance threshold.
+    LowProbability {
+        /// The tube's probability.
+        probability: f64,
+        /// The threshold ([`tubeloc_core::ScoreCalibration::threshold`]).
+        threshold: f64,
+    },
+}
+
+impl Rejection {
+    /// A short machine-readable name (`fit_failed`, `low_probability`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Rejection::FitFailed(_) => "fit_failed",
+            Rejection::LowProbability { .. } => "low_probability",
+        }
+    }
 }
 
 /// A detection whose refinement was rejected, with its (unconverged) pose.
@@ -185,9 +205,9 @@ impl Locator {
     /// Detects with this locator's detector (COCO image id 0) and checks the masks' sizes.
     /// (A detector working at its own pixel scale wraps the detector: it resamples the image
     /// for the camera and maps its detections back to the image's pixels before they return.)
-    pub fn detect(&self, image: &DynamicImage) -> Result<Vec<TubeDetection>> {
+    pub fn detect(&self, image: &DynamicImage, ground: Option<&GroundPlane>) -> Result<Vec<TubeDetection>> {
         self.check_size(image, "image", &self.camera)?;
-        let dets = self.detector.detect(image, &self.camera.model, 0)?;
+        let dets = self.detector.detect(image, &self.camera.model, ground, 0)?;
         check_mask_sizes(&dets, image.width(), image.height(), &self.detector.origin())?;
         Ok(dets)
     }
@@ -245,7 +265,7 @@ impl Locator {
         let t0 = Instant::now();
         let up = Self::up_direction(input)?;
         let px = FramePixels::of(input.image);
-        let detections = self.detect(input.image)?;
+        let detections = self.detect(input.image, input.ground.as_ref())?;
         let detect_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         // Each detection is refined in the form it has in a detections file, so that `locate`
@@ -257,12 +277,15 @@ impl Locator {
         poses.sort_by(|x, y| y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score)));
         let merged = if self.settings.merge_duplicates { tubeloc_refine::duplicates::merge_duplicates(&mut poses, &self.settings.tube) } else { 0 };
         let (mut tubes, mut rejected) = (Vec::new(), Vec::new());
+        let cal = &self.settings.calibration;
         for pose in poses {
             let t_cam_grasp = pose.grasp_frame(&up);
             let failure = pose.failure.as_ref().map(|f| f.reason);
-            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, pose };
+            let probability = cal.probability(pose.score);
+            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, pose, probability };
             match (tube.pose.converged, failure) {
-                (true, _) => tubes.push(tube),
+                (true, _) if probability >= cal.threshold => tubes.push(tube),
+                (true, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
                 (false, reason) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
             }
         }

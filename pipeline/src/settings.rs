@@ -1,7 +1,7 @@
 //! Settings of a [`crate::Locator`] run: the refiner's, the stereo matcher's and those of the
 //! stages after the fit.
 
-use tubeloc_core::TubeModel;
+use tubeloc_core::{ScoreCalibration, TubeModel};
 use tubeloc_refine::silhouette::MaskSnap;
 use tubeloc_refine::two_view::TwoViewConfig;
 use tubeloc_refine::RefineConfig;
@@ -25,11 +25,16 @@ pub struct LocatorSettings {
     /// Merge converged poses of the same physical tube ([`tubeloc_refine::duplicates`]) in
     /// [`crate::Locator::locate`] (Line2D fires several times on one tube).
     pub merge_duplicates: bool,
+    /// Score calibration: each tube's probability of being a tube, and the threshold below
+    /// which a converged tube is rejected (`low_probability`) instead of handed to the planner.
+    /// Default: the identity with threshold 0 (every converged tube accepted); `tubeloc
+    /// locate` loads the one fitted for its model.
+    pub calibration: ScoreCalibration,
 }
 
 impl Default for LocatorSettings {
     fn default() -> Self {
-        LocatorSettings { refine: RefineConfig::default(), tube: TubeModel::default(), colour_ends: true, stages: StageSettings::default(), merge_duplicates: true }
+        LocatorSettings { refine: RefineConfig::default(), tube: TubeModel::default(), colour_ends: true, stages: StageSettings::default(), merge_duplicates: true, calibration: ScoreCalibration { threshold: 0.0, ..ScoreCalibration::identity() } }
     }
 }
 
