@@ -19,9 +19,11 @@ pub struct CompositeArgs {
     /// Camera model JSON (CameraModel) of the photograph; its size must match the photo.
     #[arg(long)]
     pub camera: PathBuf,
-    /// Ground plane in the camera frame as "nx,ny,nz,d" (n·X + d = 0, metres).
+    /// Ground plane in the camera frame as "nx,ny,nz,d" (`n·X = d`, n up, metres: the same
+    /// convention as `locate` and `refine`; a camera 1.5 m above level ground looking ahead
+    /// has n = (0, -1, 0) and d = -1.5).
     #[arg(long, allow_hyphen_values = true)]
-    pub ground: String,
+    pub ground: tubeloc_core::GroundPlane,
     /// Sun as "azimuth,elevation" in degrees (azimuth from the camera's forward direction on the ground, positive to the right).
     #[arg(long, default_value = "60,45", allow_hyphen_values = true)]
     pub sun: String,
@@ -52,7 +54,6 @@ fn numbers(s: &str, n: usize, what: &str) -> Result<Vec<f64>> {
 
 /// Runs `tubeloc synth composite`.
 pub fn run(a: CompositeArgs) -> Result<()> {
-    let g = numbers(&a.ground, 4, "ground")?;
     let s = numbers(&a.sun, 2, "sun")?;
     let cam = CameraModel::load_json(&a.camera).with_context(|| format!("reading camera {}", a.camera.display()))?;
     let img = image::open(&a.background).with_context(|| format!("reading background {}", a.background.display()))?.to_rgb8();
@@ -63,7 +64,7 @@ pub fn run(a: CompositeArgs) -> Result<()> {
         Some(p) => TubeShape::from_mesh(&TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?),
         None => TubeShape::from_model(&TubeModel::default()),
     };
-    let cfg = CompositeConfig { ground: (nalgebra::Vector3::new(g[0], g[1], g[2]), g[3]), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0 };
+    let cfg = CompositeConfig { ground: (a.ground.normal, -a.ground.offset), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0 };
     let c = composite(img.as_raw(), &cam, &cfg)?;
     let stem = a.background.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "composite".into());
     let file_name = format!("{stem}_composite.png");
@@ -71,6 +72,7 @@ pub fn run(a: CompositeArgs) -> Result<()> {
     let mut extra = Map::new();
     extra.insert("camera".into(), serde_json::to_value(&cam)?);
     extra.insert("T_world_cam".into(), pose_json(&c.t_ground_cam));
+    extra.insert("ground".into(), json!({"normal": [a.ground.normal.x, a.ground.normal.y, a.ground.normal.z], "d": a.ground.offset}));
     extra.insert("background".into(), json!(a.background.display().to_string()));
     extra.insert("sun_az_el_deg".into(), json!([s[0], s[1]]));
     let image = CocoImage { id: 1, width: cam.width, height: cam.height, file_name: file_name.clone(), extra };

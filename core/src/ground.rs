@@ -70,6 +70,11 @@ impl FromStr for GroundPlane {
         if n.norm() < 1e-9 {
             return Err(bad("the normal is zero"));
         }
+        if v[3] >= 0.0 {
+            // With n up, points of the ground below the camera have n·X < 0: d is minus the
+            // camera's height. d >= 0 puts the camera on or under the ground.
+            return Err(bad(&format!("d = {} puts the camera on or below the ground (with n pointing up, d is minus the camera's height above it; a plane written as n·X + d = 0 needs -d here)", v[3])));
+        }
         GroundPlane::new(n, v[3]).map_err(|e| bad(&e.to_string()))
     }
 }
@@ -83,6 +88,14 @@ impl std::fmt::Display for GroundPlane {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_ground_above_the_camera_is_refused_with_a_hint() {
+        let e = "0,-1,0,1.5".parse::<super::GroundPlane>().unwrap_err().to_string();
+        assert!(e.contains("\"0,-1,0,1.5\"") && e.contains("n·X + d = 0"), "{e}");
+        let g: super::GroundPlane = "0,-2,0,-3".parse().unwrap();
+        assert!((g.offset + 1.5).abs() < 1e-12 && (g.normal.y + 1.0).abs() < 1e-12);
+    }
+
     use super::*;
 
     #[test]
