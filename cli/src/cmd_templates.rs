@@ -135,10 +135,15 @@ fn check_size(est: &LibraryEstimate, max_templates: usize, max_memory_gib: f64) 
             count(MAX_DEDUPE_COMPARISONS)
         )));
     }
-    if est.templates > max_templates as f64 || gib > max_memory_gib {
-        return Err(crate::args::usage(format!(
-            "the library would hold {what}: above the limit of {max_templates} templates and {max_memory_gib} GiB (--max-templates, --max-memory-gib); use a coarser --distances or --step-deg"
-        )));
+    let mut over = Vec::new();
+    if est.templates > max_templates as f64 {
+        over.push(format!("the limit of {max_templates} templates (--max-templates)"));
+    }
+    if gib > max_memory_gib {
+        over.push(format!("the limit of {max_memory_gib} GiB (--max-memory-gib)"));
+    }
+    if !over.is_empty() {
+        return Err(crate::args::usage(format!("the library would hold {what}: above {}; use a coarser --distances or --step-deg", over.join(" and "))));
     }
     Ok(())
 }
