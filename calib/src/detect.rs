@@ -16,6 +16,57 @@ use tubeloc_core::Plane;
 /// Shift from the C detector's pixel convention to tubeloc's, pixels.
 pub const C_TO_OPENCV_PX: f64 = -0.5;
 
+/// Largest image side the C detector takes, pixels (it asserts `w, h < 32768` and indexes
+/// pixels with 32-bit ints). Larger images are refused with an error.
+pub const MAX_IMAGE_SIDE: usize = 32767;
+
+/// Smallest side of the image the C detector searches for quads (the input after
+/// decimation), pixels. Below it the C code reads outside its buffers (its 4 px threshold
+/// tiles do not fit: 1 or 2 px tall images crashed it), and no tag fits anyway (a tag36h11
+/// needs 8 cells across): such images give no detection.
+pub const MIN_QUAD_SIDE: usize = 8;
+
+/// Largest decimation factor accepted.
+pub const MAX_DECIMATION: f32 = 64.0;
+
+/// Largest Gaussian blur sigma accepted, pixels.
+pub const MAX_SIGMA: f32 = 16.0;
+
+/// Checks a decimation factor: 1, 1.5, or a whole number from 2 to [`MAX_DECIMATION`]. The C
+/// library decimates by the integer part of the factor but scales the quads back by the factor
+/// itself, so other fractions would misplace every corner.
+pub fn check_decimation(decimation: f32) -> Result<(), String> {
+    let ok = decimation.is_finite() && (1.0..=MAX_DECIMATION).contains(&decimation) && (decimation == 1.5 || decimation.fract() == 0.0);
+    if ok {
+        Ok(())
+    } else {
+        Err(format!("must be 1, 1.5 or a whole number from 2 to {MAX_DECIMATION}, got {decimation}"))
+    }
+}
+
+/// Size of the image the C detector searches for quads: `width x height` decimated by
+/// `decimation` as `image_u8_decimate` does it.
+pub fn quad_image_size(width: usize, height: usize, decimation: f32) -> (usize, usize) {
+    if decimation == 1.5 {
+        (width / 3 * 2, height / 3 * 2)
+    } else if decimation > 1.0 {
+        let f = decimation as usize;
+        (1 + (width.max(1) - 1) / f, 1 + (height.max(1) - 1) / f)
+    } else {
+        (width, height)
+    }
+}
+
+/// Kernel size of the C detector's quad blur for `sigma` (`4 sigma`, made odd; 1 = no blur).
+fn blur_kernel(sigma: f32) -> usize {
+    let k = (4.0 * sigma) as usize;
+    if k % 2 == 0 {
+        k + 1
+    } else {
+        k
+    }
+}
+
 /// Supported tag families.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum TagFamily {
@@ -149,11 +200,12 @@ impl TagDetector {
         if config.families.is_empty() {
             return Err(CalibError::invalid("detector", "no tag family given"));
         }
-        if !(config.decimation >= 1.0 && config.decimation.is_finite()) {
-            return Err(CalibError::invalid("decimation", format!("must be >= 1, got {}", config.decimation)));
+        check_decimation(config.decimation).map_err(|m| CalibError::invalid("decimation", m))?;
+        if !(config.sigma >= 0.0 && config.sigma <= MAX_SIGMA) || config.threads == 0 || config.max_hamming > 3 {
+            return Err(CalibError::invalid("detector", format!("sigma must be in [0, {MAX_SIGMA}], threads >= 1, max_hamming <= 3")));
         }
-        if !(config.sigma >= 0.0) || config.threads == 0 || config.max_hamming > 3 {
-            return Err(CalibError::invalid("detector", "sigma must be >= 0, threads >= 1, max_hamming <= 3"));
+        if !config.sharpening.is_finite() || config.min_decision_margin.is_nan() {
+            return Err(CalibError::invalid("detector", "sharpening must be finite and min_decision_margin a number"));
         }
         let mut b = DetectorBuilder::new();
         for f in &config.families {
@@ -200,9 +252,23 @@ impl TagDetector {
     }
 
     /// Detects tags in a raw buffer with the given row stride (bytes).
+    ///
+    /// This is the one place that calls the C detector, and it only calls it with inputs it
+    /// takes: an image with a side over [`MAX_IMAGE_SIDE`] is an error; one whose decimated
+    /// quad image (see [`quad_image_size`]) is under [`MIN_QUAD_SIDE`] px, or narrower than
+    /// the blur kernel, holds no tag and gives no detection without calling the C code.
     pub fn detect_raw(&mut self, width: usize, height: usize, stride: usize, data: &[u8]) -> Result<Vec<TagDetection>, CalibError> {
-        if width == 0 || height == 0 || stride < width || data.len() < stride * (height - 1) + width {
+        let fits = stride >= width && height.checked_sub(1).and_then(|h| h.checked_mul(stride)).and_then(|n| n.checked_add(width)).is_some_and(|n| data.len() >= n);
+        if width == 0 || height == 0 || !fits {
             return Err(CalibError::invalid("image", format!("{width}x{height} stride {stride} does not fit a buffer of {} bytes", data.len())));
+        }
+        if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+            return Err(CalibError::invalid("image", format!("{width}x{height} is larger than the AprilTag detector takes ({MAX_IMAGE_SIDE} px a side)")));
+        }
+        let (qw, qh) = quad_image_size(width, height, self.config.decimation);
+        let min_side = MIN_QUAD_SIDE.max(blur_kernel(self.config.sigma));
+        if qw < min_side || qh < min_side {
+            return Ok(Vec::new());
         }
         let mut im = Image::zeros_with_alignment(width, height, 96).map_err(|e| CalibError::Detector(e.to_string()))?;
         let s = im.stride();

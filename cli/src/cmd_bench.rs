@@ -56,10 +56,10 @@ pub struct BenchArgs {
     #[arg(long)]
     pub dataset: Option<PathBuf>,
     /// Scenes to render when generating the dataset (default: the paper preset's).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     pub scenes: Option<usize>,
     /// Use at most this many images per split (evenly spaced by image id; default: all).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     pub images_per_split: Option<usize>,
     /// Line2D library (default: built into <out>/templates.tlt for the benchmark camera).
     #[arg(long)]
@@ -77,7 +77,7 @@ pub struct BenchArgs {
     #[arg(long, value_enum, value_delimiter = ',')]
     pub skip: Vec<Part>,
     /// Scenes of the synthetic stereo set.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, value_parser = crate::args::positive_usize)]
     pub stereo_scenes: usize,
     /// The real rover data (`MANIFEST.tsv`, `backgrounds/`, `negatives_val/`, `with_cameras/`)
     /// for the real stage.

@@ -24,10 +24,10 @@ pub struct DetectorArgs {
     #[arg(long, value_delimiter = ',', default_value = "tag36h11")]
     pub family: Vec<String>,
     /// Quad decimation factor (1 = full resolution).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::args::decimation)]
     pub decimate: f32,
     /// Detector threads.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = crate::args::positive_u8)]
     pub threads: u8,
     /// Snap quad edges to strong gradients (off by default, as in the reference detector's
     /// corners; can help when decimating).
@@ -126,7 +126,7 @@ fn run_detect(a: DetectArgs) -> Result<()> {
     let v = serde_json::Value::Object(all);
     match a.out {
         Some(out) => files::write_json(&out, &v).with_context(|| format!("writing {}", out.display()))?,
-        None => println!("{}", serde_json::to_string_pretty(&v)?),
+        None => crate::out::outln!("{}", serde_json::to_string_pretty(&v)?),
     }
     Ok(())
 }
@@ -153,12 +153,12 @@ fn run_rig(a: RigArgs) -> Result<()> {
     }
     for c in &cal.cameras {
         let m = &c.model;
-        println!("{:>6}: fx {:.3}±{:.3} fy {:.3}±{:.3} cx {:.3} cy {:.3} k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}  rms {:.3} px  views {}  outliers {}", c.name, m.fx, c.std[0], m.fy, c.std[1], m.cx, m.cy, m.distortion.k1, m.distortion.k2, m.distortion.p1, m.distortion.p2, m.distortion.k3, c.rms_px, c.views.len(), c.outliers);
+        crate::out::outln!("{:>6}: fx {:.3}±{:.3} fy {:.3}±{:.3} cx {:.3} cy {:.3} k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}  rms {:.3} px  views {}  outliers {}", c.name, m.fx, c.std[0], m.fy, c.std[1], m.cx, m.cy, m.distortion.k1, m.distortion.k2, m.distortion.p1, m.distortion.p2, m.distortion.k3, c.rms_px, c.views.len(), c.outliers);
     }
     for (l, r, b) in &cal.baselines {
-        println!("baseline {l}-{r}: {:.2} mm", b * 1e3);
+        crate::out::outln!("baseline {l}-{r}: {:.2} mm", b * 1e3);
     }
-    println!("overall rms {:.4} px per corner ({:.4} px per coordinate)", cal.rms_px, cal.rms_coord_px);
+    crate::out::outln!("overall rms {:.4} px per corner ({:.4} px per coordinate)", cal.rms_px, cal.rms_coord_px);
     for s in &cal.skipped {
         eprintln!("skipped: {s}");
     }
@@ -253,7 +253,7 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     files::write_json(&ann_path, &coco).with_context(|| format!("writing {}", ann_path.display()))?;
-    println!("{}: {posed} tag poses ({single} from one tag only), {none} images without mount tags", ann_path.display());
+    crate::out::outln!("{}: {posed} tag poses ({single} from one tag only), {none} images without mount tags", ann_path.display());
     if posed == 0 && !images.is_empty() {
         bail!("no mount tag found in any image of {}", Path::new(&a.dataset).display());
     }

@@ -26,7 +26,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
     /// Crop side of the rendered images, pixels.
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = crate::args::positive_u32)]
     pub resolution: u32,
     /// Learned model (default: the shipped data/models/tubenet.safetensors; skipped if absent).
     #[arg(long)]
@@ -156,7 +156,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let report = build_report(&a, &log, &detectors.iter().map(|d| d.0).collect::<Vec<_>>(), &tags, out);
     let report_path = out.join("report.md");
     files::write_atomic(&report_path, report.as_bytes())?;
-    println!("\ndemo finished in {:.1} s; report: {}", t0.elapsed().as_secs_f64(), report_path.display());
+    crate::out::outln!("\ndemo finished in {:.1} s; report: {}", t0.elapsed().as_secs_f64(), report_path.display());
     Ok(())
 }
 

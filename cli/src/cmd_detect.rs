@@ -59,6 +59,7 @@ pub struct DetectArgs {
 
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
+    args.line2d.check()?;
     let dets = match args.method {
         Method::Line2d => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;

@@ -18,46 +18,53 @@ pub struct Line2dOpts {
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// Line2D detection threshold, percent of the maximal similarity.
-    #[arg(long, default_value_t = 80.0)]
+    #[arg(long, default_value_t = 80.0, value_parser = crate::args::percent_f32)]
     pub threshold: f32,
     /// Line2D coarse-level threshold, percent (default: --threshold).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::percent_f32)]
     pub coarse_threshold: Option<f32>,
     /// Line2D NMS: silhouette IoU above which the weaker detection is dropped.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = 0.3, value_parser = crate::args::unit_interval_f32)]
     pub nms_iou: f32,
     /// Line2D: maximum detections per image.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 100, value_parser = crate::args::positive_usize)]
     pub max_detections: usize,
     /// Line2D: minimum Sobel gradient magnitude.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = crate::args::non_negative_f32)]
     pub grad_threshold: f32,
     /// Line2D verification: weight of the silhouette-vs-ring luminance contrast in the score
     /// (score = (similarity/100 + w clamp(C,-1,1)) / (1 + w)).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = crate::args::non_negative_f32)]
     pub contrast_weight: f32,
     /// Line2D verification: drop matches whose contrast C is below this.
-    #[arg(long, default_value_t = -0.2, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = -0.2, allow_hyphen_values = true, value_parser = crate::args::finite_f32)]
     pub min_contrast: f32,
     /// Line2D verification: ring of background samples from this many px outside the silhouette...
     #[arg(long, default_value_t = 2)]
     pub ring_inner: u32,
     /// ...to this many px (inside samples are at least --ring-inner px inside).
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 6, value_parser = crate::args::positive_u32)]
     pub ring_outer: u32,
     /// Line2D verification: weight of the contrast when choosing the template (mask, pose)
     /// within an NMS cluster (0 = Line2D re-ranking only).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::args::non_negative_f32)]
     pub rerank_contrast_weight: f32,
     /// Line2D: matches within this many similarity points of a cluster's best are re-ranked.
-    #[arg(long, default_value_t = 15.0)]
+    #[arg(long, default_value_t = 15.0, value_parser = crate::args::non_negative_f32)]
     pub rerank_margin: f32,
     /// Line2D: re-ranking bonus `w area / max area` for larger silhouettes within a cluster.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = 0.3, value_parser = crate::args::non_negative_f32)]
     pub rerank_area_weight: f32,
     /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
     #[arg(long)]
     pub no_verify: bool,
+}
+
+impl Line2dOpts {
+    /// Checks the options that depend on each other (a command-line error, exit 2).
+    pub fn check(&self) -> Result<()> {
+        crate::args::require_at_most(("--ring-inner", self.ring_inner), ("--ring-outer", self.ring_outer))
+    }
 }
 
 /// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries. The coarse

@@ -26,7 +26,7 @@ pub struct EvalArgs {
     poses: Vec<String>,
     /// Pose evaluation: least visible fraction (annotations' `visible_fraction`) of the
     /// ground-truth tubes evaluated.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = crate::args::unit_interval)]
     min_visible: f64,
     /// Pose evaluation of a stereo dataset: keep only the truths whose axis lies at least half
     /// inside the right image (`images[].right_camera`, `images[].T_left_right`; 21 points along
@@ -35,7 +35,7 @@ pub struct EvalArgs {
     #[arg(long)]
     in_both_views: bool,
     /// Pose evaluation: gate of the greedy matching on the centre distance, millimetres.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = 50.0, value_parser = crate::args::positive_f64)]
     match_mm: f64,
     /// Pose evaluation: the annotation field holding the true pose: `T_cam_tube` (the exact
     /// pose of a rendered dataset) or `T_cam_tube_tags` (the tag-pair ground truth written by
@@ -128,10 +128,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         eprintln!("calibration -> {}", p.display());
     }
 
-    print!("{}", result.summary_text());
+    crate::out::out!("{}", result.summary_text());
     let table = breakdown::markdown_table(&breakdowns);
     if !breakdowns.is_empty() {
-        println!("\n{table}");
+        crate::out::outln!("\n{table}");
     }
     if let Some(out) = &args.out {
         let mut metrics = result.to_json();

@@ -33,7 +33,7 @@ pub struct StereoArgs {
     #[arg(long, conflicts_with_all = ["left", "right", "rig", "rois", "ply"])]
     set: Option<PathBuf>,
     /// With --set: evaluate at most this many pairs.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     limit: Option<usize>,
     /// Rig JSON file: the pair is rectified with it before matching.
     #[arg(long)]
@@ -42,16 +42,16 @@ pub struct StereoArgs {
     #[arg(long)]
     pair: Option<String>,
     /// Number of disparities searched (multiple of 16).
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = 128, value_parser = disparities_arg)]
     disparities: usize,
     /// Smallest disparity searched, pixels.
     #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     min_disparity: i32,
     /// Aggregation paths: 8 or 4.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = paths_arg)]
     paths: u8,
     /// Region of interest "x,y,w,h" in (rectified) left pixels; repeatable. Without it the whole image is matched.
-    #[arg(long = "roi")]
+    #[arg(long = "roi", value_parser = roi_arg)]
     rois: Vec<String>,
     /// Margin (pixels) added around each region of interest.
     #[arg(long, default_value_t = 32)]
@@ -63,7 +63,7 @@ pub struct StereoArgs {
     #[arg(long)]
     ply: bool,
     /// Disparity standard deviation (pixels) used for the depth uncertainty.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = 0.25, value_parser = crate::args::positive_f64)]
     sigma_d: f64,
     /// Output folder.
     #[arg(long)]
@@ -91,6 +91,37 @@ fn parse_roi(s: &str) -> Result<Roi> {
         bail!("--roi {s:?}: expected 4 numbers x,y,w,h, got {}", v.len());
     }
     Ok(Roi::new(v[0], v[1], v[2], v[3]))
+}
+
+/// `--disparities`: a positive multiple of 16.
+fn disparities_arg(s: &str) -> std::result::Result<usize, String> {
+    let n = crate::args::positive_usize(s)?;
+    if n % 16 == 0 {
+        Ok(n)
+    } else {
+        Err(format!("must be a positive multiple of 16, got {n}"))
+    }
+}
+
+/// `--paths`: 8 or 4.
+fn paths_arg(s: &str) -> std::result::Result<u8, String> {
+    match s.trim() {
+        "8" => Ok(8),
+        "4" => Ok(4),
+        _ => Err(format!("must be 8 or 4, got {s:?}")),
+    }
+}
+
+/// `--roi`: `x,y,w,h` integers with `w, h > 0` (checked while parsing, kept as text).
+fn roi_arg(s: &str) -> std::result::Result<String, String> {
+    let v: Vec<i64> = s.split(',').map(|t| t.trim().parse::<i64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("{s:?}: expected x,y,w,h integers"))?;
+    if v.len() != 4 {
+        return Err(format!("{s:?}: expected 4 numbers x,y,w,h, got {}", v.len()));
+    }
+    if v[2] <= 0 || v[3] <= 0 {
+        return Err(format!("{s:?}: width and height must be > 0"));
+    }
+    Ok(s.to_string())
 }
 
 /// Runs `tubeloc stereo`.
@@ -164,7 +195,7 @@ pub fn run(args: StereoArgs) -> Result<()> {
         header["points"] = pts.len().into();
     }
     tubeloc_core::files::write_json(&args.out.join("disparity.json"), &header)?;
-    println!("{}: {}x{} disparity, {:.1}% valid", args.out.display(), w, h, 100.0 * valid as f64 / (w as f64 * h as f64).max(1.0));
+    crate::out::outln!("{}: {}x{} disparity, {:.1}% valid", args.out.display(), w, h, 100.0 * valid as f64 / (w as f64 * h as f64).max(1.0));
     Ok(())
 }
 
@@ -234,7 +265,7 @@ fn eval_set(dir: &Path, params: &SgmParams, limit: Option<usize>, out: &Path) ->
         "definitions": "valid: finite exact disparity, inside the right image, not occluded; tube: valid pixels in the visible tube masks; bad-t: no estimate or |error| > t px; MAE over pixels with an estimate; distances: triangulated tube points to the true tube surface",
     });
     tubeloc_core::files::write_json(&out.join("stereo_eval.json"), &report)?;
-    println!(
+    crate::out::outln!(
         "{} pairs: valid px bad-1 {:.4} bad-2 {:.4} MAE {:.3} px (density {:.3}); tube px bad-1 {:.4} bad-2 {:.4} MAE {:.3} px; tube points {} median {:.2} mm p90 {:.2} mm",
         per_pair.len(), s.valid.bad1, s.valid.bad2, s.valid.mae, s.valid.density, s.tube.bad1, s.tube.bad2, s.tube.mae, s.tube_points, s.tube_median_mm, s.tube_p90_mm
     );

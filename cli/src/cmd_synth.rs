@@ -10,7 +10,7 @@ use tubeloc_synth::{write_dataset, DatasetSpec, TubeShape};
 
 /// Arguments of `tubeloc synth`.
 #[derive(Args)]
-#[command(args_conflicts_with_subcommands = true)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct SynthArgs {
     /// Other synthetic outputs.
     #[command(subcommand)]
@@ -40,16 +40,16 @@ pub struct DatasetArgs {
     #[arg(long, default_value = "paper")]
     pub preset: String,
     /// Output folder (written atomically: <out>.tmp-<pid>, renamed at the end).
-    #[arg(long)]
+    #[arg(long, required = true)]
     pub out: Option<PathBuf>,
     /// Number of scenes (cycles through the preset's terrains and times).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     pub scenes: Option<usize>,
     /// Crop side in pixels (the preset's by default: 1024 for paper).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_u32)]
     pub resolution: Option<u32>,
     /// Render scale relative to the native 5472x3648 cameras (0.5 for paper).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_f64)]
     pub scale: Option<f64>,
     /// Master seed.
     #[arg(long, default_value_t = 0)]
@@ -58,21 +58,11 @@ pub struct DatasetArgs {
     #[arg(long)]
     pub tube_mesh: Option<PathBuf>,
     /// Render only shard I of N (scenes s with s % N == I), e.g. `--shard 0/4`.
-    #[arg(long, default_value = "0/1")]
-    pub shard: String,
+    #[arg(long, default_value = "0/1", value_parser = crate::args::shard)]
+    pub shard: (usize, usize),
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
-}
-
-fn parse_shard(s: &str) -> Result<(usize, usize)> {
-    let (a, b) = s.split_once('/').with_context(|| format!("--shard {s:?}: expected I/N, e.g. 0/4"))?;
-    let i: usize = a.trim().parse().with_context(|| format!("--shard {s:?}: I is not a number"))?;
-    let n: usize = b.trim().parse().with_context(|| format!("--shard {s:?}: N is not a number"))?;
-    if n == 0 || i >= n {
-        bail!("--shard {s:?}: need 0 <= I < N");
-    }
-    Ok((i, n))
 }
 
 /// Runs `tubeloc synth`.
@@ -104,7 +94,7 @@ pub(crate) fn preset_spec(preset: &str, seed: u64, scenes: Option<usize>, crop: 
 
 fn run_dataset(a: DatasetArgs) -> Result<()> {
     let Some(out) = a.out.clone() else { bail!("--out DIR is required") };
-    let shard = parse_shard(&a.shard)?;
+    let shard = a.shard;
     let mut spec = preset_spec(&a.preset, a.seed, a.scenes, a.resolution, a.scale)?;
     if let Some(p) = &a.tube_mesh {
         let mesh = TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?;
@@ -118,6 +108,6 @@ fn run_dataset(a: DatasetArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     let summary = write_dataset(&spec, &out, shard, a.force, &|done, _| bar.set_position(done as u64)).with_context(|| format!("writing dataset {}", out.display()))?;
     bar.finish_and_clear();
-    println!("{}: {} images, {} annotations in {:.1} s", summary.out.display(), summary.images, summary.annotations, t0.elapsed().as_secs_f64());
+    crate::out::outln!("{}: {} images, {} annotations in {:.1} s", summary.out.display(), summary.images, summary.annotations, t0.elapsed().as_secs_f64());
     Ok(())
 }

@@ -16,7 +16,7 @@ pub struct SynthCalibArgs {
     #[arg(long)]
     pub default_rig: bool,
     /// Number of board poses.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 30, value_parser = crate::args::positive_usize)]
     pub views: usize,
     /// Output folder.
     #[arg(long)]
@@ -25,13 +25,13 @@ pub struct SynthCalibArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Gaussian noise added to each corner coordinate of the `noisy` corners, pixels.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, value_parser = crate::args::non_negative_f64)]
     pub noise: f64,
     /// Grey-level noise of the rendered images.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = crate::args::non_negative_f64)]
     pub image_noise: f64,
     /// Image scale relative to the rig's native size.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = 0.25, value_parser = crate::args::positive_f64)]
     pub scale: f64,
     /// Write corners only (no images).
     #[arg(long)]
@@ -50,6 +50,6 @@ pub fn run(a: SynthCalibArgs) -> Result<()> {
     let bar = indicatif::ProgressBar::new(if cfg.render { n as u64 } else { 0 });
     write_calib_set(&a.out, &set, || bar.inc(1)).with_context(|| format!("writing {}", a.out.display()))?;
     bar.finish_and_clear();
-    println!("{}: {} views, {n} images/observations", a.out.display(), set.views.len());
+    crate::out::outln!("{}: {} views, {n} images/observations", a.out.display(), set.views.len());
     Ok(())
 }

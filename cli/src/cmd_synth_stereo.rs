@@ -15,16 +15,16 @@ pub struct SynthStereoArgs {
     #[arg(long, default_value = "paper")]
     pub preset: String,
     /// Number of scenes (cycles through the preset's terrains and times).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     pub scenes: Option<usize>,
     /// Stereo pairs per scene.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, value_parser = crate::args::positive_usize)]
     pub pairs_per_scene: usize,
     /// Crop side in pixels (the preset's by default: 1024 for paper).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_u32)]
     pub resolution: Option<u32>,
     /// Render scale relative to the native 5472x3648 cameras (the preset's by default).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_f64)]
     pub scale: Option<f64>,
     /// Master seed.
     #[arg(long, default_value_t = 0)]
@@ -48,6 +48,6 @@ pub fn run(a: SynthStereoArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     let summary = write_stereo_set(&spec, &a.out, a.force, &|done, _| bar.set_position(done as u64)).with_context(|| format!("writing stereo set {}", a.out.display()))?;
     bar.finish_and_clear();
-    println!("{}: {} pairs, {} annotations in {:.1} s", summary.out.display(), summary.images, summary.annotations, t0.elapsed().as_secs_f64());
+    crate::out::outln!("{}: {} pairs, {} annotations in {:.1} s", summary.out.display(), summary.images, summary.annotations, t0.elapsed().as_secs_f64());
     Ok(())
 }

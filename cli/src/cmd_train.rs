@@ -18,14 +18,14 @@ pub struct TrainArgs {
     /// Also train on N freshly rendered images of the paper preset's terrains and conditions
     /// (scene seeds from --gen-seed, checked disjoint from the benchmark's seed 0), rendered
     /// once into --gen-dir and reused when it already holds them.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     pub generate: Option<usize>,
     /// Master seed of the generated scenes (must differ from the benchmark's 0).
     #[arg(long, default_value_t = 1)]
     pub gen_seed: u64,
     /// Crop side of the generated images, pixels (the paper preset's scale 0.5; smaller crops
     /// render faster and training crops are smaller still).
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = crate::args::positive_u32)]
     pub gen_crop: u32,
     /// Cache folder of the generated images (default `<out>.gen`).
     #[arg(long)]
@@ -37,10 +37,10 @@ pub struct TrainArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Epochs (one epoch = as many crop pixels as the training set has pixels).
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = crate::args::positive_u64)]
     pub epochs: u64,
     /// Total optimizer steps (overrides --epochs).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_u64)]
     pub steps: Option<u64>,
     /// Seed of the weight initialization and of the crop sampler.
     #[arg(long, default_value_t = 0)]
@@ -82,13 +82,13 @@ pub struct TrainArgs {
     #[arg(long, default_value = "1:4")]
     pub range_m: String,
     /// Base width of the network.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = crate::args::positive_usize)]
     pub width: usize,
     /// Crops per step.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = crate::args::positive_usize)]
     pub batch: usize,
     /// Crop side, pixels (multiple of 32).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = crop_arg)]
     pub crop: usize,
     /// Keep training crops upright (no 90-degree turns; left-right mirror only), so that the
     /// network can learn that a tube's contact shadow lies on its far (image-up) side.
@@ -96,28 +96,38 @@ pub struct TrainArgs {
     pub upright: bool,
     /// Probability that a training crop gets random occluders (1 to 3 rectangles of flat
     /// or block-patterned fill whose pixels become background; 0 = off).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::args::unit_interval)]
     pub occluders: f64,
     /// Peak learning rate.
-    #[arg(long, default_value_t = 2e-3)]
+    #[arg(long, default_value_t = 2e-3, value_parser = crate::args::positive_f64)]
     pub lr: f64,
     /// Validate every this many steps (and at the end).
-    #[arg(long, default_value_t = 250)]
+    #[arg(long, default_value_t = 250, value_parser = crate::args::positive_u64)]
     pub val_every: u64,
     /// Use at most this many validation images.
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 40, value_parser = crate::args::positive_usize)]
     pub val_limit: usize,
     /// Write a checkpoint every this many steps.
-    #[arg(long, default_value_t = 250)]
+    #[arg(long, default_value_t = 250, value_parser = crate::args::positive_u64)]
     pub ckpt_every: u64,
     /// Use at most this many images of each training set.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::args::positive_usize)]
     pub train_limit: Option<usize>,
     /// Instead of training, write the uniform average of these models' weights to --out (a
     /// "model soup": fine-tunings of one --init model with different --seed values; same
     /// architecture and preprocessing required). With --val, its AP50 is reported.
     #[arg(long, num_args = 2.., value_name = "MODEL", conflicts_with_all = ["train", "generate", "resume", "init"])]
     pub average: Vec<PathBuf>,
+}
+
+/// `--crop`: a positive multiple of 32 (the network's input stride).
+fn crop_arg(s: &str) -> std::result::Result<usize, String> {
+    let n = crate::args::positive_usize(s)?;
+    if n % 32 == 0 {
+        Ok(n)
+    } else {
+        Err(format!("must be a positive multiple of 32, got {n}"))
+    }
 }
 
 /// `tubeloc train --average`: the weight average of the given models, saved to `out`.

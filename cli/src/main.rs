@@ -25,6 +25,8 @@ mod cmd_bench;
 mod cmd_bench_real;
 mod memory;
 mod figures;
+pub(crate) mod args;
+pub(crate) mod out;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
 #[derive(Parser)]
@@ -99,9 +101,16 @@ fn main() -> ExitCode {
     let result = dispatch(cli.command);
     match result {
         Ok(code) => ExitCode::from(code),
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::from(1)
-        }
+        Err(e) => match e.downcast_ref::<clap::Error>() {
+            // A command-line error found after parsing (`args::usage`): exit 2, as clap's own.
+            Some(usage) => {
+                let _ = usage.print();
+                ExitCode::from(2)
+            }
+            None => {
+                eprintln!("error: {e:#}");
+                ExitCode::from(1)
+            }
+        },
     }
 }

@@ -252,7 +252,10 @@ pub fn write_dataset(spec: &DatasetSpec, out: &Path, shard: (usize, usize), over
 /// Writes a dataset folder atomically: `fill` writes into `<out>.tmp-<pid>` and returns
 /// `(images, annotations)`; on success the folder is renamed to `out` (replacing an existing
 /// one only when `overwrite`), on failure it is removed, so `out` is never half-written.
+/// Temporaries `<out>.tmp-<pid>` of processes that are no longer alive (killed runs) are
+/// removed first ([`tubeloc_core::files::remove_stale_temporaries`]).
 pub fn write_folder_atomically(out: &Path, overwrite: bool, fill: impl FnOnce(&Path) -> Result<(usize, usize), SynthError>) -> Result<DatasetSummary, SynthError> {
+    tubeloc_core::files::remove_stale_temporaries(out)?;
     if out.exists() && !overwrite {
         return Err(SynthError::Invalid(format!("{} already exists (remove it or pass --force)", out.display())));
     }

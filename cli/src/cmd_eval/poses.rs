@@ -106,9 +106,9 @@ pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64
     let model = ModelPoints::from_tube(&TubeModel::default(), 0.002).context("sampling the tube model")?;
     let config = PoseEvalConfig { cameras, ..Default::default() };
     let mut evals: Vec<(String, PoseEvaluation)> = Vec::new();
-    println!("{} truths ({truth_field}, visible_fraction >= {min_visible}{in_both}); matching: nearest centre within {match_mm} mm", truths.len());
-    println!("| poses | converged / all | matched | axis deg med / p90 | perp mm med / p90 | |along| mm med / p90 | centre mm med / p90 | ends right | AR MSSD | AR MSPD |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    crate::out::outln!("{} truths ({truth_field}, visible_fraction >= {min_visible}{in_both}); matching: nearest centre within {match_mm} mm", truths.len());
+    crate::out::outln!("| poses | converged / all | matched | axis deg med / p90 | perp mm med / p90 | |along| mm med / p90 | centre mm med / p90 | ends right | AR MSSD | AR MSPD |");
+    crate::out::outln!("|---|---|---|---|---|---|---|---|---|---|");
     for spec in poses {
         let (label, path) = label_and_path(spec);
         let all: Vec<TubeAxisPose> = read_json(&path).with_context(|| format!("reading poses {}", path.display()))?;
@@ -116,7 +116,7 @@ pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64
         let matching = match_by_centre_distance(&truths, &est, match_mm * 1e-3);
         let e = evaluate_poses(&truths, &est, &matching, &model, &config).with_context(|| format!("evaluating {}", path.display()))?;
         let s = &e.summaries;
-        println!(
+        crate::out::outln!(
             "| {label} | {} / {} | {} / {} | {} | {} | {} | {} | {:.0}% | {:.3} | {} |",
             est.len(),
             all.len(),

@@ -252,7 +252,8 @@ impl LearnedModel {
             .map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?)))
             .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
             .map_err(|e| LearnedError::Invalid(e.to_string()))?;
-        safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))
+        let bytes = safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))?;
+        sort_header_metadata(bytes)
     }
 
     /// Writes the model atomically to `path`.
@@ -352,4 +353,33 @@ fn checksum<'a>(items: impl Iterator<Item = (&'a str, &'a [usize], &'a [u8])>) -
         h.update(data);
     }
     h.finalize()
+}
+
+/// Rewrites a safetensors file's header with its `__metadata__` entries in key order.
+/// `safetensors::serialize` takes the metadata as a `HashMap` and writes it in the map's
+/// (randomly seeded) iteration order, so the same model gave different bytes from run to run.
+/// Tensor entries and data are kept as they are (data offsets are relative to the data start).
+pub(crate) fn sort_header_metadata(bytes: Vec<u8>) -> Result<Vec<u8>, LearnedError> {
+    let bad = |m: &str| LearnedError::Invalid(format!("serialized safetensors header: {m}"));
+    let n = u64::from_le_bytes(bytes.get(..8).ok_or_else(|| bad("too short"))?.try_into().map_err(|_| bad("too short"))?) as usize;
+    let header = bytes.get(8..8 + n).ok_or_else(|| bad("length out of range"))?;
+    let mut value: serde_json::Map<String, serde_json::Value> = serde_json::from_slice(header).map_err(|e| bad(&e.to_string()))?;
+    if let Some(serde_json::Value::Object(md)) = value.get_mut("__metadata__") {
+        let mut entries: Vec<(String, serde_json::Value)> = std::mem::take(md).into_iter().collect();
+        entries.sort_by(|a, b| a.0.cmp(&b.0));
+        md.extend(entries);
+    }
+    // `__metadata__` first, then the tensors in the order safetensors wrote them.
+    let mut ordered = serde_json::Map::new();
+    if let Some(md) = value.remove("__metadata__") {
+        ordered.insert("__metadata__".to_string(), md);
+    }
+    ordered.extend(value);
+    let mut text = serde_json::to_vec(&ordered).map_err(|e| bad(&e.to_string()))?;
+    text.resize(text.len().next_multiple_of(8), b' ');
+    let mut out = Vec::with_capacity(8 + text.len() + bytes.len() - 8 - n);
+    out.extend((text.len() as u64).to_le_bytes());
+    out.extend(text);
+    out.extend(&bytes[8 + n..]);
+    Ok(out)
 }

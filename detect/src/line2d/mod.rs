@@ -36,9 +36,9 @@ pub use detection::Line2dDetection;
 pub use gradient::GradientParams;
 pub use matching::{Line2dDetector, MatchParams};
 pub use render::{render_silhouette, Silhouette};
-pub use template::{Feature, LibraryParams, Template, TemplateLevel, TemplateLibrary};
+pub use template::{Feature, LibraryEstimate, LibraryParams, Template, TemplateLevel, TemplateLibrary};
 pub use verify::VerifyParams;
-pub use viewpoints::{ViewParams, ViewSpec};
+pub use viewpoints::{ViewEstimate, ViewParams, ViewSpec};
 
 use std::path::PathBuf;
 

@@ -11,7 +11,7 @@
 use crate::line2d::gradient::orientation_bin;
 use crate::line2d::mesh::{render_mesh_silhouette, MeshShape};
 use crate::line2d::render::{render_silhouette, Pinhole, Silhouette};
-use crate::line2d::viewpoints::{generate_views, ViewParams, ViewSpec};
+use crate::line2d::viewpoints::{estimate_views, generate_views, ViewEstimate, ViewParams, ViewSpec};
 use crate::line2d::Line2dError;
 use rayon::prelude::*;
 use tubeloc_core::{CameraModel, Pose, TubeModel};
@@ -77,6 +77,52 @@ impl LibraryParams {
     /// benchmark images are half-resolution crops: `fx = fy ≈ 1720 px`.
     pub fn default_camera() -> CameraModel {
         CameraModel::from_hfov(5472, 3648, 77.0).scaled(0.5)
+    }
+}
+
+/// The estimated size of a library, from its parameters alone ([`LibraryParams::estimate`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LibraryEstimate {
+    /// The view counts.
+    pub views: ViewEstimate,
+    /// Upper bound of the templates (views whose silhouette is empty are dropped).
+    pub templates: f64,
+    /// Estimated in-memory size of one template, bytes: the structure, two levels of features
+    /// and the level-0 mask, taken as half the square of the tube's longest projected extent
+    /// (a tube lying diagonally) averaged over the distance grid (an over-estimate: most views
+    /// are foreshortened or closer to an image axis).
+    pub bytes_per_template: f64,
+    /// Estimated peak memory of a build, bytes: the templates twice (the library and its
+    /// serialized file in memory when it is saved).
+    pub peak_bytes: f64,
+}
+
+impl LibraryParams {
+    /// Estimates the library these parameters give for a tube of `length_m` and largest
+    /// radius `radius_m`, without rendering anything (see [`LibraryEstimate`]): what
+    /// `tubeloc templates build` checks against its limits before building.
+    pub fn estimate(&self, length_m: f64, radius_m: f64) -> Result<LibraryEstimate, Line2dError> {
+        let views = estimate_views(&self.views)?;
+        let f = self.camera.fx.abs().max(self.camera.fy.abs());
+        let extent = length_m + 2.0 * radius_m;
+        let reach = 0.5 * length_m + radius_m;
+        let max_side = (u16::MAX / 2) as f64;
+        // Mean squared projected extent over (up to 1000 evenly spaced) grid distances.
+        let k = views.distances.clamp(1.0, 1000.0) as usize;
+        let span = (self.views.dist_max - self.views.dist_min).max(0.0);
+        let mean_sq = (0..k)
+            .map(|i| {
+                let d = if k == 1 { self.views.dist_min } else { self.views.dist_min + span * i as f64 / (k - 1) as f64 };
+                let side = if d > reach { (f * extent / (d - reach) + 2.0).min(max_side) } else { max_side };
+                // A tube lying diagonally in the image fills at most about half its square box.
+                0.5 * side * side
+            })
+            .sum::<f64>()
+            / k as f64;
+        let fixed = std::mem::size_of::<Template>() + 2 * std::mem::size_of::<TemplateLevel>();
+        let features = 2.0 * self.features as f64 * std::mem::size_of::<Feature>() as f64;
+        let bytes_per_template = fixed as f64 + features + mean_sq;
+        Ok(LibraryEstimate { views, templates: views.templates, bytes_per_template, peak_bytes: 2.0 * views.templates * bytes_per_template })
     }
 }
 

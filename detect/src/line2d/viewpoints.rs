@@ -73,18 +73,80 @@ pub fn geodesic_sphere(n: usize) -> Vec<Vector3<f64>> {
     ];
     let n = n.max(1);
     let mut out: Vec<Vector3<f64>> = Vec::new();
+    // Vertices shared by faces are found through a grid of 1e-6 cells (the 27 cells around a
+    // point hold every earlier point within 1e-9 of it): the same points, in the same order, as
+    // comparing with every earlier vertex, without the quadratic cost.
+    let cell = |q: &Vector3<f64>| [(q.x * 1e6).floor() as i64, (q.y * 1e6).floor() as i64, (q.z * 1e6).floor() as i64];
+    let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
     for f in faces {
         for i in 0..=n {
             for j in 0..=(n - i) {
                 let k = n - i - j;
                 let q = (v[f[0]] * i as f64 + v[f[1]] * j as f64 + v[f[2]] * k as f64).normalize();
-                if !out.iter().any(|o| (o - q).norm() < 1e-9) {
+                let c = cell(&q);
+                let mut seen = false;
+                'near: for dx in -1..=1 {
+                    for dy in -1..=1 {
+                        for dz in -1..=1 {
+                            if let Some(ids) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                                if ids.iter().any(|&o| (out[o] - q).norm() < 1e-9) {
+                                    seen = true;
+                                    break 'near;
+                                }
+                            }
+                        }
+                    }
+                }
+                if !seen {
+                    grid.entry(c).or_default().push(out.len());
                     out.push(q);
                 }
             }
         }
     }
     out
+}
+
+/// What a [`ViewParams`] asks for, computed from the numbers alone (nothing is generated), so
+/// that a library too large to build can be refused before any work. Counts are `f64` because
+/// absurd parameters give counts beyond any integer type.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewEstimate {
+    /// Subdivision `n` of the icosahedron's faces.
+    pub subdivision: f64,
+    /// Vertices of the whole subdivided sphere, `10 n² + 2`.
+    pub sphere_vertices: f64,
+    /// Upper bound of the candidate views (upper-hemisphere vertices times in-plane angles)
+    /// that the symmetry deduplication examines.
+    pub candidates: f64,
+    /// Upper bound of the unique view rotations kept: at most the candidates, and at most the
+    /// number of axis directions pairwise `dedupe_tol_deg` apart (`2 / (1 - cos(tol / 2))`,
+    /// disjoint caps on the sphere).
+    pub rotations: f64,
+    /// Distances of the grid.
+    pub distances: f64,
+    /// Upper bound of the templates: `rotations * distances` (views whose silhouette is empty
+    /// are dropped when building).
+    pub templates: f64,
+    /// Upper bound of the axis comparisons of the deduplication (`candidates * rotations`).
+    pub comparisons: f64,
+}
+
+/// Estimates the size of the view set of `params` without generating it; see [`ViewEstimate`].
+pub fn estimate_views(params: &ViewParams) -> Result<ViewEstimate, Line2dError> {
+    check(params)?;
+    let n = (63.434_948_822_922_01 / params.step_deg).round().max(1.0);
+    let sphere_vertices = 10.0 * n * n + 2.0;
+    // Upper hemisphere (z >= 0) with the vertices on the equator: at most half the sphere plus
+    // one ring of 10 n, plus the poles.
+    let hemisphere = (5.0 * n * n + 10.0 * n + 2.0).min(sphere_vertices);
+    let rolls = 2.0 * (params.inplane_range_deg / params.inplane_step_deg + 1e-9).floor() + 1.0;
+    let candidates = hemisphere * rolls;
+    let half_tol = (params.dedupe_tol_deg / 2.0).to_radians();
+    let packing = if half_tol > 0.0 { 2.0 / (1.0 - half_tol.cos()) } else { f64::INFINITY };
+    let rotations = candidates.min(packing.ceil());
+    let distances = ((params.dist_max - params.dist_min) / params.dist_step + 1e-6).floor() + 1.0;
+    Ok(ViewEstimate { subdivision: n, sphere_vertices, candidates, rotations, distances, templates: rotations * distances, comparisons: candidates * rotations })
 }
 
 /// `T_world_tube`: tube `+z` along world `x`, tube `x` along world `y`, tube `y` along world `z`.
@@ -174,6 +236,56 @@ mod tests {
             // Nearest-neighbour angle close to 63.4 / n degrees.
             let nn = v[1..].iter().map(|q| v[0].angle(q).to_degrees()).fold(f64::INFINITY, f64::min);
             assert!((nn - 63.43 / n as f64).abs() < 0.25 * 63.43 / n as f64, "n={n} nn={nn}");
+        }
+    }
+
+    #[test]
+    fn estimate_bounds_the_real_counts() {
+        let base = ViewParams::default();
+        for p in [
+            base.clone(),
+            ViewParams { step_deg: 5.0, ..base.clone() },
+            ViewParams { step_deg: 21.0, inplane_range_deg: 0.0, ..base.clone() },
+            ViewParams { dedupe_tol_deg: 0.0, step_deg: 15.0, ..base.clone() },
+            ViewParams { dedupe_tol_deg: 20.0, inplane_step_deg: 3.0, inplane_range_deg: 30.0, ..base.clone() },
+            ViewParams { dist_min: 0.5, dist_max: 0.5, dist_step: 1.0, ..base.clone() },
+        ] {
+            let e = estimate_views(&p).unwrap();
+            let rots = unique_rotations(&p).unwrap().len() as f64;
+            assert!(rots <= e.rotations, "{p:?}: {rots} > {}", e.rotations);
+            assert_eq!(e.distances as usize, distances(&p).len());
+            assert!(generate_views(&p).unwrap().len() as f64 <= e.templates);
+            // Not a wild overestimate for the libraries people build.
+            assert!(e.templates <= 5.0 * rots * e.distances, "{p:?}: {} vs {}", e.templates, rots * e.distances);
+        }
+        for n in 1..=30 {
+            let hemi = geodesic_sphere(n).into_iter().filter(|v| v.z >= -1e-9).count() as f64;
+            assert!(hemi <= 5.0 * (n * n) as f64 + 10.0 * n as f64 + 2.0, "n={n}: {hemi}");
+        }
+        // The inputs: estimated instantly, astronomically large.
+        let e = estimate_views(&ViewParams { dist_step: 1e-9, ..base.clone() }).unwrap();
+        assert!(e.templates > 1e11, "{e:?}");
+        let e = estimate_views(&ViewParams { step_deg: 0.01, ..base.clone() }).unwrap();
+        assert!(e.candidates > 1e8 && e.comparisons > 1e10, "{e:?}");
+    }
+
+    #[test]
+    fn geodesic_sphere_grid_lookup_keeps_every_vertex_once() {
+        // The quadratic check: every earlier vertex compared (the former algorithm, which kept
+        // first occurrences in the same order).
+        fn reference(n: usize) -> Vec<Vector3<f64>> {
+            let all = geodesic_sphere(n);
+            let mut out: Vec<Vector3<f64>> = Vec::new();
+            for q in all {
+                if !out.iter().any(|o| (o - q).norm() < 1e-9) {
+                    out.push(q);
+                }
+            }
+            out
+        }
+        for n in [1usize, 2, 5, 6, 11] {
+            assert_eq!(geodesic_sphere(n), reference(n));
+            assert_eq!(geodesic_sphere(n).len(), 10 * n * n + 2);
         }
     }
 

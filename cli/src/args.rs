@@ -1,0 +1,197 @@
+//! Value parsers for the numeric command-line arguments, used as clap `value_parser`s so a bad
+//! number is refused while the command line is parsed: exit code 2 and a message naming the
+//! flag (`error: invalid value 'NaN' for '--sigma-d <SIGMA_D>': must be a finite number`),
+//! before any input is read or any output written. NaN and infinities are never accepted.
+//!
+//! Checks that involve two arguments (`--ring-inner` at most `--ring-outer`) run at the start of
+//! the subcommand and return [`usage`], which `main` reports like clap's own errors (exit 2).
+//! Some parsers are here for the subcommands that do not use them yet (locate, refine).
+#![allow(dead_code)]
+
+use clap::error::ErrorKind;
+
+fn parse_f64(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("{s:?} is not a number"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err("must be a finite number".into())
+    }
+}
+
+/// Any finite number.
+pub fn finite_f64(s: &str) -> Result<f64, String> {
+    parse_f64(s)
+}
+
+/// A finite number > 0.
+pub fn positive_f64(s: &str) -> Result<f64, String> {
+    let v = parse_f64(s)?;
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be > 0, got {v}"))
+    }
+}
+
+/// A finite number >= 0.
+pub fn non_negative_f64(s: &str) -> Result<f64, String> {
+    let v = parse_f64(s)?;
+    if v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be >= 0, got {v}"))
+    }
+}
+
+/// A number in [0, 1].
+pub fn unit_interval(s: &str) -> Result<f64, String> {
+    let v = parse_f64(s)?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be in [0, 1], got {v}"))
+    }
+}
+
+/// A number in [0, 100] (a percentage).
+pub fn percent(s: &str) -> Result<f64, String> {
+    let v = parse_f64(s)?;
+    if (0.0..=100.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be in [0, 100], got {v}"))
+    }
+}
+
+/// `f32` versions of the parsers above (the value is also finite as an `f32`).
+fn to_f32(v: f64) -> Result<f32, String> {
+    let f = v as f32;
+    if f.is_finite() {
+        Ok(f)
+    } else {
+        Err(format!("{v} is out of range"))
+    }
+}
+
+/// Any finite number (`f32`).
+pub fn finite_f32(s: &str) -> Result<f32, String> {
+    to_f32(finite_f64(s)?)
+}
+
+/// A finite number > 0 (`f32`).
+pub fn positive_f32(s: &str) -> Result<f32, String> {
+    to_f32(positive_f64(s)?)
+}
+
+/// A finite number >= 0 (`f32`).
+pub fn non_negative_f32(s: &str) -> Result<f32, String> {
+    to_f32(non_negative_f64(s)?)
+}
+
+/// A number in [0, 1] (`f32`).
+pub fn unit_interval_f32(s: &str) -> Result<f32, String> {
+    to_f32(unit_interval(s)?)
+}
+
+/// A number in [0, 100] (`f32`).
+pub fn percent_f32(s: &str) -> Result<f32, String> {
+    to_f32(percent(s)?)
+}
+
+fn parse_u64(s: &str) -> Result<u64, String> {
+    s.trim().parse::<u64>().map_err(|_| format!("{s:?} is not a whole number >= 0"))
+}
+
+/// A whole number >= 1.
+pub fn positive_usize(s: &str) -> Result<usize, String> {
+    let v = parse_u64(s)?;
+    if v == 0 {
+        return Err("must be at least 1".into());
+    }
+    usize::try_from(v).map_err(|_| format!("{v} is too large"))
+}
+
+/// A whole number >= 1 (`u32`).
+pub fn positive_u32(s: &str) -> Result<u32, String> {
+    let v = positive_usize(s)?;
+    u32::try_from(v).map_err(|_| format!("{v} is too large (at most {})", u32::MAX))
+}
+
+/// A whole number >= 1 (`u64`).
+pub fn positive_u64(s: &str) -> Result<u64, String> {
+    let v = parse_u64(s)?;
+    if v == 0 {
+        Err("must be at least 1".into())
+    } else {
+        Ok(v)
+    }
+}
+
+/// A whole number >= 1 (`u8`).
+pub fn positive_u8(s: &str) -> Result<u8, String> {
+    let v = positive_usize(s)?;
+    u8::try_from(v).map_err(|_| format!("{v} is too large (at most {})", u8::MAX))
+}
+
+/// A shard `I/N` of a batch job: `0 <= I < N`.
+pub fn shard(s: &str) -> Result<(usize, usize), String> {
+    let (a, b) = s.split_once('/').ok_or_else(|| format!("{s:?}: expected I/N, e.g. 0/4"))?;
+    let i: usize = a.trim().parse().map_err(|_| format!("{s:?}: I is not a whole number"))?;
+    let n: usize = b.trim().parse().map_err(|_| format!("{s:?}: N is not a whole number"))?;
+    if n == 0 || i >= n {
+        return Err(format!("{s:?}: need 0 <= I < N"));
+    }
+    Ok((i, n))
+}
+
+/// An AprilTag quad decimation factor: 1, 1.5 or a whole number up to 64
+/// ([`tubeloc_calib::detect::check_decimation`]).
+pub fn decimation(s: &str) -> Result<f32, String> {
+    let v = to_f32(parse_f64(s)?)?;
+    tubeloc_calib::detect::check_decimation(v)?;
+    Ok(v)
+}
+
+/// A command-line error found after parsing (two arguments that do not go together): `main`
+/// reports it like clap's own errors, with exit code 2. `message` names the flags.
+pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
+    anyhow::Error::new(clap::Error::raw(ErrorKind::ArgumentConflict, format!("{message}\n")))
+}
+
+/// Checks `a <= b` for two flags' values; a [`usage`] error naming both otherwise.
+pub fn require_at_most<T: PartialOrd + std::fmt::Display>(a: (&str, T), b: (&str, T)) -> anyhow::Result<()> {
+    if a.1 <= b.1 {
+        Ok(())
+    } else {
+        Err(usage(format!("{} ({}) must not exceed {} ({})", a.0, a.1, b.0, b.1)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parsers_refuse_nan_infinities_and_out_of_range() {
+        for s in ["NaN", "nan", "inf", "-inf", "infinity", "1e400", "x", ""] {
+            assert!(finite_f64(s).is_err(), "{s}");
+            assert!(positive_f32(s).is_err(), "{s}");
+        }
+        assert_eq!(finite_f64("-2.5"), Ok(-2.5));
+        assert!(positive_f64("0").is_err() && positive_f64("1e-9").is_ok());
+        assert!(non_negative_f64("-0.1").is_err() && non_negative_f64("0").is_ok());
+        assert!(unit_interval("1.01").is_err() && unit_interval("1").is_ok() && unit_interval("0").is_ok());
+        assert!(percent("101").is_err() && percent("80").is_ok());
+        assert!(positive_f32("1e39").is_err(), "overflows f32");
+        assert!(positive_usize("0").is_err() && positive_usize("-1").is_err() && positive_usize("3").is_ok());
+        assert!(positive_u8("256").is_err() && positive_u8("255").is_ok());
+        assert_eq!(shard("1/4"), Ok((1, 4)));
+        for s in ["3/2", "2/2", "0/0", "1", "a/2", "-1/2"] {
+            assert!(shard(s).is_err(), "{s}");
+        }
+        assert!(decimation("200").is_err() && decimation("2.5").is_err() && decimation("1.5").is_ok() && decimation("NaN").is_err());
+        assert!(require_at_most(("--a", 2), ("--b", 6)).is_ok() && require_at_most(("--a", 6), ("--b", 6)).is_ok());
+        assert!(require_at_most(("--a", 7), ("--b", 6)).unwrap_err().to_string().contains("--a (7) must not exceed --b (6)"));
+    }
+}
