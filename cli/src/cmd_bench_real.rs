@@ -5,7 +5,8 @@
 //!     frames under the documented assumed mast view ([`AssumedView::MAST`]); learned
 //!     detection at the working scale, COCO AP50 / AR, and the reliability of the calibrated
 //!     probability on these held-out detections.
-//! (b) False positives per frame on `negatives_val` (real frames without tubes, never used for
+//! (b) False positives per frame on `negatives_val` (detections kept, and tubes that `locate`
+//!     at its defaults hands the planner) (real frames without tubes, never used for
 //!     training or choosing settings): learned detections kept at the calibration's
 //!     threshold, under an assumed camera per frame kind (grey Navcam: 45 degree field of view,
 //!     1.9 m high, 30 degrees down; colour: the mast view).
@@ -93,6 +94,28 @@ fn detect_eval(set: &Path, model: &Path, cal: &ScoreCalibration, out: &Path) -> 
     }))
 }
 
+/// Mono refinement of a set's learned detections on each image's own ground (`--ground
+/// auto`: the composites' `T_world_cam` has the ground at z = 0) and pose errors against the
+/// composite truth; returns the `mono` summaries (axis degrees, across-axis millimetres).
+fn poses(set: &Path, dir: &Path) -> Result<Value> {
+    use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
+    let (dets, poses, seeds) = (dir.join("detections.json"), dir.join("poses.json"), dir.join("seeds.json"));
+    let mut job = DatasetJob::new(set.to_path_buf(), DatasetSeeds::Detections(dets), poses.clone());
+    job.ground = Some(crate::cmd_refine::GroundArg::Auto);
+    job.seeds_out = Some(seeds.clone());
+    refine_dataset(&job)?;
+    let filter = crate::cmd_eval::poses::TruthFilter { field: "T_cam_tube", min_visible: 0.5, in_both_views: false };
+    let labels = [format!("coarse={}", seeds.display()), format!("mono={}", poses.display())];
+    crate::cmd_eval::poses::run(&set.join("annotations.json"), &labels, &filter, 50.0, Some(&dir.join("pose_eval")))?;
+    let m: Value = files::read_json(&dir.join("pose_eval").join("pose_metrics.json"))?;
+    let mono = m["poses"].as_array().and_then(|v| v.iter().find(|p| p["label"] == "mono")).cloned().unwrap_or(Value::Null);
+    Ok(json!({
+        "truths": mono["n_truths"], "matched": mono["n_matched"],
+        "axis_deg_median": mono["summaries"]["axis_angle_deg"]["median"], "axis_deg_p90": mono["summaries"]["axis_angle_deg"]["p90"],
+        "across_mm_median": mono["summaries"]["perpendicular_mm"]["median"], "across_mm_p90": mono["summaries"]["perpendicular_mm"]["p90"],
+    }))
+}
+
 /// Learned detections kept at the threshold on each real negative frame.
 fn negatives(data: &Path, model: &Path, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
     let dir = data.join("negatives_val");
@@ -114,21 +137,30 @@ fn negatives(data: &Path, model: &Path, cal: &ScoreCalibration, frames: Option<u
         let step = (paths.len() as f64 / n.max(1) as f64).max(1.0);
         paths = (0..n.min(paths.len())).map(|i| paths[(i as f64 * step) as usize].clone()).collect();
     }
-    let m = tubeloc_detect::learned::LearnedModel::load(model).with_context(|| format!("loading {}", model.display()))?;
+    let mut settings = tubeloc_pipeline::LocatorSettings::default();
+    settings.calibration = cal.clone();
     let mut per_frame = Vec::new();
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     for p in &paths {
         let input = tubeloc_detect::input::load(p).map_err(|e| anyhow::anyhow!(e))?;
         let view = negative_view(input.info.grey).view(p.clone(), input.width as u32, input.height as u32, None, &mut rng);
         let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
-        let found = tubeloc_detect::learned::detect_rgb_at_scale(&m, &input.rgb, input.width, input.height, s, &DecodeConfig::default())?;
-        let kept = found.iter().filter(|i| cal.probability(i.score) >= cal.threshold).count();
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": input.info.grey, "scale": s, "detections": found.len(), "kept": kept}));
+        // `locate` at its defaults on the frame, with the assumed camera and ground; its
+        // detector runs at the same working scale `s`.
+        let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
+        let detector = tubeloc_pipeline::LearnedDetector::load(model, DecodeConfig::default())?;
+        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector), settings.clone())?;
+        let image = image::open(p).with_context(|| format!("reading {}", p.display()))?;
+        let (n, d) = view.ground();
+        let ground = tubeloc_core::GroundPlane::new(n, d)?;
+        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None })?;
+        let (found, located) = (&out.detections, out.tubes.len());
+        let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": input.info.grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
     }
     let n = per_frame.len().max(1) as f64;
-    let kept: u64 = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum();
-    let all: u64 = per_frame.iter().filter_map(|f| f["detections"].as_u64()).sum();
-    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept as f64 / n, "detections_per_frame": all as f64 / n, "per_frame": per_frame}))
+    let sum = |k: &str| per_frame.iter().filter_map(|f| f[k].as_u64()).sum::<u64>() as f64 / n;
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "per_frame": per_frame}))
 }
 
 /// Runs the real stage into `<out>/real`; returns the report's markdown section.
@@ -144,8 +176,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     composite_set(&stage.data, "test", crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &colour_set)?;
     let grey = detect_eval(&grey_set, &stage.model, &stage.calibration, &dir.join("learned_grey"))?;
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
+    let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
-    let summary = json!({"model": stage.model, "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "negatives": neg});
+    let summary = json!({"model": stage.model, "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -155,7 +188,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
         writeln!(md, "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.3} / {:.3} | {:.3} |", v["images"], v["tubes"], v["ap50"].as_f64().unwrap_or(f64::NAN), v["ar"].as_f64().unwrap_or(f64::NAN), v["ms_per_image"].as_f64().unwrap_or(f64::NAN), v["precision_at_threshold"].as_f64().unwrap_or(f64::NAN), v["recall_at_threshold"].as_f64().unwrap_or(f64::NAN), v["ece"].as_f64().unwrap_or(f64::NAN)).ok();
     }
-    writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it).\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
+    writeln!(md, "\nMono refinement of the learned detections on the grey test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", grey_poses["matched"], grey_poses["truths"], f(&grey_poses["axis_deg_median"]), f(&grey_poses["axis_deg_p90"]), f(&grey_poses["across_mm_median"]), f(&grey_poses["across_mm_p90"])).ok();
+    writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(md, "Reliability of the calibrated probability on the grey test detections (bins of 0.1: mean predicted / observed / count):\n").ok();
     if let Some(bins) = grey["reliability"].as_array() {
         for b in bins.iter().filter(|b| b["count"].as_u64().unwrap_or(0) > 0) {

@@ -9,7 +9,7 @@ use tubeloc_core::CocoDataset;
 use tubeloc_eval::breakdown::{self, Breakdown};
 use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
 
-mod poses;
+pub(crate) mod poses;
 
 /// Arguments of `tubeloc eval`.
 #[derive(clap::Args)]

@@ -358,7 +358,7 @@ fn refine_two_view_config_bad_fields_are_refused_before_any_work() {
 fn train_average_writes_the_weight_average_and_refuses_mismatched_models() {
     let dir = tempfile::tempdir().unwrap();
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models");
-    let (rgb, gray) = (models.join("tubenet.safetensors"), models.join("gray/tubenet.safetensors"));
+    let (rgb, gray) = (models.join("synthetic_rgb/tubenet.safetensors"), models.join("gray/tubenet.safetensors"));
     // Averaging a model with itself gives the same weights: the soup detects what the model does.
     let soup = dir.path().join("soup.safetensors");
     ok(&["train", "--average", p(&rgb), p(&rgb), "--out", p(&soup)]);

@@ -95,3 +95,32 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert_eq!(summary["negatives"]["frames"], 2);
     assert!(summary["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
 }
+
+#[test]
+fn locate_hands_the_planner_no_tube_on_a_real_frame_without_tubes() {
+    // A real Curiosity Navcam frame held out for false positives (negatives_val), under the
+    // bench's assumed Navcam view: 45 degree field of view, 1.9 m above the ground, 30 degrees
+    // down. The shipped model and its calibrated threshold must not report a tube there.
+    let dir = tempfile::tempdir().unwrap();
+    let f = 512.0 / 22.5f64.to_radians().tan();
+    let rig = serde_json::json!({"cameras": [{"name": "navcam", "model": {"width": 1024, "height": 1024, "fx": f, "fy": f, "cx": 511.5, "cy": 511.5}, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}}], "stereo_pairs": []});
+    let rig_path = dir.path().join("rig.json");
+    std::fs::write(&rig_path, rig.to_string()).unwrap();
+    let image = real_data().join("negatives_val/msl_navcam_1024/NLB_462567671EDR_F0402448NCAM00385M_.jpg");
+    let out = dir.path().join("poses.json");
+    let o = tubeloc(&["locate", "--rig", p(&rig_path), "--image", p(&image), "--ground=0,-0.8660254,-0.5,-1.9", "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(3), "exit 3: no tube located; stderr {}", String::from_utf8_lossy(&o.stderr));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let tubes = doc["tubes"].as_array().unwrap();
+    assert!(tubes.iter().all(|t| t["status"] != "located"), "{tubes:?}");
+    // Every detection still carries its probability and the threshold it was judged by.
+    let thr = doc["min_probability"].as_f64().unwrap();
+    assert!(thr > 0.0 && thr < 1.0, "{thr}");
+    for t in tubes {
+        let pr = t["probability"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&pr));
+        if t["status"] == "low_probability" {
+            assert!(pr < thr);
+        }
+    }
+}
