@@ -161,9 +161,7 @@ fn adjust(input: &CalibrationInput, obs_idx: &[usize], adj: &mut Adjustment, opt
         let mut pose_b = BTreeMap::new();
         for &o in obs_idx {
             let v = input.observations[o].view;
-            if !pose_b.contains_key(&v) {
-                pose_b.insert(v, p.add_block(adj.poses[&v].to_vec(), BlockKind::Pose, false));
-            }
+            pose_b.entry(v).or_insert_with(|| p.add_block(adj.poses[&v].to_vec(), BlockKind::Pose, false));
         }
         for &o in obs_idx {
             let ob = &input.observations[o];
@@ -282,8 +280,7 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
         }
     }
     // Per-camera initialization and adjustment.
-    for c in 0..nc {
-        let spec = &input.cameras[c];
+    for (c, spec) in input.cameras.iter().enumerate() {
         if usable[c].len() < opts.min_views {
             return Err(CalibError::TooFew(format!("camera {}: {} usable views, need at least {}{}", spec.name, usable[c].len(), opts.min_views, if skipped.is_empty() { String::new() } else { format!(" (skipped: {})", skipped.join("; ")) })));
         }
@@ -335,8 +332,8 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
             }
         }
     }
-    for c in 0..nc {
-        let t = t_ref_cam[c].ok_or_else(|| CalibError::Degenerate(format!("camera {} shares no simultaneous view with the other cameras; extrinsics are undetermined", input.cameras[c].name)))?;
+    for (c, t) in t_ref_cam.iter().enumerate() {
+        let t = t.ok_or_else(|| CalibError::Degenerate(format!("camera {} shares no simultaneous view with the other cameras; extrinsics are undetermined", input.cameras[c].name)))?;
         adj.ext[c] = pose_vec(&t.inverse());
     }
     for ((c, v), t_c_b) in &init_pose {
@@ -352,8 +349,7 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
     // Report.
     let (mut sum2, mut npts) = (0.0, 0usize);
     let mut cameras = Vec::new();
-    for c in 0..nc {
-        let spec = &input.cameras[c];
+    for (c, spec) in input.cameras.iter().enumerate() {
         let (mut csum, mut cn, mut cout) = (0.0, 0usize, 0usize);
         let mut views = Vec::new();
         for &o in &usable[c] {

@@ -299,9 +299,11 @@ impl TagDetector {
                 }
             }
             // Shift the output pixel frame by -0.5: H' = [1 0 -.5; 0 1 -.5; 0 0 1] H.
-            for c in 0..3 {
-                hm[0][c] += C_TO_OPENCV_PX * hm[2][c];
-                hm[1][c] += C_TO_OPENCV_PX * hm[2][c];
+            let h2 = hm[2];
+            for row in &mut hm[..2] {
+                for (v, w) in row.iter_mut().zip(h2) {
+                    *v += C_TO_OPENCV_PX * w;
+                }
             }
             let shift = |p: [f64; 2]| [p[0] + C_TO_OPENCV_PX, p[1] + C_TO_OPENCV_PX];
             let (id, hamming, margin, center, corners) = (d.id() as u32, d.hamming() as u32, d.decision_margin(), shift(d.center()), d.corners().map(shift));

@@ -9,6 +9,7 @@
 //!   board poses, outlier rejection, multi-camera extrinsics; [`views`] reads calibration sets.
 //! - [`yaml`]: OpenCV FileStorage YAML rig files.
 //! - [`lm`], [`geometry`]: the least-squares solver and projective helpers.
+#![warn(missing_docs)]
 
 pub mod calibrate;
 pub mod detect;

@@ -207,9 +207,9 @@ impl<'a> Problem<'a> {
     pub fn solve(&mut self, max_iterations: usize) -> Result<Solution, CalibError> {
         let mut offsets = vec![None; self.params.len()];
         let mut n = 0;
-        for b in 0..self.params.len() {
+        for (b, offset) in offsets.iter_mut().enumerate() {
             if !self.fixed[b] {
-                offsets[b] = Some(n);
+                *offset = Some(n);
                 n += self.params[b].len();
             }
         }

@@ -1,29 +1,28 @@
 //! Rig YAML interchange with OpenCV: a file written by `cv2.FileStorage` is read by our reader,
-//! and a file we write is read by `cv2.FileStorage` with the same numbers. Skips when python3 or
-//! cv2 is missing.
+//! and a file we write is read by `cv2.FileStorage` with the same numbers.
+//!
+//! Needs python3 with OpenCV, which CI does not install: the test is `#[ignore]`d; run it with
+//! `cargo test --release -p tubeloc-calib --test opencv_yaml -- --ignored`. It fails when python3
+//! or cv2 is missing.
 
 use std::path::Path;
 use std::process::Command;
 use tubeloc_calib::yaml::{load_rig_yaml, save_rig_yaml};
 
-fn peer(args: &[&str]) -> Option<std::process::Output> {
+fn peer(args: &[&str]) -> std::process::Output {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/opencv_yaml_peer.py");
-    let out = Command::new("python3").arg(&script).args(args).output().ok()?;
-    if out.status.code() == Some(3) {
-        eprintln!("skipping: cv2 not installed");
-        return None;
-    }
+    let out = Command::new("python3").arg(&script).args(args).output().unwrap_or_else(|e| panic!("python3 not runnable ({e})"));
+    assert_ne!(out.status.code(), Some(3), "cv2/numpy not installed: pip install opencv-contrib-python-headless numpy");
     assert!(out.status.success(), "peer failed: {}", String::from_utf8_lossy(&out.stderr));
-    Some(out)
+    out
 }
 
 #[test]
+#[ignore = "needs python3 with opencv-contrib-python-headless (pip install opencv-contrib-python-headless numpy); run with --ignored"]
 fn reads_opencv_filestorage_yaml_and_opencv_reads_ours() {
     let dir = tempfile::tempdir().unwrap();
     let cv_yaml = dir.path().join("cv.yaml");
-    if peer(&["write", cv_yaml.to_str().unwrap()]).is_none() {
-        return;
-    }
+    peer(&["write", cv_yaml.to_str().unwrap()]);
     let rig = load_rig_yaml(&cv_yaml).unwrap();
     assert_eq!(rig.cameras.len(), 2);
     assert_eq!(rig.stereo_pairs, vec![("L20".to_string(), "R20".to_string())]);
@@ -38,7 +37,7 @@ fn reads_opencv_filestorage_yaml_and_opencv_reads_ours() {
 
     let ours = dir.path().join("ours.yaml");
     save_rig_yaml(&rig, &ours).unwrap();
-    let Some(out) = peer(&["read", ours.to_str().unwrap()]) else { return };
+    let out = peer(&["read", ours.to_str().unwrap()]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["camera_count"], 2);
     for (c, cv) in rig.cameras.iter().zip(v["cameras"].as_array().unwrap()) {

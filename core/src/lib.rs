@@ -4,6 +4,7 @@
 //! pixel centres sit at integer coordinates, the world frame is z up in metres, and `T_a_b`
 //! maps points of frame `b` into frame `a`. The tube frame has its origin at the tube's centre
 //! and +z along the axis toward the seal end.
+#![warn(missing_docs)]
 
 pub mod camera;
 pub mod confidence;

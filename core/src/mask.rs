@@ -427,7 +427,8 @@ impl Rle {
                     5.0 * dx.abs().max(dy.abs()) + 1.0
                 })
                 .sum();
-            if !(walk <= MAX_POLYGON_WALK as f64) {
+            // NaN (non-finite coordinates) is refused too.
+            if walk.is_nan() || walk > MAX_POLYGON_WALK as f64 {
                 return Err(CoreError::invalid(
                     "segmentation",
                     format!("polygon {i}: boundary walk of {walk:.0} points exceeds the limit of {MAX_POLYGON_WALK} (coordinates far outside the image?)"),

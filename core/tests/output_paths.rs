@@ -125,7 +125,7 @@ fn stale_temporaries_of_dead_processes_are_removed() {
     std::fs::create_dir_all(stale_dir.join("images")).unwrap();
     std::fs::write(stale_dir.join("images/a.png"), b"x").unwrap();
     std::fs::write(dir.path().join(format!("set.tmp-{}", dead_pid())), b"x").unwrap();
-    for keep in [format!("set.tmp-{me}"), format!("set.tmp-1"), "set.tmp-abc".into(), "set.tmp-".into(), format!("other.tmp-{dead}"), format!("set.tmp-{dead}x")] {
+    for keep in [format!("set.tmp-{me}"), "set.tmp-1".to_string(), "set.tmp-abc".into(), "set.tmp-".into(), format!("other.tmp-{dead}"), format!("set.tmp-{dead}x")] {
         std::fs::create_dir(dir.path().join(keep)).unwrap();
     }
     let removed = remove_stale_temporaries(&out).unwrap();

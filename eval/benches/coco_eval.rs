@@ -35,7 +35,7 @@ fn dataset(n_images: usize, dets_per_image: usize) -> (CocoDataset, Vec<CocoResu
             let mut anns = Vec::new();
             let mut dts = Vec::new();
             let centres: Vec<(f64, f64, f64)> = (0..3)
-                .map(|_| (rng.random_range(150.0..1130.0), rng.random_range(150.0..810.0), rng.random_range(0.0..3.14)))
+                .map(|_| (rng.random_range(150.0..1130.0), rng.random_range(150.0..810.0), rng.random_range(0.0..std::f64::consts::PI)))
                 .collect();
             for (o, &(cx, cy, a)) in centres.iter().enumerate() {
                 let rle = Rle::from_polygons(&[tube(&mut rng, cx, cy, a)], H, W).unwrap();
@@ -47,7 +47,7 @@ fn dataset(n_images: usize, dets_per_image: usize) -> (CocoDataset, Vec<CocoResu
                     let (cx, cy, a) = centres[d % 3];
                     (cx + rng.random_range(-15.0..15.0), cy + rng.random_range(-15.0..15.0), a + rng.random_range(-0.2..0.2))
                 } else {
-                    (rng.random_range(100.0..1180.0), rng.random_range(100.0..860.0), rng.random_range(0.0..3.14))
+                    (rng.random_range(100.0..1180.0), rng.random_range(100.0..860.0), rng.random_range(0.0..std::f64::consts::PI))
                 };
                 let rle = Rle::from_polygons(&[tube(&mut rng, cx, cy, a)], H, W).unwrap();
                 dts.push(json!({"image_id": i + 1, "category_id": 1, "score": rng.random_range(0.0..1.0),

@@ -144,7 +144,7 @@ fn covariance_consistency_divides_each_error_by_the_estimates_sigma() {
     }
     let truths = vec![TubeTruth { image_id: 1, pose: truth.to_pose() }];
     let plain = TubeEstimate { std: None, ..TubeEstimate::from_axis_pose(&est) };
-    let estimates = vec![TubeEstimate::from_axis_pose(&est), plain];
+    let estimates = [TubeEstimate::from_axis_pose(&est), plain];
     let model = ModelPoints::from_tube(&TubeModel::default(), 0.005).unwrap();
     for (k, want) in [(0, Some(2.0)), (1, None)] {
         let m = match_by_centre_distance(&truths, &estimates[k..=k], 0.05);

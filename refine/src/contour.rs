@@ -264,7 +264,7 @@ pub fn project_with_normal(camera: &CameraModel, p: &SamplePoint) -> Option<(Poi
     let uo = camera.project(&(p.x + p.out * h))?;
     let t = ut - u;
     let tn = t.norm();
-    if !(tn > 1e-12) {
+    if tn.is_nan() || tn <= 1e-12 {
         return None;
     }
     let mut n = Vector2::new(-t.y, t.x) / tn;

@@ -74,7 +74,7 @@ pub fn anchor_visible_end(pose: &mut TubeAxisPose, length_m: f64, mask: &BinaryM
     let p0 = camera.project(&Point3::from(c - half))?;
     let p1 = camera.project(&Point3::from(c + half))?;
     let ell = (p1 - p0).norm();
-    if !(ell >= 10.0) {
+    if ell.is_nan() || ell < 10.0 {
         return None;
     }
     let u = (p1 - p0) / ell;
@@ -117,7 +117,7 @@ pub fn unseen_length_variance(pose: &TubeAxisPose, length_m: f64, mask: &BinaryM
     let p0 = camera.project(&Point3::from(pose.centre - half))?;
     let p1 = camera.project(&Point3::from(pose.centre + half))?;
     let ell = (p1 - p0).norm();
-    if !(ell >= 10.0) {
+    if ell.is_nan() || ell < 10.0 {
         return None;
     }
     if pose.end_anchored.is_some() {

@@ -8,6 +8,7 @@
 //! seal end is decided afterwards by fitting both end hypotheses and comparing their edge
 //! support ([`Refiner::refine`]). The output is a [`TubeAxisPose`] with a flip-free axis,
 //! covariance, residual statistics and a failure reason instead of NaN when the fit fails.
+#![warn(missing_docs)]
 
 pub mod contour;
 pub mod duplicates;

@@ -43,7 +43,7 @@ fn run_batch_at(dist: (f64, f64), n: usize, seed: u64, stereo: bool, distorted: 
         let (truth, up, gd) = random_truth(&mut rng, &model, &cam, dist);
         let sc = render(&model, &cam, truth, up, gd, None, seed * 1000 + i as u64, 0.01);
         let pts = if stereo { stereo_points(&model, &sc, 4, 0.25, 0.2, i as u64) } else { vec![] };
-        let g = ground.then(|| tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d });
+        let g = ground.then_some(tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d });
         let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: g, scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None, image_axis: None, shown: None } };
         let seed_state = perturb(&mut rng, &truth, pos_m, ang_deg);
         if std::env::var("REFINE_DEBUG").is_ok() {

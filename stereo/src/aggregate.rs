@@ -455,7 +455,7 @@ fn select_row(sw: &mut Sweep, ap: &AggParams, w: usize, s_row: &[i16], out_row: 
     if ap.lr_max_diff >= 0 {
         right_min(s_row, nd, &mut sw.r_cost, &mut sw.r_idx, &mut sw.rev, &sw.desc);
     }
-    for x in 0..w {
+    for (x, out) in out_row[..w].iter_mut().enumerate() {
         let b = sw.best[x];
         let xr = x as i64 - ap.dmin as i64 - b as i64;
         let mut ok = b >= 0 && xr >= 0 && xr < w as i64;
@@ -463,7 +463,7 @@ fn select_row(sw: &mut Sweep, ap: &AggParams, w: usize, s_row: &[i16], out_row: 
             let j = x + nd - 1 - b as usize;
             ok = (sw.r_idx[j] as i32 - b as i32).abs() <= ap.lr_max_diff;
         }
-        out_row[x] = if ok { ap.dmin as f32 + sw.sub[x] } else { f32::NAN };
+        *out = if ok { ap.dmin as f32 + sw.sub[x] } else { f32::NAN };
     }
 }
 

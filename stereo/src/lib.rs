@@ -16,6 +16,7 @@
 //! - [`pair_eval`]: scores against exact disparity (valid and tube pixels) and distances of
 //!   triangulated tube points to the true tube surface.
 //! - [`io`]: PFM and 16-bit fixed-point disparity files, colour previews.
+#![warn(missing_docs)]
 
 pub(crate) mod aggregate;
 pub mod census;

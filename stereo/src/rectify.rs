@@ -102,7 +102,7 @@ impl StereoRectification {
         let r = t_left_right.rotation();
         let t = t_left_right.translation();
         let baseline = t.norm();
-        if !(baseline > 1e-9) {
+        if baseline.is_nan() || baseline <= 1e-9 {
             return Err(StereoError::Unrectifiable(format!("zero baseline ({baseline:.3e} m) between the optical centres")));
         }
         let e1 = t / baseline;

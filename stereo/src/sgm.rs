@@ -113,13 +113,13 @@ impl SgmParams {
         if self.p1 == 0 || self.p1 > self.p2 || self.p2 > 3800 {
             return Err(param("p1/p2", format!("need 0 < p1 <= p2 <= 3800, got p1={} p2={}", self.p1, self.p2)));
         }
-        if !(self.p2_edge_k >= 0.0) || !self.p2_edge_k.is_finite() {
+        if !self.p2_edge_k.is_finite() || self.p2_edge_k < 0.0 {
             return Err(param("p2_edge_k", format!("{} must be finite and >= 0", self.p2_edge_k)));
         }
         if self.uniqueness >= 100 {
             return Err(param("uniqueness", format!("{} must be below 100 (percent)", self.uniqueness)));
         }
-        if !(self.speckle_range >= 0.0) {
+        if self.speckle_range.is_nan() || self.speckle_range < 0.0 {
             return Err(param("speckle_range", "must be >= 0"));
         }
         Ok(())

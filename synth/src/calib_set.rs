@@ -278,7 +278,8 @@ pub fn generate(rig: &Rig, board: &BoardLayout, cfg: &CalibSetConfig) -> Result<
     if !(cfg.scale > 0.0 && cfg.scale <= 1.0) {
         return Err(CoreError::invalid("scale", format!("must be in (0, 1], got {}", cfg.scale)));
     }
-    if !(cfg.corner_noise_px >= 0.0) || !(cfg.distance_m.0 > 0.0 && cfg.distance_m.1 > cfg.distance_m.0) {
+    let distances_ok = cfg.distance_m.0 > 0.0 && cfg.distance_m.1 > cfg.distance_m.0;
+    if cfg.corner_noise_px.is_nan() || cfg.corner_noise_px < 0.0 || !distances_ok {
         return Err(CoreError::invalid("calibration set", "noise must be >= 0 and the distance range increasing"));
     }
     BoardTexture::new(board)?;
@@ -333,7 +334,9 @@ pub fn render_planes(model: &CameraModel, planes: &[(Pose, &BoardLayout)], noise
     let texs = planes.iter().map(|(_, b)| BoardTexture::new(b)).collect::<Result<Vec<_>, _>>()?;
     let (w, h) = (model.width as usize, model.height as usize);
     let light = Vector3::new(0.3, -0.5, -1.0).normalize();
-    let geo: Vec<(Matrix3<f64>, Vector3<f64>, Vector3<f64>, f64)> = planes
+    // Per plane: rotation R_cam_plane, origin in the camera frame (m), unit normal, shade.
+    type PlaneGeo = (Matrix3<f64>, Vector3<f64>, Vector3<f64>, f64);
+    let geo: Vec<PlaneGeo> = planes
         .iter()
         .map(|(p, _)| {
             let r = p.rotation();

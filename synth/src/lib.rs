@@ -16,6 +16,7 @@
 //!
 //! Frames follow the workspace conventions: world x east, y north, z up (metres); cameras are
 //! OpenCV frames; `T_a_b` maps frame-b points into frame a; the tube frame has +z toward the seal.
+#![warn(missing_docs)]
 
 pub mod calib_set;
 pub mod composite;

@@ -73,9 +73,13 @@ impl TagMount {
     }
 }
 
+/// One tag of a mount description, relative to its tube: `(id, size_m, T_tube_tag)` (edge of the
+/// black border square in metres; pose of the tag frame in the tube frame).
+pub type TubeMountTag = (u32, f64, Pose);
+
 /// Parses a mount description (TOML text, see `data/tag_mount.toml`) into `(family, [(id,
 /// size_m, T_tube_tag)])`.
-pub fn parse_mount(text: &str) -> Result<(TagFamily, Vec<(u32, f64, Pose)>), SynthError> {
+pub fn parse_mount(text: &str) -> Result<(TagFamily, Vec<TubeMountTag>), SynthError> {
     let f: MountFile = toml::from_str(text).map_err(|e| SynthError::Invalid(format!("tag mount description: {e}")))?;
     let mut out = Vec::new();
     for t in f.tags {

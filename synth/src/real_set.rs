@@ -379,7 +379,9 @@ pub fn split_views(data: &Path, split: RealSplit, grey: bool, colour: bool, min_
             continue;
         }
         let is_colour = e.group.contains("mastcam");
-        if (is_colour && !colour) || (!is_colour && !grey) || (!is_colour && split != RealSplit::Train) {
+        // Colour backgrounds when asked for; grey ones only for training and when asked for.
+        let wanted = if is_colour { colour } else { grey && split == RealSplit::Train };
+        if !wanted {
             continue;
         }
         let path = data.join(&e.file);

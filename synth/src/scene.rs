@@ -222,7 +222,7 @@ impl Scene {
         let shape = config.tube_shape.clone();
         let (hl, r) = shape.bounds();
         let n_tubes = config.tubes.unwrap_or_else(|| rng.random_range(5..=6));
-        let mut cases = vec![TubeCase::Unoccluded, TubeCase::Rock, TubeCase::Dust, TubeCase::Dune, TubeCase::SandMound, TubeCase::Unoccluded];
+        let mut cases = [TubeCase::Unoccluded, TubeCase::Rock, TubeCase::Dust, TubeCase::Dune, TubeCase::SandMound, TubeCase::Unoccluded];
         cases.shuffle(&mut rng);
         let mut tubes: Vec<TubeInstance> = Vec::new();
         let mut info: Vec<TubeInfo> = Vec::new();

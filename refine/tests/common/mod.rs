@@ -142,6 +142,7 @@ pub fn random_truth(rng: &mut ChaCha8Rng, model: &CylinderModel, camera: &Camera
 }
 
 /// Renders the scene. `rock`: optional occluding sphere (centre, radius), camera frame.
+#[allow(clippy::too_many_arguments)]
 pub fn render(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, rock: Option<(Vector3<f64>, f64)>, seed: u64, noise: f64) -> Scene {
     render_at(model, camera, truth, up, ground_d, rock, seed, noise, Vector3::zeros())
 }
@@ -149,6 +150,7 @@ pub fn render(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vec
 /// The right view of a rectified pair: the same scene (given in the left camera frame) seen by
 /// a camera at `(baseline, 0, 0)` with the left camera's orientation and intrinsics; the ground
 /// texture stays attached to the ground. The returned scene is in the right camera's frame.
+#[allow(clippy::too_many_arguments)]
 pub fn render_right(model: &CylinderModel, camera: &CameraModel, truth: Truth, up: Vector3<f64>, ground_d: f64, seed: u64, noise: f64, baseline: f64) -> Scene {
     let t = Vector3::new(baseline, 0.0, 0.0);
     let tr = Truth { centre: truth.centre - t, axis: truth.axis };

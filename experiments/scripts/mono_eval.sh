@@ -2,7 +2,7 @@
 # Mono pose accuracy of tubeloc refine on a paper-preset subset: the first N "no-tags" images of
 # a paper-preset benchmark (default /tmp/synth_paper, from `tubeloc synth --preset paper`),
 # seeds = exact poses perturbed by 10 mm / 5 degrees: seeds alone, mono, mono + --ground auto.
-# Usage: refine/scripts/mono_eval.sh [WORKDIR] [N] [BENCHMARK]   (tubeloc in release on PATH or
+# Usage: experiments/scripts/mono_eval.sh [WORKDIR] [N] [BENCHMARK]   (tubeloc in release on PATH or
 # in $TUBELOC)
 set -euo pipefail
 W=${1:-/tmp/refine_mono_eval}

@@ -2,7 +2,7 @@
 # Stereo refinement with and without the two-view contour fit (tubeloc_refine::two_view),
 # without and with the ground prior, on a set rendered by stereo_eval.sh (W/st), seeds = exact
 # poses moved by 10 mm / 5 degrees; tubes at least half visible (tubeloc eval --min-visible).
-# Usage: refine/scripts/two_view_eval.sh W   (tubeloc built in release on PATH or in $TUBELOC;
+# Usage: experiments/scripts/two_view_eval.sh W   (tubeloc built in release on PATH or in $TUBELOC;
 # --two-view-config FILE (JSON of TwoViewConfig fields) changes the fit's settings for experiments)
 set -euo pipefail
 W=${1:?usage: two_view_eval.sh W}

@@ -1,7 +1,7 @@
 //! Probe: mask AP at IoU 0.50..0.95 and median matched IoU of a learned model under a few
 //! decoder settings (select them on a validation set, not on the test sets). The network runs
 //! once per image; each setting only re-decodes.
-//! `cargo run --release -p tubeloc-detect --example learned_mask_probe -- MODEL DATASET_DIR [LIMIT]`
+//! `cargo run --release --manifest-path experiments/Cargo.toml --bin learned_mask_probe -- MODEL DATASET_DIR [LIMIT]`
 #[path = "common/probe_args.rs"]
 mod probe_args;
 

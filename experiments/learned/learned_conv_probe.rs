@@ -1,6 +1,6 @@
 //! Quick probe of candle CPU convolution speed for the layer shapes `TubeNet` could use
 //! (median of 9 runs each, forward only, batch 1). Run:
-//! `RAYON_NUM_THREADS=2 cargo run --release -p tubeloc-detect --example learned_conv_probe`.
+//! `RAYON_NUM_THREADS=2 cargo run --release --manifest-path experiments/Cargo.toml --bin learned_conv_probe`.
 
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{Conv2dConfig, VarBuilder, VarMap};

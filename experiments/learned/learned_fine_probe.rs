@@ -1,6 +1,6 @@
 //! Probe: how well the full-resolution mask logits of a fine-mask model separate tube pixels
 //! from the background, against the bilinear stride-4 foreground logits.
-//! `cargo run --release -p tubeloc-detect --example learned_fine_probe -- MODEL DATASET_DIR [LIMIT]`
+//! `cargo run --release --manifest-path experiments/Cargo.toml --bin learned_fine_probe -- MODEL DATASET_DIR [LIMIT]`
 #[path = "common/probe_args.rs"]
 mod probe_args;
 

@@ -1,5 +1,5 @@
 //! Probe: candle CPU matmul orientation for thin convolutions (W·cols vs cols·Wᵀ).
-//! `RAYON_NUM_THREADS=2 cargo run --release -p tubeloc-detect --example learned_matmul_probe`.
+//! `RAYON_NUM_THREADS=2 cargo run --release --manifest-path experiments/Cargo.toml --bin learned_matmul_probe`.
 use candle_core::{Device, Tensor};
 use std::time::Instant;
 fn median_ms(mut f: impl FnMut()) -> f64 {

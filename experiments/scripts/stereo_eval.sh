@@ -5,7 +5,7 @@
 # (+ photometric ends and scene occlusion, the default), stereo without the scene-occlusion
 # test, stereo + ground, and stereo with the mask-agreement term on the annotations' masks (a
 # perfect segmenter). Truths: visible_fraction >= 0.5 (tubeloc eval --min-visible).
-# Usage: refine/scripts/stereo_eval.sh [WORKDIR] [SCENES] [PAIR] [SEED]   (PAIR: L20,R20 (default)
+# Usage: experiments/scripts/stereo_eval.sh [WORKDIR] [SCENES] [PAIR] [SEED]   (PAIR: L20,R20 (default)
 # or L40,R40; SEED: 3; tubeloc built in release on PATH or in $TUBELOC)
 set -euo pipefail
 W=${1:-/tmp/refine_stereo_eval}

@@ -5,7 +5,7 @@
 //! Environment `PROFILE=<annotation id>` also prints that tube's body-limb intensity profiles
 //! (-6..+6 px along the outward normal, 0.5 px steps, grey levels).
 //! Level 0 is differentiated unsmoothed (the refiner's default) unless `BLUR0=1` is set.
-//! Usage: cargo run --release -p tubeloc-refine --example edge_bias -- DIR [MAX_IMAGES] [MIN_VIS]
+//! Usage: cargo run --release --manifest-path experiments/Cargo.toml --bin edge_bias -- DIR [MAX_IMAGES] [MIN_VIS]
 
 use nalgebra::{Point2, Vector3};
 use tubeloc_core::{CocoDataset, Plane, Pose, TubeModel};
