@@ -3,8 +3,8 @@
 //!
 //! candle 0.11's CPU `conv2d` converts the input to NHWC serially and runs many small GEMMs,
 //! and building the shifted copies with tensor ops (`narrow` + `cat`) is slower still; both
-//! make thin networks slow on 2 cores (`examples/learned_conv_probe.rs`,
-//! `examples/learned_matmul_probe.rs`). Features here are kept `(B, H, W, C)` and a `k x k`,
+//! make thin networks slow on 2 cores (`experiments/learned/learned_conv_probe.rs`,
+//! `experiments/learned/learned_matmul_probe.rs`). Features here are kept `(B, H, W, C)` and a `k x k`,
 //! stride-1, zero-padded convolution is
 //!
 //! `y[b] = cols(x[b]) · Wᵀ + bias`, with `cols` the `(H·W, k·k·C_in)` im2col matrix (taps
