@@ -191,7 +191,7 @@ fn adjust(input: &CalibrationInput, obs_idx: &[usize], adj: &mut Adjustment, opt
                         }
                     }),
                 );
-                    }
+            }
         }
         let sol = p.solve(opts.max_iterations)?;
         for &c in cams {
@@ -269,11 +269,7 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
             return Err(CalibError::invalid("observation", format!("camera {name} view {}: target points must be planar (z = 0)", ob.view)));
         }
         let obj2: Vec<Point2<f64>> = ob.object.iter().map(|p| Point2::new(p.x, p.y)).collect();
-        let check = if ob.object.len() < 6 {
-            Err(CalibError::TooFew(format!("{} corners, need at least 6", ob.object.len())))
-        } else {
-            check_spread(&obj2, "target").and_then(|_| check_spread(&ob.image, "image"))
-        };
+        let check = if ob.object.len() < 6 { Err(CalibError::TooFew(format!("{} corners, need at least 6", ob.object.len()))) } else { check_spread(&obj2, "target").and_then(|_| check_spread(&ob.image, "image")) };
         match check {
             Ok(()) => usable[ob.camera].push(o),
             Err(e) => skipped.push(format!("camera {name} view {}: {e}", ob.view)),
@@ -320,11 +316,7 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
             }
             for a in 0..nc {
                 let Some(t_ref_a) = t_ref_cam[a] else { continue };
-                let rel: Vec<Pose> = init_pose
-                    .iter()
-                    .filter(|((cc, _), _)| *cc == c)
-                    .filter_map(|((_, v), t_c_b)| init_pose.get(&(a, *v)).map(|t_a_b| *t_a_b * t_c_b.inverse()))
-                    .collect();
+                let rel: Vec<Pose> = init_pose.iter().filter(|((cc, _), _)| *cc == c).filter_map(|((_, v), t_c_b)| init_pose.get(&(a, *v)).map(|t_a_b| *t_a_b * t_c_b.inverse())).collect();
                 if let Some(t_a_c) = average_poses(&rel) {
                     t_ref_cam[c] = Some(t_ref_a * t_a_c);
                     break;

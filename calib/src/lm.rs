@@ -306,10 +306,14 @@ mod tests {
         let b = p.add_block(vec![1.0, 0.0], BlockKind::Euclidean, false);
         for (x, y) in xs.iter().zip(&ys) {
             let (x, y) = (*x, *y);
-            p.add_residual(vec![b], 1, Box::new(move |v, r| {
-                r[0] = v[0][0] * (v[0][1] * x).exp() - y;
-                true
-            }));
+            p.add_residual(
+                vec![b],
+                1,
+                Box::new(move |v, r| {
+                    r[0] = v[0][0] * (v[0][1] * x).exp() - y;
+                    true
+                }),
+            );
         }
         let s = p.solve(100).unwrap();
         assert!((p.params[b][0] - 2.0).abs() < 5e-3 && (p.params[b][1] + 0.7).abs() < 5e-3, "{:?}", p.params[b]);

@@ -69,10 +69,14 @@ pub fn estimate_tube_pose(camera: &CameraModel, mount: &TagMount, detections: &[
     let mut image = Vec::new();
     let mut candidates = Vec::new();
     for (tag, det) in &used {
-        let norm: Vec<Point2<f64>> = det.corners.iter().map(|c| {
-            let (x, y) = camera.normalize(&Point2::new(c[0], c[1]));
-            Point2::new(x, y)
-        }).collect();
+        let norm: Vec<Point2<f64>> = det
+            .corners
+            .iter()
+            .map(|c| {
+                let (x, y) = camera.normalize(&Point2::new(c[0], c[1]));
+                Point2::new(x, y)
+            })
+            .collect();
         let plane: Vec<Point2<f64>> = tag_corners(tag.size_m).iter().map(|p| Point2::new(p.x, p.y)).collect();
         let h = homography(&plane, &norm)?;
         let t_cam_tag = pose_from_homography(&h)?;
@@ -118,14 +122,18 @@ fn fit(k: &[f64; 9], object: &[Point3<f64>], image: &[Point2<f64>], init: &Pose)
     let b = p.add_block(pose_vec(init).to_vec(), BlockKind::Pose, false);
     for (x, u) in object.iter().zip(image) {
         let (x, u, k) = (*x, *u, *k);
-        p.add_residual(vec![b], 2, Box::new(move |v, r| match project(&k, v[0], &x) {
-            Some(q) => {
-                r[0] = q.x - u.x;
-                r[1] = q.y - u.y;
-                true
-            }
-            None => false,
-        }));
+        p.add_residual(
+            vec![b],
+            2,
+            Box::new(move |v, r| match project(&k, v[0], &x) {
+                Some(q) => {
+                    r[0] = q.x - u.x;
+                    r[1] = q.y - u.y;
+                    true
+                }
+                None => false,
+            }),
+        );
     }
     let sol = p.solve(100)?;
     let m = (2 * object.len()) as f64;

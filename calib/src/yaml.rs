@@ -55,7 +55,11 @@ fn fmt_num(v: f64) -> String {
     if v.is_nan() {
         ".Nan".into()
     } else if v.is_infinite() {
-        if v > 0.0 { ".Inf".into() } else { "-.Inf".into() }
+        if v > 0.0 {
+            ".Inf".into()
+        } else {
+            "-.Inf".into()
+        }
     } else {
         format!("{v:.17e}")
     }
@@ -178,11 +182,7 @@ pub fn parse_yaml(text: &str, path: &Path) -> Result<BTreeMap<String, YamlValue>
                             i += 1;
                         }
                         let inner = buf.trim().strip_prefix('[').and_then(|b| b.trim_end().strip_suffix(']')).ok_or_else(|| err(sln, format!("{key}.data: expected `[ ... ]`")))?;
-                        let vals = inner
-                            .split(',')
-                            .filter(|t| !t.trim().is_empty())
-                            .map(|t| parse_num(t).ok_or_else(|| err(sln, format!("{key}.data: not a number: {:?}", t.trim()))))
-                            .collect::<Result<Vec<f64>, _>>()?;
+                        let vals = inner.split(',').filter(|t| !t.trim().is_empty()).map(|t| parse_num(t).ok_or_else(|| err(sln, format!("{key}.data: not a number: {:?}", t.trim())))).collect::<Result<Vec<f64>, _>>()?;
                         data = Some(vals);
                     }
                     other => return Err(err(sln, format!("{key}: unknown matrix field {other:?}"))),

@@ -63,7 +63,18 @@ fn outliers_are_rejected() {
 }
 
 fn planar_view(camera: usize, view: usize, pts: &[(f64, f64)], img: impl Fn(f64, f64) -> (f64, f64)) -> Observation {
-    Observation { camera, view, object: pts.iter().map(|&(x, y)| Point3::new(x, y, 0.0)).collect(), image: pts.iter().map(|&(x, y)| { let (u, v) = img(x, y); Point2::new(u, v) }).collect() }
+    Observation {
+        camera,
+        view,
+        object: pts.iter().map(|&(x, y)| Point3::new(x, y, 0.0)).collect(),
+        image: pts
+            .iter()
+            .map(|&(x, y)| {
+                let (u, v) = img(x, y);
+                Point2::new(u, v)
+            })
+            .collect(),
+    }
 }
 
 #[test]

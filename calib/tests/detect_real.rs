@@ -106,7 +106,14 @@ fn agreement(photos: &[Photo], config: &DetectorConfig, pjpeg: bool, shift: f64)
         a.reference += p.reference.len();
         for (id, rc) in &p.reference {
             let err = |d: &TagDetection, k: usize| (d.corners[k][0] - rc[k][0] - shift, d.corners[k][1] - rc[k][1] - shift);
-            let sum = |d: &TagDetection| -> f64 { (0..4).map(|k| { let e = err(d, k); e.0.hypot(e.1) }).sum() };
+            let sum = |d: &TagDetection| -> f64 {
+                (0..4)
+                    .map(|k| {
+                        let e = err(d, k);
+                        e.0.hypot(e.1)
+                    })
+                    .sum()
+            };
             let Some(d) = found.iter().filter(|d| d.id == *id).min_by(|x, y| sum(x).total_cmp(&sum(y))) else { continue };
             let e: Vec<(f64, f64)> = (0..4).map(|k| err(d, k)).collect();
             if e.iter().all(|(x, y)| x.hypot(*y) < 2.0) {
@@ -124,7 +131,6 @@ fn agreement(photos: &[Photo], config: &DetectorConfig, pjpeg: bool, shift: f64)
     a.mean = (sx / n, sy / n);
     a
 }
-
 
 /// The measurement behind docs/design/0026: every combination of JPEG decoder, encoding, edge
 /// refinement and decimation against the reference corners, as a markdown table.
@@ -256,4 +262,3 @@ fn bad_options_and_buffers_are_rejected() {
     // A blank image has no tags.
     assert!(det.detect_raw(64, 64, 64, &[128u8; 64 * 64]).unwrap().is_empty());
 }
-

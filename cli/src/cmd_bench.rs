@@ -96,7 +96,10 @@ pub struct BenchArgs {
 
 /// The benchmark's splits, with the paper's Line2D (AP50, AR) and Mask R-CNN (AP50, AR) figures
 /// (Tables I and II; Mask R-CNN tested on this split after training on the other).
-const SPLITS: [(&str, (f64, f64), (f64, f64)); 2] = [("no-tags", (0.345, 0.184), (0.911, 0.555)), ("with-tags", (0.255, 0.153), (0.918, 0.575))];
+type SplitFigures = (&'static str, (f64, f64), (f64, f64));
+
+/// The splits with the paper's figures (see above).
+const SPLITS: [SplitFigures; 2] = [("no-tags", (0.345, 0.184), (0.911, 0.555)), ("with-tags", (0.255, 0.153), (0.918, 0.575))];
 
 /// Stage bookkeeping: wall time per finished stage, persisted after each one.
 struct Stages {
@@ -238,7 +241,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             Some(l) => l.clone(),
             None => {
                 let l = out.join("templates.tlt");
-                st.run("templates", &[l.clone()], || {
+                st.run("templates", std::slice::from_ref(&l), || {
                     crate::run_words(&words(&["templates", "build", "--camera", &s(&camera), "--out", &s(&l)]))?;
                     Ok(Value::Null)
                 })?;
@@ -424,10 +427,7 @@ fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     files::write_atomic(&img_path, &buf.into_inner())?;
     let exe = std::env::current_exe().context("locating the tubeloc executable")?;
     let t = Instant::now();
-    let status = std::process::Command::new(&exe)
-        .args(["locate", "--rig", &s(&rig_path), "--image", &s(&img_path), "--out", &s(&dir.join("poses.json"))])
-        .status()
-        .with_context(|| format!("running {}", exe.display()))?;
+    let status = std::process::Command::new(&exe).args(["locate", "--rig", &s(&rig_path), "--image", &s(&img_path), "--out", &s(&dir.join("poses.json"))]).status().with_context(|| format!("running {}", exe.display()))?;
     if !matches!(status.code(), Some(0) | Some(3)) {
         bail!("locate on the full-resolution image failed ({status})");
     }
@@ -443,7 +443,12 @@ fn f3(x: f64) -> String {
 fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Result<PathBuf> {
     let mut r = String::new();
     let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
-    let _ = writeln!(r, "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n", env!("CARGO_PKG_VERSION"), n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "));
+    let _ = writeln!(
+        r,
+        "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n",
+        env!("CARGO_PKG_VERSION"),
+        n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
+    );
     // One table row per split: `stages(sp)` names the stages whose `ms_per_image` add up to
     // the row's time, `eval_dir(sp)` the evaluation folder (relative to `out`).
     let table = |r: &mut String, stages: &dyn Fn(&str) -> Vec<String>, eval_dir: &dyn Fn(&str) -> String, paper_of: &dyn Fn(usize) -> (f64, f64), title: &str| {
@@ -524,7 +529,14 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         let _ = writeln!(r, "| {name} | {:.1} | {} |", st.seconds(name).unwrap_or(0.0), v["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or_default());
     }
     if let Some(f) = st.result("fullres") {
-        let _ = writeln!(r, "\nFull resolution ({}x{}): `tubeloc locate` in a child process took {:.1} s with a peak RSS of {} MiB.", f["width"], f["height"], f["seconds"].as_f64().unwrap_or(0.0), f["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or("?".into()));
+        let _ = writeln!(
+            r,
+            "\nFull resolution ({}x{}): `tubeloc locate` in a child process took {:.1} s with a peak RSS of {} MiB.",
+            f["width"],
+            f["height"],
+            f["seconds"].as_f64().unwrap_or(0.0),
+            f["peak_rss_mb"].as_f64().map(|m| format!("{m:.0}")).unwrap_or("?".into())
+        );
     }
     let argv: Vec<String> = std::env::args().skip(1).collect();
     let _ = writeln!(r, "\nMachine: {} logical CPUs. Command: `tubeloc {}`.", std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1), argv.join(" "));

@@ -45,6 +45,7 @@ fn negative_view(grey: bool) -> AssumedView {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<()> {
     if out.join("annotations.json").exists() {
         return Ok(());
@@ -186,7 +187,19 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "| set | images | tubes | AP50 | AR | ms / image | precision / recall at P >= {:.3} | ECE |", stage.calibration.threshold).ok();
     writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|").ok();
     for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
-        writeln!(md, "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.3} / {:.3} | {:.3} |", v["images"], v["tubes"], v["ap50"].as_f64().unwrap_or(f64::NAN), v["ar"].as_f64().unwrap_or(f64::NAN), v["ms_per_image"].as_f64().unwrap_or(f64::NAN), v["precision_at_threshold"].as_f64().unwrap_or(f64::NAN), v["recall_at_threshold"].as_f64().unwrap_or(f64::NAN), v["ece"].as_f64().unwrap_or(f64::NAN)).ok();
+        writeln!(
+            md,
+            "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.3} / {:.3} | {:.3} |",
+            v["images"],
+            v["tubes"],
+            v["ap50"].as_f64().unwrap_or(f64::NAN),
+            v["ar"].as_f64().unwrap_or(f64::NAN),
+            v["ms_per_image"].as_f64().unwrap_or(f64::NAN),
+            v["precision_at_threshold"].as_f64().unwrap_or(f64::NAN),
+            v["recall_at_threshold"].as_f64().unwrap_or(f64::NAN),
+            v["ece"].as_f64().unwrap_or(f64::NAN)
+        )
+        .ok();
     }
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\nMono refinement of the learned detections on the grey test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", grey_poses["matched"], grey_poses["truths"], f(&grey_poses["axis_deg_median"]), f(&grey_poses["axis_deg_p90"]), f(&grey_poses["across_mm_median"]), f(&grey_poses["across_mm_p90"])).ok();

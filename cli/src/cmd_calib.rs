@@ -153,7 +153,24 @@ fn run_rig(a: RigArgs) -> Result<()> {
     }
     for c in &cal.cameras {
         let m = &c.model;
-        crate::out::outln!("{:>6}: fx {:.3}±{:.3} fy {:.3}±{:.3} cx {:.3} cy {:.3} k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}  rms {:.3} px  views {}  outliers {}", c.name, m.fx, c.std[0], m.fy, c.std[1], m.cx, m.cy, m.distortion.k1, m.distortion.k2, m.distortion.p1, m.distortion.p2, m.distortion.k3, c.rms_px, c.views.len(), c.outliers);
+        crate::out::outln!(
+            "{:>6}: fx {:.3}±{:.3} fy {:.3}±{:.3} cx {:.3} cy {:.3} k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}  rms {:.3} px  views {}  outliers {}",
+            c.name,
+            m.fx,
+            c.std[0],
+            m.fy,
+            c.std[1],
+            m.cx,
+            m.cy,
+            m.distortion.k1,
+            m.distortion.k2,
+            m.distortion.p1,
+            m.distortion.p2,
+            m.distortion.k3,
+            c.rms_px,
+            c.views.len(),
+            c.outliers
+        );
     }
     for (l, r, b) in &cal.baselines {
         crate::out::outln!("baseline {l}-{r}: {:.2} mm", b * 1e3);
@@ -173,7 +190,11 @@ fn bbox_score(ann: &serde_json::Value, u: f64, v: f64) -> f64 {
     }
     let inside = u >= b[0] && u <= b[0] + b[2] && v >= b[1] && v <= b[1] + b[3];
     let d = (u - (b[0] + b[2] / 2.0)).hypot(v - (b[1] + b[3] / 2.0));
-    if inside { d } else { 1e6 + d }
+    if inside {
+        d
+    } else {
+        1e6 + d
+    }
 }
 
 /// The mount recorded with an image by `tubeloc synth` (`tags.tags[*]` with `id`, `size_m`,
@@ -187,7 +208,7 @@ fn mount_from_image(im: &serde_json::Value) -> Option<TagMount> {
         let pose: tubeloc_core::Pose = serde_json::from_value(t.get("T_tube_tag")?.clone()).ok()?;
         out.push(tubeloc_calib::MountedTag { id, size_m, t_tube_tag: pose });
     }
-    (!out.is_empty()).then(|| TagMount { family: tubeloc_calib::TagFamily::Tag36h11, tags: out })
+    (!out.is_empty()).then_some(TagMount { family: tubeloc_calib::TagFamily::Tag36h11, tags: out })
 }
 
 fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {

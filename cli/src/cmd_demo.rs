@@ -7,13 +7,13 @@
 //! pose, score the poses against the renderer's exact poses (with histograms), run the main job
 //! `tubeloc locate` on the first image, and write `report.md`.
 
+use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
+use crate::cmd_refine::GroundArg;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
-use crate::cmd_refine::GroundArg;
 use tubeloc_core::{files, CameraModel, CocoDataset, Pose};
 
 /// Arguments of `tubeloc demo`.
@@ -73,7 +73,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     let gt = CocoDataset::load(&gt_path)?;
     let first = gt.images.first().with_context(|| format!("{}: no images", gt_path.display()))?;
-    let camera: CameraModel = serde_json::from_value(first.extra.get("camera").cloned().with_context(|| format!("{}: image {} has no camera", gt_path.display(), first.id))?).with_context(|| format!("{}: image {}: camera", gt_path.display(), first.id))?;
+    let camera: CameraModel =
+        serde_json::from_value(first.extra.get("camera").cloned().with_context(|| format!("{}: image {} has no camera", gt_path.display(), first.id))?).with_context(|| format!("{}: image {}: camera", gt_path.display(), first.id))?;
     let cam_path = out.join("camera.json");
     files::write_json(&cam_path, &camera)?;
 

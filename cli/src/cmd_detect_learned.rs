@@ -7,7 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{AxisSeed, BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation, TubeDetection};
+use tubeloc_core::{BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
 
 /// One output entry: a COCO result with the detection's seed fields.
@@ -178,32 +178,10 @@ pub fn run_external(results: &Path, sizes: &(dyn Fn(u64) -> Option<(u32, u32)> +
     list.into_par_iter()
         .enumerate()
         .map(|(k, r)| {
-            let ctx = || format!("{}: entry {k} (image {})", results.display(), r.image_id);
-            let mask = match &r.segmentation {
-                None => None,
-                Some(seg) => {
-                    let (h, w) = match seg {
-                        Segmentation::CompressedRle { size, .. } | Segmentation::UncompressedRle { size, .. } => (size[0], size[1]),
-                        Segmentation::Polygons(_) => sizes(r.image_id).map(|(w, h)| (h, w)).with_context(|| format!("{}: polygon mask needs the image size (--image or --dataset)", ctx()))?,
-                    };
-                    Some(seg.to_rle(h, w).and_then(|x| x.to_mask()).with_context(ctx)?)
-                }
-            };
-            let bbox = match (r.bbox, &mask) {
-                (Some(b), _) => b,
-                (None, Some(m)) => m.bbox(),
-                (None, None) => bail!("{}: neither bbox nor segmentation", ctx()),
-            };
-            let mut det = TubeDetection::new(r.image_id, r.score, bbox, DetectionSource::External);
-            det.category_id = r.category_id;
-            det.axis_seed = Some(match &mask {
-                Some(m) => {
-                    let px = m.data.iter().enumerate().filter(|(_, &v)| v != 0).map(|(i, _)| ((i % m.width) as f64, (i / m.width) as f64));
-                    AxisSeed::from_pixels(px).unwrap_or_else(|| det.axis_seed_from_bbox())
-                }
-                None => det.axis_seed_from_bbox(),
-            });
-            det.validate().with_context(ctx)?;
+            let ctx = format!("{}: entry {k} (image {})", results.display(), r.image_id);
+            let mut det = tubeloc_pipeline::detector::detection_from_coco_result(&r, sizes(r.image_id), &ctx).map_err(|e| anyhow::anyhow!("{e}"))?;
+            // The mask travels as the result's own segmentation.
+            det.mask = None;
             Ok(DetectionOut { det, segmentation: r.segmentation })
         })
         .collect()

@@ -74,9 +74,24 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
     let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
     let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
-    let mut params = MatchParams { threshold: opts.threshold, coarse_threshold: opts.coarse_threshold, nms_iou: opts.nms_iou, max_detections: opts.max_detections, rerank_margin: opts.rerank_margin, rerank_area_weight: opts.rerank_area_weight, ..MatchParams::default() };
+    let mut params = MatchParams {
+        threshold: opts.threshold,
+        coarse_threshold: opts.coarse_threshold,
+        nms_iou: opts.nms_iou,
+        max_detections: opts.max_detections,
+        rerank_margin: opts.rerank_margin,
+        rerank_area_weight: opts.rerank_area_weight,
+        ..MatchParams::default()
+    };
     params.gradient.mag_threshold = opts.grad_threshold;
-    params.verify = (!opts.no_verify).then(|| VerifyParams { contrast_weight: opts.contrast_weight, min_contrast: opts.min_contrast, ring_inner: opts.ring_inner, ring_outer: opts.ring_outer, rerank_weight: opts.rerank_contrast_weight, ..VerifyParams::default() });
+    params.verify = (!opts.no_verify).then(|| VerifyParams {
+        contrast_weight: opts.contrast_weight,
+        min_contrast: opts.min_contrast,
+        ring_inner: opts.ring_inner,
+        ring_outer: opts.ring_outer,
+        rerank_weight: opts.rerank_contrast_weight,
+        ..VerifyParams::default()
+    });
     let det = Line2dDetector::new(lib, params)?;
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));

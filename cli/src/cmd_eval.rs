@@ -171,11 +171,7 @@ fn report_of(args: &EvalArgs, result: &tubeloc_eval::coco_eval::EvalResult, brea
         pr_curves: result.iou_thrs.iter().enumerate().map(|(t, &thr)| (thr, result.pr_curve(t))).collect(),
         breakdowns: breakdowns
             .iter()
-            .map(|b| tubeloc_eval::report::Breakdown {
-                attribute: b.attribute.clone(),
-                metrics: vec!["AP50".into(), "AP".into(), "AR100".into()],
-                rows: b.rows.iter().map(|r| (r.value.clone(), r.num_images, pick(&r.result))).collect(),
-            })
+            .map(|b| tubeloc_eval::report::Breakdown { attribute: b.attribute.clone(), metrics: vec!["AP50".into(), "AP".into(), "AR100".into()], rows: b.rows.iter().map(|r| (r.value.clone(), r.num_images, pick(&r.result))).collect() })
             .collect(),
         poses: Vec::new(),
     }

@@ -175,11 +175,7 @@ fn external_detections(a: &LocateArgs, size: (u32, u32)) -> Result<ExternalDetec
     let image_name = a.image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let origin = path.display().to_string();
     let list = detector::select_results_for_image(list, &image_name, names.as_ref(), &origin)?;
-    let dets = list
-        .iter()
-        .enumerate()
-        .map(|(k, r)| detector::detection_from_coco_result(r, Some(size), &format!("{origin}: entry {k} (image {})", r.image_id)))
-        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let dets = list.iter().enumerate().map(|(k, r)| detector::detection_from_coco_result(r, Some(size), &format!("{origin}: entry {k} (image {})", r.image_id))).collect::<std::result::Result<Vec<_>, _>>()?;
     Ok(ExternalDetections::new(dets, origin))
 }
 
@@ -245,12 +241,7 @@ pub fn run(a: LocateArgs) -> Result<usize> {
 
     // Outputs: the overlay, then the poses, each written atomically; nothing printed before.
     let overlay_path = a.overlay.clone().unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
-    let tubes: Vec<TubeOut> = found
-        .tubes
-        .iter()
-        .map(|t| TubeOut { tube: t, status: "located" })
-        .chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() }))
-        .collect();
+    let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
     let overlay = locator.overlay(&image, tubes.iter().map(|t| &t.tube.pose));
     let png = tubeloc_pipeline::overlay::png_bytes(&overlay).context("encoding the overlay PNG")?;
     let doc = LocateDoc {
@@ -289,10 +280,15 @@ pub fn run(a: LocateArgs) -> Result<usize> {
 fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged: usize) {
     let mut out = std::io::stdout().lock();
     let mut lines = vec![format!("{}: {} tube(s) located, {} detection(s) rejected, {} duplicate(s) merged", image.display(), converged, found.rejected.len(), found.merged)];
-    let low: Vec<Option<(f64, f64)>> = found.tubes.iter().map(|_| None).chain(found.rejected.iter().map(|r| match r.reason {
-        tubeloc_pipeline::Rejection::LowProbability { probability, threshold } => Some((probability, threshold)),
-        _ => None,
-    })).collect();
+    let low: Vec<Option<(f64, f64)>> = found
+        .tubes
+        .iter()
+        .map(|_| None)
+        .chain(found.rejected.iter().map(|r| match r.reason {
+            tubeloc_pipeline::Rejection::LowProbability { probability, threshold } => Some((probability, threshold)),
+            _ => None,
+        }))
+        .collect();
     for (i, t) in found.all_tubes().enumerate() {
         let p = &t.pose;
         if let Some((pr, th)) = low[i] {
@@ -304,7 +300,20 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
         lines.push(match &p.failure {
             None => format!(
                 "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}, P(tube) {:.3}",
-                c.x, c.y, c.z, g.x, g.y, g.z, p.axis.x, p.axis.y, p.axis.z, p.centre_std_m() * 1e3, p.axis_std_rad().to_degrees(), p.end_confidence, p.score, t.probability
+                c.x,
+                c.y,
+                c.z,
+                g.x,
+                g.y,
+                g.z,
+                p.axis.x,
+                p.axis.y,
+                p.axis.z,
+                p.centre_std_m() * 1e3,
+                p.axis_std_rad().to_degrees(),
+                p.end_confidence,
+                p.score,
+                t.probability
             ),
             Some(f) => format!("  tube {i}: rejected ({:?}): {}", f.reason, f.message),
         });

@@ -351,7 +351,19 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
         };
         let line = format!(
             "tube {i} (image {}, score {:.2}): centre [{:.1}, {:.1}, {:.1}] mm, axis [{:.3}, {:.3}, {:.3}], end conf {:.2}, rms {:.2} px, {}/{} inliers, {} stereo pts: {status}",
-            p.image_id, p.score, c.x, c.y, c.z, p.axis.x, p.axis.y, p.axis.z, p.end_confidence, p.residuals.rms_px, p.residuals.inliers, p.residuals.count, refined.stereo_points.get(i).map_or(0, Vec::len)
+            p.image_id,
+            p.score,
+            c.x,
+            c.y,
+            c.z,
+            p.axis.x,
+            p.axis.y,
+            p.axis.z,
+            p.end_confidence,
+            p.residuals.rms_px,
+            p.residuals.inliers,
+            p.residuals.count,
+            refined.stereo_points.get(i).map_or(0, Vec::len)
         );
         if writeln!(stdout, "{line}").is_err() {
             break;

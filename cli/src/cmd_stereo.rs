@@ -267,7 +267,17 @@ fn eval_set(dir: &Path, params: &SgmParams, limit: Option<usize>, out: &Path) ->
     tubeloc_core::files::write_json(&out.join("stereo_eval.json"), &report)?;
     crate::out::outln!(
         "{} pairs: valid px bad-1 {:.4} bad-2 {:.4} MAE {:.3} px (density {:.3}); tube px bad-1 {:.4} bad-2 {:.4} MAE {:.3} px; tube points {} median {:.2} mm p90 {:.2} mm",
-        per_pair.len(), s.valid.bad1, s.valid.bad2, s.valid.mae, s.valid.density, s.tube.bad1, s.tube.bad2, s.tube.mae, s.tube_points, s.tube_median_mm, s.tube_p90_mm
+        per_pair.len(),
+        s.valid.bad1,
+        s.valid.bad2,
+        s.valid.mae,
+        s.valid.density,
+        s.tube.bad1,
+        s.tube.bad2,
+        s.tube.mae,
+        s.tube_points,
+        s.tube_median_mm,
+        s.tube_p90_mm
     );
     Ok(())
 }

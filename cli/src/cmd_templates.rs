@@ -86,7 +86,7 @@ const MAX_DEDUPE_COMPARISONS: f64 = 2e10;
 
 /// `--distances MIN:MAX:STEP`: finite, `0 < MIN <= MAX`, `STEP > 0`.
 fn distance_range(s: &str) -> std::result::Result<(f64, f64, f64), String> {
-    let v: Vec<f64> = s.split(':').map(|x| crate::args::finite_f64(x)).collect::<std::result::Result<_, _>>().map_err(|e| format!("{s:?}: expected MIN:MAX:STEP in metres ({e})"))?;
+    let v: Vec<f64> = s.split(':').map(crate::args::finite_f64).collect::<std::result::Result<_, _>>().map_err(|e| format!("{s:?}: expected MIN:MAX:STEP in metres ({e})"))?;
     if v.len() != 3 {
         return Err(format!("{s:?}: expected MIN:MAX:STEP in metres"));
     }
@@ -119,13 +119,7 @@ fn count(x: f64) -> String {
 fn check_size(est: &LibraryEstimate, max_templates: usize, max_memory_gib: f64) -> Result<()> {
     let v = &est.views;
     let gib = est.peak_bytes / (1u64 << 30) as f64;
-    let what = format!(
-        "up to {} templates ({} distances x {} view rotations) needing about {} GiB",
-        count(est.templates),
-        count(v.distances),
-        count(v.rotations),
-        if gib < 1e6 { format!("{gib:.1}") } else { format!("{gib:.2e}") }
-    );
+    let what = format!("up to {} templates ({} distances x {} view rotations) needing about {} GiB", count(est.templates), count(v.distances), count(v.rotations), if gib < 1e6 { format!("{gib:.1}") } else { format!("{gib:.2e}") });
     if v.candidates > MAX_VIEW_CANDIDATES || v.comparisons > MAX_DEDUPE_COMPARISONS {
         return Err(crate::args::usage(format!(
             "--step-deg / --inplane-step-deg / --dedupe-tol-deg sample the views too finely: {} candidate views and {} axis comparisons (limits {} and {}); the library would hold {what}",

@@ -271,7 +271,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
     pb.set_style(ProgressStyle::with_template("train {bar:30} {pos}/{len} {elapsed}<{eta} {msg}").expect("template"));
     pb.set_position(start.min(total));
     let (mut ema, mut last_ap) = (f32::NAN, f64::NAN);
-    let validate = |t: &Trainer| -> Result<f64> { if val.is_empty() { Ok(f64::NAN) } else { Ok(ap50(&t.model, &val, &DecodeConfig::default())?) } };
+    let validate = |t: &Trainer| -> Result<f64> {
+        if val.is_empty() {
+            Ok(f64::NAN)
+        } else {
+            Ok(ap50(&t.model, &val, &DecodeConfig::default())?)
+        }
+    };
     let t0 = std::time::Instant::now();
     while trainer.model.meta.steps < total {
         let l = trainer.step(&images)?;

@@ -44,7 +44,6 @@ pub fn tag_pose_errors(ann: &Path) -> Result<Value> {
     Ok(Value::Object(r))
 }
 
-
 /// The pose table of a `report.md` written by `tubeloc eval --poses --out` (its header row
 /// starts with `| poses |`), or `None` when absent.
 pub fn pose_table(report_md: &Path) -> Option<String> {

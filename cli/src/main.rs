@@ -5,27 +5,27 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
-mod cmd_calib;
-mod cmd_detect;
-mod cmd_detect_line2d;
-mod cmd_templates;
-mod cmd_detect_learned;
-mod cmd_eval;
-mod cmd_synth;
-mod cmd_stereo;
-mod cmd_refine;
-mod cmd_synth_calib;
-mod cmd_synth_stereo;
-mod cmd_synth_composite;
-mod cmd_synth_real;
-mod cmd_train;
-mod cmd_demo;
-mod cmd_locate;
+pub(crate) mod args;
 mod cmd_bench;
 mod cmd_bench_real;
-mod memory;
+mod cmd_calib;
+mod cmd_demo;
+mod cmd_detect;
+mod cmd_detect_learned;
+mod cmd_detect_line2d;
+mod cmd_eval;
+mod cmd_locate;
+mod cmd_refine;
+mod cmd_stereo;
+mod cmd_synth;
+mod cmd_synth_calib;
+mod cmd_synth_composite;
+mod cmd_synth_real;
+mod cmd_synth_stereo;
+mod cmd_templates;
+mod cmd_train;
 mod figures;
-pub(crate) mod args;
+mod memory;
 pub(crate) mod out;
 
 /// tubeloc: find Mars sample tubes in rover camera images and return grasp-ready 6D tube poses.
@@ -37,6 +37,7 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
+#[allow(clippy::large_enum_variant)] // parsed once; boxing the arguments buys nothing
 enum Command {
     // Subcommands are registered here, one variant each.
     /// AprilTag detection, tag-pair ground-truth tube poses, and camera-rig calibration.

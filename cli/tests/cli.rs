@@ -131,10 +131,12 @@ fn locate_finds_tubes_on_a_rendered_scene_with_grasp_frames() {
     let truths: Vec<[f64; 3]> = s.gt["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == id).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();
     let best = converged
         .iter()
-        .flat_map(|t| truths.iter().map(move |g| {
-            let c = vec3(&t["centre"]);
-            ((c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2)).sqrt()
-        }))
+        .flat_map(|t| {
+            truths.iter().map(move |g| {
+                let c = vec3(&t["centre"]);
+                ((c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2)).sqrt()
+            })
+        })
         .fold(f64::INFINITY, f64::min);
     assert!(best < 0.05, "nearest located tube is {:.1} mm from a rendered one", best * 1e3);
 }

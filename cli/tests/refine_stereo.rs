@@ -61,11 +61,7 @@ fn stereo_term_fixes_the_depth_that_mono_loses() {
                 continue;
             }
             let c = vec3(&s["centre"]);
-            let g = truth[&s["image_id"].as_u64().unwrap()]
-                .iter()
-                .copied()
-                .min_by(|a, b| dist(a, &c).total_cmp(&dist(b, &c)))
-                .expect("a true tube in the image");
+            let g = truth[&s["image_id"].as_u64().unwrap()].iter().copied().min_by(|a, b| dist(a, &c).total_cmp(&dist(b, &c))).expect("a true tube in the image");
             let n = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
             let along = |p: &[f64; 3]| ((p[0] - g[0]) * g[0] + (p[1] - g[1]) * g[1] + (p[2] - g[2]) * g[2]).abs() / n;
             depth_st.push(along(&c));
@@ -257,11 +253,14 @@ impl MaskSet {
     }
 }
 
+/// A detection's truth: image id, true centre and axis (camera frame), visible fraction.
+type Truth = (u64, [f64; 3], [f64; 3], f64);
+
 /// Mask detections of the learned segmenter's kind from a stereo set's annotations: each tube at
 /// least half visible gets its visible mask and an axis seed turned 2 degrees and moved 2 px off
 /// its true image axis. Returns the detections and, per detection, its image id, true centre and
 /// axis (camera frame) and visible fraction.
-fn mask_detections(ann: &Value) -> (Vec<Value>, Vec<(u64, [f64; 3], [f64; 3], f64)>) {
+fn mask_detections(ann: &Value) -> (Vec<Value>, Vec<Truth>) {
     let images: std::collections::BTreeMap<u64, &Value> = ann["images"].as_array().unwrap().iter().map(|i| (i["id"].as_u64().unwrap(), i)).collect();
     let mut dets = Vec::new();
     let mut truths = Vec::new();

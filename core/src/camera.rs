@@ -114,15 +114,7 @@ impl CameraModel {
     /// point at the image centre, square pixels.
     pub fn from_hfov(width: u32, height: u32, hfov_deg: f64) -> Self {
         let fx = (width as f64 / 2.0) / (hfov_deg.to_radians() / 2.0).tan();
-        CameraModel {
-            width,
-            height,
-            fx,
-            fy: fx,
-            cx: (width as f64 - 1.0) / 2.0,
-            cy: (height as f64 - 1.0) / 2.0,
-            distortion: Distortion::default(),
-        }
+        CameraModel { width, height, fx, fy: fx, cx: (width as f64 - 1.0) / 2.0, cy: (height as f64 - 1.0) / 2.0, distortion: Distortion::default() }
     }
 
     /// Checks that sizes are non-zero and all numbers finite with positive focal lengths.
@@ -225,10 +217,7 @@ mod tests {
     use super::*;
 
     fn lens() -> CameraModel {
-        CameraModel {
-            distortion: Distortion { k1: -0.12, k2: 0.05, p1: 0.001, p2: -0.0007, k3: -0.01 },
-            ..CameraModel::from_hfov(1024, 768, 77.0)
-        }
+        CameraModel { distortion: Distortion { k1: -0.12, k2: 0.05, p1: 0.001, p2: -0.0007, k3: -0.01 }, ..CameraModel::from_hfov(1024, 768, 77.0) }
     }
 
     #[test]

@@ -120,10 +120,7 @@ impl Segmentation {
                 };
                 if first.len() <= 4 {
                     // pycocotools' frPyObjects reads such a list as boxes (4) or rejects it (< 4).
-                    return Err(CoreError::invalid(
-                        "segmentation",
-                        format!("polygon 0 has {} numbers; a polygon needs at least 6", first.len()),
-                    ));
+                    return Err(CoreError::invalid("segmentation", format!("polygon 0 has {} numbers; a polygon needs at least 6", first.len())));
                 }
                 if let Some(bad) = polys.iter().flatten().find(|v| !v.is_finite()) {
                     return Err(CoreError::invalid("segmentation", format!("non-finite polygon coordinate {bad}")));
@@ -151,10 +148,7 @@ impl Segmentation {
 
 fn check_size(size: [u32; 2], h: u32, w: u32) -> Result<(), CoreError> {
     if size != [h, w] {
-        return Err(CoreError::invalid(
-            "segmentation",
-            format!("mask size [h, w] = {size:?} differs from the image size [{h}, {w}]"),
-        ));
+        return Err(CoreError::invalid("segmentation", format!("mask size [h, w] = {size:?} differs from the image size [{h}, {w}]")));
     }
     Ok(())
 }
@@ -237,8 +231,7 @@ pub fn load_results(path: &Path, gt: &CocoDataset) -> Result<Vec<CocoResult>, Co
 
 /// Checks results against `gt` (see [`load_results`]); the message names the entry.
 pub fn validate_results(results: &[CocoResult], gt: &CocoDataset) -> Result<(), String> {
-    let sizes: std::collections::HashMap<u64, (u32, u32)> =
-        gt.images.iter().map(|im| (im.id, (im.height, im.width))).collect();
+    let sizes: std::collections::HashMap<u64, (u32, u32)> = gt.images.iter().map(|im| (im.id, (im.height, im.width))).collect();
     for (i, r) in results.iter().enumerate() {
         let at = || format!("results[{i}] (image_id {})", r.image_id);
         let Some(&(h, w)) = sizes.get(&r.image_id) else {
@@ -293,10 +286,7 @@ fn explain_list_error(path: &Path, text: &[u8], e: serde_json::Error) -> CoreErr
 fn first_bad<T: serde::de::DeserializeOwned>(key: &str, items: &[Value]) -> Option<String> {
     items.iter().enumerate().find_map(|(i, v)| {
         serde_json::from_value::<T>(v.clone()).err().map(|err| {
-            let id = ["id", "image_id"]
-                .iter()
-                .find_map(|k| v.get(*k).map(|x| format!(" ({k} {x})")))
-                .unwrap_or_default();
+            let id = ["id", "image_id"].iter().find_map(|k| v.get(*k).map(|x| format!(" ({k} {x})"))).unwrap_or_default();
             format!("{key}[{i}]{id}: {err}")
         })
     })

@@ -95,12 +95,7 @@ impl AxisSeed {
         let mid = 0.5 * (lo + hi);
         let wmid = 0.5 * (wlo + whi);
         let centre = m + dir * mid + perp * wmid;
-        Some(AxisSeed {
-            centre_px: [centre.x, centre.y],
-            direction_px: [dir.x, dir.y],
-            length_px: hi - lo + 1.0,
-            width_px: whi - wlo + 1.0,
-        })
+        Some(AxisSeed { centre_px: [centre.x, centre.y], direction_px: [dir.x, dir.y], length_px: hi - lo + 1.0, width_px: whi - wlo + 1.0 })
     }
 
     /// Checks finite values, a unit direction (within 1e-3) and positive sizes.
@@ -178,10 +173,7 @@ impl TubeDetection {
             m.check()?;
             let pixels = m.size[0] as u64 * m.size[1] as u64;
             if pixels > crate::mask::MAX_MASK_PIXELS {
-                return Err(CoreError::invalid(
-                    "segmentation",
-                    format!("mask size {}x{} (h x w) exceeds the limit of {} pixels", m.size[0], m.size[1], crate::mask::MAX_MASK_PIXELS),
-                ));
+                return Err(CoreError::invalid("segmentation", format!("mask size {}x{} (h x w) exceeds the limit of {} pixels", m.size[0], m.size[1], crate::mask::MAX_MASK_PIXELS)));
             }
         }
         Ok(())
@@ -218,8 +210,7 @@ pub fn read_coco_results(path: &Path) -> Result<Vec<TubeDetection>, CoreError> {
 
 /// Parses COCO results JSON text (see [`read_coco_results`]); `origin` names the source.
 pub fn parse_coco_results(text: &[u8], origin: &Path) -> Result<Vec<TubeDetection>, CoreError> {
-    let mut dets: Vec<TubeDetection> =
-        serde_json::from_slice(text).map_err(|e| CoreError::parse(origin, format!("invalid COCO results JSON: {e}")))?;
+    let mut dets: Vec<TubeDetection> = serde_json::from_slice(text).map_err(|e| CoreError::parse(origin, format!("invalid COCO results JSON: {e}")))?;
     for (i, d) in dets.iter_mut().enumerate() {
         d.validate().map_err(|e| CoreError::parse(origin, format!("entry {i}: {e}")))?;
         if d.axis_seed.is_none() {

@@ -121,9 +121,7 @@ fn write_renamed(path: &Path, bytes: &[u8]) -> Result<(), CoreError> {
         _ => Path::new("."),
     };
     std::fs::create_dir_all(dir).map_err(|e| CoreError::io(dir, e))?;
-    let name = path
-        .file_name()
-        .ok_or_else(|| CoreError::invalid("output path", format!("{} has no file name", path.display())))?;
+    let name = path.file_name().ok_or_else(|| CoreError::invalid("output path", format!("{} has no file name", path.display())))?;
     let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
     let keep_permissions = std::fs::metadata(path).ok().filter(|m| m.is_file()).map(|m| m.permissions());
     let result = (|| {
@@ -196,8 +194,7 @@ pub fn remove_stale_temporaries(out: &Path) -> Result<Vec<PathBuf>, CoreError> {
 
 /// Serializes `value` as pretty JSON and writes it atomically to `path`.
 pub fn write_json<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), CoreError> {
-    let text = serde_json::to_vec_pretty(value)
-        .map_err(|e| CoreError::parse(path, format!("cannot serialize JSON: {e}")))?;
+    let text = serde_json::to_vec_pretty(value).map_err(|e| CoreError::parse(path, format!("cannot serialize JSON: {e}")))?;
     write_atomic(path, &text)
 }
 

@@ -7,10 +7,10 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub mod coco;
 pub mod confidence;
 pub mod detection;
 pub mod error;
-pub mod coco;
 pub mod files;
 pub mod geometry;
 pub mod ground;
@@ -23,8 +23,8 @@ pub mod tube;
 pub mod tube_pose;
 
 pub use camera::{CameraModel, Distortion};
-pub use confidence::ScoreCalibration;
 pub use coco::{CocoAnnotation, CocoCategory, CocoDataset, CocoImage, CocoResult, Segmentation};
+pub use confidence::ScoreCalibration;
 pub use detection::{AxisSeed, DetectionSource, TubeDetection};
 pub use error::CoreError;
 pub use ground::GroundPlane;

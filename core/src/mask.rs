@@ -328,10 +328,7 @@ impl Rle {
         let total: u64 = self.counts.iter().map(|&c| c as u64).sum();
         let expect = self.size[0] as u64 * self.size[1] as u64;
         if total != expect {
-            return Err(CoreError::invalid(
-                "RLE",
-                format!("counts sum to {total} but size {}x{} (h x w) has {expect} pixels", self.size[0], self.size[1]),
-            ));
+            return Err(CoreError::invalid("RLE", format!("counts sum to {total} but size {}x{} (h x w) has {expect} pixels", self.size[0], self.size[1])));
         }
         Ok(())
     }
@@ -381,10 +378,7 @@ impl Rle {
         let mut acc = first.counts.clone();
         for (i, b) in rles.iter().enumerate().skip(1) {
             if b.size != first.size {
-                return Err(CoreError::invalid(
-                    "RLE merge",
-                    format!("mask {i} has size {:?} but mask 0 has {:?} (h, w)", b.size, first.size),
-                ));
+                return Err(CoreError::invalid("RLE merge", format!("mask {i} has size {:?} but mask 0 has {:?} (h, w)", b.size, first.size)));
             }
             acc = merge_two(&acc, &b.counts, intersect);
         }
@@ -429,10 +423,7 @@ impl Rle {
                 .sum();
             // NaN (non-finite coordinates) is refused too.
             if walk.is_nan() || walk > MAX_POLYGON_WALK as f64 {
-                return Err(CoreError::invalid(
-                    "segmentation",
-                    format!("polygon {i}: boundary walk of {walk:.0} points exceeds the limit of {MAX_POLYGON_WALK} (coordinates far outside the image?)"),
-                ));
+                return Err(CoreError::invalid("segmentation", format!("polygon {i}: boundary walk of {walk:.0} points exceeds the limit of {MAX_POLYGON_WALK} (coordinates far outside the image?)")));
             }
         }
         let rles: Vec<Rle> = polys.iter().map(|p| Rle::from_polygon(p, h, w)).collect();
@@ -493,10 +484,7 @@ impl Rle {
                     return Err(CoreError::invalid("RLE string", format!("truncated count at byte {p}")));
                 };
                 if !(48..=111).contains(&b) {
-                    return Err(CoreError::invalid(
-                        "RLE string",
-                        format!("byte {p} is {:?}, outside the RLE alphabet '0'..'o'", b as char),
-                    ));
+                    return Err(CoreError::invalid("RLE string", format!("byte {p} is {:?}, outside the RLE alphabet '0'..'o'", b as char)));
                 }
                 if k >= 12 {
                     return Err(CoreError::invalid("RLE string", format!("count too long at byte {p}")));
@@ -516,9 +504,7 @@ impl Rle {
             if m > 2 {
                 x += counts[m - 2] as i64;
             }
-            let v = u32::try_from(x).map_err(|_| {
-                CoreError::invalid("RLE string", format!("count {m} decodes to {x}, outside 0..2^32"))
-            })?;
+            let v = u32::try_from(x).map_err(|_| CoreError::invalid("RLE string", format!("count {m} decodes to {x}, outside 0..2^32")))?;
             counts.push(v);
         }
         let rle = Rle { size, counts };

@@ -118,11 +118,7 @@ impl Serialize for Pose {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         let r = self.rotation();
         let t = self.translation();
-        PoseJson {
-            rotation: [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]],
-            translation: [t.x, t.y, t.z],
-        }
-        .serialize(s)
+        PoseJson { rotation: [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]], translation: [t.x, t.y, t.z] }.serialize(s)
     }
 }
 

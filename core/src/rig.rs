@@ -87,10 +87,7 @@ mod tests {
     fn baseline_and_json_round_trip() {
         let model = CameraModel::from_hfov(640, 480, 77.0);
         let rig = Rig {
-            cameras: vec![
-                RigCamera { name: "L".into(), model: model.clone(), t_rig_cam: Pose::identity() },
-                RigCamera { name: "R".into(), model, t_rig_cam: Pose::from_parts(Rotation3::identity(), Vector3::new(0.2, 0.0, 0.0)) },
-            ],
+            cameras: vec![RigCamera { name: "L".into(), model: model.clone(), t_rig_cam: Pose::identity() }, RigCamera { name: "R".into(), model, t_rig_cam: Pose::from_parts(Rotation3::identity(), Vector3::new(0.2, 0.0, 0.0)) }],
             stereo_pairs: vec![("L".into(), "R".into())],
         };
         assert!((rig.baseline("L", "R").unwrap() - 0.2).abs() < 1e-12);

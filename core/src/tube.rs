@@ -100,10 +100,7 @@ impl TubeModel {
         for (i, s) in self.sections.iter().enumerate() {
             let ok = s.z0.is_finite() && s.z1.is_finite() && s.radius.is_finite() && s.z0 >= 0.0 && s.z1 > s.z0 && s.z1 <= self.length + 1e-9 && s.radius > 0.0;
             if !ok {
-                return Err(CoreError::invalid(
-                    format!("section[{i}] ({})", s.name),
-                    format!("need 0 <= z0 < z1 <= length and radius > 0 (z0={}, z1={}, radius={})", s.z0, s.z1, s.radius),
-                ));
+                return Err(CoreError::invalid(format!("section[{i}] ({})", s.name), format!("need 0 <= z0 < z1 <= length and radius > 0 (z0={}, z1={}, radius={})", s.z0, s.z1, s.radius)));
             }
         }
         Ok(())

@@ -214,11 +214,7 @@ impl TubeAxisPose {
             let n = p.norm();
             (n > 1e-6 * v.norm().max(1e-300) && n > 1e-12).then(|| p / n)
         };
-        let z = perp(-up)
-            .or_else(|| perp(self.centre))
-            .or_else(|| perp(Vector3::z()))
-            .or_else(|| perp(Vector3::y()))
-            .unwrap_or_else(|| tangent_basis(&x).0);
+        let z = perp(-up).or_else(|| perp(self.centre)).or_else(|| perp(Vector3::z())).or_else(|| perp(Vector3::y())).unwrap_or_else(|| tangent_basis(&x).0);
         let y = z.cross(&x);
         Pose::from_parts(Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z])), self.centre)
     }

@@ -64,8 +64,15 @@ fn results_load_and_validate() {
     assert!(e.contains("syntax.json") && e.contains("line 1"), "{e}");
 
     // a well-formed file with a bad entry (score missing)
-    let e = load_results(&write(dir.path(), "field.json", r#"[{"image_id": 1, "category_id": 1, "score": 1},
-        {"image_id": 2, "category_id": 1}]"#), &gt)
+    let e = load_results(
+        &write(
+            dir.path(),
+            "field.json",
+            r#"[{"image_id": 1, "category_id": 1, "score": 1},
+        {"image_id": 2, "category_id": 1}]"#,
+        ),
+        &gt,
+    )
     .unwrap_err()
     .to_string();
     assert!(e.contains("field.json") && e.contains("results[1]") && e.contains("score"), "{e}");

@@ -34,8 +34,7 @@ fn coco_results_far_polygon_fuzz_regressions() {
         assert!(err.contains("results[0]") && err.contains("polygon 0") && err.contains(&MAX_POLYGON_WALK.to_string()), "{err}");
     }
     // Polygons partly outside the image are still rasterized.
-    let near: Vec<CocoResult> =
-        serde_json::from_str(r#"[{"image_id":1,"category_id":1,"score":0.5,"segmentation":[[-10,-10,100,0,30,90]]}]"#).unwrap();
+    let near: Vec<CocoResult> = serde_json::from_str(r#"[{"image_id":1,"category_id":1,"score":0.5,"segmentation":[[-10,-10,100,0,30,90]]}]"#).unwrap();
     validate_results(&near, &gt).unwrap();
 }
 

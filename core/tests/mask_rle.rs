@@ -86,9 +86,7 @@ fn mask_iou_matches_pycocotools_including_crowd() {
     let f = fixture();
     for c in f["ious"].as_array().unwrap() {
         let (h, w) = hw(c);
-        let dec = |k: &str| -> Vec<Rle> {
-            c[k].as_array().unwrap().iter().map(|s| Rle::from_compressed_string(s.as_str().unwrap(), [h, w]).unwrap()).collect()
-        };
+        let dec = |k: &str| -> Vec<Rle> { c[k].as_array().unwrap().iter().map(|s| Rle::from_compressed_string(s.as_str().unwrap(), [h, w]).unwrap()).collect() };
         let (dt, gt) = (dec("dt"), dec("gt"));
         let crowd: Vec<bool> = c["iscrowd"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() == 1).collect();
         let got = Rle::iou(&dt, &gt, &crowd);

@@ -10,10 +10,10 @@
 //! ~700-template library). The peer part needs `pip install opencv-contrib-python-headless`.
 
 use criterion::Criterion;
-use std::hint::black_box;
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::hint::black_box;
 use std::time::Instant;
 use tubeloc_core::{Pose, TubeModel};
 use tubeloc_detect::line2d::matching::{match_all, nms, prepare_image};
@@ -132,11 +132,7 @@ fn main() {
     let detect_ms = median_ms(|| drop(black_box(det.detect(&img, W, H, None))), 5);
     let detect_cpu = cpu_per_call(|| drop(black_box(det.detect(&img, W, H, None))), 5);
     println!("  Line2dDetector::detect end to end (+ verification, re-ranking, masks): {detect_ms:.1} ms wall median, {detect_cpu:.1} ms CPU");
-    println!(
-        "  CPU time per image (all threads): response maps {resp_cpu:.1} ms, matching {match_cpu:.1} ms, total {:.1} ms = {:.1} ms wall on 2 idle cores if perfectly parallel",
-        resp_cpu + match_cpu,
-        (resp_cpu + match_cpu) / 2.0
-    );
+    println!("  CPU time per image (all threads): response maps {resp_cpu:.1} ms, matching {match_cpu:.1} ms, total {:.1} ms = {:.1} ms wall on 2 idle cores if perfectly parallel", resp_cpu + match_cpu, (resp_cpu + match_cpu) / 2.0);
     println!("tubeloc line2d: {} templates, 1024x1024: response maps {resp_ms:.1} ms, matching {match_ms:.1} ms, total {ours:.1} ms median ({n_det} detections, {} threads)", lib.len(), rayon::current_num_threads());
 
     // Peer: export the image and the silhouettes, run OpenCV's LINE-2D on them.

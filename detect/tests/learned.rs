@@ -400,7 +400,7 @@ fn mirror_averaged_predictions_are_mirror_symmetric() {
     assert!(gap(&p, &q) < 1e-4, "mirror-averaged outputs differ by {}", gap(&p, &q));
     assert!(gap(&plain_p, &plain_q) > 1e-3, "the plain network is not symmetric by itself");
     // Widths that are not a multiple of 4 get the plain prediction.
-    let odd = pre.apply(&rgb[..(s * 95 * 3)].iter().copied().collect::<Vec<_>>().chunks_exact(s * 3).flat_map(|r| r[..95 * 3].to_vec()).collect::<Vec<_>>(), 95, 95);
+    let odd = pre.apply(&rgb[..(s * 95 * 3)].to_vec().chunks_exact(s * 3).flat_map(|r| r[..95 * 3].to_vec()).collect::<Vec<_>>(), 95, 95);
     assert_eq!(m.predict_mirror_averaged(&odd, 95, 95).unwrap().planes, m.predict(&odd, 95, 95).unwrap().planes);
 }
 

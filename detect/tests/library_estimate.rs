@@ -5,19 +5,13 @@ use tubeloc_core::TubeModel;
 use tubeloc_detect::line2d::{LibraryParams, TemplateLibrary, ViewParams};
 
 fn in_memory_bytes(lib: &TemplateLibrary) -> f64 {
-    lib.templates
-        .iter()
-        .map(|t| std::mem::size_of_val(t) + t.levels.iter().map(|l| std::mem::size_of_val(l) + l.features.len() * std::mem::size_of::<tubeloc_detect::line2d::Feature>()).sum::<usize>() + t.mask.len())
-        .sum::<usize>() as f64
+    lib.templates.iter().map(|t| std::mem::size_of_val(t) + t.levels.iter().map(|l| std::mem::size_of_val(l) + l.features.len() * std::mem::size_of::<tubeloc_detect::line2d::Feature>()).sum::<usize>() + t.mask.len()).sum::<usize>() as f64
 }
 
 #[test]
 fn estimate_is_an_upper_bound_of_the_same_order() {
     let tube = TubeModel::default();
-    for views in [
-        ViewParams { step_deg: 25.0, dist_min: 1.0, dist_max: 2.0, dist_step: 0.5, ..ViewParams::default() },
-        ViewParams { step_deg: 30.0, inplane_range_deg: 0.0, dist_min: 0.6, dist_max: 3.0, dist_step: 0.8, ..ViewParams::default() },
-    ] {
+    for views in [ViewParams { step_deg: 25.0, dist_min: 1.0, dist_max: 2.0, dist_step: 0.5, ..ViewParams::default() }, ViewParams { step_deg: 30.0, inplane_range_deg: 0.0, dist_min: 0.6, dist_max: 3.0, dist_step: 0.8, ..ViewParams::default() }] {
         let params = LibraryParams { views, ..LibraryParams::default() };
         let e = params.estimate(tube.length, tube.max_radius()).unwrap();
         let lib = TemplateLibrary::build(&tube, &params, &|_| {}).unwrap();

@@ -19,7 +19,14 @@ fn scene(w: usize, h: usize, k: &Pinhole, t_cam_tube: &Pose, seed: u64) -> Vec<u
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let blobs: Vec<(f64, f64, f64, f64)> = (0..60).map(|_| (rng.random_range(0.0..w as f64), rng.random_range(0.0..h as f64), rng.random_range(5.0..40.0), rng.random_range(-35.0..35.0))).collect();
     let tube = TubeModel::default();
-    let sections: Vec<(f64, f64, f64)> = tube.sections.iter().map(|s| { let (a, b) = tube.section_z_in_tube_frame(s); (a, b, s.radius) }).collect();
+    let sections: Vec<(f64, f64, f64)> = tube
+        .sections
+        .iter()
+        .map(|s| {
+            let (a, b) = tube.section_z_in_tube_frame(s);
+            (a, b, s.radius)
+        })
+        .collect();
     let inv = t_cam_tube.inverse();
     let (o, rot) = (inv.translation(), inv.rotation());
     let mut img = vec![0u8; w * h * 3];
@@ -50,10 +57,7 @@ fn scene(w: usize, h: usize, k: &Pinhole, t_cam_tube: &Pose, seed: u64) -> Vec<u
 }
 
 fn small_params(dmin: f64, dmax: f64, features: u32) -> LibraryParams {
-    let mut p = LibraryParams::default();
-    p.views = ViewParams { dist_min: dmin, dist_max: dmax, ..ViewParams::default() };
-    p.features = features;
-    p
+    LibraryParams { views: ViewParams { dist_min: dmin, dist_max: dmax, ..ViewParams::default() }, features, ..LibraryParams::default() }
 }
 
 #[test]
@@ -84,7 +88,15 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     // The truth as a template would see it: centre moved onto the optical axis.
     let to_centre = Rotation3::rotation_between(&c.normalize(), &Vector3::z()).unwrap();
     let axis_c = to_centre * axis;
-    let nearest = det.library.templates.iter().map(|t| { let a = t.axis(); a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees() }).fold(f64::INFINITY, f64::min);
+    let nearest = det
+        .library
+        .templates
+        .iter()
+        .map(|t| {
+            let a = t.axis();
+            a.angle(&axis_c).min((-a).angle(&axis_c)).to_degrees()
+        })
+        .fold(f64::INFINITY, f64::min);
     eprintln!("best: template {} similarity {:.1}, centre error {err_px:.1} px; nearest template axis {nearest:.1} deg", best.template_id, best.similarity);
     if std::env::var("L2D_DEBUG").is_ok() {
         for t0 in [4usize, 2] {
@@ -100,8 +112,12 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
                 rows.push((best, t.id, e, t.distance));
             }
             rows.sort_by(|a, b| b.0.total_cmp(&a.0));
-            for r in rows.iter().take(8) { eprintln!("t0={t0} score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3); }
-            for r in rows.iter().filter(|r| r.2 < 6.0 && (r.3 - 2.0).abs() < 0.06) { eprintln!("t0={t0} near-true: score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3); }
+            for r in rows.iter().take(8) {
+                eprintln!("t0={t0} score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3);
+            }
+            for r in rows.iter().filter(|r| r.2 < 6.0 && (r.3 - 2.0).abs() < 0.06) {
+                eprintln!("t0={t0} near-true: score {:.1} id {} axis err {:.1} dist {:.1}", r.0, r.1, r.2, r.3);
+            }
         }
     }
     let ang = undirected(&a_det);

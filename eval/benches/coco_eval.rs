@@ -34,9 +34,7 @@ fn dataset(n_images: usize, dets_per_image: usize) -> (CocoDataset, Vec<CocoResu
             let img = json!({"id": i + 1, "width": W, "height": H, "file_name": format!("{i}.png")});
             let mut anns = Vec::new();
             let mut dts = Vec::new();
-            let centres: Vec<(f64, f64, f64)> = (0..3)
-                .map(|_| (rng.random_range(150.0..1130.0), rng.random_range(150.0..810.0), rng.random_range(0.0..std::f64::consts::PI)))
-                .collect();
+            let centres: Vec<(f64, f64, f64)> = (0..3).map(|_| (rng.random_range(150.0..1130.0), rng.random_range(150.0..810.0), rng.random_range(0.0..std::f64::consts::PI))).collect();
             for (o, &(cx, cy, a)) in centres.iter().enumerate() {
                 let rle = Rle::from_polygons(&[tube(&mut rng, cx, cy, a)], H, W).unwrap();
                 anns.push(json!({"id": i * 3 + o + 1, "image_id": i + 1, "category_id": 1,
@@ -64,9 +62,7 @@ fn dataset(n_images: usize, dets_per_image: usize) -> (CocoDataset, Vec<CocoResu
         anns.extend(a);
         dts.extend(d);
     }
-    let gt: CocoDataset =
-        serde_json::from_value(json!({"images": images, "annotations": anns, "categories": [{"id": 1, "name": "tube"}]}))
-            .unwrap();
+    let gt: CocoDataset = serde_json::from_value(json!({"images": images, "annotations": anns, "categories": [{"id": 1, "name": "tube"}]})).unwrap();
     let dt: Vec<CocoResult> = serde_json::from_value(serde_json::Value::Array(dts)).unwrap();
     (gt, dt)
 }
@@ -75,9 +71,7 @@ fn bench(c: &mut Criterion) {
     let (gt, dt) = dataset(1000, 100);
     let mut g = c.benchmark_group("coco_eval");
     g.sample_size(10);
-    g.bench_function("segm_1000img_100det", |b| {
-        b.iter(|| CocoEvaluator::new(&gt, &dt, IouType::Segm).unwrap().evaluate().stats[0])
-    });
+    g.bench_function("segm_1000img_100det", |b| b.iter(|| CocoEvaluator::new(&gt, &dt, IouType::Segm).unwrap().evaluate().stats[0]));
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm).unwrap();
     g.bench_function("segm_1000img_100det_evaluate_only", |b| b.iter(|| ev.evaluate().stats[0]));
     g.finish();

@@ -66,24 +66,17 @@ pub fn breakdown(evaluator: &CocoEvaluator, gt: &CocoDataset, attr: &str) -> Res
     let level = match (on_images, on_anns) {
         (true, _) => AttrLevel::Image,
         (false, true) => AttrLevel::Annotation,
-        (false, false) => {
-            return Err(EvalError::Entry {
-                entry: format!("attribute {attr:?}"),
-                message: "found on no image and no annotation of the ground truth".into(),
-            })
-        }
+        (false, false) => return Err(EvalError::Entry { entry: format!("attribute {attr:?}"), message: "found on no image and no annotation of the ground truth".into() }),
     };
     let mut rows = Vec::new();
     match level {
         AttrLevel::Image => {
-            let img_val: std::collections::HashMap<u64, String> =
-                gt.images.iter().map(|im| (im.id, attr_of(&im.extra, attr))).collect();
+            let img_val: std::collections::HashMap<u64, String> = gt.images.iter().map(|im| (im.id, attr_of(&im.extra, attr))).collect();
             let values: BTreeSet<&String> = img_val.values().collect();
             for v in values {
                 let keep = |id: u64| img_val.get(&id) == Some(v);
                 let result = evaluator.evaluate_with(&keep, &|_| false);
-                let num_objects =
-                    gt.annotations.iter().filter(|a| a.iscrowd == 0 && img_val.get(&a.image_id) == Some(v)).count();
+                let num_objects = gt.annotations.iter().filter(|a| a.iscrowd == 0 && img_val.get(&a.image_id) == Some(v)).count();
                 rows.push(BreakdownRow { value: v.clone(), num_images: result.num_images, num_objects, result });
             }
         }
@@ -93,8 +86,7 @@ pub fn breakdown(evaluator: &CocoEvaluator, gt: &CocoDataset, attr: &str) -> Res
             for v in values {
                 let ignore = |j: usize| &ann_val[j] != v;
                 let result = evaluator.evaluate_with(&|_| true, &ignore);
-                let num_objects =
-                    gt.annotations.iter().zip(&ann_val).filter(|(a, av)| a.iscrowd == 0 && *av == v).count();
+                let num_objects = gt.annotations.iter().zip(&ann_val).filter(|(a, av)| a.iscrowd == 0 && *av == v).count();
                 rows.push(BreakdownRow { value: v.clone(), num_images: result.num_images, num_objects, result });
             }
         }
@@ -143,8 +135,7 @@ pub fn to_json(breakdowns: &[Breakdown]) -> Value {
                     .rows
                     .iter()
                     .map(|r| {
-                        let stats: Map<String, Value> =
-                            STATS.iter().zip(r.result.stats).map(|(s, v)| (s.name.to_string(), json!(v))).collect();
+                        let stats: Map<String, Value> = STATS.iter().zip(r.result.stats).map(|(s, v)| (s.name.to_string(), json!(v))).collect();
                         json!({"value": r.value, "num_images": r.num_images, "num_objects": r.num_objects, "stats": stats})
                     })
                     .collect();

@@ -42,10 +42,7 @@ pub const FONT: &str = "sans-serif";
 /// Registers DejaVu Sans (regular and bold) as [`FONT`]; idempotent and thread-safe.
 pub fn register_fonts() -> Result<(), PlotError> {
     static DONE: OnceLock<bool> = OnceLock::new();
-    let ok = *DONE.get_or_init(|| {
-        plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok()
-            && plotters::style::register_font(FONT, FontStyle::Bold, dejavu::sans::bold()).is_ok()
-    });
+    let ok = *DONE.get_or_init(|| plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok() && plotters::style::register_font(FONT, FontStyle::Bold, dejavu::sans::bold()).is_ok());
     if ok {
         Ok(())
     } else {
@@ -54,18 +51,8 @@ pub fn register_fonts() -> Result<(), PlotError> {
 }
 
 /// Ten well-separated series colours (the "tab10" palette).
-pub const PALETTE: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
-];
+pub const PALETTE: [RGBColor; 10] =
+    [RGBColor(31, 119, 180), RGBColor(255, 127, 14), RGBColor(44, 160, 44), RGBColor(214, 39, 40), RGBColor(148, 103, 189), RGBColor(140, 86, 75), RGBColor(227, 119, 194), RGBColor(127, 127, 127), RGBColor(188, 189, 34), RGBColor(23, 190, 207)];
 
 /// Colour of series `i` (cycles through [`PALETTE`]).
 pub fn series_color(i: usize) -> RGBColor {

@@ -53,25 +53,8 @@ impl Chart for BarChart {
             return Err(PlotError::Data(format!("bar chart y range ({y0}, {y1}) is empty or not finite")));
         }
         area.fill(&WHITE).map_err(draw_err)?;
-        let mut chart = ChartBuilder::on(area)
-            .caption(&self.title, title_font())
-            .margin(16)
-            .margin_right(32)
-            .x_label_area_size(40)
-            .y_label_area_size(64)
-            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), y0..y1)
-            .map_err(draw_err)?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(0)
-            .x_label_formatter(&|_| String::new())
-            .y_desc(&self.y_label)
-            .axis_desc_style(label_font())
-            .label_style(tick_font())
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(draw_err)?;
+        let mut chart = ChartBuilder::on(area).caption(&self.title, title_font()).margin(16).margin_right(32).x_label_area_size(40).y_label_area_size(64).build_cartesian_2d(-0.5f64..(n as f64 - 0.5), y0..y1).map_err(draw_err)?;
+        chart.configure_mesh().disable_x_mesh().x_labels(0).x_label_formatter(&|_| String::new()).y_desc(&self.y_label).axis_desc_style(label_font()).label_style(tick_font()).light_line_style(RGBColor(235, 235, 235)).draw().map_err(draw_err)?;
         let k = self.series.len().max(1) as f64;
         let bw = 0.8 / k;
         for (s, (label, values)) in self.series.iter().enumerate() {
@@ -93,14 +76,7 @@ impl Chart for BarChart {
             area.draw(&Text::new(name.as_str(), (px - bx, py - by + 8), style.clone())).map_err(draw_err)?;
         }
         if !self.series.is_empty() {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(tick_font())
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(draw_err)?;
+            chart.configure_series_labels().position(SeriesLabelPosition::UpperRight).label_font(tick_font()).background_style(WHITE.mix(0.85)).border_style(BLACK).draw().map_err(draw_err)?;
         }
         Ok(())
     }

@@ -78,24 +78,8 @@ impl Chart for Histogram {
         let counts: Vec<Vec<u64>> = self.series.iter().map(|s| self.counts(&s.values)).collect();
         let ymax = counts.iter().flatten().copied().max().unwrap_or(0).max(1) as f64 * 1.1;
         area.fill(&WHITE).map_err(draw_err)?;
-        let mut chart = ChartBuilder::on(area)
-            .caption(&self.title, title_font())
-            .margin(16)
-            .margin_right(32)
-            .x_label_area_size(50)
-            .y_label_area_size(64)
-            .build_cartesian_2d(lo..hi, 0.0..ymax)
-            .map_err(draw_err)?;
-        chart
-            .configure_mesh()
-            .x_desc(&self.x_label)
-            .y_desc("count")
-            .axis_desc_style(label_font())
-            .label_style(tick_font())
-            .y_label_formatter(&|y| format!("{y:.0}"))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(draw_err)?;
+        let mut chart = ChartBuilder::on(area).caption(&self.title, title_font()).margin(16).margin_right(32).x_label_area_size(50).y_label_area_size(64).build_cartesian_2d(lo..hi, 0.0..ymax).map_err(draw_err)?;
+        chart.configure_mesh().x_desc(&self.x_label).y_desc("count").axis_desc_style(label_font()).label_style(tick_font()).y_label_formatter(&|y| format!("{y:.0}")).light_line_style(RGBColor(235, 235, 235)).draw().map_err(draw_err)?;
         let w = (hi - lo) / n as f64;
         for (i, (s, c)) in self.series.iter().zip(&counts).enumerate() {
             let color = series_color(i);
@@ -120,14 +104,7 @@ impl Chart for Histogram {
                 .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.mix(0.6).filled()));
         }
         if !self.series.is_empty() {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(tick_font())
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(draw_err)?;
+            chart.configure_series_labels().position(SeriesLabelPosition::UpperRight).label_font(tick_font()).background_style(WHITE.mix(0.85)).border_style(BLACK).draw().map_err(draw_err)?;
         }
         Ok(())
     }

@@ -47,14 +47,7 @@ impl Chart for PrCurves {
             return Err(PlotError::Data("PR curves: non-finite IoU threshold or precision".into()));
         }
         area.fill(&WHITE).map_err(draw_err)?;
-        let mut chart = ChartBuilder::on(area)
-            .caption(&self.title, title_font())
-            .margin(16)
-            .margin_right(32)
-            .x_label_area_size(50)
-            .y_label_area_size(64)
-            .build_cartesian_2d(0.0f64..1.0, 0.0f64..1.02)
-            .map_err(draw_err)?;
+        let mut chart = ChartBuilder::on(area).caption(&self.title, title_font()).margin(16).margin_right(32).x_label_area_size(50).y_label_area_size(64).build_cartesian_2d(0.0f64..1.0, 0.0f64..1.02).map_err(draw_err)?;
         chart
             .configure_mesh()
             .x_desc("Recall")
@@ -70,22 +63,10 @@ impl Chart for PrCurves {
             .map_err(draw_err)?;
         for (i, (iou, prec)) in self.curves.iter().enumerate() {
             let color = series_color(i);
-            let pts: Vec<(f64, f64)> =
-                prec.iter().enumerate().filter(|(_, &p)| p > -1.0).map(|(k, &p)| (k as f64 / 100.0, p)).collect();
-            chart
-                .draw_series(LineSeries::new(pts, color.stroke_width(2)))
-                .map_err(draw_err)?
-                .label(legend_label(*iou, prec))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
+            let pts: Vec<(f64, f64)> = prec.iter().enumerate().filter(|(_, &p)| p > -1.0).map(|(k, &p)| (k as f64 / 100.0, p)).collect();
+            chart.draw_series(LineSeries::new(pts, color.stroke_width(2))).map_err(draw_err)?.label(legend_label(*iou, prec)).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerLeft)
-            .label_font(tick_font())
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(draw_err)?;
+        chart.configure_series_labels().position(SeriesLabelPosition::LowerLeft).label_font(tick_font()).background_style(WHITE.mix(0.85)).border_style(BLACK).draw().map_err(draw_err)?;
         Ok(())
     }
 }

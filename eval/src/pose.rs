@@ -92,13 +92,7 @@ pub fn axis_error(est: &AxisLine, gt: &AxisLine) -> AxisError {
     let d = est.centre - gt.centre;
     let along = d.dot(&gt.axis);
     let perp = (d - gt.axis.into_inner() * along).norm();
-    AxisError {
-        axis_angle_deg,
-        perpendicular_mm: perp * 1e3,
-        along_axis_mm: along * 1e3,
-        centre_distance_mm: d.norm() * 1e3,
-        end_correct: dot > 0.0,
-    }
+    AxisError { axis_angle_deg, perpendicular_mm: perp * 1e3, along_axis_mm: along * 1e3, centre_distance_mm: d.norm() * 1e3, end_correct: dot > 0.0 }
 }
 
 /// [`axis_error`] of two tube poses `T_cam_tube`.

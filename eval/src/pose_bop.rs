@@ -42,12 +42,7 @@ impl ModelPoints {
         if points.iter().any(|p| !p.coords.iter().all(|v| v.is_finite())) {
             return Err(PoseEvalError::invalid("model points", "non-finite coordinate"));
         }
-        let diameter = points
-            .par_iter()
-            .enumerate()
-            .map(|(i, p)| points[i + 1..].iter().map(|q| (p - q).norm_squared()).fold(0.0, f64::max))
-            .reduce(|| 0.0, f64::max)
-            .sqrt();
+        let diameter = points.par_iter().enumerate().map(|(i, p)| points[i + 1..].iter().map(|q| (p - q).norm_squared()).fold(0.0, f64::max)).reduce(|| 0.0, f64::max).sqrt();
         Ok(ModelPoints { points, diameter })
     }
 
@@ -114,9 +109,7 @@ impl Symmetries {
             return Err(PoseEvalError::invalid("symmetry step", format!("must be in (0, 360] degrees, got {step_deg}")));
         }
         let n = (360.0 / step_deg).round().max(1.0) as usize;
-        let axial: Vec<Rotation3<f64>> = (0..n)
-            .map(|k| Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::TAU * k as f64 / n as f64))
-            .collect();
+        let axial: Vec<Rotation3<f64>> = (0..n).map(|k| Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::TAU * k as f64 / n as f64)).collect();
         let mut rotations = axial.clone();
         if flip {
             let fx = Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
@@ -192,10 +185,7 @@ pub fn mspd_thresholds_640() -> Vec<f64> {
 /// Recall at each threshold: `#{errors < τ} / n_truths` (an error of a matched pair; unmatched
 /// truths simply have no error). Zero truths give recalls of 0.
 pub fn bop_recalls(errors: &[f64], n_truths: usize, thresholds: &[f64]) -> Vec<f64> {
-    thresholds
-        .iter()
-        .map(|&t| if n_truths == 0 { 0.0 } else { errors.iter().filter(|&&e| e < t).count() as f64 / n_truths as f64 })
-        .collect()
+    thresholds.iter().map(|&t| if n_truths == 0 { 0.0 } else { errors.iter().filter(|&&e| e < t).count() as f64 / n_truths as f64 }).collect()
 }
 
 /// Mean of the recalls at the thresholds (BOP's AR for one error function).

@@ -108,13 +108,7 @@ pub struct Matching {
 /// Greedy matching with a caller-given similarity. `similarity(e, t)` is called only for an
 /// estimate and truth of the same image; `None` means "not allowed". With `higher_is_better`
 /// the largest similarity wins, otherwise the smallest.
-pub fn greedy_match(
-    truths: &[TubeTruth],
-    estimates: &[TubeEstimate],
-    method: MatchMethod,
-    higher_is_better: bool,
-    mut similarity: impl FnMut(usize, usize) -> Option<f64>,
-) -> Matching {
+pub fn greedy_match(truths: &[TubeTruth], estimates: &[TubeEstimate], method: MatchMethod, higher_is_better: bool, mut similarity: impl FnMut(usize, usize) -> Option<f64>) -> Matching {
     let mut by_image: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
     for (i, t) in truths.iter().enumerate() {
         by_image.entry(t.image_id).or_default().push(i);
@@ -162,12 +156,7 @@ pub fn match_by_centre_distance(truths: &[TubeTruth], estimates: &[TubeEstimate]
 
 /// Matches by mask IoU, gated at `min_iou`; `iou(e, t)` gives the IoU of estimate `e`'s mask
 /// with truth `t`'s mask (e.g. `Rle::iou` of the core mask module).
-pub fn match_by_iou(
-    truths: &[TubeTruth],
-    estimates: &[TubeEstimate],
-    min_iou: f64,
-    mut iou: impl FnMut(usize, usize) -> f64,
-) -> Matching {
+pub fn match_by_iou(truths: &[TubeTruth], estimates: &[TubeEstimate], min_iou: f64, mut iou: impl FnMut(usize, usize) -> f64) -> Matching {
     greedy_match(truths, estimates, MatchMethod::MaskIou { min_iou }, true, |e, t| {
         let v = iou(e, t);
         (v >= min_iou).then_some(v)
@@ -177,26 +166,9 @@ pub fn match_by_iou(
 /// Matches by the IoU of COCO RLE masks (`Rle::iou`, no crowd), gated at `min_iou`;
 /// `estimate_masks[e]` and `truth_masks[t]` belong to `estimates[e]` and `truths[t]`. Masks of
 /// different image sizes never match. Fails when the mask counts differ from the tube counts.
-pub fn match_by_mask_iou(
-    truths: &[TubeTruth],
-    estimates: &[TubeEstimate],
-    truth_masks: &[Rle],
-    estimate_masks: &[Rle],
-    min_iou: f64,
-) -> Result<Matching, crate::pose::PoseEvalError> {
+pub fn match_by_mask_iou(truths: &[TubeTruth], estimates: &[TubeEstimate], truth_masks: &[Rle], estimate_masks: &[Rle], min_iou: f64) -> Result<Matching, crate::pose::PoseEvalError> {
     if truth_masks.len() != truths.len() || estimate_masks.len() != estimates.len() {
-        return Err(crate::pose::PoseEvalError::invalid(
-            "masks",
-            format!(
-                "{} truth masks for {} truths and {} estimate masks for {} estimates",
-                truth_masks.len(),
-                truths.len(),
-                estimate_masks.len(),
-                estimates.len()
-            ),
-        ));
+        return Err(crate::pose::PoseEvalError::invalid("masks", format!("{} truth masks for {} truths and {} estimate masks for {} estimates", truth_masks.len(), truths.len(), estimate_masks.len(), estimates.len())));
     }
-    Ok(match_by_iou(truths, estimates, min_iou, |e, t| {
-        Rle::iou(std::slice::from_ref(&estimate_masks[e]), std::slice::from_ref(&truth_masks[t]), &[false])[0]
-    }))
+    Ok(match_by_iou(truths, estimates, min_iou, |e, t| Rle::iou(std::slice::from_ref(&estimate_masks[e]), std::slice::from_ref(&truth_masks[t]), &[false])[0]))
 }

@@ -72,18 +72,8 @@ pub fn summarize(values: &[f64], thresholds: &[f64]) -> Summary {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     v.sort_by(f64::total_cmp);
     let n = v.len();
-    let within = thresholds
-        .iter()
-        .map(|&t| Within { threshold: t, fraction: if n == 0 { 0.0 } else { v.iter().filter(|&&x| x <= t).count() as f64 / n as f64 } })
-        .collect();
-    Summary {
-        count: n,
-        mean: (n > 0).then(|| v.iter().sum::<f64>() / n as f64),
-        median: percentile(&v, 50.0),
-        p90: percentile(&v, 90.0),
-        max: v.last().copied(),
-        within,
-    }
+    let within = thresholds.iter().map(|&t| Within { threshold: t, fraction: if n == 0 { 0.0 } else { v.iter().filter(|&&x| x <= t).count() as f64 / n as f64 } }).collect();
+    Summary { count: n, mean: (n > 0).then(|| v.iter().sum::<f64>() / n as f64), median: percentile(&v, 50.0), p90: percentile(&v, 90.0), max: v.last().copied(), within }
 }
 
 /// Errors of one matched pair.
@@ -215,13 +205,7 @@ impl Default for PoseEvalConfig {
 
 /// Evaluates matched estimates: per-pair axis and BOP errors (in parallel), summaries and
 /// recalls. Pair indices in `matching` refer to `truths` and `estimates`.
-pub fn evaluate_poses(
-    truths: &[TubeTruth],
-    estimates: &[TubeEstimate],
-    matching: &Matching,
-    model: &ModelPoints,
-    config: &PoseEvalConfig,
-) -> Result<PoseEvaluation, PoseEvalError> {
+pub fn evaluate_poses(truths: &[TubeTruth], estimates: &[TubeEstimate], matching: &Matching, model: &ModelPoints, config: &PoseEvalConfig) -> Result<PoseEvaluation, PoseEvalError> {
     let axial = Symmetries::tube(config.symmetry_step_deg, false)?;
     let flip = Symmetries::tube(config.symmetry_step_deg, true)?;
     for m in &matching.pairs {
@@ -270,18 +254,12 @@ pub fn evaluate_poses(
     let mssd_thr = mssd_thresholds(diameter_mm);
     let px_thr = mspd_thresholds_640();
     // MSPD errors normalized to a 640-pixel-wide image, so one threshold list serves all.
-    let norm = |f: &dyn Fn(&PairErrors) -> Option<f64>| -> Vec<f64> {
-        pairs.iter().filter_map(|p| Some(f(p)? * 640.0 / p.image_width? as f64)).collect()
-    };
+    let norm = |f: &dyn Fn(&PairErrors) -> Option<f64>| -> Vec<f64> { pairs.iter().filter_map(|p| Some(f(p)? * 640.0 / p.image_width? as f64)).collect() };
     let has_cam = pairs.iter().any(|p| p.mspd_px.is_some()) || (pairs.is_empty() && (config.default_camera.is_some() || !config.cameras.is_empty()));
     let mean = |r: &[f64]| if r.is_empty() { 0.0 } else { r.iter().sum::<f64>() / r.len() as f64 };
     let mssd_recalls = bop_recalls(&col(&|p| Some(p.mssd_mm)), n, &mssd_thr);
     let mssd_flip_recalls = bop_recalls(&col(&|p| Some(p.mssd_flip_mm)), n, &mssd_thr);
-    let (mspd_recalls, mspd_flip_recalls) = if has_cam {
-        (bop_recalls(&norm(&|p| p.mspd_px), n, &px_thr), bop_recalls(&norm(&|p| p.mspd_flip_px), n, &px_thr))
-    } else {
-        (Vec::new(), Vec::new())
-    };
+    let (mspd_recalls, mspd_flip_recalls) = if has_cam { (bop_recalls(&norm(&|p| p.mspd_px), n, &px_thr), bop_recalls(&norm(&|p| p.mspd_flip_px), n, &px_thr)) } else { (Vec::new(), Vec::new()) };
     let bop = BopRecalls {
         diameter_mm,
         symmetry_step_deg: 360.0 / axial.rotations.len() as f64,
@@ -298,15 +276,5 @@ pub fn evaluate_poses(
     };
     let n_matched = pairs.len();
     let end_correct_fraction = if n_matched == 0 { 0.0 } else { pairs.iter().filter(|p| p.axis.end_correct).count() as f64 / n_matched as f64 };
-    Ok(PoseEvaluation {
-        method: matching.method.to_string(),
-        matching: matching.method.clone(),
-        n_truths: n,
-        n_estimates: estimates.len(),
-        n_matched,
-        end_correct_fraction,
-        summaries,
-        bop,
-        pairs,
-    })
+    Ok(PoseEvaluation { method: matching.method.to_string(), matching: matching.method.clone(), n_truths: n, n_estimates: estimates.len(), n_matched, end_correct_fraction, summaries, bop, pairs })
 }

@@ -263,10 +263,7 @@ fn write_pose_section(dir: &Path, e: &EvalReport, r: &mut Report) -> Result<(), 
     for (label, p) in &e.poses {
         r.paragraph(format!("`{label}`: {} of {} truths matched by {} ({} estimates).", p.n_matched, p.n_truths, p.method, p.n_estimates));
     }
-    let mut t = Table::new([
-        "poses", "axis angle median / p90", "≤1/2/5°", "perp. median / p90", "≤2/5/10 mm", "|along| median / p90", "ends right",
-        "AR MSSD", "AR MSSD flip", "AR MSPD", "AR MSPD flip",
-    ]);
+    let mut t = Table::new(["poses", "axis angle median / p90", "≤1/2/5°", "perp. median / p90", "≤2/5/10 mm", "|along| median / p90", "ends right", "AR MSSD", "AR MSSD flip", "AR MSPD", "AR MSPD flip"]);
     for (label, p) in &e.poses {
         let s = &p.summaries;
         t.row([
@@ -296,14 +293,7 @@ fn write_pose_section(dir: &Path, e: &EvalReport, r: &mut Report) -> Result<(), 
         let ratio = |s: &crate::pose_summary::Summary| format!("{} / {}", opt(s.median, ""), opt(s.p90, ""));
         for (label, p) in &e.poses {
             let s = &p.summaries;
-            t.row([
-                label.clone(),
-                s.axis_error_over_std.count.to_string(),
-                ratio(&s.axis_error_over_std),
-                within(&s.axis_error_over_std),
-                ratio(&s.centre_error_over_std),
-                within(&s.centre_error_over_std),
-            ]);
+            t.row([label.clone(), s.axis_error_over_std.count.to_string(), ratio(&s.axis_error_over_std), within(&s.axis_error_over_std), ratio(&s.centre_error_over_std), within(&s.centre_error_over_std)]);
         }
         r.table(t);
         r.paragraph("σ is the square root of the trace of the estimate's covariance block (axis tangent, centre). A consistent Gaussian covariance puts about 61-68 % of the errors within 1 σ and 95 % or more within 2 σ; fewer means the covariance is overconfident (seeds carry none).");
@@ -316,18 +306,13 @@ fn write_pose_section(dir: &Path, e: &EvalReport, r: &mut Report) -> Result<(), 
         ("pose_mssd", "MSSD (axial symmetry)", "MSSD (mm)", |p| Some(p.mssd_mm)),
     ];
     for (stem, title, xl, f) in metrics {
-        let series: Vec<HistSeries> =
-            e.poses.iter().map(|(l, p)| HistSeries { label: l.clone(), values: p.pairs.iter().filter_map(f).collect() }).collect();
+        let series: Vec<HistSeries> = e.poses.iter().map(|(l, p)| HistSeries { label: l.clone(), values: p.pairs.iter().filter_map(f).collect() }).collect();
         if series.iter().all(|s| s.values.is_empty()) {
             continue;
         }
         plot(&Histogram::new(title, xl, series), dir, stem, (800, 560), r, title)?;
     }
-    let json: Vec<serde_json::Value> = e
-        .poses
-        .iter()
-        .map(|(l, p)| serde_json::json!({ "label": l, "evaluation": p }))
-        .collect();
+    let json: Vec<serde_json::Value> = e.poses.iter().map(|(l, p)| serde_json::json!({ "label": l, "evaluation": p })).collect();
     tubeloc_core::files::write_json(&dir.join("pose_eval.json"), &json)?;
     r.paragraph("Per-pair errors: [`pose_eval.json`](pose_eval.json).");
     Ok(())

@@ -28,13 +28,7 @@ fn regenerate_fixture() {
     let g = common::write(&dir, "coco_small_gt.json", &gt);
     let d = common::write(&dir, "coco_small_dt.json", &dt);
     let out = dir.join("coco_small_pycocotools.json");
-    let st = std::process::Command::new("python3")
-        .arg(common::script("coco_parity.py"))
-        .args([&g, &d])
-        .arg("segm")
-        .arg(&out)
-        .status()
-        .unwrap();
+    let st = std::process::Command::new("python3").arg(common::script("coco_parity.py")).args([&g, &d]).arg("segm").arg(&out).status().unwrap();
     assert!(st.success());
 }
 
@@ -72,9 +66,7 @@ fn tiny_gt(anns: Value) -> CocoDataset {
 }
 
 fn boxes(list: &[(u64, [f64; 4], f64)]) -> Vec<CocoResult> {
-    list.iter()
-        .map(|(img, bb, s)| serde_json::from_value(json!({"image_id": img, "category_id": 1, "score": s, "bbox": bb})).unwrap())
-        .collect()
+    list.iter().map(|(img, bb, s)| serde_json::from_value(json!({"image_id": img, "category_id": 1, "score": s, "bbox": bb})).unwrap()).collect()
 }
 
 #[test]
@@ -90,8 +82,7 @@ fn breakdowns_by_image_and_annotation_attribute() {
     assert!((all.stats[8] - 2.0 / 3.0).abs() < 1e-12, "AR100 over all: {}", all.stats[8]);
 
     let by_terrain = breakdown(&ev, &gt, "terrain").unwrap();
-    let rows: Vec<(&str, f64, f64)> =
-        by_terrain.rows.iter().map(|r| (r.value.as_str(), r.result.stats[1], r.result.stats[8])).collect();
+    let rows: Vec<(&str, f64, f64)> = by_terrain.rows.iter().map(|r| (r.value.as_str(), r.result.stats[1], r.result.stats[8])).collect();
     // rock: one object, missed, one FP -> AP50 0, AR 0; sand: both found, no FP -> 1, 1
     // (precision is tp / (tp + fp + 2^-52), so "1" is 1 - 2^-52).
     assert_eq!((rows[0].0, rows[0].1, rows[0].2), ("rock", 0.0, 0.0));
@@ -124,8 +115,7 @@ fn crowd_regions_absorb_detections_and_no_results_give_zero() {
         {"id": 1, "image_id": 1, "category_id": 1, "area": 400, "bbox": [10, 10, 20, 20]},
         {"id": 2, "image_id": 1, "category_id": 1, "area": 2500, "bbox": [40, 40, 50, 50], "iscrowd": 1}]));
     // Three detections inside the crowd box: ignored, not false positives.
-    let dt = boxes(&[(1, [41., 41., 10., 10.], 0.99), (1, [60., 60., 10., 10.], 0.98), (1, [10., 10., 20., 20.], 0.5),
-                     (1, [70., 70., 10., 10.], 0.97)]);
+    let dt = boxes(&[(1, [41., 41., 10., 10.], 0.99), (1, [60., 60., 10., 10.], 0.98), (1, [10., 10., 20., 20.], 0.5), (1, [70., 70., 10., 10.], 0.97)]);
     let res = CocoEvaluator::new(&gt, &dt, IouType::Bbox).unwrap().evaluate();
     assert!((res.stats[0] - 1.0).abs() < 1e-12, "{}", res.summary_text());
     // No results at all: AP and AR are 0 where ground truth exists (pycocotools would raise).
@@ -167,10 +157,7 @@ fn shards_merge_and_results_with_wrong_mask_size_are_refused() {
     let mut merged = load_results(&pa, &gt).unwrap();
     merged.extend(load_results(&pb, &gt).unwrap());
     let full: Vec<CocoResult> = serde_json::from_value(dt_v.clone()).unwrap();
-    assert_eq!(
-        CocoEvaluator::new(&gt, &merged, IouType::Segm).unwrap().evaluate(),
-        CocoEvaluator::new(&gt, &full, IouType::Segm).unwrap().evaluate()
-    );
+    assert_eq!(CocoEvaluator::new(&gt, &merged, IouType::Segm).unwrap().evaluate(), CocoEvaluator::new(&gt, &full, IouType::Segm).unwrap().evaluate());
     // A mask made for image 19 (64x48) attached to image 16 (120x90).
     let mut bad = all[..3].to_vec();
     let seg = all.iter().find(|d| d["image_id"] == 19).unwrap()["segmentation"].clone();

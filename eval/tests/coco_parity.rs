@@ -27,13 +27,7 @@ fn coco_eval_matches_pycocotools() {
         let gt_path = common::write(dir.path(), &format!("{}_gt.json", case.name), &case.gt);
         let dt_path = common::write(dir.path(), &format!("{}_dt.json", case.name), &case.dt);
         let out_path = dir.path().join(format!("{}_py.json", case.name));
-        let run = Command::new("python3")
-            .arg(common::script("coco_parity.py"))
-            .args([&gt_path, &dt_path])
-            .arg(case.iou_type)
-            .arg(&out_path)
-            .output()
-            .expect("python3 runs");
+        let run = Command::new("python3").arg(common::script("coco_parity.py")).args([&gt_path, &dt_path]).arg(case.iou_type).arg(&out_path).output().expect("python3 runs");
         assert!(run.status.success(), "{}: pycocotools failed: {}", case.name, String::from_utf8_lossy(&run.stderr));
         let py: serde_json::Value = serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
 

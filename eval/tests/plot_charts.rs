@@ -80,15 +80,8 @@ fn curve_ap_skips_undefined_points() {
 fn overlaid_histograms() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = out_dir(tmp.path());
-    let series = |label: &str, scale: f64, n: usize| HistSeries {
-        label: label.into(),
-        values: (0..n).map(|i| scale * ((i * 7919 % 101) as f64 / 100.0).powi(2) * 10.0).collect(),
-    };
-    let h = Histogram::new(
-        "Axis angle error",
-        "axis angle error (deg)",
-        vec![series("coarse", 1.0, 300), series("mono", 0.4, 300), series("stereo", 0.2, 300)],
-    );
+    let series = |label: &str, scale: f64, n: usize| HistSeries { label: label.into(), values: (0..n).map(|i| scale * ((i * 7919 % 101) as f64 / 100.0).powi(2) * 10.0).collect() };
+    let h = Histogram::new("Axis angle error", "axis angle error (deg)", vec![series("coarse", 1.0, 300), series("mono", 0.4, 300), series("stereo", 0.2, 300)]);
     // Bin counts: every finite value is counted once, outliers in the last bin.
     assert_eq!(h.counts(&h.series[0].values).iter().sum::<u64>(), 300);
     let mut h2 = h.clone();
@@ -106,12 +99,7 @@ fn grouped_bar_chart() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = out_dir(tmp.path());
     let cats: Vec<String> = ["flat", "bedrock", "sand", "rocks"].iter().map(|s| s.to_string()).collect();
-    let b = BarChart::new(
-        "AP50 and AR by terrain",
-        "score",
-        cats,
-        vec![("AP50".into(), vec![0.8, 0.6, 0.7, -1.0]), ("AR".into(), vec![0.5, 0.45, 0.52, 0.3])],
-    );
+    let b = BarChart::new("AP50 and AR by terrain", "score", cats, vec![("AP50".into(), vec![0.8, 0.6, 0.7, -1.0]), ("AR".into(), vec![0.5, 0.45, 0.52, 0.3])]);
     let (png, svg) = save_png_svg(&b, &dir.join("bars_terrain"), (800, 500)).unwrap();
     check_png(&png, (800, 500));
     let text = std::fs::read_to_string(svg).unwrap();

@@ -40,11 +40,7 @@ fn eval_report_folder_has_linked_plots_and_tables() {
         inputs: vec![("ground truth".into(), "gt.json".into()), ("iou type".into(), "segm".into())],
         stats: vec![("AP".into(), 0.5), ("AP50".into(), 0.72), ("AP small".into(), -1.0)],
         pr_curves: vec![(0.5, prec), (0.55, [-1.0; 101])],
-        breakdowns: vec![Breakdown {
-            attribute: "time of day".into(),
-            metrics: vec!["AP50".into(), "AR".into()],
-            rows: vec![("morning".into(), 12, vec![0.7, 0.4]), ("noon".into(), 9, vec![-1.0, 0.5])],
-        }],
+        breakdowns: vec![Breakdown { attribute: "time of day".into(), metrics: vec!["AP50".into(), "AR".into()], rows: vec![("morning".into(), 12, vec![0.7, 0.4]), ("noon".into(), 9, vec![-1.0, 0.5])] }],
         poses: vec![("mono".into(), ev.clone()), ("stereo".into(), ev)],
     };
     let path = write_eval_report(&dir, &report).unwrap();

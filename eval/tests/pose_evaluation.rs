@@ -31,11 +31,7 @@ fn percentiles_and_fractions() {
 
 #[test]
 fn greedy_matching_by_distance_and_by_iou() {
-    let truths = vec![
-        TubeTruth { image_id: 1, pose: pose(0.0, 0.0, 1.0) },
-        TubeTruth { image_id: 1, pose: pose(0.3, 0.0, 1.0) },
-        TubeTruth { image_id: 2, pose: pose(0.0, 0.0, 1.0) },
-    ];
+    let truths = vec![TubeTruth { image_id: 1, pose: pose(0.0, 0.0, 1.0) }, TubeTruth { image_id: 1, pose: pose(0.3, 0.0, 1.0) }, TubeTruth { image_id: 2, pose: pose(0.0, 0.0, 1.0) }];
     let est = |img, p: Pose, score| TubeEstimate { image_id: img, pose: p, score, std: None };
     let estimates = vec![
         // Low score, closest to truth 0, but truth 0 is taken first and truth 1 is beyond the gate.
@@ -67,15 +63,11 @@ fn evaluation_recalls_and_summaries_match_hand_computation() {
     let t0 = pose(0.0, 0.0, 1.0);
     let t1 = pose(0.2, 0.1, 1.5);
     let t2 = pose(-0.1, 0.0, 0.8);
-    let truths = vec![
-        TubeTruth { image_id: 7, pose: t0 },
-        TubeTruth { image_id: 7, pose: t1 },
-        TubeTruth { image_id: 8, pose: t2 },
-    ];
+    let truths = vec![TubeTruth { image_id: 7, pose: t0 }, TubeTruth { image_id: 7, pose: t1 }, TubeTruth { image_id: 8, pose: t2 }];
     let estimates = vec![
-        TubeEstimate { image_id: 7, pose: t0, score: 0.9, std: None },                                        // exact
+        TubeEstimate { image_id: 7, pose: t0, score: 0.9, std: None },                                          // exact
         TubeEstimate { image_id: 7, pose: shifted(&t1, Vector3::new(0.0, 0.0, 0.010)), score: 0.8, std: None }, // 10 mm off
-        TubeEstimate { image_id: 8, pose: pose(0.5, 0.5, 3.0), score: 0.7, std: None },                      // far: false positive
+        TubeEstimate { image_id: 8, pose: pose(0.5, 0.5, 3.0), score: 0.7, std: None },                         // far: false positive
     ];
     let m = match_by_centre_distance(&truths, &estimates, 0.05);
     assert_eq!(m.pairs.len(), 2);

@@ -6,11 +6,11 @@ use crate::error::{PipelineError, Result};
 use image::DynamicImage;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
-use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
 use tubeloc_core::GroundPlane;
+use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
-use tubeloc_detect::scale::RangeBand;
 use tubeloc_detect::line2d::Line2dDetector;
+use tubeloc_detect::scale::RangeBand;
 
 /// A tube detector: one image (with the camera that took it) in, detections out.
 pub trait TubeDetector: Send + Sync {
@@ -239,10 +239,7 @@ pub fn check_mask_sizes(dets: &[TubeDetection], width: u32, height: u32, origin:
     for (k, d) in dets.iter().enumerate() {
         if let Some(m) = &d.mask {
             if m.size != [height, width] {
-                return Err(PipelineError::Input(format!(
-                    "{origin}: detection {k} (image {}): its mask is {}x{} but the image is {width}x{height}",
-                    d.image_id, m.size[1], m.size[0]
-                )));
+                return Err(PipelineError::Input(format!("{origin}: detection {k} (image {}): its mask is {}x{} but the image is {width}x{height}", d.image_id, m.size[1], m.size[0])));
             }
         }
     }

@@ -236,13 +236,7 @@ impl Locator {
             }
             None => None,
         };
-        let frame = Frame {
-            image: input.image,
-            camera: &self.camera.model,
-            image_id: 0,
-            ground: input.ground,
-            stereo: right.as_ref().map(|(img, cam, t)| StereoView { right: img, right_camera: &cam.model, t_left_right: *t }),
-        };
+        let frame = Frame { image: input.image, camera: &self.camera.model, image_id: 0, ground: input.ground, stereo: right.as_ref().map(|(img, cam, t)| StereoView { right: img, right_camera: &cam.model, t_left_right: *t }) };
         let items: Vec<SeedItem> = detections.iter().cloned().map(SeedItem::Detection).collect();
         refine_pixels(&self.refiner, &self.settings, &frame, px, &items, &FrameOptions::default())
     }

@@ -19,7 +19,17 @@ use tubeloc_stereo::{disparity_regions, Roi, SgmParams, StereoRectification};
 /// cameras `lcam`/`rcam`, `t_left_right` mapping right-camera points into the left frame) is
 /// rectified and matched ([`match_regions`]).
 #[allow(clippy::too_many_arguments)]
-pub fn points_per_region(lcam: &CameraModel, rcam: &CameraModel, t_left_right: &Pose, left: &Plane<u8>, right: &Plane<u8>, regions: &[StereoRegion], num_disparities: usize, erode_px: usize, ground: Option<&GroundPlane>) -> Result<(StereoRegions, RectifiedPair)> {
+pub fn points_per_region(
+    lcam: &CameraModel,
+    rcam: &CameraModel,
+    t_left_right: &Pose,
+    left: &Plane<u8>,
+    right: &Plane<u8>,
+    regions: &[StereoRegion],
+    num_disparities: usize,
+    erode_px: usize,
+    ground: Option<&GroundPlane>,
+) -> Result<(StereoRegions, RectifiedPair)> {
     let rect = StereoRectification::new(lcam, rcam, t_left_right)?;
     match_regions(&rect, lcam, left, right, regions, num_disparities, erode_px, ground)
 }

@@ -18,13 +18,7 @@ fn to_image(p: &Plane<f32>) -> DynamicImage {
 
 fn rig(cam: &tubeloc_core::CameraModel, baseline: f64) -> Rig {
     let right = Pose::from_parts(nalgebra::Rotation3::identity(), Vector3::new(baseline, 0.0, 0.0));
-    Rig {
-        cameras: vec![
-            RigCamera { name: "L".into(), model: cam.clone(), t_rig_cam: Pose::identity() },
-            RigCamera { name: "R".into(), model: cam.clone(), t_rig_cam: right },
-        ],
-        stereo_pairs: vec![("L".into(), "R".into())],
-    }
+    Rig { cameras: vec![RigCamera { name: "L".into(), model: cam.clone(), t_rig_cam: Pose::identity() }, RigCamera { name: "R".into(), model: cam.clone(), t_rig_cam: right }], stereo_pairs: vec![("L".into(), "R".into())] }
 }
 
 fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {

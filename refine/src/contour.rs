@@ -72,7 +72,6 @@ impl AxisState {
         }
         Some(out)
     }
-
 }
 
 /// Derived axis frame, see the module docs.
@@ -342,10 +341,7 @@ mod vis_tests {
     #[test]
     fn self_occlusion_matches_brute_force() {
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
-        for st in [
-            AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() },
-            AxisState { c: Vector3::new(-0.05, 0.1, 0.5), a: Vector3::new(0.2, -0.3, 1.0).normalize() },
-        ] {
+        for st in [AxisState { c: Vector3::new(0.1, 0.05, 0.8), a: Vector3::new(1.0, 0.2, 0.3).normalize() }, AxisState { c: Vector3::new(-0.05, 0.1, 0.5), a: Vector3::new(0.2, -0.3, 1.0).normalize() }] {
             let f = st.frame().unwrap();
             let mut disagree = 0;
             let mut n = 0;

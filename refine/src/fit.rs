@@ -18,13 +18,13 @@
 
 use crate::contour::{build_samples_capped, project_with_normal, AxisState, ContourSample};
 use crate::edges::{EdgeHits, GradientLevel};
+use crate::jacobian::{stereo_row, FrameDerivatives};
 use crate::model::CylinderModel;
+use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
+use crate::priors::{self, SeedPrior};
 use crate::robust::{mad_scale, tukey_rho, tukey_weight};
 use crate::seed::GroundPlane;
 use crate::RefineConfig;
-use crate::jacobian::{stereo_row, FrameDerivatives};
-use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
-use crate::priors::{self, SeedPrior};
 use nalgebra::{Matrix2x5, Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
 use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
 use tubeloc_core::{CameraModel, FailureReason, Plane, ResidualStats};
@@ -333,7 +333,21 @@ fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
 /// and returns `Σ w r²` and `Σ w`. The stereo rows enter `JᵀWJ` scaled by `stereo_info`
 /// (1 in the fit; `1 / stereo_points_per_measurement` for the output covariance).
 #[allow(clippy::too_many_arguments)]
-fn normal_equations(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, u: (&Vector3<f64>, &Vector3<f64>), r0: &[Option<f64>], c: (f64, f64), sp: &SeedPrior, jac: &mut Vec<Option<Matrix2x5<f64>>>, stereo_info: f64) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+fn normal_equations(
+    model: &CylinderModel,
+    st: &AxisState,
+    assoc: &[Assoc],
+    cam: &CameraModel,
+    sigma_px: f64,
+    scene: &Scene,
+    cfg: &RefineConfig,
+    u: (&Vector3<f64>, &Vector3<f64>),
+    r0: &[Option<f64>],
+    c: (f64, f64),
+    sp: &SeedPrior,
+    jac: &mut Vec<Option<Matrix2x5<f64>>>,
+    stereo_info: f64,
+) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();

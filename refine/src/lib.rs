@@ -20,16 +20,16 @@ pub mod jacobian;
 pub mod local_ground;
 pub mod model;
 mod mono;
-pub mod priors;
 pub mod photo;
+pub mod priors;
 pub mod rims;
 pub mod robust;
-pub mod search;
-pub mod stereo_stage;
-pub mod seed;
 pub mod seal_end;
+pub mod search;
+pub mod seed;
 pub mod seed_policy;
 pub mod silhouette;
+pub mod stereo_stage;
 pub mod two_view;
 
 pub use contour::AxisState;
@@ -40,8 +40,8 @@ pub use seed::{seed_from_detection, GroundPlane, Seed};
 pub use seed_policy::{SeedKind, SeedSettings};
 
 use nalgebra::{Point2, Point3, Vector3};
-use serde::{Deserialize, Serialize};
 use seal_end::ColourImage;
+use serde::{Deserialize, Serialize};
 use tubeloc_core::{BinaryMask, CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
 
 /// Tuning of the refiner. Pixel values are in pixels of the level they apply to unless noted.
@@ -670,13 +670,7 @@ impl Refiner {
         let cfg = &self.config;
         let mut cands: Vec<AxisState> = Vec::new();
         if cfg.seed_search {
-            let spec = search::SearchSpec {
-                radius_px: cfg.seed_search_radius_px as i32,
-                step_px: 2,
-                max_rotation_deg: cfg.seed_search_rotation_deg,
-                rotation_step_deg: 2.5,
-                max_samples: 120,
-            };
+            let spec = search::SearchSpec { radius_px: cfg.seed_search_radius_px as i32, step_px: 2, max_rotation_deg: cfg.seed_search_rotation_deg, rotation_step_deg: 2.5, max_samples: 120 };
             let hyps = search::coarse_search(&self.model, &pyr[top], st, scene.ground.as_ref(), cfg.ground_height_known, &spec);
             cands.extend(hyps.iter().map(|h| h.state));
         }

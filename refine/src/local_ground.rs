@@ -199,7 +199,13 @@ mod tests {
         for v in (0..480).step_by(2) {
             for u in (0..640).step_by(2) {
                 let (uf, vf) = (u as f64, v as f64);
-                let z = if u < 107 { 1.5 } else if mid.get(u, v) { 0.93 } else { 0.98 };
+                let z = if u < 107 {
+                    1.5
+                } else if mid.get(u, v) {
+                    0.93
+                } else {
+                    0.98
+                };
                 pts.push(at(&cam, uf, vf, z));
             }
         }

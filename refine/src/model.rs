@@ -88,12 +88,7 @@ impl CylinderModel {
     pub fn neighbour_radius(&self, i: usize, end: i8) -> f64 {
         let s = self.sections[i];
         let (z, eps) = if end < 0 { (s.z0, -1e-7) } else { (s.z1, 1e-7) };
-        self.sections
-            .iter()
-            .enumerate()
-            .filter(|(k, o)| *k != i && z + eps >= o.z0 && z + eps <= o.z1)
-            .map(|(_, o)| o.r)
-            .fold(0.0, f64::max)
+        self.sections.iter().enumerate().filter(|(k, o)| *k != i && z + eps >= o.z0 && z + eps <= o.z1).map(|(_, o)| o.r).fold(0.0, f64::max)
     }
 
     /// True when the segment from the camera centre (origin) to `p` (camera frame, metres)

@@ -106,10 +106,12 @@ pub fn photometric_depth_visible(model: &CylinderModel, camera: &CameraModel, le
     };
     let scan = |lo: f64, hi: f64, step: f64| -> Option<(f64, f64)> {
         let k = ((hi - lo) / step).round() as i64;
-        (0..=k).filter_map(|i| {
-            let s = lo + i as f64 * step;
-            zncc(s).map(|c| (s, c))
-        }).max_by(|a, b| a.1.total_cmp(&b.1))
+        (0..=k)
+            .filter_map(|i| {
+                let s = lo + i as f64 * step;
+                zncc(s).map(|c| (s, c))
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1))
     };
     let (s1, _) = scan(-range_m, range_m, 1e-3)?;
     let (s2, c2) = scan(s1 - 1.5e-3, s1 + 1.5e-3, 1e-4)?;

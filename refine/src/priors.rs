@@ -166,7 +166,6 @@ mod tests {
         }
     }
 
-
     #[test]
     fn image_axis_prior_contains_the_imaged_axis_and_scales_with_distance() {
         let cam = tubeloc_core::CameraModel::from_hfov(640, 480, 50.0);

@@ -66,14 +66,8 @@ impl SeedSettings {
     /// The settings of seeds of `kind` under `config`; `has_ground`: a ground plane is given.
     pub fn new(config: &RefineConfig, kind: SeedKind, has_ground: bool) -> Self {
         let c = config;
-        let explicit = SeedSettings {
-            depth_sigma_frac: c.mono_depth_sigma_frac,
-            end_limb_weight: c.end_limb_weight,
-            keep_depth: false,
-            length_depth: c.mono_length_depth,
-            relief_sigma_m: c.ground_relief_sigma_m,
-            ground_tilt_sigma_deg: c.ground_tilt_sigma_deg,
-        };
+        let explicit =
+            SeedSettings { depth_sigma_frac: c.mono_depth_sigma_frac, end_limb_weight: c.end_limb_weight, keep_depth: false, length_depth: c.mono_length_depth, relief_sigma_m: c.ground_relief_sigma_m, ground_tilt_sigma_deg: c.ground_tilt_sigma_deg };
         match kind {
             SeedKind::Explicit => explicit,
             SeedKind::TemplatePose => SeedSettings { depth_sigma_frac: c.detection_depth_sigma_frac, end_limb_weight: c.detection_end_limb_weight, ..explicit },

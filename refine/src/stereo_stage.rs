@@ -21,7 +21,6 @@ pub struct StereoRegion {
     pub seed_z: Option<f64>,
 }
 
-
 /// Start of the disparity window, pixels: `floor(f B / (z_max + 0.5 m))` with `f B` the
 /// rectified focal length times the baseline (pixels · metres) and `z_max` the farthest seed's
 /// depth; 0 without seeds.
@@ -174,8 +173,7 @@ pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Recti
             (pe.zncc >= cfg.min_zncc && pe.shifts_m.0.abs() < range_m && pe.shifts_m.1.abs() < range_m).then_some(pe.state)
         })
     } else {
-        photo::photometric_depth_visible(model, &pair.camera, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref())
-            .and_then(|pd| (pd.zncc >= cfg.min_zncc && pd.shift_m.abs() < range_m).then(|| photo::shifted(&st, pd.shift_m)))
+        photo::photometric_depth_visible(model, &pair.camera, &pair.left, &pair.right, fb, &st, range_m, occ.as_ref()).and_then(|pd| (pd.zncc >= cfg.min_zncc && pd.shift_m.abs() < range_m).then(|| photo::shifted(&st, pd.shift_m)))
     };
     // The axis direction from the rims in both views about the photometric centre (whose
     // distance, from all covered pixels, is better than the rims'), for axes within
@@ -201,7 +199,18 @@ pub fn photo_refine(pose: &mut TubeAxisPose, model: &CylinderModel, pair: &Recti
         two_view::fit_two_view(model, &pair.camera, &pair.left, &pair.right, pair.baseline, &moved.unwrap_or(st), occ.as_ref(), ground, tc)
     });
     if let (true, Some(t)) = (debug, &tv) {
-        eprintln!("two-view image {} centre {:.4}: moved {:.2} mm turned {:.2} deg samples {:?} rms {:.2} limb offsets {:.2} {:.2} px it {}", pose.image_id, pose.centre.x, t.moved_m * 1e3, t.turned_deg, t.samples, t.rms_px, t.limb_offsets_px.0, t.limb_offsets_px.1, t.iterations);
+        eprintln!(
+            "two-view image {} centre {:.4}: moved {:.2} mm turned {:.2} deg samples {:?} rms {:.2} limb offsets {:.2} {:.2} px it {}",
+            pose.image_id,
+            pose.centre.x,
+            t.moved_m * 1e3,
+            t.turned_deg,
+            t.samples,
+            t.rms_px,
+            t.limb_offsets_px.0,
+            t.limb_offsets_px.1,
+            t.iterations
+        );
     }
     let moved = tv.map(|t| t.state).or(moved)?;
     let shift = moved.c.norm() - st.c.norm();

@@ -125,7 +125,6 @@ pub struct TwoViewFit {
     pub iterations: usize,
 }
 
-
 /// Sub-pixel edge offset along `n` from `u` near the search's `offset`: the centroid of
 /// `|∇I · n| − ½ max` (where positive) sampled every 0.25 px over ±1.5 px about the
 /// strongest sample. The search's parabola through samples one pixel apart, taken from the
@@ -152,7 +151,11 @@ fn refine_offset(level: &GradientLevel, u: &nalgebra::Point2<f64>, n: &nalgebra:
             swx += v * o;
         }
     }
-    if sw > 0.0 { swx / sw } else { offset }
+    if sw > 0.0 {
+        swx / sw
+    } else {
+        offset
+    }
 }
 
 /// Two unit vectors perpendicular to `a` (and to each other).
@@ -170,17 +173,7 @@ fn tangent_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 /// either view has fewer than `min_samples` edges, the system is singular, or the result moved
 /// beyond `max_move_m` / `max_turn_deg`.
 #[allow(clippy::too_many_arguments)]
-pub fn fit_two_view(
-    model: &CylinderModel,
-    camera: &CameraModel,
-    left: &Plane<f32>,
-    right: &Plane<f32>,
-    baseline_m: f64,
-    st: &AxisState,
-    occluders: Option<&Occluders>,
-    ground: Option<(Vector3<f64>, f64)>,
-    cfg: &TwoViewConfig,
-) -> Option<TwoViewFit> {
+pub fn fit_two_view(model: &CylinderModel, camera: &CameraModel, left: &Plane<f32>, right: &Plane<f32>, baseline_m: f64, st: &AxisState, occluders: Option<&Occluders>, ground: Option<(Vector3<f64>, f64)>, cfg: &TwoViewConfig) -> Option<TwoViewFit> {
     let views = [view(model, camera, left, st, Vector3::zeros())?, view(model, camera, right, st, Vector3::new(baseline_m, 0.0, 0.0))?];
     let samples = build_samples(model, st, camera, cfg.spacing_px);
     let body_r = model.body_radius();
@@ -221,9 +214,7 @@ pub fn fit_two_view(
         iters = it + 1;
         let radius = if it < 3 { 4 } else { 2 };
         let (u1, u2) = tangent_basis(&cur.a);
-        let state_of = |d: &Vector5<f64>| -> AxisState {
-            AxisState { c: cur.c + Vector3::new(d[0], d[1], d[2]), a: (cur.a + u1 * d[3] + u2 * d[4]).normalize() }
-        };
+        let state_of = |d: &Vector5<f64>| -> AxisState { AxisState { c: cur.c + Vector3::new(d[0], d[1], d[2]), a: (cur.a + u1 * d[3] + u2 * d[4]).normalize() } };
         let perturbed: Vec<AxisState> = (0..5).map(|k| state_of(&(Vector5::ith(k, if k < 3 { hc } else { ha })))).collect();
         let f0 = cur.frame()?;
         let frames: Vec<_> = perturbed.iter().map(|s| s.frame()).collect();

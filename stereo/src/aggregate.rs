@@ -24,7 +24,6 @@
 
 use tubeloc_core::Plane;
 
-
 /// Parameters of the aggregation and selection stage (validated by the caller).
 #[derive(Clone, Debug)]
 pub(crate) struct AggParams {
@@ -413,11 +412,7 @@ fn sweep_row_impl<T: Lane>(st: &mut PathState<T>, cost: &[u8], ctx: &Ctx, img_ro
                 None => z,
             };
             let ov = &mut vcur[x * pp..(x + 1) * pp];
-            let m = if set {
-                pixel2::<T, true>(c, [ph, pv], [pmh, pmv], [p2h, p2v], p1, [ho, ov], s)
-            } else {
-                pixel2::<T, false>(c, [ph, pv], [pmh, pmv], [p2h, p2v], p1, [ho, ov], s)
-            };
+            let m = if set { pixel2::<T, true>(c, [ph, pv], [pmh, pmv], [p2h, p2v], p1, [ho, ov], s) } else { pixel2::<T, false>(c, [ph, pv], [pmh, pmv], [p2h, p2v], p1, [ho, ov], s) };
             hmin = m[0];
             vcur_min[x] = m[1];
             continue;
@@ -436,11 +431,7 @@ fn sweep_row_impl<T: Lane>(st: &mut PathState<T>, cost: &[u8], ctx: &Ctx, img_ro
         let (oa, r) = vcur[k0 * pp..(k0 + 3) * pp].split_at_mut(pp);
         let (ob, oc) = r.split_at_mut(pp);
         let args = ([ph, q0.0, q1.0, q2.0], [pmh, q0.1, q1.1, q2.1], [p2h, q0.2, q1.2, q2.2], [ho, oa, ob, oc]);
-        let m = if set {
-            pixel4::<T, true>(c, args.0, args.1, args.2, p1, args.3, s)
-        } else {
-            pixel4::<T, false>(c, args.0, args.1, args.2, p1, args.3, s)
-        };
+        let m = if set { pixel4::<T, true>(c, args.0, args.1, args.2, p1, args.3, s) } else { pixel4::<T, false>(c, args.0, args.1, args.2, p1, args.3, s) };
         hmin = m[0];
         vcur_min[k0..k0 + 3].copy_from_slice(&m[1..4]);
     }

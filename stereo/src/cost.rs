@@ -37,15 +37,7 @@ pub(crate) struct CostWeights {
 /// Fills `out` (`h * w * nd`) with the cost volume of census planes `cl`, `cr` and optional
 /// gradient planes.
 #[cfg(test)]
-pub(crate) fn cost_volume(
-    cl: &Plane<u64>,
-    cr: &Plane<u64>,
-    grads: Option<(&Plane<i16>, &Plane<i16>)>,
-    dmin: i32,
-    nd: usize,
-    wt: CostWeights,
-    out: &mut [u8],
-) {
+pub(crate) fn cost_volume(cl: &Plane<u64>, cr: &Plane<u64>, grads: Option<(&Plane<i16>, &Plane<i16>)>, dmin: i32, nd: usize, wt: CostWeights, out: &mut [u8]) {
     let w = cl.width;
     let mut cr_rev = cr.clone();
     reverse_rows(&mut cr_rev);
@@ -93,24 +85,24 @@ pub(crate) fn cost_row(y: usize, cl: &Plane<u64>, cr_rev: &Plane<u64>, grads: Op
 
 #[inline(always)]
 fn census_row(o: &mut [u8], l: u64, win: &[u64], weight: u8) {
-        // o[k] pairs with win[k].
-        if weight == 1 {
-            for (c, &r) in o.iter_mut().zip(win) {
-                *c = (l ^ r).count_ones() as u8;
-            }
-        } else {
-            for (c, &r) in o.iter_mut().zip(win) {
-                *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
-            }
+    // o[k] pairs with win[k].
+    if weight == 1 {
+        for (c, &r) in o.iter_mut().zip(win) {
+            *c = (l ^ r).count_ones() as u8;
         }
+    } else {
+        for (c, &r) in o.iter_mut().zip(win) {
+            *c = ((l ^ r).count_ones() as u8).saturating_mul(weight);
+        }
+    }
 }
 
 #[inline(always)]
 fn grad_row(o: &mut [u8], l: i16, win: &[i16], weight: u8, trunc: u8) {
-        for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
-            let diff = (l - r).unsigned_abs().min(trunc as u16) as u8;
-            *c = c.saturating_add(diff.saturating_mul(weight));
-        }
+    for (c, &r) in o.iter_mut().zip(win.iter().rev()) {
+        let diff = (l - r).unsigned_abs().min(trunc as u16) as u8;
+        *c = c.saturating_add(diff.saturating_mul(weight));
+    }
 }
 
 #[cfg(test)]

@@ -89,13 +89,7 @@ impl ExactAccumulator {
     /// The scores so far.
     pub fn score(&self) -> ExactScore {
         let n = self.n.max(1) as f64;
-        ExactScore {
-            pixels: self.n,
-            density: self.est as f64 / n,
-            bad1: self.bad1 as f64 / n,
-            bad2: self.bad2 as f64 / n,
-            mae: if self.est > 0 { self.abs_sum / self.est as f64 } else { f64::NAN },
-        }
+        ExactScore { pixels: self.n, density: self.est as f64 / n, bad1: self.bad1 as f64 / n, bad2: self.bad2 as f64 / n, mae: if self.est > 0 { self.abs_sum / self.est as f64 } else { f64::NAN } }
     }
 }
 
@@ -192,13 +186,7 @@ impl PairEval {
 
     /// The pooled scores.
     pub fn summary(&self) -> PairEvalSummary {
-        PairEvalSummary {
-            valid: self.valid.score(),
-            tube: self.tube.score(),
-            tube_points: self.tube_distances_m.len(),
-            tube_median_mm: 1e3 * quantile(&self.tube_distances_m, 0.5),
-            tube_p90_mm: 1e3 * quantile(&self.tube_distances_m, 0.9),
-        }
+        PairEvalSummary { valid: self.valid.score(), tube: self.tube.score(), tube_points: self.tube_distances_m.len(), tube_median_mm: 1e3 * quantile(&self.tube_distances_m, 0.5), tube_p90_mm: 1e3 * quantile(&self.tube_distances_m, 0.9) }
     }
 }
 

@@ -90,14 +90,7 @@ impl StereoRectification {
         left.validate()?;
         right.validate()?;
         if left.width != right.width || left.height != right.height {
-            return Err(StereoError::SizeMismatch {
-                what: "left camera".into(),
-                a_w: left.width as usize,
-                a_h: left.height as usize,
-                other: "right camera".into(),
-                b_w: right.width as usize,
-                b_h: right.height as usize,
-            });
+            return Err(StereoError::SizeMismatch { what: "left camera".into(), a_w: left.width as usize, a_h: left.height as usize, other: "right camera".into(), b_w: right.width as usize, b_h: right.height as usize });
         }
         let r = t_left_right.rotation();
         let t = t_left_right.translation();
@@ -113,10 +106,7 @@ impl StereoRectification {
         let z_mean = z_mean.normalize();
         let along = e1.dot(&z_mean);
         if along.abs() > std::f64::consts::FRAC_1_SQRT_2 {
-            return Err(StereoError::Unrectifiable(format!(
-                "the baseline is {:.1}° from the optical axis (must be more than 45°): the epipoles lie inside the images",
-                along.abs().acos().to_degrees()
-            )));
+            return Err(StereoError::Unrectifiable(format!("the baseline is {:.1}° from the optical axis (must be more than 45°): the epipoles lie inside the images", along.abs().acos().to_degrees())));
         }
         let e3 = (z_mean - e1 * along).normalize();
         let e2 = e3.cross(&e1);
@@ -142,21 +132,7 @@ impl StereoRectification {
         let map_right = remap_table(right, &r2, &rectified);
         let valid_left = valid_rect(&map_left);
         let valid_right = valid_rect(&map_right);
-        Ok(StereoRectification {
-            r_left: r1,
-            r_right: r2,
-            rectified,
-            baseline,
-            p1,
-            p2,
-            q,
-            map_left,
-            map_right,
-            valid_left,
-            valid_right,
-            left: left.clone(),
-            right: right.clone(),
-        })
+        Ok(StereoRectification { r_left: r1, r_right: r2, rectified, baseline, p1, p2, q, map_left, map_right, valid_left, valid_right, left: left.clone(), right: right.clone() })
     }
 
     /// Focal length, principal point and baseline for [`crate::triangulate::triangulate`].
@@ -169,14 +145,7 @@ impl StereoRectification {
     pub fn rectify_pair(&self, left: &Plane<u8>, right: &Plane<u8>) -> Result<(Plane<u8>, Plane<u8>)> {
         for (name, img, cam) in [("left image", left, &self.left), ("right image", right, &self.right)] {
             if img.width != cam.width as usize || img.height != cam.height as usize {
-                return Err(StereoError::SizeMismatch {
-                    what: name.into(),
-                    a_w: img.width,
-                    a_h: img.height,
-                    other: format!("its camera model ({})", name.split(' ').next().unwrap_or("")),
-                    b_w: cam.width as usize,
-                    b_h: cam.height as usize,
-                });
+                return Err(StereoError::SizeMismatch { what: name.into(), a_w: img.width, a_h: img.height, other: format!("its camera model ({})", name.split(' ').next().unwrap_or("")), b_w: cam.width as usize, b_h: cam.height as usize });
             }
         }
         Ok((remap(left, &self.map_left), remap(right, &self.map_right)))

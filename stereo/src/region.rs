@@ -69,12 +69,7 @@ fn grown_regions(rois: &[Roi], margin: usize, w: usize, h: usize) -> Result<Vec<
             return Err(r.err(&format!("region lies outside the {w}x{h} image")));
         }
         let m = margin as i64;
-        rects.push(Rect {
-            x0: (x0 - m).max(0) as usize,
-            y0: (y0 - m).max(0) as usize,
-            x1: (x1 + m).min(w as i64) as usize,
-            y1: (y1 + m).min(h as i64) as usize,
-        });
+        rects.push(Rect { x0: (x0 - m).max(0) as usize, y0: (y0 - m).max(0) as usize, x1: (x1 + m).min(w as i64) as usize, y1: (y1 + m).min(h as i64) as usize });
     }
     // Merge overlapping rectangles until none overlap.
     let mut merged = true;

@@ -189,12 +189,7 @@ impl SgmMatcher {
         reverse_rows(cr);
         let (cl, cr) = (&*cl, &*cr);
         let grads = if p.gradient_weight > 0 { Some((sobel_x(left), sobel_x(right))) } else { None };
-        let wt = CostWeights {
-            census: p.census_weight,
-            grad: p.gradient_weight,
-            grad_trunc: p.gradient_trunc,
-            border: (p.census_weight as u32 * (p.census_width * p.census_height - 1) as u32 / 2).min(255) as u8,
-        };
+        let wt = CostWeights { census: p.census_weight, grad: p.gradient_weight, grad_trunc: p.gradient_trunc, border: (p.census_weight as u32 * (p.census_width * p.census_height - 1) as u32 / 2).min(255) as u8 };
         let grads = grads.as_ref().map(|(a, b)| (a, b));
         let dmin = p.min_disparity;
         let mut out = Plane::<f32>::new(w, h);
@@ -215,14 +210,7 @@ pub fn disparity(left: &Plane<u8>, right: &Plane<u8>, params: &SgmParams) -> Res
 
 fn check_pair(left: &Plane<u8>, right: &Plane<u8>) -> Result<()> {
     if left.width != right.width || left.height != right.height {
-        return Err(StereoError::SizeMismatch {
-            what: "left image".into(),
-            a_w: left.width,
-            a_h: left.height,
-            other: "right image".into(),
-            b_w: right.width,
-            b_h: right.height,
-        });
+        return Err(StereoError::SizeMismatch { what: "left image".into(), a_w: left.width, a_h: left.height, other: "right image".into(), b_w: right.width, b_h: right.height });
     }
     if left.width < 2 || left.height < 2 || left.data.len() != left.width * left.height || right.data.len() != left.data.len() {
         return Err(param("images", format!("{}x{} image with {} values is too small or inconsistent", left.width, left.height, left.data.len())));

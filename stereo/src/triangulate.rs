@@ -60,25 +60,14 @@ impl RectifiedGeometry {
     /// Triangulates one pixel `(u, v)` with disparity `d`, disparity noise `sigma_d` pixels.
     pub fn triangulate_pixel(&self, u: f64, v: f64, d: f64, sigma_d: f64) -> Option<StereoPoint> {
         let z = self.depth(d)?;
-        Some(StereoPoint {
-            pixel: [u as f32, v as f32],
-            disparity: d as f32,
-            point: Point3::new((u - self.cx) * z / self.f, (v - self.cy) * z / self.f, z),
-            sigma_z: z * z * sigma_d / (self.f * self.baseline),
-        })
+        Some(StereoPoint { pixel: [u as f32, v as f32], disparity: d as f32, point: Point3::new((u - self.cx) * z / self.f, (v - self.cy) * z / self.f, z), sigma_z: z * z * sigma_d / (self.f * self.baseline) })
     }
 }
 
 /// Triangulates every valid pixel (`d` finite and `> 0`) of a rectified left disparity map,
 /// in raster order. `sigma_d` is the disparity standard deviation in pixels.
 pub fn triangulate(disp: &Plane<f32>, geom: &RectifiedGeometry, sigma_d: f64) -> Vec<StereoPoint> {
-    disp.data
-        .par_chunks(disp.width.max(1))
-        .enumerate()
-        .flat_map_iter(|(y, row)| {
-            row.iter().enumerate().filter_map(move |(x, &d)| geom.triangulate_pixel(x as f64, y as f64, d as f64, sigma_d))
-        })
-        .collect()
+    disp.data.par_chunks(disp.width.max(1)).enumerate().flat_map_iter(|(y, row)| row.iter().enumerate().filter_map(move |(x, &d)| geom.triangulate_pixel(x as f64, y as f64, d as f64, sigma_d))).collect()
 }
 
 #[cfg(test)]

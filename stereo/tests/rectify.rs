@@ -16,10 +16,12 @@ fn cams() -> (CameraModel, CameraModel, Pose) {
 
 fn random_points(n: usize, seed: u64) -> Vec<Point3<f64>> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..n).map(|_| {
-        let z = rng.random_range(1.0..6.0);
-        Point3::new(rng.random_range(-0.3..0.3) * z, rng.random_range(-0.2..0.2) * z, z)
-    }).collect()
+    (0..n)
+        .map(|_| {
+            let z = rng.random_range(1.0..6.0);
+            Point3::new(rng.random_range(-0.3..0.3) * z, rng.random_range(-0.2..0.2) * z, z)
+        })
+        .collect()
 }
 
 #[test]

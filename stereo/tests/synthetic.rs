@@ -31,13 +31,7 @@ fn errors(est: &Plane<f32>, gt: &Plane<f32>, vis: &Plane<u8>, t: f32, margin: us
 
 #[test]
 fn slanted_plane_with_boxes_is_recovered_with_eight_and_four_paths() {
-    let pair = render_scene(
-        320,
-        240,
-        (8.0, 0.04, 0.02),
-        &[SyntheticBox { x0: 150.0, y0: 60.0, x1: 230.0, y1: 150.0, d: 40.5 }],
-        7,
-    );
+    let pair = render_scene(320, 240, (8.0, 0.04, 0.02), &[SyntheticBox { x0: 150.0, y0: 60.0, x1: 230.0, y1: 150.0, d: 40.5 }], 7);
     for paths in [Paths::Eight, Paths::Four] {
         let p = SgmParams { num_disparities: 64, paths, ..SgmParams::default() };
         let d = disparity(&pair.left, &pair.right, &p).unwrap();

@@ -106,11 +106,7 @@ struct BoardTexture<'a> {
 
 impl<'a> BoardTexture<'a> {
     fn new(layout: &'a BoardLayout) -> Result<Self, CoreError> {
-        let tex = layout
-            .tags
-            .iter()
-            .map(|t| TagTexture::new(layout.family, t.id, layout.tag_size_m).ok_or_else(|| CoreError::invalid("board", format!("tag id {} not in {}", t.id, layout.family.name()))))
-            .collect::<Result<Vec<_>, _>>()?;
+        let tex = layout.tags.iter().map(|t| TagTexture::new(layout.family, t.id, layout.tag_size_m).ok_or_else(|| CoreError::invalid("board", format!("tag id {} not in {}", t.id, layout.family.name())))).collect::<Result<Vec<_>, _>>()?;
         Ok(BoardTexture { layout, tex })
     }
 
@@ -302,13 +298,7 @@ pub fn generate(rig: &Rig, board: &BoardLayout, cfg: &CalibSetConfig) -> Result<
             if exact.len() < MIN_TAGS_PER_IMAGE {
                 continue;
             }
-            let noisy = exact
-                .iter()
-                .map(|t| TagCorners {
-                    id: t.id,
-                    corners: t.corners.map(|[x, y]| if cfg.corner_noise_px > 0.0 { [x + noise.sample(&mut rng), y + noise.sample(&mut rng)] } else { [x, y] }),
-                })
-                .collect();
+            let noisy = exact.iter().map(|t| TagCorners { id: t.id, corners: t.corners.map(|[x, y]| if cfg.corner_noise_px > 0.0 { [x + noise.sample(&mut rng), y + noise.sample(&mut rng)] } else { [x, y] }) }).collect();
             let image = cfg.render.then(|| format!("view{k:03}_{}.png", cam.name));
             observations.push(CameraObservation { camera: cam.name.clone(), image, exact, noisy });
         }

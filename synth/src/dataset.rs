@@ -309,13 +309,7 @@ fn write_into(spec: &DatasetSpec, dir: &Path, shard: (usize, usize), progress: &
             images.push(img);
             annotations.extend(anns);
         }
-        let tubes: Vec<Value> = scene
-            .objects
-            .tubes
-            .iter()
-            .zip(&scene.tube_info)
-            .map(|(t, i)| json!({"T_world_tube": pose_json(&t.t_world_tube), "case": i.case, "dust": i.dust, "carries_tags": i.carries_tags}))
-            .collect();
+        let tubes: Vec<Value> = scene.objects.tubes.iter().zip(&scene.tube_info).map(|(t, i)| json!({"T_world_tube": pose_json(&t.t_world_tube), "case": i.case, "dust": i.dust, "carries_tags": i.carries_tags})).collect();
         let mount = scene.mount.as_ref().map(|m| json!({"tube_index": m.tube_index, "tags": m.tags}));
         scenes_meta.push(json!({
             "scene_index": si, "split": ss.split, "terrain": ss.terrain.name(), "time": ss.time.name(), "seed": ss.seed,
@@ -399,10 +393,8 @@ fn render_view(spec: &DatasetSpec, scene: &Scene, ground_height: f64, ss: &Scene
 /// its top-left corner `(x0, y0)`; `None` when no tube fits.
 pub fn crop_around_a_tube(scene: &Scene, cam: &CameraModel, t_world_cam: &Pose, crop: i64, rng: &mut impl Rng) -> Option<(i64, i64)> {
     let (w, h) = (cam.width as i64, cam.height as i64);
-    let mut fits: Vec<(i64, i64, i64, i64)> = (0..scene.objects.tubes.len())
-        .filter_map(|i| projected_rect(&scene.objects, i, cam, t_world_cam))
-        .filter(|&(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop)
-        .collect();
+    let mut fits: Vec<(i64, i64, i64, i64)> =
+        (0..scene.objects.tubes.len()).filter_map(|i| projected_rect(&scene.objects, i, cam, t_world_cam)).filter(|&(u0, v0, u1, v1)| u0 >= 0 && v0 >= 0 && u1 < w && v1 < h && u1 - u0 < crop && v1 - v0 < crop).collect();
     if fits.is_empty() {
         return None;
     }
@@ -443,16 +435,7 @@ pub fn annotation_from_truth(id: u64, image_id: u64, cam: &CameraModel, t: &crat
     extra.insert("amodal_area".into(), json!(t.amodal_area));
     extra.insert("amodal_bbox".into(), json!(t.amodal_bbox));
     extra.insert("T_cam_tube".into(), pose_json(&t.t_cam_tube));
-    CocoAnnotation {
-        id,
-        image_id,
-        category_id: 1,
-        segmentation: Some(Segmentation::CompressedRle { size: [cam.height, cam.width], counts: rle.to_compressed_string() }),
-        area: t.visible_area as f64,
-        bbox: t.bbox,
-        iscrowd: 0,
-        extra,
-    }
+    CocoAnnotation { id, image_id, category_id: 1, segmentation: Some(Segmentation::CompressedRle { size: [cam.height, cam.width], counts: rle.to_compressed_string() }), area: t.visible_area as f64, bbox: t.bbox, iscrowd: 0, extra }
 }
 
 /// The single COCO category of tubeloc datasets.

@@ -41,12 +41,12 @@ pub mod terrain;
 pub mod truth;
 pub mod tube_shape;
 
+pub use dataset::{write_dataset, DatasetSpec, DatasetSummary};
 pub use error::SynthError;
 pub use render::{render, RenderOptions, RenderOutput, SurfaceKind};
 pub use scene::{Scene, SceneConfig, TimeOfDay, TubeCase, TubeInfo};
 pub use sensor::SensorOptions;
 pub use sun::Sun;
 pub use terrain::TerrainKind;
-pub use tube_shape::TubeShape;
-pub use dataset::{write_dataset, DatasetSpec, DatasetSummary};
 pub use truth::{tube_truth, Occlusion, TubeTruth};
+pub use tube_shape::TubeShape;

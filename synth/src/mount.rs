@@ -11,8 +11,8 @@
 use crate::heightfield::HeightField;
 use crate::objects::PlateObject;
 use crate::scene::sand;
-use crate::terrain::{srgb_to_linear, SAND_SRGB};
 use crate::tags::{TagFamily, TagTexture};
+use crate::terrain::{srgb_to_linear, SAND_SRGB};
 use crate::SynthError;
 use nalgebra::{Matrix3, Point3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};

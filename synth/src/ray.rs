@@ -54,17 +54,7 @@ pub fn clip_aabb(ray: &Ray, lo: [f64; 3], hi: [f64; 3], tmin: f64, tmax: f64) ->
 /// the first `Some` that `visit` gives.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub fn dda2<R>(
-    ray: &Ray,
-    x0: f64,
-    y0: f64,
-    cell: f64,
-    nx: usize,
-    ny: usize,
-    t_start: f64,
-    t_end: f64,
-    mut visit: impl FnMut(usize, usize, f64, f64) -> Option<R>,
-) -> Option<R> {
+pub fn dda2<R>(ray: &Ray, x0: f64, y0: f64, cell: f64, nx: usize, ny: usize, t_start: f64, t_end: f64, mut visit: impl FnMut(usize, usize, f64, f64) -> Option<R>) -> Option<R> {
     if t_end < t_start {
         return None;
     }

@@ -79,15 +79,7 @@ pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError>
         let rows: Vec<Vector3<f64>> = rows.iter().map(vec3).collect::<Option<_>>().ok_or_else(|| ctx("`R_cam_from_site` is not 3x3 numbers"))?;
         let r = Matrix3::from_rows(&[rows[0].transpose(), rows[1].transpose(), rows[2].transpose()]);
         let up_cam = (r * Vector3::new(0.0, 0.0, -1.0)).normalize();
-        let camera = CameraModel {
-            width: num("image_width")? as u32,
-            height: num("image_height")? as u32,
-            fx: num("fx")?,
-            fy: num("fy")?,
-            cx: num("cx")?,
-            cy: num("cy")?,
-            distortion: Default::default(),
-        };
+        let camera = CameraModel { width: num("image_width")? as u32, height: num("image_height")? as u32, fx: num("fx")?, fy: num("fy")?, cx: num("cx")?, cy: num("cy")?, distortion: Default::default() };
         camera.validate().map_err(|e| ctx(&e.to_string()))?;
         let height_m = num("camera_height_m")?;
         if height_m <= 0.0 {
@@ -232,11 +224,8 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
 /// Encodes an sRGB composite as PNG or JPEG, grey (luminance) when `grey`.
 pub fn encode(rgb: &[u8], w: u32, h: u32, grey: bool, jpeg_quality: Option<u8>) -> Result<Vec<u8>, String> {
     use image::ImageEncoder;
-    let (data, ct): (Vec<u8>, image::ExtendedColorType) = if grey {
-        (rgb.chunks_exact(3).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32).round().clamp(0.0, 255.0) as u8).collect(), image::ExtendedColorType::L8)
-    } else {
-        (rgb.to_vec(), image::ExtendedColorType::Rgb8)
-    };
+    let (data, ct): (Vec<u8>, image::ExtendedColorType) =
+        if grey { (rgb.chunks_exact(3).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32).round().clamp(0.0, 255.0) as u8).collect(), image::ExtendedColorType::L8) } else { (rgb.to_vec(), image::ExtendedColorType::Rgb8) };
     let mut buf = Vec::new();
     match jpeg_quality {
         Some(q) => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, q).write_image(&data, w, h, ct).map_err(|e| e.to_string())?,

@@ -242,7 +242,17 @@ fn shade(scene: &Scene, lut: &Lut, ray: &Ray, opts: &RenderOptions) -> Sample {
         }
     };
     let ndl = n.dot(&sun).max(0.0) as f32;
-    let lit = if ndl > 0.0 && opts.shadows && !matches!(hit, Hit::Far) { if sunlit(scene, &p, &n, &sun) { 1.0 } else { 0.0 } } else if ndl > 0.0 { 1.0 } else { 0.0 };
+    let lit = if ndl > 0.0 && opts.shadows && !matches!(hit, Hit::Far) {
+        if sunlit(scene, &p, &n, &sun) {
+            1.0
+        } else {
+            0.0
+        }
+    } else if ndl > 0.0 {
+        1.0
+    } else {
+        0.0
+    };
     let mut rgb = [0.0f32; 3];
     for k in 0..3 {
         rgb[k] = albedo[k] * (SUN_RGB[k] * ndl * lit + SKY_RGB[k] * ao);
@@ -283,24 +293,18 @@ pub fn render(scene: &Scene, cam: &CameraModel, t_world_cam: &Pose, opts: &Rende
     let mut depth = Plane::filled(w, h, f32::INFINITY);
     let mut instance = Plane::<u16>::new(w, h);
     let mut surface = Plane::<u8>::new(w, h);
-    linear
-        .par_chunks_mut(w * 3)
-        .zip(depth.data.par_chunks_mut(w))
-        .zip(instance.data.par_chunks_mut(w))
-        .zip(surface.data.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(y, (((lrow, drow), irow), srow))| {
-            for x in 0..w {
-                let (ray, zf) = pixel_ray(cam, t_world_cam, x as f64, y as f64);
-                let s = shade(scene, &lut, &ray, opts);
-                for k in 0..3 {
-                    lrow[x * 3 + k] = s.rgb[k] * opts.exposure;
-                }
-                drow[x] = (s.depth_t * zf) as f32;
-                irow[x] = s.instance;
-                srow[x] = s.surface as u8;
+    linear.par_chunks_mut(w * 3).zip(depth.data.par_chunks_mut(w)).zip(instance.data.par_chunks_mut(w)).zip(surface.data.par_chunks_mut(w)).enumerate().for_each(|(y, (((lrow, drow), irow), srow))| {
+        for x in 0..w {
+            let (ray, zf) = pixel_ray(cam, t_world_cam, x as f64, y as f64);
+            let s = shade(scene, &lut, &ray, opts);
+            for k in 0..3 {
+                lrow[x * 3 + k] = s.rgb[k] * opts.exposure;
             }
-        });
+            drow[x] = (s.depth_t * zf) as f32;
+            irow[x] = s.instance;
+            srow[x] = s.surface as u8;
+        }
+    });
     let rgb = develop(&mut linear, w, h, &opts.sensor, opts.noise_seed);
     RenderOutput { width: w, height: h, rgb, depth, instance, surface }
 }

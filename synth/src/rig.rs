@@ -24,10 +24,7 @@ pub const HEIGHTS_M: [f64; 2] = [1.0, 2.0];
 pub fn paper_rig() -> Rig {
     let model = CameraModel::from_hfov(NATIVE_WIDTH, NATIVE_HEIGHT, HFOV_DEG);
     let cam = |name: &str, x: f64| RigCamera { name: name.into(), model: model.clone(), t_rig_cam: Pose::from_parts(Rotation3::identity(), Vector3::new(x, 0.0, 0.0)) };
-    Rig {
-        cameras: vec![cam("L40", -0.20), cam("L20", -0.10), cam("R20", 0.10), cam("R40", 0.20)],
-        stereo_pairs: vec![("L20".into(), "R20".into()), ("L40".into(), "R40".into())],
-    }
+    Rig { cameras: vec![cam("L40", -0.20), cam("L20", -0.10), cam("R20", 0.10), cam("R40", 0.20)], stereo_pairs: vec![("L20".into(), "R20".into()), ("L40".into(), "R40".into())] }
 }
 
 /// `T_world_rig` of the tripod at stop `stop` of `n_stops` (angle `2π·stop/n + offset`), at

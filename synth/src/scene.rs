@@ -95,16 +95,7 @@ pub struct SceneConfig {
 impl SceneConfig {
     /// Defaults: 8 m square terrain at 5 mm, tubes within 0.65 m, parametric tube model.
     pub fn new(terrain: TerrainKind, time: TimeOfDay, with_tags: bool) -> Self {
-        SceneConfig {
-            terrain,
-            time,
-            with_tags,
-            tubes: None,
-            extent_m: 8.0,
-            cell_m: 0.005,
-            tube_field_radius_m: 0.65,
-            tube_shape: Arc::new(TubeShape::from_model(&TubeModel::default())),
-        }
+        SceneConfig { terrain, time, with_tags, tubes: None, extent_m: 8.0, cell_m: 0.005, tube_field_radius_m: 0.65, tube_shape: Arc::new(TubeShape::from_model(&TubeModel::default())) }
     }
 
     /// Checks the numbers (finite, positive, grid not absurdly large).
@@ -428,22 +419,7 @@ impl Scene {
         };
         let sun = Sun::at(JPL_LATITUDE_DEG, day_of_year, solar_hour);
         let stop_offset = rng.random_range(0.0..std::f64::consts::TAU);
-        let mut scene = Scene {
-            config: config.clone(),
-            seed,
-            sun,
-            solar_hour,
-            day_of_year,
-            hf,
-            albedo,
-            objects,
-            tube_info: info,
-            mount: mount_out,
-            sky: Plane::new(1, 1),
-            sky_cell: 0.02,
-            stop_offset,
-            terrain: params,
-        };
+        let mut scene = Scene { config: config.clone(), seed, sun, solar_hour, day_of_year, hf, albedo, objects, tube_info: info, mount: mount_out, sky: Plane::new(1, 1), sky_cell: 0.02, stop_offset, terrain: params };
         scene.sky = scene.compute_sky();
         Ok(scene)
     }

@@ -61,10 +61,7 @@ pub fn pair_geometry(rig: &Rig, left: &str, right: &str) -> Result<(Pose, f64), 
     let tr = t.translation();
     let rot_err = (t.rotation() - nalgebra::Matrix3::identity()).norm();
     if rot_err > 1e-9 || tr.y.abs() > 1e-9 || tr.z.abs() > 1e-9 || tr.x <= 0.0 {
-        return Err(SynthError::Invalid(format!(
-            "pair {left},{right}: the right camera must share the left camera's orientation and sit on its +x axis (translation {:.4},{:.4},{:.4} m)",
-            tr.x, tr.y, tr.z
-        )));
+        return Err(SynthError::Invalid(format!("pair {left},{right}: the right camera must share the left camera's orientation and sit on its +x axis (translation {:.4},{:.4},{:.4} m)", tr.x, tr.y, tr.z)));
     }
     Ok((t, tr.x))
 }

@@ -50,9 +50,7 @@ impl TagFamily {
         // and then free with the matching destroy function.
         unsafe {
             match self {
-                TagFamily::Tag36h11 => {
-                    T36.get_or_init(|| FamilyTable::copy(sys::tag36h11_create(), sys::tag36h11_destroy))
-                }
+                TagFamily::Tag36h11 => T36.get_or_init(|| FamilyTable::copy(sys::tag36h11_create(), sys::tag36h11_destroy)),
                 TagFamily::Tag25h9 => T25.get_or_init(|| FamilyTable::copy(sys::tag25h9_create(), sys::tag25h9_destroy)),
                 TagFamily::Tag16h5 => T16.get_or_init(|| FamilyTable::copy(sys::tag16h5_create(), sys::tag16h5_destroy)),
             }

@@ -9,8 +9,8 @@
 //! that hides most of the hidden part (`"border"` for the part outside the image), or
 //! `"none"` when less than 3 % is hidden.
 
-use crate::render::{pixel_ray, RenderOutput, SurfaceKind};
 use crate::objects::Objects;
+use crate::render::{pixel_ray, RenderOutput, SurfaceKind};
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use tubeloc_core::{BinaryMask, CameraModel, Pose};

@@ -31,7 +31,16 @@ fn iou(a: &[u8], b: &[u8]) -> f64 {
 fn grey_sixteen_bit_rgba_and_jpeg_give_the_detections_of_the_eight_bit_colour_image() {
     let views = views_from_cameras_json(&data().join("with_cameras/cameras.json")).unwrap();
     let view = views.iter().find(|v| v.camera.width == 1024 && v.sol == Some(38)).expect("a sol-38 Navcam frame");
-    let cfg = RealSetConfig { tubes: (3, 3), per_view: 1, range_m: (1.5, 5.0), dust: (0.0, 0.0), tube_gain: (1.0, 1.0), jpeg_quality: None, seed: 5, tube_shape: std::sync::Arc::new(tubeloc_synth::TubeShape::from_model(&tubeloc_core::TubeModel::default())) };
+    let cfg = RealSetConfig {
+        tubes: (3, 3),
+        per_view: 1,
+        range_m: (1.5, 5.0),
+        dust: (0.0, 0.0),
+        tube_gain: (1.0, 1.0),
+        jpeg_quality: None,
+        seed: 5,
+        tube_shape: std::sync::Arc::new(tubeloc_synth::TubeShape::from_model(&tubeloc_core::TubeModel::default())),
+    };
     let sample = render_sample(view, 0, 1, &cfg).unwrap().expect("three tubes fit on the frame");
     let decoded = image::load_from_memory(&sample.bytes).unwrap();
     let grey8 = decoded.to_luma8();

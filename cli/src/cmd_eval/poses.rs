@@ -143,7 +143,8 @@ pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64
             })
             .collect();
         let p = out.join("pose_metrics.json");
-        write_json(&p, &serde_json::json!({ "gt": gt_path, "truth_field": truth_field, "min_visible": min_visible, "in_both_views": filter.in_both_views, "match_mm": match_mm, "poses": metrics })).with_context(|| format!("writing {}", p.display()))?;
+        write_json(&p, &serde_json::json!({ "gt": gt_path, "truth_field": truth_field, "min_visible": min_visible, "in_both_views": filter.in_both_views, "match_mm": match_mm, "poses": metrics }))
+            .with_context(|| format!("writing {}", p.display()))?;
         let report = tubeloc_eval::report::EvalReport {
             title: "Tube pose evaluation".into(),
             inputs: std::iter::once(("ground truth".to_string(), gt_path.display().to_string()))

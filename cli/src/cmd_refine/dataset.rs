@@ -168,11 +168,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
     }
     let refiner = Refiner::new(&settings.tube, settings.refine.clone()).context("building the refiner")?;
     let snap = settings.stages.snap;
-    let mut images: Vec<&CocoImage> = ds
-        .images
-        .iter()
-        .filter(|im| args.split.as_ref().is_none_or(|s| im.extra.get("split").and_then(|v| v.as_str()) == Some(s.as_str())))
-        .collect();
+    let mut images: Vec<&CocoImage> = ds.images.iter().filter(|im| args.split.as_ref().is_none_or(|s| im.extra.get("split").and_then(|v| v.as_str()) == Some(s.as_str()))).collect();
     if let Some(n) = args.max_images {
         images.truncate(n);
     }
@@ -227,7 +223,11 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
             let ground = if auto_ground { ground_of(im)? } else { fixed_ground };
             let path = {
                 let p = dir.join(&im.file_name);
-                if p.exists() { p } else { dir.join("images").join(&im.file_name) }
+                if p.exists() {
+                    p
+                } else {
+                    dir.join("images").join(&im.file_name)
+                }
             };
             let image = image::open(&path).with_context(|| format!("cannot read image {}", path.display()))?;
             if image.width() != camera.width || image.height() != camera.height {
@@ -242,13 +242,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
                     Work::GtSeed(st, bbox, _) => SeedItem::Explicit { state: *st, bbox: *bbox, mask: it.mask(h, w) },
                 })
                 .collect();
-            let frame = Frame {
-                image: &image,
-                camera: &camera,
-                image_id: im.id,
-                ground,
-                stereo: right.as_ref().map(|(img, rcam, t)| StereoView { right: img, right_camera: rcam, t_left_right: *t }),
-            };
+            let frame = Frame { image: &image, camera: &camera, image_id: im.id, ground, stereo: right.as_ref().map(|(img, rcam, t)| StereoView { right: img, right_camera: rcam, t_left_right: *t }) };
             let refined = refine_frame(&refiner, &settings, &frame, &seeds, &opts).with_context(|| match &right {
                 Some(_) => format!("refining {} (stereo, {})", path.display(), dir.join("right").display()),
                 None => format!("refining {}", path.display()),
@@ -305,14 +299,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
     }
     super::write_snapped(args.snapped_out.as_deref(), &snapped)?;
     let out: PathBuf = args.out.clone();
-    eprintln!(
-        "{} images, {} poses ({} converged; failures {:?}) -> {}",
-        images.len(),
-        poses.len(),
-        poses.iter().filter(|p| p.converged).count(),
-        reasons,
-        out.display()
-    );
+    eprintln!("{} images, {} poses ({} converged; failures {:?}) -> {}", images.len(), poses.len(), poses.iter().filter(|p| p.converged).count(), reasons, out.display());
     fit_ms.sort_by(f64::total_cmp);
     if let (Some(median), Some(p90)) = (percentile(&fit_ms, 50.0), percentile(&fit_ms, 90.0)) {
         eprintln!("refinement time per seed (the fit alone, without loading, stereo matching or the stages after it): median {median:.2} ms, p90 {p90:.2} ms over {} seeds on {} threads", fit_ms.len(), rayon::current_num_threads());

@@ -208,7 +208,7 @@ fn add_occluder(input: &mut [f32], labels: &mut [u16], s: usize, channels: usize
     let bits: Vec<bool> = (0..bw * bh).map(|_| block > 0 && rng.random_bool(0.5)).collect();
     for y in y0..(y0 + h).min(s) {
         for x in x0..(x0 + w).min(s) {
-            let bit = if block > 0 { bits[((y - y0) / block) * bw + (x - x0) / block] } else { false };
+            let bit = (y - y0).checked_div(block).zip((x - x0).checked_div(block)).is_some_and(|(by, bx)| bits[by * bw + bx]);
             let level = &levels[bit as usize];
             for (k, &v) in level.iter().enumerate() {
                 input[k * s * s + y * s + x] = v;

@@ -55,10 +55,7 @@ pub fn load_coco_dir_at_scale(dir: &Path, pre: Preprocess, limit: Option<usize>,
             let mut masks = Vec::new();
             for a in ds.annotations.iter().filter(|a| a.image_id == im.id && a.iscrowd == 0) {
                 let Some(seg) = &a.segmentation else { continue };
-                let m = seg
-                    .to_rle(im.height, im.width)
-                    .and_then(|r| r.to_mask())
-                    .map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: format!("annotation {}: {e}", a.id) })?;
+                let m = seg.to_rle(im.height, im.width).and_then(|r| r.to_mask()).map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: format!("annotation {}: {e}", a.id) })?;
                 masks.push(m.data);
             }
             let mut t = TrainImage::new(w, h, pre.apply(&rgb.rgb, w, h), &masks);
@@ -110,12 +107,16 @@ pub fn mask_scores(model: &LearnedModel, images: &[TrainImage], cfg: &DecodeConf
     Ok(score_detections(images, &dets))
 }
 
+/// Per image: the largest label, the number of tubes present, and per detection its score and
+/// its IoU with every tube present.
+type ImageMatches = (usize, usize, Vec<(f64, Vec<(usize, f64)>)>);
+
 /// [`mask_scores`] of detections already made: `dets[i]` are the instances of `images[i]`,
 /// in decreasing score order.
 pub fn score_detections(images: &[TrainImage], dets: &[Vec<LearnedInstance>]) -> MaskScores {
     // Per image: the largest label, the number of tubes present, and per detection its score
     // and its IoU with every tube present.
-    let per: Vec<(usize, usize, Vec<(f64, Vec<(usize, f64)>)>)> = images
+    let per: Vec<ImageMatches> = images
         .par_iter()
         .zip(dets)
         .map(|(img, dets)| {

@@ -84,7 +84,23 @@ pub struct DecodeConfig {
 
 impl Default for DecodeConfig {
     fn default() -> Self {
-        DecodeConfig { fg_threshold: 0.5, peak_threshold: 0.2, across_weight: 4.0, min_area: 40, min_score: 0.05, same_axis_cells: 2.5, same_tube_fraction: 100.0, mask_logit: 0.0, mask_logit_rel: 0.3, fine_mask: true, mirror_average: true, length_weight: 0.5, mask_logit_weight: 4.0, fill_weight: 1.0, mask_direction_weight: 2.0 }
+        DecodeConfig {
+            fg_threshold: 0.5,
+            peak_threshold: 0.2,
+            across_weight: 4.0,
+            min_area: 40,
+            min_score: 0.05,
+            same_axis_cells: 2.5,
+            same_tube_fraction: 100.0,
+            mask_logit: 0.0,
+            mask_logit_rel: 0.3,
+            fine_mask: true,
+            mirror_average: true,
+            length_weight: 0.5,
+            mask_logit_weight: 4.0,
+            fill_weight: 1.0,
+            mask_direction_weight: 2.0,
+        }
     }
 }
 
@@ -349,7 +365,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
         let (dx, dy) = direction(cells);
         let dir = if dx.abs() >= dy.abs() && dx < 0.0 || dy.abs() > dx.abs() && dy < 0.0 { (-dx, -dy) } else { (dx, dy) };
         let half = cells.iter().map(|&c| fg[c] * out[4 * n + c]).sum::<f32>() / cells.iter().map(|&c| fg[c]).sum::<f32>().max(1e-6);
-        let pred_len = (half > 0.0).then(|| (2.0 * half * LENGTH_SCALE) as f64);
+        let pred_len = (half > 0.0).then_some((2.0 * half * LENGTH_SCALE) as f64);
         let peak_centre = peak.map(|p| {
             let (px, py) = ((p % ow) as isize, (p / ow) as isize);
             let (mut sw, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
@@ -439,7 +455,6 @@ fn grown_owner(owner: &[u32], fg: &[f32], ow: usize, oh: usize) -> Vec<u32> {
     }
     grown
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -247,11 +247,8 @@ impl LearnedModel {
         md.insert("format_version".to_string(), FORMAT_VERSION.to_string());
         md.insert("meta".to_string(), serde_json::to_string(&self.meta).map_err(|e| LearnedError::Invalid(e.to_string()))?);
         md.insert("checksum".to_string(), format!("{checksum:08x}"));
-        let views = blobs
-            .iter()
-            .map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?)))
-            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
-            .map_err(|e| LearnedError::Invalid(e.to_string()))?;
+        let views =
+            blobs.iter().map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?))).collect::<Result<Vec<_>, safetensors::SafeTensorError>>().map_err(|e| LearnedError::Invalid(e.to_string()))?;
         let bytes = safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))?;
         sort_header_metadata(bytes)
     }
@@ -283,8 +280,7 @@ impl LearnedModel {
         if ver != FORMAT_VERSION.to_string() {
             return Err(bad(format!("format version {ver} but this program reads version {FORMAT_VERSION}")));
         }
-        let meta: ModelMeta = serde_json::from_str(md.get("meta").map(String::as_str).unwrap_or(""))
-            .map_err(|e| bad(format!("bad meta: {e}")))?;
+        let meta: ModelMeta = serde_json::from_str(md.get("meta").map(String::as_str).unwrap_or("")).map_err(|e| bad(format!("bad meta: {e}")))?;
         let mut tensors = st.tensors();
         tensors.sort_by(|a, b| a.0.cmp(&b.0));
         for (n, t) in &tensors {

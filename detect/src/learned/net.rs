@@ -128,20 +128,11 @@ impl TubeNet {
             enc.push((Conv::new(vb.pp(format!("enc{l}a")), cin, c, 3)?, Conv::new(vb.pp(format!("enc{l}b")), c, c, 3)?));
             cin = c;
         }
-        let dec = vec![
-            Conv::new(vb.pp("dec0"), 4 * w, 2 * w, 3)?,
-            Conv::new(vb.pp("dec1"), 2 * w, w, 3)?,
-            Conv::new(vb.pp("dec2"), w, w, 3)?,
-        ];
+        let dec = vec![Conv::new(vb.pp("dec0"), 4 * w, 2 * w, 3)?, Conv::new(vb.pp("dec1"), 2 * w, w, 3)?, Conv::new(vb.pp("dec2"), w, w, 3)?];
         let head = Conv::new(vb.pp("head"), w, HEADS, 1)?;
         let fine = if cfg.fine_mask {
             let f = FINE_WIDTH;
-            Some([
-                Conv::new(vb.pp("fine_in"), 4 * cfg.in_channels, f, 3)?,
-                Conv::new(vb.pp("fine_proj"), w, f, 1)?,
-                Conv::new(vb.pp("fine_mid"), f, f, 1)?,
-                Conv::new(vb.pp("fine_out"), f, 4, 1)?,
-            ])
+            Some([Conv::new(vb.pp("fine_in"), 4 * cfg.in_channels, f, 3)?, Conv::new(vb.pp("fine_proj"), w, f, 1)?, Conv::new(vb.pp("fine_mid"), f, f, 1)?, Conv::new(vb.pp("fine_out"), f, 4, 1)?])
         } else {
             None
         };

@@ -69,11 +69,8 @@ impl AdamW {
                 blobs.push((format!("{tag}.{name}"), p.dims().to_vec(), vals.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>()));
             }
         }
-        let views = blobs
-            .iter()
-            .map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?)))
-            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
-            .map_err(|e| LearnedError::Invalid(e.to_string()))?;
+        let views =
+            blobs.iter().map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?))).collect::<Result<Vec<_>, safetensors::SafeTensorError>>().map_err(|e| LearnedError::Invalid(e.to_string()))?;
         let md = HashMap::from([("format".to_string(), FORMAT.to_string()), ("t".to_string(), self.t.to_string())]);
         let bytes = safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))?;
         tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: std::io::Error::other(e.to_string()) })

@@ -65,11 +65,7 @@ impl Preprocess {
                 out
             }
             Preprocess::GrayBox { radius } => {
-                let gray: Vec<f32> = rgb
-                    .chunks_exact(3)
-                    .take(n)
-                    .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)
-                    .collect();
+                let gray: Vec<f32> = rgb.chunks_exact(3).take(n).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0).collect();
                 let mut out = box_filter(&gray, width, height, radius);
                 out.iter_mut().for_each(|v| *v = (*v - 0.5) / 0.25);
                 out

@@ -13,9 +13,7 @@ use candle_core::Tensor;
 /// ([`super::NetConfig`]) and the preprocessing. The result's metadata is the first model's,
 /// with `steps` the largest of them and `notes` naming the number averaged.
 pub fn weight_average(models: &[LearnedModel]) -> Result<LearnedModel, LearnedError> {
-    let first = models
-        .first()
-        .ok_or_else(|| LearnedError::Invalid("weight average of no models".into()))?;
+    let first = models.first().ok_or_else(|| LearnedError::Invalid("weight average of no models".into()))?;
     for (k, m) in models.iter().enumerate().skip(1) {
         if m.meta.net != first.meta.net || m.meta.preprocess != first.meta.preprocess {
             return Err(LearnedError::Invalid(format!(
@@ -28,14 +26,8 @@ pub fn weight_average(models: &[LearnedModel]) -> Result<LearnedModel, LearnedEr
             )));
         }
     }
-    let mut out = LearnedModel::with_fine_mask(
-        first.meta.preprocess,
-        first.meta.net.width,
-        first.meta.net.fine_mask,
-        0,
-    )?;
-    let per_model: Vec<Vec<(String, candle_core::Var)>> =
-        models.iter().map(|m| sorted_vars(&m.varmap)).collect();
+    let mut out = LearnedModel::with_fine_mask(first.meta.preprocess, first.meta.net.width, first.meta.net.fine_mask, 0)?;
+    let per_model: Vec<Vec<(String, candle_core::Var)>> = models.iter().map(|m| sorted_vars(&m.varmap)).collect();
     for (i, (name, var)) in sorted_vars(&out.varmap).into_iter().enumerate() {
         let mut sum: Option<Tensor> = None;
         for vars in &per_model {
@@ -51,11 +43,7 @@ pub fn weight_average(models: &[LearnedModel]) -> Result<LearnedModel, LearnedEr
     }
     out.meta = first.meta.clone();
     out.meta.steps = models.iter().map(|m| m.meta.steps).max().unwrap_or(0);
-    out.meta.notes = format!(
-        "uniform weight average of {} models; first: {}",
-        models.len(),
-        first.meta.notes
-    );
+    out.meta.notes = format!("uniform weight average of {} models; first: {}", models.len(), first.meta.notes);
     Ok(out)
 }
 
@@ -65,16 +53,7 @@ mod tests {
     use crate::learned::Preprocess;
 
     fn weights(m: &LearnedModel) -> Vec<f32> {
-        sorted_vars(&m.varmap)
-            .iter()
-            .flat_map(|(_, v)| {
-                v.as_tensor()
-                    .flatten_all()
-                    .unwrap()
-                    .to_vec1::<f32>()
-                    .unwrap()
-            })
-            .collect()
+        sorted_vars(&m.varmap).iter().flat_map(|(_, v)| v.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap()).collect()
     }
 
     #[test]
@@ -82,52 +61,26 @@ mod tests {
         let a = LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap();
         let b = LearnedModel::new(Preprocess::Rgb, 4, 2).unwrap();
         let avg = weight_average(&[a, b]).unwrap();
-        let (a, b) = (
-            LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap(),
-            LearnedModel::new(Preprocess::Rgb, 4, 2).unwrap(),
-        );
+        let (a, b) = (LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap(), LearnedModel::new(Preprocess::Rgb, 4, 2).unwrap());
         let (wa, wb, wm) = (weights(&a), weights(&b), weights(&avg));
         assert_eq!(wm.len(), wa.len());
-        assert!(wa
-            .iter()
-            .zip(&wb)
-            .zip(&wm)
-            .all(|((x, y), m)| (0.5 * (x + y) - m).abs() <= 1e-6 * (1.0 + m.abs())));
+        assert!(wa.iter().zip(&wb).zip(&wm).all(|((x, y), m)| (0.5 * (x + y) - m).abs() <= 1e-6 * (1.0 + m.abs())));
         assert!(wa != wb);
         // The average of a model with itself is the model: same outputs.
-        let self_avg = weight_average(&[
-            LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap(),
-            LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap(),
-        ])
-        .unwrap();
-        let input: Vec<f32> = (0..3 * 64 * 64)
-            .map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) * 4.0)
-            .collect();
-        assert_eq!(
-            self_avg.predict(&input, 64, 64).unwrap().planes,
-            a.predict(&input, 64, 64).unwrap().planes
-        );
+        let self_avg = weight_average(&[LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap(), LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap()]).unwrap();
+        let input: Vec<f32> = (0..3 * 64 * 64).map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) * 4.0).collect();
+        assert_eq!(self_avg.predict(&input, 64, 64).unwrap().planes, a.predict(&input, 64, 64).unwrap().planes);
         // And it survives a save / load round trip.
-        let back = LearnedModel::from_bytes(
-            &avg.to_bytes().unwrap(),
-            std::path::Path::new("soup.safetensors"),
-        )
-        .unwrap();
+        let back = LearnedModel::from_bytes(&avg.to_bytes().unwrap(), std::path::Path::new("soup.safetensors")).unwrap();
         assert_eq!(weights(&back), wm);
-        assert!(back
-            .meta
-            .notes
-            .starts_with("uniform weight average of 2 models"));
+        assert!(back.meta.notes.starts_with("uniform weight average of 2 models"));
     }
 
     #[test]
     fn mismatched_or_missing_models_are_refused() {
         let a = LearnedModel::new(Preprocess::Rgb, 4, 1).unwrap();
         let b = LearnedModel::new(Preprocess::Rgb, 8, 1).unwrap();
-        let e = weight_average(&[a, b])
-            .err()
-            .expect("widths differ")
-            .to_string();
+        let e = weight_average(&[a, b]).err().expect("widths differ").to_string();
         assert!(e.contains("model 2") && e.contains("architecture"), "{e}");
         let e = weight_average(&[]).err().expect("no models").to_string();
         assert!(e.contains("no models"), "{e}");

@@ -19,8 +19,8 @@
 use super::augment::{sample_crop, AugmentConfig, TrainImage};
 use super::error::LearnedError;
 use super::model::LearnedModel;
-use super::optim::AdamW;
 use super::net::{NetOutput, HEADS, STRIDE};
+use super::optim::AdamW;
 use super::targets::make_targets;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;

@@ -8,12 +8,12 @@
 //! sight.
 
 use crate::line2d::mask::rle_from_box;
-use tubeloc_core::Rle;
 use crate::line2d::matching::RawMatch;
 use crate::line2d::template::Template;
 use nalgebra::{Point2, Rotation3, Vector3};
 use serde_json::json;
 use tubeloc_core::detection::{DetectionSource, TubeDetection};
+use tubeloc_core::Rle;
 use tubeloc_core::{CameraModel, Pose};
 
 /// A Line2D detection in one image.

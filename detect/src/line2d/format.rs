@@ -178,15 +178,7 @@ impl TemplateLibrary {
 fn parse_payload(payload: &[u8]) -> Result<TemplateLibrary, String> {
     let mut r = R { b: payload, pos: 0 };
     let camera = Pinhole { fx: r.f64()?, fy: r.f64()?, cx: r.f64()?, cy: r.f64()? };
-    let views = ViewParams {
-        step_deg: r.f64()?,
-        inplane_step_deg: r.f64()?,
-        inplane_range_deg: r.f64()?,
-        dedupe_tol_deg: r.f64()?,
-        dist_min: r.f64()?,
-        dist_max: r.f64()?,
-        dist_step: r.f64()?,
-    };
+    let views = ViewParams { step_deg: r.f64()?, inplane_step_deg: r.f64()?, inplane_range_deg: r.f64()?, dedupe_tol_deg: r.f64()?, dist_min: r.f64()?, dist_max: r.f64()?, dist_step: r.f64()? };
     let features = r.u32()?;
     let n = r.u32()? as usize;
     let mut templates = Vec::with_capacity(n.min(1 << 20));

@@ -29,15 +29,7 @@ impl Default for GradientParams {
 const NONE: u8 = 255;
 
 /// `(cos, sin)` of the 7 inner bin boundaries `22.5 k` degrees, `k = 1..=7`.
-const BOUNDS: [(f32, f32); 7] = [
-    (0.923_879_5, 0.382_683_43),
-    (0.707_106_77, 0.707_106_77),
-    (0.382_683_43, 0.923_879_5),
-    (0.0, 1.0),
-    (-0.382_683_43, 0.923_879_5),
-    (-0.707_106_77, 0.707_106_77),
-    (-0.923_879_5, 0.382_683_43),
-];
+const BOUNDS: [(f32, f32); 7] = [(0.923_879_5, 0.382_683_43), (0.707_106_77, 0.707_106_77), (0.382_683_43, 0.923_879_5), (0.0, 1.0), (-0.382_683_43, 0.923_879_5), (-0.707_106_77, 0.707_106_77), (-0.923_879_5, 0.382_683_43)];
 
 /// Orientation bin (0..8) of gradient `(gx, gy)` modulo 180 degrees, without `atan2`: after
 /// folding to `gy >= 0`, the bin is the number of boundaries `b` with `sin(θ - b) >= 0`, i.e.
@@ -90,7 +82,7 @@ fn labels(ch: &[Vec<f32>; 3], w: usize, h: usize, thr: f32) -> Vec<u8> {
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let ym = y.saturating_sub(1);
         let yp = (y + 1).min(h - 1);
-        for x in 0..w {
+        for (x, label) in row.iter_mut().enumerate() {
             let xm = x.saturating_sub(1);
             let xp = (x + 1).min(w - 1);
             let (mut best, mut bgx, mut bgy) = (-1.0f32, 0.0f32, 0.0f32);
@@ -106,7 +98,7 @@ fn labels(ch: &[Vec<f32>; 3], w: usize, h: usize, thr: f32) -> Vec<u8> {
                 }
             }
             if best >= thr2 && best > 0.0 {
-                row[x] = orientation_bin(bgx, bgy);
+                *label = orientation_bin(bgx, bgy);
             }
         }
     });

@@ -44,7 +44,7 @@ mod tests {
         // 3x4 image (h=3, w=4), foreground at (x=1, y=1) and (x=1, y=2), (x=2, y=0).
         let fg = [(1u32, 1u32), (1, 2), (2, 0)];
         let r = rle_from_box(3, 4, 1, 3, 0, 3, |x, y| fg.contains(&(x, y)));
-        // Column-major sequence: col0 000, col1 011, col2 100, col3 000 -> 4 zeros, 3 ones, 8 zeros... 
+        // Column-major sequence: col0 000, col1 011, col2 100, col3 000 -> 4 zeros, 3 ones, 8 zeros...
         assert_eq!(r.counts, vec![4, 3, 5]);
         assert_eq!(r.area(), 3);
         // Known pycocotools encoding of counts [4, 3, 5] is "435".

@@ -397,11 +397,7 @@ fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16
         acc8.clear();
         acc8.resize(n, 0);
         add_features_u8(simd, lm, &l1.features[..head], acc8);
-        let tails: Vec<(&[u8], usize)> = tail
-            .iter()
-            .map(|f| ((f.y as usize / tt) * gw + f.x as usize / tt, lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt)))
-            .map(|(start, m)| (m, start))
-            .collect();
+        let tails: Vec<(&[u8], usize)> = tail.iter().map(|f| ((f.y as usize / tt) * gw + f.x as usize / tt, lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt))).map(|(start, m)| (m, start)).collect();
         // Exact score of a valid grid index, or None when it is surely below need1.
         let score = |i: usize| -> Option<u16> {
             let h = acc8[i];
@@ -471,12 +467,7 @@ fn candidates(rmax: usize, cmax: usize, gw: usize, row_may_pass: impl Fn(usize) 
 
 /// All raw matches of a library (rayon across templates), sorted by decreasing score.
 pub fn match_all(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchParams) -> Vec<RawMatch> {
-    let mut all: Vec<RawMatch> = lib
-        .templates
-        .par_iter()
-        .map_init(|| (Vec::new(), Vec::new()), |(a16, a8), t| match_template(img, t, p, a16, a8))
-        .flatten()
-        .collect();
+    let mut all: Vec<RawMatch> = lib.templates.par_iter().map_init(|| (Vec::new(), Vec::new()), |(a16, a8), t| match_template(img, t, p, a16, a8)).flatten().collect();
     all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
     all
 }
@@ -627,10 +618,13 @@ impl Line2dDetector {
                     })
                     .collect();
                 scored.sort_by(|a, b| b.0.score.total_cmp(&a.0.score).then(a.0.template.cmp(&b.0.template)).then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x))));
-                scored.into_iter().map(|(m, sim, c)| {
-                    sims.insert((m.template, m.x, m.y), (sim, c));
-                    m
-                }).collect()
+                scored
+                    .into_iter()
+                    .map(|(m, sim, c)| {
+                        sims.insert((m.template, m.x, m.y), (sim, c));
+                        m
+                    })
+                    .collect()
             }
         };
         let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
@@ -646,9 +640,9 @@ impl Line2dDetector {
                 let max_area = by_sim.iter().filter(|m| m.score >= by_sim[0].score - margin).map(|m| self.library.templates[m.template as usize].area).max().unwrap_or(1).max(1) as f32;
                 let aw = self.params.rerank_area_weight;
                 let m = match (&img.resp_rerank, &self.params.verify, &luma) {
-                    (Some(rr), Some(v), Some(l)) if v.rerank_weight > 0.0 => rerank_with(&by_sim, &self.library, rr, margin, |t, x, y| {
-                        v.rerank_weight * contrast(l, width, height, self.samples.get(t, v), x, y).unwrap_or(-1.0).clamp(-1.0, 1.0) + aw * t.area as f32 / max_area
-                    }),
+                    (Some(rr), Some(v), Some(l)) if v.rerank_weight > 0.0 => {
+                        rerank_with(&by_sim, &self.library, rr, margin, |t, x, y| v.rerank_weight * contrast(l, width, height, self.samples.get(t, v), x, y).unwrap_or(-1.0).clamp(-1.0, 1.0) + aw * t.area as f32 / max_area)
+                    }
                     (Some(rr), _, _) => rerank_with(&by_sim, &self.library, rr, margin, |t, _, _| aw * t.area as f32 / max_area),
                     _ => by_sim[0],
                 };
@@ -678,15 +672,7 @@ impl Line2dDetector {
                 }
                 Ok(c.clone())
             }
-            None => Ok(CameraModel {
-                width: width as u32,
-                height: height as u32,
-                fx: k.fx,
-                fy: k.fy,
-                cx: (width as f64 - 1.0) / 2.0,
-                cy: (height as f64 - 1.0) / 2.0,
-                distortion: Default::default(),
-            }),
+            None => Ok(CameraModel { width: width as u32, height: height as u32, fx: k.fx, fy: k.fy, cx: (width as f64 - 1.0) / 2.0, cy: (height as f64 - 1.0) / 2.0, distortion: Default::default() }),
         }
     }
 }

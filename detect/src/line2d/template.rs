@@ -268,10 +268,7 @@ impl Template {
             distance: view.distance as f32,
             t_cam_tube: view.t_cam_tube,
             centre: [(cx - (sil.x0 as f64 + x0 as f64)) as f32, (cy - (sil.y0 as f64 + y0 as f64)) as f32],
-            levels: vec![
-                TemplateLevel { width: tw as u16, height: th as u16, features: f0 },
-                TemplateLevel { width: w1 as u16, height: h1 as u16, features: f1 },
-            ],
+            levels: vec![TemplateLevel { width: tw as u16, height: th as u16, features: f0 }, TemplateLevel { width: w1 as u16, height: h1 as u16, features: f1 }],
             area: mask.iter().map(|&m| m as u32).sum(),
             mask,
         })

@@ -59,18 +59,11 @@ pub struct ViewSpec {
 /// Vertices of the icosahedron with each face split into `n²` triangles, on the unit sphere.
 pub fn geodesic_sphere(n: usize) -> Vec<Vector3<f64>> {
     let p = (1.0 + 5f64.sqrt()) / 2.0;
-    let v: Vec<Vector3<f64>> = [
-        (-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0),
-        (0.0, -1.0, p), (0.0, 1.0, p), (0.0, -1.0, -p), (0.0, 1.0, -p),
-        (p, 0.0, -1.0), (p, 0.0, 1.0), (-p, 0.0, -1.0), (-p, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vector3::new(x, y, z).normalize())
-    .collect();
-    let faces = [
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
-    ];
+    let v: Vec<Vector3<f64>> = [(-1.0, p, 0.0), (1.0, p, 0.0), (-1.0, -p, 0.0), (1.0, -p, 0.0), (0.0, -1.0, p), (0.0, 1.0, p), (0.0, -1.0, -p), (0.0, 1.0, -p), (p, 0.0, -1.0), (p, 0.0, 1.0), (-p, 0.0, -1.0), (-p, 0.0, 1.0)]
+        .iter()
+        .map(|&(x, y, z)| Vector3::new(x, y, z).normalize())
+        .collect();
+    let faces = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]];
     let n = n.max(1);
     let mut out: Vec<Vector3<f64>> = Vec::new();
     // Vertices shared by faces are found through a grid of 1e-6 cells (the 27 cells around a
@@ -160,7 +153,7 @@ fn check(params: &ViewParams) -> Result<(), Line2dError> {
     if !(ok(params.step_deg) && params.step_deg <= 90.0) {
         return Err(Line2dError::invalid("step-deg", format!("must be in (0, 90], got {}", params.step_deg)));
     }
-    if !ok(params.inplane_step_deg) || !(params.inplane_range_deg.is_finite() && params.inplane_range_deg >= 0.0) {
+    if !(ok(params.inplane_step_deg) && params.inplane_range_deg.is_finite() && params.inplane_range_deg >= 0.0) {
         return Err(Line2dError::invalid("inplane", "step must be > 0 and range >= 0 degrees"));
     }
     if !(params.dedupe_tol_deg.is_finite() && params.dedupe_tol_deg >= 0.0) {
@@ -213,12 +206,7 @@ pub fn generate_views(params: &ViewParams) -> Result<Vec<ViewSpec>, Line2dError>
     for r in &rots {
         let a = r.matrix().column(2).into_owned();
         for &d in &dists {
-            out.push(ViewSpec {
-                t_cam_tube: Pose::from_parts(*r, Vector3::new(0.0, 0.0, d)),
-                alpha_deg: (-a.z).clamp(-1.0, 1.0).acos().to_degrees(),
-                psi_deg: a.y.atan2(a.x).to_degrees(),
-                distance: d,
-            });
+            out.push(ViewSpec { t_cam_tube: Pose::from_parts(*r, Vector3::new(0.0, 0.0, d)), alpha_deg: (-a.z).clamp(-1.0, 1.0).acos().to_degrees(), psi_deg: a.y.atan2(a.x).to_degrees(), distance: d });
         }
     }
     Ok(out)

@@ -13,11 +13,7 @@ use super::params::{MAX_DETS, NUM_IOU_THRS, NUM_REC_THRS};
 
 /// Accumulates one (k, a, m) slice. `evals` are the images' results in image-id order.
 /// Returns `(precision[t][r], recall[t])`, or `None` when there is no non-ignored ground truth.
-pub(crate) fn accumulate_slice(
-    evals: &[&ImgEval],
-    max_det: usize,
-    rec_thrs: &[f64; NUM_REC_THRS],
-) -> Option<(Vec<[f64; NUM_REC_THRS]>, [f64; NUM_IOU_THRS])> {
+pub(crate) fn accumulate_slice(evals: &[&ImgEval], max_det: usize, rec_thrs: &[f64; NUM_REC_THRS]) -> Option<(Vec<[f64; NUM_REC_THRS]>, [f64; NUM_IOU_THRS])> {
     debug_assert!(MAX_DETS.contains(&max_det));
     let npig: usize = evals.iter().map(|e| e.num_gt).sum();
     if npig == 0 {

@@ -21,22 +21,13 @@ pub(crate) struct ImgEval {
 /// Evaluates one cell. `area_rng` is inclusive; `extra_ignore(ann_index)` marks additional
 /// ground truth as ignored (attribute breakdowns). Returns `None` when the cell has neither
 /// ground truth nor detections.
-pub(crate) fn evaluate_cell(
-    cell: &Cell,
-    area_rng: [f64; 2],
-    iou_thrs: &[f64; NUM_IOU_THRS],
-    extra_ignore: &dyn Fn(usize) -> bool,
-) -> Option<ImgEval> {
+pub(crate) fn evaluate_cell(cell: &Cell, area_rng: [f64; 2], iou_thrs: &[f64; NUM_IOU_THRS], extra_ignore: &dyn Fn(usize) -> bool) -> Option<ImgEval> {
     let (g_n, d_n) = (cell.gts.len(), cell.dts.len());
     if g_n == 0 && d_n == 0 {
         return None;
     }
     // `_ignore`: crowd (pycocotools' `ignore = iscrowd`), outside the area range, or filtered.
-    let ignore: Vec<bool> = cell
-        .gts
-        .iter()
-        .map(|g| g.crowd || g.area < area_rng[0] || g.area > area_rng[1] || extra_ignore(g.ann_index))
-        .collect();
+    let ignore: Vec<bool> = cell.gts.iter().map(|g| g.crowd || g.area < area_rng[0] || g.area > area_rng[1] || extra_ignore(g.ann_index)).collect();
     // Stable sort: non-ignored first, each group in file order.
     let gt_order: Vec<usize> = (0..g_n).filter(|&g| !ignore[g]).chain((0..g_n).filter(|&g| ignore[g])).collect();
     let gt_ig: Vec<bool> = gt_order.iter().map(|&g| ignore[g]).collect();
@@ -88,10 +79,5 @@ pub(crate) fn evaluate_cell(
             }
         }
     }
-    Some(ImgEval {
-        dt_scores: cell.dts.iter().map(|d| d.score).collect(),
-        dt_matched,
-        dt_ignore,
-        num_gt: gt_ig.iter().filter(|&&i| !i).count(),
-    })
+    Some(ImgEval { dt_scores: cell.dts.iter().map(|d| d.score).collect(), dt_matched, dt_ignore, num_gt: gt_ig.iter().filter(|&&i| !i).count() })
 }

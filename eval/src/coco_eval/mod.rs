@@ -102,11 +102,7 @@ impl CocoEvaluator {
     /// `params.imgIds` set to them), additionally ignoring ground truth for which
     /// `ignore_gt(annotation_index)` holds (like an area range: detections matched to it are
     /// ignored too). `annotation_index` indexes `CocoDataset::annotations`.
-    pub fn evaluate_with(
-        &self,
-        keep_image: &(dyn Fn(u64) -> bool + Sync),
-        ignore_gt: &(dyn Fn(usize) -> bool + Sync),
-    ) -> EvalResult {
+    pub fn evaluate_with(&self, keep_image: &(dyn Fn(u64) -> bool + Sync), ignore_gt: &(dyn Fn(usize) -> bool + Sync)) -> EvalResult {
         let p = &self.prep;
         let k_n = p.cat_ids.len();
         let a_n = AREA_RNGS.len();
@@ -128,8 +124,7 @@ impl CocoEvaluator {
             .collect();
 
         let (m_n, r_n, t_n) = (MAX_DETS.len(), NUM_REC_THRS, NUM_IOU_THRS);
-        let combos: Vec<(usize, usize, usize)> =
-            (0..k_n).flat_map(|k| (0..a_n).flat_map(move |a| (0..m_n).map(move |m| (k, a, m)))).collect();
+        let combos: Vec<(usize, usize, usize)> = (0..k_n).flat_map(|k| (0..a_n).flat_map(move |a| (0..m_n).map(move |m| (k, a, m)))).collect();
         let slices: Vec<_> = combos
             .par_iter()
             .map(|&(k, a, m)| {
@@ -148,16 +143,7 @@ impl CocoEvaluator {
                 }
             }
         }
-        let mut res = EvalResult {
-            iou_type: self.iou_type,
-            iou_thrs: iou_thrs.to_vec(),
-            rec_thrs: rec_thrs.to_vec(),
-            cat_ids: p.cat_ids.clone(),
-            num_images: images.len(),
-            stats: [0.0; 12],
-            precision,
-            recall,
-        };
+        let mut res = EvalResult { iou_type: self.iou_type, iou_thrs: iou_thrs.to_vec(), rec_thrs: rec_thrs.to_vec(), cat_ids: p.cat_ids.clone(), num_images: images.len(), stats: [0.0; 12], precision, recall };
         for (i, s) in STATS.iter().enumerate() {
             res.stats[i] = summary::stat(&res, s);
         }
@@ -206,8 +192,7 @@ impl EvalResult {
     pub fn pr_curve(&self, t: usize) -> [f64; 101] {
         let mut out = [-1.0; 101];
         for (r, v) in out.iter_mut().enumerate() {
-            let vals: Vec<f64> =
-                (0..self.cat_ids.len()).map(|k| self.precision_at(t, r, k, 0, 2)).filter(|&p| p > -1.0).collect();
+            let vals: Vec<f64> = (0..self.cat_ids.len()).map(|k| self.precision_at(t, r, k, 0, 2)).filter(|&p| p > -1.0).collect();
             if !vals.is_empty() {
                 *v = vals.iter().sum::<f64>() / vals.len() as f64;
             }
@@ -234,11 +219,7 @@ impl EvalResult {
     /// `metrics.json`: the 12 numbers with names, the PR curves (one per IoU threshold, area
     /// all, maxDets 100) and the recall per IoU threshold.
     pub fn to_json(&self) -> Value {
-        let stats: Vec<Value> = STATS
-            .iter()
-            .zip(self.stats)
-            .map(|(s, v)| json!({"name": s.name, "value": v, "line": summary::line(s, v).trim_start()}))
-            .collect();
+        let stats: Vec<Value> = STATS.iter().zip(self.stats).map(|(s, v)| json!({"name": s.name, "value": v, "line": summary::line(s, v).trim_start()})).collect();
         json!({
             "iou_type": self.iou_type.name(),
             "num_images": self.num_images,

@@ -78,10 +78,7 @@ pub(crate) fn prepare(gt: &CocoDataset, dt: &[CocoResult], iou_type: IouType) ->
     let mut seen_ids = HashMap::with_capacity(gt.annotations.len());
     for (j, a) in gt.annotations.iter().enumerate() {
         if let Some(prev) = seen_ids.insert(a.id, j) {
-            return Err(EvalError::entry(
-                format!("annotations[{j}] (id {})", a.id),
-                format!("duplicate annotation id (also annotations[{prev}]); pycocotools would silently mix them up"),
-            ));
+            return Err(EvalError::entry(format!("annotations[{j}] (id {})", a.id), format!("duplicate annotation id (also annotations[{prev}]); pycocotools would silently mix them up")));
         }
         let Some(&i) = img_index.get(&a.image_id) else {
             return Err(EvalError::entry(format!("annotations[{j}] (id {})", a.id), format!("unknown image_id {}", a.image_id)));
@@ -99,10 +96,7 @@ pub(crate) fn prepare(gt: &CocoDataset, dt: &[CocoResult], iou_type: IouType) ->
     let mut dt_lists: Vec<Vec<usize>> = vec![Vec::new(); img_ids.len() * k_n];
     for (j, r) in dt.iter().enumerate() {
         let Some(&i) = img_index.get(&r.image_id) else {
-            return Err(EvalError::entry(
-                format!("results[{j}] (image_id {})", r.image_id),
-                format!("image_id {} is not in the ground truth", r.image_id),
-            ));
+            return Err(EvalError::entry(format!("results[{j}] (image_id {})", r.image_id), format!("image_id {} is not in the ground truth", r.image_id)));
         };
         if !r.score.is_finite() {
             return Err(EvalError::entry(format!("results[{j}] (image_id {})", r.image_id), "non-finite score"));
@@ -122,15 +116,7 @@ pub(crate) fn prepare(gt: &CocoDataset, dt: &[CocoResult], iou_type: IouType) ->
     Ok(Prepared { img_ids, cat_ids, cells: cells? })
 }
 
-fn build_cell(
-    gt: &CocoDataset,
-    dt: &[CocoResult],
-    gt_idx: &[usize],
-    dt_idx: &[usize],
-    (h, w): (u32, u32),
-    iou_type: IouType,
-    mode: ResultMode,
-) -> Result<Cell, EvalError> {
+fn build_cell(gt: &CocoDataset, dt: &[CocoResult], gt_idx: &[usize], dt_idx: &[usize], (h, w): (u32, u32), iou_type: IouType, mode: ResultMode) -> Result<Cell, EvalError> {
     // Stable sort by descending score (np.argsort(-score, kind='mergesort')), then the cap.
     let mut order: Vec<usize> = dt_idx.to_vec();
     order.sort_by(|&a, &b| dt[b].score.partial_cmp(&dt[a].score).unwrap_or(std::cmp::Ordering::Equal));
@@ -200,7 +186,6 @@ fn result_rle(r: &CocoResult, h: u32, w: u32, mode: ResultMode) -> Result<Rle, S
 
 fn gt_rle(a: &CocoAnnotation, j: usize, h: u32, w: u32) -> Result<Rle, EvalError> {
     let at = || format!("annotations[{j}] (id {})", a.id);
-    let seg: &Segmentation =
-        a.segmentation.as_ref().ok_or_else(|| EvalError::entry(at(), "no segmentation (needed for segm evaluation)"))?;
+    let seg: &Segmentation = a.segmentation.as_ref().ok_or_else(|| EvalError::entry(at(), "no segmentation (needed for segm evaluation)"))?;
     seg.to_rle(h, w).map_err(|e| EvalError::entry(at(), e.to_string()))
 }

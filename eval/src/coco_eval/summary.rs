@@ -108,8 +108,5 @@ pub(crate) fn line(s: &StatSpec, value: f64) -> String {
         Some(t) => format!("{:.2}", thrs[t]),
         None => format!("{:.2}:{:.2}", thrs[0], thrs[thrs.len() - 1]),
     };
-    format!(
-        " {:<18} {} @[ IoU={:<9} | area={:>6} | maxDets={:>3} ] = {:.3}",
-        title, kind, iou, AREA_LABELS[s.area_index], MAX_DETS[s.max_det_index], value
-    )
+    format!(" {:<18} {} @[ IoU={:<9} | area={:>6} | maxDets={:>3} ] = {:.3}", title, kind, iou, AREA_LABELS[s.area_index], MAX_DETS[s.max_det_index], value)
 }

@@ -95,30 +95,32 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
                 continue;
             }
             // Detections: near-copies (some duplicated), several inside crowd regions.
-            let copies = if crowd { 3 } else if rng.random_bool(0.2) { 0 } else if rng.random_bool(0.2) { 2 } else { 1 };
+            let copies = if crowd {
+                3
+            } else if rng.random_bool(0.2) {
+                0
+            } else if rng.random_bool(0.2) {
+                2
+            } else {
+                1
+            };
             for _ in 0..copies {
-                let dp = tube_polygon(
-                    cx + rng.random_range(-3.0..3.0),
-                    cy + rng.random_range(-3.0..3.0),
-                    len * rng.random_range(0.8..1.2),
-                    wid * rng.random_range(0.8..1.2),
-                    ang + rng.random_range(-0.15..0.15),
-                );
+                let dp = tube_polygon(cx + rng.random_range(-3.0..3.0), cy + rng.random_range(-3.0..3.0), len * rng.random_range(0.8..1.2), wid * rng.random_range(0.8..1.2), ang + rng.random_range(-0.15..0.15));
                 let dcat = if rng.random_bool(0.9) { cat } else { 3 - cat };
                 let score = scores[rng.random_range(0..scores.len())];
                 dts.push(det(img_id, dcat, score, &dp, h, w, form, &mut rng));
             }
         }
         // False positives, and over 100 detections in image 3.
-        let n_fp = if i == 3 { 130 } else if no_dets { 0 } else { rng.random_range(0..4) };
+        let n_fp = if i == 3 {
+            130
+        } else if no_dets {
+            0
+        } else {
+            rng.random_range(0..4)
+        };
         for _ in 0..n_fp {
-            let dp = tube_polygon(
-                rng.random_range(0.0..w as f64),
-                rng.random_range(0.0..h as f64),
-                rng.random_range(5.0..40.0),
-                rng.random_range(3.0..12.0),
-                rng.random_range(0.0..3.1),
-            );
+            let dp = tube_polygon(rng.random_range(0.0..w as f64), rng.random_range(0.0..h as f64), rng.random_range(5.0..40.0), rng.random_range(3.0..12.0), rng.random_range(0.0..3.1));
             let score = if i == 3 { rng.random_range(0.0..1.0) } else { scores[rng.random_range(0..scores.len())] };
             dts.push(det(img_id, rng.random_range(1..3), score, &dp, h, w, form, &mut rng));
         }
@@ -135,12 +137,7 @@ pub fn make(seed: u64, n_images: usize, form: DtForm) -> (Value, Value) {
 fn det(img: u64, cat: u64, score: f64, poly: &[f64], h: u32, w: u32, form: DtForm, rng: &mut ChaCha8Rng) -> Value {
     let rle = Rle::from_polygons(&[poly.to_vec()], h, w).unwrap();
     let bb = rle.to_bbox();
-    let noisy = [
-        bb[0] + rng.random_range(-0.5..0.5),
-        bb[1] + rng.random_range(-0.5..0.5),
-        bb[2] + rng.random_range(-0.5..0.5),
-        bb[3] + rng.random_range(-0.5..0.5),
-    ];
+    let noisy = [bb[0] + rng.random_range(-0.5..0.5), bb[1] + rng.random_range(-0.5..0.5), bb[2] + rng.random_range(-0.5..0.5), bb[3] + rng.random_range(-0.5..0.5)];
     match form {
         DtForm::Mask => json!({"image_id": img, "category_id": cat, "score": score, "segmentation": seg_value(&Segmentation::from_rle(&rle))}),
         DtForm::MaskAndBox => json!({"image_id": img, "category_id": cat, "score": score,
@@ -180,11 +177,7 @@ pub fn write(dir: &Path, name: &str, value: &Value) -> PathBuf {
 
 /// Whether `python3 -c "import pycocotools"` works.
 pub fn have_pycocotools() -> bool {
-    std::process::Command::new("python3")
-        .args(["-c", "import pycocotools.cocoeval"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false)
+    std::process::Command::new("python3").args(["-c", "import pycocotools.cocoeval"]).output().map(|o| o.status.success()).unwrap_or(false)
 }
 
 /// Path of a file under the repository's `scripts/`.
