@@ -92,6 +92,11 @@ impl Agreement {
     fn quantile(&self, q: f64) -> f64 {
         self.errs[((self.errs.len() - 1) as f64 * q).round() as usize]
     }
+
+    /// Fraction of corner errors within `px` pixels.
+    fn within(&self, px: f64) -> f64 {
+        self.errs.iter().filter(|e| **e <= px).count() as f64 / self.errs.len().max(1) as f64
+    }
 }
 
 /// Runs `config` on every photo (pjpeg or image-crate pixels) and matches detections to the
@@ -148,7 +153,7 @@ fn settings_table_on_real_photos() {
                 for decimation in [1.0, 2.0] {
                     let cfg = DetectorConfig { linearize_srgb, refine_edges, decimation, ..Default::default() };
                     let a = agreement(&photos, &cfg, pjpeg, C_TO_OPENCV_PX);
-                    let within = a.errs.iter().filter(|e| **e <= 0.1).count() as f64 / a.errs.len().max(1) as f64;
+                    let within = a.within(0.1);
                     println!(
                         "| {} | {} | {} | {} | {} | {}/{} | {:.3} | {:.3} | {:.3} | {:.0} % | ({:+.3}, {:+.3}) |",
                         if pjpeg { "pjpeg" } else { "image crate" },
@@ -199,7 +204,7 @@ fn photos_or_skip(test: &str) -> Option<Vec<Photo>> {
 }
 
 fn report(label: &str, a: &Agreement) -> f64 {
-    let within = a.errs.iter().filter(|e| **e <= 0.1).count() as f64 / a.errs.len() as f64;
+    let within = a.within(0.1);
     eprintln!(
         "{label}: {} found, {}/{} reference tags matched; per-corner error median {:.3} px, 90th percentile {:.3} px, max {:.3} px, {:.0} % within 0.1 px, mean offset ({:+.3}, {:+.3}) px",
         a.found,

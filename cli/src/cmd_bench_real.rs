@@ -143,21 +143,21 @@ fn negatives(data: &Path, model: &Path, cal: &ScoreCalibration, frames: Option<u
     let mut per_frame = Vec::new();
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     for p in &paths {
-        let input = tubeloc_detect::input::load(p).map_err(|e| anyhow::anyhow!(e))?;
-        let view = negative_view(input.info.grey).view(p.clone(), input.width as u32, input.height as u32, None, &mut rng);
+        let image = image::open(p).with_context(|| format!("reading {}", p.display()))?;
+        let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
+        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
         let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
         // `locate` at its defaults on the frame, with the assumed camera and ground; its
         // detector runs at the same working scale `s`.
         let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
         let detector = tubeloc_pipeline::LearnedDetector::load(model, DecodeConfig::default())?;
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector), settings.clone())?;
-        let image = image::open(p).with_context(|| format!("reading {}", p.display()))?;
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
         let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None })?;
         let (found, located) = (&out.detections, out.tubes.len());
         let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": input.info.grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
     }
     let n = per_frame.len().max(1) as f64;
     let sum = |k: &str| per_frame.iter().filter_map(|f| f[k].as_u64()).sum::<u64>() as f64 / n;

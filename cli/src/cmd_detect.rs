@@ -44,7 +44,7 @@ pub struct DetectArgs {
     /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up, metres) for the learned
     /// detector's working scale (with `--camera`); dataset images use their own `ground`.
     #[arg(long, allow_hyphen_values = true)]
-    pub ground: Option<String>,
+    pub ground: Option<tubeloc_core::GroundPlane>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
     /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
     #[arg(long, default_value = "1:4")]
@@ -84,7 +84,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
                 None => Default::default(),
             };
             let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
-            let scales = crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_deref(), band)?;
+            let scales = crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_ref(), band)?;
             crate::cmd_detect_learned::run_learned(&model, &images, &scales, &cfg)?
         }
         Method::External => {

@@ -97,24 +97,10 @@ pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -
     }
 }
 
-/// Parses a ground plane "nx,ny,nz,d" (`n·X = d`, camera frame, metres): four finite numbers
-/// and a non-zero normal; returns the unit normal and `d` scaled with it.
-pub fn parse_ground(s: &str) -> Result<(nalgebra::Vector3<f64>, f64)> {
-    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<Result<_, _>>().with_context(|| format!("--ground {s:?}: expected four comma-separated numbers nx,ny,nz,d"))?;
-    if v.len() != 4 || v.iter().any(|x| !x.is_finite()) {
-        bail!("--ground {s:?}: expected four finite comma-separated numbers nx,ny,nz,d");
-    }
-    let n = nalgebra::Vector3::new(v[0], v[1], v[2]);
-    if n.norm() < 1e-9 {
-        bail!("--ground {s:?}: the normal (nx, ny, nz) is zero");
-    }
-    Ok((n / n.norm(), v[3] / n.norm()))
-}
-
 /// The working scale of each image ([`tubeloc_detect::scale`]): from each dataset image's
 /// `camera` and `ground`, or for one image from `--camera` and `--ground`; 1 without a camera
 /// or with the band "off".
-pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera: Option<&Path>, ground: Option<&str>, band: Option<tubeloc_detect::scale::RangeBand>) -> Result<Vec<f64>> {
+pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera: Option<&Path>, ground: Option<&tubeloc_core::GroundPlane>, band: Option<tubeloc_detect::scale::RangeBand>) -> Result<Vec<f64>> {
     let Some(band) = band else { return Ok(vec![1.0; images.len()]) };
     if let Some(d) = dataset {
         let ann = d.join("annotations.json");
@@ -122,7 +108,7 @@ pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera:
         let by_id: std::collections::HashMap<u64, &tubeloc_core::CocoImage> = ds.images.iter().map(|im| (im.id, im)).collect();
         return Ok(images.iter().map(|(id, _)| by_id.get(id).map_or(1.0, |im| tubeloc_detect::learned::dataset::image_working_scale(im, band))).collect());
     }
-    let ground = ground.map(parse_ground).transpose()?;
+    let ground = ground.map(|g| (g.normal, g.offset));
     let Some(cam) = camera else {
         if ground.is_some() {
             bail!("--ground needs --camera (the working scale comes from the camera's focal length)");

@@ -1,27 +1,11 @@
 //! End-to-end tests of the `tubeloc` program: exit codes, error messages, `locate` on a rendered
 //! scene (checked against the renderer's exact poses) and `bench` resuming an interrupted run.
 
+mod common;
+
+use common::*;
 use serde_json::Value;
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn tubeloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
-}
-
-fn ok(args: &[&str]) -> Output {
-    let o = tubeloc(args);
-    assert!(o.status.success(), "tubeloc {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr));
-    o
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 /// A rendered tiny dataset, its first image's camera as a one-camera rig, and a small library.
 struct Scene {

@@ -3,20 +3,11 @@
 //! images the C detector cannot take, template libraries too large to build, stale temporaries,
 //! outputs that are not regular files, and a closed stdout.
 
+mod common;
+
+use common::*;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-
-fn tubeloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 fn entries(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();

@@ -3,6 +3,9 @@
 //! the wrong size refused; external results selected by the image's file name; a bad --ground
 //! refused as a bad command line before any work.
 
+mod common;
+
+use common::*;
 use nalgebra::Vector3;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -10,18 +13,6 @@ use std::process::{Command, Output, Stdio};
 use tubeloc_core::{CameraModel, Segmentation, TubeAxisPose};
 use tubeloc_refine::silhouette::silhouette_mask;
 use tubeloc_refine::CylinderModel;
-
-fn tubeloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 /// A painted 320x240 scene with one tube, a one-camera rig and COCO results holding the tube's
 /// mask, in a temporary folder; `out` (empty) for the outputs.

@@ -1,23 +1,11 @@
 //! Real imagery: composite sets on real rover frames split by sol, and the bench's real stage
 //! at a small size. These need `../shared/data/real_mars` beside the repository.
 
+mod common;
+
+use common::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn tubeloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).output().expect("running tubeloc")
-}
-
-fn ok(args: &[&str]) -> Output {
-    let o = tubeloc(args);
-    assert!(o.status.success(), "tubeloc {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr));
-    o
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 fn real_data() -> PathBuf {
     let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
