@@ -145,6 +145,24 @@ pub fn shard(s: &str) -> Result<(usize, usize), String> {
     Ok((i, n))
 }
 
+/// A tube-range band "NEAR:FAR" (metres, `0 < NEAR < FAR`, finite) or "off", checked when the
+/// command line is parsed; the text is kept and read by
+/// [`crate::cmd_detect_learned::parse_range_band`].
+pub fn range_band(s: &str) -> Result<String, String> {
+    crate::cmd_detect_learned::parse_range_band(s).map_err(|e| format!("{e:#}"))?;
+    Ok(s.to_string())
+}
+
+/// A range "NEAR:FAR" in metres with `0 <= NEAR < FAR`, finite (composite placement).
+pub fn range_m(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected NEAR:FAR in metres"))?;
+    let (near, far) = (parse_f64(a.trim())?, parse_f64(b.trim())?);
+    if !(near.is_finite() && far.is_finite() && near >= 0.0 && far > near) {
+        return Err(format!("{s:?}: need 0 <= NEAR < FAR, finite"));
+    }
+    Ok((near, far))
+}
+
 /// An AprilTag quad decimation factor: 1, 1.5 or a whole number up to 64
 /// ([`tubeloc_calib::detect::check_decimation`]).
 pub fn decimation(s: &str) -> Result<f32, String> {

@@ -47,7 +47,7 @@ pub struct DetectArgs {
     pub ground: Option<tubeloc_core::GroundPlane>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
     /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
-    #[arg(long, default_value = "1:4")]
+    #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
     pub range_m: String,
     /// Output detections (JSON list of COCO results with seeds).
     #[arg(long)]

@@ -84,7 +84,7 @@ pub struct LocateArgs {
     pub min_probability: Option<f64>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
     /// the working scale of this band (or of --ground), or "off" (the image as it is).
-    #[arg(long, default_value = "1:4")]
+    #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
     pub range_m: String,
     /// Output poses (JSON, schema tubeloc.locate.v1).
     #[arg(long)]
@@ -264,11 +264,8 @@ pub fn run(a: LocateArgs) -> Result<usize> {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
     }
-    files::write_atomic(&overlay_path, &png).with_context(|| format!("writing {}", overlay_path.display()))?;
-    if let Err(e) = files::write_atomic(&a.out, &json) {
-        let _ = std::fs::remove_file(&overlay_path);
-        return Err(e).with_context(|| format!("writing {}", a.out.display()));
-    }
+    // Both files appear together: a concurrent run to the same --out leaves one run's pair.
+    files::write_atomic_group(&[(&a.out, &json), (&overlay_path, &png)]).with_context(|| format!("writing {} and {}", a.out.display(), overlay_path.display()))?;
 
     let converged = found.tubes.len();
     print_summary(&a.image, &found, converged);

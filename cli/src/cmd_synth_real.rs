@@ -5,7 +5,7 @@
 //! split under the documented assumed mast view; training sets use every background of the
 //! training split under random assumed views, with appearance randomization.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -44,11 +44,11 @@ pub struct RealArgs {
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub per_view: u32,
     /// Tubes per composite, "MIN:MAX" (0 gives negative frames).
-    #[arg(long, default_value = "1:4")]
-    pub tubes: String,
+    #[arg(long, default_value = "1:4", value_parser = tube_counts)]
+    pub tubes: (usize, usize),
     /// Distance band of the tubes from the camera, metres, "NEAR:FAR".
-    #[arg(long, default_value = "1.5:5")]
-    pub range_m: String,
+    #[arg(long, default_value = "1.5:5", value_parser = crate::args::range_m)]
+    pub range_m: (f64, f64),
     /// Smallest frame side used (the 256 px frames binned on board show tubes 1-3 px wide).
     #[arg(long, default_value_t = 500)]
     pub min_size: u32,
@@ -70,24 +70,19 @@ pub struct RealArgs {
     pub out: PathBuf,
 }
 
-fn pair<T: std::str::FromStr>(s: &str, what: &str) -> Result<(T, T)> {
-    let (a, b) = s.split_once(':').with_context(|| format!("--{what} {s:?}: expected MIN:MAX"))?;
-    match (a.trim().parse::<T>(), b.trim().parse::<T>()) {
-        (Ok(a), Ok(b)) => Ok((a, b)),
-        _ => bail!("--{what} {s:?}: expected two numbers MIN:MAX"),
+/// Tubes per composite "MIN:MAX", `MIN <= MAX <= 20`, checked when the command line is parsed.
+fn tube_counts(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected MIN:MAX"))?;
+    match (a.trim().parse::<usize>(), b.trim().parse::<usize>()) {
+        (Ok(a), Ok(b)) if a <= b && b <= 20 => Ok((a, b)),
+        (Ok(_), Ok(_)) => Err(format!("{s:?}: need MIN <= MAX <= 20")),
+        _ => Err(format!("{s:?}: expected two whole numbers MIN:MAX")),
     }
 }
 
 /// Runs `tubeloc synth real`.
 pub fn run(a: RealArgs) -> Result<()> {
-    let tubes: (usize, usize) = pair(&a.tubes, "tubes")?;
-    let range: (f64, f64) = pair(&a.range_m, "range-m")?;
-    if tubes.0 > tubes.1 || tubes.1 > 20 {
-        bail!("--tubes {}: need MIN <= MAX <= 20", a.tubes);
-    }
-    if !(range.0.is_finite() && range.1.is_finite() && range.0 >= 0.0 && range.1 > range.0) {
-        bail!("--range-m {}: need 0 <= NEAR < FAR, finite", a.range_m);
-    }
+    let (tubes, range) = (a.tubes, a.range_m);
     let mut views = split_views(&a.data, a.split, a.kind != RealKind::Colour, a.kind != RealKind::Grey, a.min_size, a.seed)?;
     if let Some(n) = a.limit {
         views.truncate(n);

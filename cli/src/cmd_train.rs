@@ -79,7 +79,7 @@ pub struct TrainArgs {
     /// Train each image at its working scale (from its camera and ground plane, as inference
     /// resamples it; `tubeloc synth real` sets carry both): the tube-range band "NEAR:FAR" in
     /// metres, or "off".
-    #[arg(long, default_value = "1:4")]
+    #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
     pub range_m: String,
     /// Base width of the network.
     #[arg(long, default_value_t = 8, value_parser = crate::args::positive_usize)]

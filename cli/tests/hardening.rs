@@ -75,6 +75,12 @@ fn bad_numbers_and_argument_errors_exit_2_naming_the_flag_and_writing_nothing() 
         (vec!["demo", "--resolution", "0", "--out", o], "--resolution"),
         (vec!["bench", "--stereo-scenes", "0", "--out", o], "--stereo-scenes"),
         (vec!["calib", "detect", "--threads", "0", img], "--threads"),
+        (vec!["locate", "--rig", "rig.json", "--image", img, "--range-m", "4:1", "--out", oj], "--range-m"),
+        (vec!["locate", "--rig", "rig.json", "--image", img, "--range-m", "NaN:3", "--out", oj], "--range-m"),
+        (vec!["detect", "--image", img, "--range-m", "0:3", "--out", oj], "--range-m"),
+        (vec!["train", "--train", "ds", "--range-m", "1", "--out", oj], "--range-m"),
+        (vec!["synth", "real", "--split", "val", "--range-m", "5:1", "--out", o], "--range-m"),
+        (vec!["synth", "real", "--split", "val", "--tubes", "3:1", "--out", o], "--tubes"),
     ];
     let mut failures = Vec::new();
     for (args, flag) in &cases {

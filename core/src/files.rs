@@ -102,6 +102,79 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CoreError> {
     }
 }
 
+/// Writes several files so that they appear together: every file goes to its temporary first,
+/// and only when all are written are they renamed into place, one after the other, while an
+/// exclusive lock (`flock`) is held on the folder of the first file. Two processes writing the
+/// same group of files to one folder therefore leave all files of one of them, never a mix;
+/// when any write fails, no file of the group is replaced and the temporaries are removed.
+///
+/// Each path follows the rules of [`write_atomic`]; files that are written in place (devices,
+/// FIFOs) are written after the renames.
+pub fn write_atomic_group(files: &[(&Path, &[u8])]) -> Result<(), CoreError> {
+    let targets: Vec<Target> = files.iter().map(|(p, _)| resolve_target(p)).collect::<Result<_, _>>()?;
+    let Some((first, _)) = files.first() else { return Ok(()) };
+    let dir = match first.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir).map_err(|e| CoreError::io(dir, e))?;
+    let _lock = FolderLock::exclusive(dir)?;
+    let mut staged: Vec<(PathBuf, &Path)> = Vec::new();
+    let mut failure = None;
+    for (t, (_, bytes)) in targets.iter().zip(files) {
+        if let Target::Atomic(p) = t {
+            match stage(p, bytes) {
+                Ok(tmp) => staged.push((tmp, p)),
+                Err(e) => {
+                    failure = Some(e);
+                    break;
+                }
+            }
+        }
+    }
+    if let Some(e) = failure {
+        for (tmp, _) in &staged {
+            let _ = std::fs::remove_file(tmp);
+        }
+        return Err(e);
+    }
+    for (i, (tmp, p)) in staged.iter().enumerate() {
+        if let Err(e) = std::fs::rename(tmp, p) {
+            for (t, _) in &staged[i..] {
+                let _ = std::fs::remove_file(t);
+            }
+            return Err(CoreError::io(p, e));
+        }
+    }
+    for (t, (given, bytes)) in targets.iter().zip(files) {
+        if let Target::Direct(p) = t {
+            write_direct(given, p, bytes)?;
+        }
+    }
+    Ok(())
+}
+
+/// An exclusive `flock` on a folder, released when dropped (or when the process dies).
+struct FolderLock {
+    #[cfg_attr(not(unix), allow(dead_code))]
+    file: std::fs::File,
+}
+
+impl FolderLock {
+    fn exclusive(dir: &Path) -> Result<Self, CoreError> {
+        let file = std::fs::File::open(dir).map_err(|e| CoreError::io(dir, e))?;
+        #[cfg(unix)]
+        {
+            use std::os::fd::AsRawFd;
+            // SAFETY: flock on a descriptor this function owns; it blocks until the lock is free.
+            if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX) } != 0 {
+                return Err(CoreError::io(dir, std::io::Error::last_os_error()));
+            }
+        }
+        Ok(FolderLock { file })
+    }
+}
+
 /// Writes `bytes` into an existing non-regular file (device, FIFO, `/dev/stdout`) in place.
 fn write_direct(given: &Path, p: &Path, bytes: &[u8]) -> Result<(), CoreError> {
     let regular = std::fs::metadata(p).map(|m| m.is_file()).unwrap_or(false);
@@ -116,6 +189,17 @@ fn write_direct(given: &Path, p: &Path, bytes: &[u8]) -> Result<(), CoreError> {
 
 /// The temporary-file-and-rename write of a regular file.
 fn write_renamed(path: &Path, bytes: &[u8]) -> Result<(), CoreError> {
+    let tmp = stage(path, bytes)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        CoreError::io(path, e)
+    })
+}
+
+/// Writes `bytes` to the temporary `.<name>.<pid>.tmp` beside `path` (fsynced, with the
+/// permissions of the file it will replace); returns the temporary's path. Nothing is left
+/// behind on failure.
+fn stage(path: &Path, bytes: &[u8]) -> Result<PathBuf, CoreError> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -130,14 +214,15 @@ fn write_renamed(path: &Path, bytes: &[u8]) -> Result<(), CoreError> {
         if let Some(perm) = keep_permissions {
             f.set_permissions(perm)?;
         }
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        f.sync_all()
     })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(CoreError::io(path, e));
+    match result {
+        Ok(()) => Ok(tmp),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(CoreError::io(path, e))
+        }
     }
-    Ok(())
 }
 
 /// Whether process `pid` is alive on this machine (`/proc/<pid>` exists). Where `/proc` is not

@@ -5,7 +5,7 @@
 use std::io::Read;
 use std::os::unix::fs::{FileTypeExt, PermissionsExt};
 use std::path::Path;
-use tubeloc_core::files::{remove_stale_temporaries, write_atomic, write_json};
+use tubeloc_core::files::{self, remove_stale_temporaries, write_atomic, write_json};
 
 fn names(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
@@ -139,4 +139,40 @@ fn stale_temporaries_of_dead_processes_are_removed() {
     });
     // A missing parent folder is not an error.
     assert!(remove_stale_temporaries(&dir.path().join("nope/set")).unwrap().is_empty());
+}
+
+/// Writers racing on one pair of files leave both files from the same writer.
+#[test]
+fn a_group_written_concurrently_ends_as_one_writers_pair() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("p.json"), dir.path().join("p.overlay.png"));
+    std::thread::scope(|s| {
+        for w in 0..6u32 {
+            let (a, b) = (&a, &b);
+            s.spawn(move || {
+                for round in 0..40u32 {
+                    let text = format!("writer {w} round {round}");
+                    files::write_atomic_group(&[(a, text.as_bytes()), (b, text.repeat(50).as_bytes())]).unwrap();
+                }
+            });
+        }
+    });
+    let (ta, tb) = (std::fs::read_to_string(&a).unwrap(), std::fs::read_to_string(&b).unwrap());
+    assert_eq!(tb, ta.repeat(50), "the pair came from two writers");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 2, "temporaries left behind: {left:?}");
+}
+
+/// When one file of a group cannot be written, none of the group is replaced.
+#[test]
+fn a_group_with_an_unwritable_member_replaces_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("p.json");
+    std::fs::write(&a, "old").unwrap();
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    let err = files::write_atomic_group(&[(&a, b"new".as_slice()), (&sub, b"x".as_slice())]).unwrap_err();
+    assert!(err.to_string().contains("is a directory"), "{err}");
+    assert_eq!(std::fs::read_to_string(&a).unwrap(), "old");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
 }
