@@ -7,7 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{BinaryMask, CocoDataset, CocoResult, DetectionSource, Rle, Segmentation, TubeDetection};
+use tubeloc_core::{CocoDataset, CocoResult, DetectionSource, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
 
 /// One output entry: a COCO result with the detection's seed fields.
@@ -142,8 +142,7 @@ pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], scales: &[f64],
             Ok(inst
                 .into_par_iter()
                 .map(|i| {
-                    let mask = BinaryMask { width: w, height: h, data: i.mask.data };
-                    let rle = Rle::from_mask(&mask);
+                    let rle = i.mask;
                     let mut det = TubeDetection::new(*id, i.score, i.bbox, DetectionSource::Learned);
                     det.axis_seed = Some(i.axis);
                     DetectionOut { det, segmentation: Some(Segmentation::from_rle(&rle)) }

@@ -156,8 +156,8 @@ pub fn write_atomic_group(files: &[(&Path, &[u8])]) -> Result<(), CoreError> {
 
 /// An exclusive `flock` on a folder, released when dropped (or when the process dies).
 struct FolderLock {
-    #[cfg_attr(not(unix), allow(dead_code))]
-    file: std::fs::File,
+    /// The open folder; closing it releases the lock.
+    _file: std::fs::File,
 }
 
 impl FolderLock {
@@ -171,7 +171,7 @@ impl FolderLock {
                 return Err(CoreError::io(dir, std::io::Error::last_os_error()));
             }
         }
-        Ok(FolderLock { file })
+        Ok(FolderLock { _file: file })
     }
 }
 

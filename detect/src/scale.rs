@@ -174,6 +174,61 @@ pub fn mask_back(mask: &[u8], nw: usize, nh: usize, width: usize, height: usize)
     out
 }
 
+/// [`mask_back`] straight to the original image's COCO RLE and tight bounding box, without the
+/// original-size mask: original pixel `(x, y)` takes the value of resampled pixel
+/// `(xs(x), ys(y))` (nearest, as in [`mask_back`]). The RLE equals
+/// `Rle::from_mask(&mask_back(..))` and the box its `BinaryMask::bbox`; memory is
+/// `O(width + height)` besides the runs.
+pub fn mask_back_rle(mask: &[u8], nw: usize, nh: usize, width: usize, height: usize) -> (tubeloc_core::Rle, [f64; 4]) {
+    let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
+    let xs: Vec<usize> = (0..width).map(|x| (((x as f64 + 0.5) * sx - 0.5).round().max(0.0) as usize).min(nw - 1)).collect();
+    let ys: Vec<usize> = (0..height).map(|y| (((y as f64 + 0.5) * sy - 0.5).round().max(0.0) as usize).min(nh - 1)).collect();
+    // Column-major runs: each original column is the resampled column xs[x] read at rows ys.
+    let (mut counts, mut prev, mut run) = (Vec::new(), false, 0u32);
+    let mut push = |v: bool, len: u32| {
+        if v != prev {
+            counts.push(run);
+            run = 0;
+            prev = v;
+        }
+        run += len;
+    };
+    for &xx in &xs {
+        let mut y = 0;
+        while y < height {
+            let yy = ys[y];
+            let mut len = 1;
+            while y + len < height && ys[y + len] == yy {
+                len += 1;
+            }
+            push(mask[yy * nw + xx] != 0, len as u32);
+            y += len;
+        }
+    }
+    counts.push(run);
+    // Tight box over the sampled rows and columns only.
+    let (mut row_hit, mut col_hit) = (vec![false; nh], vec![false; nw]);
+    ys.iter().for_each(|&yy| row_hit[yy] = true);
+    xs.iter().for_each(|&xx| col_hit[xx] = true);
+    let (mut row_any, mut col_any) = (vec![false; nh], vec![false; nw]);
+    for yy in (0..nh).filter(|&yy| row_hit[yy]) {
+        for xx in (0..nw).filter(|&xx| col_hit[xx] && mask[yy * nw + xx] != 0) {
+            row_any[yy] = true;
+            col_any[xx] = true;
+        }
+    }
+    let span = |idx: &[usize], any: &[bool]| {
+        let first = idx.iter().position(|&i| any[i])?;
+        let last = idx.iter().rposition(|&i| any[i])?;
+        Some((first, last))
+    };
+    let bbox = match (span(&xs, &col_any), span(&ys, &row_any)) {
+        (Some((x0, x1)), Some((y0, y1))) => [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64],
+        _ => [0.0; 4],
+    };
+    (tubeloc_core::Rle { size: [height as u32, width as u32], counts }, bbox)
+}
+
 /// Maps a point `(u', v')` of the image resampled by `(sx, sy)` back to original pixels.
 pub fn point_back(p: [f64; 2], sx: f64, sy: f64) -> [f64; 2] {
     [(p[0] + 0.5) / sx - 0.5, (p[1] + 0.5) / sy - 0.5]
@@ -181,6 +236,27 @@ pub fn point_back(p: [f64; 2], sx: f64, sy: f64) -> [f64; 2] {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn mask_back_rle_equals_the_rle_of_mask_back() {
+        use tubeloc_core::{BinaryMask, Rle};
+        // Shrinking, enlarging and mixed factors; masks with seeded random blobs and edges.
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) as usize
+        };
+        for &(nw, nh, w, h) in &[(10usize, 7usize, 37usize, 23usize), (40, 30, 13, 9), (16, 16, 16, 16), (5, 50, 20, 11), (1, 1, 4, 3)] {
+            for fill in [0usize, 1, 30, 100] {
+                let mask: Vec<u8> = (0..nw * nh).map(|_| (next() % 100 < fill) as u8).collect();
+                let back = mask_back(&mask, nw, nh, w, h);
+                let bm = BinaryMask { width: w, height: h, data: back };
+                let (rle, bbox) = mask_back_rle(&mask, nw, nh, w, h);
+                assert_eq!(rle, Rle::from_mask(&bm), "{nw}x{nh} -> {w}x{h}, fill {fill}");
+                assert_eq!(bbox, bm.bbox(), "{nw}x{nh} -> {w}x{h}, fill {fill}");
+            }
+        }
+    }
+
     use super::*;
 
     fn navcam() -> CameraModel {

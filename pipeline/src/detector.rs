@@ -7,7 +7,7 @@ use image::DynamicImage;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use tubeloc_core::GroundPlane;
-use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
+use tubeloc_core::{AxisSeed, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
 use tubeloc_detect::line2d::Line2dDetector;
 use tubeloc_detect::scale::RangeBand;
@@ -62,20 +62,27 @@ impl TubeDetector for LearnedDetector {
     }
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
-        let input = tubeloc_detect::input::rgb8_of(image);
-        let (w, h) = (input.width, input.height);
+        // An RGB8 image is read in place; other formats go through the shared conversion.
+        let converted;
+        let rgb: &[u8] = match image {
+            DynamicImage::ImageRgb8(img) => img.as_raw(),
+            _ => {
+                converted = tubeloc_detect::input::rgb8_of(image).rgb;
+                &converted
+            }
+        };
+        let (w, h) = (image.width() as usize, image.height() as usize);
         let s = match self.range {
             Some(band) => tubeloc_detect::scale::working_scale(camera, ground.map(|g| (g.normal, g.offset)), band),
             None => 1.0,
         };
-        let inst = detect_rgb_at_scale(&self.model, &input.rgb, w, h, s, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
+        let inst = detect_rgb_at_scale(&self.model, rgb, w, h, s, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
         Ok(inst
             .into_par_iter()
             .map(|i| {
-                let mask = BinaryMask { width: w, height: h, data: i.mask.data };
                 let mut det = TubeDetection::new(image_id, i.score, i.bbox, DetectionSource::Learned);
                 det.axis_seed = Some(i.axis);
-                det.mask = Some(Rle::from_mask(&mask));
+                det.mask = Some(i.mask);
                 det
             })
             .collect())

@@ -104,26 +104,33 @@ pub struct FrameRefinement {
 }
 
 /// The grey levels (the refiner's input) and the colours (the seal-end decision) of an image.
-pub(crate) struct FramePixels {
+/// An RGB8 image's colours are read in place; other formats are converted only when the
+/// colours are wanted.
+pub(crate) struct FramePixels<'a> {
     pub gray: Plane<u8>,
-    pub rgb: image::RgbImage,
+    rgb: Option<std::borrow::Cow<'a, [u8]>>,
 }
 
-impl FramePixels {
-    pub fn of(image: &DynamicImage) -> Self {
+impl<'a> FramePixels<'a> {
+    /// The grey levels of `image`, and its colours when `colour` is set.
+    pub fn of(image: &'a DynamicImage, colour: bool) -> Self {
         let luma = image.to_luma8();
-        FramePixels { gray: Plane::from_vec(luma.width() as usize, luma.height() as usize, luma.into_raw()), rgb: image.to_rgb8() }
+        let rgb = colour.then(|| match image {
+            DynamicImage::ImageRgb8(img) => std::borrow::Cow::Borrowed(img.as_raw().as_slice()),
+            _ => std::borrow::Cow::Owned(image.to_rgb8().into_raw()),
+        });
+        FramePixels { gray: Plane::from_vec(luma.width() as usize, luma.height() as usize, luma.into_raw()), rgb }
     }
 
     fn colour(&self, wanted: bool) -> Option<ColourImage<'_>> {
-        wanted.then(|| ColourImage { width: self.rgb.width() as usize, height: self.rgb.height() as usize, rgb: self.rgb.as_raw() })
+        self.rgb.as_deref().filter(|_| wanted).map(|rgb| ColourImage { width: self.gray.width, height: self.gray.height, rgb })
     }
 }
 
 /// Refines every seed item of one frame: stereo points per item (with a right view), the fit
 /// (sequential over the items), then the stages after the fit ([`after_fit`]).
 pub fn refine_frame(refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, items: &[SeedItem], opts: &FrameOptions) -> Result<FrameRefinement> {
-    refine_pixels(refiner, settings, frame, &FramePixels::of(frame.image), items, opts)
+    refine_pixels(refiner, settings, frame, &FramePixels::of(frame.image, settings.colour_ends), items, opts)
 }
 
 pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, px: &FramePixels, items: &[SeedItem], opts: &FrameOptions) -> Result<FrameRefinement> {

@@ -65,6 +65,6 @@ pub mod stereo;
 pub use detector::{ExternalDetections, LearnedDetector, Line2dTubeDetector, TubeDetector};
 pub use error::PipelineError;
 pub use frame::{refine_frame, Frame, FrameOptions, FrameRefinement, SeedItem, StereoView};
-pub use locator::{CameraSelection, LocateInput, LocateOutput, LocatedTube, Locator, RejectedTube, Rejection, Timings};
+pub use locator::{CameraSelection, LocateInput, LocateOutput, LocatedTube, Locator, RejectedTube, Rejection, Timings, MAX_IMAGE_PIXELS};
 pub use settings::{LocatorSettings, StageSettings};
 pub use tubeloc_core::GroundPlane;

@@ -147,6 +147,26 @@ pub struct Locator {
     settings: LocatorSettings,
 }
 
+/// Most pixels of an image the locator takes (100 megapixels, e.g. 10000 x 10000). Peak
+/// memory is about 200 MB plus 12 bytes per pixel (the decoded image, its grey levels and
+/// the refiner's float copy at full resolution; the detector runs at its working scale in
+/// bands of bounded size): ~290 MB at 5472 x 3648, ~1.4 GB at this bound.
+pub const MAX_IMAGE_PIXELS: u64 = 100_000_000;
+
+/// Refuses cameras whose images exceed [`MAX_IMAGE_PIXELS`], before any image is read.
+fn check_image_pixels(width: u32, height: u32, camera: &str) -> Result<()> {
+    let n = width as u64 * height as u64;
+    if n > MAX_IMAGE_PIXELS {
+        return Err(PipelineError::Input(format!(
+            "camera {camera:?} takes {width}x{height} images ({:.0} megapixels): more than the {} megapixels tubeloc locates in (about {:.1} GB of memory); downsample the image and its camera model",
+            n as f64 / 1e6,
+            MAX_IMAGE_PIXELS / 1_000_000,
+            (200e6 + 12.0 * n as f64) / 1e9
+        )));
+    }
+    Ok(())
+}
+
 impl Locator {
     /// A locator for images of the selected camera of `rig`, seeded by `detector`.
     pub fn new(rig: &Rig, selection: &CameraSelection, detector: Box<dyn TubeDetector>, settings: LocatorSettings) -> Result<Self> {
@@ -158,6 +178,7 @@ impl Locator {
         };
         let camera = rig.camera(&name).ok_or_else(|| PipelineError::Input(format!("the rig has no camera named {name:?}")))?.clone();
         camera.model.validate()?;
+        check_image_pixels(camera.model.width, camera.model.height, &camera.name)?;
         let refiner = Refiner::new(&settings.tube, settings.refine.clone())?;
         Ok(Locator { rig: rig.clone(), camera, pair, detector, refiner, settings })
     }
@@ -216,13 +237,13 @@ impl Locator {
     /// fit, and the stages after it; one pose per detection, in order (camera frame), with
     /// each fit's time in milliseconds. No merging, no grasp frames.
     pub fn refine(&self, input: &LocateInput, detections: &[TubeDetection]) -> Result<(Vec<TubeAxisPose>, Vec<f64>)> {
-        let r = self.refine_items(input, &FramePixels::of(input.image), detections)?;
+        let r = self.refine_items(input, &FramePixels::of(input.image, self.settings.colour_ends), detections)?;
         Ok((r.poses, r.fit_ms))
     }
 
     /// [`Locator::refine`] returning the whole frame refinement (stereo points, scene depth).
     pub fn refine_frame(&self, input: &LocateInput, detections: &[TubeDetection]) -> Result<crate::frame::FrameRefinement> {
-        self.refine_items(input, &FramePixels::of(input.image), detections)
+        self.refine_items(input, &FramePixels::of(input.image, self.settings.colour_ends), detections)
     }
 
     fn refine_items(&self, input: &LocateInput, px: &FramePixels, detections: &[TubeDetection]) -> Result<crate::frame::FrameRefinement> {
@@ -258,8 +279,8 @@ impl Locator {
     pub fn locate(&self, input: &LocateInput) -> Result<LocateOutput> {
         let t0 = Instant::now();
         let up = Self::up_direction(input)?;
-        let px = FramePixels::of(input.image);
         let detections = self.detect(input.image, input.ground.as_ref())?;
+        let px = FramePixels::of(input.image, self.settings.colour_ends);
         let detect_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
         // Each detection is refined in the form it has in a detections file, so that `locate`
@@ -289,6 +310,6 @@ impl Locator {
     /// The input image in grey with each tube's fitted contour and centre drawn (green:
     /// converged, red: rejected).
     pub fn overlay<'a>(&self, image: &DynamicImage, tubes: impl IntoIterator<Item = &'a TubeAxisPose>) -> image::RgbImage {
-        crate::overlay::draw(&FramePixels::of(image).gray, &self.refiner, &self.camera.model, tubes)
+        crate::overlay::draw(&FramePixels::of(image, false).gray, &self.refiner, &self.camera.model, tubes)
     }
 }

@@ -87,3 +87,17 @@ fn wrong_sizes_are_refused_naming_the_detection() {
     let msg = locator.locate(&LocateInput::mono(&small)).unwrap_err().to_string();
     assert!(msg.contains("64x48") && msg.contains("\"L\""), "{msg}");
 }
+
+/// A camera whose images exceed the stated bound is refused before any image is read, with the
+/// size, the bound and the memory it would take.
+#[test]
+fn cameras_beyond_the_pixel_bound_are_refused_up_front() {
+    let cam = tubeloc_core::CameraModel::from_hfov(13000, 13000, 60.0);
+    let detector = ExternalDetections::new(vec![], "results.json");
+    let e = Locator::new(&rig(&cam, 0.2), &CameraSelection::default(), Box::new(detector), LocatorSettings::default()).err().expect("a 169-megapixel camera is refused");
+    let msg = e.to_string();
+    assert!(msg.contains("13000x13000") && msg.contains("169 megapixels") && msg.contains("100 megapixels") && msg.contains("GB"), "{msg}");
+    // At the bound it is accepted.
+    let ok = tubeloc_core::CameraModel::from_hfov(10000, 10000, 60.0);
+    assert!(Locator::new(&rig(&ok, 0.2), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![], "r")), LocatorSettings::default()).is_ok());
+}

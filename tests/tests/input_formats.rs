@@ -77,7 +77,7 @@ fn grey_sixteen_bit_rgba_and_jpeg_give_the_detections_of_the_eight_bit_colour_im
         let strong = |v: &[tubeloc_detect::learned::LearnedInstance]| v.iter().filter(|d| d.score >= 0.3).count();
         assert_eq!(strong(&found), strong(&reference), "{name}: {} vs {} detections above 0.3", strong(&found), strong(&reference));
         for r in reference.iter().filter(|d| d.score >= 0.3) {
-            let best = found.iter().map(|f| (iou(&f.mask.data, &r.mask.data), f.score)).max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
+            let best = found.iter().map(|f| (iou(&f.mask.to_mask().unwrap().data, &r.mask.to_mask().unwrap().data), f.score)).max_by(|a, b| a.0.total_cmp(&b.0)).unwrap();
             assert!(best.0 >= 0.8 && (best.1 - r.score).abs() <= 0.1, "{name}: best IoU {:.3}, score {:.3} vs {:.3}", best.0, best.1, r.score);
         }
     }

@@ -131,7 +131,8 @@ pub fn score_detections(images: &[TrainImage], dets: &[Vec<LearnedInstance>]) ->
                 .map(|d| {
                     let mut inter = vec![0usize; ngt + 1];
                     let mut area = 0usize;
-                    for (m, &l) in d.mask.data.iter().zip(&img.labels) {
+                    let mask = d.mask.to_mask().map(|m| m.data).unwrap_or_default();
+                    for (m, &l) in mask.iter().zip(&img.labels) {
                         if *m != 0 {
                             area += 1;
                             inter[l as usize] += 1;

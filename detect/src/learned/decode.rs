@@ -141,8 +141,8 @@ impl DecodeConfig {
 pub struct LearnedInstance {
     /// Confidence in `[0, 1]`.
     pub score: f64,
-    /// Full-resolution binary mask (1 = tube), image size.
-    pub mask: Plane<u8>,
+    /// Binary mask (1 = tube) of the image's size as COCO RLE (column-major runs).
+    pub mask: tubeloc_core::Rle,
     /// COCO bbox `[x, y, w, h]` of the mask, pixels.
     pub bbox: [f64; 4],
     /// Image axis of the tube (seed for `refine`).
@@ -426,7 +426,7 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
                 axis.direction_px = [x / n, y / n];
             }
         }
-        result.push(LearnedInstance { score, mask, bbox, axis });
+        result.push(LearnedInstance { score, mask: tubeloc_core::Rle::from_mask(&tubeloc_core::BinaryMask { width: mask.width, height: mask.height, data: mask.data }), bbox, axis });
     }
     result.sort_by(|a, b| b.score.total_cmp(&a.score));
     result

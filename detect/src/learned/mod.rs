@@ -70,12 +70,11 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
     Ok(found
         .into_iter()
         .filter_map(|i| {
-            let data = crate::scale::mask_back(&i.mask.data, nw, nh, width, height);
-            let bm = tubeloc_core::BinaryMask { width, height, data };
-            if bm.data.iter().all(|&v| v == 0) {
+            let small = i.mask.to_mask().ok()?;
+            let (mask, bbox) = crate::scale::mask_back_rle(&small.data, nw, nh, width, height);
+            if mask.area() == 0 {
                 return None;
             }
-            let bbox = bm.bbox();
             let mut axis = i.axis;
             axis.centre_px = crate::scale::point_back(axis.centre_px, sx, sy);
             let (dx, dy) = (axis.direction_px[0] / sx, axis.direction_px[1] / sy);
@@ -86,7 +85,7 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
             let sm = (sx * sy).sqrt();
             axis.length_px /= sm;
             axis.width_px /= sm;
-            Some(LearnedInstance { score: i.score, mask: tubeloc_core::Plane { width, height, data: bm.data }, bbox, axis })
+            Some(LearnedInstance { score: i.score, mask, bbox, axis })
         })
         .collect())
 }

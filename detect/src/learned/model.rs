@@ -157,6 +157,49 @@ impl LearnedModel {
         if width == 0 || height == 0 || input.len() != c * width * height {
             return Err(LearnedError::Invalid(format!("input has {} values, expected {c} x {width} x {height}", input.len())));
         }
+        match band_rows(width, height) {
+            Some(rows) => self.predict_in_bands(input, width, height, rows, BAND_HALO_PX),
+            None => self.predict_whole(input, width, height),
+        }
+    }
+
+    /// [`LearnedModel::predict`] over horizontal bands of `rows` rows (a multiple of
+    /// [`TubeNet::ALIGN`]), each run with `halo` rows of context above and below (a multiple of
+    /// `ALIGN`); the band's own rows of every output are kept. Peak memory follows the band.
+    fn predict_in_bands(&self, input: &[f32], width: usize, height: usize, rows: usize, halo: usize) -> Result<Prediction, LearnedError> {
+        let c = self.meta.net.in_channels;
+        let (cw, chh) = (width.div_ceil(STRIDE), height.div_ceil(STRIDE));
+        let mut planes = vec![0f32; HEADS * cw * chh];
+        let mut fine: Option<Vec<f32>> = None;
+        let n = width * height;
+        for y0 in (0..height).step_by(rows) {
+            let y1 = (y0 + rows).min(height);
+            let (a, b) = (y0.saturating_sub(halo), (y1 + halo).min(height));
+            let bh = b - a;
+            let mut band = Vec::with_capacity(c * width * bh);
+            for ch in 0..c {
+                band.extend_from_slice(&input[ch * n + a * width..ch * n + b * width]);
+            }
+            let p = self.predict_whole(&band, width, bh)?;
+            // Rows y0..y1 of the image are rows y0-a.. of the band; a, y0 are multiples of 4.
+            let (r0, r1) = ((y0 - a) / STRIDE, (y1 - a).div_ceil(STRIDE));
+            for k in 0..HEADS {
+                for r in r0..r1 {
+                    let dst = y0 / STRIDE + (r - r0);
+                    planes[k * cw * chh + dst * cw..][..cw].copy_from_slice(&p.planes[k * cw * p.out_h + r * cw..][..cw]);
+                }
+            }
+            if let Some(f) = p.fine {
+                let all = fine.get_or_insert_with(|| vec![0f32; n]);
+                all[y0 * width..y1 * width].copy_from_slice(&f[(y0 - a) * width..(y1 - a) * width]);
+            }
+        }
+        Ok(Prediction { planes, out_w: cw, out_h: chh, width, height, fine })
+    }
+
+    /// The network on the whole image at once.
+    fn predict_whole(&self, input: &[f32], width: usize, height: usize) -> Result<Prediction, LearnedError> {
+        let c = self.meta.net.in_channels;
         let a = TubeNet::ALIGN;
         let (pw, ph) = (width.div_ceil(a) * a, height.div_ceil(a) * a);
         let mut padded = vec![0f32; c * pw * ph];
@@ -313,6 +356,29 @@ impl LearnedModel {
     }
 }
 
+/// Working images with more pixels than this run through the network in horizontal bands
+/// ([`LearnedModel::predict`]; the network needs about 120 bytes of activations per pixel).
+/// Smaller images (a 1024² Navcam frame at its working scale included) run whole.
+pub const WHOLE_MAX_PIXELS: usize = 3_000_000;
+/// Most pixels of one band with its halo: ~180 MB of activations however large the image.
+pub const BAND_PIXELS: usize = 1_500_000;
+/// Rows of context above and below each band, pixels (a multiple of [`TubeNet::ALIGN`]).
+/// The network's receptive field is larger, so banded logits differ from whole-image ones
+/// by context far from the tube; the network was trained on crops smaller than a band.
+pub const BAND_HALO_PX: usize = 96;
+
+/// Band height for an image of `width x height` working pixels: `None` when the image runs
+/// whole (at most [`WHOLE_MAX_PIXELS`]); otherwise the largest multiple of [`TubeNet::ALIGN`]
+/// whose band with its halo holds at most [`BAND_PIXELS`] (at least one `ALIGN`).
+pub fn band_rows(width: usize, height: usize) -> Option<usize> {
+    if width * height <= WHOLE_MAX_PIXELS {
+        return None;
+    }
+    let a = TubeNet::ALIGN;
+    let rows = (BAND_PIXELS / width).saturating_sub(2 * BAND_HALO_PX) / a * a;
+    Some(rows.max(a))
+}
+
 /// Network outputs for one image, cropped to it.
 #[derive(Clone, Debug)]
 pub struct Prediction {
@@ -378,4 +444,38 @@ pub(crate) fn sort_header_metadata(bytes: Vec<u8>) -> Result<Vec<u8>, LearnedErr
     out.extend(text);
     out.extend(&bytes[8 + n..]);
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With a halo wider than the network's receptive field, the bands stitch into the
+    /// whole-image prediction (coarse planes and fine logits).
+    #[test]
+    fn bands_with_a_wide_halo_stitch_into_the_whole_prediction() {
+        let model = LearnedModel::with_fine_mask(Preprocess::GrayNorm, 8, true, 7).unwrap();
+        let (w, h) = (32, 1024);
+        let input: Vec<f32> = (0..w * h).map(|i| (((i * 7919) % 613) as f32 / 613.0 - 0.5) * 2.0).collect();
+        let whole = model.predict_whole(&input, w, h).unwrap();
+        let banded = model.predict_in_bands(&input, w, h, 64, 256).unwrap();
+        assert_eq!((banded.out_w, banded.out_h), (whole.out_w, whole.out_h));
+        let max_diff = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+        assert!(max_diff(&banded.planes, &whole.planes) < 1e-4, "coarse planes differ by {}", max_diff(&banded.planes, &whole.planes));
+        let (bf, wf) = (banded.fine.unwrap(), whole.fine.unwrap());
+        assert!(max_diff(&bf, &wf) < 1e-4, "fine logits differ by {}", max_diff(&bf, &wf));
+        // A halo of one ALIGN changes the logits only by the missing far context.
+        let narrow = model.predict_in_bands(&input, w, h, 32, 32).unwrap();
+        assert_eq!(narrow.planes.len(), whole.planes.len());
+    }
+
+    #[test]
+    fn band_rows_keep_small_images_whole_and_bound_the_band() {
+        assert_eq!(band_rows(1024, 1024), None);
+        assert_eq!(band_rows(1600, 1600), None);
+        let rows = band_rows(2977, 1985).unwrap();
+        assert_eq!(rows % TubeNet::ALIGN, 0);
+        assert!((rows + 2 * BAND_HALO_PX) * 2977 <= BAND_PIXELS, "{rows}");
+        assert_eq!(band_rows(200_000, 100), Some(TubeNet::ALIGN));
+    }
 }
