@@ -1,4 +1,5 @@
 //! tubeloc-detect (see the README for what this crate owns).
+#![warn(missing_docs)]
 
 pub mod input;
 pub mod learned;
