@@ -64,7 +64,7 @@ pub struct BenchArgs {
     /// Line2D library (default: built into <out>/templates.tlt for the benchmark camera).
     #[arg(long)]
     pub templates: Option<PathBuf>,
-    /// Learned model used on both splits (default: the shipped data/models/tubenet.safetensors).
+    /// Learned model used on both splits (default: the shipped model, embedded in the program).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Cross-split protocol: model trained on the with-tags split (tested on no-tags).
@@ -259,15 +259,17 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if !a.skip.contains(&Part::Learned) {
         for (sp, ..) in SPLITS {
             let cross = if sp == "no-tags" { &a.model_trained_with_tags } else { &a.model_trained_no_tags };
-            let model = cross.clone().or_else(|| a.model.clone()).unwrap_or_else(crate::cmd_detect_learned::default_model);
-            if !model.exists() {
-                bail!("learned model {} not found (pass --model, or --skip learned)", model.display());
+            let model = crate::cmd_detect_learned::ModelChoice::of(cross.as_deref().or(a.model.as_deref()));
+            if let crate::cmd_detect_learned::ModelChoice::File(p) = &model {
+                if !p.exists() {
+                    bail!("learned model {} not found (pass --model, or --skip learned)", p.display());
+                }
             }
             let dir = out.join("learned").join(sp);
-            let extra = words(&["--model", &s(&model)]);
+            let extra = model.words();
             st.run(&format!("learned/{sp}"), &[dir.join("eval/metrics.json")], || {
                 let mut r = detect_and_eval("learned", &extra, &split_dir(sp), &dir, n_img[sp])?;
-                r["model"] = json!(model);
+                r["model"] = json!(model.name());
                 r["protocol"] = json!(if cross.is_some() { "cross-split" } else { "trained on generated scenes" });
                 Ok(r)
             })?;
@@ -316,12 +318,14 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if !a.skip.contains(&Part::Stereo) {
         let sdir = out.join("stereo");
         let set = sdir.join("set");
-        let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+        let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         st.run("stereo", &[sdir.join("gt_seeds/eval/pose_metrics.json"), sdir.join("learned/eval/pose_metrics.json"), sdir.join("learned/eval_both_views/pose_metrics.json")], || {
             crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--seed", "3", "--force"]))?;
             let gt = set.join("annotations.json");
             let dets = sdir.join("learned_detections.json");
-            crate::run_words(&words(&["detect", "--method", "learned", "--model", &s(&model), "--dataset", &s(&set), "--out", &s(&dets)]))?;
+            let mut detect = words(&["detect", "--method", "learned", "--dataset", &s(&set), "--out", &s(&dets)]);
+            detect.extend(model.words());
+            crate::run_words(&detect)?;
             let mut r = serde_json::Map::new();
             let gt_seeds = DatasetSeeds::Gt { pos_mm: 10.0, deg: 5.0, seed: 0, min_visible: 0.5 };
             for (name, seeds) in [("gt_seeds", gt_seeds), ("learned", DatasetSeeds::Detections(dets.clone()))] {
@@ -394,8 +398,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
 
     // 8. Real imagery.
     if !a.skip.contains(&Part::Real) {
-        let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
-        let calibration = crate::cmd_detect_learned::load_calibration(a.calibration.as_deref(), &model)?;
+        let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
+        let calibration = model.calibration(a.calibration.as_deref())?;
         let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4 };
         st.run("real", &[out.join("real").join("report.md")], || {
             crate::cmd_bench_real::run(&stage, &out)?;

@@ -27,7 +27,7 @@ pub struct RealStage {
     /// The real data folder (`../shared/data/real_mars`).
     pub data: PathBuf,
     /// Learned model.
-    pub model: PathBuf,
+    pub model: crate::cmd_detect_learned::ModelChoice,
     /// Score calibration (probability and threshold).
     pub calibration: ScoreCalibration,
     /// Keep at most this many frames per set (small runs, e.g. in CI).
@@ -68,7 +68,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
 
 /// Detects with the learned model at each image's working scale and evaluates: returns the
 /// summary numbers.
-fn detect_eval(set: &Path, model: &Path, cal: &ScoreCalibration, out: &Path) -> Result<Value> {
+fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
     let band = Some(tubeloc_detect::scale::RangeBand::default());
@@ -118,7 +118,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
-fn negatives(data: &Path, model: &Path, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
     let dir = data.join("negatives_val");
     let mut paths: Vec<PathBuf> = Vec::new();
     for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
@@ -150,7 +150,7 @@ fn negatives(data: &Path, model: &Path, cal: &ScoreCalibration, frames: Option<u
         // `locate` at its defaults on the frame, with the assumed camera and ground; its
         // detector runs at the same working scale `s`.
         let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
-        let detector = tubeloc_pipeline::LearnedDetector::load(model, DecodeConfig::default())?;
+        let detector = model.detector()?;
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector), settings.clone())?;
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
@@ -179,11 +179,11 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
-    let summary = json!({"model": stage.model, "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg});
+    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the test sols (`tubeloc synth real --split test`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.display()).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the test sols (`tubeloc synth real --split test`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
     writeln!(md, "| set | images | tubes | AP50 | AR | ms / image | precision / recall at P >= {:.3} | ECE |", stage.calibration.threshold).ok();
     writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|").ok();
     for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {

@@ -28,7 +28,8 @@ pub struct DemoArgs {
     /// Crop side of the rendered images, pixels.
     #[arg(long, default_value_t = 512, value_parser = crate::args::positive_u32)]
     pub resolution: u32,
-    /// Learned model (default: the shipped data/models/tubenet.safetensors; skipped if absent).
+    /// Learned model (default: the shipped model, embedded in the program; a file that does not
+    /// exist is skipped).
     #[arg(long)]
     pub model: Option<PathBuf>,
 }
@@ -82,12 +83,11 @@ pub fn run(a: DemoArgs) -> Result<()> {
     //    learned segmenter when a model is available.
     let lib = out.join("templates.tlt");
     step("build Line2D templates", words(&["templates", "build", "--out", &p(&lib), "--camera", &p(&cam_path), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]), &mut log)?;
-    let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+    let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
     let mut detectors: Vec<(&str, Vec<String>)> = vec![("line2d", words(&["--templates", &p(&lib), "--camera", &p(&cam_path)]))];
-    if model.exists() {
-        detectors.push(("learned", words(&["--model", &p(&model)])));
-    } else {
-        eprintln!("demo: no learned model at {} (skipping the learned detector)", model.display());
+    match &model {
+        crate::cmd_detect_learned::ModelChoice::File(m) if !m.exists() => eprintln!("demo: no learned model at {} (skipping the learned detector)", m.display()),
+        _ => detectors.push(("learned", model.words())),
     }
     let mut pose_inputs = Vec::new();
     for (det, extra) in &detectors {
@@ -121,7 +121,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     files::write_json(&rig_path, &rig)?;
     let image = dataset.join("images").join(&first.file_name);
     let (detector, model_arg, templates) = match detectors.last() {
-        Some(("learned", _)) => (crate::cmd_locate::Detector::Learned, Some(model.clone()), None),
+        Some(("learned", _)) => (crate::cmd_locate::Detector::Learned, a.model.clone(), None),
         _ => (crate::cmd_locate::Detector::Line2d, None, Some(lib.clone())),
     };
     // The image's nominal ground, as `tubeloc refine --ground auto` takes it (normalized as
@@ -130,26 +130,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
         Some(g) => Some(tubeloc_core::GroundPlane::new(g.normal, g.offset).with_context(|| format!("{}: image {}: ground", gt_path.display(), first.id))?),
         None => None,
     };
-    let locate = crate::cmd_locate::LocateArgs {
-        rig: rig_path.clone(),
-        image,
-        right: None,
-        camera_name: None,
-        pair: None,
-        detector,
-        model: model_arg,
-        templates,
-        results: None,
-        results_images: None,
-        ground,
-        up: None,
-        calibration: None,
-        min_probability: None,
-        range_m: "1:4".into(),
-        out: out.join("locate/poses.json"),
-        overlay: None,
-    };
-    eprintln!("\n== demo: locate on {}", locate.image.display());
+    let mut locate = crate::cmd_locate::LocateArgs::single(rig_path.clone(), image.clone(), out.join("locate/poses.json"));
+    (locate.detector, locate.model, locate.templates, locate.ground) = (detector, model_arg, templates, ground);
+    eprintln!("\n== demo: locate on {}", image.display());
     let t = Instant::now();
     crate::cmd_locate::run(locate).context("demo step \"locate\"")?;
     log.push(("locate (first image)".into(), t.elapsed().as_secs_f64()));

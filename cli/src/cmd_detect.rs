@@ -9,7 +9,7 @@ use std::path::PathBuf;
 pub enum Method {
     /// Line2D template matching.
     Line2d,
-    /// The learned segmenter (`--model`, default: the shipped model in data/models/).
+    /// The learned segmenter (`--model`, default: the shipped model, embedded in the program).
     Learned,
     /// Detections made elsewhere (`--results coco_results.json`), passed through with an axis
     /// seed from each mask's principal axis.
@@ -31,7 +31,7 @@ pub struct DetectArgs {
     /// A COCO dataset directory (annotations.json + images): detect in all its images.
     #[arg(long)]
     pub dataset: Option<PathBuf>,
-    /// Learned model weights (safetensors).
+    /// Learned model weights (safetensors; default: the shipped model, embedded in the program).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Learned decoder settings: JSON of `DecodeConfig` fields (thresholds, instance score,
@@ -74,7 +74,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
         }
         Method::Learned => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
-            let model = args.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
+            let model = crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref());
             let cfg = match &args.decode_config {
                 Some(p) => {
                     let cfg: tubeloc_detect::learned::DecodeConfig = tubeloc_core::files::read_json(p).with_context(|| format!("decoder config {}", p.display()))?;

@@ -18,35 +18,83 @@ pub struct DetectionOut {
     segmentation: Option<Segmentation>,
 }
 
-/// The shipped model (`data/models/tubenet.safetensors`), looked up under the current
-/// directory, then in the workspace the executable sits in (`<ws>/target/<profile>/tubeloc`),
-/// then in the source tree the program was built from (`CARGO_MANIFEST_DIR/..`).
-pub fn default_model() -> PathBuf {
-    let rel = Path::new("data/models/tubenet.safetensors");
-    let mut candidates = vec![rel.to_path_buf()];
-    if let Some(ws) = std::env::current_exe().ok().and_then(|e| e.parent()?.parent()?.parent().map(Path::to_path_buf)) {
-        candidates.push(ws.join(rel));
-    }
-    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel);
-    candidates.into_iter().find(|p| p.exists()).unwrap_or(built)
+/// The learned model a command runs: a file given with `--model`, or the shipped model, which
+/// is embedded in the program (`data/models/tubenet.safetensors` when it was built), so an
+/// installed or copied `tubeloc` needs no data folder.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ModelChoice {
+    /// The shipped model, embedded in the program.
+    Shipped,
+    /// A model file.
+    File(PathBuf),
 }
 
-/// The score calibration of a model: `path` when given, else `<model>.calibration.json` beside
-/// the model (`data/models/tubenet.calibration.json` for the shipped one), else the identity
-/// (probability = score, threshold 0.5) with a warning.
-pub fn load_calibration(path: Option<&Path>, model: &Path) -> Result<tubeloc_core::ScoreCalibration> {
-    let p = match path {
-        Some(p) => p.to_path_buf(),
-        None => {
-            let beside = model.with_extension("calibration.json");
-            if !beside.exists() {
-                eprintln!("warning: no score calibration beside {} ({}): probabilities are the raw scores", model.display(), beside.display());
-                return Ok(tubeloc_core::ScoreCalibration::identity());
-            }
-            beside
+impl ModelChoice {
+    /// `--model FILE` when given, else the shipped model.
+    pub fn of(arg: Option<&Path>) -> Self {
+        arg.map_or(ModelChoice::Shipped, |p| ModelChoice::File(p.to_path_buf()))
+    }
+
+    /// The model's name in reports and messages: the file, or the shipped model's file name
+    /// marked as embedded.
+    pub fn name(&self) -> String {
+        match self {
+            ModelChoice::Shipped => format!("{} (embedded)", tubeloc_detect::learned::shipped::SHIPPED_MODEL_NAME),
+            ModelChoice::File(p) => p.display().to_string(),
         }
-    };
-    let c: tubeloc_core::ScoreCalibration = tubeloc_core::files::read_json(&p).with_context(|| format!("reading score calibration {}", p.display()))?;
+    }
+
+    /// Parses the model (checked: format, version, checksum, shapes).
+    pub fn load(&self) -> Result<LearnedModel> {
+        match self {
+            ModelChoice::Shipped => tubeloc_detect::learned::shipped_model().context("loading the embedded shipped model"),
+            ModelChoice::File(p) => {
+                if !p.exists() {
+                    bail!("learned model {} not found: pass an existing --model FILE, or leave --model out to use the shipped model", p.display());
+                }
+                LearnedModel::load(p).with_context(|| format!("loading model {}", p.display()))
+            }
+        }
+    }
+
+    /// The pipeline's learned detector with this model.
+    pub fn detector(&self) -> Result<tubeloc_pipeline::LearnedDetector> {
+        Ok(tubeloc_pipeline::LearnedDetector::new(self.load()?, Default::default(), self.name()))
+    }
+
+    /// The command-line words that select this model in another subcommand (`--model FILE`,
+    /// or none for the shipped model).
+    pub fn words(&self) -> Vec<String> {
+        match self {
+            ModelChoice::Shipped => Vec::new(),
+            ModelChoice::File(p) => vec!["--model".into(), p.display().to_string()],
+        }
+    }
+
+    /// The score calibration of this model: `path` when given; else for a model file
+    /// `<model>.calibration.json` beside it, or the identity (probability = score, threshold
+    /// 0.5) with a warning when there is none; for the shipped model its embedded calibration
+    /// (`data/models/tubenet.calibration.json`).
+    pub fn calibration(&self, path: Option<&Path>) -> Result<tubeloc_core::ScoreCalibration> {
+        let p = match (path, self) {
+            (Some(p), _) => p.to_path_buf(),
+            (None, ModelChoice::Shipped) => return tubeloc_pipeline::shipped_calibration().map_err(anyhow::Error::from),
+            (None, ModelChoice::File(model)) => {
+                let beside = model.with_extension("calibration.json");
+                if !beside.exists() {
+                    eprintln!("warning: no score calibration beside {} ({}): probabilities are the raw scores", model.display(), beside.display());
+                    return Ok(tubeloc_core::ScoreCalibration::identity());
+                }
+                beside
+            }
+        };
+        read_calibration(&p)
+    }
+}
+
+/// Reads and validates a score calibration file.
+pub fn read_calibration(p: &Path) -> Result<tubeloc_core::ScoreCalibration> {
+    let c: tubeloc_core::ScoreCalibration = tubeloc_core::files::read_json(p).with_context(|| format!("reading score calibration {}", p.display()))?;
     c.validate().map_err(|e| anyhow::anyhow!("score calibration {}: {e}", p.display()))?;
     Ok(c)
 }
@@ -121,11 +169,8 @@ pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera:
 
 /// Runs the learned model over images, each at its working scale (`scales[i]`, 1 = as it
 /// is); returns the output entries.
-pub fn run_learned(model_path: &Path, images: &[(u64, PathBuf)], scales: &[f64], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
-    if !model_path.exists() {
-        bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model_path.display());
-    }
-    let model = LearnedModel::load(model_path).with_context(|| format!("loading model {}", model_path.display()))?;
+pub fn run_learned(model: &ModelChoice, images: &[(u64, PathBuf)], scales: &[f64], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
+    let model = model.load()?;
     let pb = ProgressBar::new(images.len() as u64);
     pb.set_style(ProgressStyle::with_template("detect {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
     let per: Vec<Vec<DetectionOut>> = images

@@ -59,14 +59,11 @@ enum Command {
     Refine(cmd_refine::RefineArgs),
     /// Run the whole pipeline on a small generated with-tags scene and write a report (no arguments needed).
     Demo(cmd_demo::DemoArgs),
-    /// The main job: detect, (stereo,) refine and write grasp-ready tube poses for one image or pair.
+    /// The main job: detect, (stereo,) refine and write grasp-ready tube poses for one image or pair, or a sharded batch of frames.
     Locate(cmd_locate::LocateArgs),
     /// Reproduce the paper's experiments on the paper preset and write a markdown report with plots.
     Bench(cmd_bench::BenchArgs),
 }
-
-/// Exit code of a run that finished but located no tube (`tubeloc locate`).
-const EXIT_NO_TUBE: u8 = 3;
 
 /// Runs one parsed subcommand; returns the process exit code of a successful run.
 fn dispatch(command: Command) -> anyhow::Result<u8> {
@@ -81,7 +78,7 @@ fn dispatch(command: Command) -> anyhow::Result<u8> {
         Command::Stereo(a) => cmd_stereo::run(a),
         Command::Refine(a) => cmd_refine::run(a),
         Command::Demo(a) => cmd_demo::run(a),
-        Command::Locate(a) => return cmd_locate::run(a).map(|n| if n == 0 { EXIT_NO_TUBE } else { 0 }),
+        Command::Locate(a) => return cmd_locate::run(a),
         Command::Bench(a) => cmd_bench::run(a),
     };
     done.map(|()| 0)

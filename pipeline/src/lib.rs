@@ -59,6 +59,7 @@ pub mod frame;
 pub mod locator;
 pub mod overlay;
 pub mod settings;
+pub mod shipped;
 pub mod stages;
 pub mod stereo;
 
@@ -67,4 +68,5 @@ pub use error::PipelineError;
 pub use frame::{refine_frame, Frame, FrameOptions, FrameRefinement, SeedItem, StereoView};
 pub use locator::{CameraSelection, LocateInput, LocateOutput, LocatedTube, Locator, RejectedTube, Rejection, Timings, MAX_IMAGE_PIXELS};
 pub use settings::{LocatorSettings, StageSettings};
+pub use shipped::shipped_calibration;
 pub use tubeloc_core::GroundPlane;

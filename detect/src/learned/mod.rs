@@ -6,7 +6,8 @@
 //! [`net::TubeNet`] (stride-4 foreground, centre heatmap, axis angle, half-length) →
 //! [`decode`] (instances with mask, score and [`tubeloc_core::AxisSeed`]). Training:
 //! [`augment`] crops, [`targets`], [`train::Trainer`]; weights: [`model::LearnedModel`]
-//! (safetensors with format version and checksum); [`soup`] averages fine-tuned models.
+//! (safetensors with format version and checksum); [`soup`] averages fine-tuned models;
+//! [`shipped`] is the shipped model, embedded in the library.
 
 pub mod augment;
 pub mod dataset;
@@ -17,6 +18,7 @@ pub mod model;
 pub mod net;
 pub mod optim;
 pub mod preprocess;
+pub mod shipped;
 pub mod soup;
 pub mod targets;
 pub mod train;
@@ -27,6 +29,7 @@ pub use error::LearnedError;
 pub use model::{LearnedModel, ModelMeta, Prediction, FORMAT_VERSION};
 pub use net::{NetConfig, NetOutput};
 pub use preprocess::Preprocess;
+pub use shipped::shipped_model;
 pub use soup::weight_average;
 pub use train::{TrainConfig, Trainer};
 

@@ -1,0 +1,123 @@
+//! The frames of a batch run: read from a folder or a list file, sorted, paired with their right
+//! frames, named by their image file stems, and split into shards.
+
+use super::Frame;
+use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Image file extensions a folder given to `--images` is read for (any case).
+pub const IMAGE_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
+
+/// The image paths of `--images`/`--right-images` (`flag` names it in errors), sorted: a
+/// folder's files with an [`IMAGE_EXTENSIONS`] extension (not its subfolders), or a list file's
+/// lines (paths relative to the list's folder; blank lines and lines starting with `#` skipped).
+pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
+    let mut paths = Vec::new();
+    if arg.is_dir() {
+        for entry in std::fs::read_dir(arg).with_context(|| format!("{flag} {}: reading the folder", arg.display()))? {
+            let p = entry.with_context(|| format!("{flag} {}: reading the folder", arg.display()))?.path();
+            let is_image = p.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)));
+            if is_image && p.is_file() {
+                paths.push(p);
+            }
+        }
+    } else {
+        let text = std::fs::read_to_string(arg).with_context(|| format!("{flag} {}: not a folder, and not readable as a list file", arg.display()))?;
+        let base = arg.parent().unwrap_or(Path::new(""));
+        for line in text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')) {
+            paths.push(base.join(line));
+        }
+    }
+    if paths.is_empty() {
+        bail!("{flag} {}: no images (a folder's .png/.jpg/.jpeg files, or a list file of image paths)", arg.display());
+    }
+    paths.sort();
+    Ok(paths)
+}
+
+/// The frames of a batch run in sorted order: the left images, each paired with the right image
+/// of the same rank when `right` is given. Refuses lists of different lengths and two frames
+/// whose image file stems (their result names) are equal.
+pub fn frame_list(images: &Path, right: Option<&Path>) -> Result<Vec<Frame>> {
+    let left = image_paths(images, "--images")?;
+    let right = match right {
+        Some(r) => {
+            let list = image_paths(r, "--right-images")?;
+            if list.len() != left.len() {
+                bail!("--right-images {} has {} images but --images {} has {}: each left frame needs its right frame", r.display(), list.len(), images.display(), left.len());
+            }
+            list.into_iter().map(Some).collect()
+        }
+        None => vec![None; left.len()],
+    };
+    let frames: Vec<Frame> = left.into_iter().zip(right).map(|(image, right)| Frame { image, right }).collect();
+    let mut seen: BTreeMap<String, &Path> = BTreeMap::new();
+    for f in &frames {
+        let name = result_name(&f.image);
+        if let Some(other) = seen.insert(name.clone(), &f.image) {
+            bail!("--images {}: frames {} and {} would both write frames/{name}.json: image file names must be unique in a batch", images.display(), other.display(), f.image.display());
+        }
+    }
+    Ok(frames)
+}
+
+/// The name of a frame's result files: its image file stem.
+pub fn result_name(image: &Path) -> String {
+    image.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+}
+
+/// The indices of the frames of shard `index` of `count`: frame k goes to shard k mod count.
+pub fn shard_indices(frames: usize, (index, count): (usize, usize)) -> impl Iterator<Item = usize> {
+    (index..frames).step_by(count.max(1))
+}
+
+/// A digest of the frame list (CRC-32 of its paths, left and right, one a line, hex): equal in
+/// every shard of one batch, so `merge` can refuse shards of different lists.
+pub fn list_digest(frames: &[Frame]) -> String {
+    let mut h = crc32fast::Hasher::new();
+    for f in frames {
+        h.update(f.image.to_string_lossy().as_bytes());
+        if let Some(r) = &f.right {
+            h.update(b"\t");
+            h.update(r.to_string_lossy().as_bytes());
+        }
+        h.update(b"\n");
+    }
+    format!("{:08x}", h.finalize())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_partition_the_frames_by_rank_modulo_the_count() {
+        let all: Vec<usize> = (0..3).flat_map(|i| shard_indices(10, (i, 3))).collect();
+        let mut sorted = all.clone();
+        sorted.sort();
+        assert_eq!(sorted, (0..10).collect::<Vec<_>>());
+        assert_eq!(shard_indices(10, (1, 3)).collect::<Vec<_>>(), [1, 4, 7]);
+        assert_eq!(shard_indices(2, (3, 4)).count(), 0);
+    }
+
+    #[test]
+    fn a_list_file_is_read_relative_to_its_folder_sorted_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let list = dir.path().join("list.txt");
+        std::fs::write(&list, "# frames\nb/f2.png\n\n a/f1.png \n").unwrap();
+        let frames = frame_list(&list, None).unwrap();
+        assert_eq!(frames.iter().map(|f| f.image.clone()).collect::<Vec<_>>(), [dir.path().join("a/f1.png"), dir.path().join("b/f2.png")]);
+        std::fs::write(&list, "a/f1.png\nb/f1.png\n").unwrap();
+        let e = frame_list(&list, None).unwrap_err().to_string();
+        assert!(e.contains("frames/f1.json") && e.contains("unique"), "{e}");
+        let right = dir.path().join("right.txt");
+        std::fs::write(&right, "r1.png\n").unwrap();
+        std::fs::write(&list, "a/f1.png\nb/f2.png\n").unwrap();
+        let e = frame_list(&list, Some(&right)).unwrap_err().to_string();
+        assert!(e.contains("has 1 images but --images") && e.contains("has 2"), "{e}");
+        std::fs::write(&list, "# nothing\n").unwrap();
+        let e = frame_list(&list, None).unwrap_err().to_string();
+        assert!(e.contains("no images"), "{e}");
+    }
+}

@@ -1,0 +1,448 @@
+//! `tubeloc locate`: the main job. One image (or a stereo pair) and a rig file in, grasp-ready
+//! tube poses out; or, with `--images`, many frames in one process ([`batch`]), sharded over
+//! machines and combined by `tubeloc locate merge` ([`merge`]).
+//!
+//! Reading files, building the detector and writing the outputs happen here; the pipeline itself
+//! (detect -> (stereo) -> refine -> stages after the fit -> duplicate merging -> grasp frames)
+//! is [`tubeloc_pipeline::Locator`]. A run writes one JSON document per frame (schema
+//! `tubeloc.locate.v1`, documented in the README; it also holds the camera model and the
+//! detections that seeded the refinement) and the overlay PNG, each atomically, both before
+//! anything is printed; a failing run writes neither.
+
+pub mod batch;
+pub mod frames;
+pub mod merge;
+pub mod single;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use nalgebra::Vector3;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use tubeloc_core::{CameraModel, CocoResult, Pose, Rig, TubeDetection};
+use tubeloc_pipeline::{detector, CameraSelection, ExternalDetections, GroundPlane, LocateInput, LocatedTube, Locator, LocatorSettings, TubeDetector};
+
+/// Exit code of a run that finished but located no tube.
+pub const EXIT_NO_TUBE: u8 = 3;
+
+/// Detector that seeds the refinement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Detector {
+    /// The learned segmenter (`--model`, default: the shipped model, embedded in the program).
+    Learned,
+    /// Line2D template matching (`--templates LIB.tlt`, built for the rig camera).
+    Line2d,
+    /// Detections made elsewhere (`--results coco_results.json`, e.g. Detectron2).
+    External,
+}
+
+/// Nested `tubeloc locate` subcommands.
+#[derive(Subcommand, Debug)]
+pub enum LocateCommand {
+    /// Combine the output folders of the shards of a batch run (`--shard I/N`) into one folder:
+    /// every frame's result file and one summary. Overlapping or missing frames are refused.
+    Merge(merge::MergeArgs),
+}
+
+/// Arguments of `tubeloc locate`.
+#[derive(Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct LocateArgs {
+    /// `merge`: combine the folders of a sharded batch run.
+    #[command(subcommand)]
+    pub command: Option<LocateCommand>,
+    /// Rig file (tubeloc JSON from `tubeloc calib rig`, or the `rig.json` of a synthetic dataset).
+    #[arg(long, required = true)]
+    pub rig: Option<PathBuf>,
+    /// The (left) image.
+    #[arg(long, required_unless_present = "images", conflicts_with = "images")]
+    pub image: Option<PathBuf>,
+    /// Right image of a stereo pair: adds the stereo term to the refinement.
+    #[arg(long, conflicts_with = "images")]
+    pub right: Option<PathBuf>,
+    /// Batch run: the (left) frames, a folder (its .png/.jpg/.jpeg files) or a list file (one
+    /// image path a line, relative to the list's folder; blank lines and `#` comments skipped).
+    /// Frames are taken in sorted path order; each frame's result is `--out DIR/frames/<image
+    /// file stem>.json` (image file stems must be unique), plus `DIR/summary.json`. A frame
+    /// whose result file exists and is complete is skipped, so a killed run resumes by running
+    /// the same command again.
+    #[arg(long)]
+    pub images: Option<PathBuf>,
+    /// Batch run: the right frames (folder or list as --images); the k-th right frame in sorted
+    /// order pairs with the k-th left frame.
+    #[arg(long)]
+    pub right_images: Option<PathBuf>,
+    /// Batch run: process only shard I of N ("I/N", 0 <= I < N): frame k of the sorted list
+    /// goes to shard k mod N. Run each shard with its own --out folder, then `tubeloc locate
+    /// merge`.
+    #[arg(long, value_parser = crate::args::shard)]
+    pub shard: Option<(usize, usize)>,
+    /// Batch run: also write each frame's overlay PNG (`frames/<stem>.overlay.png`).
+    #[arg(long)]
+    pub overlays: bool,
+    /// Rig camera that took `--image` (default: the left camera of `--pair`, or of the rig's first
+    /// stereo pair).
+    #[arg(long)]
+    pub camera_name: Option<String>,
+    /// Stereo pair "LEFT,RIGHT" of the rig (default: the rig's first stereo pair).
+    #[arg(long)]
+    pub pair: Option<String>,
+    /// Detector that seeds the refinement.
+    #[arg(long, value_enum, default_value = "learned")]
+    pub detector: Detector,
+    /// Learned model weights (default: the shipped model, embedded in the program).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Line2D template library (`--detector line2d`).
+    #[arg(long)]
+    pub templates: Option<PathBuf>,
+    /// External COCO results (`--detector external`). Entries are selected by the image's file
+    /// name: by an entry's own "file_name" field, or through --results-images; results for a
+    /// single image id are taken whole.
+    #[arg(long)]
+    pub results: Option<PathBuf>,
+    /// With --results: a COCO file whose images[] (id, file_name) tell which results belong to
+    /// --image (e.g. the dataset's annotations.json).
+    #[arg(long, requires = "results")]
+    pub results_images: Option<PathBuf>,
+    /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres: places seeds on
+    /// the ground and gives the grasp approach direction.
+    #[arg(long, allow_hyphen_values = true)]
+    pub ground: Option<GroundPlane>,
+    /// Up direction "ux,uy,uz" in the camera frame for the grasp approach when no --ground is
+    /// given (default: -y, i.e. the camera is roughly level).
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_up)]
+    pub up: Option<Vector3<f64>>,
+    /// Score calibration JSON (probability of a tube and acceptance threshold; `tubeloc eval
+    /// --calibrate` writes one). Default for the learned detector: the shipped model's
+    /// (embedded) or the one beside --model (`<model>.calibration.json`); other detectors: none
+    /// (probability = score).
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Accept tubes whose probability is at least this (default: the calibration's threshold,
+    /// chosen for precision >= 0.95 on real validation composites).
+    #[arg(long, value_parser = probability)]
+    pub min_probability: Option<f64>,
+    /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
+    /// the working scale of this band (or of --ground), or "off" (the image as it is).
+    #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
+    pub range_m: String,
+    /// Output: the poses JSON file (schema tubeloc.locate.v1) for one image; the output folder
+    /// for a batch run (--images).
+    #[arg(long, required = true)]
+    pub out: Option<PathBuf>,
+    /// Overlay PNG with the fitted contours (default: `<out stem>.overlay.png` next to --out).
+    #[arg(long, conflicts_with = "images")]
+    pub overlay: Option<PathBuf>,
+}
+
+impl LocateArgs {
+    /// The arguments of a one-image run with every option at its default.
+    pub fn single(rig: PathBuf, image: PathBuf, out: PathBuf) -> Self {
+        LocateArgs {
+            command: None,
+            rig: Some(rig),
+            image: Some(image),
+            right: None,
+            images: None,
+            right_images: None,
+            shard: None,
+            overlays: false,
+            camera_name: None,
+            pair: None,
+            detector: Detector::Learned,
+            model: None,
+            templates: None,
+            results: None,
+            results_images: None,
+            ground: None,
+            up: None,
+            calibration: None,
+            min_probability: None,
+            range_m: "1:4".into(),
+            out: Some(out),
+            overlay: None,
+        }
+    }
+
+    /// `--rig` (required by the command line).
+    fn rig_path(&self) -> Result<&Path> {
+        self.rig.as_deref().ok_or_else(|| crate::args::usage("the following required argument was not provided: --rig <RIG>"))
+    }
+
+    /// `--out` (required by the command line).
+    fn out_path(&self) -> Result<&Path> {
+        self.out.as_deref().ok_or_else(|| crate::args::usage("the following required argument was not provided: --out <OUT>"))
+    }
+}
+
+/// Runs `tubeloc locate` (one image, a batch, or `merge`); returns the process exit code:
+/// [`EXIT_NO_TUBE`] when the run finished but located no tube, else 0.
+pub fn run(a: LocateArgs) -> Result<u8> {
+    if let Some(LocateCommand::Merge(m)) = a.command {
+        return merge::run(m).map(|()| 0);
+    }
+    if a.images.is_none() {
+        // Batch-only flags (clap's `requires` does not see them through the subcommand setup).
+        for (given, flag) in [(a.shard.is_some(), "--shard"), (a.right_images.is_some(), "--right-images"), (a.overlays, "--overlays")] {
+            if given {
+                return Err(crate::args::usage(format!("{flag} is for batch runs (--images LIST_OR_DIR); a one-image run takes --image, --right and --overlay FILE")));
+            }
+        }
+    }
+    let located = if a.images.is_some() { batch::run(&a)? } else { single::run(&a)? };
+    Ok(if located == 0 { EXIT_NO_TUBE } else { 0 })
+}
+
+/// A probability in [0, 1].
+fn probability(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
+        _ => Err(format!("{s:?}: expected a probability in [0, 1]")),
+    }
+}
+
+/// `--up ux,uy,uz`: three finite numbers, not all zero (normalized).
+fn parse_up(s: &str) -> std::result::Result<Vector3<f64>, String> {
+    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("{s:?}: expected three numbers ux,uy,uz"))?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("{s:?}: expected three finite numbers ux,uy,uz"));
+    }
+    let n = Vector3::new(v[0], v[1], v[2]);
+    if n.norm() < 1e-9 {
+        return Err(format!("{s:?}: the vector is zero"));
+    }
+    Ok(n.normalize())
+}
+
+/// The document `tubeloc locate` writes for each frame.
+#[derive(Serialize, Debug)]
+pub struct LocateDoc<'a> {
+    /// Schema name and version: `tubeloc.locate.v1`.
+    pub schema: &'static str,
+    /// The input image.
+    pub image: &'a Path,
+    /// The right image, when stereo was used.
+    pub right_image: Option<&'a Path>,
+    /// Rig camera of `image`.
+    pub camera: &'a str,
+    /// Detector that seeded the refinement.
+    pub detector: &'a str,
+    /// Up direction used for the grasp frames, unit vector in the camera frame.
+    pub up_cam: Vector3<f64>,
+    /// Pose of the camera in the rig frame.
+    #[serde(rename = "T_rig_cam")]
+    pub t_rig_cam: Pose,
+    /// Located tubes, best score first, then the rejected detections (`status` says why).
+    pub tubes: Vec<TubeOut<'a>>,
+    /// The probability threshold tubes were accepted at.
+    pub min_probability: f64,
+    /// Run statistics of a one-image run: wall time (s) and peak resident memory (MiB) of the
+    /// whole run. Absent from the frames of a batch run (its `run.json` holds them), so that a
+    /// frame's document depends on its inputs only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub run: Option<serde_json::Value>,
+    /// The model of the camera that took `image`.
+    pub camera_model: &'a CameraModel,
+    /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
+    pub detections: &'a [TubeDetection],
+}
+
+/// Schema name of a frame's document.
+pub const FRAME_SCHEMA: &str = "tubeloc.locate.v1";
+
+/// One tube of the document: the pose, grasp frames and probability, and what became of it.
+#[derive(Serialize, Debug)]
+pub struct TubeOut<'a> {
+    /// The tube.
+    #[serde(flatten)]
+    pub tube: &'a LocatedTube,
+    /// `located` (handed to the planner), `fit_failed` or `low_probability`.
+    pub status: &'static str,
+}
+
+/// External COCO results, read once and selected per image by its file name.
+struct ExternalResults {
+    list: Vec<CocoResult>,
+    names: Option<BTreeMap<u64, String>>,
+    origin: String,
+}
+
+impl ExternalResults {
+    fn read(a: &LocateArgs) -> Result<Self> {
+        let path = a.results.as_ref().context("--detector external needs --results coco_results.json")?;
+        let text = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        let list: Vec<CocoResult> = serde_json::from_slice(&text).with_context(|| format!("{}: not a COCO results list", path.display()))?;
+        let names = match &a.results_images {
+            Some(p) => {
+                let ds = tubeloc_core::CocoDataset::load(p).with_context(|| format!("reading {}", p.display()))?;
+                Some(ds.images.iter().map(|im| (im.id, im.file_name.clone())).collect())
+            }
+            None => None,
+        };
+        Ok(ExternalResults { list, names, origin: path.display().to_string() })
+    }
+
+    /// The detections of `image` (of `size` pixels): its results, selected by its file name and
+    /// converted.
+    fn detections_for(&self, image: &Path, size: (u32, u32)) -> Result<ExternalDetections> {
+        let image_name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let origin = &self.origin;
+        let list = detector::select_results_for_image(self.list.clone(), &image_name, self.names.as_ref(), origin)?;
+        let dets = list.iter().enumerate().map(|(k, r)| detector::detection_from_coco_result(r, Some(size), &format!("{origin}: entry {k} (image {})", r.image_id))).collect::<std::result::Result<Vec<_>, _>>()?;
+        Ok(ExternalDetections::new(dets, origin.clone()))
+    }
+}
+
+/// How each frame's locator is had: one locator (its detector loaded once) for every frame, or
+/// (external results) one per frame with that frame's detections.
+enum FrameLocators {
+    Shared(Box<Locator>),
+    External(ExternalResults),
+}
+
+/// What every frame of a run shares: the rig, the camera selection, the settings and the
+/// detector (a model or template library is loaded once).
+pub struct Setup {
+    rig: Rig,
+    rig_path: PathBuf,
+    selection: CameraSelection,
+    settings: LocatorSettings,
+    locators: FrameLocators,
+    camera: tubeloc_core::RigCamera,
+    /// Name of the detector (`learned`, `line2d`, `external`).
+    pub detector_name: String,
+}
+
+impl Setup {
+    /// Reads the rig, builds the detector and the settings (score calibration) of `a`.
+    pub fn new(a: &LocateArgs) -> Result<Self> {
+        let rig_path = a.rig_path()?.to_path_buf();
+        let rig = Rig::load_json(&rig_path).with_context(|| format!("rig {}", rig_path.display()))?;
+        let pair = match &a.pair {
+            Some(p) => {
+                let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
+                Some((l.trim().to_string(), r.trim().to_string()))
+            }
+            None => None,
+        };
+        let selection = CameraSelection { camera: a.camera_name.clone(), pair };
+        let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
+        let mut settings = LocatorSettings::default();
+        settings.calibration = match (&a.calibration, a.detector) {
+            (Some(p), _) => crate::cmd_detect_learned::read_calibration(p)?,
+            (None, Detector::Learned) => model.calibration(None)?,
+            (None, _) => settings.calibration,
+        };
+        if let Some(p) = a.min_probability {
+            settings.calibration.threshold = p;
+        }
+        let shared: Option<Box<dyn TubeDetector>> = match a.detector {
+            Detector::Learned => {
+                let mut d = model.detector()?;
+                d.range = crate::cmd_detect_learned::parse_range_band(&a.range_m)?;
+                Some(Box::new(d))
+            }
+            Detector::Line2d => {
+                let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
+                let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).with_context(|| format!("reading {}", lib.display()))?;
+                Some(Box::new(tubeloc_pipeline::Line2dTubeDetector::new(tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default())?)))
+            }
+            Detector::External => None,
+        };
+        // External results: a locator without detections resolves the camera here; each frame
+        // gets its own.
+        let external = match shared {
+            None => Some(ExternalResults::read(a)?),
+            Some(_) => None,
+        };
+        let detector = shared.unwrap_or_else(|| Box::new(ExternalDetections::new(Vec::new(), "")));
+        let locator = Locator::new(&rig, &selection, detector, settings.clone()).with_context(|| rig_path.display().to_string())?;
+        let (camera, detector_name) = (locator.camera().clone(), locator.detector().name().to_string());
+        let locators = match external {
+            Some(ext) => FrameLocators::External(ext),
+            None => FrameLocators::Shared(Box::new(locator)),
+        };
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, detector_name })
+    }
+
+    /// Checks that `image` (`size` pixels) is the size of the rig camera the images come from.
+    fn check_size(&self, image: &Path, (w, h): (u32, u32)) -> Result<()> {
+        let cam = &self.camera;
+        if (w, h) != (cam.model.width, cam.model.height) {
+            bail!("{} is {w}x{h} but rig camera {:?} in {} is {}x{}", image.display(), cam.name, self.rig_path.display(), cam.model.width, cam.model.height);
+        }
+        Ok(())
+    }
+
+    /// Runs `f` with the locator of the frame `image` (of `size` pixels).
+    fn with_locator<R>(&self, image: &Path, size: (u32, u32), f: impl FnOnce(&Locator) -> Result<R>) -> Result<R> {
+        match &self.locators {
+            FrameLocators::Shared(l) => f(l),
+            FrameLocators::External(ext) => {
+                let dets = ext.detections_for(image, size)?;
+                let l = Locator::new(&self.rig, &self.selection, Box::new(dets), self.settings.clone()).with_context(|| self.rig_path.display().to_string())?;
+                f(&l)
+            }
+        }
+    }
+}
+
+/// The inputs of one frame.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Frame {
+    /// The (left) image.
+    pub image: PathBuf,
+    /// The right image of a stereo pair.
+    pub right: Option<PathBuf>,
+}
+
+/// What locating one frame gave: its document and overlay, encoded, and the tubes.
+pub struct FrameOutcome {
+    /// The frame's document (JSON, schema [`FRAME_SCHEMA`]).
+    pub json: Vec<u8>,
+    /// The overlay PNG, when asked for.
+    pub overlay_png: Option<Vec<u8>>,
+    /// What the pipeline found.
+    pub found: tubeloc_pipeline::LocateOutput,
+}
+
+/// Locates the tubes of one frame and encodes its document (with run statistics since
+/// `started` when given) and, with `overlay`, the overlay PNG. Nothing is written.
+pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Option<std::time::Instant>, overlay: bool) -> Result<FrameOutcome> {
+    let size = image::image_dimensions(&frame.image).with_context(|| format!("reading {}", frame.image.display()))?;
+    setup.check_size(&frame.image, size)?;
+    setup.with_locator(&frame.image, size, |locator| {
+        let cam = locator.camera().clone();
+        let image = open_image(&frame.image)?;
+        let right = frame.right.as_deref().map(open_image).transpose()?;
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground, up: a.up };
+        let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
+        let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
+        let overlay_png = match overlay {
+            true => Some(tubeloc_pipeline::overlay::png_bytes(&locator.overlay(&image, tubes.iter().map(|t| &t.tube.pose))).context("encoding the overlay PNG")?),
+            false => None,
+        };
+        let doc = LocateDoc {
+            schema: FRAME_SCHEMA,
+            image: &frame.image,
+            right_image: frame.right.as_deref(),
+            camera: &cam.name,
+            detector: &setup.detector_name,
+            up_cam: found.up_cam,
+            t_rig_cam: cam.t_rig_cam,
+            tubes,
+            min_probability: setup.settings.calibration.threshold,
+            run: started.map(|t0| serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb()})),
+            camera_model: &cam.model,
+            detections: &found.detections,
+        };
+        let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
+        Ok(FrameOutcome { json, overlay_png, found })
+    })
+}
+
+fn open_image(p: &Path) -> Result<image::DynamicImage> {
+    image::open(p).with_context(|| format!("cannot read image {}", p.display()))
+}
