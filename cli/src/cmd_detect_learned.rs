@@ -18,37 +18,14 @@ pub struct DetectionOut {
     segmentation: Option<Segmentation>,
 }
 
-/// The shipped model (`data/models/tubenet.safetensors`), looked up under the current
-/// directory, then in the workspace the executable sits in (`<ws>/target/<profile>/tubeloc`),
-/// then in the source tree the program was built from (`CARGO_MANIFEST_DIR/..`).
+/// The shipped model ([`tubeloc_pipeline::shipped::default_model`]).
 pub fn default_model() -> PathBuf {
-    let rel = Path::new("data/models/tubenet.safetensors");
-    let mut candidates = vec![rel.to_path_buf()];
-    if let Some(ws) = std::env::current_exe().ok().and_then(|e| e.parent()?.parent()?.parent().map(Path::to_path_buf)) {
-        candidates.push(ws.join(rel));
-    }
-    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel);
-    candidates.into_iter().find(|p| p.exists()).unwrap_or(built)
+    tubeloc_pipeline::shipped::default_model()
 }
 
-/// The score calibration of a model: `path` when given, else `<model>.calibration.json` beside
-/// the model (`data/models/tubenet.calibration.json` for the shipped one), else the identity
-/// (probability = score, threshold 0.5) with a warning.
+/// The score calibration of a model ([`tubeloc_pipeline::shipped::load_calibration`]).
 pub fn load_calibration(path: Option<&Path>, model: &Path) -> Result<tubeloc_core::ScoreCalibration> {
-    let p = match path {
-        Some(p) => p.to_path_buf(),
-        None => {
-            let beside = model.with_extension("calibration.json");
-            if !beside.exists() {
-                eprintln!("warning: no score calibration beside {} ({}): probabilities are the raw scores", model.display(), beside.display());
-                return Ok(tubeloc_core::ScoreCalibration::identity());
-            }
-            beside
-        }
-    };
-    let c: tubeloc_core::ScoreCalibration = tubeloc_core::files::read_json(&p).with_context(|| format!("reading score calibration {}", p.display()))?;
-    c.validate().map_err(|e| anyhow::anyhow!("score calibration {}: {e}", p.display()))?;
-    Ok(c)
+    Ok(tubeloc_pipeline::shipped::load_calibration(path, model)?)
 }
 
 /// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`), by id;
@@ -66,15 +43,9 @@ pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64,
     Ok(out)
 }
 
-/// Parses a tube-range band "NEAR:FAR" (metres, 0 < NEAR < FAR) or "off" (no working scale).
+/// Parses a tube-range band ([`tubeloc_pipeline::shipped::parse_range_band`]).
 pub fn parse_range_band(s: &str) -> Result<Option<tubeloc_detect::scale::RangeBand>> {
-    if s == "off" {
-        return Ok(None);
-    }
-    let (a, b) = s.split_once(':').with_context(|| format!("--range-m {s:?}: expected NEAR:FAR in metres, or off"))?;
-    let band = tubeloc_detect::scale::RangeBand { near_m: a.trim().parse().with_context(|| format!("--range-m {s:?}: NEAR is not a number"))?, far_m: b.trim().parse().with_context(|| format!("--range-m {s:?}: FAR is not a number"))? };
-    band.validate().map_err(|m| anyhow::anyhow!("--range-m {s:?}: {m}"))?;
-    Ok(Some(band))
+    Ok(tubeloc_pipeline::shipped::parse_range_band(s)?)
 }
 
 /// Images to process: `(image_id, path)`.

@@ -15,7 +15,7 @@ use serde::Serialize;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{files, CameraModel, CocoResult, Pose, Rig, TubeDetection};
-use tubeloc_pipeline::{detector, CameraSelection, ExternalDetections, GroundPlane, LearnedDetector, Line2dTubeDetector, LocateInput, LocatedTube, Locator, LocatorSettings, TubeDetector};
+use tubeloc_pipeline::{detector, CameraSelection, ExternalDetections, GroundPlane, Line2dTubeDetector, LocateInput, LocatedTube, Locator, LocatorSettings, TubeDetector};
 
 /// Detector that seeds the refinement.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -182,15 +182,7 @@ fn external_detections(a: &LocateArgs, size: (u32, u32)) -> Result<ExternalDetec
 /// The detector of the arguments.
 fn detector_of(a: &LocateArgs, size: (u32, u32)) -> Result<Box<dyn TubeDetector>> {
     Ok(match a.detector {
-        Detector::Learned => {
-            let model = a.model.clone().unwrap_or_else(crate::cmd_detect_learned::default_model);
-            if !model.exists() {
-                bail!("learned model {} not found: pass --model FILE, or restore the shipped data/models/tubenet.safetensors (data/models/README.md has the command that trains it)", model.display());
-            }
-            let mut d = LearnedDetector::load(&model, Default::default())?;
-            d.range = crate::cmd_detect_learned::parse_range_band(&a.range_m)?;
-            Box::new(d)
-        }
+        Detector::Learned => Box::new(tubeloc_pipeline::shipped::learned_detector(a.model.as_deref(), &a.range_m)?),
         Detector::Line2d => {
             let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
             let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).with_context(|| format!("reading {}", lib.display()))?;

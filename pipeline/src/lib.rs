@@ -59,6 +59,7 @@ pub mod frame;
 pub mod locator;
 pub mod overlay;
 pub mod settings;
+pub mod shipped;
 pub mod stages;
 pub mod stereo;
 
