@@ -8,7 +8,8 @@ use image::{DynamicImage, ImageBuffer};
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-/// The image of a numpy array; `what` names the argument in errors.
+/// The image of a numpy array (one copy: a memcpy for C-contiguous arrays, else element by element in row-major
+/// order); `what` names the argument in errors.
 pub fn image_of(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<DynamicImage> {
     let shape_err = |shape: &[usize], dtype: &str| to_py(format!("{what}: expected a uint8 or uint16 array of shape HxW, HxWx1, HxWx2, HxWx3 or HxWx4, got a {dtype} array of shape {shape:?}"));
     let Ok(arr) = obj.cast::<PyUntypedArray>() else {
@@ -26,7 +27,8 @@ pub fn image_of(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<DynamicImage> {
     }
     let (w32, h32) = (w as u32, h as u32);
     if let Ok(a) = obj.cast::<PyArrayDyn<u8>>() {
-        let data: Vec<u8> = a.readonly().as_array().iter().copied().collect();
+        let ro = a.readonly();
+        let data: Vec<u8> = if ro.is_c_contiguous() { ro.as_slice().map(<[u8]>::to_vec).ok() } else { None }.unwrap_or_else(|| ro.as_array().iter().copied().collect());
         return Ok(match c {
             1 => DynamicImage::ImageLuma8(ImageBuffer::from_raw(w32, h32, data).expect("size")),
             2 => DynamicImage::ImageLumaA8(ImageBuffer::from_raw(w32, h32, data).expect("size")),
@@ -35,7 +37,8 @@ pub fn image_of(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<DynamicImage> {
         });
     }
     if let Ok(a) = obj.cast::<PyArrayDyn<u16>>() {
-        let data: Vec<u16> = a.readonly().as_array().iter().copied().collect();
+        let ro = a.readonly();
+        let data: Vec<u16> = if ro.is_c_contiguous() { ro.as_slice().map(<[u16]>::to_vec).ok() } else { None }.unwrap_or_else(|| ro.as_array().iter().copied().collect());
         return Ok(match c {
             1 => DynamicImage::ImageLuma16(ImageBuffer::from_raw(w32, h32, data).expect("size")),
             2 => DynamicImage::ImageLumaA16(ImageBuffer::from_raw(w32, h32, data).expect("size")),
