@@ -76,27 +76,12 @@ impl ModelChoice {
     /// 0.5) with a warning when there is none; for the shipped model its embedded calibration
     /// (`data/models/tubenet.calibration.json`).
     pub fn calibration(&self, path: Option<&Path>) -> Result<tubeloc_core::ScoreCalibration> {
-        let p = match (path, self) {
-            (Some(p), _) => p.to_path_buf(),
-            (None, ModelChoice::Shipped) => return tubeloc_pipeline::shipped_calibration().map_err(anyhow::Error::from),
-            (None, ModelChoice::File(model)) => {
-                let beside = model.with_extension("calibration.json");
-                if !beside.exists() {
-                    eprintln!("warning: no score calibration beside {} ({}): probabilities are the raw scores", model.display(), beside.display());
-                    return Ok(tubeloc_core::ScoreCalibration::identity());
-                }
-                beside
-            }
+        let model = match self {
+            ModelChoice::Shipped => None,
+            ModelChoice::File(p) => Some(p.as_path()),
         };
-        read_calibration(&p)
+        Ok(tubeloc_pipeline::shipped::load_calibration(path, model)?)
     }
-}
-
-/// Reads and validates a score calibration file.
-pub fn read_calibration(p: &Path) -> Result<tubeloc_core::ScoreCalibration> {
-    let c: tubeloc_core::ScoreCalibration = tubeloc_core::files::read_json(p).with_context(|| format!("reading score calibration {}", p.display()))?;
-    c.validate().map_err(|e| anyhow::anyhow!("score calibration {}: {e}", p.display()))?;
-    Ok(c)
 }
 
 /// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`), by id;
@@ -114,15 +99,9 @@ pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64,
     Ok(out)
 }
 
-/// Parses a tube-range band "NEAR:FAR" (metres, 0 < NEAR < FAR) or "off" (no working scale).
+/// Parses a tube-range band ([`tubeloc_pipeline::shipped::parse_range_band`]).
 pub fn parse_range_band(s: &str) -> Result<Option<tubeloc_detect::scale::RangeBand>> {
-    if s == "off" {
-        return Ok(None);
-    }
-    let (a, b) = s.split_once(':').with_context(|| format!("--range-m {s:?}: expected NEAR:FAR in metres, or off"))?;
-    let band = tubeloc_detect::scale::RangeBand { near_m: a.trim().parse().with_context(|| format!("--range-m {s:?}: NEAR is not a number"))?, far_m: b.trim().parse().with_context(|| format!("--range-m {s:?}: FAR is not a number"))? };
-    band.validate().map_err(|m| anyhow::anyhow!("--range-m {s:?}: {m}"))?;
-    Ok(Some(band))
+    Ok(tubeloc_pipeline::shipped::parse_range_band(s)?)
 }
 
 /// Images to process: `(image_id, path)`.

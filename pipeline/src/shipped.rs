@@ -6,12 +6,19 @@
 //! calibration is the text of `data/models/tubenet.calibration.json` (fitted by `tubeloc eval
 //! --calibrate` on real validation composites: probability of a tube, and the threshold for
 //! precision >= 0.95).
+//!
+//! The learned detector, its calibration and the working-scale band are built here the way
+//! `tubeloc locate` builds them, so that every front end (the CLI, the Python package) makes
+//! the same [`crate::Locator`] from the same options; error messages are the CLI's (they name
+//! the option, e.g. `--range-m`, and the file at fault).
 
 use crate::detector::LearnedDetector;
 use crate::error::{PipelineError, Result};
+use std::path::Path;
 use tubeloc_core::ScoreCalibration;
 use tubeloc_detect::learned::shipped::{shipped_model, SHIPPED_MODEL_NAME};
 use tubeloc_detect::learned::DecodeConfig;
+use tubeloc_detect::scale::RangeBand;
 
 /// The file the embedded calibration comes from, relative to the workspace root.
 pub const SHIPPED_CALIBRATION_NAME: &str = "data/models/tubenet.calibration.json";
@@ -36,6 +43,68 @@ impl LearnedDetector {
     }
 }
 
+/// The score calibration of a model: `path` when given; else for a model file
+/// `<model>.calibration.json` beside it, or the identity (probability = score, threshold 0.5)
+/// with a warning on stderr when there is none; for the shipped model (`model` = `None`) its
+/// embedded calibration.
+pub fn load_calibration(path: Option<&Path>, model: Option<&Path>) -> Result<ScoreCalibration> {
+    let p = match (path, model) {
+        (Some(p), _) => p.to_path_buf(),
+        (None, None) => return shipped_calibration(),
+        (None, Some(model)) => {
+            let beside = model.with_extension("calibration.json");
+            if !beside.exists() {
+                eprintln!("warning: no score calibration beside {} ({}): probabilities are the raw scores", model.display(), beside.display());
+                return Ok(ScoreCalibration::identity());
+            }
+            beside
+        }
+    };
+    let c: ScoreCalibration = tubeloc_core::files::read_json(&p).map_err(|e| PipelineError::Input(format!("reading score calibration {}: {}", p.display(), error_chain(&e))))?;
+    c.validate().map_err(|e| PipelineError::Input(format!("score calibration {}: {e}", p.display())))?;
+    Ok(c)
+}
+
+/// An error and its sources, each after ": " (as the CLI prints errors).
+pub fn error_chain(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
+}
+
+/// Parses a tube-range band "NEAR:FAR" (metres, 0 < NEAR < FAR) or "off" (no working scale:
+/// the learned detector sees the image as it is).
+pub fn parse_range_band(s: &str) -> Result<Option<RangeBand>> {
+    if s == "off" {
+        return Ok(None);
+    }
+    let bad = |m: String| PipelineError::Input(format!("--range-m {s:?}: {m}"));
+    let (a, b) = s.split_once(':').ok_or_else(|| bad("expected NEAR:FAR in metres, or off".into()))?;
+    let near_m = a.trim().parse().map_err(|e| bad(format!("NEAR is not a number: {e}")))?;
+    let far_m = b.trim().parse().map_err(|e| bad(format!("FAR is not a number: {e}")))?;
+    let band = RangeBand { near_m, far_m };
+    band.validate().map_err(bad)?;
+    Ok(Some(band))
+}
+
+/// The learned detector of `tubeloc locate`: the weights at `model` (default: the shipped,
+/// embedded model) with the default decoder, run at the working scale of the band `range_m`
+/// ("NEAR:FAR" metres, or "off"; see [`parse_range_band`]).
+pub fn learned_detector(model: Option<&Path>, range_m: &str) -> Result<LearnedDetector> {
+    let mut d = match model {
+        None => LearnedDetector::shipped(Default::default())?,
+        Some(m) if !m.exists() => return Err(PipelineError::Input(format!("learned model {} not found: pass an existing --model FILE, or leave --model out to use the shipped model", m.display()))),
+        Some(m) => LearnedDetector::load(m, Default::default())?,
+    };
+    d.range = parse_range_band(range_m)?;
+    Ok(d)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -49,5 +118,21 @@ mod tests {
         // The shipped threshold was chosen for precision >= 0.95.
         assert_eq!(c.target_precision, 0.95);
         assert!(c.threshold > 0.0 && c.threshold < 1.0, "{c:?}");
+    }
+
+    #[test]
+    fn range_band_errors_name_the_option_and_the_problem() {
+        assert_eq!(parse_range_band("off").unwrap(), None);
+        let b = parse_range_band("1:4").unwrap().unwrap();
+        assert_eq!((b.near_m, b.far_m), (1.0, 4.0));
+        assert_eq!(parse_range_band("14").unwrap_err().to_string(), "--range-m \"14\": expected NEAR:FAR in metres, or off");
+        assert_eq!(parse_range_band("x:4").unwrap_err().to_string(), "--range-m \"x:4\": NEAR is not a number: invalid float literal");
+        assert_eq!(parse_range_band("4:1").unwrap_err().to_string(), "--range-m \"4:1\": range band 4..1 m: need 0 < near < far, finite");
+    }
+
+    #[test]
+    fn a_missing_model_is_named_with_the_way_out() {
+        let err = learned_detector(Some(Path::new("/nonexistent/m.safetensors")), "1:4").err().unwrap().to_string();
+        assert!(err.starts_with("learned model /nonexistent/m.safetensors not found: pass an existing --model FILE"), "{err}");
     }
 }

@@ -331,7 +331,7 @@ impl Setup {
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let mut settings = LocatorSettings::default();
         settings.calibration = match (&a.calibration, a.detector) {
-            (Some(p), _) => crate::cmd_detect_learned::read_calibration(p)?,
+            (Some(p), _) => tubeloc_pipeline::shipped::load_calibration(Some(p), None)?,
             (None, Detector::Learned) => model.calibration(None)?,
             (None, _) => settings.calibration,
         };
@@ -339,11 +339,8 @@ impl Setup {
             settings.calibration.threshold = p;
         }
         let shared: Option<Box<dyn TubeDetector>> = match a.detector {
-            Detector::Learned => {
-                let mut d = model.detector()?;
-                d.range = crate::cmd_detect_learned::parse_range_band(&a.range_m)?;
-                Some(Box::new(d))
-            }
+            // The same detector the Python package builds from the same options.
+            Detector::Learned => Some(Box::new(tubeloc_pipeline::shipped::learned_detector(a.model.as_deref(), &a.range_m)?)),
             Detector::Line2d => {
                 let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
                 let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).with_context(|| format!("reading {}", lib.display()))?;

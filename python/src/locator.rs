@@ -1,0 +1,295 @@
+//! `tubeloc.Locator`, `detect` and `refine`: the pipeline of `tubeloc locate`, `tubeloc
+//! detect` and `tubeloc refine` on numpy images, built with the CLI's defaults.
+
+use crate::error::{chain_to_py, context_to_py, to_py};
+use crate::image_array::image_of;
+use crate::poses::PyTube;
+use crate::rig::rig_of;
+use nalgebra::Vector3;
+use pyo3::prelude::*;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use tubeloc_core::{GroundPlane, Rig, TubeDetection};
+use tubeloc_pipeline::{shipped, CameraSelection, ExternalDetections, LocateInput, Locator, LocatorSettings, Timings, TubeDetector};
+
+/// The locator's options as the CLI's flags (`tubeloc locate --detector ... --model ...`).
+struct Options<'a> {
+    detector: &'a str,
+    model: Option<PathBuf>,
+    templates: Option<PathBuf>,
+    calibration: Option<PathBuf>,
+    min_probability: Option<f64>,
+    range_m: &'a str,
+}
+
+/// The detector of `tubeloc locate --detector NAME` with the options.
+fn detector_of(o: &Options) -> PyResult<Box<dyn TubeDetector>> {
+    Ok(match o.detector {
+        "learned" => Box::new(shipped::learned_detector(o.model.as_deref(), o.range_m).map_err(|e| chain_to_py(&e))?),
+        "line2d" => {
+            let lib = o.templates.as_ref().ok_or_else(|| to_py("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)"))?;
+            let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).map_err(|e| context_to_py(format!("reading {}", lib.display()), &e))?;
+            Box::new(tubeloc_pipeline::Line2dTubeDetector::new(tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default()).map_err(|e| chain_to_py(&e))?))
+        }
+        "external" => return Err(to_py("detector \"external\": detections made elsewhere are refined with tubeloc.refine(image, detections, rig)")),
+        other => return Err(to_py(format!("detector {other:?}: expected \"learned\" or \"line2d\""))),
+    })
+}
+
+/// The settings of `tubeloc locate` with the options: the defaults, the score calibration
+/// (given, or the learned model's), the acceptance threshold.
+fn settings_of(o: &Options) -> PyResult<LocatorSettings> {
+    let mut settings = LocatorSettings::default();
+    settings.calibration = match (&o.calibration, o.detector) {
+        (Some(p), _) => shipped::load_calibration(Some(p), None).map_err(|e| chain_to_py(&e))?,
+        (None, "learned") => shipped::load_calibration(None, o.model.as_deref()).map_err(|e| chain_to_py(&e))?,
+        (None, _) => settings.calibration,
+    };
+    if let Some(p) = o.min_probability {
+        if !(0.0..=1.0).contains(&p) {
+            return Err(to_py(format!("min_probability {p}: expected a probability in [0, 1]")));
+        }
+        settings.calibration.threshold = p;
+    }
+    Ok(settings)
+}
+
+/// A ground plane argument: a string "nx,ny,nz,d" or four numbers (camera frame, `n·X = d`, n
+/// up, metres), parsed as `--ground` is.
+fn ground_of(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Option<GroundPlane>> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else { return Ok(None) };
+    let text = match obj.extract::<String>() {
+        Ok(s) => s,
+        Err(_) => {
+            let v: Vec<f64> = obj.extract().map_err(|_| to_py("ground: expected \"nx,ny,nz,d\" or four numbers"))?;
+            v.iter().map(f64::to_string).collect::<Vec<_>>().join(",")
+        }
+    };
+    text.parse::<GroundPlane>().map(Some).map_err(|e| chain_to_py(&e))
+}
+
+/// An up direction argument (three numbers, camera frame), checked and normalized as `--up` is.
+fn up_of(up: Option<Vec<f64>>) -> PyResult<Option<Vector3<f64>>> {
+    let Some(v) = up else { return Ok(None) };
+    let s = v.iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        return Err(to_py(format!("up {s:?}: expected three finite numbers ux,uy,uz")));
+    }
+    let n = Vector3::new(v[0], v[1], v[2]);
+    if n.norm() < 1e-9 {
+        return Err(to_py(format!("up {s:?}: the vector is zero")));
+    }
+    Ok(Some(n.normalize()))
+}
+
+/// The camera selection of `--camera-name` and `--pair`.
+fn selection_of(camera: Option<String>, pair: Option<(String, String)>) -> CameraSelection {
+    CameraSelection { camera, pair }
+}
+
+/// Where the rig came from, for the CLI's "RIG: message" errors.
+fn rig_origin(obj: &Bound<'_, PyAny>) -> String {
+    obj.extract::<PathBuf>().map(|p| p.display().to_string()).unwrap_or_else(|_| "rig".into())
+}
+
+fn build(rig: &Rig, origin: &str, selection: &CameraSelection, detector: Box<dyn TubeDetector>, settings: LocatorSettings) -> PyResult<Locator> {
+    Locator::new(rig, selection, detector, settings).map_err(|e| context_to_py(origin, &e))
+}
+
+/// Detections as a list of dicts in the JSON form of `tubeloc detect`'s output.
+fn detections_to_py<'py>(py: Python<'py>, dets: &[TubeDetection]) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(dets).map_err(to_py)?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// Detections from a list of dicts (COCO results with tubeloc's seed fields), read and checked
+/// as `tubeloc refine --detections` reads its file.
+fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<TubeDetection>> {
+    let text: String = py.import("json")?.call_method1("dumps", (obj,)).map_err(|e| to_py(format!("detections: not JSON-serializable: {e}")))?.extract()?;
+    tubeloc_core::detection::parse_coco_results(text.as_bytes(), std::path::Path::new("detections")).map_err(|e| chain_to_py(&e))
+}
+
+/// Finds sample tubes in images of one rig camera (or stereo pair): detect, (stereo,) refine,
+/// the stages after the fit, duplicate merging and grasp frames -- `tubeloc locate`'s pipeline.
+///
+/// Locator(rig, detector="learned", model=None, templates=None, camera=None, pair=None,
+///         calibration=None, min_probability=None, range_m="1:4")
+///
+/// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
+/// default the shipped model) or "line2d" (templates: a .tlt library for the camera). camera:
+/// the rig camera of the (left) images; pair: (left, right) camera names. calibration: score
+/// calibration JSON (default: the learned model's); min_probability: acceptance threshold
+/// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".
+#[pyclass(name = "Locator", module = "tubeloc", frozen)]
+pub struct PyLocator {
+    locator: Locator,
+    min_probability: f64,
+    /// Stage timings of the last `locate` call, measured inside the Rust pipeline.
+    last_timings: Mutex<Option<Timings>>,
+}
+
+#[pymethods]
+impl PyLocator {
+    #[new]
+    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4"))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        rig: &Bound<'_, PyAny>,
+        detector: &str,
+        model: Option<PathBuf>,
+        templates: Option<PathBuf>,
+        camera: Option<String>,
+        pair: Option<(String, String)>,
+        calibration: Option<PathBuf>,
+        min_probability: Option<f64>,
+        range_m: &str,
+    ) -> PyResult<Self> {
+        let origin = rig_origin(rig);
+        let rig = rig_of(rig)?;
+        let o = Options { detector, model, templates, calibration, min_probability, range_m };
+        let (locator, min_probability) = py.detach(|| -> PyResult<(Locator, f64)> {
+            let det = detector_of(&o)?;
+            let settings = settings_of(&o)?;
+            let threshold = settings.calibration.threshold;
+            Ok((build(&rig, &origin, &selection_of(camera, pair), det, settings)?, threshold))
+        })?;
+        Ok(PyLocator { locator, min_probability, last_timings: Mutex::new(None) })
+    }
+
+    /// locate(left, right=None, ground=None, up=None) -> list[Tube]
+    ///
+    /// The tubes in `left` (a numpy image of the locator's camera; with `right`, the right
+    /// image of the pair adds stereo): located tubes best score first, then the rejected
+    /// detections (`status` says why), as in `tubeloc locate`'s poses file. ground: the ground
+    /// plane "nx,ny,nz,d" or four numbers (camera frame, n·X = d, n up, metres); up: the up
+    /// direction (three numbers, camera frame) for the grasp when there is no ground.
+    #[pyo3(signature = (left, right = None, ground = None, up = None))]
+    fn locate<'py>(&self, py: Python<'py>, left: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>, up: Option<Vec<f64>>) -> PyResult<Vec<PyTube>> {
+        let image = image_of(left, "left")?;
+        let right = right.filter(|r| !r.is_none()).map(|r| image_of(r, "right")).transpose()?;
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: up_of(up)? };
+        let found = py.detach(|| self.locator.locate(&input)).map_err(|e| chain_to_py(&e))?;
+        *self.last_timings.lock().unwrap_or_else(|e| e.into_inner()) = Some(found.timings.clone());
+        Ok(found.tubes.iter().map(|t| PyTube::from_located(py, t, "located")).chain(found.rejected.iter().map(|r| PyTube::from_located(py, &r.tube, r.reason.name()))).collect())
+    }
+
+    /// detect(image, ground=None) -> list[dict]
+    ///
+    /// The locator's detections in `image` (COCO results with tubeloc's seed fields, as
+    /// `tubeloc detect` writes them; image id 0).
+    #[pyo3(signature = (image, ground = None))]
+    fn detect<'py>(&self, py: Python<'py>, image: &Bound<'py, PyAny>, ground: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyAny>> {
+        let image = image_of(image, "image")?;
+        let ground = ground_of(ground)?;
+        let dets = py.detach(|| self.locator.detect(&image, ground.as_ref())).map_err(|e| chain_to_py(&e))?;
+        detections_to_py(py, &dets)
+    }
+
+    /// refine(image, detections, right=None, ground=None) -> list[Tube]
+    ///
+    /// One pose per detection, in order (no merging, no grasp frames), refined with the
+    /// locator's settings.
+    #[pyo3(signature = (image, detections, right = None, ground = None))]
+    fn refine<'py>(&self, py: Python<'py>, image: &Bound<'py, PyAny>, detections: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>) -> PyResult<Vec<PyTube>> {
+        refine_with(py, &self.locator, image, detections, right, ground)
+    }
+
+    /// The rig camera the (left) images come from.
+    #[getter]
+    fn camera(&self) -> String {
+        self.locator.camera().name.clone()
+    }
+
+    /// The detector's name (`learned`, `line2d`).
+    #[getter]
+    fn detector(&self) -> String {
+        self.locator.detector().name().to_string()
+    }
+
+    /// Wall times of the last `locate` call's stages, measured inside the pipeline (seconds;
+    /// `fit_ms`: each detection's fit, milliseconds), or None before the first call:
+    /// {"detect_s", "refine_s", "total_s", "fit_ms"}.
+    #[getter]
+    fn last_timings<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let t = self.last_timings.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        t.map(|t| py.import("json")?.call_method1("loads", (serde_json::to_string(&t).map_err(to_py)?,))).transpose()
+    }
+
+    /// The probability threshold tubes are accepted at.
+    #[getter]
+    fn min_probability(&self) -> f64 {
+        self.min_probability
+    }
+
+    fn __repr__(&self) -> String {
+        format!("tubeloc.Locator(camera={:?}, detector={:?}, min_probability={})", self.camera(), self.detector(), self.min_probability)
+    }
+}
+
+fn refine_with<'py>(py: Python<'py>, locator: &Locator, image: &Bound<'py, PyAny>, detections: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>) -> PyResult<Vec<PyTube>> {
+    let image = image_of(image, "image")?;
+    let right = right.filter(|r| !r.is_none()).map(|r| image_of(r, "right")).transpose()?;
+    let dets = detections_from_py(py, detections)?;
+    let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: None };
+    let (poses, _) = py.detach(|| locator.refine(&input, &dets)).map_err(|e| chain_to_py(&e))?;
+    Ok(poses.iter().map(|p| PyTube::from_pose(py, p)).collect())
+}
+
+/// detect(image, rig, detector="learned", model=None, templates=None, camera=None,
+///        ground=None, range_m="1:4") -> list[dict]
+///
+/// Tubes detected in `image` (a numpy image of the rig camera `camera`, default the rig's
+/// first pair's left camera or first camera) as COCO results with tubeloc's seed fields (the
+/// entries `tubeloc detect` writes; image id 0).
+#[pyfunction]
+#[pyo3(signature = (image, rig, detector = "learned", model = None, templates = None, camera = None, ground = None, range_m = "1:4"))]
+#[allow(clippy::too_many_arguments)]
+pub fn detect<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    rig: &Bound<'py, PyAny>,
+    detector: &str,
+    model: Option<PathBuf>,
+    templates: Option<PathBuf>,
+    camera: Option<String>,
+    ground: Option<&Bound<'py, PyAny>>,
+    range_m: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let origin = rig_origin(rig);
+    let rig = rig_of(rig)?;
+    let o = Options { detector, model, templates, calibration: None, min_probability: None, range_m };
+    let det = py.detach(|| detector_of(&o))?;
+    let locator = build(&rig, &origin, &selection_of(camera, None), det, LocatorSettings::default())?;
+    let image = image_of(image, "image")?;
+    let ground = ground_of(ground)?;
+    let dets = py.detach(|| locator.detect(&image, ground.as_ref())).map_err(|e| chain_to_py(&e))?;
+    detections_to_py(py, &dets)
+}
+
+/// refine(image, detections, rig, right=None, ground=None, camera=None, pair=None) -> list[Tube]
+///
+/// Refines detections (a list of dicts: COCO results with tubeloc's seed fields, as `detect`
+/// returns or `tubeloc detect` writes) into tube poses in `image`'s camera frame, one per
+/// detection, in order -- `tubeloc refine`'s work with its default settings. With `right`, the
+/// rig's pair (`pair`, default its first) adds stereo.
+#[pyfunction]
+#[pyo3(signature = (image, detections, rig, right = None, ground = None, camera = None, pair = None))]
+#[allow(clippy::too_many_arguments)]
+pub fn refine<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    detections: &Bound<'py, PyAny>,
+    rig: &Bound<'py, PyAny>,
+    right: Option<&Bound<'py, PyAny>>,
+    ground: Option<&Bound<'py, PyAny>>,
+    camera: Option<String>,
+    pair: Option<(String, String)>,
+) -> PyResult<Vec<PyTube>> {
+    let origin = rig_origin(rig);
+    let rig = rig_of(rig)?;
+    let mut settings = LocatorSettings::default();
+    settings.merge_duplicates = false;
+    let locator = build(&rig, &origin, &selection_of(camera, pair), Box::new(ExternalDetections::new(Vec::new(), "detections")), settings)?;
+    refine_with(py, &locator, image, detections, right, ground)
+}

@@ -1,0 +1,107 @@
+//! `tubeloc.Rig`, `read_rig` and `write_rig`: rig files as Python objects. A file is tubeloc
+//! JSON (the format `tubeloc --rig` reads), or OpenCV FileStorage YAML when its name ends in
+//! `.yaml` or `.yml` (the second file `tubeloc calib rig` writes).
+
+use crate::error::{chain_to_py, context_to_py, to_py};
+use pyo3::prelude::*;
+use std::path::{Path, PathBuf};
+use tubeloc_core::Rig;
+
+/// A camera rig: calibrated cameras (intrinsics, distortion, pose in the rig frame) and the
+/// stereo pairs among them. Read one with `read_rig(path)`.
+#[pyclass(name = "Rig", module = "tubeloc", frozen)]
+#[derive(Clone)]
+pub struct PyRig {
+    /// The rig.
+    pub rig: Rig,
+}
+
+#[pymethods]
+impl PyRig {
+    /// The rig from its JSON text (the format of `tubeloc calib rig`'s rig file).
+    #[staticmethod]
+    fn from_json(text: &str) -> PyResult<Self> {
+        let rig: Rig = serde_json::from_str(text).map_err(|e| to_py(format!("rig JSON: {e}")))?;
+        rig.validate().map_err(|e| chain_to_py(&e))?;
+        Ok(PyRig { rig })
+    }
+
+    /// The rig as JSON text (the rig file's format).
+    fn to_json(&self) -> PyResult<String> {
+        serde_json::to_string_pretty(&self.rig).map_err(to_py)
+    }
+
+    /// The names of the cameras, in the file's order.
+    #[getter]
+    fn camera_names(&self) -> Vec<String> {
+        self.rig.cameras.iter().map(|c| c.name.clone()).collect()
+    }
+
+    /// The stereo pairs as (left, right) camera names.
+    #[getter]
+    fn stereo_pairs(&self) -> Vec<(String, String)> {
+        self.rig.stereo_pairs.clone()
+    }
+
+    /// Image size (width, height) in pixels of the camera `name`.
+    fn image_size(&self, name: &str) -> PyResult<(u32, u32)> {
+        let c = self.rig.camera(name).ok_or_else(|| to_py(format!("the rig has no camera named {name:?}")))?;
+        Ok((c.model.width, c.model.height))
+    }
+
+    fn __eq__(&self, other: &Self) -> bool {
+        self.rig == other.rig
+    }
+
+    fn __repr__(&self) -> String {
+        format!("tubeloc.Rig(cameras={:?}, stereo_pairs={:?})", self.camera_names(), self.rig.stereo_pairs)
+    }
+}
+
+/// The rig of an argument: a `Rig`, or the path of a rig file (read as `tubeloc --rig` reads
+/// it; errors start with "rig PATH:" as the CLI's).
+pub fn rig_of(obj: &Bound<'_, PyAny>) -> PyResult<Rig> {
+    if let Ok(r) = obj.cast::<PyRig>() {
+        return Ok(r.get().rig.clone());
+    }
+    let path: PathBuf = obj.extract().map_err(|_| to_py(format!("rig: expected a tubeloc.Rig or the path of a rig file, got {}", obj.get_type().name().map(|n| n.to_string()).unwrap_or_default())))?;
+    load(&path)
+}
+
+/// Whether `path` names an OpenCV YAML file (`.yaml`, `.yml`).
+fn is_yaml(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("yaml") || e.eq_ignore_ascii_case("yml"))
+}
+
+/// Reads the rig file at `path` as `tubeloc --rig` does (JSON), or an OpenCV YAML rig; errors
+/// start with "rig PATH:" as the CLI's.
+pub fn load(path: &Path) -> PyResult<Rig> {
+    let context = format!("rig {}", path.display());
+    if is_yaml(path) {
+        tubeloc_calib::load_rig_yaml(path).map_err(|e| context_to_py(context, &e))
+    } else {
+        Rig::load_json(path).map_err(|e| context_to_py(context, &e))
+    }
+}
+
+/// read_rig(path) -> Rig
+///
+/// Reads and checks a rig file: tubeloc JSON, or OpenCV YAML for a name ending in .yaml/.yml
+/// (both written by `tubeloc calib rig`).
+#[pyfunction]
+pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
+    Ok(PyRig { rig: load(&path)? })
+}
+
+/// write_rig(rig, path)
+///
+/// Writes a rig file, atomically: tubeloc JSON, or OpenCV YAML for a name ending in .yaml/.yml.
+#[pyfunction]
+pub fn write_rig(rig: &PyRig, path: PathBuf) -> PyResult<()> {
+    let context = format!("writing {}", path.display());
+    if is_yaml(&path) {
+        tubeloc_calib::save_rig_yaml(&rig.rig, &path).map_err(|e| context_to_py(context, &e))
+    } else {
+        rig.rig.save_json(&path).map_err(|e| context_to_py(context, &e))
+    }
+}

@@ -1,0 +1,75 @@
+"""numpy images: dtypes and shapes go through the same input conversion as image files."""
+
+import numpy as np
+import pytest
+
+import tubeloc
+
+
+@pytest.fixture(scope="module")
+def scene(demo_scene):
+    rig, image, ground = demo_scene
+    locator = tubeloc.Locator(str(rig))
+    img = tubeloc.read_image(image)
+    return locator, img, ground
+
+
+def poses(locator, img, ground):
+    return [t.to_dict() for t in locator.locate(img, ground=ground)]
+
+
+def test_read_image_gives_the_file_pixels(demo_scene):
+    _, image, _ = demo_scene
+    img = tubeloc.read_image(image)
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] in (3, 4)
+    assert img.std() > 1.0
+
+
+def test_sixteen_bit_full_range_equals_eight_bit(scene):
+    locator, img, ground = scene
+    assert poses(locator, img.astype(np.uint16) * 257, ground) == poses(locator, img, ground)
+
+
+def test_rgba_with_opaque_alpha_equals_rgb(scene):
+    locator, img, ground = scene
+    rgb = img[..., :3]
+    rgba = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    assert poses(locator, rgba, ground) == poses(locator, np.ascontiguousarray(rgb), ground)
+
+
+def test_grey_shapes_agree(scene):
+    locator, img, ground = scene
+    grey = np.ascontiguousarray(img[..., 1])
+    assert poses(locator, grey[..., None], ground) == poses(locator, grey, ground)
+
+
+def test_non_contiguous_arrays_equal_their_copies(scene):
+    locator, img, ground = scene
+    rgb = img[..., :3]
+    fortran = np.asfortranarray(rgb)
+    strided = np.repeat(rgb, 2, axis=1)[:, ::2]
+    expected = poses(locator, np.ascontiguousarray(rgb), ground)
+    assert poses(locator, fortran, ground) == expected
+    assert poses(locator, strided, ground) == expected
+
+
+@pytest.mark.parametrize(
+    "array, described",
+    [
+        (np.zeros((8, 8), np.float64), "a float64 array of shape [8, 8]"),
+        (np.zeros((8, 8, 5), np.uint8), "a uint8 array of shape [8, 8, 5]"),
+        (np.zeros((2, 8, 8, 3), np.uint8), "a uint8 array of shape [2, 8, 8, 3]"),
+        (np.zeros((8, 8, 3), np.int32), "a int32 array of shape [8, 8, 3]"),
+    ],
+)
+def test_unsupported_arrays_are_refused_with_their_dtype_and_shape(scene, array, described):
+    locator, _, _ = scene
+    with pytest.raises(tubeloc.TubelocError) as e:
+        locator.locate(array)
+    assert str(e.value) == f"left: expected a uint8 or uint16 array of shape HxW, HxWx1, HxWx2, HxWx3 or HxWx4, got {described}"
+
+
+def test_a_list_is_not_an_image(scene):
+    locator, _, _ = scene
+    with pytest.raises(tubeloc.TubelocError, match="left: expected a numpy array, got list"):
+        locator.locate([[0, 1], [2, 3]])

@@ -1,0 +1,81 @@
+"""`tubeloc.Locator.locate` returns the poses `tubeloc locate` writes for the same inputs."""
+
+import json
+
+import numpy as np
+import pytest
+
+import tubeloc
+
+TOL = 1e-9
+
+
+def cli_locate(cli, tmp_path, rig, image, *extra):
+    out = tmp_path / "poses.json"
+    cli("locate", "--rig", rig, "--image", image, "--out", out, *extra)
+    return json.loads(out.read_text())
+
+
+def assert_same_tube(py_tube, cli_tube):
+    assert py_tube.status == cli_tube["status"]
+    assert py_tube.converged == cli_tube["converged"]
+    assert py_tube.score == pytest.approx(cli_tube["score"], abs=TOL)
+    assert py_tube.probability == pytest.approx(cli_tube["probability"], abs=TOL)
+    assert py_tube.end_confidence == pytest.approx(cli_tube["end_confidence"], abs=TOL)
+    for field in ("centre", "axis", "end_direction"):
+        np.testing.assert_allclose(getattr(py_tube, field), cli_tube[field], rtol=0, atol=TOL, err_msg=field)
+    np.testing.assert_allclose(py_tube.covariance, cli_tube["covariance"], rtol=0, atol=TOL)
+    for field, key in (("t_cam_grasp", "T_cam_grasp"), ("t_rig_grasp", "T_rig_grasp")):
+        m = getattr(py_tube, field)
+        assert m.shape == (4, 4)
+        np.testing.assert_allclose(m[:3, :3], cli_tube[key]["rotation"], rtol=0, atol=TOL, err_msg=field)
+        np.testing.assert_allclose(m[:3, 3], cli_tube[key]["translation"], rtol=0, atol=TOL, err_msg=field)
+        np.testing.assert_array_equal(m[3], [0, 0, 0, 1])
+    failure = cli_tube.get("failure")
+    assert py_tube.failure == (failure["reason"] if failure else None)
+    # Every other field of the file (residuals, seed_kept, end_anchored...) as the CLI wrote it.
+    assert py_tube.to_dict() == cli_tube
+
+
+@pytest.mark.parametrize("with_ground", [True, False], ids=["ground", "no-ground"])
+def test_locate_equals_the_cli_on_the_demo_scene(cli, demo_scene, tmp_path, with_ground):
+    rig, image, ground = demo_scene
+    extra = ["--ground", ground] if with_ground else []
+    doc = cli_locate(cli, tmp_path, rig, image, *extra)
+    locator = tubeloc.Locator(str(rig))
+    tubes = locator.locate(tubeloc.read_image(image), ground=ground if with_ground else None)
+    assert len(doc["tubes"]) > 0, "the demo scene has tubes"
+    assert [t.status for t in tubes] == [t["status"] for t in doc["tubes"]]
+    for py_tube, cli_tube in zip(tubes, doc["tubes"]):
+        assert_same_tube(py_tube, cli_tube)
+    assert locator.min_probability == pytest.approx(doc["min_probability"], abs=0)
+    assert locator.camera == doc["camera"]
+    assert locator.detector == doc["detector"]
+
+
+def test_ground_as_numbers_equals_ground_as_text(demo_scene):
+    rig, image, ground = demo_scene
+    locator = tubeloc.Locator(tubeloc.read_rig(rig))
+    img = tubeloc.read_image(image)
+    a = [t.to_dict() for t in locator.locate(img, ground=ground)]
+    b = [t.to_dict() for t in locator.locate(img, ground=[float(v) for v in ground.split(",")])]
+    assert a == b
+
+
+def test_detect_then_refine_equals_the_cli(cli, demo_scene, tmp_path):
+    rig, image, ground = demo_scene
+    rig_doc = json.loads(rig.read_text())
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps(rig_doc["cameras"][0]["model"]))
+    dets_path, poses_path = tmp_path / "dets.json", tmp_path / "poses.json"
+    cli("detect", "--method", "learned", "--image", image, "--camera", camera, "--ground", ground, "--out", dets_path)
+    cli("refine", "--image", image, "--camera", camera, "--detections", dets_path, "--ground", ground, "--out", poses_path)
+    img = tubeloc.read_image(image)
+    dets = tubeloc.detect(img, str(rig), ground=ground)
+    assert dets == json.loads(dets_path.read_text())
+    poses = tubeloc.refine(img, dets, str(rig), ground=ground)
+    cli_poses = json.loads(poses_path.read_text())
+    assert [p.to_dict() for p in poses] == cli_poses
+    for p, c in zip(poses, cli_poses):
+        np.testing.assert_allclose(p.centre, c["centre"], rtol=0, atol=TOL)
+        assert p.status is None and p.t_cam_grasp is None and p.probability is None
