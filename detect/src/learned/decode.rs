@@ -22,7 +22,8 @@
 //!    mean), direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
 //!    predicted half-length, width from the mask's extent across the axis.
 
-use super::model::Prediction;
+use super::error::LearnedError;
+use super::model::{LearnedModel, Prediction};
 use super::net::{bilinear4_at, HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
 
@@ -151,6 +152,17 @@ pub struct LearnedInstance {
 
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
+}
+
+/// The prediction that `cfg` asks for from preprocessed input planes (`channels * width *
+/// height`): [`LearnedModel::predict_mirror_averaged`] with [`DecodeConfig::mirror_average`],
+/// else [`LearnedModel::predict`].
+pub fn predict_for(model: &LearnedModel, input: &[f32], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Prediction, LearnedError> {
+    if cfg.mirror_average {
+        model.predict_mirror_averaged(input, width, height)
+    } else {
+        model.predict(input, width, height)
+    }
 }
 
 /// Decodes the network outputs of one image ([`super::LearnedModel::predict`]) into
