@@ -74,7 +74,7 @@ pub struct DecodeConfig {
     /// Weight `w` of the mask's principal axis `p` in the axis seed's image direction,
     /// `normalize(u + w p)` with `u` the direction head's (sign-aligned; 0 = the head alone).
     /// The two err apart, so their sum is the better seed (and the better prior of
-    /// refinement's `mask_axis_sigma_px`). The score keeps the head's direction. `w = 2` chosen
+    /// refinement's `mask.axis_sigma_px`). The score keeps the head's direction. `w = 2` chosen
     /// on the generated validation sets (val9, val21; both cross-split RGB models, mono
     /// refinement with `--ground auto`) among 0, 0.5, 1, 2, 4 and 100 (the principal axis
     /// alone) by the mean axis p90: 1.98 (0) -> 1.70 deg (2); head alone vs principal axis vs
