@@ -377,7 +377,7 @@ pub(crate) fn fit(model: &CylinderModel, cfg: &FitSettings, levels: &[GradientLe
     let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
     let mut run = StageRun { st: seed, seed, iterations: 0, mono, bufs: Buffers::default() };
     for (si, &(li, radius)) in stages(&p, top).iter().enumerate() {
-        if let Err(failed) = run_stage(&p, &mut run, &levels[li], li, radius, si == 0) {
+        if let Some(failed) = run_stage(&p, &mut run, &levels[li], li, radius, si == 0) {
             return failed;
         }
     }
@@ -443,9 +443,9 @@ impl StageRun {
 /// `solver.converged_px`. Edge associations are refreshed when the contour has moved more than
 /// `solver.reassociate_px` since the last search (and on the first two iterations, before and
 /// after the limb polarity is fixed); in between the residuals follow the stored hypotheses
-/// along the normals. Fails when too few samples are visible or matched, or when the stage
-/// leaves the seed further than the acceptance allows.
-fn run_stage(p: &Problem, run: &mut StageRun, lv: &GradientLevel, li: usize, radius: usize, first_stage: bool) -> Result<(), FitResult> {
+/// along the normals. Returns the failed fit when too few samples are visible or matched, or
+/// when the stage leaves the seed further than the acceptance allows; `None` when it succeeds.
+fn run_stage(p: &Problem, run: &mut StageRun, lv: &GradientLevel, li: usize, radius: usize, first_stage: bool) -> Option<FitResult> {
     let Problem { model, cfg, .. } = *p;
     let level = Level { lv, radius, sigma_px: cfg.solver.edge_sigma_px };
     let samples = build_samples_capped(model, &run.st, &lv.camera, cfg.edge_search.sample_spacing_px, cfg.edge_search.max_samples);
@@ -465,10 +465,10 @@ fn run_stage(p: &Problem, run: &mut StageRun, lv: &GradientLevel, li: usize, rad
                 polarity = limb_polarity(&samples, &assoc);
             }
             if visible < cfg.acceptance.min_samples {
-                return Err(run.failed(run.st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}")));
+                return Some(run.failed(run.st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}")));
             }
             if assoc.len() < cfg.acceptance.min_samples {
-                return Err(run.failed(run.st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len())));
+                return Some(run.failed(run.st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len())));
             }
         }
         let Some((next, motion)) = damped_iteration(p, run, &assoc, &level, &mut lambda) else {
@@ -482,7 +482,7 @@ fn run_stage(p: &Problem, run: &mut StageRun, lv: &GradientLevel, li: usize, rad
         drift += motion;
         let st = run.st;
         if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.c.z < 0.02 {
-            return Err(run.failed(run.seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice())));
+            return Some(run.failed(run.seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice())));
         }
         if motion < cfg.solver.converged_px {
             if fresh {
@@ -494,9 +494,9 @@ fn run_stage(p: &Problem, run: &mut StageRun, lv: &GradientLevel, li: usize, rad
     let (st, seed) = (run.st, run.seed);
     let moved = (st.c - seed.c).norm();
     if moved > cfg.acceptance.max_centre_shift_frac * seed.c.norm() || axis_angle(&st.a, &seed.a) > cfg.acceptance.max_axis_change_deg.to_radians() {
-        return Err(run.failed(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees())));
+        return Some(run.failed(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees())));
     }
-    Ok(())
+    None
 }
 
 /// One damped Gauss-Newton iteration from `run.st` with the associations `assoc`: the robust
