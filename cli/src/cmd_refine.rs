@@ -95,7 +95,7 @@ pub struct RefineArgs {
     pub(crate) detections_camera: Option<PathBuf>,
     /// Dataset mode: also write the seeds as poses (JSON array of TubeAxisPose), to evaluate the
     /// seeds alone: those the fit starts from, a mask seed's axis already turned to the seal end
-    /// by its mask's colours (unless --no-colour-ends; `Refiner::seed_with_colour`).
+    /// by its mask's colours (unless --no-colour-ends; `Refiner::seed`).
     #[arg(long, requires = "dataset")]
     pub(crate) seeds_out: Option<PathBuf>,
     /// Camera model JSON of the image (ignored for the left image when --rig is given).
@@ -224,7 +224,9 @@ pub struct RefineArgs {
     /// the terrain instead of the nominal ground.
     #[arg(long)]
     pub(crate) no_local_ground: bool,
-    /// Refiner configuration JSON (fields of RefineConfig; missing fields keep their defaults).
+    /// Refiner settings file, TOML (`.toml`) or JSON: any of the groups of RefineConfig
+    /// (edge_search, seed_search, solver, acceptance, end_decision, priors, mono_depth, seeds,
+    /// mask; see refine/README.md); missing fields keep their defaults, unknown ones are refused.
     #[arg(long)]
     pub(crate) config: Option<PathBuf>,
     /// Tube model TOML (default: the built-in model of data/tube.toml).
@@ -245,7 +247,7 @@ pub(crate) fn write_snapped(path: Option<&std::path::Path>, snapped: &[(TubeDete
 /// The refiner's configuration and tube model of the arguments (config and tube model files).
 fn refine_parts(args: &RefineArgs) -> Result<(RefineConfig, TubeModel)> {
     let config = match &args.config {
-        Some(p) => files::read_json::<RefineConfig>(p).with_context(|| format!("refine config {}", p.display()))?,
+        Some(p) => RefineConfig::load(p)?,
         None => RefineConfig::default(),
     };
     let tube = match &args.tube {

@@ -110,7 +110,7 @@ fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 fn stereo_points_per_measurement_is_the_default_census_window() {
     let sgm = tubeloc_stereo::sgm::SgmParams::default();
     let refine = tubeloc_refine::RefineConfig::default();
-    assert_eq!(refine.stereo_points_per_measurement, (sgm.census_width * sgm.census_height) as f64, "census window {}x{}", sgm.census_width, sgm.census_height);
+    assert_eq!(refine.solver.stereo_points_per_measurement, (sgm.census_width * sgm.census_height) as f64, "census window {}x{}", sgm.census_width, sgm.census_height);
 }
 
 /// Mask detections (the learned segmenter's kind: mask, image axis, no template pose) refined in

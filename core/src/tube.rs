@@ -41,6 +41,7 @@ impl TubeMaterial {
 
 /// One coaxial cylinder of the parametric model; `z0 < z1` measured from the foot (metres).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TubeSection {
     /// Section name (`foot`, `body`, `seal`).
     pub name: String,
@@ -54,8 +55,10 @@ pub struct TubeSection {
     pub material: TubeMaterial,
 }
 
-/// Parametric tube: total length and its sections, from `data/tube.toml`.
+/// Parametric tube: total length and its sections, from `data/tube.toml` (unknown fields are
+/// refused).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TubeModel {
     /// Model name.
     pub name: String,
@@ -238,6 +241,16 @@ mod tests {
         assert!(err.contains("tube.toml") && err.contains("body"), "{err}");
         let err = TubeModel::from_toml_str("name = 1", Path::new("x.toml")).unwrap_err().to_string();
         assert!(err.contains("x.toml"), "{err}");
+    }
+
+    #[test]
+    fn unknown_fields_are_refused_with_file_and_field() {
+        let top = DEFAULT_TUBE_TOML.replace("length = 0.150", "length = 0.150\nlenght = 0.150");
+        let err = TubeModel::from_toml_str(&top, Path::new("tube.toml")).unwrap_err().to_string();
+        assert!(err.contains("tube.toml") && err.contains("unknown field `lenght`"), "{err}");
+        let section = DEFAULT_TUBE_TOML.replace("radius = 0.00855", "radius = 0.00855\nradius_mm = 8.55");
+        let err = TubeModel::from_toml_str(&section, Path::new("tube.toml")).unwrap_err().to_string();
+        assert!(err.contains("tube.toml") && err.contains("unknown field `radius_mm`"), "{err}");
     }
 
     #[test]

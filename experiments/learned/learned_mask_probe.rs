@@ -12,7 +12,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (model, imgs) = probe_args::model_and_images("learned_mask_probe", 40)?;
     // PROBE_MIRROR=0: the plain prediction instead of the mirror-averaged default.
     let d = DecodeConfig { mirror_average: std::env::var("PROBE_MIRROR").map_or(true, |v| v != "0"), ..DecodeConfig::default() };
-    let preds = imgs.iter().map(|im| model.predict_with(&im.input, im.width, im.height, &d)).collect::<Result<Vec<_>, _>>()?;
+    let preds = imgs.iter().map(|im| tubeloc_detect::learned::predict_for(&model, &im.input, im.width, im.height, &d)).collect::<Result<Vec<_>, _>>()?;
     // The decoder before the mask-based score (docs/design/0009-decoder-score-and-mask-threshold.md):
     // score = peak x mean fg, fixed mask threshold 0.5.
     let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, mask_logit: 0.5, mask_logit_rel: 0.0, ..d };

@@ -177,9 +177,9 @@ pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame
                     }
                 }
                 let t0 = std::time::Instant::now();
-                out.poses.push(refiner.refine_with_colour(&input, &d, colour.as_ref()));
+                out.poses.push(refiner.refine(&input, &d, colour.as_ref()));
                 out.fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                if let (true, Ok(sd)) = (opts.seeds, refiner.seed_with_colour(&input, &d, colour.as_ref())) {
+                if let (true, Ok(sd)) = (opts.seeds, refiner.seed(&input, &d, colour.as_ref())) {
                     if let Ok(p) = TubeAxisPose::new(frame.image_id, d.score, sd.state.c, sd.state.a, 0.5) {
                         out.seeds.push(p);
                     }

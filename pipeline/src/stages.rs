@@ -7,7 +7,7 @@ use tubeloc_core::{CameraModel, Plane, TubeAxisPose, TubeDetection};
 use tubeloc_refine::hidden_end::{anchor_visible_end, unseen_length_variance, widen_along_axis, HiddenEnd};
 use tubeloc_refine::silhouette::{silhouette_mask, snap_mask, trim_kept_mask, MaskSnap};
 use tubeloc_refine::stereo_stage::{self, PhotoStage, RectifiedPair};
-use tubeloc_refine::{GroundPlane, Refiner, SeedKind, SeedSettings};
+use tubeloc_refine::{GroundPlane, Refiner, SeedKind};
 
 /// The stages after the fit of one pose, in order:
 /// 1. with a scene depth map `depth` (stereo) and [`StageSettings::hidden_end`], a pose refined
@@ -49,12 +49,11 @@ pub fn photo_moves_ends(settings: &StageSettings, has_ground: bool) -> bool {
 /// The photometric / rims stage's settings ([`stereo_stage::photo_refine`]) for a pose refined
 /// from a seed of `kind`; with a ground plane the two-view fit's tilt prior and the rims' tilt
 /// change have the deviation of that kind's ground tilt prior
-/// ([`SeedSettings::ground_tilt_sigma_deg`]), as in the fit before them: mask seeds are taken to
-/// lie parallel to the ground (`mask_seed_tilt_sigma_deg`), other seeds may tilt
-/// (`ground_tilt_sigma_deg`).
+/// ([`tubeloc_refine::settings::SeedProfile::ground_tilt_sigma_deg`]), as in the fit before
+/// them: mask seeds are taken to lie parallel to the ground, other seeds may tilt.
 pub fn photo_stage(settings: &StageSettings, ground: Option<&GroundPlane>, refiner: &Refiner, kind: SeedKind) -> PhotoStage {
     let has_ground = ground.is_some();
-    let tilt_sigma_deg = SeedSettings::new(&refiner.config, kind, has_ground).ground_tilt_sigma_deg;
+    let tilt_sigma_deg = refiner.settings(kind).seed.ground_tilt_sigma_deg;
     PhotoStage {
         two_view: settings.two_view,
         ground: ground.map(|g| (g.normal, tilt_sigma_deg)),

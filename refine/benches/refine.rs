@@ -30,10 +30,10 @@ fn bench(c: &mut Criterion) {
     for (name, range) in [("1.2m", (1.1, 1.3)), ("2.5m", (2.4, 2.6))] {
         let (scene, det) = mask_seed_scene(range);
         let input = scene.ground_input();
-        let p = pool.install(|| refiner.refine(&input, &det));
+        let p = pool.install(|| refiner.refine(&input, &det, None));
         assert!(p.converged, "mask-seed bench does not converge: {:?}", p.failure);
         eprintln!("mask seed at {name}: {:.0} px long, error {:.2} mm", det.axis_seed.as_ref().unwrap().length_px, (p.centre - scene.truth.centre).norm() * 1e3);
-        c.bench_function(&format!("refine_mono_mask_seed_ground_{name}_1_thread"), |b| b.iter(|| pool.install(|| refiner.refine(&input, &det))));
+        c.bench_function(&format!("refine_mono_mask_seed_ground_{name}_1_thread"), |b| b.iter(|| pool.install(|| refiner.refine(&input, &det, None))));
     }
 }
 

@@ -36,7 +36,7 @@ fn main() {
             let (scene, det) = mask_seed_scene(range);
             let scene: &'static Scene = Box::leak(Box::new(scene));
             let input = scene.ground_input();
-            (scene, Box::new(move || ss.refiner.refine(&input, &det)))
+            (scene, Box::new(move || ss.refiner.refine(&input, &det, None)))
         }
         other => panic!("unknown case {other:?}: explicit, mask-1.2m or mask-2.5m"),
     };

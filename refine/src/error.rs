@@ -7,8 +7,9 @@ pub enum RefineError {
     /// The tube model cannot be used (no sections, non-positive sizes).
     #[error("invalid tube model: {0}")]
     Model(String),
-    /// A configuration value is out of range.
-    #[error("invalid refine config: {0}")]
+    /// A setting is out of range: the message names the field (`group.field`), its value and
+    /// the allowed range.
+    #[error("refine config: {0}")]
     Config(String),
     /// The detection carries no usable seed.
     #[error("unusable seed: {0}")]

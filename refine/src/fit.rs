@@ -7,7 +7,7 @@
 //! normalized by the nominal edge noise) and, for stereo points `P_j`,
 //! `s_j(θ) = (ρ_j - R(z_j)) / σ_s` with `z_j = (P_j - c)·a`, `ρ_j = |P_j - c - z_j a|`,
 //! and the quadratic (not robust) prior residuals of the `priors` module: with a ground plane,
-//! the centre height and the axis tilt; the seed distance; the mono seed tilt.
+//! the centre height and the axis tilt; the detector's image axis.
 //! After the first iteration of each level, the contrast polarity of each limb is fixed to the
 //! sign most of its samples found (tube brighter or darker than the ground along that limb), so
 //! that texture and shading edges of the other polarity are not associated.
@@ -21,46 +21,20 @@ use crate::edges::{EdgeHits, GradientLevel};
 use crate::jacobian::{stereo_row, FrameDerivatives};
 use crate::model::CylinderModel;
 use crate::mono::{damped_step, mono_basis, mono_ground_depth, mono_mode};
-use crate::priors::{self, SeedPrior};
+use crate::priors;
 use crate::robust::{mad_scale, tukey_rho, tukey_weight};
-use crate::seed::GroundPlane;
-use crate::RefineConfig;
+use crate::scene::{image_axis_prior, Scene};
+use crate::seed_policy::FitSettings;
 use nalgebra::{Matrix2x5, Matrix5, Point2, Point3, Vector2, Vector3, Vector5};
 use tubeloc_core::tube_pose::{axis_angle, canonical_axis, tangent_basis};
-use tubeloc_core::{CameraModel, FailureReason, Plane, ResidualStats};
+use tubeloc_core::{FailureReason, ResidualStats};
 
-/// Optional scene information for visibility and the stereo term.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Scene<'a> {
-    /// Depth map (Z in metres along the optical axis, ≤ 0 or non-finite = unknown) of the full
-    /// image and its camera; contour points behind the depth surface are occluded.
-    pub depth: Option<(&'a Plane<f32>, &'a CameraModel)>,
-    /// 3D points (camera frame, metres) triangulated in the detection's region.
-    pub stereo_points: &'a [Point3<f64>],
-    /// Ground plane the tube rests on (camera frame): adds the centre-height and axis-parallel
-    /// priors (`RefineConfig::ground_sigma_m`, `ground_tilt_sigma_deg`).
-    pub ground: Option<GroundPlane>,
-    /// Mask-agreement mode: the detection's mask (full image) and the full-resolution camera.
-    /// When given, each silhouette sample is associated with the mask's boundary along its
-    /// normal (the last inside → outside transition within the search radius) instead of image
-    /// edges: the fit then makes the projected silhouette agree with the mask.
-    pub mask: Option<(&'a tubeloc_core::BinaryMask, &'a CameraModel)>,
-    /// The detector's image axis as a prior on the axis's direction in the image
-    /// ([`crate::priors::ImageAxisPrior`]; mask seeds, `RefineConfig::mask_axis_sigma_px`).
-    pub image_axis: Option<crate::priors::ImageAxisPrior>,
-    /// The part of the image where the detector's mask shows the tube (the mask grown by
-    /// `RefineConfig::mask_visibility_px`) and the full-resolution camera: contour points that
-    /// project inside the image but outside it are hidden (by rocks or sand) and are not
-    /// associated with edges.
-    pub shown: Option<(&'a tubeloc_core::MaskWindow, &'a CameraModel)>,
-}
-
-/// The image-axis prior of a fit: `Scene::image_axis`, in fits without stereo points only. In
-/// the stereo fit it traded position for axis (calibration stereo set: perpendicular p90 4.12
-/// -> 4.54 mm); the stereo edge polish, which keeps the stereo distance, fits without the
-/// points and uses it (axis p90 2.85 -> 2.19 deg).
-fn image_axis_prior<'s>(scene: &'s Scene) -> Option<&'s crate::priors::ImageAxisPrior> {
-    scene.image_axis.as_ref().filter(|_| scene.stereo_points.is_empty())
+/// What stays fixed through one fit: the tube, the scene and the settings.
+#[derive(Clone, Copy)]
+struct Problem<'a> {
+    model: &'a CylinderModel,
+    scene: &'a Scene<'a>,
+    cfg: &'a FitSettings,
 }
 
 /// Offset (level pixels along `n`, from the sample's level position) of the mask boundary seen
@@ -130,10 +104,24 @@ impl Assoc {
     }
 }
 
+/// One pyramid level as a stage of the fit sees it.
 struct Level<'a> {
     lv: &'a GradientLevel,
+    /// Half length of the edge search, level pixels.
     radius: usize,
+    /// Edge noise of the residual normalization (`solver.edge_sigma_px`, used as is at every
+    /// level).
     sigma_px: f64,
+}
+
+/// The residuals of one linearization with their robust weighting: the Tukey thresholds of
+/// the image and stereo groups, and the scale of the stereo rows' information (1 in the fit;
+/// `1 / stereo_points_per_measurement` for the output covariance).
+#[derive(Clone, Copy)]
+struct Weighting<'r> {
+    r: &'r [Option<f64>],
+    c: (f64, f64),
+    stereo_info: f64,
 }
 
 fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vector3<f64>, scene: &Scene) -> bool {
@@ -168,9 +156,9 @@ fn is_visible(model: &CylinderModel, st: &AxisState, x: &Point3<f64>, out: &Vect
 /// number of visible samples inside the image, and the number of visible samples wherever
 /// they project (inside the image or not).
 /// `end_limb_scale` scales the residuals of the limbs of sections other than the body (see
-/// `RefineConfig::end_limb_weight`); with 0 they are left out.
-#[allow(clippy::too_many_arguments)]
-fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], level: &Level, scene: &Scene, cfg: &RefineConfig, polarity: &[i8], end_limb_scale: f64) -> (Vec<Assoc>, usize, usize) {
+/// the seed profile's `end_limb_weight`); with 0 they are left out.
+fn associate(p: &Problem, st: &AxisState, samples: &[ContourSample], level: &Level, polarity: &[i8], end_limb_scale: f64) -> (Vec<Assoc>, usize, usize) {
+    let Problem { model, scene, cfg } = *p;
     let mut out = Vec::with_capacity(samples.len());
     let mut total = 0;
     let Some(f) = st.frame() else { return (out, 0, total) };
@@ -207,14 +195,7 @@ fn associate(model: &CylinderModel, st: &AxisState, samples: &[ContourSample], l
             continue;
         }
         let pol = polarity.get(i).copied().unwrap_or(0);
-        let mut hyps = level.lv.search_all(&u, &n, level.radius, cfg.min_gradient, pol, cfg.rel_edge_strength);
-        if cfg.outermost_limb_edge && pol != 0 && hyps.len > 1 && matches!(s.kind, crate::contour::SampleKind::Limb { .. }) {
-            // Shading boundaries inside the tube have the limb's polarity too; the silhouette is
-            // the outermost of the edges (the normal points outward).
-            let k = (0..hyps.len).max_by(|&a, &b| hyps.hits[a].offset.total_cmp(&hyps.hits[b].offset)).unwrap_or(0);
-            hyps.hits[0] = hyps.hits[k];
-            hyps.len = 1;
-        }
+        let hyps = level.lv.search_all(&u, &n, level.radius, cfg.edge_search.min_gradient, pol, cfg.edge_search.rel_edge_strength);
         if hyps.len > 0 {
             out.push(Assoc { sample: *s, scale, n, u0: u, hyps });
         }
@@ -260,8 +241,9 @@ fn limb_polarity(samples: &[ContourSample], assoc: &[Assoc]) -> Vec<i8> {
 
 /// Residuals (normalized) of the associations and stereo points at state `st`; missing
 /// projections give `None` entries (skipped).
-#[allow(clippy::too_many_arguments)]
-fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &CameraModel, sigma_px: f64, scene: &Scene, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
+fn residuals(p: &Problem, st: &AxisState, assoc: &[Assoc], level: &Level, out: &mut Vec<Option<f64>>) {
+    let Problem { model, scene, cfg } = *p;
+    let (cam, sigma_px) = (&level.lv.camera, level.sigma_px);
     out.clear();
     let f = st.frame();
     for a in assoc {
@@ -278,9 +260,9 @@ fn residuals(model: &CylinderModel, st: &AxisState, assoc: &[Assoc], cam: &Camer
         }
         let rho = (rel - st.a * z).norm();
         let rz = model.radius_at(z.clamp(-half, half));
-        out.push(Some((rho - rz) / cfg.stereo_sigma_m));
+        out.push(Some((rho - rz) / cfg.solver.stereo_sigma_m));
     }
-    priors::push_residuals(model, st, scene.ground.as_ref(), image_axis_prior(scene), cfg, sp, out);
+    priors::push_residuals(model, st, scene.ground.as_ref(), image_axis_prior(scene), cfg, out);
 }
 
 /// Threshold of residual `i`: image (`i < n_img`), stereo (`i < n_img + n_st`) or prior
@@ -330,24 +312,12 @@ fn max_motion(jac: &[Option<Matrix2x5<f64>>], d: &Vector5<f64>) -> f64 {
 
 /// Normal equations `JᵀWJ`, `JᵀWr` at `st` for the perturbation basis `(u1, u2)` with the
 /// Jacobians of [`crate::jacobian`]; fills `jac` with the image Jacobian of each association
-/// and returns `Σ w r²` and `Σ w`. The stereo rows enter `JᵀWJ` scaled by `stereo_info`
-/// (1 in the fit; `1 / stereo_points_per_measurement` for the output covariance).
-#[allow(clippy::too_many_arguments)]
-fn normal_equations(
-    model: &CylinderModel,
-    st: &AxisState,
-    assoc: &[Assoc],
-    cam: &CameraModel,
-    sigma_px: f64,
-    scene: &Scene,
-    cfg: &RefineConfig,
-    u: (&Vector3<f64>, &Vector3<f64>),
-    r0: &[Option<f64>],
-    c: (f64, f64),
-    sp: &SeedPrior,
-    jac: &mut Vec<Option<Matrix2x5<f64>>>,
-    stereo_info: f64,
-) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+/// and returns `Σ w r²` and `Σ w`. The stereo rows enter `JᵀWJ` scaled by
+/// [`Weighting::stereo_info`].
+fn normal_equations(p: &Problem, st: &AxisState, assoc: &[Assoc], level: &Level, u: (&Vector3<f64>, &Vector3<f64>), w: &Weighting, jac: &mut Vec<Option<Matrix2x5<f64>>>) -> (Matrix5<f64>, Vector5<f64>, f64, f64) {
+    let Problem { model, scene, cfg } = *p;
+    let (cam, sigma_px) = (&level.lv.camera, level.sigma_px);
+    let Weighting { r: r0, c, stereo_info } = *w;
     let n_img = assoc.len();
     let n_st = scene.stereo_points.len();
     jac.clear();
@@ -370,9 +340,9 @@ fn normal_equations(
             let Some(ji) = &jac[i] else { continue };
             (ji.transpose() * assoc[i].n) * (assoc[i].scale / sigma_px)
         } else if i < n_img + n_st {
-            Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.stereo_sigma_m
+            Vector5::from(stereo_row(st, u.0, u.1, &scene.stereo_points[i - n_img])) / cfg.solver.stereo_sigma_m
         } else {
-            priors::jacobian_row(i - n_img - n_st, st, scene.ground.as_ref(), image_axis_prior(scene), cfg, sp, u)
+            priors::jacobian_row(i - n_img - n_st, scene.ground.as_ref(), image_axis_prior(scene), cfg, u)
         };
         if !j.iter().all(|v| v.is_finite()) {
             continue;
@@ -396,163 +366,175 @@ fn normal_equations(
     (h, g, wrr, wsum)
 }
 
-/// The limb samples' share of the normal equations (image rows of limbs only, same weights as
-/// [`normal_equations`], whose `jac` it reuses): removed from the distance column in the mono
-/// length-depth mode.
-fn limb_normal_equations(assoc: &[Assoc], jac: &[Option<Matrix2x5<f64>>], r0: &[Option<f64>], c_img: f64, sigma_px: f64) -> (Matrix5<f64>, Vector5<f64>) {
-    let mut h = Matrix5::zeros();
-    let mut g = Vector5::zeros();
-    for (i, a) in assoc.iter().enumerate() {
-        if !matches!(a.sample.kind, crate::contour::SampleKind::Limb { .. }) {
-            continue;
-        }
-        let (Some(r), Some(Some(ji))) = (r0.get(i).copied().flatten(), jac.get(i)) else { continue };
-        let w = tukey_weight(r, c_img);
-        if w <= 0.0 {
-            continue;
-        }
-        let j: Vector5<f64> = (ji.transpose() * a.n) * (a.scale / sigma_px);
-        if j.iter().all(|v| v.is_finite()) {
-            h += j * j.transpose() * w;
-            g += j * (w * r);
-        }
-    }
-    (h, g)
-}
-
 /// Fits the model starting from `seed` over `levels` (coarsest last in the slice order given by
 /// [`crate::edges::build_pyramid`]: index 0 is full resolution). `first_level` is the coarsest
-/// index used; iterations run from it down to 0.
-pub fn fit(model: &CylinderModel, cfg: &RefineConfig, levels: &[GradientLevel], first_level: usize, scene: &Scene, seed: AxisState) -> FitResult {
-    let mut st = seed;
-    let mut iterations = 0;
-    let mut scratch = Vec::new();
-    let mut rbuf = Vec::new();
-    let mut rtrial = Vec::new();
-    let mut jbuf = Vec::new();
+/// index used; the stages ([`stages`]) run from it down to 0, each by [`run_stage`]. A mono
+/// keep-depth fit is finally moved along its ray by the ground ([`mono_ground_depth`]); the
+/// acceptance and statistics come from [`finish`].
+pub(crate) fn fit(model: &CylinderModel, cfg: &FitSettings, levels: &[GradientLevel], first_level: usize, scene: &Scene, seed: AxisState) -> FitResult {
+    let p = Problem { model, scene, cfg };
     let top = first_level.min(levels.len().saturating_sub(1));
     let mono = levels.first().is_some_and(|l0| mono_mode(cfg, scene, model, &seed, &l0.camera));
-    let sp = SeedPrior::new(cfg, &seed, mono, scene.ground.is_some());
-    let tilt_prior = sp.tilt_sin_sigma.is_some();
-    // Mono with a ground plane (tilt fixed by it): the distance along the ray from the
-    // foreshortened length (rims) alone, the limbs' separation being biased by shading.
-    let length_depth = mono && cfg.mono_length_depth && scene.ground.is_some();
-    let fail = |st: AxisState, reason: FailureReason, msg: String, iterations: usize| FitResult {
-        state: st,
-        stats: ResidualStats { iterations, ..Default::default() },
-        covariance: [[0.0; 5]; 5],
-        inlier_fraction: 0.0,
-        score: 1.0,
-        failure: Some((reason, msg)),
-    };
-    // Stages (level, search radius): the coarsest level with the wide search, the finer ones
-    // with the fine search; when the coarsest level is full resolution (narrow tubes), it is
-    // run again with the fine search (fewer shading and texture edges within reach), in mono
-    // fits: no stereo points, no depth map (see [`RefineConfig::fine_polish`]).
-    let fine = cfg.fine_search_radius_px.min(cfg.search_radius_px);
-    let mut stages: Vec<(usize, usize)> = (0..=top).rev().map(|li| (li, if li == top { cfg.search_radius_px } else { fine })).collect();
-    if top == 0 && cfg.fine_polish && scene.stereo_points.is_empty() && scene.depth.is_none() && fine < cfg.search_radius_px {
-        stages.push((0, fine));
-    }
-    for (si, &(li, radius)) in stages.iter().enumerate() {
-        let lv = &levels[li];
-        let level = Level { lv, radius, sigma_px: cfg.edge_sigma_px };
-        let first_stage = si == 0;
-        let samples = build_samples_capped(model, &st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
-        let mut polarity = vec![0i8; samples.len()];
-        let max_it = if first_stage { cfg.max_iterations } else { cfg.max_iterations.div_ceil(2) };
-        let mut lambda = 1e-3;
-        // Edge associations are refreshed when the contour has moved more than
-        // `reassociate_px` since the last search (and on the first two iterations, before and
-        // after the limb polarity is fixed); in between the residuals follow the stored
-        // hypotheses along the normals.
-        let mut assoc = Vec::new();
-        let mut drift = f64::INFINITY;
-        for it in 0..max_it {
-            iterations += 1;
-            let fresh = it <= 1 || drift > cfg.reassociate_px;
-            if fresh {
-                let (a, visible, _) = associate(model, &st, &samples, &level, scene, cfg, &polarity, cfg.end_limb_weight.sqrt());
-                assoc = a;
-                drift = 0.0;
-                if cfg.limb_polarity && it == 0 {
-                    polarity = limb_polarity(&samples, &assoc);
-                }
-                if visible < cfg.min_samples {
-                    return fail(st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}"), iterations);
-                }
-                if assoc.len() < cfg.min_samples {
-                    return fail(st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len()), iterations);
-                }
-            }
-            let n_img = assoc.len();
-            residuals(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, &sp, &mut rbuf);
-            let n_st = scene.stereo_points.len();
-            let c = thresholds(&rbuf, n_img, n_st, &mut scratch, level.sigma_px, level.radius);
-            let cost0 = robust_cost(&rbuf, c.0, c.1, n_img, n_st);
-            let ax = st.a;
-            let (u1, u2) = tangent_basis(&ax);
-            let (h, g, _, _) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &rbuf, c, &sp, &mut jbuf, 1.0);
-            let mut accepted = None;
-            let basis = if mono { mono_basis(&st, &u1, &u2, scene.ground.is_some() || tilt_prior, length_depth) } else { None };
-            let limb_part = length_depth.then(|| limb_normal_equations(&assoc, &jbuf, &rbuf, c.0, level.sigma_px));
-            for _ in 0..6 {
-                let Some(mut d) = damped_step(&h, &g, lambda, basis.as_deref(), limb_part.as_ref()) else {
-                    lambda *= 10.0;
-                    continue;
-                };
-                // Trust region: no contour sample may move more than `max_step_px` level pixels,
-                // so that samples do not jump between edge hypotheses within one step.
-                let motion = max_motion(&jbuf, &d);
-                if motion > cfg.max_step_px {
-                    d *= cfg.max_step_px / motion;
-                }
-                let delta = [d[0], d[1], d[2], d[3], d[4]];
-                let trial = st.updated(&delta, &u1, &u2);
-                residuals(model, &trial, &assoc, &lv.camera, level.sigma_px, scene, cfg, &sp, &mut rtrial);
-                let cost = robust_cost(&rtrial, c.0, c.1, n_img, n_st);
-                if cost.is_finite() && cost <= cost0 {
-                    lambda = (lambda / 3.0).max(1e-7);
-                    accepted = Some((trial, d));
-                    break;
-                }
-                lambda *= 4.0;
-            }
-            let Some((next, d)) = accepted else {
-                if fresh {
-                    break;
-                }
-                drift = f64::INFINITY;
-                continue;
-            };
-            st = next;
-            let motion = max_motion(&jbuf, &d);
-            drift += motion;
-            if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.c.z < 0.02 {
-                return fail(seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice()), iterations);
-            }
-            if motion < cfg.converged_px {
-                if fresh {
-                    break;
-                }
-                drift = f64::INFINITY;
-            }
-        }
-        let moved = (st.c - seed.c).norm();
-        if moved > cfg.max_centre_shift_frac * seed.c.norm() || axis_angle(&st.a, &seed.a) > cfg.max_axis_change_deg.to_radians() {
-            return fail(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees()), iterations);
+    let mut run = StageRun { st: seed, seed, iterations: 0, mono, bufs: Buffers::default() };
+    for (si, &(li, radius)) in stages(&p, top).iter().enumerate() {
+        if let Some(failed) = run_stage(&p, &mut run, &levels[li], li, radius, si == 0) {
+            return failed;
         }
     }
+    let mut st = run.st;
     if mono {
-        st = mono_ground_depth(model, cfg, scene, st, sp.dist);
+        st = mono_ground_depth(model, cfg, scene, st, seed.c.norm());
     }
     // Acceptance and statistics on the smoothed level (texture and noise make more edges in the
     // unsmoothed one), the score that ranks hypotheses and ends on the level fitted.
-    let mut r = finish(model, cfg, levels[0].smooth(), scene, st, &sp, iterations, mono);
+    let mut r = finish(&p, levels[0].smooth(), st, run.iterations, mono);
     if levels[0].smoothed.is_some() {
-        r.score = Evaluation::new(model, cfg, &levels[0], scene, &st, &sp).score;
+        r.score = Evaluation::new(&p, &levels[0], &st).score;
     }
     r
+}
+
+/// The stages (level, search radius) of a fit from level `top`: the coarsest level with the
+/// wide search, the finer ones with the fine search; when the coarsest level is full
+/// resolution (narrow tubes), it is run again with the fine search (fewer shading and texture
+/// edges within reach), in mono fits: no stereo points, no depth map (`solver.fine_polish`).
+fn stages(p: &Problem, top: usize) -> Vec<(usize, usize)> {
+    let (cfg, scene) = (p.cfg, p.scene);
+    let (wide, fine) = (cfg.edge_search.radius_px, cfg.fine_radius_px());
+    let mut stages: Vec<(usize, usize)> = (0..=top).rev().map(|li| (li, if li == top { wide } else { fine })).collect();
+    if top == 0 && cfg.solver.fine_polish && scene.stereo_points.is_empty() && scene.depth.is_none() && fine < wide {
+        stages.push((0, fine));
+    }
+    stages
+}
+
+/// Scratch buffers reused across the iterations of a fit.
+#[derive(Default)]
+struct Buffers {
+    scratch: Vec<f64>,
+    r: Vec<Option<f64>>,
+    trial: Vec<Option<f64>>,
+    jac: Vec<Option<Matrix2x5<f64>>>,
+}
+
+/// The state of a fit between its stages.
+struct StageRun {
+    /// Current estimate.
+    st: AxisState,
+    /// The fit's seed (divergence is measured from it).
+    seed: AxisState,
+    /// Outer iterations so far, all stages.
+    iterations: usize,
+    /// The fit is in mono keep-depth mode ([`mono_mode`]).
+    mono: bool,
+    bufs: Buffers,
+}
+
+impl StageRun {
+    /// A failed fit at `st` after the iterations so far.
+    fn failed(&self, st: AxisState, reason: FailureReason, msg: String) -> FitResult {
+        FitResult { state: st, stats: ResidualStats { iterations: self.iterations, ..Default::default() }, covariance: [[0.0; 5]; 5], inlier_fraction: 0.0, score: 1.0, failure: Some((reason, msg)) }
+    }
+}
+
+/// One stage of the fit at level `li` with search radius `radius`: outer iterations of edge
+/// association and damped Gauss-Newton steps ([`damped_step`], within the mono subspace in
+/// keep-depth mode) until a step right after a fresh edge search moves the contour less than
+/// `solver.converged_px`. Edge associations are refreshed when the contour has moved more than
+/// `solver.reassociate_px` since the last search (and on the first two iterations, before and
+/// after the limb polarity is fixed); in between the residuals follow the stored hypotheses
+/// along the normals. Returns the failed fit when too few samples are visible or matched, or
+/// when the stage leaves the seed further than the acceptance allows; `None` when it succeeds.
+fn run_stage(p: &Problem, run: &mut StageRun, lv: &GradientLevel, li: usize, radius: usize, first_stage: bool) -> Option<FitResult> {
+    let Problem { model, cfg, .. } = *p;
+    let level = Level { lv, radius, sigma_px: cfg.solver.edge_sigma_px };
+    let samples = build_samples_capped(model, &run.st, &lv.camera, cfg.edge_search.sample_spacing_px, cfg.edge_search.max_samples);
+    let mut polarity = vec![0i8; samples.len()];
+    let max_it = if first_stage { cfg.solver.max_iterations } else { cfg.solver.max_iterations.div_ceil(2) };
+    let mut lambda = 1e-3;
+    let mut assoc = Vec::new();
+    let mut drift = f64::INFINITY;
+    for it in 0..max_it {
+        run.iterations += 1;
+        let fresh = it <= 1 || drift > cfg.solver.reassociate_px;
+        if fresh {
+            let (a, visible, _) = associate(p, &run.st, &samples, &level, &polarity, cfg.seed.end_limb_weight.sqrt());
+            assoc = a;
+            drift = 0.0;
+            if cfg.edge_search.limb_polarity && it == 0 {
+                polarity = limb_polarity(&samples, &assoc);
+            }
+            if visible < cfg.acceptance.min_samples {
+                return Some(run.failed(run.st, FailureReason::OutOfImage, format!("only {visible} contour samples visible in the image at level {li}")));
+            }
+            if assoc.len() < cfg.acceptance.min_samples {
+                return Some(run.failed(run.st, FailureReason::TooFewEdges, format!("{} of {visible} contour samples found an edge at level {li}", assoc.len())));
+            }
+        }
+        let Some((next, motion)) = damped_iteration(p, run, &assoc, &level, &mut lambda) else {
+            if fresh {
+                break;
+            }
+            drift = f64::INFINITY;
+            continue;
+        };
+        run.st = next;
+        drift += motion;
+        let st = run.st;
+        if !(st.c.iter().all(|v| v.is_finite()) && st.a.iter().all(|v| v.is_finite())) || st.c.z < 0.02 {
+            return Some(run.failed(run.seed, FailureReason::Diverged, format!("pose left the valid range (centre {:?})", st.c.as_slice())));
+        }
+        if motion < cfg.solver.converged_px {
+            if fresh {
+                break;
+            }
+            drift = f64::INFINITY;
+        }
+    }
+    let (st, seed) = (run.st, run.seed);
+    let moved = (st.c - seed.c).norm();
+    if moved > cfg.acceptance.max_centre_shift_frac * seed.c.norm() || axis_angle(&st.a, &seed.a) > cfg.acceptance.max_axis_change_deg.to_radians() {
+        return Some(run.failed(seed, FailureReason::Diverged, format!("fit moved {:.1} mm and turned {:.1} deg from the seed", moved * 1e3, axis_angle(&st.a, &seed.a).to_degrees())));
+    }
+    None
+}
+
+/// One damped Gauss-Newton iteration from `run.st` with the associations `assoc`: the robust
+/// cost and normal equations, then up to six steps with growing damping `lambda` (each limited
+/// to `solver.max_step_px` of image motion, the trust region that keeps samples from jumping
+/// between edge hypotheses) until one lowers the cost. Returns the new state and the step's
+/// largest image motion, or `None` when no step lowered the cost.
+fn damped_iteration(p: &Problem, run: &mut StageRun, assoc: &[Assoc], level: &Level, lambda: &mut f64) -> Option<(AxisState, f64)> {
+    let (scene, cfg) = (p.scene, p.cfg);
+    let st = run.st;
+    let b = &mut run.bufs;
+    let n_img = assoc.len();
+    residuals(p, &st, assoc, level, &mut b.r);
+    let n_st = scene.stereo_points.len();
+    let c = thresholds(&b.r, n_img, n_st, &mut b.scratch, level.sigma_px, level.radius);
+    let cost0 = robust_cost(&b.r, c.0, c.1, n_img, n_st);
+    let (u1, u2) = tangent_basis(&st.a);
+    let (h, g, _, _) = normal_equations(p, &st, assoc, level, (&u1, &u2), &Weighting { r: &b.r, c, stereo_info: 1.0 }, &mut b.jac);
+    let basis = if run.mono { mono_basis(&st, &u1, &u2, scene.ground.is_some()) } else { None };
+    for _ in 0..6 {
+        let Some(mut d) = damped_step(&h, &g, *lambda, basis.as_deref()) else {
+            *lambda *= 10.0;
+            continue;
+        };
+        let motion = max_motion(&b.jac, &d);
+        if motion > cfg.solver.max_step_px {
+            d *= cfg.solver.max_step_px / motion;
+        }
+        let trial = st.updated(&[d[0], d[1], d[2], d[3], d[4]], &u1, &u2);
+        residuals(p, &trial, assoc, level, &mut b.trial);
+        let cost = robust_cost(&b.trial, c.0, c.1, n_img, n_st);
+        if cost.is_finite() && cost <= cost0 {
+            *lambda = (*lambda / 3.0).max(1e-7);
+            return Some((trial, max_motion(&b.jac, &d)));
+        }
+        *lambda *= 4.0;
+    }
+    None
 }
 
 /// The fitted contour's edges at the finest level, as [`finish`] and the unsmoothed level's
@@ -574,16 +556,18 @@ struct Evaluation<'a> {
 }
 
 impl<'a> Evaluation<'a> {
-    fn new(model: &CylinderModel, cfg: &RefineConfig, lv: &'a GradientLevel, scene: &Scene, st: &AxisState, sp: &SeedPrior) -> Self {
-        let level = Level { lv, radius: cfg.fine_search_radius_px.min(cfg.search_radius_px), sigma_px: cfg.edge_sigma_px };
-        let samples = build_samples_capped(model, st, &lv.camera, cfg.sample_spacing_px, cfg.max_samples);
+    /// The evaluation of state `st` at level `lv` (the finest).
+    fn new(p: &Problem, lv: &'a GradientLevel, st: &AxisState) -> Self {
+        let cfg = p.cfg;
+        let level = Level { lv, radius: cfg.fine_radius_px(), sigma_px: cfg.solver.edge_sigma_px };
+        let samples = build_samples_capped(p.model, st, &lv.camera, cfg.edge_search.sample_spacing_px, cfg.edge_search.max_samples);
         let polarity = vec![0i8; samples.len()];
-        let (assoc, visible, total) = associate(model, st, &samples, &level, scene, cfg, &polarity, 1.0);
+        let (assoc, visible, total) = associate(p, st, &samples, &level, &polarity, 1.0);
         let mut r = Vec::new();
-        residuals(model, st, &assoc, &lv.camera, level.sigma_px, scene, cfg, sp, &mut r);
+        residuals(p, st, &assoc, &level, &mut r);
         let n_img = assoc.len();
         let to_px = level.sigma_px / lv.scale; // normalized -> full-resolution pixels (level 0: scale 1)
-        let tau = cfg.inlier_px / to_px;
+        let tau = cfg.acceptance.inlier_px / to_px;
         let (mut inliers, mut inlier_ss, mut score) = (0usize, 0.0, 0.0);
         for v in r[..n_img].iter().flatten() {
             if v.abs() < tau {
@@ -598,15 +582,16 @@ impl<'a> Evaluation<'a> {
     }
 }
 
-/// Final statistics and covariance at the finest level.
+/// Final statistics, covariance and acceptance at the finest level `lv`.
 /// `mono`: keep-depth mode, where a tube cut by the image border keeps its seed's distance, so
 /// the in-image fraction is not checked.
-#[allow(clippy::too_many_arguments)]
-fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: &Scene, st: AxisState, sp: &SeedPrior, iterations: usize, mono: bool) -> FitResult {
-    let Evaluation { level, assoc, visible, total, r, inliers: inl, inlier_ss: ss, score } = Evaluation::new(model, cfg, lv, scene, &st, sp);
+fn finish(p: &Problem, lv: &GradientLevel, st: AxisState, iterations: usize, mono: bool) -> FitResult {
+    let (scene, cfg) = (p.scene, p.cfg);
+    let Evaluation { level, assoc, visible, total, r, inliers: inl, inlier_ss: ss, score } = Evaluation::new(p, lv, &st);
     let n_img = assoc.len();
-    let stereo: Vec<f64> = r[n_img..(n_img + scene.stereo_points.len()).min(r.len())].iter().flatten().map(|v| v * cfg.stereo_sigma_m).collect();
-    let stereo_in: Vec<f64> = stereo.iter().copied().filter(|v| v.abs() < 3.0 * cfg.stereo_sigma_m.max(1e-4) * 3.0).collect();
+    let sigma_m = cfg.solver.stereo_sigma_m;
+    let stereo: Vec<f64> = r[n_img..(n_img + scene.stereo_points.len()).min(r.len())].iter().flatten().map(|v| v * sigma_m).collect();
+    let stereo_in: Vec<f64> = stereo.iter().copied().filter(|v| v.abs() < 3.0 * sigma_m.max(1e-4) * 3.0).collect();
     let stats = ResidualStats {
         rms_px: if inl > 0 { (ss / inl as f64).sqrt() } else { 0.0 },
         inliers: inl,
@@ -621,7 +606,8 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
     let (b1, b2) = tangent_basis(&axis);
     let (u1, u2) = (b1 * sgn, b2 * sgn);
     let c = if r.is_empty() { (1.0, 1.0) } else { thresholds(&r, n_img, scene.stereo_points.len(), &mut Vec::new(), level.sigma_px, level.radius) };
-    let (h, _, wrr, wsum) = normal_equations(model, &st, &assoc, &lv.camera, level.sigma_px, scene, cfg, (&u1, &u2), &r, c, sp, &mut Vec::new(), 1.0 / cfg.stereo_points_per_measurement);
+    let weighting = Weighting { r: &r, c, stereo_info: 1.0 / cfg.solver.stereo_points_per_measurement };
+    let (h, _, wrr, wsum) = normal_equations(p, &st, &assoc, &level, (&u1, &u2), &weighting, &mut Vec::new());
     let mut cov = [[0.0; 5]; 5];
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {
@@ -635,12 +621,13 @@ fn finish(model: &CylinderModel, cfg: &RefineConfig, lv: &GradientLevel, scene: 
         }
     }
     let inlier_fraction = if visible > 0 { inl as f64 / visible as f64 } else { 0.0 };
-    let failure = if visible < cfg.min_samples {
+    let acc = &cfg.acceptance;
+    let failure = if visible < acc.min_samples {
         Some((FailureReason::OutOfImage, format!("only {visible} contour samples visible at full resolution")))
-    } else if !mono && (visible as f64) < cfg.min_in_image_fraction * total as f64 {
+    } else if !mono && (visible as f64) < acc.min_in_image_fraction * total as f64 {
         Some((FailureReason::OutOfImage, format!("only {visible} of {total} visible contour samples ({:.0}%) lie inside the image: depth is not constrained enough", 100.0 * visible as f64 / total.max(1) as f64)))
-    } else if inlier_fraction < cfg.min_inlier_fraction {
-        Some((FailureReason::EmptyTerrain, format!("only {inl} of {visible} contour samples ({:.0}%) lie on an image edge within {} px", 100.0 * inlier_fraction, cfg.inlier_px)))
+    } else if inlier_fraction < acc.min_inlier_fraction {
+        Some((FailureReason::EmptyTerrain, format!("only {inl} of {visible} contour samples ({:.0}%) lie on an image edge within {} px", 100.0 * inlier_fraction, acc.inlier_px)))
     } else {
         None
     };

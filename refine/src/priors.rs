@@ -1,46 +1,17 @@
 //! The quadratic prior residuals of the fit ([`crate::fit`]) and their Jacobian rows, in the
 //! order they follow the image and stereo residuals:
 //! - with a ground plane `n·X = d` (tube resting on it): the centre height
-//!   `g₁ = (n·c - d - r_max) / σ_g` (only when `RefineConfig::ground_height_known`; `None`
-//!   otherwise) and the axis tilt `g₂ = (n·a) / σ_t` (axis parallel to the ground);
-//! - with `RefineConfig::seed_distance_sigma_frac = f > 0`, the seed distance
-//!   `(|c| - |c₀|) / (f |c₀|)` (mono depth from a narrow tube's width is weak: 0.1 px of width
-//!   error on a 12 px wide tube is ~1 % of the distance);
-//! - in mono mode without a ground plane with `RefineConfig::mono_tilt_sigma_deg > 0`, the
-//!   seed tilt `(a·ĉ₀ - a₀·ĉ₀) / sin σ` with `ĉ₀` the seed's viewing ray ([`SeedPrior`]);
+//!   `g₁ = (n·c - d - r_max) / σ_g` (only when `priors.ground_height_known`; `None`
+//!   otherwise) and the axis tilt `g₂ = (n·a) / σ_t` (axis parallel to the ground; `σ_t` from
+//!   the seed kind's profile);
 //! - with a detector's image axis ([`ImageAxisPrior`], `Scene::image_axis`), the axis's
 //!   component out of that line's interpretation plane, `(a·n) / σ`.
 
 use crate::contour::AxisState;
 use crate::model::CylinderModel;
 use crate::seed::GroundPlane;
-use crate::RefineConfig;
+use crate::seed_policy::FitSettings;
 use nalgebra::{Vector3, Vector5};
-
-/// The seed's terms of the priors: its distance and viewing ray, and the tilt prior's
-/// `sin σ` when that prior is used.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct SeedPrior {
-    /// `|c₀|`, metres.
-    pub dist: f64,
-    /// `ĉ₀`, the seed centre's unit viewing ray.
-    pub ray: Vector3<f64>,
-    /// `a₀·ĉ₀`.
-    pub tilt: f64,
-    /// `sin σ` of the tilt prior, when it is used.
-    pub tilt_sin_sigma: Option<f64>,
-}
-
-impl SeedPrior {
-    /// The prior of `seed`; `mono`: the fit is in mono keep-depth mode. The foreshortened
-    /// length fixes the tilt θ to ~(δL/L)/tan θ, so the tilt prior applies only to axes clearly
-    /// out of the image plane (`RefineConfig::mono_tilt_min_deg`) and without a ground plane.
-    pub fn new(cfg: &RefineConfig, seed: &AxisState, mono: bool, has_ground: bool) -> Self {
-        let ray = seed.c.try_normalize(1e-12).unwrap_or(Vector3::z());
-        let tilt_prior = mono && !has_ground && cfg.mono_tilt_sigma_deg > 0.0 && seed.a.dot(&ray).abs() >= cfg.mono_tilt_min_deg.to_radians().sin();
-        SeedPrior { dist: seed.c.norm(), ray, tilt: seed.a.dot(&ray), tilt_sin_sigma: tilt_prior.then(|| cfg.mono_tilt_sigma_deg.to_radians().sin()) }
-    }
-}
 
 /// The detector's image axis (a segmentation mask's principal axis) as a prior on the fitted
 /// axis's direction in the image. The image line through the mask's centre along its axis
@@ -83,30 +54,23 @@ enum PriorRow<'a> {
     GroundHeight(&'a GroundPlane),
     /// Axis parallel to the ground.
     GroundTilt(&'a GroundPlane),
-    /// Distance of the centre from the camera against the seed's.
-    SeedDistance,
-    /// Axis tilt toward the camera against the seed's, with `sin σ`.
-    SeedTilt(f64),
     /// Axis in the detector's image line's interpretation plane.
     ImageAxis(&'a ImageAxisPrior),
 }
 
 /// The prior rows that apply, in order: the single list both [`push_residuals`] and
 /// [`jacobian_row`] follow.
-fn prior_rows<'a>(ground: Option<&'a GroundPlane>, image_axis: Option<&'a ImageAxisPrior>, cfg: &RefineConfig, sp: &SeedPrior) -> impl Iterator<Item = PriorRow<'a>> {
+fn prior_rows<'a>(ground: Option<&'a GroundPlane>, image_axis: Option<&'a ImageAxisPrior>) -> impl Iterator<Item = PriorRow<'a>> {
     let ground_rows = ground.into_iter().flat_map(|g| [PriorRow::GroundHeight(g), PriorRow::GroundTilt(g)]);
-    let distance = (cfg.seed_distance_sigma_frac > 0.0).then_some(PriorRow::SeedDistance);
-    ground_rows.chain(distance).chain(sp.tilt_sin_sigma.map(PriorRow::SeedTilt)).chain(image_axis.map(PriorRow::ImageAxis))
+    ground_rows.chain(image_axis.map(PriorRow::ImageAxis))
 }
 
 /// Appends the prior residuals at `st` to `out` (order: see the module doc).
-pub(crate) fn push_residuals(model: &CylinderModel, st: &AxisState, ground: Option<&GroundPlane>, image_axis: Option<&ImageAxisPrior>, cfg: &RefineConfig, sp: &SeedPrior, out: &mut Vec<Option<f64>>) {
-    for row in prior_rows(ground, image_axis, cfg, sp) {
+pub(crate) fn push_residuals(model: &CylinderModel, st: &AxisState, ground: Option<&GroundPlane>, image_axis: Option<&ImageAxisPrior>, cfg: &FitSettings, out: &mut Vec<Option<f64>>) {
+    for row in prior_rows(ground, image_axis) {
         out.push(match row {
-            PriorRow::GroundHeight(g) => cfg.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.ground_sigma_m),
-            PriorRow::GroundTilt(g) => Some(g.normal.dot(&st.a) / cfg.ground_tilt_sigma_deg.to_radians()),
-            PriorRow::SeedDistance => Some((st.c.norm() - sp.dist) / (cfg.seed_distance_sigma_frac * sp.dist)),
-            PriorRow::SeedTilt(ss) => Some((st.a.dot(&sp.ray) - sp.tilt) / ss),
+            PriorRow::GroundHeight(g) => cfg.priors.ground_height_known.then(|| (g.normal.dot(&st.c) - g.offset - model.max_radius()) / cfg.priors.ground_sigma_m),
+            PriorRow::GroundTilt(g) => Some(g.normal.dot(&st.a) / cfg.seed.ground_tilt_sigma_deg.to_radians()),
             PriorRow::ImageAxis(p) => Some(st.a.dot(&p.normal) / p.sigma),
         });
     }
@@ -115,16 +79,11 @@ pub(crate) fn push_residuals(model: &CylinderModel, st: &AxisState, ground: Opti
 /// Jacobian row of prior residual `k` (its index among the priors, order of [`push_residuals`])
 /// for the perturbation basis `u = (u1, u2)` of the axis (parameters: centre x, y, z, axis
 /// along u1, u2); zero for an index past the last prior.
-pub(crate) fn jacobian_row(k: usize, st: &AxisState, ground: Option<&GroundPlane>, image_axis: Option<&ImageAxisPrior>, cfg: &RefineConfig, sp: &SeedPrior, u: (&Vector3<f64>, &Vector3<f64>)) -> Vector5<f64> {
+pub(crate) fn jacobian_row(k: usize, ground: Option<&GroundPlane>, image_axis: Option<&ImageAxisPrior>, cfg: &FitSettings, u: (&Vector3<f64>, &Vector3<f64>)) -> Vector5<f64> {
     let axis_row = |n: &Vector3<f64>, sigma: f64| Vector5::new(0.0, 0.0, 0.0, n.dot(u.0), n.dot(u.1)) / sigma;
-    match prior_rows(ground, image_axis, cfg, sp).nth(k) {
-        Some(PriorRow::GroundHeight(g)) => Vector5::new(g.normal.x, g.normal.y, g.normal.z, 0.0, 0.0) / cfg.ground_sigma_m,
-        Some(PriorRow::GroundTilt(g)) => axis_row(&g.normal, cfg.ground_tilt_sigma_deg.to_radians()),
-        Some(PriorRow::SeedDistance) => {
-            let ch = st.c / st.c.norm().max(1e-12);
-            Vector5::new(ch.x, ch.y, ch.z, 0.0, 0.0) / (cfg.seed_distance_sigma_frac * sp.dist)
-        }
-        Some(PriorRow::SeedTilt(ss)) => axis_row(&sp.ray, ss),
+    match prior_rows(ground, image_axis).nth(k) {
+        Some(PriorRow::GroundHeight(g)) => Vector5::new(g.normal.x, g.normal.y, g.normal.z, 0.0, 0.0) / cfg.priors.ground_sigma_m,
+        Some(PriorRow::GroundTilt(g)) => axis_row(&g.normal, cfg.seed.ground_tilt_sigma_deg.to_radians()),
         Some(PriorRow::ImageAxis(p)) => axis_row(&p.normal, p.sigma),
         None => Vector5::zeros(),
     }
@@ -139,10 +98,7 @@ mod tests {
     #[test]
     fn jacobian_rows_match_finite_differences() {
         let model = CylinderModel::new(&TubeModel::default()).unwrap();
-        let cfg = RefineConfig { seed_distance_sigma_frac: 0.02, mono_tilt_sigma_deg: 2.0, ..RefineConfig::default() };
-        let seed = AxisState { c: Vector3::new(0.1, 0.3, 2.0), a: Vector3::new(0.3, -0.2, 0.8).normalize() };
-        let sp = SeedPrior::new(&cfg, &seed, true, false);
-        assert!(sp.tilt_sin_sigma.is_some());
+        let cfg = crate::RefineConfig::default().resolve(crate::SeedKind::Explicit);
         let ground = GroundPlane { normal: Vector3::new(0.0, -0.8, -0.6), offset: -1.0 };
         let st = AxisState { c: Vector3::new(0.12, 0.28, 2.05), a: Vector3::new(0.25, -0.1, 0.9).normalize() };
         let (u1, u2) = (st.a.cross(&Vector3::x()).normalize(), st.a.cross(&st.a.cross(&Vector3::x())).normalize());
@@ -150,13 +106,13 @@ mod tests {
         let eval = |p: &Vector5<f64>| {
             let s = AxisState { c: st.c + Vector3::new(p[0], p[1], p[2]), a: (st.a + u1 * p[3] + u2 * p[4]).normalize() };
             let mut out = Vec::new();
-            push_residuals(&model, &s, Some(&ground), Some(&image_axis), &cfg, &sp, &mut out);
+            push_residuals(&model, &s, Some(&ground), Some(&image_axis), &cfg, &mut out);
             out.into_iter().map(|r| r.unwrap()).collect::<Vec<f64>>()
         };
         let n = eval(&Vector5::zeros()).len();
-        assert_eq!(n, 5);
+        assert_eq!(n, 3);
         for k in 0..n {
-            let row = jacobian_row(k, &st, Some(&ground), Some(&image_axis), &cfg, &sp, (&u1, &u2));
+            let row = jacobian_row(k, Some(&ground), Some(&image_axis), &cfg, (&u1, &u2));
             for j in 0..5 {
                 let mut e = Vector5::zeros();
                 e[j] = 1e-6;

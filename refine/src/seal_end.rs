@@ -129,7 +129,7 @@ pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &Ca
 
 /// Decides `pose`'s seal end from `evidence` (computed for this pose): flips `end_direction`
 /// when the contrast is negative and sets `end_confidence` ([`end_confidence`]). The flip-free
-/// axis and the centre do not change ([`crate::Refiner::refine_with_colour`] re-fits the flipped
+/// axis and the centre do not change ([`crate::Refiner::refine`] re-fits the flipped
 /// end instead).
 pub fn apply_seal_end(pose: &mut TubeAxisPose, evidence: &SealEndEvidence) {
     if evidence.contrast < 0.0 {
@@ -155,7 +155,7 @@ const MIN_MASK_PIXELS: usize = 20;
 /// in [−1, 1], positive when `direction_px` points toward the gold seal end. In a monochrome
 /// image (R = G = B on every mask pixel) the darkness `−(R + G + B)/3` replaces `Y` (the gold
 /// section is the darker). It orients a mask seed before the fit
-/// ([`crate::RefineConfig::mask_seed_end_colour_corr`]), whose image axis has no end of its
+/// ([`crate::settings::MaskUse::end_colour_corr`]), whose image axis has no end of its
 /// own. `None` when the sizes differ, the mask has fewer than 20 pixels, or `t` or the colour
 /// is constant over it.
 pub fn seal_end_along_axis(mask: &BinaryMask, axis: &AxisSeed, image: &ColourImage) -> Option<f64> {

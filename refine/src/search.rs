@@ -181,7 +181,7 @@ pub fn onto_ground(st: &AxisState, g: &GroundPlane, h: f64) -> Option<AxisState>
 }
 
 /// Scores rotated and shifted copies of `seed` at level `lv` (`height_known`: see
-/// [`crate::RefineConfig::ground_height_known`]) and returns them best first (one
+/// [`crate::settings::Priors::ground_height_known`]) and returns them best first (one
 /// per rotation, each at its best translation). The unmoved seed is among the candidates
 /// scored (rotation 0, translation 0 competes on the same grid).
 pub fn coarse_search(model: &CylinderModel, lv: &GradientLevel, seed: &AxisState, ground: Option<&GroundPlane>, height_known: bool, spec: &SearchSpec) -> Vec<Hypothesis> {

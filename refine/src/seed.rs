@@ -27,7 +27,7 @@ use tubeloc_core::{CameraModel, Pose, TubeDetection};
 ///
 /// With a ground plane the refiner places such a seed on the ground ([`seed_from_detection`]),
 /// which beats the template's own distance and tilt (those of the nearest template view; see
-/// [`crate::RefineConfig::template_seed_as_image_axis`]).
+/// [`crate::settings::SeedProfiles::template_as_image_axis`]).
 pub fn template_image_axis(det: &TubeDetection, camera: &CameraModel, model: &CylinderModel) -> Option<TubeDetection> {
     let AxisState { c, a } = axis_state_of(det.t_cam_tube.as_ref()?);
     let a = a.normalize();

@@ -87,6 +87,13 @@ fn check_medians(name: &str, e: &mut Errors, max_failed: usize, pos_m: f64, axis
     assert!(am < axis_deg, "{name}: median axis error {am}");
 }
 
+/// The default settings changed by `edit`.
+fn config(edit: impl FnOnce(&mut RefineConfig)) -> RefineConfig {
+    let mut c = RefineConfig::default();
+    edit(&mut c);
+    c
+}
+
 #[test]
 fn mono_perturbed_seeds_converge_back() {
     let (pos, deg) = perturbation();
@@ -338,13 +345,13 @@ fn mask_seed_whose_fit_disagrees_with_its_mask_keeps_the_seed() {
     let input = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene::default() };
     let seed = tubeloc_refine::seed_from_detection(&det, cam, &model, Some(&g), &[]).unwrap();
 
-    let off = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_seed_min_agreement: 0.0, ..RefineConfig::default() }).unwrap();
-    let fit = off.refine(&input, &det);
+    let off = Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.mask.min_agreement = 0.0)).unwrap();
+    let fit = off.refine(&input, &det, None);
     assert!(fit.converged && fit.seed_kept.is_none(), "{:?}", fit.failure);
     assert!((fit.centre - seed.state.c).norm() > 0.005, "the fit stayed at the seed; the test needs it to move to the tube");
 
     let on = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let kept = on.refine(&input, &det);
+    let kept = on.refine(&input, &det, None);
     assert!(kept.converged, "{:?}", kept.failure);
     let why = kept.seed_kept.as_deref().expect("seed kept");
     assert!(why.contains("IoU"), "{why}");
@@ -403,7 +410,7 @@ fn colours_decide_the_seal_end_of_a_flipped_template_seed() {
     for gold_at_seal in [true, false] {
         let rgb = painted(&sc, &model, &mask, gold_at_seal);
         let colour = ColourImage { width: w, height: h, rgb: &rgb };
-        let p = refiner.refine_with_colour(&input, &det, Some(&colour));
+        let p = refiner.refine(&input, &det, Some(&colour));
         assert!(p.converged, "{:?}", p.failure);
         let expected = if gold_at_seal { 1.0 } else { -1.0 };
         assert!(p.end_direction.dot(&t.axis) * expected > 0.99, "gold at the seal: {gold_at_seal}; end {:?}, truth {:?}", p.end_direction, t.axis);
@@ -436,22 +443,22 @@ fn mask_seed_is_turned_toward_the_gold_end_before_the_fit() {
     let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
     let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(g), scene: FitScene::default() };
     let on = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
-    let right = on.refine_with_colour(&input, &seed_toward(1.0), Some(&colour));
-    let turned = on.refine_with_colour(&input, &seed_toward(-1.0), Some(&colour));
+    let right = on.refine(&input, &seed_toward(1.0), Some(&colour));
+    let turned = on.refine(&input, &seed_toward(-1.0), Some(&colour));
     assert!(right.converged && turned.converged, "{:?} {:?}", right.failure, turned.failure);
     assert_eq!((turned.centre, turned.axis, turned.end_direction), (right.centre, right.axis, right.end_direction));
     assert!(turned.end_direction.dot(&t.axis) > 0.99, "end {:?}, truth {:?}", turned.end_direction, t.axis);
     // The seed it starts from (what `tubeloc refine --seeds-out` writes) is the turned one;
     // without colours, the detection's own.
     let seed_of = |det: &TubeDetection| tubeloc_refine::seed_from_detection(det, &sc.camera, &model, Some(&g), &[]).unwrap().state;
-    let started = on.seed_with_colour(&input, &seed_toward(-1.0), Some(&colour)).unwrap().state;
+    let started = on.seed(&input, &seed_toward(-1.0), Some(&colour)).unwrap().state;
     assert_eq!((started.c, started.a), (seed_of(&seed_toward(1.0)).c, seed_of(&seed_toward(1.0)).a));
-    let grey_start = on.seed_with_colour(&input, &seed_toward(-1.0), None).unwrap().state;
+    let grey_start = on.seed(&input, &seed_toward(-1.0), None).unwrap().state;
     assert_eq!((grey_start.c, grey_start.a), (seed_of(&seed_toward(-1.0)).c, seed_of(&seed_toward(-1.0)).a));
     assert!(grey_start.a.dot(&started.a) < -0.99);
     // Disabled, the seed pointing the wrong way starts the fit (whatever it then decides).
-    let off = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_seed_end_colour_corr: 2.0, ..RefineConfig::default() }).unwrap();
-    let as_given = off.refine_with_colour(&input, &seed_toward(-1.0), Some(&colour));
+    let off = Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.mask.end_colour_corr = 2.0)).unwrap();
+    let as_given = off.refine(&input, &seed_toward(-1.0), Some(&colour));
     assert!(as_given.centre != right.centre || as_given.axis != right.axis, "the wrong-way seed gave the same fit without the turn: the test shows nothing");
 }
 
@@ -460,7 +467,7 @@ fn correlated_stereo_points_widen_the_covariance_not_the_fit() {
     let (sc, pts) = one_scene();
     let t = sc.truth;
     let refine = |k: f64, stereo: &[nalgebra::Point3<f64>]| {
-        let cfg = RefineConfig { stereo_points_per_measurement: k, ..RefineConfig::default() };
+        let cfg = config(|c| c.solver.stereo_points_per_measurement = k);
         let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), cfg).unwrap();
         let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { depth: None, stereo_points: stereo, ground: None, mask: None, image_axis: None, shown: None } };
         refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None)
@@ -474,7 +481,7 @@ fn correlated_stereo_points_widen_the_covariance_not_the_fit() {
     let mono = refine(63.0, &[]);
     assert_eq!(refine(1.0, &[]).covariance, mono.covariance, "no stereo points: nothing to scale");
     assert!(many.centre_std_m() <= mono.centre_std_m() * 1.05, "{} vs mono {}", many.centre_std_m(), mono.centre_std_m());
-    assert!(RefineConfig { stereo_points_per_measurement: 0.5, ..RefineConfig::default() }.validate().is_err());
+    assert_eq!(config(|c| c.solver.stereo_points_per_measurement = 0.5).validate().unwrap_err().to_string(), "refine config: solver.stereo_points_per_measurement = 0.5 is out of range [1, 10000]");
 }
 
 #[test]
@@ -484,7 +491,10 @@ fn stereo_polish_keeps_the_stereo_distance_over_a_lower_ground() {
     // move a stereo fit there: its distance comes from the stereo points.
     let (sc, pts) = one_scene();
     let t = sc.truth;
-    let cfg = RefineConfig { ground_height_known: false, ground_relief_sigma_m: 0.001, ..RefineConfig::default() };
+    let cfg = config(|c| {
+        c.priors.ground_height_known = false;
+        c.seeds.explicit.ground_relief_sigma_m = 0.001;
+    });
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), cfg).unwrap();
     let ground = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d - 0.020 };
     let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(ground), scene: FitScene { depth: None, stereo_points: &pts, ground: None, mask: None, image_axis: None, shown: None } };
@@ -510,7 +520,7 @@ fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
     let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig::default()).unwrap();
     let with_junk = RefineInput { image: &sc.image, camera: cam, ground: Some(g), scene: FitScene { depth: None, stereo_points: &junk, ground: None, mask: None, image_axis: None, shown: None } };
     let without = RefineInput { scene: FitScene::default(), ..with_junk };
-    let (a, b) = (refiner.refine(&with_junk, &det), refiner.refine(&without, &det));
+    let (a, b) = (refiner.refine(&with_junk, &det, None), refiner.refine(&without, &det, None));
     assert!(b.converged, "{:?}", b.failure);
     assert_eq!((a.centre, a.axis, a.converged), (b.centre, b.axis, b.converged), "the mono pose, not one at 10 m");
     assert_eq!(a.residuals.stereo_points, 0);
@@ -518,7 +528,7 @@ fn mask_seed_with_mismatched_stereo_points_falls_back_to_mono() {
 }
 
 /// The mask's axis line is a prior on the fitted axis's image direction
-/// (`RefineConfig::mask_axis_sigma_px`): with a mask axis turned 1 degree in the image, a tight
+/// (`mask.axis_sigma_px`): with a mask axis turned 1 degree in the image, a tight
 /// prior keeps the fit on the mask's line, no prior lets the edges bring it back to the truth,
 /// and the default (0.4 px) lets the edges of this clean, fully visible tube win. With stereo
 /// points and the ground plane the stereo edge polish takes the prior too; without a ground
@@ -546,11 +556,11 @@ fn mask_axis_prior_holds_the_image_direction_by_its_sigma() {
     };
     let p0 = cam.project(&nalgebra::Point3::from(sc.truth.centre)).unwrap();
     let true_dir = (cam.project(&nalgebra::Point3::from(sc.truth.centre + sc.truth.axis * 0.01)).unwrap() - p0).normalize();
-    let refine = |sigma_px: f64| Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_axis_sigma_px: sigma_px, ..RefineConfig::default() }).unwrap().refine(&input, &det);
+    let refine = |sigma_px: f64| Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.mask.axis_sigma_px = sigma_px)).unwrap().refine(&input, &det, None);
     let tight = refine(0.02);
     assert!(tight.converged, "{:?}", tight.failure);
     assert!(image_angle(tight.centre, tight.axis, &mask_dir) < 0.3, "tight prior: {:.2} deg off the mask's line", image_angle(tight.centre, tight.axis, &mask_dir));
-    for sigma_px in [0.0, RefineConfig::default().mask_axis_sigma_px] {
+    for sigma_px in [0.0, RefineConfig::default().mask.axis_sigma_px] {
         let p = refine(sigma_px);
         assert!(p.converged, "{:?}", p.failure);
         let off = image_angle(p.centre, p.axis, &true_dir);
@@ -559,7 +569,7 @@ fn mask_axis_prior_holds_the_image_direction_by_its_sigma() {
     }
     let with_points = |ground: Option<tubeloc_refine::GroundPlane>, sigma_px: f64| {
         let input = RefineInput { image: &sc.image, camera: cam, ground, scene: FitScene { stereo_points: &pts, ..FitScene::default() } };
-        let p = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_axis_sigma_px: sigma_px, ..RefineConfig::default() }).unwrap().refine(&input, &det);
+        let p = Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.mask.axis_sigma_px = sigma_px)).unwrap().refine(&input, &det, None);
         assert!(p.converged && p.residuals.stereo_points > 0, "{:?}", p.failure);
         p
     };
@@ -585,8 +595,8 @@ fn mask_seed_leaves_out_the_contour_its_mask_does_not_show() {
     let det = mask_detection(&mask);
     let g = tubeloc_refine::GroundPlane { normal: sc.ground_n, offset: sc.ground_d };
     let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: Some(g), scene: FitScene::default() };
-    let refine = |px: usize| Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { mask_visibility_px: px, ..RefineConfig::default() }).unwrap().refine(&input, &det);
-    let (on, off) = (refine(RefineConfig::default().mask_visibility_px), refine(0));
+    let refine = |px: usize| Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.mask.visibility_px = px)).unwrap().refine(&input, &det, None);
+    let (on, off) = (refine(RefineConfig::default().mask.visibility_px), refine(0));
     for (name, p) in [("mask visibility", &on), ("off", &off)] {
         eprintln!("{name}: converged {} {:.2} deg, centre {:.1} mm off, {} of {} samples inliers", p.converged, axis_angle(&p.axis, &truth.axis).to_degrees(), (p.centre - truth.centre).norm() * 1e3, p.residuals.inliers, p.residuals.count);
     }
@@ -603,14 +613,14 @@ fn mask_seed_leaves_out_the_contour_its_mask_does_not_show() {
     assert!(perp < 0.01, "{:.1} mm across the axis", perp * 1e3);
 }
 
-/// `RefineConfig::fine_polish` (the narrow tubes' full-resolution stage run again with the fine
+/// `solver.fine_polish` (the narrow tubes' full-resolution stage run again with the fine
 /// search) acts on mono fits only: with stereo points the poses are bit-identical with it on
 /// or off, and in mono it changes the fits of narrow tubes (fitted at full resolution alone).
 #[test]
 fn fine_polish_changes_mono_fits_and_leaves_stereo_ones_alone() {
     let model = default_model();
-    let with = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { fine_polish: true, ..RefineConfig::default() }).unwrap();
-    let without = Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { fine_polish: false, ..RefineConfig::default() }).unwrap();
+    let with = Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.solver.fine_polish = true)).unwrap();
+    let without = Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.solver.fine_polish = false)).unwrap();
     let cam = camera(false);
     let mut rng = ChaCha8Rng::seed_from_u64(31);
     let (mut mono_changed, mut stereo_compared) = (0, 0);
@@ -635,7 +645,7 @@ fn fine_polish_changes_mono_fits_and_leaves_stereo_ones_alone() {
     assert!(mono_changed >= 1, "the fine polish changed no mono fit of a narrow tube");
 }
 
-/// A Line2D template pose on a ground plane (`RefineConfig::template_seed_as_image_axis`): the
+/// A Line2D template pose on a ground plane (`seeds.template_as_image_axis`): the
 /// nearest template view puts the tube at the right pixel but at the template's distance and
 /// tilt. Seeded by its image axis, placed on the ground, the fit lands on the tube; from the
 /// template pose itself it keeps much of the distance error.
@@ -645,7 +655,7 @@ fn template_poses_on_the_ground_are_seeded_by_their_image_axis() {
     use tubeloc_core::{DetectionSource, Pose, Rle, TubeDetection};
     let model = default_model();
     let cam = camera(false);
-    let refiner = |on: bool| Refiner::new(&tubeloc_core::TubeModel::default(), RefineConfig { template_seed_as_image_axis: on, ..RefineConfig::default() }).unwrap();
+    let refiner = |on: bool| Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.seeds.template_as_image_axis = on)).unwrap();
     let (with, without) = (refiner(true), refiner(false));
     let mut rng = ChaCha8Rng::seed_from_u64(41);
     let (mut on, mut off) = (vec![], vec![]);
@@ -662,7 +672,7 @@ fn template_poses_on_the_ground_are_seeded_by_their_image_axis() {
         det.t_cam_tube = Some(Pose::from_parts(rot, c));
         det.mask = Some(Rle::from_mask(&mask));
         for (r, errs) in [(&with, &mut on), (&without, &mut off)] {
-            let p = r.refine(&sc.ground_input(), &det);
+            let p = r.refine(&sc.ground_input(), &det, None);
             assert!(p.centre.iter().all(|v| v.is_finite()));
             errs.push(if p.converged { (p.centre - truth.centre).norm() } else { f64::INFINITY });
         }

@@ -29,7 +29,7 @@ pub enum Paths {
 
 /// Parameters of semi-global matching. Costs are in census bits (Hamming distance units).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SgmParams {
     /// Smallest disparity searched, pixels.
     pub min_disparity: i32,
@@ -216,4 +216,20 @@ fn check_pair(left: &Plane<u8>, right: &Plane<u8>) -> Result<()> {
         return Err(param("images", format!("{}x{} image with {} values is too small or inconsistent", left.width, left.height, left.data.len())));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SgmParams;
+
+    #[test]
+    fn parameter_files_refuse_unknown_fields_with_file_and_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sgm.json");
+        std::fs::write(&path, r#"{"p1": 8, "p3": 100}"#).unwrap();
+        let err = tubeloc_core::files::read_json::<SgmParams>(&path).unwrap_err().to_string();
+        assert!(err.contains("sgm.json") && err.contains("unknown field `p3`"), "{err}");
+        std::fs::write(&path, r#"{"p1": 8}"#).unwrap();
+        assert_eq!(tubeloc_core::files::read_json::<SgmParams>(&path).unwrap(), SgmParams { p1: 8, ..SgmParams::default() });
+    }
 }

@@ -164,7 +164,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
         // The nominal ground (world z = ground_height_m of the tripod pose) is the terrain's
         // level, but the terrain has relief about it: its orientation is a prior (tubes lie
         // parallel to it), its height is not a constraint (mask seeds' settings weigh it).
-        settings.refine.ground_height_known = false;
+        settings.refine.priors.ground_height_known = false;
     }
     let refiner = Refiner::new(&settings.tube, settings.refine.clone()).context("building the refiner")?;
     let snap = settings.stages.snap;

@@ -5,7 +5,7 @@
 //! looked up relative to the directory, then under `images/`.
 
 use super::augment::TrainImage;
-use super::decode::{decode, DecodeConfig, LearnedInstance};
+use super::decode::{decode, predict_for, DecodeConfig, LearnedInstance};
 use super::error::LearnedError;
 use super::model::LearnedModel;
 use super::preprocess::Preprocess;
@@ -72,7 +72,7 @@ pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) 
     if img.scale != 1.0 {
         return super::detect_planes_at_scale(model, img.input.clone(), img.width, img.height, img.scale as f64, cfg);
     }
-    Ok(decode(&model.predict_with(&img.input, img.width, img.height, cfg)?, cfg))
+    Ok(decode(&predict_for(model, &img.input, img.width, img.height, cfg)?, cfg))
 }
 
 /// Mask quality of a model on labelled images (see [`mask_scores`]).

@@ -22,7 +22,8 @@
 //!    mean), direction from the fg-weighted mean of `(cos 2θ, sin 2θ)`, length from the mean
 //!    predicted half-length, width from the mask's extent across the axis.
 
-use super::model::Prediction;
+use super::error::LearnedError;
+use super::model::{LearnedModel, Prediction};
 use super::net::{bilinear4_at, HEADS, LENGTH_SCALE, STRIDE};
 use tubeloc_core::{AxisSeed, Plane};
 
@@ -73,7 +74,7 @@ pub struct DecodeConfig {
     /// Weight `w` of the mask's principal axis `p` in the axis seed's image direction,
     /// `normalize(u + w p)` with `u` the direction head's (sign-aligned; 0 = the head alone).
     /// The two err apart, so their sum is the better seed (and the better prior of
-    /// refinement's `mask_axis_sigma_px`). The score keeps the head's direction. `w = 2` chosen
+    /// refinement's `mask.axis_sigma_px`). The score keeps the head's direction. `w = 2` chosen
     /// on the generated validation sets (val9, val21; both cross-split RGB models, mono
     /// refinement with `--ground auto`) among 0, 0.5, 1, 2, 4 and 100 (the principal axis
     /// alone) by the mean axis p90: 1.98 (0) -> 1.70 deg (2); head alone vs principal axis vs
@@ -151,6 +152,17 @@ pub struct LearnedInstance {
 
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
+}
+
+/// The prediction that `cfg` asks for from preprocessed input planes (`channels * width *
+/// height`): [`LearnedModel::predict_mirror_averaged`] with [`DecodeConfig::mirror_average`],
+/// else [`LearnedModel::predict`].
+pub fn predict_for(model: &LearnedModel, input: &[f32], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Prediction, LearnedError> {
+    if cfg.mirror_average {
+        model.predict_mirror_averaged(input, width, height)
+    } else {
+        model.predict(input, width, height)
+    }
 }
 
 /// Decodes the network outputs of one image ([`super::LearnedModel::predict`]) into

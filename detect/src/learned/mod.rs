@@ -24,7 +24,7 @@ pub mod targets;
 pub mod train;
 
 pub use augment::{AugmentConfig, TrainImage};
-pub use decode::{decode, DecodeConfig, LearnedInstance};
+pub use decode::{decode, predict_for, DecodeConfig, LearnedInstance};
 pub use error::LearnedError;
 pub use model::{LearnedModel, ModelMeta, Prediction, FORMAT_VERSION};
 pub use net::{NetConfig, NetOutput};
@@ -39,7 +39,7 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
         return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
     let input = model.meta.preprocess.apply(rgb, width, height);
-    Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg))
+    Ok(decode(&predict_for(model, &input, width, height, cfg)?, cfg))
 }
 
 /// Detects tubes in an interleaved RGB8 image at working scale `s` ([`crate::scale`]): the
@@ -62,13 +62,13 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
         return Err(LearnedError::Invalid(format!("working scale {s} must be finite and > 0")));
     }
     if s == 1.0 {
-        return Ok(decode(&model.predict_with(&input, width, height, cfg)?, cfg));
+        return Ok(decode(&predict_for(model, &input, width, height, cfg)?, cfg));
     }
     let (nw, nh) = crate::scale::scaled_size(width, height, s);
     let c = model.meta.preprocess.channels();
     let scaled = crate::scale::resample_planes(&input, c, width, height, nw, nh);
     drop(input);
-    let found = decode(&model.predict_with(&scaled, nw, nh, cfg)?, cfg);
+    let found = decode(&predict_for(model, &scaled, nw, nh, cfg)?, cfg);
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
     Ok(found
         .into_iter()

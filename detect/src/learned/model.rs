@@ -6,7 +6,6 @@
 //! format, version, checksum, tensor names or shapes do not match is refused with a
 //! [`LearnedError::BadModel`] naming the file.
 
-use super::decode::DecodeConfig;
 use super::error::LearnedError;
 use super::net::{NetConfig, NetOutput, TubeNet, HEADS, STRIDE};
 use super::preprocess::Preprocess;
@@ -232,16 +231,6 @@ impl LearnedModel {
             None => None,
         };
         Ok(Prediction { planes, out_w: cw, out_h: chh, width, height, fine })
-    }
-
-    /// The prediction that `cfg` asks for: [`LearnedModel::predict_mirror_averaged`] with
-    /// [`DecodeConfig::mirror_average`], else [`LearnedModel::predict`].
-    pub fn predict_with(&self, input: &[f32], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Prediction, LearnedError> {
-        if cfg.mirror_average {
-            self.predict_mirror_averaged(input, width, height)
-        } else {
-            self.predict(input, width, height)
-        }
     }
 
     /// [`LearnedModel::predict`] averaged over the image and its left-right mirror
