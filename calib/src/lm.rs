@@ -456,9 +456,9 @@ mod tests {
         let r0 = DVector::from_vec(all(&p.params));
         let mut offsets = vec![None; p.params.len()];
         let mut n = 0;
-        for b in 0..p.params.len() {
+        for (b, offset) in offsets.iter_mut().enumerate() {
             if !p.fixed[b] {
-                offsets[b] = Some(n);
+                *offset = Some(n);
                 n += p.params[b].len();
             }
         }

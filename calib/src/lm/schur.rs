@@ -303,7 +303,7 @@ impl BlockNormal {
     /// Covariance `σ²·H⁻¹` by blocks (kept block and each eliminated block's marginal), or
     /// `None` when `H` is not positive definite. Also returns the inverse condition number
     /// (smallest over the column-scaled Schur complement and `D` blocks).
-    pub fn covariance(&self, sigma2: f64) -> (Option<(DMatrix<f64>, Vec<DMatrix<f64>>)>, f64) {
+    pub fn covariance(&self, sigma2: f64) -> (Option<CovarianceBlocks>, f64) {
         let mut inverse_condition = f64::INFINITY;
         for d in &self.d {
             inverse_condition = inverse_condition.min(scaled_inverse_condition(d));
@@ -333,6 +333,9 @@ impl BlockNormal {
         (Some((sinv * sigma2, elim)), inverse_condition)
     }
 }
+
+/// Covariance of the kept parameters and the marginal covariance of each eliminated block.
+pub(crate) type CovarianceBlocks = (DMatrix<f64>, Vec<DMatrix<f64>>);
 
 struct Reduced {
     s: DMatrix<f64>,
