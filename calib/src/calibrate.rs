@@ -14,6 +14,8 @@
 //! RMS figures: `rms_px = sqrt(Σ|r|²/N)` over corners (OpenCV's `calibrateCamera` figure) and
 //! `rms_coord_px = sqrt(Σ|r|²/(2N))`, which estimates the per-coordinate corner noise.
 
+mod reprojection;
+
 use crate::error::CalibError;
 use crate::geometry::{average_poses, check_spread, homography, intrinsics_vec, model_from_vec, pose_from_homography, pose_from_vec, pose_vec, project_cam, zhang_intrinsics};
 use crate::lm::{BlockKind, Problem};
@@ -99,11 +101,16 @@ pub struct CameraCalibration {
     pub name: String,
     /// Estimated intrinsics and distortion.
     pub model: CameraModel,
-    /// One-sigma uncertainties of `[fx, fy, cx, cy, k1, k2, p1, p2, k3]` (0 for fixed ones).
+    /// One-sigma uncertainties of `[fx, fy, cx, cy, k1, k2, p1, p2, k3]` (pixels,
+    /// dimensionless; 0 for fixed ones), from `σ²·(JᵀJ)⁻¹` of the final adjustment.
     pub std: [f64; 9],
     /// `T_ref_cam`: the camera in the rig (first camera) frame.
     #[serde(rename = "T_rig_cam")]
     pub t_rig_cam: Pose,
+    /// One-sigma uncertainty of `T_rig_cam` (zero for the first camera, which defines the rig
+    /// frame, and for a single camera).
+    #[serde(rename = "T_rig_cam_std", default)]
+    pub t_rig_cam_std: PoseStd,
     /// RMS residual norm, pixels.
     pub rms_px: f64,
     /// Per-view residuals.
@@ -112,6 +119,32 @@ pub struct CameraCalibration {
     pub points: usize,
     /// Corners rejected.
     pub outliers: usize,
+}
+
+/// One-sigma uncertainty of a camera's pose in the rig, from the adjustment's covariance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseStd {
+    /// Rotation about the rig frame's x, y, z axes, radians (left perturbation of `R_rig_cam`).
+    pub rotation_rad: [f64; 3],
+    /// Camera position in the rig frame along x, y, z, metres.
+    pub translation_m: [f64; 3],
+}
+
+impl PoseStd {
+    /// Uncertainty of `T_rig_cam = T_cam_ref⁻¹` from the 6x6 covariance `cov` of the pose
+    /// vector `t_cam_ref` (left update `[δω, δt]`): `δθ_rig = −Rᵀδω`,
+    /// `δc = −Rᵀ(δt + [t]×δω)`.
+    pub fn of_inverse(t_cam_ref: &[f64], cov: &nalgebra::DMatrix<f64>) -> PoseStd {
+        let rt = Rotation3::new(Vector3::new(t_cam_ref[0], t_cam_ref[1], t_cam_ref[2])).matrix().transpose();
+        let t = Vector3::new(t_cam_ref[3], t_cam_ref[4], t_cam_ref[5]);
+        let mut j = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&-rt);
+        j.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-rt * t.cross_matrix()));
+        j.fixed_view_mut::<3, 3>(3, 3).copy_from(&-rt);
+        let c = nalgebra::SMatrix::<f64, 6, 6>::from_fn(|r, k| cov[(r, k)]);
+        let out = j * c * j.transpose();
+        PoseStd { rotation_rad: [0, 1, 2].map(|i| out[(i, i)].max(0.0).sqrt()), translation_m: [3, 4, 5].map(|i| out[(i, i)].max(0.0).sqrt()) }
+    }
 }
 
 /// Result of [`calibrate`].
@@ -147,6 +180,7 @@ struct Adjustment {
     poses: BTreeMap<usize, [f64; 6]>,
     rejected: Vec<Vec<bool>>,
     std: Vec<[f64; 9]>,
+    ext_std: Vec<PoseStd>,
 }
 
 fn adjust(input: &CalibrationInput, obs_idx: &[usize], adj: &mut Adjustment, opts: &CalibrationOptions, cams: &[usize]) -> Result<(), CalibError> {
@@ -154,8 +188,10 @@ fn adjust(input: &CalibrationInput, obs_idx: &[usize], adj: &mut Adjustment, opt
         let mut p = Problem::new();
         let mut intr_b = BTreeMap::new();
         let mut ext_b = BTreeMap::new();
+        let mut k3_b = BTreeMap::new();
         for &c in cams {
-            intr_b.insert(c, p.add_block(adj.intr[c].to_vec(), BlockKind::Euclidean, false));
+            intr_b.insert(c, p.add_block(adj.intr[c][..8].to_vec(), BlockKind::Euclidean, false));
+            k3_b.insert(c, p.add_block(vec![if opts.fix_k3 { 0.0 } else { adj.intr[c][8] }], BlockKind::Euclidean, opts.fix_k3));
             ext_b.insert(c, p.add_block(adj.ext[c].to_vec(), BlockKind::Pose, c == cams[0]));
         }
         let mut pose_b = BTreeMap::new();
@@ -170,42 +206,26 @@ fn adjust(input: &CalibrationInput, obs_idx: &[usize], adj: &mut Adjustment, opt
                     continue;
                 }
                 let (x, u) = (x.coords, *u);
-                let fix_k3 = opts.fix_k3;
-                p.add_residual(
-                    vec![intr_b[&ob.camera], ext_b[&ob.camera], pose_b[&ob.view]],
+                p.add_residual_with_jacobian(
+                    vec![intr_b[&ob.camera], k3_b[&ob.camera], ext_b[&ob.camera], pose_b[&ob.view]],
                     2,
-                    Box::new(move |b, r| {
-                        let pc = transform(b[1], &transform(b[2], &x));
-                        let mut k = [0.0; 9];
-                        k.copy_from_slice(b[0]);
-                        if fix_k3 {
-                            k[8] = 0.0;
-                        }
-                        match project_cam(&k, &pc) {
-                            Some(q) => {
-                                r[0] = q.x - u.x;
-                                r[1] = q.y - u.y;
-                                true
-                            }
-                            None => false,
-                        }
-                    }),
+                    Box::new(move |b, r| reprojection::residual(b, &x, &u, r)),
+                    Box::new(move |b, r, j| reprojection::residual_and_jacobian(b, &x, &u, r, j)),
                 );
             }
         }
         let sol = p.solve(opts.max_iterations)?;
         for &c in cams {
-            let mut k = [0.0; 9];
-            k.copy_from_slice(&p.params[intr_b[&c]]);
-            if opts.fix_k3 {
-                k[8] = 0.0;
-            }
-            adj.intr[c] = k;
+            adj.intr[c][..8].copy_from_slice(&p.params[intr_b[&c]]);
+            adj.intr[c][8] = p.params[k3_b[&c]][0];
             adj.ext[c].copy_from_slice(&p.params[ext_b[&c]]);
-            if let (Some(cov), Some(off)) = (&sol.covariance, sol.offsets[intr_b[&c]]) {
-                for j in 0..9 {
-                    adj.std[c][j] = if opts.fix_k3 && j == 8 { 0.0 } else { cov[(off + j, off + j)].max(0.0).sqrt() };
+            if let Some(cov) = &sol.covariance {
+                let ci = cov.block(intr_b[&c]).expect("intrinsics are free");
+                for j in 0..8 {
+                    adj.std[c][j] = ci[(j, j)].max(0.0).sqrt();
                 }
+                adj.std[c][8] = cov.block(k3_b[&c]).map(|m| m[(0, 0)].max(0.0).sqrt()).unwrap_or(0.0);
+                adj.ext_std[c] = cov.block(ext_b[&c]).map(|m| PoseStd::of_inverse(&adj.ext[c], &m)).unwrap_or_default();
             }
         }
         for (v, b) in &pose_b {
@@ -259,7 +279,8 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
     let mut skipped = Vec::new();
     let mut usable: Vec<Vec<usize>> = vec![Vec::new(); nc];
     let mut init_pose: BTreeMap<(usize, usize), Pose> = BTreeMap::new();
-    let mut adj = Adjustment { intr: vec![[0.0; 9]; nc], ext: vec![[0.0; 6]; nc], poses: BTreeMap::new(), rejected: input.observations.iter().map(|o| vec![false; o.object.len()]).collect(), std: vec![[0.0; 9]; nc] };
+    let mut adj =
+        Adjustment { intr: vec![[0.0; 9]; nc], ext: vec![[0.0; 6]; nc], poses: BTreeMap::new(), rejected: input.observations.iter().map(|o| vec![false; o.object.len()]).collect(), std: vec![[0.0; 9]; nc], ext_std: vec![PoseStd::default(); nc] };
     for (o, ob) in input.observations.iter().enumerate() {
         let name = input.cameras.get(ob.camera).map(|c| c.name.as_str()).ok_or_else(|| CalibError::invalid("observation", format!("camera index {} out of range", ob.camera)))?;
         if ob.object.len() != ob.image.len() {
@@ -291,7 +312,7 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
         let k4 = zhang_intrinsics(&hs).map_err(|e| CalibError::Degenerate(format!("camera {}: {e}", spec.name)))?;
         let kinv = nalgebra::Matrix3::new(1.0 / k4[0], 0.0, -k4[2] / k4[0], 0.0, 1.0 / k4[1], -k4[3] / k4[1], 0.0, 0.0, 1.0);
         adj.intr[c] = [k4[0], k4[1], k4[2], k4[3], 0.0, 0.0, 0.0, 0.0, 0.0];
-        let mut single = Adjustment { intr: adj.intr.clone(), ext: vec![[0.0; 6]; nc], poses: BTreeMap::new(), rejected: adj.rejected.clone(), std: vec![[0.0; 9]; nc] };
+        let mut single = Adjustment { intr: adj.intr.clone(), ext: vec![[0.0; 6]; nc], poses: BTreeMap::new(), rejected: adj.rejected.clone(), std: vec![[0.0; 9]; nc], ext_std: vec![PoseStd::default(); nc] };
         for (&o, h) in usable[c].iter().zip(&hs) {
             let pose = pose_from_homography(&(kinv * h))?;
             single.poses.insert(input.observations[o].view, pose_vec(&pose));
@@ -357,7 +378,17 @@ pub fn calibrate(input: &CalibrationInput, opts: &CalibrationOptions) -> Result<
         sum2 += csum;
         npts += cn;
         let t_rig_cam = pose_from_vec(&adj.ext[c]).inverse();
-        cameras.push(CameraCalibration { name: spec.name.clone(), model: model_from_vec(spec.width, spec.height, &adj.intr[c]), std: adj.std[c], t_rig_cam, rms_px: (csum / cn.max(1) as f64).sqrt(), views, points: cn, outliers: cout });
+        cameras.push(CameraCalibration {
+            name: spec.name.clone(),
+            model: model_from_vec(spec.width, spec.height, &adj.intr[c]),
+            std: adj.std[c],
+            t_rig_cam,
+            t_rig_cam_std: adj.ext_std[c],
+            rms_px: (csum / cn.max(1) as f64).sqrt(),
+            views,
+            points: cn,
+            outliers: cout,
+        });
     }
     let rig = Rig { cameras: cameras.iter().map(|c| RigCamera { name: c.name.clone(), model: c.model.clone(), t_rig_cam: c.t_rig_cam }).collect(), stereo_pairs: input.stereo_pairs.clone() };
     rig.validate()?;

@@ -140,6 +140,6 @@ fn fit(k: &[f64; 9], object: &[Point3<f64>], image: &[Point2<f64>], init: &Pose)
     // Re-scale the covariance to a noise floor of 0.1 px.
     let sigma2 = if m > 6.0 { sol.cost / (m - 6.0) } else { f64::NAN };
     let floor = 0.01;
-    let cov = sol.covariance.map(|c| if sigma2.is_finite() && sigma2 > 0.0 { c * (sigma2.max(floor) / sigma2) } else { c });
+    let cov = sol.covariance.and_then(|c| c.block(b)).map(|c| if sigma2.is_finite() && sigma2 > 0.0 { c * (sigma2.max(floor) / sigma2) } else { c });
     Ok((sol.cost, pose_from_vec(&p.params[b]), cov))
 }

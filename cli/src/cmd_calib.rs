@@ -152,25 +152,48 @@ fn run_rig(a: RigArgs) -> Result<()> {
         files::write_json(r, &cal).with_context(|| format!("writing {}", r.display()))?;
     }
     for c in &cal.cameras {
-        let m = &c.model;
+        let (m, sd) = (&c.model, &c.std);
         crate::out::outln!(
-            "{:>6}: fx {:.3}±{:.3} fy {:.3}±{:.3} cx {:.3} cy {:.3} k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}  rms {:.3} px  views {}  outliers {}",
+            "{:>6}: fx {:.3}±{:.3} fy {:.3}±{:.3} cx {:.3}±{:.3} cy {:.3}±{:.3} k1 {:.5}±{:.5} k2 {:.5}±{:.5} p1 {:.6}±{:.6} p2 {:.6}±{:.6} k3 {:.5}±{:.5}  rms {:.3} px  views {}  outliers {}",
             c.name,
             m.fx,
-            c.std[0],
+            sd[0],
             m.fy,
-            c.std[1],
+            sd[1],
             m.cx,
+            sd[2],
             m.cy,
+            sd[3],
             m.distortion.k1,
+            sd[4],
             m.distortion.k2,
+            sd[5],
             m.distortion.p1,
+            sd[6],
             m.distortion.p2,
+            sd[7],
             m.distortion.k3,
+            sd[8],
             c.rms_px,
             c.views.len(),
             c.outliers
         );
+        let ps = &c.t_rig_cam_std;
+        if ps.translation_m.iter().chain(&ps.rotation_rad).any(|v| *v > 0.0) {
+            let t = c.t_rig_cam.translation();
+            crate::out::outln!(
+                "        position in rig {:.2}±{:.2} {:.2}±{:.2} {:.2}±{:.2} mm, rotation std {:.4} {:.4} {:.4} deg",
+                t.x * 1e3,
+                ps.translation_m[0] * 1e3,
+                t.y * 1e3,
+                ps.translation_m[1] * 1e3,
+                t.z * 1e3,
+                ps.translation_m[2] * 1e3,
+                ps.rotation_rad[0].to_degrees(),
+                ps.rotation_rad[1].to_degrees(),
+                ps.rotation_rad[2].to_degrees()
+            );
+        }
     }
     for (l, r, b) in &cal.baselines {
         crate::out::outln!("baseline {l}-{r}: {:.2} mm", b * 1e3);
