@@ -207,7 +207,7 @@ fn open_image(p: &Path) -> Result<image::DynamicImage> {
 /// Runs `tubeloc locate`; returns the number of converged tubes.
 pub fn run(a: LocateArgs) -> Result<usize> {
     let t0 = std::time::Instant::now();
-    let rig = tubeloc_calib::read_rig(&a.rig).with_context(|| format!("rig {}", a.rig.display()))?;
+    let rig: Rig = tubeloc_calib::read_rig(&a.rig).with_context(|| format!("rig {}", a.rig.display()))?;
     let pair = match &a.pair {
         Some(p) => {
             let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;

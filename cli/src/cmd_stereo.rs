@@ -17,7 +17,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{files::write_atomic, Plane, Rig};
+use tubeloc_core::{files::write_atomic, Plane};
 use tubeloc_stereo::{disparity_regions, io, Paths, Roi, SgmMatcher, SgmParams, StereoRectification};
 
 /// Arguments of `tubeloc stereo`.

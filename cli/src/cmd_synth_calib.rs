@@ -3,7 +3,6 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
-use tubeloc_core::Rig;
 use tubeloc_synth::calib_set::{default_rig, generate, write_calib_set, BoardLayout, CalibSetConfig};
 
 /// Arguments of `tubeloc synth calib`.

@@ -105,15 +105,18 @@ mod tests {
         let rect = PairRectification::new(&l, &r, &t_lr).unwrap();
         assert!((rect.baseline - t_lr.translation().norm()).abs() < 1e-15);
         assert_eq!(rect.rectified.fx, l.fx);
-        // A point seen by both cameras: same rectified row, disparity f·B/Z.
+        // A point seen by both cameras: P1, P2 project it from the stereo frame (R1 p_left) to
+        // the same rectified row, disparity f·B/Z, and P2 agrees with the right camera's own
+        // rectified ray R2 p_right.
         let p_left = Point3::new(0.3, -0.2, 3.0);
         let p_right = t_lr.inverse().transform_point(&p_left);
-        let a = rect.p1 * (rect.r_left * p_left.coords).push(1.0);
-        let b = rect.p2 * (rect.r_right * p_right.coords).push(1.0);
+        let stereo = (rect.r_left * p_left.coords).push(1.0);
+        let (a, b) = (rect.p1 * stereo, rect.p2 * stereo);
         let (ua, va, ub, vb) = (a.x / a.z, a.y / a.z, b.x / b.z, b.y / b.z);
         assert!((va - vb).abs() < 1e-9, "{va} {vb}");
-        let z_rect = (rect.r_left * p_left.coords).z;
-        assert!(((ua - ub) - rect.rectified.fx * rect.baseline / z_rect).abs() < 1e-9);
+        assert!(((ua - ub) - rect.rectified.fx * rect.baseline / stereo.z).abs() < 1e-9);
+        let own = rect.rectified.project(&Point3::from(rect.r_right * p_right.coords)).unwrap();
+        assert!((own.x - ub).abs() < 1e-9 && (own.y - vb).abs() < 1e-9, "{own:?} vs ({ub}, {vb})");
         let e = PairRectification::new(&l, &r, &Pose::identity()).unwrap_err().to_string();
         assert!(e.contains("zero baseline"), "{e}");
     }
