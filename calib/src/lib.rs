@@ -1,5 +1,6 @@
 //! tubeloc-calib: AprilTag detection, tag-pair ground-truth tube poses, and intrinsic and
-//! multi-camera calibration with rig files (tubeloc JSON and OpenCV YAML).
+//! multi-camera calibration with rig files (tubeloc JSON, OpenCV YAML, ROS camera_info, kalibr
+//! camchain).
 //!
 //! - [`detect`]: wrapper of the AprilTag 3 detector (`apriltag` crate); corners in the tubeloc /
 //!   OpenCV pixel convention (pixel centres at integers).
@@ -7,7 +8,8 @@
 //!   tag pair (PnP + Levenberg-Marquardt, covariance, single-tag fallback flagged).
 //! - [`calibrate`]: Zhang initialization, bundle adjustment of intrinsics, distortion and
 //!   board poses, outlier rejection, multi-camera extrinsics; [`views`] reads calibration sets.
-//! - [`yaml`]: OpenCV FileStorage YAML rig files.
+//! - [`yaml`]: OpenCV FileStorage YAML rig files; [`interchange`]: ROS `camera_info` and kalibr
+//!   camchain files, and [`read_rig`], the one reader of every format.
 //! - [`lm`], [`geometry`]: the least-squares solver and projective helpers.
 #![warn(missing_docs)]
 
@@ -15,6 +17,7 @@ pub mod calibrate;
 pub mod detect;
 pub mod error;
 pub mod geometry;
+pub mod interchange;
 pub mod lm;
 pub mod mount;
 pub mod tagpose;
@@ -24,6 +27,7 @@ pub mod yaml;
 pub use calibrate::{calibrate, CalibrationInput, CalibrationOptions, CameraCalibration, CameraSpec, Observation, RigCalibration};
 pub use detect::{DetectorConfig, TagDetection, TagDetector, TagFamily};
 pub use error::CalibError;
+pub use interchange::{read_rig, RigFormat};
 pub use mount::{MountedTag, TagMount};
 pub use tagpose::{estimate_tube_pose, TagPoseEstimate};
 pub use views::{load_calib_set, Board, CornerSource, LoadedSet};

@@ -418,7 +418,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
 fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     std::fs::create_dir_all(dir)?;
     let rig_path = dataset.join("rig.json");
-    let rig = tubeloc_core::Rig::load_json(&rig_path)?;
+    let rig = tubeloc_calib::read_rig(&rig_path)?;
     let (l, _) = rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo pair", rig_path.display()))?;
     let cam = rig.camera(&l).with_context(|| format!("{}: no camera {l}", rig_path.display()))?;
     let gt: Value = files::read_json(&dataset.join("annotations.json"))?;

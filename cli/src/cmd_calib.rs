@@ -3,6 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
+use tubeloc_calib::interchange::{kalibr, ros};
 use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount};
 use tubeloc_core::{files, CameraModel, Rig};
 
@@ -76,6 +77,13 @@ pub struct RigArgs {
     /// Also write the rig as OpenCV FileStorage YAML.
     #[arg(long)]
     pub yaml: Option<PathBuf>,
+    /// Also write ROS camera_info YAML files into this folder: `NAME.yaml` per camera, with its
+    /// first stereo pair's rectification (R) and projection (P) matrices.
+    #[arg(long)]
+    pub ros: Option<PathBuf>,
+    /// Also write a kalibr camchain (pinhole, radtan). kalibr's radtan has no k3, hence --fix-k3.
+    #[arg(long, requires = "fix_k3")]
+    pub camchain: Option<PathBuf>,
     /// Corner source: detect (run the detector on the images), noisy or exact (from the file).
     #[arg(long, default_value = "detect", value_parser = ["detect", "noisy", "exact"])]
     pub corners: String,
@@ -141,11 +149,27 @@ fn run_rig(a: RigArgs) -> Result<()> {
     let set = load_calib_set(&a.views, source, Some(&mut det)).with_context(|| format!("reading calibration set {}", a.views.display()))?;
     let opts = CalibrationOptions { fix_k3: a.fix_k3, ..Default::default() };
     let cal = calibrate(&set.input, &opts).with_context(|| format!("calibrating from {}", a.views.display()))?;
+    // Every export is built before anything is written, so that a refused one writes nothing.
+    if let Some(p) = &a.camchain {
+        kalibr::rig_to_camchain(&cal.rig).with_context(|| format!("--camchain {}", p.display()))?;
+    }
+    if let Some(d) = &a.ros {
+        ros::rig_camera_infos(&cal.rig).with_context(|| format!("--ros {}", d.display()))?;
+    }
     cal.rig.save_json(&a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    // Each file is read back as a check.
     if let Some(y) = &a.yaml {
         save_rig_yaml(&cal.rig, y).with_context(|| format!("writing {}", y.display()))?;
-        // Read both back as a check.
         tubeloc_calib::load_rig_yaml(y).with_context(|| format!("re-reading {}", y.display()))?;
+    }
+    if let Some(d) = &a.ros {
+        for p in ros::save_rig_camera_infos(&cal.rig, d).with_context(|| format!("writing {}", d.display()))? {
+            ros::CameraInfo::load(&p).with_context(|| format!("re-reading {}", p.display()))?;
+        }
+    }
+    if let Some(p) = &a.camchain {
+        kalibr::save_camchain(&cal.rig, p).with_context(|| format!("writing {}", p.display()))?;
+        kalibr::load_camchain(p).with_context(|| format!("re-reading {}", p.display()))?;
     }
     Rig::load_json(&a.out).with_context(|| format!("re-reading {}", a.out.display()))?;
     if let Some(r) = &a.report {

@@ -148,7 +148,7 @@ pub struct RefineArgs {
     /// Right image of a stereo pair (needs --rig).
     #[arg(long)]
     pub(crate) right: Option<PathBuf>,
-    /// Rig JSON with both cameras.
+    /// Rig file with both cameras (tubeloc JSON, OpenCV YAML or kalibr camchain).
     #[arg(long)]
     pub(crate) rig: Option<PathBuf>,
     /// Camera names of the pair in the rig, "LEFT,RIGHT" (default: the rig's first stereo pair).
@@ -314,7 +314,7 @@ pub fn run(mut args: RefineArgs) -> Result<()> {
     // The camera(s): the rig's pair (stereo), or --camera alone.
     let (rig, selection) = match &args.rig {
         Some(p) => {
-            let rig = Rig::load_json(p).with_context(|| format!("rig {}", p.display()))?;
+            let rig = tubeloc_calib::read_rig(p).with_context(|| format!("rig {}", p.display()))?;
             let pair = match &args.pair {
                 Some(s) => Some(s.split_once(',').map(|(l, r)| (l.trim().to_string(), r.trim().to_string())).with_context(|| format!("--pair {s:?}: expected LEFT,RIGHT"))?),
                 None => Some(rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", p.display()))?),

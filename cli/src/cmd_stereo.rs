@@ -17,7 +17,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{files::write_atomic, Plane, Rig};
+use tubeloc_core::{files::write_atomic, Plane};
 use tubeloc_stereo::{disparity_regions, io, Paths, Roi, SgmMatcher, SgmParams, StereoRectification};
 
 /// Arguments of `tubeloc stereo`.
@@ -35,7 +35,7 @@ pub struct StereoArgs {
     /// With --set: evaluate at most this many pairs.
     #[arg(long, value_parser = crate::args::positive_usize)]
     limit: Option<usize>,
-    /// Rig JSON file: the pair is rectified with it before matching.
+    /// Rig file (tubeloc JSON, OpenCV YAML or kalibr camchain): the pair is rectified with it before matching.
     #[arg(long)]
     rig: Option<PathBuf>,
     /// Camera names of the pair in the rig, "LEFT,RIGHT" (default: the rig's first stereo pair).
@@ -203,7 +203,7 @@ pub fn run(args: StereoArgs) -> Result<()> {
 /// default the rig's first stereo pair. Returns the pair's names, the left camera's model and the
 /// rectification.
 pub(crate) fn rectification_from_rig(rig_path: &Path, pair: Option<&str>) -> Result<((String, String), tubeloc_core::CameraModel, StereoRectification)> {
-    let rig = Rig::load_json(rig_path)?;
+    let rig = tubeloc_calib::read_rig(rig_path)?;
     let (ln, rn) = match pair {
         Some(p) => {
             let (a, b) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;

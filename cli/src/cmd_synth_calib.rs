@@ -3,13 +3,12 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
-use tubeloc_core::Rig;
 use tubeloc_synth::calib_set::{default_rig, generate, write_calib_set, BoardLayout, CalibSetConfig};
 
 /// Arguments of `tubeloc synth calib`.
 #[derive(Args)]
 pub struct SynthCalibArgs {
-    /// Rig JSON to simulate.
+    /// Rig file to simulate (tubeloc JSON, OpenCV YAML or kalibr camchain).
     #[arg(long, conflicts_with = "default_rig")]
     pub rig: Option<PathBuf>,
     /// Use the shipped default rig (data/rig_default.json: paper geometry, mild distortion).
@@ -41,7 +40,7 @@ pub struct SynthCalibArgs {
 /// Runs `tubeloc synth calib`.
 pub fn run(a: SynthCalibArgs) -> Result<()> {
     let rig = match &a.rig {
-        Some(p) => Rig::load_json(p)?,
+        Some(p) => tubeloc_calib::read_rig(p)?,
         None => default_rig(),
     };
     let cfg = CalibSetConfig { views: a.views, seed: a.seed, corner_noise_px: a.noise, image_noise: a.image_noise, scale: a.scale, render: !a.no_images, ..Default::default() };

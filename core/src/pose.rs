@@ -41,7 +41,9 @@ impl Pose {
         if orth > 1e-6 || (r.determinant() - 1.0).abs() > 1e-6 {
             return Err(CoreError::invalid("pose", format!("rotation is not orthonormal with det +1 (error {orth:.2e}, det {:.6})", r.determinant())));
         }
-        let rot = Rotation3::from_matrix_eps(r, 1e-12, 100, Rotation3::identity());
+        // Iterate to machine precision (an update below 1e-15 rad): a rotation read back from
+        // a file is then the written one to ~1e-16, not 1e-12.
+        let rot = Rotation3::from_matrix_eps(r, 1e-15, 100, Rotation3::identity());
         Ok(Pose::from_parts(rot, t))
     }
 
@@ -158,6 +160,9 @@ mod tests {
         let back: Pose = serde_json::from_str(&text).unwrap();
         let (a, d) = p.distance(&back);
         assert!(a < 1e-12 && d < 1e-12);
+        // Written and read again, the rotation matrix is the same to rounding.
+        let again: Pose = serde_json::from_str(&serde_json::to_string(&back).unwrap()).unwrap();
+        assert!((again.rotation() - back.rotation()).abs().max() < 1e-15, "{}", (again.rotation() - back.rotation()).abs().max());
         let bad = r#"{"rotation": [[2,0,0],[0,1,0],[0,0,1]], "translation": [0,0,0]}"#;
         let err = serde_json::from_str::<Pose>(bad).unwrap_err().to_string();
         assert!(err.contains("orthonormal"), "{err}");

@@ -73,21 +73,17 @@ fn is_yaml(path: &Path) -> bool {
     path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("yaml") || e.eq_ignore_ascii_case("yml"))
 }
 
-/// Reads the rig file at `path` as `tubeloc --rig` does (JSON), or an OpenCV YAML rig; errors
-/// start with "rig PATH:" as the CLI's.
+/// Reads the rig file at `path` as `tubeloc --rig` does (tubeloc JSON, OpenCV YAML, a kalibr
+/// camchain or one ROS `camera_info`, recognised by content); errors start with "rig PATH:" as
+/// the CLI's.
 pub fn load(path: &Path) -> PyResult<Rig> {
-    let context = format!("rig {}", path.display());
-    if is_yaml(path) {
-        tubeloc_calib::load_rig_yaml(path).map_err(|e| context_to_py(context, &e))
-    } else {
-        Rig::load_json(path).map_err(|e| context_to_py(context, &e))
-    }
+    tubeloc_calib::read_rig(path).map_err(|e| context_to_py(format!("rig {}", path.display()), &e))
 }
 
 /// read_rig(path) -> Rig
 ///
-/// Reads and checks a rig file: tubeloc JSON, or OpenCV YAML for a name ending in .yaml/.yml
-/// (both written by `tubeloc calib rig`).
+/// Reads and checks a rig file: tubeloc JSON, OpenCV YAML, a kalibr camchain or one ROS
+/// `camera_info` (recognised by content).
 #[pyfunction]
 pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
     Ok(PyRig { rig: load(&path)? })

@@ -13,7 +13,8 @@
 //! Q  = [[1, 0, 0, -cx], [0, 1, 0, -cy], [0, 0, 0, f], [0, 0, 1/B, 0]],  (X Y Z W)ᵀ = Q (u v d 1)ᵀ
 //! ```
 //!
-//! The remap tables send each rectified pixel through `R_i⁻¹` and the original camera model
+//! These rotations and matrices are computed by [`tubeloc_core::PairRectification`] (shared with
+//! the ROS `camera_info` export of `tubeloc calib rig`). The remap tables send each rectified pixel through `R_i⁻¹` and the original camera model
 //! (with its lens distortion) to a source pixel, sampled bilinearly. The valid region of each
 //! rectified image is an axis-aligned rectangle inside which every pixel has a source inside the
 //! original image.
@@ -27,7 +28,7 @@ use crate::triangulate::{RectifiedGeometry, StereoPoint};
 use nalgebra::{Matrix3, Matrix3x4, Matrix4, Point2, Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
-use tubeloc_core::{CameraModel, Plane, Pose};
+use tubeloc_core::{CameraModel, CoreError, PairRectification, Plane, Pose};
 
 /// Source coordinates (pixels of the original image) of each rectified pixel; `NaN` where the
 /// source lies outside the original image.
@@ -92,42 +93,11 @@ impl StereoRectification {
         if left.width != right.width || left.height != right.height {
             return Err(StereoError::SizeMismatch { what: "left camera".into(), a_w: left.width as usize, a_h: left.height as usize, other: "right camera".into(), b_w: right.width as usize, b_h: right.height as usize });
         }
-        let r = t_left_right.rotation();
-        let t = t_left_right.translation();
-        let baseline = t.norm();
-        if baseline.is_nan() || baseline <= 1e-9 {
-            return Err(StereoError::Unrectifiable(format!("zero baseline ({baseline:.3e} m) between the optical centres")));
-        }
-        let e1 = t / baseline;
-        let z_mean = Vector3::z() + r * Vector3::z();
-        if z_mean.norm() < 1e-6 {
-            return Err(StereoError::Unrectifiable("the cameras look in opposite directions".into()));
-        }
-        let z_mean = z_mean.normalize();
-        let along = e1.dot(&z_mean);
-        if along.abs() > std::f64::consts::FRAC_1_SQRT_2 {
-            return Err(StereoError::Unrectifiable(format!("the baseline is {:.1}° from the optical axis (must be more than 45°): the epipoles lie inside the images", along.abs().acos().to_degrees())));
-        }
-        let e3 = (z_mean - e1 * along).normalize();
-        let e2 = e3.cross(&e1);
-        let r1 = Matrix3::from_rows(&[e1.transpose(), e2.transpose(), e3.transpose()]);
-        let r2 = r1 * r;
-
-        let f = left.fx.min(left.fy).min(right.fx).min(right.fy);
-        let (w, h) = (left.width as usize, left.height as usize);
-        // Principal point: the original image centres land, on average, at the rectified centre.
-        let mut off = Vector3::zeros();
-        for (cam, rot) in [(left, &r1), (right, &r2)] {
-            let (x, y) = cam.normalize(&Point2::new((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0));
-            let ray = rot * Vector3::new(x, y, 1.0);
-            off += Vector3::new(f * ray.x / ray.z, f * ray.y / ray.z, 0.0) / 2.0;
-        }
-        let (cx, cy) = ((w as f64 - 1.0) / 2.0 - off.x, (h as f64 - 1.0) / 2.0 - off.y);
-        let rectified = CameraModel { width: w as u32, height: h as u32, fx: f, fy: f, cx, cy, distortion: Default::default() };
-        let p1 = Matrix3x4::new(f, 0.0, cx, 0.0, 0.0, f, cy, 0.0, 0.0, 0.0, 1.0, 0.0);
-        let mut p2 = p1;
-        p2[(0, 3)] = -f * baseline;
-        let q = Matrix4::new(1.0, 0.0, 0.0, -cx, 0.0, 1.0, 0.0, -cy, 0.0, 0.0, 0.0, f, 0.0, 0.0, 1.0 / baseline, 0.0);
+        let geom = PairRectification::new(left, right, t_left_right).map_err(|e| match e {
+            CoreError::Invalid { message, .. } => StereoError::Unrectifiable(message),
+            other => other.into(),
+        })?;
+        let PairRectification { r_left: r1, r_right: r2, rectified, baseline, p1, p2, q } = geom;
         let map_left = remap_table(left, &r1, &rectified);
         let map_right = remap_table(right, &r2, &rectified);
         let valid_left = valid_rect(&map_left);

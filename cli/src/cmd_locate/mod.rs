@@ -52,7 +52,8 @@ pub struct LocateArgs {
     /// `merge`: combine the folders of a sharded batch run.
     #[command(subcommand)]
     pub command: Option<LocateCommand>,
-    /// Rig file (tubeloc JSON from `tubeloc calib rig`, or the `rig.json` of a synthetic dataset).
+    /// Rig file: tubeloc JSON (`tubeloc calib rig`, a synthetic dataset's `rig.json`), OpenCV YAML,
+    /// a kalibr camchain or one ROS `camera_info`, recognised by content.
     #[arg(long, required = true)]
     pub rig: Option<PathBuf>,
     /// The (left) image.
@@ -319,7 +320,7 @@ impl Setup {
     /// Reads the rig, builds the detector and the settings (score calibration) of `a`.
     pub fn new(a: &LocateArgs) -> Result<Self> {
         let rig_path = a.rig_path()?.to_path_buf();
-        let rig = Rig::load_json(&rig_path).with_context(|| format!("rig {}", rig_path.display()))?;
+        let rig: Rig = tubeloc_calib::read_rig(&rig_path).with_context(|| format!("rig {}", rig_path.display()))?;
         let pair = match &a.pair {
             Some(p) => {
                 let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;

@@ -1,0 +1,84 @@
+//! Calibration interchange: the rig in the formats the rest of a robot's stack reads, and one
+//! reader for every `--rig` argument.
+//!
+//! - tubeloc JSON ([`tubeloc_core::Rig::load_json`]) and OpenCV FileStorage YAML
+//!   ([`crate::yaml`]): the whole rig, read and written.
+//! - [`kalibr`]: a kalibr `camchain.yaml`, read and written (refused for cameras with `k3 != 0`).
+//! - [`ros`]: ROS `camera_info` YAML, one file per camera with each stereo pair's rectification;
+//!   written, and read as one camera.
+//!
+//! [`read_rig`] tells the formats apart by content, not by file name.
+
+pub mod kalibr;
+pub mod ros;
+pub mod yaml_fields;
+
+use crate::error::CalibError;
+use std::path::Path;
+use tubeloc_core::{Pose, Rig, RigCamera};
+
+/// A rig file format recognised by [`read_rig`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RigFormat {
+    /// tubeloc rig JSON (first character `{`).
+    TubelocJson,
+    /// OpenCV FileStorage YAML (first line `%YAML:1.0`).
+    OpencvYaml,
+    /// kalibr camchain (a YAML mapping with `cam0`).
+    KalibrCamchain,
+    /// ROS `camera_info` (a YAML mapping with `camera_matrix`): a one-camera rig.
+    RosCameraInfo,
+}
+
+impl RigFormat {
+    /// Human name of the format, as used in error messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            RigFormat::TubelocJson => "tubeloc JSON",
+            RigFormat::OpencvYaml => "OpenCV FileStorage YAML",
+            RigFormat::KalibrCamchain => "kalibr camchain",
+            RigFormat::RosCameraInfo => "ROS camera_info",
+        }
+    }
+}
+
+/// The format of a rig file's text, from its content: `Err` says, for each format tried, why the
+/// text is not in it.
+pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
+    let body = text.trim_start_matches('\u{feff}');
+    let first = body.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
+    if first.starts_with('{') {
+        return Ok(RigFormat::TubelocJson);
+    }
+    if first.starts_with("%YAML:") {
+        return Ok(RigFormat::OpencvYaml);
+    }
+    let why_yaml = match yaml_rust2::YamlLoader::load_from_str(body) {
+        Ok(docs) => match docs.first() {
+            Some(d) if !d["cam0"].is_badvalue() => return Ok(RigFormat::KalibrCamchain),
+            Some(d) if !d["camera_matrix"].is_badvalue() => return Ok(RigFormat::RosCameraInfo),
+            Some(yaml_rust2::Yaml::Hash(_)) => "a YAML mapping without `cam0` (kalibr) or `camera_matrix` (ROS)".to_string(),
+            Some(_) => "YAML whose top level is not a mapping".to_string(),
+            None => "empty".to_string(),
+        },
+        Err(e) => format!("not YAML ({e})"),
+    };
+    Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
+}
+
+/// Reads a rig from tubeloc JSON, OpenCV FileStorage YAML, a kalibr camchain, or a single ROS
+/// `camera_info` file (a one-camera rig with the camera at the rig origin), recognised by
+/// content. Errors name the file, and the field where one is wrong.
+pub fn read_rig(path: &Path) -> Result<Rig, CalibError> {
+    let text = std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    match detect_rig_format(&text).map_err(|m| CalibError::parse(path, m))? {
+        RigFormat::TubelocJson => Ok(Rig::load_json(path)?),
+        RigFormat::OpencvYaml => crate::yaml::rig_from_yaml(&text, path),
+        RigFormat::KalibrCamchain => kalibr::rig_from_camchain(&text, path),
+        RigFormat::RosCameraInfo => {
+            let info = ros::CameraInfo::from_yaml(&text, path)?;
+            let name = if info.name.is_empty() { "camera".to_string() } else { info.name };
+            Ok(Rig { cameras: vec![RigCamera { name, model: info.model, t_rig_cam: Pose::identity() }], stereo_pairs: Vec::new() })
+        }
+    }
+}
