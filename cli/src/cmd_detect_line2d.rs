@@ -55,6 +55,10 @@ pub struct Line2dOpts {
     /// Line2D: re-ranking bonus `w area / max area` for larger silhouettes within a cluster.
     #[arg(long, default_value_t = 0.3, value_parser = crate::args::non_negative_f32)]
     pub rerank_area_weight: f32,
+    /// Line2D: at most this many coarse candidates per template go to the full-resolution
+    /// search, the best by coarse score (0 = all).
+    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_CANDIDATES)]
+    pub max_candidates: usize,
     /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
     #[arg(long)]
     pub no_verify: bool,
@@ -81,6 +85,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
         max_detections: opts.max_detections,
         rerank_margin: opts.rerank_margin,
         rerank_area_weight: opts.rerank_area_weight,
+        max_candidates: opts.max_candidates,
         ..MatchParams::default()
     };
     params.gradient.mag_threshold = opts.grad_threshold;

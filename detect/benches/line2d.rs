@@ -1,71 +1,92 @@
-//! Line2D speed on a 1024x1024 image with the default template library (~7000 templates):
-//! response-map time (gradients, spreading, response maps, linearization) and matching time
-//! (coarse + fine over all templates, NMS) separately, then the same image and silhouettes
-//! through OpenCV contrib's `cv2.linemod` LINE-2D (T = {4, 8}) via scripts/linemod_peer.py.
+//! Line2D speed on real work: a rendered 1024x1024 paper frame (the synth crate's renderer,
+//! paper rig at half resolution, a crop around a tube) and a real textured 1024x1024 Navcam
+//! frame, with the default template library (~8300 templates), ours against OpenCV contrib's
+//! `cv2.linemod` LINE-2D (T = {4, 8}) on identical templates and frames, in the same run.
 //!
-//! Also prints CPU time per image (all threads, from /proc/self/stat), which the load of other
-//! processes on a shared machine does not inflate, and the peer's CPU time.
+//! Per frame: `Line2dDetector::detect` end to end (gradients, response maps, matching,
+//! verification, NMS, re-ranking, masks) and the part that OpenCV's `Detector::match` also does
+//! (response maps + matching + NMS), as wall-time medians of repeated in-process runs and CPU
+//! time per run (all threads, from /proc/self/stat, which the load of other processes on a
+//! shared machine does not inflate). The peer (scripts/linemod_peer.py) times `match` in its own
+//! process the same way. Results are printed and written to `<target>/line2d_speed.json`.
 //!
-//! Run: `cargo bench -p tubeloc-detect --bench line2d` (set `LINE2D_BENCH_QUICK=1` for a
-//! ~700-template library). The peer part needs `pip install opencv-contrib-python-headless`.
+//! Run: `cargo bench -p tubeloc-detect --bench line2d`. Env: `LINE2D_BENCH_REAL` (the real
+//! frame; default the first frame of `../shared/data/real_mars/backgrounds/msl_navcam_1024`,
+//! skipped when absent), `LINE2D_BENCH_REPEATS` (default 5), `LINE2D_BENCH_PYTHON` (the Python
+//! with `opencv-contrib-python-headless`, default `python3`), `LINE2D_BENCH_QUICK=1` (a ~700
+//! template library), `LINE2D_BENCH_MAX_CANDIDATES` (the candidate cap), `LINE2D_BENCH_PEER=0`
+//! (ours only). The library is cached in the target folder.
 
-use criterion::Criterion;
-use nalgebra::{Rotation3, Vector3};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use nalgebra::Point3;
+use rand::SeedableRng;
+use serde_json::{json, Value};
 use std::hint::black_box;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
-use tubeloc_core::{Pose, TubeModel};
+use tubeloc_core::TubeModel;
 use tubeloc_detect::line2d::matching::{match_all, nms, prepare_image};
-use tubeloc_detect::line2d::render::{draw_tube_rgb, Pinhole};
-use tubeloc_detect::line2d::{LibraryParams, MatchParams, TemplateLibrary};
+use tubeloc_detect::line2d::{LibraryParams, Line2dDetector, MatchParams, TemplateLibrary};
+use tubeloc_synth::{dataset::crop_around_a_tube, render, rig, RenderOptions, Scene, SceneConfig, TerrainKind, TimeOfDay};
 
 const W: usize = 1024;
 const H: usize = 1024;
 
-fn scene(k: &Pinhole) -> Vec<u8> {
-    let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let blobs: Vec<(f64, f64, f64, f64)> = (0..400).map(|_| (rng.random_range(0.0..W as f64), rng.random_range(0.0..H as f64), rng.random_range(5.0..60.0), rng.random_range(-40.0..40.0))).collect();
-    let mut img = vec![0u8; W * H * 3];
-    let mut base = vec![120.0f64; W * H];
-    for &(bx, by, r, a) in &blobs {
-        let (x0, x1) = ((bx - 2.0 * r).max(0.0) as usize, ((bx + 2.0 * r) as usize).min(W));
-        let (y0, y1) = ((by - 2.0 * r).max(0.0) as usize, ((by + 2.0 * r) as usize).min(H));
-        for y in y0..y1 {
-            for x in x0..x1 {
-                base[y * W + x] += a * (-((x as f64 - bx).powi(2) + (y as f64 - by).powi(2)) / (r * r)).exp();
-            }
+/// A rendered paper frame: flagstone at noon, the paper rig's camera at half resolution, a
+/// 1024x1024 crop that holds a whole tube.
+fn paper_frame() -> Vec<u8> {
+    let scene = Scene::generate(&SceneConfig::new(TerrainKind::Flagstone, TimeOfDay::Am, false), 7).expect("scene");
+    let rig = rig::paper_rig();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    for stop in 0..8 {
+        let t_world_rig = rig::stop_pose(&Point3::origin(), rig::STOP_RADIUS_M, rig::HEIGHTS_M[0], stop, 8, scene.stop_offset).expect("stop");
+        let cam = &rig.cameras[0];
+        let half = cam.model.scaled(0.5);
+        let pose = t_world_rig * cam.t_rig_cam;
+        if let Some((x0, y0)) = crop_around_a_tube(&scene, &half, &pose, W as i64, &mut rng) {
+            let crop = half.cropped(x0 as u32, y0 as u32, W as u32, H as u32);
+            return render(&scene, &crop, &pose, &RenderOptions::default()).rgb;
         }
     }
-    for i in 0..W * H {
-        for (c, f) in [1.15, 0.85, 0.6].iter().enumerate() {
-            img[i * 3 + c] = (base[i] * f + rng.random_range(-10.0..10.0)).clamp(0.0, 255.0) as u8;
-        }
-    }
-    let tube = TubeModel::default();
-    for (i, (ax, t)) in [((0.7, 0.3, -0.4), (0.1, 0.05, 2.2)), ((-0.2, 0.9, 0.3), (-0.25, -0.2, 1.6)), ((1.0, -0.1, 0.1), (0.3, -0.3, 3.0))].iter().enumerate() {
-        let a = Vector3::new(ax.0, ax.1, ax.2).normalize();
-        let r = Rotation3::rotation_between(&Vector3::z(), &a).unwrap_or_else(Rotation3::identity);
-        let _ = i;
-        draw_tube_rgb(&mut img, W, H, &tube, k, &Pose::from_parts(r, Vector3::new(t.0, t.1, t.2)));
-    }
-    img
+    panic!("no stop shows a whole tube");
 }
 
-fn median_ms(mut f: impl FnMut(), n: usize) -> f64 {
-    let mut v: Vec<f64> = (0..n)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64() * 1000.0
+/// The real frames (RGB): `LINE2D_BENCH_REAL` (paths separated by `:`), else the first and the
+/// last 1024x1024 Navcam frame of the shared backgrounds; frames absent or of another size are
+/// skipped.
+fn real_frames() -> Vec<(PathBuf, Vec<u8>)> {
+    let paths: Vec<PathBuf> = match std::env::var("LINE2D_BENCH_REAL") {
+        Ok(list) => list.split(':').filter(|p| !p.is_empty()).map(PathBuf::from).collect(),
+        Err(_) => {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars/backgrounds/msl_navcam_1024");
+            let mut v: Vec<PathBuf> = std::fs::read_dir(dir).map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect()).unwrap_or_default();
+            v.sort();
+            match (v.first(), v.last()) {
+                (Some(a), Some(b)) if a != b => vec![a.clone(), b.clone()],
+                (Some(a), _) => vec![a.clone()],
+                _ => vec![],
+            }
+        }
+    };
+    paths
+        .into_iter()
+        .filter_map(|path| {
+            let img = image::open(&path).map_err(|e| eprintln!("{}: {e}; skipped", path.display())).ok()?.to_rgb8();
+            if (img.width() as usize, img.height() as usize) != (W, H) {
+                eprintln!("{}: {}x{}, need {W}x{H}; skipped", path.display(), img.width(), img.height());
+                return None;
+            }
+            Some((path, img.into_raw()))
         })
-        .collect();
+        .collect()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
-    v[n / 2]
+    v[v.len() / 2]
 }
 
 /// CPU time (user + system, all threads) of this process so far, ms (Linux `/proc/self/stat`;
-/// 0 elsewhere). Under load from other processes wall time inflates but CPU time does not.
+/// 0 elsewhere).
 fn cpu_ms() -> f64 {
     let Ok(s) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
     // Fields after the parenthesised command name: state is field 3, utime 14, stime 15.
@@ -75,71 +96,90 @@ fn cpu_ms() -> f64 {
     ticks * 10.0 // USER_HZ = 100 on Linux
 }
 
-/// Mean CPU time per call over `n` calls, ms.
-fn cpu_per_call(mut f: impl FnMut(), n: usize) -> f64 {
-    let c0 = cpu_ms();
+/// `(wall median ms, CPU median ms)` of `n` runs of `f`.
+fn timed(n: usize, mut f: impl FnMut()) -> (f64, f64) {
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
     for _ in 0..n {
+        let (t, c) = (Instant::now(), cpu_ms());
         f();
+        wall.push(t.elapsed().as_secs_f64() * 1e3);
+        cpu.push(cpu_ms() - c);
     }
-    (cpu_ms() - c0) / n as f64
+    (median(wall), median(cpu))
 }
 
-fn main() {
-    let quick = std::env::var("LINE2D_BENCH_QUICK").is_ok();
+fn library(quick: bool) -> TemplateLibrary {
     let mut params = LibraryParams::default();
     params.camera.cx = (W as f64 - 1.0) / 2.0;
     params.camera.cy = (H as f64 - 1.0) / 2.0;
     if quick {
         params.views.dist_step = 1.0;
     }
+    let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join(if quick { "line2d_bench_quick.tlt" } else { "line2d_bench.tlt" });
+    if let Ok(lib) = TemplateLibrary::load(&cache) {
+        if lib.params == params {
+            return lib;
+        }
+    }
     let t = Instant::now();
     let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).expect("library");
     eprintln!("library: {} templates built in {:.1} s", lib.len(), t.elapsed().as_secs_f64());
-    let img = scene(&params.camera);
-    let p = MatchParams::default();
+    let _ = lib.save(&cache);
+    lib
+}
 
-    let mut c = Criterion::default().sample_size(10).configure_from_args();
-    c.bench_function("line2d/response_maps_1024", |b| b.iter(|| black_box(prepare_image(&img, W, H, &p).expect("prepare"))));
-    let prep = prepare_image(&img, W, H, &p).expect("prepare");
-    c.bench_function(&format!("line2d/matching_{}_templates_1024", lib.len()), |b| {
-        b.iter(|| {
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        return; // `cargo test --benches` lists benchmarks; nothing to list here.
+    }
+    let quick = std::env::var("LINE2D_BENCH_QUICK").is_ok();
+    let repeats: usize = std::env::var("LINE2D_BENCH_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(5).max(1);
+    let lib = library(quick);
+    let mut p = MatchParams::default();
+    if let Some(k) = std::env::var("LINE2D_BENCH_MAX_CANDIDATES").ok().and_then(|v| v.parse().ok()) {
+        p.max_candidates = k;
+    }
+    let det = Line2dDetector::new(lib.clone(), p.clone()).expect("detector");
+    let mut frames: Vec<(String, String, Vec<u8>)> = vec![("paper".into(), "rendered paper frame (flagstone, paper rig at half resolution, 1024x1024 crop)".into(), paper_frame())];
+    for (k, (path, rgb)) in real_frames().into_iter().enumerate() {
+        frames.push((format!("real{}", k + 1), format!("real Navcam frame {}", path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default()), rgb));
+    }
+    if frames.len() == 1 {
+        eprintln!("no real frame (set LINE2D_BENCH_REAL): rendered frame only");
+    }
+
+    // A fresh detector's first image also computes the verification samples of every template
+    // that matches (once per process).
+    let cold = Line2dDetector::new(lib.clone(), p.clone()).expect("detector");
+    let (first_ms, first_cpu) = timed(1, || drop(black_box(cold.detect(&frames[0].2, W, H, None))));
+    println!("ours  first image of a fresh detector ({}): {first_ms:.1} ms wall, {first_cpu:.1} ms CPU", frames[0].0);
+    // The candidate cap does not bind on the rendered frame: same detections without it.
+    let uncapped = Line2dDetector::new(lib.clone(), MatchParams { max_candidates: 0, ..p.clone() }).expect("detector");
+    let same = uncapped.detect(&frames[0].2, W, H, None).expect("detect") == det.detect(&frames[0].2, W, H, None).expect("detect");
+    println!("ours  {}: detections with max_candidates = {} identical to uncapped: {same}", frames[0].0, p.max_candidates);
+
+    // Ours.
+    let mut rows = Vec::new();
+    for (name, what, rgb) in &frames {
+        let _ = det.detect(rgb, W, H, None).expect("detect"); // fills the verification sample cache
+        let mut n_det = 0;
+        let (detect_ms, detect_cpu) = timed(repeats, || n_det = black_box(det.detect(rgb, W, H, None).expect("detect")).len());
+        let mut n_raw = 0;
+        let (core_ms, core_cpu) = timed(repeats, || {
+            let prep = prepare_image(rgb, W, H, &p).expect("prepare");
             let raw = match_all(&prep, &lib, &p);
-            black_box(nms(&raw, &lib, p.nms_iou, p.max_detections))
-        })
-    });
-    c.final_summary();
+            n_raw = raw.len();
+            black_box(nms(&raw, &lib, p.nms_iou, p.max_detections));
+        });
+        println!("ours  {name:5}: detect {detect_ms:8.1} ms wall, {detect_cpu:8.1} ms CPU ({n_det} detections); response maps + matching + NMS {core_ms:8.1} ms wall, {core_cpu:8.1} ms CPU ({n_raw} raw matches)");
+        let (uncapped_ms, uncapped_cpu) = timed(1, || drop(black_box(uncapped.detect(rgb, W, H, None))));
+        println!("ours  {name:5}: uncapped (max_candidates = 0) detect {uncapped_ms:8.1} ms wall, {uncapped_cpu:8.1} ms CPU");
+        rows.push(json!({"frame": name, "uncapped_detect_ms": uncapped_ms, "uncapped_detect_cpu_ms": uncapped_cpu, "what": what, "detect_ms": detect_ms, "detect_cpu_ms": detect_cpu, "detections": n_det, "match_ms": core_ms, "match_cpu_ms": core_cpu, "raw_matches": n_raw}));
+    }
 
-    // Our medians with plain timers (same numbers criterion reports, kept for the ratio).
-    let resp_ms = median_ms(|| drop(black_box(prepare_image(&img, W, H, &p))), 9);
-    let mut n_det = 0;
-    let match_ms = median_ms(
-        || {
-            let raw = match_all(&prep, &lib, &p);
-            n_det = nms(&raw, &lib, p.nms_iou, p.max_detections).len();
-        },
-        9,
-    );
-    let ours = resp_ms + match_ms;
-    let mut n_raw = 0;
-    let raw_ms = median_ms(|| n_raw = match_all(&prep, &lib, &p).len(), 5);
-    let raw = match_all(&prep, &lib, &p);
-    let nms_ms = median_ms(|| drop(black_box(nms(&raw, &lib, p.nms_iou, p.max_detections))), 5);
-    println!("  of which coarse+fine {raw_ms:.1} ms ({n_raw} raw matches), NMS {nms_ms:.1} ms");
-    let resp_cpu = cpu_per_call(|| drop(black_box(prepare_image(&img, W, H, &p))), 20);
-    let match_cpu = cpu_per_call(|| drop(black_box(nms(&match_all(&prep, &lib, &p), &lib, p.nms_iou, p.max_detections))), 10);
-    let det = tubeloc_detect::line2d::Line2dDetector::new(lib.clone(), p.clone()).expect("detector");
-    let _ = det.detect(&img, W, H, None).expect("detect"); // fills the verification sample cache
-    let detect_ms = median_ms(|| drop(black_box(det.detect(&img, W, H, None))), 5);
-    let detect_cpu = cpu_per_call(|| drop(black_box(det.detect(&img, W, H, None))), 5);
-    println!("  Line2dDetector::detect end to end (+ verification, re-ranking, masks): {detect_ms:.1} ms wall median, {detect_cpu:.1} ms CPU");
-    println!("  CPU time per image (all threads): response maps {resp_cpu:.1} ms, matching {match_cpu:.1} ms, total {:.1} ms = {:.1} ms wall on 2 idle cores if perfectly parallel", resp_cpu + match_cpu, (resp_cpu + match_cpu) / 2.0);
-    println!("tubeloc line2d: {} templates, 1024x1024: response maps {resp_ms:.1} ms, matching {match_ms:.1} ms, total {ours:.1} ms median ({n_det} detections, {} threads)", lib.len(), rayon::current_num_threads());
-
-    // Peer: export the image and the silhouettes, run OpenCV's LINE-2D on them.
-    let dir = std::env::temp_dir().join("tubeloc_line2d_peer");
+    // Peer: the same frames and silhouettes through OpenCV's LINE-2D.
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("line2d_peer");
     std::fs::create_dir_all(&dir).expect("peer dir");
-    let png = image::RgbImage::from_raw(W as u32, H as u32, img.clone()).expect("image");
-    png.save(dir.join("image.png")).expect("write image.png");
     let mut masks = (lib.len() as u32).to_le_bytes().to_vec();
     for t in &lib.templates {
         masks.extend_from_slice(&t.levels[0].width.to_le_bytes());
@@ -147,20 +187,54 @@ fn main() {
         masks.extend_from_slice(&t.mask);
     }
     std::fs::write(dir.join("masks.bin"), masks).expect("write masks.bin");
-    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/linemod_peer.py");
-    match std::process::Command::new("python3").arg(&script).arg(&dir).args(["--repeats", "3"]).output() {
-        Ok(out) if out.status.success() => {
-            let line = String::from_utf8_lossy(&out.stdout);
-            println!("peer: {}", line.trim());
-            let v = serde_json::from_str::<serde_json::Value>(line.trim()).ok();
-            if let Some(ms) = v.as_ref().and_then(|v| v["match_ms_median"].as_f64()) {
-                println!("ratio OpenCV / tubeloc (wall, total per image) = {:.2}x", ms / ours);
-            }
-            if let Some(ms) = v.as_ref().and_then(|v| v["match_cpu_ms_median"].as_f64()) {
-                println!("ratio OpenCV / tubeloc (CPU time, total per image) = {:.2}x", ms / (resp_cpu + match_cpu));
-            }
+    let mut args = vec![dir.to_string_lossy().into_owned(), "--repeats".into(), repeats.to_string()];
+    for (name, _, rgb) in &frames {
+        let png = dir.join(format!("{name}.png"));
+        image::RgbImage::from_raw(W as u32, H as u32, rgb.clone()).expect("image").save(&png).expect("write frame");
+        args.extend(["--image".into(), format!("{name}={}", png.display())]);
+    }
+    if std::env::var("LINE2D_BENCH_PEER").is_ok_and(|v| v == "0") {
+        return;
+    }
+    let python = std::env::var("LINE2D_BENCH_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/linemod_peer.py");
+    let peer: Option<Value> = match std::process::Command::new(&python).arg(&script).args(&args).output() {
+        Ok(out) if out.status.success() => serde_json::from_slice(&out.stdout).ok(),
+        Ok(out) => {
+            println!("peer skipped: {}{}", String::from_utf8_lossy(&out.stdout).trim(), String::from_utf8_lossy(&out.stderr).trim());
+            None
         }
-        Ok(out) => println!("peer skipped: {}", String::from_utf8_lossy(&out.stdout).trim()),
-        Err(e) => println!("peer skipped: python3 not runnable ({e})"),
+        Err(e) => {
+            println!("peer skipped: {python} not runnable ({e})");
+            None
+        }
+    };
+    if let Some(peer) = &peer {
+        for row in rows.iter_mut() {
+            let name = row["frame"].as_str().unwrap_or_default().to_string();
+            let Some(f) = peer["frames"].get(&name) else { continue };
+            let (pw, pc) = (f["match_ms_median"].as_f64().unwrap_or(f64::NAN), f["match_cpu_ms_median"].as_f64().unwrap_or(f64::NAN));
+            let (ow, oc) = (row["detect_ms"].as_f64().unwrap_or(f64::NAN), row["detect_cpu_ms"].as_f64().unwrap_or(f64::NAN));
+            println!("peer  {name:5}: match {pw:8.1} ms wall, {pc:8.1} ms CPU ({} matches); OpenCV / ours (detect end to end): {:.2}x wall, {:.2}x CPU", f["matches"], pw / ow, pc / oc);
+            row["opencv_ms"] = json!(pw);
+            row["opencv_cpu_ms"] = json!(pc);
+            row["opencv_matches"] = f["matches"].clone();
+            row["speedup_wall"] = json!(pw / ow);
+            row["speedup_cpu"] = json!(pc / oc);
+        }
+    }
+    let paper = rows[0].clone();
+    for r in rows.iter().skip(1) {
+        println!(
+            "{} / paper (detect): {:.2}x wall, {:.2}x CPU",
+            r["frame"],
+            r["detect_ms"].as_f64().unwrap_or(0.0) / paper["detect_ms"].as_f64().unwrap_or(1.0),
+            r["detect_cpu_ms"].as_f64().unwrap_or(0.0) / paper["detect_cpu_ms"].as_f64().unwrap_or(1.0)
+        );
+    }
+    let summary = json!({"first_image_ms": first_ms, "first_image_cpu_ms": first_cpu, "capped_equals_uncapped_on_paper": same, "max_candidates": p.max_candidates, "templates": lib.len(), "image": [W, H], "threads": rayon::current_num_threads(), "repeats": repeats, "frames": rows, "peer": peer});
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("line2d_speed.json");
+    if std::fs::write(&out, serde_json::to_string_pretty(&summary).unwrap_or_default()).is_ok() {
+        println!("-> {}", out.display());
     }
 }

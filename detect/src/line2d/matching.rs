@@ -17,14 +17,12 @@
 //! wrap, vectorized 32 lanes wide), and each block is widened into `u16` totals (up to
 //! 16383 features). Rayon runs across templates.
 
-use crate::line2d::detection::Line2dDetection;
 use crate::line2d::gradient::{downsample_rgb, quantize_rgb, GradientParams};
 use crate::line2d::response::{linearize, response_maps, spread, LinearMemories, ResponseMaps};
 use crate::line2d::template::{Template, TemplateLibrary};
-use crate::line2d::verify::{contrast, luminance, verified_score, SampleCache, VerifyParams};
+use crate::line2d::verify::VerifyParams;
 use crate::line2d::{Line2dError, SIM_MAX};
 use rayon::prelude::*;
-use tubeloc_core::CameraModel;
 
 /// Matching knobs.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,13 +54,34 @@ pub struct MatchParams {
     /// matches of a cluster. A tube's white body alone looks like a whole, farther tube; this
     /// prefers the template covering the whole tube when it scores nearly as well.
     pub rerank_area_weight: f32,
+    /// At most this many coarse candidates per template go to the level-0 search, the best by
+    /// coarse score (0 = all). On textured real frames one template reaches the coarse
+    /// threshold at hundreds of places (rock edges, layers); the cap bounds the fine search
+    /// there and does not bind on rendered frames.
+    pub max_candidates: usize,
 }
 
 impl Default for MatchParams {
     fn default() -> Self {
-        MatchParams { gradient: GradientParams::default(), t0: 4, t1: 8, threshold: 80.0, coarse_threshold: None, nms_iou: 0.3, max_detections: 100, rerank_t: 2, rerank_margin: 15.0, verify: Some(VerifyParams::default()), rerank_area_weight: 0.3 }
+        MatchParams {
+            gradient: GradientParams::default(),
+            t0: 4,
+            t1: 8,
+            threshold: 80.0,
+            coarse_threshold: None,
+            nms_iou: 0.3,
+            max_detections: 100,
+            rerank_t: 2,
+            rerank_margin: 15.0,
+            verify: Some(VerifyParams::default()),
+            rerank_area_weight: 0.3,
+            max_candidates: MAX_CANDIDATES,
+        }
     }
 }
+
+/// Default [`MatchParams::max_candidates`].
+pub const MAX_CANDIDATES: usize = 128;
 
 /// The precomputed image side: response maps at level 0, linearized memories at level 1.
 #[derive(Clone, Debug)]
@@ -368,7 +387,7 @@ fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16
     let n = gw * lm.grid_h;
     let rad = tt + 2;
     let mut out = Vec::new();
-    let mut fine_at = |r: usize, c: usize| {
+    let fine_at = |r: usize, c: usize, out: &mut Vec<RawMatch>| {
         let (gx, gy) = (2 * c * tt, 2 * r * tt);
         let x_lo = gx.saturating_sub(rad);
         let y_lo = gy.saturating_sub(rad);
@@ -382,16 +401,18 @@ fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16
             out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
         }
     };
+    // Coarse candidates `(score, r, c)` in row-major order.
+    let mut cands: Vec<(u16, usize, usize)> = Vec::new();
     let head = n1.min(63);
     if n1 - head <= tail_max && n1 > 0 {
         // Head block in u8 over all grid positions; the tail only where the head can still
         // reach `need1` (each tail feature adds at most SIM_MAX).
         let tail = &l1.features[head..];
         let Some(need_head) = need1.checked_sub((SIM_MAX as usize * tail.len()) as u16).map(|v| v.max(1)) else {
-            return out;
+            return vec![];
         };
         if need_head > (SIM_MAX as usize * head) as u16 {
-            return out;
+            return vec![];
         }
         let need_head = need_head as u8;
         acc8.clear();
@@ -407,11 +428,21 @@ fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16
             let v = h as u16 + tails.iter().map(|&(m, s)| m[s + i] as u16).sum::<u16>();
             (v >= need1).then_some(v)
         };
-        candidates(rmax, cmax, gw, |r| acc8[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need_head, score, &mut fine_at);
+        let score = &score;
+        candidates(rmax, cmax, gw, |r| acc8[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need_head, score, &mut |r, c| cands.push((score(r * gw + c).unwrap_or(0), r, c)));
     } else {
         coarse_scores_with(simd, lm, t, acc16, acc8);
         let score = |i: usize| (acc16[i] >= need1).then_some(acc16[i]);
-        candidates(rmax, cmax, gw, |r| acc16[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need1, score, &mut fine_at);
+        candidates(rmax, cmax, gw, |r| acc16[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need1, score, &mut |r, c| cands.push((acc16[r * gw + c], r, c)));
+    }
+    if p.max_candidates > 0 && cands.len() > p.max_candidates {
+        // The best by coarse score (ties: row-major order), then back in row-major order.
+        cands.sort_by(|a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        cands.truncate(p.max_candidates);
+        cands.sort_by_key(|&(_, r, c)| (r, c));
+    }
+    for &(_, r, c) in &cands {
+        fine_at(r, c, &mut out);
     }
     out
 }
@@ -571,112 +602,6 @@ pub fn rerank_with(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMap
     best.1
 }
 
-/// A ready-to-run detector: a library and matching parameters.
-pub struct Line2dDetector {
-    /// The template library.
-    pub library: TemplateLibrary,
-    /// Matching parameters.
-    pub params: MatchParams,
-    /// Verification samples per template, computed on first use.
-    samples: SampleCache,
-}
-
-impl Line2dDetector {
-    /// A detector over `library`.
-    pub fn new(library: TemplateLibrary, params: MatchParams) -> Result<Self, Line2dError> {
-        if !(0.0..=100.0).contains(&params.threshold) || params.coarse_threshold.is_some_and(|c| !(0.0..=100.0).contains(&c)) {
-            return Err(Line2dError::invalid("threshold", "must be a percentage in 0..=100"));
-        }
-        if params.t0 == 0 || params.t1 == 0 || params.t1 > 64 || params.t0 > 64 {
-            return Err(Line2dError::invalid("T", "spreading steps must be in 1..=64"));
-        }
-        let samples = SampleCache::new(library.len());
-        Ok(Line2dDetector { library, params, samples })
-    }
-
-    /// Detects tubes in an interleaved RGB8 image. `camera` gives the intrinsics of this image
-    /// (for the coarse pose); without it the library's focal lengths and the image centre are
-    /// used. The camera's focal length must match the library's within 2 percent.
-    pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
-        let cam = self.camera_for(width, height, camera)?;
-        let img = prepare_image(rgb, width, height, &self.params)?;
-        let raw = match_all(&img, &self.library, &self.params);
-        // Verified scores (percent scale, so that NMS and re-ranking margins keep their units);
-        // `sims` keeps each match's Line2D similarity and contrast.
-        let mut sims = std::collections::HashMap::new();
-        let raw = match &self.params.verify {
-            None => raw,
-            Some(v) => {
-                let luma = luminance(rgb);
-                let mut scored: Vec<(RawMatch, f32, Option<f32>)> = raw
-                    .into_par_iter()
-                    .take(MAX_NMS_INPUT * 4)
-                    .filter_map(|m| {
-                        let t = &self.library.templates[m.template as usize];
-                        let c = contrast(&luma, width, height, self.samples.get(t, v), m.x, m.y);
-                        verified_score(m.score, c, v).map(|s| (RawMatch { score: 100.0 * s / (1.0 + v.contrast_weight), ..m }, m.score, c))
-                    })
-                    .collect();
-                scored.sort_by(|a, b| b.0.score.total_cmp(&a.0.score).then(a.0.template.cmp(&b.0.template)).then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x))));
-                scored
-                    .into_iter()
-                    .map(|(m, sim, c)| {
-                        sims.insert((m.template, m.x, m.y), (sim, c));
-                        m
-                    })
-                    .collect()
-            }
-        };
-        let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
-        let luma = self.params.verify.is_some().then(|| luminance(rgb));
-        Ok(clusters
-            .iter()
-            .map(|c| {
-                // Verification picks the cluster (where); the Line2D similarity, re-ranked,
-                // picks the template (pose) within it.
-                let mut by_sim: Vec<RawMatch> = c.iter().map(|m| RawMatch { score: sims.get(&(m.template, m.x, m.y)).map_or(m.score, |s| s.0), ..*m }).collect();
-                by_sim.sort_by(|a, b| b.score.total_cmp(&a.score));
-                let margin = self.params.rerank_margin;
-                let max_area = by_sim.iter().filter(|m| m.score >= by_sim[0].score - margin).map(|m| self.library.templates[m.template as usize].area).max().unwrap_or(1).max(1) as f32;
-                let aw = self.params.rerank_area_weight;
-                let m = match (&img.resp_rerank, &self.params.verify, &luma) {
-                    (Some(rr), Some(v), Some(l)) if v.rerank_weight > 0.0 => {
-                        rerank_with(&by_sim, &self.library, rr, margin, |t, x, y| v.rerank_weight * contrast(l, width, height, self.samples.get(t, v), x, y).unwrap_or(-1.0).clamp(-1.0, 1.0) + aw * t.area as f32 / max_area)
-                    }
-                    (Some(rr), _, _) => rerank_with(&by_sim, &self.library, rr, margin, |t, _, _| aw * t.area as f32 / max_area),
-                    _ => by_sim[0],
-                };
-                let t = &self.library.templates[m.template as usize];
-                let mut d = Line2dDetection::from_match(&m, t, &cam, width, height);
-                if let (Some(v), Some(l)) = (&self.params.verify, &luma) {
-                    d.score = (c[0].score / 100.0).max(0.0);
-                    d.contrast = contrast(l, width, height, self.samples.get(t, v), m.x, m.y);
-                }
-                d
-            })
-            .collect())
-    }
-
-    /// The camera used for poses: `camera`, checked against the library, or a pinhole with the
-    /// library's focal lengths centred on the image.
-    pub fn camera_for(&self, width: usize, height: usize, camera: Option<&CameraModel>) -> Result<CameraModel, Line2dError> {
-        let k = &self.library.params.camera;
-        match camera {
-            Some(c) => {
-                let rel = ((c.fx - k.fx) / k.fx).abs().max(((c.fy - k.fy) / k.fy).abs());
-                if rel > 0.02 {
-                    return Err(Line2dError::invalid(
-                        "camera",
-                        format!("focal length {:.1}x{:.1} px differs from the library's {:.1}x{:.1} px by {:.0}%: rebuild the templates with this camera (tubeloc templates build --camera)", c.fx, c.fy, k.fx, k.fy, rel * 100.0),
-                    ));
-                }
-                Ok(c.clone())
-            }
-            None => Ok(CameraModel { width: width as u32, height: height as u32, fx: k.fx, fy: k.fy, cx: (width as f64 - 1.0) / 2.0, cy: (height as f64 - 1.0) / 2.0, distortion: Default::default() }),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -686,6 +611,37 @@ mod tests {
     use nalgebra::{Rotation3, Vector3};
     use rand::{Rng, SeedableRng};
     use tubeloc_core::{Pose, TubeModel};
+
+    /// The candidate cap keeps each template's best coarse candidates: with a cap of 1 every
+    /// template yields at most one raw match, one of those it yields uncapped; a cap above
+    /// every template's candidate count changes nothing.
+    #[test]
+    fn candidate_cap_keeps_the_best_and_is_exact_when_it_does_not_bind() {
+        let (w, h) = (320usize, 256usize);
+        let mut lp = LibraryParams { views: ViewParams { dist_min: 1.6, dist_max: 1.6, step_deg: 30.0, ..ViewParams::default() }, ..LibraryParams::default() };
+        lp.camera.cx = w as f64 / 2.0;
+        lp.camera.cy = h as f64 / 2.0;
+        let lib = TemplateLibrary::build(&TubeModel::default(), &lp, &|_| {}).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // Textured ground: random bright and dark bars give many coarse candidates.
+        let mut img: Vec<u8> = (0..w * h * 3).map(|i| if (i / 3 / w / 6 + i / 3 % w / 9) % 2 == 0 { 150 } else { rng.random_range(40..=90u8) }).collect();
+        let pose = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::y_axis(), 1.2), Vector3::new(0.02, 0.01, 1.6));
+        draw_tube_rgb(&mut img, w, h, &TubeModel::default(), &lp.camera, &pose);
+        let base = MatchParams { threshold: 55.0, max_candidates: 0, ..MatchParams::default() };
+        let prep = prepare_image(&img, w, h, &base).unwrap();
+        let all = match_all(&prep, &lib, &base);
+        let one = match_all(&prep, &lib, &MatchParams { max_candidates: 1, ..base.clone() });
+        let wide = match_all(&prep, &lib, &MatchParams { max_candidates: 100_000, ..base.clone() });
+        assert_eq!(wide, all);
+        assert!(one.len() < all.len(), "a cap of 1 removed nothing ({} matches)", all.len());
+        for t in &lib.templates {
+            let mine: Vec<&RawMatch> = one.iter().filter(|m| m.template == t.id).collect();
+            assert!(mine.len() <= 1, "template {} kept {} matches", t.id, mine.len());
+            for m in mine {
+                assert!(all.contains(m), "capped match {m:?} is not an uncapped match");
+            }
+        }
+    }
 
     /// The head-block + per-position tail path finds exactly the matches of the full u16 path.
     #[test]

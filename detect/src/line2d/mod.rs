@@ -19,8 +19,10 @@
 //! - [`verify`]: radiometric verification (bright silhouette against a ring around it)
 //!   rescoring raw matches before NMS.
 //! - [`detection`]: [`Line2dDetection`] with the coarse 6D pose and COCO output.
+//! - [`detector`]: [`Line2dDetector`], the library and parameters run end to end on an image.
 
 pub mod detection;
+pub mod detector;
 pub mod format;
 pub mod gradient;
 pub mod mask;
@@ -33,8 +35,9 @@ pub mod verify;
 pub mod viewpoints;
 
 pub use detection::Line2dDetection;
+pub use detector::Line2dDetector;
 pub use gradient::GradientParams;
-pub use matching::{Line2dDetector, MatchParams};
+pub use matching::MatchParams;
 pub use render::{render_silhouette, Silhouette};
 pub use template::{Feature, LibraryEstimate, LibraryParams, Template, TemplateLevel, TemplateLibrary};
 pub use verify::VerifyParams;

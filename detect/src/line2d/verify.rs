@@ -50,48 +50,37 @@ pub struct TemplateSamples {
     pub ring: Vec<(i16, i16)>,
 }
 
-/// Chessboard (Chebyshev) distance transform, capped at 255: for pixels with `mask == target`,
-/// the distance to the nearest pixel with `mask != target` (1 when 8-adjacent to one); 0
-/// elsewhere. Pixels outside the box never count as `!= target`. Two raster passes.
-fn chessboard_distance(mask: &[u8], w: usize, h: usize, target: u8) -> Vec<u8> {
-    let mut d: Vec<u8> = mask.iter().map(|&m| if m == target { 255 } else { 0 }).collect();
+/// Square (Chebyshev) morphology of a 0/1 mask clipped to its `w x h` box: `out[p] = 1` when
+/// the `(2r+1)²` square around `p`, clipped to the box, holds at least one 1 (`all = false`:
+/// dilation, "within Chebyshev distance r of a 1") or only 1s (`all = true`: erosion, "more
+/// than r from every 0 inside the box"). Separable: a sliding window count along rows, then
+/// along columns, O(w h) whatever `r`.
+fn square_morphology(mask: &[u8], w: usize, h: usize, r: usize, all: bool) -> Vec<u8> {
+    // `hits(count, len)`: the window of `len` pixels holding `count` ones passes.
+    let hits = |count: u32, len: usize| if all { count as usize == len } else { count > 0 };
+    let mut rows = vec![0u8; w * h];
+    let mut prefix = vec![0u32; w.max(h) + 1];
     for y in 0..h {
+        let line = &mask[y * w..(y + 1) * w];
         for x in 0..w {
-            let i = y * w + x;
-            if d[i] == 0 {
-                continue;
-            }
-            let mut v = d[i];
-            if x > 0 {
-                v = v.min(d[i - 1].saturating_add(1));
-            }
-            if y > 0 {
-                for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                    v = v.min(d[(y - 1) * w + xx].saturating_add(1));
-                }
-            }
-            d[i] = v;
+            prefix[x + 1] = prefix[x] + line[x] as u32;
+        }
+        for x in 0..w {
+            let (a, b) = (x.saturating_sub(r), (x + r + 1).min(w));
+            rows[y * w + x] = hits(prefix[b] - prefix[a], b - a) as u8;
         }
     }
-    for y in (0..h).rev() {
-        for x in (0..w).rev() {
-            let i = y * w + x;
-            if d[i] == 0 {
-                continue;
-            }
-            let mut v = d[i];
-            if x + 1 < w {
-                v = v.min(d[i + 1].saturating_add(1));
-            }
-            if y + 1 < h {
-                for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                    v = v.min(d[(y + 1) * w + xx].saturating_add(1));
-                }
-            }
-            d[i] = v;
+    let mut out = vec![0u8; w * h];
+    for x in 0..w {
+        for y in 0..h {
+            prefix[y + 1] = prefix[y] + rows[y * w + x] as u32;
+        }
+        for y in 0..h {
+            let (a, b) = (y.saturating_sub(r), (y + r + 1).min(h));
+            out[y * w + x] = hits(prefix[b] - prefix[a], b - a) as u8;
         }
     }
-    d
+    out
 }
 
 /// Up to `n` spread-out points of `pts` (a regular stride over the list, which is in row-major
@@ -114,23 +103,20 @@ pub fn template_samples(t: &Template, p: &VerifyParams) -> TemplateSamples {
             m[(y + pad) * w + x + pad] = t.mask[y * tw + x];
         }
     }
-    let din = chessboard_distance(&m, w, h, 1);
-    let dout = chessboard_distance(&m, w, h, 0);
+    // Inside: more than `ring_inner` px (Chebyshev) from every background pixel; ring: within
+    // `ring_outer` px of the silhouette but more than `ring_inner` px from it.
+    let core = square_morphology(&m, w, h, p.ring_inner as usize, true);
+    let near = square_morphology(&m, w, h, p.ring_inner as usize, false);
+    let far = square_morphology(&m, w, h, p.ring_outer as usize, false);
     let mut inside = Vec::new();
     let mut ring = Vec::new();
     for y in 0..h {
         for x in 0..w {
-            let (dx, dy) = (x as i16 - pad as i16, y as i16 - pad as i16);
-            if m[y * w + x] == 1 {
-                if din[y * w + x] as u32 > p.ring_inner {
-                    inside.push((dx, dy));
-                }
-            } else {
-                let d = dout[y * w + x] as u32;
-                // `d` counts erosion steps of the background: 1 next to the silhouette.
-                if d > p.ring_inner && d <= p.ring_outer {
-                    ring.push((dx, dy));
-                }
+            let (i, dx, dy) = (y * w + x, x as i16 - pad as i16, y as i16 - pad as i16);
+            if m[i] == 1 && core[i] == 1 {
+                inside.push((dx, dy));
+            } else if m[i] == 0 && far[i] == 1 && near[i] == 0 {
+                ring.push((dx, dy));
             }
         }
     }
@@ -226,6 +212,36 @@ mod tests {
             // Chebyshev distance outside the rectangle [0, 30) x [0, 12).
             let d = (-x).max(x - 29).max(-y).max(y - 11);
             assert!((3..=6).contains(&d), "ring sample ({x},{y}) at distance {d}");
+        }
+    }
+
+    /// The separable square morphology equals the definition: the brute-force Chebyshev
+    /// distance from each pixel to the nearest pixel of the other value, on random blobs.
+    #[test]
+    fn square_morphology_matches_brute_force_chebyshev_distance() {
+        let (w, h) = (23usize, 17usize);
+        let mut state = 12345u64;
+        let mut mask = vec![0u8; w * h];
+        for _ in 0..6 {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let (cx, cy, r) = ((state >> 33) as usize % w, (state >> 45) as usize % h, 1 + (state >> 55) as usize % 5);
+            for y in cy.saturating_sub(r)..(cy + r).min(h) {
+                for x in cx.saturating_sub(r + 1)..(cx + r).min(w) {
+                    mask[y * w + x] = 1;
+                }
+            }
+        }
+        // Distance from (x, y) to the nearest pixel of value `v` inside the box.
+        let dist = |x: usize, y: usize, v: u8| -> usize { (0..h).flat_map(|yy| (0..w).map(move |xx| (xx, yy))).filter(|&(xx, yy)| mask[yy * w + xx] == v).map(|(xx, yy)| xx.abs_diff(x).max(yy.abs_diff(y))).min().unwrap_or(usize::MAX) };
+        for r in [0usize, 1, 2, 4] {
+            let dil = square_morphology(&mask, w, h, r, false);
+            let ero = square_morphology(&mask, w, h, r, true);
+            for y in 0..h {
+                for x in 0..w {
+                    assert_eq!(dil[y * w + x] == 1, dist(x, y, 1) <= r, "dilation r {r} at ({x},{y})");
+                    assert_eq!(ero[y * w + x] == 1, dist(x, y, 0) > r, "erosion r {r} at ({x},{y})");
+                }
+            }
         }
     }
 
