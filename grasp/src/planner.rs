@@ -48,8 +48,8 @@ impl Default for PlannerSettings {
     }
 }
 
-/// Candidates rejected, by the kind of obstacle they came too close to. A candidate too close
-/// to several kinds counts under each.
+/// Candidates rejected, by the kind of obstacle found too close first (the kinds are searched
+/// in the order ground, tube, terrain); the counts add up to the candidates rejected.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RejectionCounts {
     /// The ground plane.
@@ -66,8 +66,8 @@ pub struct GraspCheck {
     /// Whether some candidate clears the scene by at least the minimum clearance.
     pub feasible: bool,
     /// The chosen grasp's smallest distance to the scene (fingers and palm swept along the last
-    /// approach segment), millimetres; for an infeasible tube, that of the plain grasp (0 when
-    /// it touches).
+    /// approach segment), millimetres; for an infeasible tube, that of the plain grasp as far
+    /// as measured (0 when it touches).
     pub clearance_mm: f64,
     /// The chosen grasp frame, camera frame: origin on the tube axis, +x along the flip-free
     /// axis, +z the approach, +y the closing direction. The plain grasp from above when no
@@ -118,8 +118,8 @@ pub struct GraspPlanner {
     swept: [GripperPart; 3],
 }
 
-/// The kind of an obstacle (index into the per-kind flags: ground, tube, terrain).
-#[derive(Clone, Copy)]
+/// The kind of an obstacle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
     Ground,
     Tube,
@@ -211,7 +211,7 @@ impl GraspPlanner {
         let n_tilts = (s.tilt_cone_deg / s.tilt_step_deg + 1e-9).floor() as i64;
         let tilts: Vec<f64> = std::iter::once(0.0).chain((1..=n_tilts).flat_map(|k| [-(k as f64) * tilt_step, k as f64 * tilt_step])).collect();
         let obstacles = self.obstacles(tube, scene);
-        let min_clear = s.min_clearance_mm * 1e-3;
+        let (min_clear, cap) = (s.min_clearance_mm * 1e-3, s.enough_clearance_mm * 1e-3);
         let mut rejected = RejectionCounts::default();
         let mut tried = 0;
         // (clearance, steps from the plain grasp, frame, tilt, shift) of each free candidate.
@@ -222,23 +222,21 @@ impl GraspPlanner {
                 let local = Isometry3::from_parts(Vector3::new(shift, 0.0, 0.0).into(), UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt));
                 let frame = plain.0 * local;
                 tried += 1;
-                let (clearance, near) = self.clearance(&frame, &obstacles, min_clear);
+                let (clearance, hit) = self.clearance(&frame, &obstacles, min_clear, cap);
                 if si == 0 && ti == 0 {
                     plain_clearance = Some(clearance);
                 }
-                if near == [false; 3] {
-                    let steps = (tilt / tilt_step).abs().round() + (shift / shift_step).abs().round();
-                    free.push((clearance, steps, frame, tilt, shift));
-                } else {
-                    rejected.ground += near[0] as usize;
-                    rejected.tube += near[1] as usize;
-                    rejected.terrain += near[2] as usize;
+                match hit {
+                    None => free.push((clearance, (tilt / tilt_step).abs().round() + (shift / shift_step).abs().round(), frame, tilt, shift)),
+                    Some(Kind::Ground) => rejected.ground += 1,
+                    Some(Kind::Tube) => rejected.tube += 1,
+                    Some(Kind::Terrain) => rejected.terrain += 1,
                 }
             }
         }
         let terrain_checked = scene.terrain.is_some_and(|t| t.measured_cells > 0);
         let best = free.iter().map(|c| c.0).fold(f64::NEG_INFINITY, f64::max);
-        let good_enough = (s.enough_clearance_mm * 1e-3).min(best - 0.25e-3);
+        let good_enough = cap.min(best - 0.25e-3);
         let chosen = free.iter().filter(|c| c.0 >= good_enough).min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.total_cmp(&a.0)));
         match chosen {
             Some(&(clearance, _, frame, tilt, shift)) => {
@@ -269,48 +267,59 @@ impl GraspPlanner {
         }
         if let Some(t) = scene.terrain {
             if let Some(c) = &t.columns {
-                out.push(Obstacle { kind: Kind::Terrain, pose: t.pose, shape: ObstacleShape::Terrain(c), sphere: None });
+                out.push(Obstacle { kind: Kind::Terrain, pose: t.pose, shape: ObstacleShape::Terrain(c, t.top), sphere: None });
             }
         }
         out
     }
 
     /// The smallest distance (metres, 0 when touching) of the swept gripper at `frame` to the
-    /// obstacles, and per kind (ground, tube, terrain) whether it is closer than `min_clear`.
-    /// Obstacles whose bounding sphere cannot come closer than both the current smallest
-    /// distance and `min_clear` are skipped.
-    fn clearance(&self, frame: &Isometry3<f64>, obstacles: &[Obstacle], min_clear: f64) -> (f64, [bool; 3]) {
+    /// obstacles, exact below `cap` (at least `cap` otherwise), and the kind of the first
+    /// obstacle (ground, tube, terrain order) closer than `min_clear`, where the search stops.
+    /// An obstacle is measured only when a lower bound on its distance (bounding spheres for
+    /// tubes; for terrain, the part's lowest point above the highest column) is below what
+    /// could change the answer.
+    fn clearance(&self, frame: &Isometry3<f64>, obstacles: &[Obstacle], min_clear: f64, cap: f64) -> (f64, Option<Kind>) {
         let mut best = f64::INFINITY;
-        let mut near = [false; 3];
         let parts: [(Isometry3<f64>, &Cuboid, f64); 3] = self.swept.each_ref().map(|p| (frame * p.pose, &p.shape, p.shape.half_extents.norm()));
         for o in obstacles {
             let shape: &dyn Shape = match &o.shape {
                 ObstacleShape::Ground(h) => h,
                 ObstacleShape::Tube(c) => c,
-                ObstacleShape::Terrain(c) => *c,
+                ObstacleShape::Terrain(c, _) => *c,
             };
             for (pose, cuboid, radius) in &parts {
-                if let Some((c, r)) = o.sphere {
-                    let bound = (c - pose.translation.vector).norm() - r - radius;
-                    if bound >= best && bound >= min_clear {
-                        continue;
+                let needed = best.min(cap).max(min_clear);
+                let bound = match (&o.shape, o.sphere) {
+                    (_, Some((c, r))) => (c - pose.translation.vector).norm() - r - radius,
+                    (ObstacleShape::Terrain(_, top), None) => {
+                        // Lowest point of the box in the height-map frame, above the highest column.
+                        let local = o.pose.inverse() * pose;
+                        let r = local.rotation.to_rotation_matrix();
+                        let reach: f64 = (0..3).map(|i| r[(2, i)].abs() * cuboid.half_extents[i]).sum();
+                        local.translation.z - reach - top
                     }
+                    _ => f64::NEG_INFINITY,
+                };
+                if bound >= needed {
+                    continue;
                 }
                 let d = query::distance(pose, *cuboid, &o.pose, shape).unwrap_or(0.0).max(0.0);
                 best = best.min(d);
                 if d < min_clear {
-                    near[o.kind as usize] = true;
+                    return (best, Some(o.kind));
                 }
             }
         }
-        (best, near)
+        (best, None)
     }
 }
 
 enum ObstacleShape<'a> {
     Ground(HalfSpace),
     Tube(parry3d_f64::shape::Cylinder),
-    Terrain(&'a parry3d_f64::shape::Compound),
+    /// Columns and their top height above the ground (height-map frame), metres.
+    Terrain(&'a parry3d_f64::shape::Compound, f64),
 }
 
 struct Obstacle<'a> {

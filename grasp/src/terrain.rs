@@ -45,6 +45,9 @@ pub struct Terrain {
     pub measured_cells: usize,
     /// Cells that became columns.
     pub column_cells: usize,
+    /// Height of the highest column's top in the height-map frame (above the ground), metres;
+    /// 0 without columns.
+    pub top: f64,
 }
 
 impl std::fmt::Debug for Terrain {
@@ -99,6 +102,7 @@ impl Terrain {
         let (min_height, sink) = (settings.min_height_mm * 1e-3, settings.sink_mm * 1e-3);
         let mut columns = Vec::new();
         let mut measured_cells = 0;
+        let mut top: f64 = 0.0;
         for run in binned.chunk_by(|a, b| a.0 == b.0) {
             if run.len() < settings.min_points.max(1) {
                 continue;
@@ -106,6 +110,7 @@ impl Terrain {
             measured_cells += 1;
             let h = run[run.len() / 2].1;
             if h > min_height {
+                top = top.max(h);
                 let (i, j) = (run[0].0 % side, run[0].0 / side);
                 let (u, v) = (((i - half_cells) as f64 + 0.5) * cell, ((j - half_cells) as f64 + 0.5) * cell);
                 let at = Isometry3::translation(u, v, 0.5 * (h - sink));
@@ -113,6 +118,6 @@ impl Terrain {
             }
         }
         let column_cells = columns.len();
-        Terrain { pose, columns: (!columns.is_empty()).then(|| Compound::new(columns)), measured_cells, column_cells }
+        Terrain { pose, columns: (!columns.is_empty()).then(|| Compound::new(columns)), measured_cells, column_cells, top }
     }
 }
