@@ -34,7 +34,7 @@ fn bench(c: &mut Criterion) {
         .collect();
     let all: Vec<TubeAxisPose> = std::iter::once(tube.clone()).chain(others.iter().cloned()).collect();
     let settings = TerrainSettings::default();
-    let terrain = Terrain::from_points(&points, &ground, &tube, r, &all, &model, &settings);
+    let terrain = Terrain::from_points(&points, &ground, &tube, r, &all, &model, &settings, 0.0);
     let plain = planner.check(&tube, &ground.normal, &Scene { ground, tubes: &[], terrain: None });
     let cluttered = Scene { ground, tubes: &others, terrain: Some(&terrain) };
     let busy = planner.check(&tube, &ground.normal, &cluttered);
@@ -43,7 +43,7 @@ fn bench(c: &mut Criterion) {
     c.bench_function("grasp_check_stereo_clutter", |b| b.iter(|| planner.check(black_box(&tube), &ground.normal, &cluttered)));
     c.bench_function("grasp_check_tubes_only", |b| b.iter(|| planner.check(black_box(&tube), &ground.normal, &Scene { ground, tubes: &others, terrain: None })));
     c.bench_function("grasp_check_terrain_only", |b| b.iter(|| planner.check(black_box(&tube), &ground.normal, &Scene { ground, tubes: &[], terrain: Some(&terrain) })));
-    c.bench_function("terrain_from_10k_points", |b| b.iter(|| Terrain::from_points(black_box(&points), &ground, &tube, r, &all, &model, &settings)));
+    c.bench_function("terrain_from_10k_points", |b| b.iter(|| Terrain::from_points(black_box(&points), &ground, &tube, r, &all, &model, &settings, 0.0)));
 }
 
 criterion_group! {

@@ -8,7 +8,8 @@
 
 use crate::gripper::{GripperModel, GripperPart};
 use crate::solid::TubeSolid;
-use crate::terrain::Terrain;
+use crate::terrain::{Terrain, TerrainSettings};
+use nalgebra::Point3;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use parry3d_f64::query;
 use parry3d_f64::shape::{Cuboid, HalfSpace, Shape};
@@ -40,11 +41,13 @@ pub struct PlannerSettings {
     /// Two located tubes whose solids interpenetrate by more than this cannot both be right,
     /// millimetres (the weaker one is rejected).
     pub tube_overlap_mm: f64,
+    /// How stereo points become terrain columns.
+    pub terrain: TerrainSettings,
 }
 
 impl Default for PlannerSettings {
     fn default() -> Self {
-        PlannerSettings { tilt_cone_deg: 30.0, tilt_step_deg: 10.0, shift_step_mm: 10.0, min_clearance_mm: 1.0, enough_clearance_mm: 10.0, min_end_confidence: 0.6, terrain_margin_mm: 20.0, tube_overlap_mm: 3.0 }
+        PlannerSettings { tilt_cone_deg: 30.0, tilt_step_deg: 10.0, shift_step_mm: 10.0, min_clearance_mm: 1.0, enough_clearance_mm: 10.0, min_end_confidence: 0.6, terrain_margin_mm: 20.0, tube_overlap_mm: 3.0, terrain: TerrainSettings::default() }
     }
 }
 
@@ -167,6 +170,14 @@ impl GraspPlanner {
     /// half the tube, the gripper's reach and the terrain margin.
     pub fn terrain_radius(&self) -> f64 {
         self.model.length / 2.0 + self.gripper.reach() + self.settings.terrain_margin_mm * 1e-3
+    }
+
+    /// The terrain around `tube` from stereo `points` (camera frame, metres) over `ground`,
+    /// within [`GraspPlanner::terrain_radius`], leaving out the points on any of `tubes` (the
+    /// located tubes, `tube` included; `metres_per_px`: a pixel's size at the tube's distance)
+    /// ([`Terrain::from_points`]).
+    pub fn terrain(&self, points: &[Point3<f64>], ground: &GroundPlane, tube: &TubeAxisPose, tubes: &[TubeAxisPose], metres_per_px: f64) -> Terrain {
+        Terrain::from_points(points, ground, tube, self.terrain_radius(), tubes, &self.model, &self.settings.terrain, metres_per_px)
     }
 
     /// The graspable interval of the grasp point along the flip-free axis, metres from the

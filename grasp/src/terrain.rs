@@ -24,13 +24,16 @@ pub struct TerrainSettings {
     /// Points within a located tube's largest radius plus this margin of its axis segment are
     /// the tube's own surface, not terrain, millimetres.
     pub tube_margin_mm: f64,
+    /// The same margin in pixels at the tube's distance, where that is wider (stereo matching
+    /// spreads a tube's depth a few pixels onto the ground beside it).
+    pub tube_margin_px: f64,
     /// Columns reach this far below the ground plane so that they are solid to it, millimetres.
     pub sink_mm: f64,
 }
 
 impl Default for TerrainSettings {
     fn default() -> Self {
-        TerrainSettings { cell_mm: 8.0, min_points: 3, min_height_mm: 4.0, tube_margin_mm: 5.0, sink_mm: 5.0 }
+        TerrainSettings { cell_mm: 8.0, min_points: 3, min_height_mm: 4.0, tube_margin_mm: 5.0, tube_margin_px: 8.0, sink_mm: 5.0 }
     }
 }
 
@@ -62,8 +65,10 @@ impl Terrain {
     /// target included) are left out, the rest binned into square cells of the ground plane;
     /// each cell with at least `min_points` points has the median of their heights above
     /// `ground`, and a cell higher than `min_height_mm` becomes a cuboid column from `sink_mm`
-    /// below the ground up to that height.
-    pub fn from_points(points: &[Point3<f64>], ground: &GroundPlane, around: &TubeAxisPose, radius: f64, tubes: &[TubeAxisPose], model: &TubeModel, settings: &TerrainSettings) -> Terrain {
+    /// below the ground up to that height. `metres_per_px` is the size of a pixel at the tube's
+    /// distance (for `tube_margin_px`; 0 without a camera).
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_points(points: &[Point3<f64>], ground: &GroundPlane, around: &TubeAxisPose, radius: f64, tubes: &[TubeAxisPose], model: &TubeModel, settings: &TerrainSettings, metres_per_px: f64) -> Terrain {
         let n = ground.normal;
         // Height-map frame: origin under the tube centre on the ground, z up, x along the axis
         // as seen from above (any horizontal direction for a standing tube).
@@ -76,8 +81,9 @@ impl Terrain {
         let cell = settings.cell_mm * 1e-3;
         let half_cells = (radius / cell).ceil().max(1.0) as i64;
         let side = 2 * half_cells;
-        let reach = model.max_radius() + settings.tube_margin_mm * 1e-3;
-        let half_len = model.length / 2.0 + settings.tube_margin_mm * 1e-3;
+        let margin = (settings.tube_margin_mm * 1e-3).max(settings.tube_margin_px * metres_per_px);
+        let reach = model.max_radius() + margin;
+        let half_len = model.length / 2.0 + margin;
         let on_a_tube = |p: &Vector3<f64>| {
             tubes.iter().any(|t| {
                 let d = p - t.centre;

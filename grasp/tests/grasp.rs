@@ -47,7 +47,7 @@ fn a_rock_over_one_side_moves_the_grasp_to_the_free_side() {
     // A 40 mm high rock over the seal end and the body's upper part (camera x from -20 mm on),
     // wider than the gripper across the tube.
     let pts = terrain_points(0.0, 1.0, 0.2, (-0.020, 0.2), (0.9, 1.1), 0.040);
-    let terrain = Terrain::from_points(&pts, &ground(), &tube, p.terrain_radius(), std::slice::from_ref(&tube), &TubeModel::default(), &TerrainSettings::default());
+    let terrain = Terrain::from_points(&pts, &ground(), &tube, p.terrain_radius(), std::slice::from_ref(&tube), &TubeModel::default(), &TerrainSettings::default(), 0.0);
     assert!(terrain.column_cells > 0 && terrain.measured_cells > terrain.column_cells, "{terrain:?}");
     let check = p.check(&tube, &ground().normal, &Scene { ground: ground(), tubes: &[], terrain: Some(&terrain) });
     assert!(check.feasible && check.changed && check.terrain_checked, "{check:?}");
@@ -59,7 +59,7 @@ fn a_rock_over_one_side_moves_the_grasp_to_the_free_side() {
     assert!((origin - (tube.centre + Vector3::x() * check.shift_mm * 1e-3)).norm() < 1e-12);
     // Without the rock the plain grasp stands: clearance is the fingertips' height, 11.5 - 3 mm.
     let flat = terrain_points(0.0, 1.0, 0.2, (0.0, 0.0), (0.0, 0.0), 0.0);
-    let terrain = Terrain::from_points(&flat, &ground(), &tube, p.terrain_radius(), std::slice::from_ref(&tube), &TubeModel::default(), &TerrainSettings::default());
+    let terrain = Terrain::from_points(&flat, &ground(), &tube, p.terrain_radius(), std::slice::from_ref(&tube), &TubeModel::default(), &TerrainSettings::default(), 0.0);
     assert_eq!(terrain.column_cells, 0);
     let check = p.check(&tube, &ground().normal, &Scene { ground: ground(), tubes: &[], terrain: Some(&terrain) });
     assert!(check.feasible && !check.changed && check.terrain_checked, "{check:?}");
@@ -79,7 +79,7 @@ fn the_tubes_own_points_are_not_terrain() {
             pts.push(Point3::new(x, tube.centre.y - 0.0105 * a.sin(), 1.0 + 0.0105 * a.cos()));
         }
     }
-    let terrain = Terrain::from_points(&pts, &ground(), &tube, p.terrain_radius(), std::slice::from_ref(&tube), &TubeModel::default(), &TerrainSettings::default());
+    let terrain = Terrain::from_points(&pts, &ground(), &tube, p.terrain_radius(), std::slice::from_ref(&tube), &TubeModel::default(), &TerrainSettings::default(), 0.0);
     assert_eq!(terrain.column_cells, 0, "{terrain:?}");
 }
 
@@ -200,7 +200,7 @@ fn parry_distances_agree_with_brute_force_point_tests() {
                 let g = GroundPlane::new(Vector3::new(0.0, -1.0, 0.0), -1.5).unwrap();
                 let pts: Vec<Point3<f64>> = (0..3000).map(|_| Point3::new(rng.random_range(-0.1..0.1), 1.5 - rng.random_range(0.0..0.05f64).powi(2) / 0.05, 1.0 + rng.random_range(-0.1..0.1))).collect();
                 let around = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 1.49, 1.0), Vector3::x(), 0.9).unwrap();
-                let t = Terrain::from_points(&pts, &g, &around, 0.08, &[], &model, &TerrainSettings { cell_mm: 20.0, min_points: 1, min_height_mm: 0.0, ..TerrainSettings::default() });
+                let t = Terrain::from_points(&pts, &g, &around, 0.08, &[], &model, &TerrainSettings { cell_mm: 20.0, min_points: 1, min_height_mm: 0.0, ..TerrainSettings::default() }, 0.0);
                 Obstacle::Columns(t)
             }
         };
