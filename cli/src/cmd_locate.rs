@@ -151,7 +151,7 @@ pub struct TubeOut<'a> {
     /// The tube.
     #[serde(flatten)]
     pub tube: &'a LocatedTube,
-    /// `located` (handed to the planner), `fit_failed` or `low_probability`.
+    /// `located` (handed to the planner), `fit_failed`, `low_probability` or `intersects_tube`.
     pub status: &'static str,
 }
 
@@ -242,7 +242,7 @@ pub fn run(a: LocateArgs) -> Result<usize> {
     // Outputs: the overlay, then the poses, each written atomically; nothing printed before.
     let overlay_path = a.overlay.clone().unwrap_or_else(|| sidecar(&a.out, "overlay.png"));
     let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
-    let overlay = locator.overlay(&image, tubes.iter().map(|t| &t.tube.pose));
+    let overlay = locator.overlay_located(&image, tubes.iter().map(|t| t.tube));
     let png = tubeloc_pipeline::overlay::png_bytes(&overlay).context("encoding the overlay PNG")?;
     let doc = LocateDoc {
         schema: "tubeloc.locate.v1",
@@ -293,6 +293,10 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
         let p = &t.pose;
         if let Some((pr, th)) = low[i] {
             lines.push(format!("  tube {i}: rejected (probability of a tube {pr:.3} < {th:.3}), score {:.2}", p.score));
+            continue;
+        }
+        if let Some(tubeloc_pipeline::Rejection::IntersectsTube { other }) = i.checked_sub(found.tubes.len()).map(|k| &found.rejected[k].reason) {
+            lines.push(format!("  tube {i}: rejected (its solid intersects tube {other}'s), score {:.2}", p.score));
             continue;
         }
         let c = p.centre * 1e3;

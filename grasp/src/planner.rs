@@ -93,8 +93,8 @@ pub struct GraspCheck {
 }
 
 impl GraspCheck {
-    /// The plain grasp from above, unchecked: feasible, no candidates tried. For tubes that
-    /// were never checked (rejected before the grasp stage).
+    /// The plain grasp from above, unchecked: not known to be feasible, no candidates tried,
+    /// clearance 0. For tubes that were never checked (rejected before the grasp stage).
     pub fn unchecked(t_cam_grasp: Pose) -> Self {
         GraspCheck { feasible: false, clearance_mm: 0.0, t_cam_grasp, tilt_deg: 0.0, shift_mm: 0.0, changed: false, candidates_tried: 0, rejected: RejectionCounts::default(), terrain_checked: false }
     }
@@ -250,7 +250,9 @@ impl GraspPlanner {
         let good_enough = cap.min(best - 0.25e-3);
         let chosen = free.iter().filter(|c| c.0 >= good_enough).min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.total_cmp(&a.0)));
         match chosen {
-            Some(&(clearance, _, frame, tilt, shift)) => {
+            Some(&(_, _, frame, tilt, shift)) => {
+                // Measured again without the cap: the exact clearance of the chosen grasp.
+                let clearance = self.clearance(&frame, &obstacles, min_clear, f64::INFINITY).0;
                 GraspCheck { feasible: true, clearance_mm: clearance * 1e3, t_cam_grasp: Pose(frame), tilt_deg: tilt.to_degrees(), shift_mm: shift * 1e3, changed: tilt != 0.0 || shift != 0.0, candidates_tried: tried, rejected, terrain_checked }
             }
             None => GraspCheck { clearance_mm: plain_clearance.unwrap_or(0.0).max(0.0) * 1e3, changed: true, candidates_tried: tried, rejected, terrain_checked, ..GraspCheck::unchecked(plain) },

@@ -276,3 +276,12 @@ fn grasp_check_round_trips_through_json() {
     assert_eq!(back.rejected, check.rejected);
     assert!(back.t_cam_grasp.distance(&check.t_cam_grasp).0 < 1e-9);
 }
+
+#[test]
+fn reported_clearance_is_exact_beyond_the_ranking_cap() {
+    // Ranking counts clearance only up to 2 mm here; the chosen grasp's figure is still exact.
+    let p = GraspPlanner::new(GripperModel::default(), PlannerSettings { enough_clearance_mm: 2.0, ..PlannerSettings::default() }, &TubeModel::default()).unwrap();
+    let tube = tube_on_ground(0.0, 1.0, Vector3::x());
+    let check = p.check(&tube, &ground().normal, &Scene { ground: ground(), tubes: &[], terrain: None });
+    assert!(check.feasible && !check.changed && (check.clearance_mm - 8.5).abs() < 1e-6, "{check:?}");
+}
