@@ -363,6 +363,18 @@ pub fn run(a: BenchArgs) -> Result<()> {
         })?;
     }
 
+    // 6a. Grasp collision checks on the synthetic stereo set (learned detections, the images'
+    //     own ground), stereo (terrain checked) and mono.
+    if !a.skip.contains(&Part::Stereo) {
+        let sdir = out.join("stereo");
+        st.run("stereo/grasp", &[sdir.join("grasp.json")], || {
+            let (set, dets) = (sdir.join("set"), sdir.join("learned_detections.json"));
+            let r = json!({"stereo": crate::bench_grasp::run(&set, &dets, true, None, None)?, "mono": crate::bench_grasp::run(&set, &dets, false, None, None)?});
+            files::write_json(&sdir.join("grasp.json"), &r)?;
+            Ok(r)
+        })?;
+    }
+
     // 6b. Tag-pair ground truth on the with-tags split (a copy, so the dataset is not modified).
     if !a.skip.contains(&Part::Tags) {
         let tdir = out.join("tags");
@@ -400,7 +412,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if !a.skip.contains(&Part::Real) {
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let calibration = model.calibration(a.calibration.as_deref())?;
-        let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4 };
+        let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4, grasp_images: None };
         st.run("real", &[out.join("real").join("report.md")], || {
             crate::cmd_bench_real::run(&stage, &out)?;
             Ok(json!({}))
@@ -520,6 +532,9 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
     }
     if st.result("stereo").is_some() {
         let _ = writeln!(r, "Rows: `coarse` / `coarse_ground` are the seeds of the stereo runs without / with the ground plane of the rig's pose (`--ground auto`; detections' seeds take their depth from the stereo points, their tilt from the ground); `mono` / `stereo` refine without it, `mono_ground` / `stereo_ground` with it. A pose counts where its centre lies within 50 mm of a truth (matched counts in the linked reports).\n");
+    }
+    if let Some(g) = st.result("stereo/grasp") {
+        let _ = writeln!(r, "### Grasp collision checks on the synthetic stereo set (`locate` on the learned detections, each image's own ground; [0031](../docs/design/0031-grasp-collision-check.md))\n\n{}\nChanged: the chosen grasp is tilted or shifted from the plain grasp from above, or none is feasible. Mono checks the ground plane and the other tubes only.\n", crate::bench_grasp::table(&[("stereo", &g["stereo"]), ("mono", &g["mono"])]));
     }
     if let Some(Value::Object(t)) = st.result("tags") {
         let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n");

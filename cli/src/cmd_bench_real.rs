@@ -34,6 +34,8 @@ pub struct RealStage {
     pub frames: Option<usize>,
     /// Composites per grey test frame.
     pub per_grey_frame: u32,
+    /// Grasp checks on at most this many grey composites (all when `None`).
+    pub grasp_images: Option<usize>,
 }
 
 /// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
@@ -179,7 +181,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
-    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg});
+    // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
+    let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
+    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg, "grasp_grey": grasp});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -204,6 +208,12 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\nMono refinement of the learned detections on the grey test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", grey_poses["matched"], grey_poses["truths"], f(&grey_poses["axis_deg_median"]), f(&grey_poses["axis_deg_p90"]), f(&grey_poses["across_mm_median"]), f(&grey_poses["across_mm_p90"])).ok();
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(
+        md,
+        "Grasp collision checks of `locate` on the grey test composites (mono: ground plane and other tubes; learned detections, each frame's own ground, tubes at or above the probability threshold):\n\n{}",
+        crate::bench_grasp::table(&[("grey composites", &grasp)])
+    )
+    .ok();
     writeln!(md, "Reliability of the calibrated probability on the grey test detections (bins of 0.1: mean predicted / observed / count):\n").ok();
     if let Some(bins) = grey["reliability"].as_array() {
         for b in bins.iter().filter(|b| b["count"].as_u64().unwrap_or(0) > 0) {

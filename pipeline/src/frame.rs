@@ -101,6 +101,9 @@ pub struct FrameRefinement {
     pub stereo_points: Vec<Vec<Point3<f64>>>,
     /// The SGM scene depth (metres per left-image pixel, NaN unknown), with stereo.
     pub scene_depth: Option<Plane<f32>>,
+    /// The ground plane each seed item was refined with (its local ground in stereo, else the
+    /// frame's), camera frame; one per seed item.
+    pub grounds: Vec<Option<GroundPlane>>,
 }
 
 /// The grey levels (the refiner's input) and the colours (the seal-end decision) of an image.
@@ -202,5 +205,6 @@ pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame
     }
     out.stereo_points = if frame.stereo.is_some() { stereo_pts } else { Vec::new() };
     out.scene_depth = depth;
+    out.grounds = grounds;
     Ok(out)
 }

@@ -8,7 +8,10 @@
 //! detect -> (stereo: rectify, SGM in the detections' regions, triangulate, local ground) ->
 //! cylinder fit per detection -> stages after the fit ([`stages::after_fit`]: hidden-end
 //! anchoring, photometric / rims / two-view stage, covariance widening over the unseen part
-//! of the tube) -> duplicate merging -> grasp frames.
+//! of the tube) -> duplicate merging -> tube-tube consistency (of two located tubes whose solids
+//! interpenetrate, the weaker is rejected) -> grasps checked for collisions with the ground,
+//! the other tubes and, in stereo, the terrain near each tube ([`tubeloc_grasp`]) -> grasp
+//! frames.
 //!
 //! Frames and units: poses are in the (left) camera frame (OpenCV: x right, y down, z
 //! forward), metres; grasp frames also in the rig frame; pixel centres at integer coordinates.

@@ -6,9 +6,11 @@ use crate::frame::{refine_pixels, Frame, FrameOptions, FramePixels, SeedItem, St
 use crate::settings::LocatorSettings;
 use image::DynamicImage;
 use nalgebra::Vector3;
+use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
 use tubeloc_core::{FailureReason, Pose, Rig, RigCamera, TubeAxisPose, TubeDetection};
+use tubeloc_grasp::{overlapping_tubes, GraspCheck, GraspPlanner, Scene};
 use tubeloc_refine::{GroundPlane, Refiner};
 
 /// Which cameras of a rig the images come from.
@@ -44,14 +46,17 @@ impl<'a> LocateInput<'a> {
     }
 }
 
-/// One located tube: the refined pose and its grasp frames.
+/// One located tube: the refined pose, its grasp frames and the grasp's collision check.
 #[derive(Clone, Debug, Serialize)]
 pub struct LocatedTube {
     /// The refined pose (camera frame, metres), flattened into this object in JSON.
     #[serde(flatten)]
     pub pose: TubeAxisPose,
-    /// Grasp frame in the camera frame: origin at the tube centre, +x along the axis, +z the
-    /// approach (from above, against up), +y the direction the fingers close.
+    /// Grasp frame in the camera frame: the grasp chosen by the collision check
+    /// ([`LocatedTube::grasp`]`.t_cam_grasp`): origin on the tube axis, +x along the flip-free
+    /// axis, +z the approach, +y the direction the fingers close. It is the plain grasp from
+    /// above (origin at the tube centre, approach against up) when that one is free, when no
+    /// candidate is, and for rejected tubes.
     #[serde(rename = "T_cam_grasp")]
     pub t_cam_grasp: Pose,
     /// The grasp frame in the rig frame (`T_rig_cam · T_cam_grasp`).
@@ -60,6 +65,10 @@ pub struct LocatedTube {
     /// Probability that this is a tube: the detector's score through the score calibration
     /// ([`LocatorSettings::calibration`]), fitted on real validation composites.
     pub probability: f64,
+    /// The grasp's collision check against the ground, the other located tubes and (stereo)
+    /// the terrain ([`tubeloc_grasp::GraspPlanner::check`]); for rejected tubes unchecked
+    /// (`candidates_tried` 0).
+    pub grasp: GraspCheck,
 }
 
 /// Why a detection did not become a located tube.
@@ -75,14 +84,21 @@ pub enum Rejection {
         /// The threshold ([`tubeloc_core::ScoreCalibration::threshold`]).
         threshold: f64,
     },
+    /// The fitted tube's solid interpenetrates a stronger located tube's (two such tubes cannot
+    /// both be right; [`tubeloc_grasp::overlapping_tubes`]).
+    IntersectsTube {
+        /// Index of the stronger tube in [`LocateOutput::tubes`].
+        other: usize,
+    },
 }
 
 impl Rejection {
-    /// A short machine-readable name (`fit_failed`, `low_probability`).
+    /// A short machine-readable name (`fit_failed`, `low_probability`, `intersects_tube`).
     pub fn name(&self) -> &'static str {
         match self {
             Rejection::FitFailed(_) => "fit_failed",
             Rejection::LowProbability { .. } => "low_probability",
+            Rejection::IntersectsTube { .. } => "intersects_tube",
         }
     }
 }
@@ -106,6 +122,9 @@ pub struct Timings {
     pub refine_s: f64,
     /// The fit alone of each detection, milliseconds, in detection order.
     pub fit_ms: Vec<f64>,
+    /// The tube-tube check and the grasp checks of all located tubes (terrain included),
+    /// milliseconds.
+    pub grasp_ms: f64,
     /// The whole call.
     pub total_s: f64,
 }
@@ -123,6 +142,9 @@ pub struct LocateOutput {
     pub detections: Vec<TubeDetection>,
     /// How many converged poses were merged into a better pose of the same tube.
     pub merged: usize,
+    /// Whether the grasp checks saw terrain (a stereo run): `false` in mono, where grasps are
+    /// checked against the ground plane and the other tubes only.
+    pub terrain_checked: bool,
     /// Unit up direction used for the grasp frames, camera frame.
     pub up_cam: Vector3<f64>,
     /// Stage timings.
@@ -137,13 +159,15 @@ impl LocateOutput {
 }
 
 /// The pipeline: detect -> (stereo) -> refine -> stages after the fit -> duplicate merging ->
-/// grasp frames, for images of one rig camera (or stereo pair).
+/// tube-tube consistency -> grasp frames checked for collisions, for images of one rig camera
+/// (or stereo pair).
 pub struct Locator {
     rig: Rig,
     camera: RigCamera,
     pair: Option<(String, String)>,
     detector: Box<dyn TubeDetector>,
     refiner: Refiner,
+    planner: GraspPlanner,
     settings: LocatorSettings,
 }
 
@@ -180,7 +204,8 @@ impl Locator {
         camera.model.validate()?;
         check_image_pixels(camera.model.width, camera.model.height, &camera.name)?;
         let refiner = Refiner::new(&settings.tube, settings.refine.clone())?;
-        Ok(Locator { rig: rig.clone(), camera, pair, detector, refiner, settings })
+        let planner = GraspPlanner::new(settings.gripper.clone(), settings.grasp.clone(), &settings.tube)?;
+        Ok(Locator { rig: rig.clone(), camera, pair, detector, refiner, planner, settings })
     }
 
     /// The rig camera the (left) images come from.
@@ -191,6 +216,11 @@ impl Locator {
     /// The refiner (tube model and configuration).
     pub fn refiner(&self) -> &Refiner {
         &self.refiner
+    }
+
+    /// The grasp planner (gripper and candidate settings).
+    pub fn planner(&self) -> &GraspPlanner {
+        &self.planner
     }
 
     /// The settings.
@@ -275,7 +305,8 @@ impl Locator {
     }
 
     /// The main job: detect, (stereo,) refine, the stages after the fit, one pose per physical
-    /// tube, grasp frames.
+    /// tube, the weaker of two interpenetrating tubes rejected, grasps checked for collisions
+    /// ([`tubeloc_grasp`]) and their frames.
     pub fn locate(&self, input: &LocateInput) -> Result<LocateOutput> {
         let t0 = Instant::now();
         let up = Self::up_direction(input)?;
@@ -288,28 +319,119 @@ impl Locator {
         let seeds: Vec<TubeDetection> = detections.iter().cloned().map(crate::detector::canonical).collect();
         let refined = self.refine_items(input, &px, &seeds)?;
         let refine_s = t1.elapsed().as_secs_f64();
-        let mut poses = refined.poses;
-        poses.sort_by(|x, y| y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score)));
+        // Poses best first with the index of their seed item (its ground plane), then one per
+        // physical tube; merging keeps the order, so the kept poses are matched in sequence.
+        let mut order: Vec<usize> = (0..refined.poses.len()).collect();
+        order.sort_by(|&a, &b| {
+            let (x, y) = (&refined.poses[a], &refined.poses[b]);
+            y.converged.cmp(&x.converged).then(y.score.total_cmp(&x.score))
+        });
+        let mut poses: Vec<TubeAxisPose> = order.iter().map(|&k| refined.poses[k].clone()).collect();
         let merged = if self.settings.merge_duplicates { tubeloc_refine::duplicates::merge_duplicates(&mut poses, &self.settings.tube) } else { 0 };
+        let mut items = order.iter().copied();
+        let seed_item: Vec<usize> = poses.iter().map(|p| items.by_ref().find(|&k| refined.poses[k] == *p).expect("merging keeps a subsequence of the poses")).collect();
         let (mut tubes, mut rejected) = (Vec::new(), Vec::new());
+        let mut tube_items = Vec::new();
         let cal = &self.settings.calibration;
-        for pose in poses {
+        for (pose, item) in poses.into_iter().zip(seed_item) {
             let t_cam_grasp = pose.grasp_frame(&up);
             let failure = pose.failure.as_ref().map(|f| f.reason);
             let probability = cal.probability(pose.score);
-            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, pose, probability };
+            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability };
             match (tube.pose.converged, failure) {
-                (true, _) if probability >= cal.threshold => tubes.push(tube),
+                (true, _) if probability >= cal.threshold => {
+                    tubes.push(tube);
+                    tube_items.push(item);
+                }
                 (true, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
                 (false, reason) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
             }
         }
-        Ok(LocateOutput { tubes, rejected, detections, merged, up_cam: up, timings: Timings { detect_s, refine_s, fit_ms: refined.fit_ms, total_s: t0.elapsed().as_secs_f64() } })
+        let t2 = Instant::now();
+        // Tube-tube consistency: of two located tubes whose solids interpenetrate, the weaker
+        // (later: lower probability) is rejected.
+        let poses: Vec<TubeAxisPose> = tubes.iter().map(|t| t.pose.clone()).collect();
+        let verdict = overlapping_tubes(&self.settings.tube, &poses, self.settings.grasp.tube_overlap_mm * 1e-3);
+        let mut kept_index = Vec::with_capacity(tubes.len());
+        let (mut kept, mut kept_items, mut overlapping) = (Vec::new(), Vec::new(), Vec::new());
+        for ((tube, item), v) in tubes.into_iter().zip(tube_items).zip(&verdict) {
+            match v {
+                None => {
+                    kept_index.push(kept.len());
+                    kept.push(tube);
+                    kept_items.push(item);
+                }
+                Some(other) => {
+                    kept_index.push(usize::MAX);
+                    overlapping.push(RejectedTube { tube, reason: Rejection::IntersectsTube { other: kept_index[*other] } });
+                }
+            }
+        }
+        let mut tubes = kept;
+        let terrain_checked = self.check_grasps(&mut tubes, &kept_items, &refined, input.ground.as_ref(), &up);
+        let grasp_ms = t2.elapsed().as_secs_f64() * 1e3;
+        overlapping.extend(rejected);
+        let rejected = overlapping;
+        Ok(LocateOutput { tubes, rejected, detections, merged, terrain_checked, up_cam: up, timings: Timings { detect_s, refine_s, fit_ms: refined.fit_ms, grasp_ms, total_s: t0.elapsed().as_secs_f64() } })
+    }
+
+    /// The grasp check of each located tube (seed item `items[k]` of `refined`): the scene is
+    /// the tube's ground plane ([`ground_under`] of its local ground in stereo, else of
+    /// `ground`), the other located tubes and, in stereo, the terrain from the scene depth
+    /// around the tube (relief above its local ground, or `ground`, before lowering). Sets each tube's grasp and grasp frames;
+    /// returns whether terrain was available (stereo).
+    fn check_grasps(&self, tubes: &mut [LocatedTube], items: &[usize], refined: &crate::frame::FrameRefinement, ground: Option<&GroundPlane>, up: &Vector3<f64>) -> bool {
+        let poses: Vec<TubeAxisPose> = tubes.iter().map(|t| t.pose.clone()).collect();
+        let radius = self.planner.terrain_radius();
+        let checks: Vec<GraspCheck> = poses
+            .par_iter()
+            .enumerate()
+            .map(|(k, pose)| {
+                let given = refined.grounds.get(items[k]).copied().flatten().or(ground.copied());
+                let checked = ground_under(given, pose, &self.settings.tube, up);
+                let others: Vec<TubeAxisPose> = poses.iter().enumerate().filter(|&(j, _)| j != k).map(|(_, p)| p.clone()).collect();
+                let terrain = refined.scene_depth.as_ref().map(|depth| {
+                    let points = crate::stereo::points_near(depth, &self.camera.model, &pose.centre, radius, 2);
+                    let cam = &self.camera.model;
+                    // Relief above the tube's (local) ground, not above the lowered plane: the
+                    // stereo terrain and that ground are measured by the same matcher.
+                    self.planner.terrain(&points, &given.unwrap_or(checked), pose, &poses, pose.centre.z.max(0.0) / cam.fx.min(cam.fy))
+                });
+                self.planner.check(pose, up, &Scene { ground: checked, tubes: &others, terrain: terrain.as_ref() })
+            })
+            .collect();
+        for (t, check) in tubes.iter_mut().zip(checks) {
+            t.t_cam_grasp = check.t_cam_grasp;
+            t.t_rig_grasp = self.camera.t_rig_cam * check.t_cam_grasp;
+            t.grasp = check;
+        }
+        refined.scene_depth.is_some()
+    }
+
+    /// The input image in grey with each located tube's fitted contour, centre and chosen
+    /// gripper pose drawn ([`crate::overlay::draw_located`]).
+    pub fn overlay_located<'a>(&self, image: &DynamicImage, tubes: impl IntoIterator<Item = &'a LocatedTube>) -> image::RgbImage {
+        crate::overlay::draw_located(&FramePixels::of(image, false).gray, &self.refiner, &self.planner, &self.camera.model, tubes)
     }
 
     /// The input image in grey with each tube's fitted contour and centre drawn (green:
     /// converged, red: rejected).
     pub fn overlay<'a>(&self, image: &DynamicImage, tubes: impl IntoIterator<Item = &'a TubeAxisPose>) -> image::RgbImage {
         crate::overlay::draw(&FramePixels::of(image, false).gray, &self.refiner, &self.camera.model, tubes)
+    }
+}
+
+/// The ground plane a tube's grasp is checked against: `given` (camera frame, n up), lowered to
+/// the tube's underside where it stands above it (a tube rests on the ground, so a plane above
+/// its underside is an error of the pose's height or of the plane; the terrain columns then
+/// show any relief around the tube); without a plane, the plane under the tube's underside with
+/// normal `up`. The underside is the lowest point of the tube's cylinder of largest radius.
+pub fn ground_under(given: Option<GroundPlane>, pose: &TubeAxisPose, model: &tubeloc_core::TubeModel, up: &Vector3<f64>) -> GroundPlane {
+    let normal = given.map_or(*up, |g| g.normal);
+    let along = pose.axis.dot(&normal).abs().min(1.0);
+    let underside = pose.centre - normal * (model.length / 2.0 * along + model.max_radius() * (1.0 - along * along).sqrt());
+    match given {
+        Some(g) if g.height_of(&underside) >= 0.0 => g,
+        _ => GroundPlane::from_point_normal(&underside, &normal),
     }
 }

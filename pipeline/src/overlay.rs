@@ -1,4 +1,4 @@
-//! The overlay image: fitted contours drawn over the grey image.
+//! The overlay image: fitted contours and the chosen gripper poses drawn over the grey image.
 
 use nalgebra::Point3;
 use tubeloc_core::{CameraModel, Plane, TubeAxisPose};
@@ -41,4 +41,43 @@ pub fn png_bytes(img: &image::RgbImage) -> Result<Vec<u8>, image::ImageError> {
     let mut buf = Vec::new();
     PngEncoder::new_with_quality(&mut buf, CompressionType::Fast, FilterType::Adaptive).write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgb8)?;
     Ok(buf)
+}
+
+/// [`draw`] for located tubes, with each checked tube's chosen gripper pose: the outlines of its
+/// fingers and palm at `grasp.t_cam_grasp` ([`tubeloc_grasp::GripperModel::parts`]) projected
+/// every 1 mm along their edges, cyan for a feasible grasp, orange for none feasible (the plain
+/// grasp drawn). Tubes rejected before the grasp check (`candidates_tried` 0) get no gripper.
+pub fn draw_located<'a>(gray: &Plane<u8>, refiner: &Refiner, planner: &tubeloc_grasp::GraspPlanner, cam: &CameraModel, tubes: impl IntoIterator<Item = &'a crate::LocatedTube>) -> image::RgbImage {
+    let tubes: Vec<&crate::LocatedTube> = tubes.into_iter().collect();
+    let mut img = draw(gray, refiner, cam, tubes.iter().map(|t| &t.pose));
+    let (w, h) = (img.width() as f64, img.height() as f64);
+    let parts = planner.gripper().parts();
+    for t in tubes.iter().filter(|t| t.grasp.candidates_tried > 0) {
+        let col = if t.grasp.feasible { [0, 210, 255] } else { [255, 150, 0] };
+        for part in &parts {
+            let pose = t.grasp.t_cam_grasp.0 * part.pose;
+            let e = part.shape.half_extents;
+            let corner = |k: usize| Point3::new(if k & 1 == 0 { -e.x } else { e.x }, if k & 2 == 0 { -e.y } else { e.y }, if k & 4 == 0 { -e.z } else { e.z });
+            // The 12 edges: corner pairs that differ in one coordinate.
+            for a in 0..8usize {
+                for bit in [1usize, 2, 4] {
+                    if a & bit != 0 {
+                        continue;
+                    }
+                    let (p, q) = (pose * corner(a), pose * corner(a | bit));
+                    let steps = ((q - p).norm() / 1e-3).ceil().max(1.0) as usize;
+                    for s in 0..=steps {
+                        let x = p + (q - p) * (s as f64 / steps as f64);
+                        if let Some(u) = cam.project(&x) {
+                            let (px, py) = (u.x.round(), u.y.round());
+                            if px >= 0.0 && py >= 0.0 && px < w && py < h {
+                                img.put_pixel(px as u32, py as u32, image::Rgb(col));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    img
 }

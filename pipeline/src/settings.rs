@@ -2,6 +2,7 @@
 //! stages after the fit.
 
 use tubeloc_core::{ScoreCalibration, TubeModel};
+use tubeloc_grasp::{GripperModel, PlannerSettings};
 use tubeloc_refine::silhouette::MaskSnap;
 use tubeloc_refine::two_view::TwoViewConfig;
 use tubeloc_refine::RefineConfig;
@@ -30,11 +31,26 @@ pub struct LocatorSettings {
     /// Default: the identity with threshold 0 (every converged tube accepted); `tubeloc
     /// locate` loads the one fitted for its model.
     pub calibration: ScoreCalibration,
+    /// The gripper whose grasps are checked for collisions (default: the built-in model of
+    /// `data/gripper.toml`).
+    pub gripper: GripperModel,
+    /// How grasp candidates are sampled, checked and ranked, and the tube-tube overlap
+    /// tolerance ([`tubeloc_grasp::PlannerSettings`]).
+    pub grasp: PlannerSettings,
 }
 
 impl Default for LocatorSettings {
     fn default() -> Self {
-        LocatorSettings { refine: RefineConfig::default(), tube: TubeModel::default(), colour_ends: true, stages: StageSettings::default(), merge_duplicates: true, calibration: ScoreCalibration { threshold: 0.0, ..ScoreCalibration::identity() } }
+        LocatorSettings {
+            refine: RefineConfig::default(),
+            tube: TubeModel::default(),
+            colour_ends: true,
+            stages: StageSettings::default(),
+            merge_duplicates: true,
+            calibration: ScoreCalibration { threshold: 0.0, ..ScoreCalibration::identity() },
+            gripper: GripperModel::default(),
+            grasp: PlannerSettings::default(),
+        }
     }
 }
 

@@ -130,3 +130,34 @@ fn points_rectified(rect: &StereoRectification, lcam: &CameraModel, rl: &Plane<u
     };
     Ok(StereoRegions { points, depth, disparity: disp, local_grounds })
 }
+
+/// The scene points (left camera frame, metres) within `radius` metres of `centre`, from the
+/// scene depth map `depth` (Z per left-image pixel, NaN where SGM did not match) of camera
+/// `lcam`: every `step`-th pixel of the window that a sphere of that radius covers in the
+/// image is unprojected at its depth. The terrain near a tube for the grasp check.
+pub fn points_near(depth: &Plane<f32>, lcam: &CameraModel, centre: &nalgebra::Vector3<f64>, radius: f64, step: usize) -> Vec<Point3<f64>> {
+    let Some(c) = lcam.project(&Point3::from(*centre)) else { return Vec::new() };
+    let near_z = (centre.z - radius).max(0.05);
+    let r_px = lcam.fx.max(lcam.fy) * radius / near_z;
+    let (w, h) = (depth.width as f64, depth.height as f64);
+    let (x0, x1) = ((c.x - r_px).floor().max(0.0), (c.x + r_px).ceil().min(w - 1.0));
+    let (y0, y1) = ((c.y - r_px).floor().max(0.0), (c.y + r_px).ceil().min(h - 1.0));
+    if x1 < x0 || y1 < y0 {
+        return Vec::new();
+    }
+    let step = step.max(1);
+    let mut out = Vec::new();
+    for y in (y0 as usize..=y1 as usize).step_by(step) {
+        let row = depth.row(y);
+        for x in (x0 as usize..=x1 as usize).step_by(step) {
+            let z = row[x];
+            if z.is_finite() && z > 0.0 {
+                let p = lcam.unproject_depth(&Point2::new(x as f64, y as f64), z as f64);
+                if (p.coords - centre).norm() <= radius {
+                    out.push(p);
+                }
+            }
+        }
+    }
+    out
+}

@@ -54,6 +54,14 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     assert!((t.t_cam_grasp.translation() - t.pose.centre).norm() < 1e-12);
     let r = t.t_cam_grasp.rotation();
     assert!(r.column(0).dot(&t.pose.axis).abs() > 1.0 - 1e-9 && r.column(2).dot(&ground.normal) < 0.0);
+    // On a clean scene the plain grasp from above is free: checked against the ground plane
+    // (mono: no terrain) and chosen unchanged, with the fingertips above the ground.
+    let g = &t.grasp;
+    assert!(g.feasible && !g.changed && !g.terrain_checked && g.candidates_tried > 1 && g.clearance_mm >= 1.0, "{g:?}");
+    assert_eq!(g.t_cam_grasp, t.t_cam_grasp);
+    assert!(!mono.terrain_checked);
+    let json = serde_json::to_value(t).unwrap();
+    assert_eq!(json["grasp"]["feasible"], serde_json::json!(true), "{json}");
 
     // Stereo: the pair's points and the stereo stages.
     let st = locator.locate(&LocateInput { image: &li, right: Some(&ri), ground: Some(ground), up: None }).unwrap();
@@ -62,6 +70,10 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     let (dc, da) = ((t.pose.centre - truth.centre).norm(), angle_deg(&t.pose.axis, &truth.axis));
     assert!(t.pose.residuals.stereo_points > 0, "no stereo points");
     assert!(dc < 0.01 && da < 1.0, "stereo: centre {:.1} mm, axis {da:.2} deg off", dc * 1e3);
+    // Stereo checks the grasp against the terrain around the tube too; the scene is clean.
+    let g = &t.grasp;
+    assert!(g.feasible && g.terrain_checked && st.terrain_checked && g.rejected.terrain == 0 && g.clearance_mm >= 1.0, "{g:?}");
+    assert_eq!(g.t_cam_grasp, t.t_cam_grasp);
 
     // `refine` with the same detections gives the poses `locate` refined, before merging.
     let (poses, fit_ms) = locator.refine(&LocateInput { image: &li, right: None, ground: Some(ground), up: None }, &mono.detections).unwrap();

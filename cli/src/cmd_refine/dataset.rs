@@ -46,7 +46,7 @@ pub(crate) fn ground_of(img: &CocoImage) -> Result<Option<GroundPlane>> {
     Ok(Some(GroundPlane { normal, offset }))
 }
 
-fn camera_of(img: &CocoImage) -> Result<CameraModel> {
+pub(crate) fn camera_of(img: &CocoImage) -> Result<CameraModel> {
     let v = img.extra.get("camera").with_context(|| format!("image {} has no \"camera\" (needed in dataset mode)", img.id))?;
     let c: CameraModel = serde_json::from_value(v.clone()).with_context(|| format!("image {}: camera", img.id))?;
     c.validate().with_context(|| format!("image {}: camera", img.id))?;
@@ -55,7 +55,7 @@ fn camera_of(img: &CocoImage) -> Result<CameraModel> {
 
 /// The right view of an image (`--stereo`): the right image and the pair geometry from
 /// `images[]` (`right_file_name` under `DIR/right/`, `right_camera`, `T_left_right`).
-fn right_view_of(dir: &std::path::Path, im: &CocoImage) -> Result<(image::DynamicImage, CameraModel, Pose)> {
+pub(crate) fn right_view_of(dir: &std::path::Path, im: &CocoImage) -> Result<(image::DynamicImage, CameraModel, Pose)> {
     let field = |k: &str| im.extra.get(k).with_context(|| format!("image {} has no {k:?} (needed by --stereo)", im.id));
     let rname = field("right_file_name")?.as_str().with_context(|| format!("image {}: right_file_name is not a string", im.id))?;
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;

@@ -1,0 +1,115 @@
+//! The grasp table of `tubeloc bench`: `locate`'s grasp collision check on a dataset's images.
+//!
+//! Each image (up to a limit) runs through the pipeline's [`Locator`] with the dataset's
+//! detections of that image as seeds, its own ground (`--ground auto`: the image's
+//! `T_world_cam`) and, for a stereo set, its right image. Counted over the located tubes: how
+//! many have a feasible grasp, how many grasps the check changed from the plain grasp from
+//! above, whether terrain was checked, and the tubes rejected for interpenetrating a stronger
+//! one.
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+use serde_json::{json, Value};
+use std::path::Path;
+use tubeloc_core::{CocoDataset, Pose, Rig, RigCamera, ScoreCalibration};
+use tubeloc_pipeline::{CameraSelection, ExternalDetections, LocateInput, Locator, LocatorSettings, Rejection};
+
+/// Runs the grasp check over up to `max_images` images of the dataset in `set` seeded by the
+/// detections file `dets` (stereo with the right images when `stereo`), with `calibration`'s
+/// probability threshold when given (else every converged tube is located). Returns the counts.
+pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, calibration: Option<&ScoreCalibration>) -> Result<Value> {
+    let ann = set.join("annotations.json");
+    let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+    let all = tubeloc_core::detection::read_coco_results(dets)?;
+    let mut images: Vec<_> = ds.images.iter().collect();
+    images.truncate(max_images.unwrap_or(usize::MAX));
+    let mut settings = LocatorSettings::default();
+    // As `refine --ground auto`: the nominal ground's height is the terrain's level, not a constraint.
+    settings.refine.priors.ground_height_known = false;
+    if let Some(c) = calibration {
+        settings.calibration = c.clone();
+    }
+    let per_image: Vec<Value> = images
+        .par_iter()
+        .map(|im| -> Result<Value> {
+            let camera = crate::cmd_refine::dataset::camera_of(im)?;
+            let ground = crate::cmd_refine::dataset::ground_of(im)?;
+            let path = [set.join(&im.file_name), set.join("images").join(&im.file_name)].into_iter().find(|p| p.exists()).with_context(|| format!("{}: image {} not found", set.display(), im.file_name))?;
+            let image = image::open(&path).with_context(|| format!("reading {}", path.display()))?;
+            let right = if stereo { Some(crate::cmd_refine::dataset::right_view_of(set, im)?) } else { None };
+            let mut cameras = vec![RigCamera { name: "left".into(), model: camera, t_rig_cam: Pose::identity() }];
+            let mut pairs = Vec::new();
+            if let Some((_, rcam, t_left_right)) = &right {
+                cameras.push(RigCamera { name: "right".into(), model: rcam.clone(), t_rig_cam: *t_left_right });
+                pairs.push(("left".to_string(), "right".to_string()));
+            }
+            let rig = Rig { cameras, stereo_pairs: pairs };
+            let mine: Vec<_> = all
+                .iter()
+                .filter(|d| d.image_id == im.id)
+                .cloned()
+                .map(|mut d| {
+                    d.image_id = 0;
+                    d
+                })
+                .collect();
+            let locator = Locator::new(&rig, &CameraSelection::default(), Box::new(ExternalDetections::new(mine, "bench")), settings.clone())?;
+            let out = locator.locate(&LocateInput { image: &image, right: right.as_ref().map(|r| &r.0), ground, up: None })?;
+            let t = &out.tubes;
+            Ok(json!({
+                "located": t.len(),
+                "feasible": t.iter().filter(|t| t.grasp.feasible).count(),
+                "changed": t.iter().filter(|t| t.grasp.changed).count(),
+                "changed_feasible": t.iter().filter(|t| t.grasp.changed && t.grasp.feasible).count(),
+                "terrain_checked": t.iter().filter(|t| t.grasp.terrain_checked).count(),
+                "intersecting": out.rejected.iter().filter(|r| matches!(r.reason, Rejection::IntersectsTube { .. })).count(),
+                "rejected_ground": t.iter().map(|t| t.grasp.rejected.ground).sum::<usize>(),
+                "rejected_tube": t.iter().map(|t| t.grasp.rejected.tube).sum::<usize>(),
+                "rejected_terrain": t.iter().map(|t| t.grasp.rejected.terrain).sum::<usize>(),
+                "candidates": t.iter().map(|t| t.grasp.candidates_tried).sum::<usize>(),
+                "grasp_ms": out.timings.grasp_ms,
+            }))
+        })
+        .collect::<Result<_>>()?;
+    let sum = |k: &str| per_image.iter().filter_map(|v| v[k].as_u64()).sum::<u64>();
+    let grasp_ms: f64 = per_image.iter().filter_map(|v| v["grasp_ms"].as_f64()).sum();
+    let located = sum("located");
+    Ok(json!({
+        "images": per_image.len(),
+        "located": located,
+        "feasible": sum("feasible"),
+        "changed": sum("changed"),
+        "changed_feasible": sum("changed_feasible"),
+        "terrain_checked": sum("terrain_checked"),
+        "intersecting": sum("intersecting"),
+        "rejected_ground": sum("rejected_ground"),
+        "rejected_tube": sum("rejected_tube"),
+        "rejected_terrain": sum("rejected_terrain"),
+        "candidates": sum("candidates"),
+        "grasp_ms_per_tube": if located > 0 { grasp_ms / located as f64 } else { 0.0 },
+    }))
+}
+
+/// The markdown table of [`run`]'s results, one row per `(name, result)`.
+pub fn table(rows: &[(&str, &Value)]) -> String {
+    let mut t = String::from("| set | images | located tubes | feasible grasp | changed by the check (of which feasible) | terrain checked | rejected: overlapping a stronger tube | candidates rejected: ground / tube / terrain | grasp stage ms per tube |\n|---|---:|---:|---:|---:|---:|---:|---|---:|\n");
+    for (name, v) in rows {
+        let n = v["located"].as_u64().unwrap_or(0);
+        let share = |k: &str| if n > 0 { format!("{} ({:.0}%)", v[k], 100.0 * v[k].as_u64().unwrap_or(0) as f64 / n as f64) } else { "-".into() };
+        t += &format!(
+            "| {name} | {} | {n} | {} | {} ({}) | {} | {} | {} / {} / {} of {} | {:.2} |\n",
+            v["images"],
+            share("feasible"),
+            share("changed"),
+            v["changed_feasible"],
+            v["terrain_checked"],
+            v["intersecting"],
+            v["rejected_ground"],
+            v["rejected_tube"],
+            v["rejected_terrain"],
+            v["candidates"],
+            v["grasp_ms_per_tube"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    t
+}
