@@ -186,14 +186,15 @@ fn decoding_splits_touching_tubes_and_recovers_axes() {
     assert!((diag.axis.direction_px[0] - s).abs() < 0.02 && (diag.axis.direction_px[1] - s).abs() < 0.02, "{:?}", diag.axis);
     assert!((diag.axis.length_px - 64.0).abs() < 2.0, "{:?}", diag.axis);
     for i in &inst {
-        let area = i.mask.data.iter().filter(|&&v| v != 0).count();
+        let area = i.mask.area();
         assert!(area > 100, "area {area}");
         assert!(i.score > 0.5 && i.score <= 1.0, "score {}", i.score);
     }
     // The two touching bars are separate instances with disjoint masks.
     let bars: Vec<_> = inst.iter().filter(|i| i.axis.centre_px[0] < 150.0).collect();
     assert_eq!(bars.len(), 2);
-    assert!(bars[0].mask.data.iter().zip(&bars[1].mask.data).all(|(a, b)| *a == 0 || *b == 0));
+    let (m0, m1) = (bars[0].mask.to_mask().unwrap(), bars[1].mask.to_mask().unwrap());
+    assert!(m0.data.iter().zip(&m1.data).all(|(a, b)| *a == 0 || *b == 0));
     let mut ys: Vec<f64> = bars.iter().map(|b| b.axis.centre_px[1]).collect();
     ys.sort_by(f64::total_cmp);
     // Rows 21 and 24 -> pixels 85.5 and 97.5.
@@ -328,7 +329,7 @@ fn decoding_with_fine_logits_follows_them_to_the_pixel() {
     let pred = Prediction { planes, out_w: ow, out_h: oh, width: 256, height: 256, fine: Some(fine.clone()) };
     let inst = decode(&pred, &DecodeConfig::default());
     assert_eq!(inst.len(), 1);
-    let m = &inst[0].mask.data;
+    let m = &inst[0].mask.to_mask().unwrap().data;
     assert!(m.iter().zip(&fine).all(|(&a, &f)| (a != 0) == (f > 0.0)), "mask differs from the fine logits");
     assert_eq!(inst[0].bbox, [82.0, 121.0, 76.0, 6.0]);
     assert!((inst[0].axis.width_px - 6.0).abs() < 1e-9, "{:?}", inst[0].axis);

@@ -49,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let (mut area, mut inter, mut sl) = (0usize, vec![0usize; ngt + 1], 0.0f64);
                 let (mut lo, mut hi) = (f64::MAX, f64::MIN);
                 let u = det.axis.direction_px;
-                for (i, (&m, &l)) in det.mask.data.iter().zip(&img.labels).enumerate() {
+                for (i, (&m, &l)) in det.mask.to_mask().unwrap().data.iter().zip(&img.labels).enumerate() {
                     if m != 0 {
                         let (x, y) = (i % img.width, i / img.width);
                         area += 1;
