@@ -28,19 +28,29 @@ def test_tubeloc_error_is_a_value_error():
     "cli_args, py_kwargs",
     [
         (["--model", "/nonexistent/tubenet.safetensors"], {"model": "/nonexistent/tubenet.safetensors"}),
-        (["--range-m", "4:1"], {"range_m": "4:1"}),
-        (["--range-m", "near:4"], {"range_m": "near:4"}),
         (["--camera-name", "nope"], {"camera": "nope"}),
         (["--detector", "line2d"], {"detector": "line2d"}),
         (["--detector", "line2d", "--templates", "/nonexistent/lib.tlt"], {"detector": "line2d", "templates": "/nonexistent/lib.tlt"}),
         (["--calibration", "/nonexistent/cal.json"], {"calibration": "/nonexistent/cal.json"}),
     ],
-    ids=["missing-model", "range-order", "range-number", "camera-name", "line2d-no-templates", "line2d-missing-templates", "missing-calibration"],
+    ids=["missing-model", "camera-name", "line2d-no-templates", "line2d-missing-templates", "missing-calibration"],
 )
 def test_locator_errors_carry_the_cli_message(cli, demo_scene, tmp_path, cli_args, py_kwargs):
     rig, image, _ = demo_scene
     expected = cli_error(cli, "locate", "--rig", rig, "--image", image, "--out", tmp_path / "p.json", *cli_args)
     assert raised(tubeloc.Locator, str(rig), **py_kwargs) == expected
+
+
+@pytest.mark.parametrize("band", ["4:1", "near:4"])
+def test_range_band_errors_carry_the_cli_message(cli, demo_scene, tmp_path, band):
+    # The CLI checks --range-m when it parses the command line (exit 2, clap's framing around
+    # the same message).
+    rig, image, _ = demo_scene
+    p = cli("locate", "--rig", rig, "--image", image, "--out", tmp_path / "p.json", "--range-m", band, check=False)
+    assert p.returncode == 2, p.stderr
+    message = raised(tubeloc.Locator, str(rig), range_m=band)
+    assert message.startswith(f'--range-m "{band}": '), message
+    assert message in p.stderr, (message, p.stderr)
 
 
 def test_missing_rig_file_carries_the_cli_message(cli, demo_scene, tmp_path):
