@@ -16,8 +16,13 @@
 //!    with its peak memory.
 //! 8. `report.md`: everything above with the paper's figures beside ours.
 
+use crate::cmd_calib::{CalibCommand, DetectorArgs, GroundtruthArgs};
+use crate::cmd_detect::{DetectArgs, Method};
+use crate::cmd_eval::EvalArgs;
 use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
 use crate::cmd_refine::GroundArg;
+use crate::cmd_synth::DatasetArgs;
+use crate::cmd_synth_stereo::SynthStereoArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::{json, Value};
@@ -25,7 +30,8 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use tubeloc_core::files;
+use tubeloc_core::{files, CameraModel};
+use tubeloc_detect::line2d::ViewParams;
 
 /// The parts of the benchmark that can be skipped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
@@ -139,13 +145,8 @@ impl Stages {
     }
 }
 
-fn s(p: &Path) -> String {
-    p.display().to_string()
-}
-
-fn words(w: &[&str]) -> Vec<String> {
-    w.iter().map(|x| x.to_string()).collect()
-}
+/// The attributes the detection evaluations are broken down by.
+const BREAKDOWN: [&str; 4] = ["terrain", "time", "height_m", "occlusion"];
 
 /// Writes `<dir>/annotations.json` with the images of one split (evenly subsampled to at most
 /// `limit`), their annotations, and an `images` link to the dataset's images.
@@ -177,16 +178,16 @@ fn write_split(dataset: &Path, split: &str, limit: Option<usize>, dir: &Path) ->
     Ok(n)
 }
 
-/// Detection + evaluation of one detector on one split; returns ms per image.
-fn detect_and_eval(method: &str, extra: &[String], split_dir: &Path, out: &Path, n_images: usize) -> Result<Value> {
+/// Detection + evaluation of one detector on one split (`detect` holds the detector's
+/// options; its dataset and output are set here); returns ms per image.
+fn detect_and_eval(mut detect: DetectArgs, split_dir: &Path, out: &Path, n_images: usize) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let dets = out.join("detections.json");
-    let mut w = words(&["detect", "--method", method, "--dataset", &s(split_dir), "--out", &s(&dets)]);
-    w.extend(extra.iter().cloned());
+    (detect.dataset, detect.out) = (Some(split_dir.to_path_buf()), dets.clone());
     let t = Instant::now();
-    crate::run_words(&w)?;
+    crate::cmd_detect::run(detect)?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / n_images.max(1) as f64;
-    crate::run_words(&words(&["eval", "--gt", &s(&split_dir.join("annotations.json")), "--dt", &s(&dets), "--out", &s(&out.join("eval")), "--by", "terrain", "time", "height_m", "occlusion"]))?;
+    crate::cmd_eval::run(EvalArgs::detections(&split_dir.join("annotations.json"), &dets, &out.join("eval"), &BREAKDOWN))?;
     Ok(json!({"ms_per_image": ms}))
 }
 
@@ -203,11 +204,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         None => {
             let d = out.join("dataset");
             st.run("dataset", &[d.join("annotations.json")], || {
-                let mut w = words(&["synth", "--preset", "paper", "--out", &s(&d), "--force"]);
-                if let Some(n) = a.scenes {
-                    w.extend(["--scenes".into(), n.to_string()]);
-                }
-                crate::run_words(&w)?;
+                crate::cmd_synth::run_dataset(DatasetArgs { preset: "paper".into(), out: Some(d.clone()), scenes: a.scenes, resolution: None, scale: None, seed: 0, tube_mesh: None, shard: (0, 1), force: true })?;
                 Ok(Value::Null)
             })?;
             d
@@ -242,7 +239,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             None => {
                 let l = out.join("templates.tlt");
                 st.run("templates", std::slice::from_ref(&l), || {
-                    crate::run_words(&words(&["templates", "build", "--camera", &s(&camera), "--out", &s(&l)]))?;
+                    crate::cmd_templates::build_for_camera(&CameraModel::load_json(&camera)?, ViewParams::default(), &l)?;
                     Ok(Value::Null)
                 })?;
                 l
@@ -250,8 +247,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
         };
         for (sp, ..) in SPLITS {
             let dir = out.join("line2d").join(sp);
-            let extra = words(&["--templates", &s(&lib), "--camera", &s(&camera)]);
-            st.run(&format!("line2d/{sp}"), &[dir.join("eval/metrics.json")], || detect_and_eval("line2d", &extra, &split_dir(sp), &dir, n_img[sp]))?;
+            st.run(&format!("line2d/{sp}"), &[dir.join("eval/metrics.json")], || {
+                let mut detect = DetectArgs::dataset(Method::Line2d, &split_dir(sp), &dir);
+                (detect.line2d.templates, detect.line2d.camera) = (Some(lib.clone()), Some(camera.clone()));
+                detect_and_eval(detect, &split_dir(sp), &dir, n_img[sp])
+            })?;
         }
     }
 
@@ -266,9 +266,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 }
             }
             let dir = out.join("learned").join(sp);
-            let extra = model.words();
             st.run(&format!("learned/{sp}"), &[dir.join("eval/metrics.json")], || {
-                let mut r = detect_and_eval("learned", &extra, &split_dir(sp), &dir, n_img[sp])?;
+                let mut detect = DetectArgs::dataset(Method::Learned, &split_dir(sp), &dir);
+                detect.model = model.path().map(Path::to_path_buf);
+                let mut r = detect_and_eval(detect, &split_dir(sp), &dir, n_img[sp])?;
                 r["model"] = json!(model.name());
                 r["protocol"] = json!(if cross.is_some() { "cross-split" } else { "trained on generated scenes" });
                 Ok(r)
@@ -301,9 +302,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
                     job.snapped_out = snap.then(|| snapped.clone());
                     refine_dataset(&job)?;
                     let secs = t.elapsed().as_secs_f64();
-                    crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval"))]))?;
+                    let gt = split_dir(sp).join("annotations.json");
+                    crate::cmd_eval::run(EvalArgs::poses(&gt, &[("coarse", &seeds), ("mono", &poses)], &dir.join("eval")))?;
                     if snap {
-                        crate::run_words(&words(&["eval", "--gt", &s(&split_dir(sp).join("annotations.json")), "--dt", &s(&snapped), "--out", &s(&dir.join("snapped_eval")), "--by", "terrain", "time", "height_m", "occlusion"]))?;
+                        crate::cmd_eval::run(EvalArgs::detections(&gt, &snapped, &dir.join("snapped_eval"), &BREAKDOWN))?;
                     }
                     let n: Vec<Value> = files::read_json(&poses)?;
                     Ok(json!({"refine_seconds": secs, "poses": n.len(), "ms_per_image": secs * 1e3 / n_img[sp].max(1) as f64}))
@@ -320,19 +322,19 @@ pub fn run(a: BenchArgs) -> Result<()> {
         let set = sdir.join("set");
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         st.run("stereo", &[sdir.join("gt_seeds/eval/pose_metrics.json"), sdir.join("learned/eval/pose_metrics.json"), sdir.join("learned/eval_both_views/pose_metrics.json")], || {
-            crate::run_words(&words(&["synth", "stereo", "--out", &s(&set), "--scenes", &a.stereo_scenes.to_string(), "--seed", "3", "--force"]))?;
+            crate::cmd_synth_stereo::run(SynthStereoArgs { out: set.clone(), preset: "paper".into(), scenes: Some(a.stereo_scenes), pairs_per_scene: 4, resolution: None, scale: None, seed: 3, pair: "L20,R20".into(), force: true })?;
             let gt = set.join("annotations.json");
             let dets = sdir.join("learned_detections.json");
-            let mut detect = words(&["detect", "--method", "learned", "--dataset", &s(&set), "--out", &s(&dets)]);
-            detect.extend(model.words());
-            crate::run_words(&detect)?;
+            let mut detect = DetectArgs::dataset(Method::Learned, &set, &dets);
+            detect.model = model.path().map(Path::to_path_buf);
+            crate::cmd_detect::run(detect)?;
             let mut r = serde_json::Map::new();
             let gt_seeds = DatasetSeeds::Gt { pos_mm: 10.0, deg: 5.0, seed: 0, min_visible: 0.5 };
             for (name, seeds) in [("gt_seeds", gt_seeds), ("learned", DatasetSeeds::Detections(dets.clone()))] {
                 let dir = sdir.join(name);
                 std::fs::create_dir_all(&dir)?;
                 let seeds_of = |ground: bool| dir.join(if ground { "seeds_ground.json" } else { "seeds.json" });
-                let mut labels = vec![format!("coarse={}", s(&seeds_of(false))), format!("coarse_ground={}", s(&seeds_of(true)))];
+                let mut labels: Vec<(String, PathBuf)> = vec![("coarse".into(), seeds_of(false)), ("coarse_ground".into(), seeds_of(true))];
                 // With and without the ground plane of the rig's pose (`--ground auto`): a rover
                 // knows its cameras' height and tilt, and mono seeds need it for their tilt.
                 for (mode, stereo, ground) in [("mono", false, false), ("stereo", true, false), ("mono_ground", false, true), ("stereo_ground", true, true)] {
@@ -349,15 +351,12 @@ pub fn run(a: BenchArgs) -> Result<()> {
                     let t = Instant::now();
                     refine_dataset(&job)?;
                     r.insert(format!("{name}/{mode}_seconds"), json!(t.elapsed().as_secs_f64()));
-                    labels.push(format!("{mode}={}", s(&poses)));
+                    labels.push((mode.into(), poses));
                 }
-                let mut w = words(&["eval", "--gt", &s(&gt), "--out", &s(&dir.join("eval")), "--poses"]);
-                w.extend(labels.iter().cloned());
-                crate::run_words(&w)?;
+                let labels: Vec<(&str, &Path)> = labels.iter().map(|(l, p)| (l.as_str(), p.as_path())).collect();
+                crate::cmd_eval::run(EvalArgs::poses(&gt, &labels, &dir.join("eval")))?;
                 // Only the tubes both cameras see: the others get mono poses from a stereo run.
-                let mut w = words(&["eval", "--gt", &s(&gt), "--in-both-views", "--out", &s(&dir.join("eval_both_views")), "--poses"]);
-                w.extend(labels);
-                crate::run_words(&w)?;
+                crate::cmd_eval::run(EvalArgs { in_both_views: true, ..EvalArgs::poses(&gt, &labels, &dir.join("eval_both_views")) })?;
             }
             Ok(Value::Object(r))
         })?;
@@ -380,7 +379,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         let tdir = out.join("tags");
         st.run("tags", &[tdir.join("annotations.json")], || {
             write_split(&dataset, "with-tags", a.images_per_split, &tdir)?;
-            crate::run_words(&words(&["calib", "groundtruth", "--dataset", &s(&tdir), "--encoding", "srgb", "--refine-edges"]))?;
+            crate::cmd_calib::run(CalibCommand::Groundtruth(GroundtruthArgs { dataset: tdir.clone(), mount: None, camera: None, detector: DetectorArgs::rendered() }))?;
             crate::figures::tag_pose_errors(&tdir.join("annotations.json"))
         })?;
     }
@@ -396,7 +395,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 continue;
             }
             st.run(&format!("poses/{det}/with-tags/tag-truth"), &[dir.join("eval_tag_truth/pose_metrics.json")], || {
-                crate::run_words(&words(&["eval", "--gt", &s(&tag_gt), "--truth-field", "T_cam_tube_tags", "--poses", &format!("coarse={}", s(&seeds)), &format!("mono={}", s(&poses)), "--out", &s(&dir.join("eval_tag_truth"))]))?;
+                let eval = EvalArgs::poses(&tag_gt, &[("coarse", &seeds), ("mono", &poses)], &dir.join("eval_tag_truth"));
+                crate::cmd_eval::run(EvalArgs { truth_field: "T_cam_tube_tags".into(), ..eval })?;
                 Ok(json!({}))
             })?;
         }
@@ -443,7 +443,7 @@ fn fullres(dataset: &Path, dir: &Path) -> Result<Value> {
     files::write_atomic(&img_path, &buf.into_inner())?;
     let exe = std::env::current_exe().context("locating the tubeloc executable")?;
     let t = Instant::now();
-    let status = std::process::Command::new(&exe).args(["locate", "--rig", &s(&rig_path), "--image", &s(&img_path), "--out", &s(&dir.join("poses.json"))]).status().with_context(|| format!("running {}", exe.display()))?;
+    let status = std::process::Command::new(&exe).arg("locate").arg("--rig").arg(&rig_path).arg("--image").arg(&img_path).arg("--out").arg(dir.join("poses.json")).status().with_context(|| format!("running {}", exe.display()))?;
     if !matches!(status.code(), Some(0) | Some(3)) {
         bail!("locate on the full-resolution image failed ({status})");
     }

@@ -108,7 +108,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     job.seeds_out = Some(seeds.clone());
     refine_dataset(&job)?;
     let filter = crate::cmd_eval::poses::TruthFilter { field: "T_cam_tube", min_visible: 0.5, in_both_views: false };
-    let labels = [format!("coarse={}", seeds.display()), format!("mono={}", poses.display())];
+    let labels = [("coarse".to_string(), seeds.clone()), ("mono".to_string(), poses.clone())];
     crate::cmd_eval::poses::run(&set.join("annotations.json"), &labels, &filter, 50.0, Some(&dir.join("pose_eval")))?;
     let m: Value = files::read_json(&dir.join("pose_eval").join("pose_metrics.json"))?;
     let mono = m["poses"].as_array().and_then(|v| v.iter().find(|p| p["label"] == "mono")).cloned().unwrap_or(Value::Null);

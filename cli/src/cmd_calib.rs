@@ -46,6 +46,12 @@ pub struct DetectorArgs {
 }
 
 impl DetectorArgs {
+    /// The settings for images rendered by `tubeloc synth` (`--encoding srgb --refine-edges`,
+    /// tag36h11, full resolution, 2 threads).
+    pub(crate) fn rendered() -> Self {
+        DetectorArgs { family: vec!["tag36h11".into()], decimate: 1.0, threads: 2, refine_edges: true, no_refine_edges: false, encoding: "srgb".into() }
+    }
+
     fn detector(&self) -> Result<TagDetector> {
         let families = self.family.iter().map(|f| TagFamily::from_name(f.trim())).collect::<Result<Vec<_>, _>>()?;
         Ok(TagDetector::new(DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: self.refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)

@@ -1,20 +1,25 @@
 //! `tubeloc demo`: the whole pipeline on a small generated with-tags scene, no arguments needed.
 //!
-//! It chains the same subcommands a user runs: render a with-tags scene, derive the paper's
+//! It runs the same steps a user runs as subcommands, called in-process with typed arguments: render a with-tags scene, derive the paper's
 //! tag-pair ground truth from the rendered AprilTags, detect tubes with both detectors (Line2D
 //! with a small library built for the scene's camera; the learned segmenter with the shipped
 //! model), score the detections with COCO metrics, refine every detection into a tube axis
 //! pose, score the poses against the renderer's exact poses (with histograms), run the main job
 //! `tubeloc locate` on the first image, and write `report.md`.
 
+use crate::cmd_calib::{CalibCommand, DetectorArgs, GroundtruthArgs};
+use crate::cmd_detect::{DetectArgs, Method};
+use crate::cmd_eval::EvalArgs;
 use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
 use crate::cmd_refine::GroundArg;
+use crate::cmd_synth::DatasetArgs;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tubeloc_core::{files, CameraModel, CocoDataset, Pose};
+use tubeloc_detect::line2d::ViewParams;
 
 /// Arguments of `tubeloc demo`.
 #[derive(Args, Debug)]
@@ -34,14 +39,6 @@ pub struct DemoArgs {
     pub model: Option<PathBuf>,
 }
 
-fn words(s: &[&str]) -> Vec<String> {
-    s.iter().map(|w| w.to_string()).collect()
-}
-
-fn p(path: &Path) -> String {
-    path.display().to_string()
-}
-
 /// Runs `tubeloc demo`.
 pub fn run(a: DemoArgs) -> Result<()> {
     let t0 = Instant::now();
@@ -52,22 +49,28 @@ pub fn run(a: DemoArgs) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let dataset = out.join("dataset");
     let mut log = Vec::<(String, f64)>::new();
-    let step = |name: &str, w: Vec<String>, log: &mut Vec<(String, f64)>| -> Result<()> {
-        eprintln!("\n== demo: {name}: tubeloc {}", w.join(" "));
+    // One timed step: `what` is the equivalent command line, shown to the user.
+    let step = |name: &str, what: String, log: &mut Vec<(String, f64)>, f: &mut dyn FnMut() -> Result<()>| -> Result<()> {
+        eprintln!("\n== demo: {name}: {what}");
         let t = Instant::now();
-        crate::run_words(&w).with_context(|| format!("demo step {name:?}"))?;
+        f().with_context(|| format!("demo step {name:?}"))?;
         log.push((name.to_string(), t.elapsed().as_secs_f64()));
         Ok(())
     };
 
     // 1. A with-tags CFA6 scene from the tiny preset, at quarter resolution.
-    let (res, seed) = (a.resolution.to_string(), a.seed.to_string());
-    step("render a with-tags scene", words(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.5", "--resolution", &res, "--seed", &seed, "--force", "--out", &p(&dataset)]), &mut log)?;
+    let render = format!("tubeloc synth --preset tiny --scenes 1 --scale 0.5 --resolution {} --seed {} --force --out {}", a.resolution, a.seed, dataset.display());
+    step("render a with-tags scene", render, &mut log, &mut || {
+        crate::cmd_synth::run_dataset(DatasetArgs { preset: "tiny".into(), out: Some(dataset.clone()), scenes: Some(1), resolution: Some(a.resolution), scale: Some(0.5), seed: a.seed, tube_mesh: None, shard: (0, 1), force: true })
+    })?;
     let gt_path = dataset.join("annotations.json");
 
     // 2. The paper's ground truth: tube poses from the AprilTag pair on the tagged tube.
     // A scene may show no tag pair (tags hidden or out of the crops): reported, not fatal.
-    if let Err(e) = step("tag-pair ground truth", words(&["calib", "groundtruth", "--dataset", &p(&dataset), "--encoding", "srgb", "--refine-edges"]), &mut log) {
+    let groundtruth = GroundtruthArgs { dataset: dataset.clone(), mount: None, camera: None, detector: DetectorArgs::rendered() };
+    let what = format!("tubeloc calib groundtruth --dataset {} --encoding srgb --refine-edges", dataset.display());
+    let mut groundtruth = Some(groundtruth);
+    if let Err(e) = step("tag-pair ground truth", what, &mut log, &mut || crate::cmd_calib::run(CalibCommand::Groundtruth(groundtruth.take().context("run once")?))) {
         eprintln!("demo: no tag-pair ground truth: {e:#}");
     }
     let tags = crate::figures::tag_pose_errors(&gt_path)?;
@@ -82,20 +85,28 @@ pub fn run(a: DemoArgs) -> Result<()> {
     // 3. Detectors: Line2D (a library coarser than the default, to stay quick) and the
     //    learned segmenter when a model is available.
     let lib = out.join("templates.tlt");
-    step("build Line2D templates", words(&["templates", "build", "--out", &p(&lib), "--camera", &p(&cam_path), "--distances", "1.0:3.5:0.25", "--step-deg", "12"]), &mut log)?;
+    let views = ViewParams { dist_min: 1.0, dist_max: 3.5, dist_step: 0.25, step_deg: 12.0, ..ViewParams::default() };
+    let what = format!("tubeloc templates build --out {} --camera {} --distances 1.0:3.5:0.25 --step-deg 12", lib.display(), cam_path.display());
+    step("build Line2D templates", what, &mut log, &mut || crate::cmd_templates::build_for_camera(&camera, views.clone(), &lib))?;
     let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
-    let mut detectors: Vec<(&str, Vec<String>)> = vec![("line2d", words(&["--templates", &p(&lib), "--camera", &p(&cam_path)]))];
+    let mut detectors: Vec<(&str, Method)> = vec![("line2d", Method::Line2d)];
     match &model {
         crate::cmd_detect_learned::ModelChoice::File(m) if !m.exists() => eprintln!("demo: no learned model at {} (skipping the learned detector)", m.display()),
-        _ => detectors.push(("learned", model.words())),
+        _ => detectors.push(("learned", Method::Learned)),
     }
-    let mut pose_inputs = Vec::new();
-    for (det, extra) in &detectors {
+    let mut pose_inputs: Vec<(String, PathBuf)> = Vec::new();
+    for &(det, method) in &detectors {
         let dets = out.join(format!("{det}_detections.json"));
-        let mut w = words(&["detect", "--method", det, "--dataset", &p(&dataset), "--out", &p(&dets)]);
-        w.extend(extra.iter().cloned());
-        step(&format!("detect ({det})"), w, &mut log)?;
-        step(&format!("evaluate detections ({det})"), words(&["eval", "--gt", &p(&gt_path), "--dt", &p(&dets), "--out", &p(&out.join(format!("eval_{det}")))]), &mut log)?;
+        let mut detect = DetectArgs::dataset(method, &dataset, &dets);
+        match method {
+            Method::Line2d => (detect.line2d.templates, detect.line2d.camera) = (Some(lib.clone()), Some(cam_path.clone())),
+            _ => detect.model = model.path().map(Path::to_path_buf),
+        }
+        let mut detect = Some(detect);
+        step(&format!("detect ({det})"), format!("tubeloc detect --method {det} --dataset {} --out {}", dataset.display(), dets.display()), &mut log, &mut || crate::cmd_detect::run(detect.take().context("run once")?))?;
+        let eval_dir = out.join(format!("eval_{det}"));
+        let what = format!("tubeloc eval --gt {} --dt {} --out {}", gt_path.display(), dets.display(), eval_dir.display());
+        step(&format!("evaluate detections ({det})"), what, &mut log, &mut || crate::cmd_eval::run(EvalArgs::detections(&gt_path, &dets, &eval_dir, &[])))?;
         let (poses, seeds) = (out.join(format!("{det}_poses.json")), out.join(format!("{det}_seeds.json")));
         // Refinement through the pipeline, as `tubeloc refine --dataset D --detections F --ground auto`.
         let mut job = DatasetJob::new(dataset.clone(), DatasetSeeds::Detections(dets.clone()), poses.clone());
@@ -105,15 +116,15 @@ pub fn run(a: DemoArgs) -> Result<()> {
         let t = Instant::now();
         refine_dataset(&job).with_context(|| format!("demo step \"refine ({det} seeds)\""))?;
         log.push((format!("refine ({det} seeds)"), t.elapsed().as_secs_f64()));
-        pose_inputs.push(format!("{det}-coarse={}", p(&seeds)));
-        pose_inputs.push(format!("{det}-refined={}", p(&poses)));
+        pose_inputs.push((format!("{det}-coarse"), seeds));
+        pose_inputs.push((format!("{det}-refined"), poses));
     }
 
     // 4. Pose errors against the renderer's exact poses, all detectors in one set of histograms.
     let pose_dir = out.join("eval_poses");
-    let mut w = words(&["eval", "--gt", &p(&gt_path), "--out", &p(&pose_dir), "--poses"]);
-    w.extend(pose_inputs);
-    step("evaluate poses", w, &mut log)?;
+    let labels: Vec<(&str, &Path)> = pose_inputs.iter().map(|(l, p)| (l.as_str(), p.as_path())).collect();
+    let what = format!("tubeloc eval --gt {} --out {} --poses {}", gt_path.display(), pose_dir.display(), labels.iter().map(|(l, p)| format!("{l}={}", p.display())).collect::<Vec<_>>().join(" "));
+    step("evaluate poses", what, &mut log, &mut || crate::cmd_eval::run(EvalArgs::poses(&gt_path, &labels, &pose_dir)))?;
 
     // 5. The main job on the first image: a one-camera rig, the known ground plane.
     let rig = serde_json::json!({"cameras": [{"name": "demo", "model": camera, "T_rig_cam": Pose::identity()}], "stereo_pairs": []});

@@ -2,7 +2,7 @@
 //! (mask RLE, bbox, score) plus the per-detection seeds that `refine` uses.
 
 use anyhow::{Context, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Which detector to run.
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -47,7 +47,7 @@ pub struct DetectArgs {
     pub ground: Option<tubeloc_core::GroundPlane>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
     /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
-    #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
+    #[arg(long, default_value = DEFAULT_RANGE_M, value_parser = crate::args::range_band)]
     pub range_m: String,
     /// Output detections (JSON list of COCO results with seeds).
     #[arg(long)]
@@ -55,6 +55,26 @@ pub struct DetectArgs {
     /// Line2D options (`--templates`, `--camera`, `--threshold`, ...).
     #[command(flatten)]
     pub line2d: crate::cmd_detect_line2d::Line2dOpts,
+}
+
+impl DetectArgs {
+    /// `tubeloc detect --method METHOD --dataset DATASET --out OUT` with the command line's
+    /// defaults for everything else.
+    pub(crate) fn dataset(method: Method, dataset: &Path, out: &Path) -> Self {
+        DetectArgs { method, image: None, image_id: 0, dataset: Some(dataset.to_path_buf()), model: None, decode_config: None, results: None, ground: None, range_m: DEFAULT_RANGE_M.into(), out: out.to_path_buf(), line2d: line2d_defaults() }
+    }
+}
+
+/// Default `--range-m`.
+const DEFAULT_RANGE_M: &str = "1:4";
+
+/// The Line2D options at their command-line defaults (clap's own defaults, so that they
+/// cannot drift from `tubeloc detect --help`).
+fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
+    use clap::{Args, FromArgMatches};
+    let cmd = crate::cmd_detect_line2d::Line2dOpts::augment_args(clap::Command::new("detect").no_binary_name(true));
+    let matches = cmd.try_get_matches_from(std::iter::empty::<&str>()).expect("every Line2D option has a default");
+    crate::cmd_detect_line2d::Line2dOpts::from_arg_matches(&matches).expect("every Line2D option has a default")
 }
 
 /// Runs `tubeloc detect`.

@@ -62,12 +62,11 @@ impl ModelChoice {
         Ok(tubeloc_pipeline::LearnedDetector::new(self.load()?, Default::default(), self.name()))
     }
 
-    /// The command-line words that select this model in another subcommand (`--model FILE`,
-    /// or none for the shipped model).
-    pub fn words(&self) -> Vec<String> {
+    /// The model file, or `None` for the shipped model (what `--model` holds).
+    pub fn path(&self) -> Option<&Path> {
         match self {
-            ModelChoice::Shipped => Vec::new(),
-            ModelChoice::File(p) => vec!["--model".into(), p.display().to_string()],
+            ModelChoice::Shipped => None,
+            ModelChoice::File(p) => Some(p),
         }
     }
 

@@ -2,7 +2,7 @@
 //! `--poses`, evaluation of refined tube poses against exact poses ([`poses`]).
 
 use anyhow::Context;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use tubeloc_core::coco::load_results;
 use tubeloc_core::files::{write_atomic, write_json};
 use tubeloc_core::CocoDataset;
@@ -11,62 +11,108 @@ use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
 
 pub(crate) mod poses;
 
+/// Default `--min-visible`.
+const DEFAULT_MIN_VISIBLE: f64 = 0.5;
+/// Default `--match-mm`.
+const DEFAULT_MATCH_MM: f64 = 50.0;
+/// Default `--target-precision`.
+const DEFAULT_TARGET_PRECISION: f64 = 0.95;
+
 /// Arguments of `tubeloc eval`.
 #[derive(clap::Args)]
 pub struct EvalArgs {
     /// Ground truth: a COCO dataset JSON file.
     #[arg(long)]
-    gt: PathBuf,
+    pub(crate) gt: PathBuf,
     /// Detections: COCO results JSON files; several files (shards) are concatenated in order.
     #[arg(long, required_unless_present = "poses", num_args = 1..)]
-    dt: Vec<PathBuf>,
+    pub(crate) dt: Vec<PathBuf>,
     /// Pose evaluation instead: refined poses (JSON arrays of TubeAxisPose, `tubeloc refine
     /// --out`), each `LABEL=PATH` or `PATH` (label: the file stem); overlaid in the histograms.
-    #[arg(long, num_args = 1..)]
-    poses: Vec<String>,
+    #[arg(long, num_args = 1.., value_parser = poses::label_and_path)]
+    pub(crate) poses: Vec<(String, PathBuf)>,
     /// Pose evaluation: least visible fraction (annotations' `visible_fraction`) of the
     /// ground-truth tubes evaluated.
-    #[arg(long, default_value_t = 0.5, value_parser = crate::args::unit_interval)]
-    min_visible: f64,
+    #[arg(long, default_value_t = DEFAULT_MIN_VISIBLE, value_parser = crate::args::unit_interval)]
+    pub(crate) min_visible: f64,
     /// Pose evaluation of a stereo dataset: keep only the truths whose axis lies at least half
     /// inside the right image (`images[].right_camera`, `images[].T_left_right`; 21 points along
     /// the axis), the tubes that both cameras see. Tubes outside the right view get mono poses
     /// from a stereo refinement (no stereo points).
     #[arg(long)]
-    in_both_views: bool,
+    pub(crate) in_both_views: bool,
     /// Pose evaluation: gate of the greedy matching on the centre distance, millimetres.
-    #[arg(long, default_value_t = 50.0, value_parser = crate::args::positive_f64)]
-    match_mm: f64,
+    #[arg(long, default_value_t = DEFAULT_MATCH_MM, value_parser = crate::args::positive_f64)]
+    pub(crate) match_mm: f64,
     /// Pose evaluation: the annotation field holding the true pose: `T_cam_tube` (the exact
     /// pose of a rendered dataset) or `T_cam_tube_tags` (the tag-pair ground truth written by
     /// `tubeloc calib groundtruth`, the paper's protocol).
     #[arg(long, default_value = "T_cam_tube")]
-    truth_field: String,
+    pub(crate) truth_field: String,
     /// IoU type: segm (mask IoU) or bbox (box IoU).
     #[arg(long, default_value = "segm")]
-    iou_type: IouType,
+    pub(crate) iou_type: IouType,
     /// Output folder for metrics.json (and breakdown.json / breakdown.md with --by).
     #[arg(long)]
-    out: Option<PathBuf>,
+    pub(crate) out: Option<PathBuf>,
     /// Fit the probability that a detection is a tube from its score (Platt scaling on the
     /// detections' outcomes at IoU 0.5) and write it, with the threshold for
     /// `--target-precision`, to this JSON file (for `locate --calibration`).
     #[arg(long, value_name = "OUT.json")]
-    calibrate: Option<PathBuf>,
+    pub(crate) calibrate: Option<PathBuf>,
     /// Precision the `--calibrate` threshold is chosen for.
-    #[arg(long, default_value_t = 0.95)]
-    target_precision: f64,
+    #[arg(long, default_value_t = DEFAULT_TARGET_PRECISION)]
+    pub(crate) target_precision: f64,
+    /// With --calibrate: the threshold also keeps at most this many false detections per
+    /// image of the ground truth (the lowest threshold meeting both bounds).
+    #[arg(long, requires = "calibrate", value_parser = crate::args::non_negative_f64)]
+    pub(crate) max_false_per_image: Option<f64>,
     /// Check a fitted calibration on these (held-out) detections: reliability diagram,
     /// expected calibration error, precision and recall at its threshold.
     #[arg(long, value_name = "CAL.json", conflicts_with = "calibrate")]
-    calibration: Option<PathBuf>,
+    pub(crate) calibration: Option<PathBuf>,
     /// Free text stored in the `--calibrate` file's `fitted_on`.
     #[arg(long, default_value = "")]
-    fitted_on: String,
+    pub(crate) fitted_on: String,
     /// Break the metrics down by an image attribute (terrain, time, split...) or an annotation
     /// attribute (occlusion, dust...); repeatable.
     #[arg(long = "by", num_args = 1..)]
-    by: Vec<String>,
+    pub(crate) by: Vec<String>,
+}
+
+impl EvalArgs {
+    /// COCO evaluation of the detections in `dt` against `gt`, written to `out`, broken down
+    /// by the attributes `by` (what `tubeloc eval --gt G --dt D --out O --by ...` does).
+    pub(crate) fn detections(gt: &Path, dt: &Path, out: &Path, by: &[&str]) -> Self {
+        EvalArgs { dt: vec![dt.to_path_buf()], by: by.iter().map(|b| b.to_string()).collect(), ..EvalArgs::common(gt, out) }
+    }
+
+    /// Pose evaluation of the labelled poses files against `gt` (field `T_cam_tube`), written
+    /// to `out` (what `tubeloc eval --gt G --poses L=P ... --out O` does).
+    pub(crate) fn poses(gt: &Path, poses: &[(&str, &Path)], out: &Path) -> Self {
+        EvalArgs { poses: poses.iter().map(|(l, p)| (l.to_string(), p.to_path_buf())).collect(), ..EvalArgs::common(gt, out) }
+    }
+
+    /// The command line's defaults with `gt` and `out`.
+    fn common(gt: &Path, out: &Path) -> Self {
+        EvalArgs {
+            gt: gt.to_path_buf(),
+            dt: Vec::new(),
+            poses: Vec::new(),
+            min_visible: DEFAULT_MIN_VISIBLE,
+            in_both_views: false,
+            match_mm: DEFAULT_MATCH_MM,
+            truth_field: "T_cam_tube".into(),
+            iou_type: IouType::Segm,
+            out: Some(out.to_path_buf()),
+            calibrate: None,
+            target_precision: DEFAULT_TARGET_PRECISION,
+            calibration: None,
+            max_false_per_image: None,
+            fitted_on: String::new(),
+            by: Vec::new(),
+        }
+    }
 }
 
 /// Runs the evaluation, prints the summary (and breakdown table), writes the JSON files.
@@ -98,9 +144,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         (Some(_), _) => {
             let outcomes: Vec<(f64, bool)> = evaluator.outcomes_at_iou50().into_iter().map(|(_, s, y)| (s, y)).collect();
             let (a, b) = tubeloc_eval::calibration::fit_platt(&outcomes);
-            let mut c = tubeloc_core::ScoreCalibration { a, b, threshold: 1.0, target_precision: args.target_precision, fitted_on: args.fitted_on.clone() };
+            let mut c = tubeloc_core::ScoreCalibration { a, b, threshold: 1.0, target_precision: args.target_precision, fitted_on: args.fitted_on.clone(), max_false_per_image: args.max_false_per_image };
             let probs: Vec<(f64, bool)> = outcomes.iter().map(|&(s, y)| (c.probability(s), y)).collect();
-            c.threshold = tubeloc_eval::calibration::choose_threshold(&probs, args.target_precision);
+            let bound = args.max_false_per_image.map(|f| (f, gt.images.len()));
+            c.threshold = tubeloc_eval::calibration::choose_threshold_bounded(&probs, args.target_precision, bound);
             Some(c)
         }
         (None, Some(p)) => {

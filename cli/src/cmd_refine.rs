@@ -39,8 +39,6 @@ use std::io::Write as _;
 use std::path::PathBuf;
 use tubeloc_core::{files, CameraModel, Pose, Rig, RigCamera, TubeDetection, TubeModel};
 use tubeloc_pipeline::{CameraSelection, ExternalDetections, GroundPlane, LocateInput, Locator, LocatorSettings, StageSettings};
-use tubeloc_refine::silhouette::MaskSnap;
-use tubeloc_refine::RefineConfig;
 
 pub(crate) mod dataset;
 pub(crate) use dataset::ground_of;
@@ -131,20 +129,6 @@ pub struct RefineArgs {
     /// (`tubeloc_refine::hidden_end`; the pose's `end_anchored` says so).
     #[arg(long)]
     pub(crate) no_hidden_end: bool,
-    /// --snapped-out: the silhouette is kept within this many pixels of the detector's mask.
-    #[arg(long, default_value_t = MaskSnap::default().dilate_px)]
-    pub(crate) snap_dilate_px: usize,
-    /// --snapped-out: least IoU of the snapped mask with the detector's for the snap to be used.
-    #[arg(long, default_value_t = MaskSnap::default().min_agreement)]
-    pub(crate) snap_min_agreement: f64,
-    /// --snapped-out: masks that are not snapped are eroded by this many pixels (the
-    /// segmenter's masks are wider than the tube; 0 keeps them as they are).
-    #[arg(long, default_value_t = MaskSnap::default().kept_erode_px)]
-    pub(crate) snap_kept_erode_px: usize,
-    /// --snapped-out: masks of fewer pixels than this are not snapped (they are trimmed like
-    /// the masks that disagree with their pose; 0 snaps every mask).
-    #[arg(long, default_value_t = MaskSnap::default().min_area_px)]
-    pub(crate) snap_min_area_px: u64,
     /// Right image of a stereo pair (needs --rig).
     #[arg(long)]
     pub(crate) right: Option<PathBuf>,
@@ -154,62 +138,36 @@ pub struct RefineArgs {
     /// Camera names of the pair in the rig, "LEFT,RIGHT" (default: the rig's first stereo pair).
     #[arg(long)]
     pub(crate) pair: Option<String>,
-    /// Number of disparities searched (multiple of 16); the window starts at the disparity of
-    /// the farthest seed + 0.5 m.
-    #[arg(long, default_value_t = 256)]
-    pub(crate) disparities: usize,
+    /// Number of disparities searched (multiple of 16; default 256, or the settings file's
+    /// `stages.disparities`); the window starts at the disparity of the farthest seed + 0.5 m.
+    #[arg(long)]
+    pub(crate) disparities: Option<usize>,
     /// Dataset mode: add the stereo term, with each image's right image (images[].right_file_name
     /// under DIR/right/, images[].right_camera, images[].T_left_right).
     #[arg(long, requires = "dataset")]
     pub(crate) stereo: bool,
     /// Stereo (--rig or --stereo): after the fit, move each converged tube along its centre's viewing
     /// ray to the best photometric agreement of the pair within ±this many millimetres
-    /// (`tubeloc_refine::photo`); 0 disables.
-    #[arg(long, default_value_t = 30.0)]
-    pub(crate) photo_range_mm: f64,
-    /// Photometric stage: move only the centre along its ray (distance) instead of each end of
-    /// the axis along its own ray (distance and tilt, the default without a ground plane; with
-    /// `--ground` the ground's tilt prior fixes the tilt better and only the centre moves).
-    #[arg(long)]
-    pub(crate) photo_centre_only: bool,
+    /// (`tubeloc_refine::photo`); 0 disables (default 30, or the settings file's
+    /// `stages.photo_range_mm`).
+    #[arg(long, value_parser = crate::args::non_negative_f64)]
+    pub(crate) photo_range_mm: Option<f64>,
     /// Stereo: turn off the scene-occlusion test (on by default: contour points whose SGM
     /// scene depth lies more than `CylinderModel::occlusion_margin` in front of the cylinder,
     /// i.e. rocks or sand over the tube, are left out of the edge fit
     /// (`tubeloc_refine::Scene::depth`), and so are such pixels in the photometric stage).
     #[arg(long = "no-scene-occlusion", action = clap::ArgAction::SetFalse)]
     pub(crate) scene_occlusion: bool,
-    /// Stereo: after the photometric stage, take the axis direction from the rims (end
-    /// outlines) fitted in both views (`tubeloc_refine::rims`), about the photometric centre,
-    /// for axes whose image direction lies within this angle of the epipolar lines, degrees
-    /// (90: all, the default; 0: never). The photometric search barely sees the tilt of a tube
-    /// along the rows; the rims cross them.
-    #[arg(long, default_value_t = 90.0)]
-    pub(crate) rim_max_epipolar_deg: f64,
     /// Stereo: turn off the last stage, the fit of the whole contour (limbs and rims) in both
     /// rectified views over all five pose parameters (`tubeloc_refine::two_view`; with the
     /// ground's tilt prior when a ground plane is given). On by default.
     #[arg(long = "no-two-view", action = clap::ArgAction::SetFalse)]
     pub(crate) two_view: bool,
-    /// Settings of the two-view fit: JSON of `TwoViewConfig` fields (missing fields keep their
-    /// defaults; for experiments).
-    #[arg(long)]
-    pub(crate) two_view_config: Option<PathBuf>,
-    /// The two-view settings read from --two-view-config (filled in by `run`).
-    #[arg(skip)]
-    pub(crate) two_view_settings: tubeloc_refine::two_view::TwoViewConfig,
-    /// Least ZNCC for the photometric depth to be applied.
-    #[arg(long, default_value_t = 0.5)]
-    pub(crate) photo_min_zncc: f64,
     /// Dataset mode: mask-agreement term instead of image edges: the silhouette is fitted to the
     /// boundary of each detection's mask (for --gt-seeds: the annotation's mask, i.e. a perfect
     /// segmenter, an upper bound).
     #[arg(long, requires = "dataset")]
     pub(crate) mask_term: bool,
-    /// Stereo: erode each detection mask by this many pixels before keeping its points (SGM
-    /// fattens the foreground at the tube's outline; on the synthetic stereo set erosion made the
-    /// points' bias worse, hence 0).
-    #[arg(long, default_value_t = 0)]
-    pub(crate) stereo_erode: usize,
     /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up), metres; with
     /// --dataset, "auto" takes it from images[].T_world_cam and images[].ground_height_m (ground
     /// = world z = ground_height_m, the median terrain height within the capture stops, written
@@ -224,9 +182,12 @@ pub struct RefineArgs {
     /// the terrain instead of the nominal ground.
     #[arg(long)]
     pub(crate) no_local_ground: bool,
-    /// Refiner settings file, TOML (`.toml`) or JSON: any of the groups of RefineConfig
-    /// (edge_search, seed_search, solver, acceptance, end_decision, priors, mono_depth, seeds,
-    /// mask; see refine/README.md); missing fields keep their defaults, unknown ones are refused.
+    /// Settings file, TOML (`.toml`) or JSON: any of the refiner's groups (edge_search,
+    /// seed_search, solver, acceptance, end_decision, priors, mono_depth, seeds, mask; see
+    /// refine/README.md) and the `stages` table of the stages after the fit (stereo erosion,
+    /// photometric ZNCC and centre-only search, rims, `stages.two_view`, `stages.snap` for
+    /// --snapped-out; `tubeloc_pipeline::StageSettings`); missing fields keep their defaults,
+    /// unknown ones are refused. Flags given on the command line win over the file.
     #[arg(long)]
     pub(crate) config: Option<PathBuf>,
     /// Tube model TOML (default: the built-in model of data/tube.toml).
@@ -245,42 +206,31 @@ pub(crate) fn write_snapped(path: Option<&std::path::Path>, snapped: &[(TubeDete
 }
 
 /// The refiner's configuration and tube model of the arguments (config and tube model files).
-fn refine_parts(args: &RefineArgs) -> Result<(RefineConfig, TubeModel)> {
-    let config = match &args.config {
-        Some(p) => RefineConfig::load(p)?,
-        None => RefineConfig::default(),
-    };
-    let tube = match &args.tube {
-        Some(p) => TubeModel::load(p).with_context(|| format!("tube model {}", p.display()))?,
-        None => TubeModel::default(),
-    };
-    Ok((config, tube))
-}
-
 impl RefineArgs {
-    /// The mask snap of `--snapped-out`.
-    pub(crate) fn mask_snap(&self) -> Result<MaskSnap> {
-        if !(0.0..=1.0).contains(&self.snap_min_agreement) {
-            bail!("--snap-min-agreement {}: expected a value in [0, 1]", self.snap_min_agreement);
-        }
-        Ok(MaskSnap { dilate_px: self.snap_dilate_px, min_agreement: self.snap_min_agreement, kept_erode_px: self.snap_kept_erode_px, min_area_px: self.snap_min_area_px })
-    }
-
-    /// The pipeline settings of the arguments (refiner, stereo, stages after the fit, snapping).
+    /// The pipeline settings of the arguments: the settings file's (or the defaults), with the
+    /// command line's flags over them.
     pub(crate) fn settings(&self) -> Result<LocatorSettings> {
-        let (refine, tube) = refine_parts(self)?;
-        let mut stages = StageSettings::default();
-        stages.disparities = self.disparities;
-        stages.stereo_erode_px = self.stereo_erode;
-        stages.local_ground = !self.no_local_ground;
-        stages.scene_occlusion = self.scene_occlusion;
-        stages.hidden_end = !self.no_hidden_end;
-        stages.photo_range_mm = self.photo_range_mm;
-        stages.photo_min_zncc = self.photo_min_zncc;
-        stages.photo_centre_only = self.photo_centre_only;
-        stages.rim_max_epipolar_deg = self.rim_max_epipolar_deg;
-        stages.two_view = self.two_view.then_some(self.two_view_settings);
-        stages.snap = self.mask_snap()?;
+        let (refine, mut stages) = match &self.config {
+            Some(p) => tubeloc_pipeline::load_settings_file(p)?,
+            None => (Default::default(), StageSettings::default()),
+        };
+        let tube = match &self.tube {
+            Some(p) => TubeModel::load(p).with_context(|| format!("tube model {}", p.display()))?,
+            None => TubeModel::default(),
+        };
+        if let Some(d) = self.disparities {
+            stages.disparities = d;
+        }
+        if let Some(r) = self.photo_range_mm {
+            stages.photo_range_mm = r;
+        }
+        stages.local_ground &= !self.no_local_ground;
+        stages.scene_occlusion &= self.scene_occlusion;
+        stages.hidden_end &= !self.no_hidden_end;
+        if !self.two_view {
+            stages.two_view = None;
+        }
+        stages.validate().map_err(|e| anyhow::anyhow!("{e} (--disparities / --photo-range-mm)"))?;
         let mut s = LocatorSettings::default();
         s.refine = refine;
         s.tube = tube;
@@ -292,10 +242,7 @@ impl RefineArgs {
 }
 
 /// Runs `tubeloc refine`.
-pub fn run(mut args: RefineArgs) -> Result<()> {
-    if let Some(p) = &args.two_view_config {
-        args.two_view_settings = files::read_json(p).with_context(|| format!("two-view config {}", p.display()))?;
-    }
+pub fn run(args: RefineArgs) -> Result<()> {
     if args.dataset.is_some() {
         return dataset::run(&args);
     }

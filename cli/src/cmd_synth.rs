@@ -92,7 +92,8 @@ pub(crate) fn preset_spec(preset: &str, seed: u64, scenes: Option<usize>, crop: 
     Ok(spec)
 }
 
-fn run_dataset(a: DatasetArgs) -> Result<()> {
+/// Renders the dataset described by `a` (`tubeloc synth` without a subcommand).
+pub(crate) fn run_dataset(a: DatasetArgs) -> Result<()> {
     let Some(out) = a.out.clone() else { bail!("--out DIR is required") };
     let shard = a.shard;
     let mut spec = preset_spec(&a.preset, a.seed, a.scenes, a.resolution, a.scale)?;

@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, TubeMaterial, TubeMesh, TubeModel};
 use tubeloc_detect::line2d::mesh::MeshShape;
 use tubeloc_detect::line2d::render::Pinhole;
@@ -191,16 +191,33 @@ fn build(a: BuildArgs) -> Result<()> {
     };
     let est = params.estimate(length, radius)?;
     check_size(&est, a.max_templates, a.max_memory_gib)?;
+    build_and_save(&params, shape.as_ref(), &tube, est.peak_bytes, &a.out)
+}
+
+/// Builds the library of the parametric tube model with `views` for `camera`'s focal lengths
+/// and writes it to `out`, under the command line's default size limits (what `tubeloc
+/// templates build --camera CAM --out OUT` does with the view options of `views`).
+pub(crate) fn build_for_camera(camera: &CameraModel, views: ViewParams, out: &Path) -> Result<()> {
+    let params = LibraryParams { camera: Pinhole { fx: camera.fx, fy: camera.fy, cx: camera.cx, cy: camera.cy }, views, ..LibraryParams::default() };
+    let tube = TubeModel::default();
+    let est = params.estimate(tube.length, tube.max_radius())?;
+    check_size(&est, DEFAULT_MAX_TEMPLATES, DEFAULT_MAX_MEMORY_GIB)?;
+    build_and_save(&params, None, &tube, est.peak_bytes, out)
+}
+
+/// Renders the templates (the mesh `shape` when given, else `tube`) with a progress bar and
+/// writes the library to `out`.
+fn build_and_save(params: &LibraryParams, shape: Option<&MeshShape>, tube: &TubeModel, peak_bytes: f64, out: &Path) -> Result<()> {
     let total = tubeloc_detect::line2d::viewpoints::generate_views(&params.views)?.len();
-    eprintln!("building {total} templates (estimated peak memory {:.2} GiB)", est.peak_bytes / (1u64 << 30) as f64);
+    eprintln!("building {total} templates (estimated peak memory {:.2} GiB)", peak_bytes / (1u64 << 30) as f64);
     let bar = ProgressBar::new(total as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} templates {elapsed} (eta {eta})").unwrap_or_else(|_| ProgressStyle::default_bar()));
-    let lib = match &shape {
-        Some(m) => TemplateLibrary::build_from_mesh(m, &params, &|n| bar.set_position(n as u64))?,
-        None => TemplateLibrary::build(&tube, &params, &|n| bar.set_position(n as u64))?,
+    let lib = match shape {
+        Some(m) => TemplateLibrary::build_from_mesh(m, params, &|n| bar.set_position(n as u64))?,
+        None => TemplateLibrary::build(tube, params, &|n| bar.set_position(n as u64))?,
     };
     bar.finish_and_clear();
-    lib.save(&a.out).with_context(|| format!("writing {}", a.out.display()))?;
-    eprintln!("{} templates -> {}", lib.len(), a.out.display());
+    lib.save(out).with_context(|| format!("writing {}", out.display()))?;
+    eprintln!("{} templates -> {}", lib.len(), out.display());
     Ok(())
 }

@@ -85,14 +85,6 @@ fn dispatch(command: Command) -> anyhow::Result<u8> {
     done.map(|()| 0)
 }
 
-/// Runs a subcommand given as command-line words (as if typed after `tubeloc`), in-process.
-/// `demo` uses it to chain the same subcommands a user would run.
-pub(crate) fn run_words(words: &[String]) -> anyhow::Result<()> {
-    let argv = std::iter::once("tubeloc".to_string()).chain(words.iter().cloned());
-    let cli = Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("internal command `tubeloc {}`: {e}", words.join(" ")))?;
-    dispatch(cli.command).map(|_| ())
-}
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // Per-tube buffers are reused rather than mapped and returned to the kernel each time.

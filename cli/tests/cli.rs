@@ -289,20 +289,24 @@ fn refine_snaps_coarse_masks_to_the_fitted_silhouettes() {
     assert!(ma > 0.9 && ma > mb + 0.1, "snapped masks' mean IoU {ma:.3}, coarse {mb:.3}");
 
     // Masks that are not snapped (here: none, since no snap reaches agreement 1) are eroded by
-    // --snap-kept-erode-px within the image, or kept as they are with 0.
+    // `stages.snap.kept_erode_px` of the settings file within the image, or kept as they are
+    // with 0.
     let mask = |d: &tubeloc_core::TubeDetection| d.mask.as_ref().unwrap().to_mask().unwrap();
+    let config = dir.path().join("snap.toml");
     for (erode, expect) in [("1", 1usize), ("0", 0)] {
-        ok(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--ground", "auto", "--out", p(&poses), "--snapped-out", p(&snapped), "--snap-min-agreement", "1", "--snap-kept-erode-px", erode]);
+        std::fs::write(&config, format!("[stages.snap]\nmin_agreement = 1.0\nkept_erode_px = {erode}\n")).unwrap();
+        ok(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--ground", "auto", "--out", p(&poses), "--snapped-out", p(&snapped), "--config", p(&config)]);
         for (b, a) in before.iter().zip(&read(&snapped)) {
-            assert_eq!(mask(a), mask(b).eroded_within_image(expect), "--snap-kept-erode-px {erode}");
+            assert_eq!(mask(a), mask(b).eroded_within_image(expect), "kept_erode_px {erode}");
             assert_eq!(a.bbox, mask(a).bbox());
         }
     }
 
     // Bad settings and a mode without masks are refused before any work.
-    let o = tubeloc(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--out", p(&poses), "--snapped-out", p(&snapped), "--snap-min-agreement", "2"]);
+    std::fs::write(&config, "[stages.snap]\nmin_agreement = 2.0\n").unwrap();
+    let o = tubeloc(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--out", p(&poses), "--snapped-out", p(&snapped), "--config", p(&config)]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("--snap-min-agreement 2"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("snap.toml") && stderr(&o).contains("stages.snap.min_agreement = 2"), "{}", stderr(&o));
     let o = tubeloc(&["refine", "--dataset", p(&ds), "--gt-seeds", "0,0", "--out", p(&poses), "--snapped-out", p(&snapped)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("--snapped-out needs --detections"), "{}", stderr(&o));
@@ -328,16 +332,24 @@ fn detect_decoder_config_is_read_and_bad_fields_are_refused() {
 }
 
 #[test]
-fn refine_two_view_config_bad_fields_are_refused_before_any_work() {
+fn refine_stage_settings_bad_fields_are_refused_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
-    let bad = dir.path().join("two_view.json");
-    std::fs::write(&bad, r#"{"max_iterations_typo": 3}"#).unwrap();
     let out = dir.path().join("poses.json");
-    let o = tubeloc(&["refine", "--image", "absent.png", "--detections", "absent.json", "--two-view-config", p(&bad), "--out", p(&out)]);
-    assert_eq!(o.status.code(), Some(1));
-    let e = stderr(&o);
-    assert!(e.contains("two_view.json") && e.contains("unknown field `max_iterations_typo`"), "{e}");
-    assert!(!out.exists(), "no output on error");
+    for (name, text, expect) in [
+        ("two_view.json", r#"{"stages": {"two_view": {"max_iterations_typo": 3}}}"#, "unknown field `max_iterations_typo`"),
+        ("stages.toml", "[stages]\nphoto_min_zncc = 3.0\n", "stages.photo_min_zncc = 3"),
+        ("stages2.toml", "[stages]\ndisparities = 100\n", "stages.disparities = 100"),
+        ("tv.toml", "[stages.two_view]\nnoise_px = -1.0\n", "stages.two_view: noise_px = -1"),
+        ("group.toml", "[stagez]\nx = 1\n", "unknown field `stagez`"),
+    ] {
+        let bad = dir.path().join(name);
+        std::fs::write(&bad, text).unwrap();
+        let o = tubeloc(&["refine", "--image", "absent.png", "--detections", "absent.json", "--config", p(&bad), "--out", p(&out)]);
+        assert_eq!(o.status.code(), Some(1), "{name}");
+        let e = stderr(&o);
+        assert!(e.contains(name) && e.contains(expect), "{name}: {e}");
+        assert!(!out.exists(), "no output on error");
+    }
 }
 
 #[test]

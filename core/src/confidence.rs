@@ -3,7 +3,8 @@
 //! `P(tube | s) = σ(a · logit(s) + b)` with `logit(s) = ln(s / (1 - s))` (scores clamped to
 //! `[1e-6, 1 - 1e-6]`) and `σ(x) = 1 / (1 + e^-x)`. `a` and `b` are fitted on real validation
 //! composites (`tubeloc eval --calibrate`); `threshold` is the lowest probability at which the
-//! validation detections kept have a precision of at least `target_precision`.
+//! validation detections kept have a precision of at least `target_precision` and, when
+//! `max_false_per_image` is set, at most that many false detections per validation image.
 
 use serde::{Deserialize, Serialize};
 
@@ -22,12 +23,16 @@ pub struct ScoreCalibration {
     /// What it was fitted on (free text: data set, detector, model).
     #[serde(default)]
     pub fitted_on: String,
+    /// Most false detections per image the threshold allowed on the fitting data (`None`: no
+    /// such bound).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_false_per_image: Option<f64>,
 }
 
 impl ScoreCalibration {
     /// The identity map (`P = s`) with threshold 0.5.
     pub fn identity() -> Self {
-        ScoreCalibration { a: 1.0, b: 0.0, threshold: 0.5, target_precision: 0.0, fitted_on: "identity".into() }
+        ScoreCalibration { a: 1.0, b: 0.0, threshold: 0.5, target_precision: 0.0, fitted_on: "identity".into(), max_false_per_image: None }
     }
 
     /// `logit(s)` with `s` clamped to `[1e-6, 1 - 1e-6]`.

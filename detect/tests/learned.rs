@@ -400,9 +400,21 @@ fn mirror_averaged_predictions_are_mirror_symmetric() {
     };
     assert!(gap(&p, &q) < 1e-4, "mirror-averaged outputs differ by {}", gap(&p, &q));
     assert!(gap(&plain_p, &plain_q) > 1e-3, "the plain network is not symmetric by itself");
-    // Widths that are not a multiple of 4 get the plain prediction.
+    // A width that is not a multiple of 4 is averaged too, as if zero-padded on the right to
+    // the next multiple (where the network pads with zeros anyway): the same cells, and the
+    // fine mask cut back to the image's width.
     let odd = pre.apply(&rgb[..(s * 95 * 3)].to_vec().chunks_exact(s * 3).flat_map(|r| r[..95 * 3].to_vec()).collect::<Vec<_>>(), 95, 95);
-    assert_eq!(m.predict_mirror_averaged(&odd, 95, 95).unwrap().planes, m.predict(&odd, 95, 95).unwrap().planes);
+    let padded: Vec<f32> = odd.chunks_exact(95).flat_map(|r| r.iter().copied().chain(std::iter::once(0.0))).collect();
+    let (a, b) = (m.predict_mirror_averaged(&odd, 95, 95).unwrap(), m.predict_mirror_averaged(&padded, 96, 95).unwrap());
+    assert_eq!((a.out_w, a.planes.len()), (b.out_w, b.planes.len()));
+    let worst = a.planes.iter().zip(&b.planes).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+    assert!(worst < 1e-5, "odd width vs zero-padded: {worst}");
+    assert!(a.planes != m.predict(&odd, 95, 95).unwrap().planes, "the odd width is mirror-averaged, not the plain prediction");
+    if let (Some(fa), Some(fb)) = (&a.fine, &b.fine) {
+        assert_eq!(fa.len(), 95 * 95);
+        let worst = fa.chunks_exact(95).zip(fb.chunks_exact(96)).flat_map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).abs())).fold(0f32, f32::max);
+        assert!(worst < 1e-5, "fine mask: {worst}");
+    }
 }
 
 /// An RGB model warm-started from a gray model computes what the gray model computes on the

@@ -49,6 +49,12 @@ pub fn fit_platt(samples: &[(f64, bool)]) -> (f64, f64) {
 /// The lowest probability threshold `t` such that the detections with `p >= t` have a
 /// precision of at least `target` (and at least one of them is kept); 1 when none reaches it.
 pub fn choose_threshold(probs: &[(f64, bool)], target: f64) -> f64 {
+    choose_threshold_bounded(probs, target, None)
+}
+
+/// [`choose_threshold`] with, when `max_false` is `Some((f, images))`, also at most `f · images`
+/// false detections (`p >= t`, not a tube) kept: the lowest `t` meeting both bounds.
+pub fn choose_threshold_bounded(probs: &[(f64, bool)], target: f64, max_false: Option<(f64, usize)>) -> f64 {
     let mut v: Vec<(f64, bool)> = probs.to_vec();
     v.sort_by(|x, y| y.0.total_cmp(&x.0));
     let (mut tp, mut best) = (0usize, 1.0f64);
@@ -57,6 +63,11 @@ pub fn choose_threshold(probs: &[(f64, bool)], target: f64) -> f64 {
         // Only cut between distinct probabilities.
         if i + 1 < v.len() && v[i + 1].0 == p {
             continue;
+        }
+        let false_kept = (i + 1 - tp) as f64;
+        if max_false.is_some_and(|(f, images)| false_kept > f * images as f64) {
+            // More false detections only come with lower thresholds.
+            break;
         }
         if tp as f64 / (i + 1) as f64 >= target {
             best = p;
@@ -112,7 +123,7 @@ mod tests {
 
     /// Scores whose true-positive rate is exactly sigmoid(2 logit(s) - 1), drawn on a grid.
     fn synthetic() -> Vec<(f64, bool)> {
-        let truth = ScoreCalibration { a: 2.0, b: -1.0, threshold: 0.5, target_precision: 0.0, fitted_on: String::new() };
+        let truth = ScoreCalibration { a: 2.0, b: -1.0, threshold: 0.5, target_precision: 0.0, fitted_on: String::new(), max_false_per_image: None };
         let mut v = Vec::new();
         for i in 1..100 {
             let s = i as f64 / 100.0;
@@ -133,7 +144,7 @@ mod tests {
     fn calibrated_probabilities_have_small_ece_and_the_threshold_meets_the_precision() {
         let data = synthetic();
         let (a, b) = fit_platt(&data);
-        let c = ScoreCalibration { a, b, threshold: 0.5, target_precision: 0.95, fitted_on: String::new() };
+        let c = ScoreCalibration { a, b, threshold: 0.5, target_precision: 0.95, fitted_on: String::new(), max_false_per_image: None };
         let probs: Vec<(f64, bool)> = data.iter().map(|&(s, y)| (c.probability(s), y)).collect();
         let (_, ece) = reliability(&probs, 10);
         assert!(ece < 0.02, "{ece}");
@@ -149,5 +160,23 @@ mod tests {
         let kept2: Vec<_> = probs.iter().filter(|p| p.0 >= next).collect();
         let prec2 = kept2.iter().filter(|p| p.1).count() as f64 / kept2.len() as f64;
         assert!(prec2 < 0.95, "{prec2}");
+    }
+
+    #[test]
+    fn a_bound_on_false_detections_per_image_raises_the_threshold_to_meet_it() {
+        let probs: Vec<(f64, bool)> = synthetic();
+        let free = choose_threshold(&probs, 0.5);
+        let false_at = |t: f64| probs.iter().filter(|p| p.0 >= t && !p.1).count();
+        let images = 100;
+        // Half the false detections the precision bound alone keeps, per image.
+        let f = false_at(free) as f64 / 2.0 / images as f64;
+        let t = choose_threshold_bounded(&probs, 0.5, Some((f, images)));
+        assert!(t > free, "bounded {t} vs free {free}");
+        assert!(false_at(t) as f64 <= f * images as f64, "{} false kept, bound {}", false_at(t), f * images as f64);
+        // The next lower distinct probability would break the bound.
+        let next = probs.iter().map(|p| p.0).filter(|&p| p < t).fold(f64::MIN, f64::max);
+        assert!(false_at(next) as f64 > f * images as f64);
+        // No bound: the same as the precision bound alone.
+        assert_eq!(choose_threshold_bounded(&probs, 0.5, None), free);
     }
 }

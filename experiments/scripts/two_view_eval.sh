@@ -3,7 +3,7 @@
 # without and with the ground prior, on a set rendered by stereo_eval.sh (W/st), seeds = exact
 # poses moved by 10 mm / 5 degrees; tubes at least half visible (tubeloc eval --min-visible).
 # Usage: experiments/scripts/two_view_eval.sh W   (tubeloc built in release on PATH or in $TUBELOC;
-# --two-view-config FILE (JSON of TwoViewConfig fields) changes the fit's settings for experiments)
+# --config FILE with a [stages.two_view] table of TwoViewConfig fields changes the fit's settings)
 set -euo pipefail
 W=${1:?usage: two_view_eval.sh W}
 T=${TUBELOC:-tubeloc}

@@ -55,8 +55,11 @@ impl Default for LocatorSettings {
 }
 
 /// Settings of stereo matching and of the stages after the fit (see
-/// [`crate::stages::after_fit`] for their order).
-#[derive(Clone, Debug)]
+/// [`crate::stages::after_fit`] for their order). In a settings file (`tubeloc refine
+/// --config`, [`load_settings_file`]) they are the `[stages]` table, with `[stages.two_view]`
+/// and `[stages.snap]`; missing fields keep their defaults, unknown ones are refused.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 #[non_exhaustive]
 pub struct StageSettings {
     /// Number of disparities searched by SGM (multiple of 16); the window starts at the
@@ -93,6 +96,63 @@ pub struct StageSettings {
     pub unseen_anchor_px: f64,
     /// How masks are snapped to their fitted silhouettes ([`crate::stages::snapped_detection`]).
     pub snap: MaskSnap,
+}
+
+impl StageSettings {
+    /// Checks every value: finite, in range. The error names the field and its value.
+    pub fn validate(&self) -> Result<(), String> {
+        let bad = |field: &str, value: &dyn std::fmt::Display, want: &str| Err(format!("stages.{field} = {value}: {want}"));
+        if self.disparities == 0 || self.disparities % 16 != 0 || self.disparities > 4096 {
+            return bad("disparities", &self.disparities, "expected a positive multiple of 16, at most 4096");
+        }
+        if self.stereo_erode_px > 64 {
+            return bad("stereo_erode_px", &self.stereo_erode_px, "expected at most 64");
+        }
+        if !(self.photo_range_mm.is_finite() && (0.0..=1000.0).contains(&self.photo_range_mm)) {
+            return bad("photo_range_mm", &self.photo_range_mm, "expected 0..=1000 (0 turns the stage off)");
+        }
+        if !(self.photo_min_zncc.is_finite() && (-1.0..=1.0).contains(&self.photo_min_zncc)) {
+            return bad("photo_min_zncc", &self.photo_min_zncc, "expected a correlation in [-1, 1]");
+        }
+        if !(self.rim_max_epipolar_deg.is_finite() && (0.0..=90.0).contains(&self.rim_max_epipolar_deg)) {
+            return bad("rim_max_epipolar_deg", &self.rim_max_epipolar_deg, "expected degrees in [0, 90]");
+        }
+        if !(self.unseen_anchor_px.is_finite() && self.unseen_anchor_px > 0.0) {
+            return bad("unseen_anchor_px", &self.unseen_anchor_px, "expected a positive number of pixels");
+        }
+        if !(self.snap.min_agreement.is_finite() && (0.0..=1.0).contains(&self.snap.min_agreement)) {
+            return bad("snap.min_agreement", &self.snap.min_agreement, "expected an IoU in [0, 1]");
+        }
+        if let Some(t) = &self.two_view {
+            t.validate().map_err(|e| format!("stages.two_view: {e}"))?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads a settings file (`tubeloc refine --config`): TOML (`.toml`) or JSON (any other
+/// extension) holding any of the refiner's groups ([`RefineConfig`]: `edge_search`,
+/// `seed_search`, `solver`, `acceptance`, `end_decision`, `priors`, `mono_depth`, `seeds`,
+/// `mask`) and the `stages` table ([`StageSettings`]). Missing groups and fields keep their
+/// defaults; unknown ones are refused; the error names the file and the field.
+pub fn load_settings_file(path: &std::path::Path) -> Result<(RefineConfig, StageSettings), tubeloc_core::CoreError> {
+    use tubeloc_core::CoreError;
+    let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
+    let is_toml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    let mut doc: serde_json::Value = if is_toml {
+        toml::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid settings: {}", e.to_string().trim_end())))?
+    } else {
+        serde_json::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid settings: {e}")))?
+    };
+    let Some(table) = doc.as_object_mut() else { return Err(CoreError::parse(path, "invalid settings: expected a table of groups")) };
+    let stages = match table.remove("stages") {
+        Some(v) => serde_json::from_value::<StageSettings>(v).map_err(|e| CoreError::parse(path, format!("invalid settings: stages: {e}")))?,
+        None => StageSettings::default(),
+    };
+    let refine: RefineConfig = serde_json::from_value(doc).map_err(|e| CoreError::parse(path, format!("invalid settings: {e}")))?;
+    refine.validate().map_err(|e| CoreError::parse(path, e.to_string()))?;
+    stages.validate().map_err(|e| CoreError::parse(path, e))?;
+    Ok((refine, stages))
 }
 
 impl Default for StageSettings {

@@ -17,7 +17,7 @@ use tubeloc_core::{BinaryMask, CameraModel, TubeAxisPose};
 
 /// Settings of [`snap_mask`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct MaskSnap {
     /// The silhouette is kept only within this many pixels (L1, 4-neighbour steps,
     /// [`BinaryMask::dilated`]) of the

@@ -25,7 +25,7 @@
 
 use crate::error::{Result, StereoError};
 use crate::triangulate::{RectifiedGeometry, StereoPoint};
-use nalgebra::{Matrix3, Matrix3x4, Matrix4, Point2, Point3, Vector3};
+use nalgebra::{Matrix3, Point2, Point3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
 use tubeloc_core::{CameraModel, CoreError, PairRectification, Plane, Pose};
@@ -57,20 +57,10 @@ pub struct PixelRect {
 /// tables and valid regions (see the module documentation for the formulas).
 #[derive(Clone, Debug)]
 pub struct StereoRectification {
-    /// Rotation from the original left camera frame into the rectified frame (`R1`).
-    pub r_left: Matrix3<f64>,
-    /// Rotation from the original right camera frame into the rectified frame (`R2`).
-    pub r_right: Matrix3<f64>,
-    /// Rectified camera shared by both images (no distortion, size of the left image).
-    pub rectified: CameraModel,
-    /// Baseline, metres.
-    pub baseline: f64,
-    /// Left projection matrix `P1 = K' [I | 0]`.
-    pub p1: Matrix3x4<f64>,
-    /// Right projection matrix `P2 = K' [I | (-B, 0, 0)]`.
-    pub p2: Matrix3x4<f64>,
-    /// Disparity-to-depth matrix `Q`.
-    pub q: Matrix4<f64>,
+    /// The rectifying rotations, the shared rectified camera and `P1`, `P2`, `Q`
+    /// ([`PairRectification`], the same matrices the ROS export writes); its fields are read
+    /// through this struct (`Deref`).
+    pub pair: PairRectification,
     /// Remap table of the left image.
     pub map_left: RemapTable,
     /// Remap table of the right image.
@@ -81,6 +71,14 @@ pub struct StereoRectification {
     pub valid_right: PixelRect,
     left: CameraModel,
     right: CameraModel,
+}
+
+impl std::ops::Deref for StereoRectification {
+    type Target = PairRectification;
+
+    fn deref(&self) -> &PairRectification {
+        &self.pair
+    }
 }
 
 impl StereoRectification {
@@ -97,12 +95,11 @@ impl StereoRectification {
             CoreError::Invalid { message, .. } => StereoError::Unrectifiable(message),
             other => other.into(),
         })?;
-        let PairRectification { r_left: r1, r_right: r2, rectified, baseline, p1, p2, q } = geom;
-        let map_left = remap_table(left, &r1, &rectified);
-        let map_right = remap_table(right, &r2, &rectified);
+        let map_left = remap_table(left, &geom.r_left, &geom.rectified);
+        let map_right = remap_table(right, &geom.r_right, &geom.rectified);
         let valid_left = valid_rect(&map_left);
         let valid_right = valid_rect(&map_right);
-        Ok(StereoRectification { r_left: r1, r_right: r2, rectified, baseline, p1, p2, q, map_left, map_right, valid_left, valid_right, left: left.clone(), right: right.clone() })
+        Ok(StereoRectification { pair: geom, map_left, map_right, valid_left, valid_right, left: left.clone(), right: right.clone() })
     }
 
     /// Focal length, principal point and baseline for [`crate::triangulate::triangulate`].

@@ -18,14 +18,15 @@ use tubeloc_eval::pose_bop::ModelPoints;
 use tubeloc_eval::pose_match::{match_by_centre_distance, TubeEstimate, TubeTruth};
 use tubeloc_eval::pose_summary::{evaluate_poses, PoseEvalConfig, PoseEvaluation, Summary};
 
-fn label_and_path(s: &str) -> (String, PathBuf) {
-    match s.split_once('=') {
+/// `--poses LABEL=PATH` or `PATH` (label: the file stem), parsed when the command line is.
+pub(crate) fn label_and_path(s: &str) -> std::result::Result<(String, PathBuf), String> {
+    Ok(match s.split_once('=') {
         Some((l, p)) if !l.is_empty() && !p.is_empty() => (l.to_string(), PathBuf::from(p)),
         _ => {
             let p = PathBuf::from(s);
             (p.file_stem().map(|x| x.to_string_lossy().into_owned()).unwrap_or_else(|| s.to_string()), p)
         }
-    }
+    })
 }
 
 fn med_p90(s: &Summary) -> String {
@@ -62,7 +63,7 @@ fn right_view_fraction(pose: &Pose, length: f64, t_left_right: &Pose, camera: &C
 }
 
 /// Runs the pose evaluation of each poses file against `gt_path`.
-pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64, out: Option<&Path>) -> Result<()> {
+pub fn run(gt_path: &Path, poses: &[(String, PathBuf)], filter: &TruthFilter, match_mm: f64, out: Option<&Path>) -> Result<()> {
     let (truth_field, min_visible) = (filter.field, filter.min_visible);
     let gt = CocoDataset::load(gt_path).with_context(|| format!("loading ground truth {}", gt_path.display()))?;
     let mut right_views = BTreeMap::new();
@@ -109,8 +110,8 @@ pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64
     crate::out::outln!("{} truths ({truth_field}, visible_fraction >= {min_visible}{in_both}); matching: nearest centre within {match_mm} mm", truths.len());
     crate::out::outln!("| poses | converged / all | matched | axis deg med / p90 | perp mm med / p90 | |along| mm med / p90 | centre mm med / p90 | ends right | AR MSSD | AR MSPD |");
     crate::out::outln!("|---|---|---|---|---|---|---|---|---|---|");
-    for spec in poses {
-        let (label, path) = label_and_path(spec);
+    for (label, path) in poses {
+        let (label, path) = (label.clone(), path.clone());
         let all: Vec<TubeAxisPose> = read_json(&path).with_context(|| format!("reading poses {}", path.display()))?;
         let est: Vec<TubeEstimate> = all.iter().filter(|p| p.converged).map(TubeEstimate::from_axis_pose).collect();
         let matching = match_by_centre_distance(&truths, &est, match_mm * 1e-3);
@@ -148,7 +149,7 @@ pub fn run(gt_path: &Path, poses: &[String], filter: &TruthFilter, match_mm: f64
         let report = tubeloc_eval::report::EvalReport {
             title: "Tube pose evaluation".into(),
             inputs: std::iter::once(("ground truth".to_string(), gt_path.display().to_string()))
-                .chain(poses.iter().map(|s| ("poses".to_string(), s.clone())))
+                .chain(poses.iter().map(|(l, p)| ("poses".to_string(), format!("{l}={}", p.display()))))
                 .chain(std::iter::once(("truths".to_string(), format!("`{truth_field}`, visible_fraction >= {min_visible}{in_both}"))))
                 .collect(),
             poses: evals,

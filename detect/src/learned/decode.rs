@@ -61,6 +61,11 @@ pub struct DecodeConfig {
     /// time). Chosen on generated validation scenes: val9 AP50 0.712 -> 0.726, AP 0.245 ->
     /// 0.272; val21 0.791 -> 0.810, 0.277 -> 0.300.
     pub mirror_average: bool,
+    /// Mirror averaging only for images of at most this many pixels (the working image the
+    /// network sees); larger ones get the plain prediction, half the network time. Large frames
+    /// already run in bands ([`super::model::WHOLE_MAX_PIXELS`]), and the mirror's gain there
+    /// does not pay for its time (docs/design/0040).
+    pub mirror_max_pixels: usize,
     /// Exponent `a` of the length agreement in the score, `score *= (min(Lm, Lp) / max(Lm, Lp))^a`
     /// with `Lm` the mask's extent along the axis and `Lp` the predicted length (0 = off).
     pub length_weight: f32,
@@ -97,6 +102,7 @@ impl Default for DecodeConfig {
             mask_logit_rel: 0.3,
             fine_mask: true,
             mirror_average: true,
+            mirror_max_pixels: super::model::WHOLE_MAX_PIXELS,
             length_weight: 0.5,
             mask_logit_weight: 4.0,
             fill_weight: 1.0,
@@ -155,10 +161,10 @@ fn sigmoid(x: f32) -> f32 {
 }
 
 /// The prediction that `cfg` asks for from preprocessed input planes (`channels * width *
-/// height`): [`LearnedModel::predict_mirror_averaged`] with [`DecodeConfig::mirror_average`],
-/// else [`LearnedModel::predict`].
+/// height`): [`LearnedModel::predict_mirror_averaged`] with [`DecodeConfig::mirror_average`]
+/// for images of at most [`DecodeConfig::mirror_max_pixels`], else [`LearnedModel::predict`].
 pub fn predict_for(model: &LearnedModel, input: &[f32], width: usize, height: usize, cfg: &DecodeConfig) -> Result<Prediction, LearnedError> {
-    if cfg.mirror_average {
+    if cfg.mirror_average && width * height <= cfg.mirror_max_pixels {
         model.predict_mirror_averaged(input, width, height)
     } else {
         model.predict(input, width, height)

@@ -237,14 +237,14 @@ impl LearnedModel {
     /// (test-time augmentation; the network was trained with mirrored crops). The mirror's
     /// outputs are mirrored back (cell `i` of a `4 n` px wide image ↔ cell `n - 1 - i`) and the
     /// axis channel `sin 2θ` changes sign (θ → π − θ); logits, `cos 2θ` and lengths are averaged
-    /// as they are. Images whose width is not a multiple of 4 get the plain prediction.
+    /// as they are. An image whose width is not a multiple of 4 is mirrored with zero columns
+    /// added on its right up to the next multiple (the network pads with zeros there anyway), so
+    /// that cells stay aligned; the fine mask is cut back to the image's width.
     pub fn predict_mirror_averaged(&self, input: &[f32], width: usize, height: usize) -> Result<Prediction, LearnedError> {
         let mut p = self.predict(input, width, height)?;
-        if width % STRIDE != 0 {
-            return Ok(p);
-        }
-        let mirrored: Vec<f32> = input.chunks_exact(width).flat_map(|row| row.iter().rev().copied()).collect();
-        let q = self.predict(&mirrored, width, height)?;
+        let pw = width.div_ceil(STRIDE) * STRIDE;
+        let mirrored: Vec<f32> = input.chunks_exact(width).flat_map(|row| std::iter::repeat_n(0.0, pw - width).chain(row.iter().rev().copied())).collect();
+        let q = self.predict(&mirrored, pw, height)?;
         let (cw, n) = (p.out_w, p.out_w * p.out_h);
         for k in 0..HEADS {
             let sign = if k == 3 { -1.0 } else { 1.0 };
@@ -256,9 +256,9 @@ impl LearnedModel {
             }
         }
         if let (Some(f), Some(g)) = (p.fine.as_mut(), q.fine.as_ref()) {
-            for (a, b) in f.chunks_exact_mut(width).zip(g.chunks_exact(width)) {
+            for (a, b) in f.chunks_exact_mut(width).zip(g.chunks_exact(pw)) {
                 for (i, v) in a.iter_mut().enumerate() {
-                    *v = 0.5 * (*v + b[width - 1 - i]);
+                    *v = 0.5 * (*v + b[pw - 1 - i]);
                 }
             }
         }
