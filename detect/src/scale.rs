@@ -183,6 +183,21 @@ pub fn mask_back_rle(mask: &[u8], nw: usize, nh: usize, width: usize, height: us
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
     let xs: Vec<usize> = (0..width).map(|x| (((x as f64 + 0.5) * sx - 0.5).round().max(0.0) as usize).min(nw - 1)).collect();
     let ys: Vec<usize> = (0..height).map(|y| (((y as f64 + 0.5) * sy - 0.5).round().max(0.0) as usize).min(nh - 1)).collect();
+    // The rows and columns of the resampled mask that hold a pixel (`r0..=r1`, `c0..=c1`):
+    // everything outside maps to runs of zeros without reading the mask.
+    let rows_set: Vec<usize> = (0..nh).filter(|&yy| mask[yy * nw..(yy + 1) * nw].iter().any(|&v| v != 0)).collect();
+    let (Some(&r0), Some(&r1)) = (rows_set.first(), rows_set.last()) else {
+        return (tubeloc_core::Rle { size: [height as u32, width as u32], counts: vec![(width * height) as u32] }, [0.0; 4]);
+    };
+    let (mut c0, mut c1) = (nw, 0);
+    for &yy in &rows_set {
+        let row = &mask[yy * nw..(yy + 1) * nw];
+        if let (Some(a), Some(b)) = (row.iter().position(|&v| v != 0), row.iter().rposition(|&v| v != 0)) {
+            (c0, c1) = (c0.min(a), c1.max(b));
+        }
+    }
+    // Original rows before / after the set rows (ys is non-decreasing).
+    let (y_lo, y_hi) = (ys.partition_point(|&yy| yy < r0), ys.partition_point(|&yy| yy <= r1));
     // Column-major runs: each original column is the resampled column xs[x] read at rows ys.
     let (mut counts, mut prev, mut run) = (Vec::new(), false, 0u32);
     let mut push = |v: bool, len: u32| {
@@ -194,15 +209,25 @@ pub fn mask_back_rle(mask: &[u8], nw: usize, nh: usize, width: usize, height: us
         run += len;
     };
     for &xx in &xs {
-        let mut y = 0;
-        while y < height {
+        if xx < c0 || xx > c1 {
+            push(false, height as u32);
+            continue;
+        }
+        if y_lo > 0 {
+            push(false, y_lo as u32);
+        }
+        let mut y = y_lo;
+        while y < y_hi {
             let yy = ys[y];
             let mut len = 1;
-            while y + len < height && ys[y + len] == yy {
+            while y + len < y_hi && ys[y + len] == yy {
                 len += 1;
             }
             push(mask[yy * nw + xx] != 0, len as u32);
             y += len;
+        }
+        if y_hi < height {
+            push(false, (height - y_hi) as u32);
         }
     }
     counts.push(run);
@@ -211,8 +236,8 @@ pub fn mask_back_rle(mask: &[u8], nw: usize, nh: usize, width: usize, height: us
     ys.iter().for_each(|&yy| row_hit[yy] = true);
     xs.iter().for_each(|&xx| col_hit[xx] = true);
     let (mut row_any, mut col_any) = (vec![false; nh], vec![false; nw]);
-    for yy in (0..nh).filter(|&yy| row_hit[yy]) {
-        for xx in (0..nw).filter(|&xx| col_hit[xx] && mask[yy * nw + xx] != 0) {
+    for yy in (r0..=r1).filter(|&yy| row_hit[yy]) {
+        for xx in (c0..=c1).filter(|&xx| col_hit[xx] && mask[yy * nw + xx] != 0) {
             row_any[yy] = true;
             col_any[xx] = true;
         }
@@ -246,8 +271,11 @@ mod tests {
             (state >> 33) as usize
         };
         for &(nw, nh, w, h) in &[(10usize, 7usize, 37usize, 23usize), (40, 30, 13, 9), (16, 16, 16, 16), (5, 50, 20, 11), (1, 1, 4, 3)] {
-            for fill in [0usize, 1, 30, 100] {
-                let mask: Vec<u8> = (0..nw * nh).map(|_| (next() % 100 < fill) as u8).collect();
+            // Random fills, and a compact blob away from the borders (rows and columns outside
+            // it are skipped without reading the mask).
+            for fill in [0usize, 1, 30, 100, 1000] {
+                let blob = |i: usize| (i % nw) * 3 >= nw && (i % nw) * 3 < 2 * nw && (i / nw) * 3 >= nh && (i / nw) * 3 < 2 * nh;
+                let mask: Vec<u8> = (0..nw * nh).map(|i| if fill == 1000 { blob(i) as u8 } else { (next() % 100 < fill) as u8 }).collect();
                 let back = mask_back(&mask, nw, nh, w, h);
                 let bm = BinaryMask { width: w, height: h, data: back };
                 let (rle, bbox) = mask_back_rle(&mask, nw, nh, w, h);

@@ -432,7 +432,10 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             t_rig_cam: cam.t_rig_cam,
             tubes,
             min_probability: setup.settings.calibration.threshold,
-            run: started.map(|t0| serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb()})),
+            run: started.map(|t0| {
+                let t = &found.timings;
+                serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb(), "detect_s": t.detect_s, "refine_s": t.refine_s, "grasp_ms": t.grasp_ms, "locate_s": t.total_s})
+            }),
             camera_model: &cam.model,
             detections: &found.detections,
         };

@@ -25,6 +25,7 @@
 use super::error::LearnedError;
 use super::model::{LearnedModel, Prediction};
 use super::net::{bilinear4_at, HEADS, LENGTH_SCALE, STRIDE};
+use rayon::prelude::*;
 use tubeloc_core::{AxisSeed, Plane};
 
 /// Thresholds of the decoder (JSON: missing fields keep their defaults).
@@ -177,8 +178,8 @@ pub fn decode(pred: &Prediction, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
     let (out, ow, oh, width, height) = (&pred.planes[..], pred.out_w, pred.out_h, pred.width, pred.height);
     let n = ow * oh;
     assert_eq!(out.len(), HEADS * n, "output plane size");
-    let fg: Vec<f32> = out[..n].iter().map(|&v| sigmoid(v)).collect();
-    let heat: Vec<f32> = out[n..2 * n].iter().map(|&v| sigmoid(v)).collect();
+    let fg: Vec<f32> = out[..n].par_iter().map(|&v| sigmoid(v)).collect();
+    let heat: Vec<f32> = out[n..2 * n].par_iter().map(|&v| sigmoid(v)).collect();
     // Peaks.
     let mut peaks = Vec::new();
     for y in 0..oh {

@@ -29,6 +29,7 @@ pub use error::LearnedError;
 pub use model::{LearnedModel, ModelMeta, Prediction, FORMAT_VERSION};
 pub use net::{NetConfig, NetOutput};
 pub use preprocess::Preprocess;
+use rayon::prelude::*;
 pub use shipped::shipped_model;
 pub use soup::weight_average;
 pub use train::{TrainConfig, Trainer};
@@ -71,7 +72,7 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
     let found = decode(&predict_for(model, &scaled, nw, nh, cfg)?, cfg);
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
     Ok(found
-        .into_iter()
+        .into_par_iter()
         .filter_map(|i| {
             let small = i.mask.to_mask().ok()?;
             let (mask, bbox) = crate::scale::mask_back_rle(&small.data, nw, nh, width, height);

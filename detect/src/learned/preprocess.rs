@@ -78,11 +78,25 @@ impl Preprocess {
 /// [`Preprocess::GrayNorm`] of interleaved RGB8: luminance `0.299 R + 0.587 G + 0.114 B`,
 /// percentiles from a 1024-bin histogram.
 pub fn gray_norm(rgb: &[u8], n: usize) -> Vec<f32> {
-    let lum: Vec<f32> = rgb.chunks_exact(3).take(n).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0).collect();
-    let mut hist = [0u32; 1024];
-    for &v in &lum {
-        hist[((v * 1023.0).round() as usize).min(1023)] += 1;
-    }
+    use rayon::prelude::*;
+    let lum: Vec<f32> = rgb[..3 * n.min(rgb.len() / 3)].par_chunks_exact(3).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0).collect();
+    // Per-chunk histograms summed (counts are integers: the same whatever the split).
+    let hist = lum
+        .par_chunks(1 << 16)
+        .map(|chunk| {
+            let mut h = [0u32; 1024];
+            for &v in chunk {
+                h[((v * 1023.0).round() as usize).min(1023)] += 1;
+            }
+            h
+        })
+        .reduce(
+            || [0u32; 1024],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
     let pct = |q: f64| -> f32 {
         let target = (q * lum.len() as f64).ceil().max(1.0) as u64;
         let mut acc = 0u64;
@@ -96,7 +110,9 @@ pub fn gray_norm(rgb: &[u8], n: usize) -> Vec<f32> {
     };
     let (p2, p50, p98) = (pct(0.02), pct(0.5), pct(0.98));
     let inv = 1.0 / (0.5 * (p98 - p2).max(0.02));
-    lum.into_iter().map(|v| ((v - p50) * inv).clamp(-6.0, 6.0)).collect()
+    let mut lum = lum;
+    lum.par_iter_mut().for_each(|v| *v = ((*v - p50) * inv).clamp(-6.0, 6.0));
+    lum
 }
 
 /// Mean over a `(2r+1)^2` window with clamped (replicated) borders; separable running sums.
