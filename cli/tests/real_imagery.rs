@@ -82,6 +82,20 @@ fn bench_real_stage_runs_at_a_small_size() {
     }
     assert_eq!(summary["negatives"]["frames"], 2);
     assert!(summary["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
+    // Line2D beside the learned detector: the default library built once in the stage's
+    // folder, every frame resampled to its scale.
+    assert!(out.join("real/line2d/templates.tlt").exists());
+    for set in ["grey", "colour"] {
+        let v = &summary["line2d"][set];
+        assert!(v["images"].as_u64().unwrap() >= 1, "line2d {set}: {v}");
+        let ap = v["ap50"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&ap), "line2d {set}: AP50 {ap}");
+        assert!(v["ms_per_image"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(summary["line2d"]["negatives"]["frames"], 2);
+    assert!(summary["line2d"]["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
+    let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
+    assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
 }
 
 #[test]
