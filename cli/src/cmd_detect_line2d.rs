@@ -139,7 +139,12 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
     for (id, path) in images {
         let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let dets = det.detect(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref())).with_context(|| format!("detecting in {}", path.display()))?;
+        let cam = cameras.get(id).or(camera.as_ref());
+        if !det.resolvable(cam) {
+            let (sx, sy) = det.scale_for(cam);
+            bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
+        }
+        let dets = det.detect(img.as_raw(), w, h, cam).with_context(|| format!("detecting in {}", path.display()))?;
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }

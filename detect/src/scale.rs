@@ -183,7 +183,7 @@ pub fn resample_rgb8(rgb: &[u8], width: usize, height: usize, nw: usize, nh: usi
 /// (`c' = (c + ½) s - ½`), distortion unchanged (it acts on normalized coordinates).
 pub fn scaled_camera(cam: &CameraModel, width: usize, height: usize, nw: usize, nh: usize) -> CameraModel {
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
-    CameraModel { width: nw as u32, height: nh as u32, fx: cam.fx * sx, fy: cam.fy * sy, cx: (cam.cx + 0.5) * sx - 0.5, cy: (cam.cy + 0.5) * sy - 0.5, distortion: cam.distortion.clone() }
+    CameraModel { width: nw as u32, height: nh as u32, fx: cam.fx * sx, fy: cam.fy * sy, cx: (cam.cx + 0.5) * sx - 0.5, cy: (cam.cy + 0.5) * sy - 0.5, distortion: cam.distortion }
 }
 
 /// Maps a mask found on a `nw x nh` resampled image back to the original `width x height`:

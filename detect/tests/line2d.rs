@@ -76,6 +76,10 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     let dets = det.detect(&img, w, h, None).unwrap();
     assert!(!dets.is_empty(), "no detection");
     let best = &dets[0];
+    // The clutter verifier (on by default) keeps the rendered tube above its threshold.
+    let thr = MatchParams::default().verifier.unwrap().threshold;
+    let p = best.probability.expect("verifier probability");
+    assert!(p >= thr && best.score == p, "probability {p} below the threshold {thr}");
     let k = params.camera;
     let c = t_true.translation();
     let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);

@@ -241,6 +241,7 @@ impl Acc {
 /// pixel at `(x, y)` in the `w x h` luminance image `luma`, given its Line2D similarity in
 /// percent. `None` when fewer than a quarter of the inside or ring samples fall inside the
 /// image.
+#[allow(clippy::too_many_arguments)]
 pub fn features(luma: &[u8], w: usize, h: usize, t: &Template, s: &TemplateSamples, x: i32, y: i32, similarity: f32) -> Option<Features> {
     let place = |dx: i16, dy: i16| -> Option<(usize, usize)> {
         let (xx, yy) = (x + dx as i32, y + dy as i32);

@@ -42,13 +42,18 @@ impl Line2dDetector {
     /// [`Line2dDetector::scale_for`] per axis: a tube at range `r` then looks like the
     /// library's templates at range `r`), matched there, and the detections are mapped back to
     /// this image (masks and boxes at its size, centres by [`crate::scale::point_back`], coarse
-    /// poses in `camera`; see [`Line2dDetection::from_match_scaled`]).
+    /// poses in `camera`; see [`Line2dDetection::from_match_scaled`]). An image that would have
+    /// to be enlarged by more than [`MatchParams::max_upsample`] is not searched (no detection;
+    /// see [`Line2dDetector::resolvable`]).
     pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
         let cam = self.camera_for(width, height, camera)?;
         if rgb.len() != width * height * 3 {
             return Err(Line2dError::invalid("image", format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
         }
         let (sx, sy) = self.scale_for(camera);
+        if !self.resolvable(camera) {
+            return Ok(Vec::new());
+        }
         if sx == 1.0 && sy == 1.0 {
             return self.detect_native(rgb, width, height, &cam, 1.0, 1.0, width, height);
         }
@@ -69,6 +74,13 @@ impl Line2dDetector {
             return (1.0, 1.0);
         }
         ((k.fx / c.fx).clamp(0.125, 8.0), (k.fy / c.fy).clamp(0.125, 8.0))
+    }
+
+    /// Whether an image of `camera` is searched: its resampling factors to the library's scale
+    /// ([`Line2dDetector::scale_for`]) are at most [`MatchParams::max_upsample`].
+    pub fn resolvable(&self, camera: Option<&CameraModel>) -> bool {
+        let (sx, sy) = self.scale_for(camera);
+        sx <= self.params.max_upsample && sy <= self.params.max_upsample
     }
 
     /// Matching, verification, NMS, re-ranking and the clutter verifier on an image already at

@@ -68,6 +68,11 @@ pub struct MatchParams {
     /// more than this fraction of the smaller of the two masks is dropped (a second NMS, in
     /// probability order, for partial matches on one tube that the first NMS keeps apart).
     pub verified_overlap: f32,
+    /// Largest resampling factor by which an image is enlarged to the library's scale. An
+    /// image whose camera needs more (its pixels are over this many times coarser than the
+    /// library's: tubes at the library's ranges span too few pixels to carry their contour,
+    /// e.g. Navcam frames binned 4x4 on board) is not searched and gives no detection.
+    pub max_upsample: f64,
 }
 
 impl Default for MatchParams {
@@ -87,6 +92,7 @@ impl Default for MatchParams {
             max_candidates: MAX_CANDIDATES,
             verifier: Some(Verifier::shipped()),
             verified_overlap: 0.5,
+            max_upsample: 2.0,
         }
     }
 }
