@@ -261,6 +261,25 @@ mod tests {
         }
     }
 
+    #[test]
+    fn ring_samples_are_split_into_the_two_long_sides_and_the_ends() {
+        let t = rect_template(40, 10);
+        let s = template_samples(&t, &VerifyParams { samples: 400, ..VerifyParams::default() });
+        assert_eq!(s.side.len(), s.ring.len());
+        let (mut top, mut bottom) = (None, None);
+        for (&(x, y), &side) in s.ring.iter().zip(&s.side) {
+            if x < 0 || x >= 40 {
+                assert_eq!(side, 2, "({x},{y}) beyond an end");
+            } else if (6..34).contains(&x) {
+                // Samples along the long sides, well inside the 80 % of the half-length.
+                let slot = if y < 0 { &mut top } else { &mut bottom };
+                assert_ne!(side, 2, "({x},{y}) on a long side");
+                assert_eq!(*slot.get_or_insert(side), side, "one side, one label");
+            }
+        }
+        assert!(top.is_some() && bottom.is_some() && top != bottom);
+    }
+
     /// The separable square morphology equals the definition: the brute-force Chebyshev
     /// distance from each pixel to the nearest pixel of the other value, on random blobs.
     #[test]
