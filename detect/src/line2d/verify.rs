@@ -268,7 +268,7 @@ mod tests {
         assert_eq!(s.side.len(), s.ring.len());
         let (mut top, mut bottom) = (None, None);
         for (&(x, y), &side) in s.ring.iter().zip(&s.side) {
-            if x < 0 || x >= 40 {
+            if !(0..40).contains(&x) {
                 assert_eq!(side, 2, "({x},{y}) beyond an end");
             } else if (6..34).contains(&x) {
                 // Samples along the long sides, well inside the 80 % of the half-length.
