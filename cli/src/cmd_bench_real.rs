@@ -10,6 +10,9 @@
 //!     training or choosing settings): learned detections kept at the calibration's
 //!     threshold, under an assumed camera per frame kind (grey Navcam: 45 degree field of view,
 //!     1.9 m high, 30 degrees down; colour: the mast view).
+//! (c) Line2D on the same composites and negatives: the default template library built once
+//!     into `<out>/real/line2d/templates.tlt`, every frame resampled to its pixel scale, the
+//!     shipped clutter verifier at its threshold; AP50 / AR, false detections per frame, time.
 //! Results go to `<out>/real/report.md` and `<out>/real/summary.json`.
 
 use anyhow::{bail, Context, Result};
@@ -121,25 +124,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
 
 /// Learned detections kept at the threshold on each real negative frame.
 fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
-    let dir = data.join("negatives_val");
-    let mut paths: Vec<PathBuf> = Vec::new();
-    for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
-        let sub = sub?.path();
-        if sub.is_dir() {
-            for f in std::fs::read_dir(&sub)? {
-                let f = f?.path();
-                if f.extension().is_some_and(|e| e == "png" || e == "jpg" || e == "jpeg") {
-                    paths.push(f);
-                }
-            }
-        }
-    }
-    paths.sort();
-    if let Some(n) = frames {
-        // Spread the subset over the folders.
-        let step = (paths.len() as f64 / n.max(1) as f64).max(1.0);
-        paths = (0..n.min(paths.len())).map(|i| paths[(i as f64 * step) as usize].clone()).collect();
-    }
+    let paths = negative_paths(data, frames)?;
     let mut settings = tubeloc_pipeline::LocatorSettings::default();
     settings.calibration = cal.clone();
     let mut per_frame = Vec::new();
@@ -166,6 +151,107 @@ fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &
     Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "per_frame": per_frame}))
 }
 
+/// The `negatives_val` frames (all, or `frames` spread over the folders), sorted.
+fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
+    let dir = data.join("negatives_val");
+    let mut paths: Vec<PathBuf> = Vec::new();
+    for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
+        let sub = sub?.path();
+        if sub.is_dir() {
+            for f in std::fs::read_dir(&sub)? {
+                let f = f?.path();
+                if f.extension().is_some_and(|e| e == "png" || e == "jpg" || e == "jpeg") {
+                    paths.push(f);
+                }
+            }
+        }
+    }
+    paths.sort();
+    if let Some(n) = frames {
+        // Spread the subset over the folders.
+        let step = (paths.len() as f64 / n.max(1) as f64).max(1.0);
+        paths = (0..n.min(paths.len())).map(|i| paths[(i as f64 * step) as usize].clone()).collect();
+    }
+    Ok(paths)
+}
+
+/// The Line2D library of the real stage: the default library (`tubeloc templates build` at its
+/// defaults: the paper's camera at half resolution, 1-4 m), built once into
+/// `<out>/real/line2d/templates.tlt`; every real frame is resampled to its pixel scale.
+fn line2d_library(dir: &Path) -> Result<PathBuf> {
+    let lib = dir.join("line2d").join("templates.tlt");
+    if !lib.exists() {
+        std::fs::create_dir_all(lib.parent().unwrap_or(dir))?;
+        let camera = tubeloc_detect::line2d::LibraryParams::default_camera();
+        crate::cmd_templates::build_for_camera(&camera, tubeloc_detect::line2d::ViewParams::default(), &lib)?;
+    }
+    Ok(lib)
+}
+
+/// Line2D options at their defaults (shipped verifier and threshold) with library `lib`.
+fn line2d_opts(lib: &Path) -> Result<crate::cmd_detect_line2d::Line2dOpts> {
+    let mut opts = crate::cmd_detect::line2d_defaults();
+    opts.templates = Some(lib.to_path_buf());
+    Ok(opts)
+}
+
+/// Line2D on a composite set (each image's own camera, resampled to the library's scale):
+/// COCO segm AP50 / AR, false detections per image, time per image.
+fn line2d_eval(set: &Path, lib: &Path, out: &Path) -> Result<Value> {
+    std::fs::create_dir_all(out)?;
+    let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
+    let cameras = crate::cmd_detect_learned::dataset_cameras(set)?;
+    let opts = line2d_opts(lib)?;
+    // Load the library outside the timing.
+    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(&opts)?;
+    let mut dets = Vec::new();
+    let mut ms = 0.0;
+    for (id, path) in &images {
+        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let t = Instant::now();
+        let found = det.detect(img.as_raw(), w, h, cameras.get(id))?;
+        ms += t.elapsed().as_secs_f64() * 1e3;
+        dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
+    }
+    let path = out.join("detections.json");
+    files::write_json(&path, &dets)?;
+    let gt = CocoDataset::load(&set.join("annotations.json"))?;
+    let dt = tubeloc_core::coco::load_results(&path, &gt)?;
+    let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
+    let r = ev.evaluate();
+    let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
+    let n = gt.images.len().max(1) as f64;
+    Ok(json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64}))
+}
+
+/// Line2D detections (default threshold) on each real negative frame, under the same assumed
+/// cameras as the learned detector's negatives.
+fn line2d_negatives(data: &Path, lib: &Path, frames: Option<usize>) -> Result<Value> {
+    let paths = negative_paths(data, frames)?;
+    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(&line2d_opts(lib)?)?;
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+    let mut per_frame = Vec::new();
+    let mut ms = 0.0;
+    for p in &paths {
+        let image = image::open(p).with_context(|| format!("reading {}", p.display()))?;
+        let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
+        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
+        let rgb = image.to_rgb8();
+        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+        let t = Instant::now();
+        let found = det.detect(rgb.as_raw(), w, h, Some(&view.camera))?;
+        let dt = t.elapsed().as_secs_f64() * 1e3;
+        ms += dt;
+        let (sx, sy) = det.scale_for(Some(&view.camera));
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d.score).collect::<Vec<_>>()}));
+    }
+    let n = per_frame.len().max(1) as f64;
+    let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
+    let max = per_frame.iter().filter_map(|f| f["kept"].as_u64()).max().unwrap_or(0);
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
+}
+
 /// Runs the real stage into `<out>/real`; returns the report's markdown section.
 pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     if !stage.data.join("MANIFEST.tsv").exists() {
@@ -183,7 +269,14 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
     // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
-    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg, "grasp_grey": grasp});
+    // Line2D: the default library, every frame resampled to its scale, shipped verifier.
+    let lib = line2d_library(&dir)?;
+    let l2_grey = line2d_eval(&grey_set, &lib, &dir.join("line2d_grey"))?;
+    let l2_colour = line2d_eval(&colour_set, &lib, &dir.join("line2d_colour"))?;
+    let l2_neg = line2d_negatives(&stage.data, &lib, stage.frames)?;
+    let threshold = tubeloc_detect::line2d::Verifier::shipped().threshold;
+    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg, "grasp_grey": grasp,
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -205,9 +298,31 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         )
         .ok();
     }
+    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
+        writeln!(
+            md,
+            "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.2} false / image | - |",
+            v["images"],
+            v["tubes"],
+            v["ap50"].as_f64().unwrap_or(f64::NAN),
+            v["ar"].as_f64().unwrap_or(f64::NAN),
+            v["ms_per_image"].as_f64().unwrap_or(f64::NAN),
+            v["false_per_image"].as_f64().unwrap_or(f64::NAN)
+        )
+        .ok();
+    }
+    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), detections kept at the shipped clutter verifier's threshold P >= {threshold:.2}; their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\nMono refinement of the learned detections on the grey test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", grey_poses["matched"], grey_poses["truths"], f(&grey_poses["axis_deg_median"]), f(&grey_poses["axis_deg_p90"]), f(&grey_poses["across_mm_median"]), f(&grey_poses["across_mm_p90"])).ok();
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(
+        md,
+        "Line2D on the same frames (assumed cameras, resampled to the library's scale, verifier threshold {threshold:.2}): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
+        l2_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
+        l2_neg["max_per_frame"],
+        l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)
+    )
+    .ok();
     writeln!(
         md,
         "Grasp collision checks of `locate` on the grey test composites (mono: ground plane and other tubes; learned detections, each frame's own ground, tubes at or above the probability threshold):\n\n{}",

@@ -70,7 +70,7 @@ const DEFAULT_RANGE_M: &str = "1:4";
 
 /// The Line2D options at their command-line defaults (clap's own defaults, so that they
 /// cannot drift from `tubeloc detect --help`).
-fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
+pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
     use clap::{Args, FromArgMatches};
     let cmd = crate::cmd_detect_line2d::Line2dOpts::augment_args(clap::Command::new("detect").no_binary_name(true));
     let matches = cmd.try_get_matches_from(std::iter::empty::<&str>()).expect("every Line2D option has a default");

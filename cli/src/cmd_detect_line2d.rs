@@ -6,7 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_core::CameraModel;
-use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, VerifyParams};
+use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
 
 /// Line2D options of `tubeloc detect`.
 #[derive(clap::Args, Clone, Debug)]
@@ -14,7 +14,8 @@ pub struct Line2dOpts {
     /// Template library (`--method line2d`), from `tubeloc templates build`.
     #[arg(long)]
     pub templates: Option<PathBuf>,
-    /// Camera JSON of the images (coarse poses; its focal length must match the library's).
+    /// Camera JSON of the images (coarse poses; an image whose focal length differs from the
+    /// library's is resampled to the library's scale).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// Line2D detection threshold, percent of the maximal similarity.
@@ -62,6 +63,18 @@ pub struct Line2dOpts {
     /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
     #[arg(long)]
     pub no_verify: bool,
+    /// Line2D clutter verifier: JSON of fitted weights (`tubeloc templates fit-verifier`;
+    /// default: the shipped verifier, embedded in the program).
+    #[arg(long)]
+    pub verifier: Option<PathBuf>,
+    /// Line2D clutter verifier: keep detections whose probability of being a tube is at least
+    /// this (default: the verifier's own threshold, chosen on real validation composites).
+    #[arg(long, value_parser = crate::args::unit_interval_f32)]
+    pub min_probability: Option<f32>,
+    /// Line2D: no clutter verifier (the score is the radiometric verified score, nothing is
+    /// dropped by probability).
+    #[arg(long)]
+    pub no_verifier: bool,
 }
 
 impl Line2dOpts {
@@ -71,10 +84,8 @@ impl Line2dOpts {
     }
 }
 
-/// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries. The coarse
-/// pose of a detection uses the image's own camera from `cameras` (a dataset's
-/// `images[].camera`: crops have their own principal points) when present, else `--camera`.
-pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>) -> Result<Vec<serde_json::Value>> {
+/// The Line2D detector and the fallback camera (`--camera`) that `opts` describe.
+pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<CameraModel>)> {
     let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
     let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
@@ -97,14 +108,43 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
         rerank_weight: opts.rerank_contrast_weight,
         ..VerifyParams::default()
     });
-    let det = Line2dDetector::new(lib, params)?;
+    params.verifier = if opts.no_verifier {
+        None
+    } else {
+        let mut v = match &opts.verifier {
+            Some(p) => {
+                let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+                Verifier::from_json(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?
+            }
+            None => Verifier::shipped(),
+        };
+        if let Some(t) = opts.min_probability {
+            v.threshold = t;
+        }
+        Some(v)
+    };
+    Ok((Line2dDetector::new(lib, params)?, camera))
+}
+
+/// Runs Line2D on `images` (`(image_id, path)`) and returns COCO result entries. The coarse
+/// pose of a detection uses the image's own camera from `cameras` (a dataset's
+/// `images[].camera`: crops have their own principal points) when present, else `--camera`;
+/// an image whose camera's focal length differs from the library's is matched resampled to
+/// the library's scale and its detections mapped back.
+pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>) -> Result<Vec<serde_json::Value>> {
+    let (det, camera) = detector_from_opts(opts)?;
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let mut out = Vec::new();
     for (id, path) in images {
         let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let dets = det.detect(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref())).with_context(|| format!("detecting in {}", path.display()))?;
+        let cam = cameras.get(id).or(camera.as_ref());
+        if !det.resolvable(cam) {
+            let (sx, sy) = det.scale_for(cam);
+            bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
+        }
+        let dets = det.detect(img.as_raw(), w, h, cam).with_context(|| format!("detecting in {}", path.display()))?;
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }

@@ -13,6 +13,9 @@ use tubeloc_detect::line2d::{LibraryEstimate, LibraryParams, TemplateLibrary, Vi
 pub enum TemplatesCmd {
     /// Render the tube model from many viewpoints and write a template library (.tlt).
     Build(BuildArgs),
+    /// Fit the Line2D clutter verifier on training composites and choose its threshold on
+    /// validation composites (writes the verifier JSON).
+    FitVerifier(Box<crate::cmd_line2d_verifier::FitArgs>),
     /// Print a summary of a template library.
     Info {
         /// Library file.
@@ -146,6 +149,7 @@ fn check_size(est: &LibraryEstimate, max_templates: usize, max_memory_gib: f64) 
 pub fn run(args: TemplatesArgs) -> Result<()> {
     match args.cmd {
         TemplatesCmd::Build(a) => build(a),
+        TemplatesCmd::FitVerifier(a) => crate::cmd_line2d_verifier::run(*a),
         TemplatesCmd::Info { path } => {
             let lib = TemplateLibrary::load(&path).with_context(|| format!("reading {}", path.display()))?;
             let p = &lib.params;

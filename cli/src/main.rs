@@ -15,6 +15,7 @@ mod cmd_detect;
 mod cmd_detect_learned;
 mod cmd_detect_line2d;
 mod cmd_eval;
+mod cmd_line2d_verifier;
 mod cmd_locate;
 mod cmd_refine;
 mod cmd_stereo;

@@ -157,6 +157,35 @@ pub fn resample_planes(src: &[f32], channels: usize, width: usize, height: usize
     out
 }
 
+/// [`resample_planes`] of an interleaved RGB8 image from `width x height` to `nw x nh`,
+/// rounded back to interleaved RGB8.
+pub fn resample_rgb8(rgb: &[u8], width: usize, height: usize, nw: usize, nh: usize) -> Vec<u8> {
+    let n = width * height;
+    let mut planes = vec![0f32; 3 * n];
+    for (i, px) in rgb.chunks_exact(3).enumerate() {
+        for c in 0..3 {
+            planes[c * n + i] = px[c] as f32;
+        }
+    }
+    let out = resample_planes(&planes, 3, width, height, nw, nh);
+    let m = nw * nh;
+    let mut rgb_out = vec![0u8; 3 * m];
+    for (i, px) in rgb_out.chunks_exact_mut(3).enumerate() {
+        for c in 0..3 {
+            px[c] = out[c * m + i].round().clamp(0.0, 255.0) as u8;
+        }
+    }
+    rgb_out
+}
+
+/// The camera of a `width x height` image resampled to `nw x nh`: focal lengths times
+/// `(sx, sy) = (nw / width, nh / height)`, principal point mapped as pixel centres
+/// (`c' = (c + ½) s - ½`), distortion unchanged (it acts on normalized coordinates).
+pub fn scaled_camera(cam: &CameraModel, width: usize, height: usize, nw: usize, nh: usize) -> CameraModel {
+    let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
+    CameraModel { width: nw as u32, height: nh as u32, fx: cam.fx * sx, fy: cam.fy * sy, cx: (cam.cx + 0.5) * sx - 0.5, cy: (cam.cy + 0.5) * sy - 0.5, distortion: cam.distortion }
+}
+
 /// Maps a mask found on a `nw x nh` resampled image back to the original `width x height`:
 /// each original pixel takes the mask value at its centre's position in the resampled image
 /// (nearest), so the mask keeps its area up to the resampling.

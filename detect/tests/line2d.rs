@@ -76,6 +76,10 @@ fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     let dets = det.detect(&img, w, h, None).unwrap();
     assert!(!dets.is_empty(), "no detection");
     let best = &dets[0];
+    // The clutter verifier (on by default) keeps the rendered tube above its threshold.
+    let thr = MatchParams::default().verifier.unwrap().threshold;
+    let p = best.probability.expect("verifier probability");
+    assert!(p >= thr && best.score == p, "probability {p} below the threshold {thr}");
     let k = params.camera;
     let c = t_true.translation();
     let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
@@ -326,4 +330,54 @@ fn mesh_silhouettes_match_the_parametric_model_and_build_a_library() {
         let rel = (m.area as f64 - r.area as f64).abs() / r.area as f64;
         assert!(rel < 0.25, "template {}: mesh area {} vs model {}", m.id, m.area, r.area);
     }
+}
+
+/// The same scene seen by a camera of another focal length (and image size) is resampled to
+/// the library's scale and gives the same detection mapped back: centre within 2 px (of the
+/// smaller image), box within 3 px, coarse pose within 0.05 m and 6 degrees of the native one,
+/// mask at the smaller image's size.
+#[test]
+fn a_camera_of_another_focal_length_is_matched_at_the_library_scale() {
+    let (w, h) = (512usize, 384usize);
+    let mut params = small_params(1.8, 2.2, 64);
+    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
+    let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.04));
+    let det = Line2dDetector::new(lib, MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
+    let k = params.camera;
+    let native_cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
+    let native = det.detect(&scene(w, h, &k, &t_true, 7), w, h, Some(&native_cam)).unwrap();
+    assert!(!native.is_empty());
+    assert_eq!(native[0].scale, 1.0);
+    // A camera with 0.7 times the focal length, on an image 0.7 times the size.
+    let s = 0.7;
+    let (w2, h2) = ((w as f64 * s).round() as usize, (h as f64 * s).round() as usize);
+    let (sx, sy) = (w2 as f64 / w as f64, h2 as f64 / h as f64);
+    let k2 = Pinhole { fx: k.fx * sx, fy: k.fy * sy, cx: (k.cx + 0.5) * sx - 0.5, cy: (k.cy + 0.5) * sy - 0.5 };
+    let cam2 = tubeloc_core::CameraModel { width: w2 as u32, height: h2 as u32, fx: k2.fx, fy: k2.fy, cx: k2.cx, cy: k2.cy, distortion: Default::default() };
+    let (fsx, fsy) = det.scale_for(Some(&cam2));
+    assert!((fsx - 1.0 / sx).abs() < 1e-9 && (fsy - 1.0 / sy).abs() < 1e-9, "{fsx} {fsy}");
+    let scaled = det.detect(&scene(w2, h2, &k2, &t_true, 7), w2, h2, Some(&cam2)).unwrap();
+    assert!(!scaled.is_empty());
+    let (a, b) = (&native[0], &scaled[0]);
+    assert!((b.scale - 1.0 / s).abs() < 0.01, "scale {}", b.scale);
+    assert_eq!(b.mask.size, [h2 as u32, w2 as u32]);
+    let c_native = [(a.centre_px[0] + 0.5) * sx - 0.5, (a.centre_px[1] + 0.5) * sy - 0.5];
+    let e = ((b.centre_px[0] - c_native[0]).powi(2) + (b.centre_px[1] - c_native[1]).powi(2)).sqrt();
+    assert!(e <= 2.0, "centre {:?} vs native mapped {:?}: {e:.2} px", b.centre_px, c_native);
+    let box_native = [a.bbox[0] * sx, a.bbox[1] * sy, a.bbox[2] * sx, a.bbox[3] * sy];
+    for i in 0..4 {
+        assert!((b.bbox[i] - box_native[i]).abs() <= 3.0, "box {:?} vs native scaled {box_native:?}", b.bbox);
+    }
+    assert!((b.mask.area() as f64 - a.mask.area() as f64 * sx * sy).abs() <= 0.25 * a.mask.area() as f64 * sx * sy, "mask areas {} vs {}", b.mask.area(), a.mask.area());
+    let dt = (b.t_cam_tube.translation() - a.t_cam_tube.translation()).norm();
+    let (za, zb) = (a.t_cam_tube.rotation().column(2).into_owned(), b.t_cam_tube.rotation().column(2).into_owned());
+    let ang = za.angle(&zb).min((-za).angle(&zb)).to_degrees();
+    assert!(dt <= 0.05 && ang <= 6.0, "pose differs by {dt:.3} m, {ang:.1} deg");
+    // The coarse pose is consistent with the image's own camera: its centre projects onto the
+    // detection's centre pixel.
+    let c = b.t_cam_tube.translation();
+    let (u, v) = (k2.fx * c.x / c.z + k2.cx, k2.fy * c.y / c.z + k2.cy);
+    assert!((u - b.centre_px[0]).abs() < 0.5 && (v - b.centre_px[1]).abs() < 0.5, "pose centre ({u:.1}, {v:.1}) vs {:?}", b.centre_px);
 }

@@ -3,6 +3,7 @@
 //! ([`crate::line2d::verify`]), non-maximum suppression, re-ranking within each cluster, and
 //! the detections with their coarse poses ([`crate::line2d::detection`]).
 
+use crate::line2d::classify::features;
 use crate::line2d::detection::Line2dDetection;
 use crate::line2d::matching::{match_all, nms_clusters, prepare_image, rerank_with, MatchParams, RawMatch, MAX_NMS_INPUT};
 use crate::line2d::template::TemplateLibrary;
@@ -36,24 +37,73 @@ impl Line2dDetector {
 
     /// Detects tubes in an interleaved RGB8 image. `camera` gives the intrinsics of this image
     /// (for the coarse pose); without it the library's focal lengths and the image centre are
-    /// used. The camera's focal length must match the library's within 2 percent.
+    /// used. When the camera's focal lengths differ from the library's by more than 2 percent
+    /// the image is first resampled to the library's pixel scale (factor
+    /// [`Line2dDetector::scale_for`] per axis: a tube at range `r` then looks like the
+    /// library's templates at range `r`), matched there, and the detections are mapped back to
+    /// this image (masks and boxes at its size, centres by [`crate::scale::point_back`], coarse
+    /// poses in `camera`; see [`Line2dDetection::from_match_scaled`]). An image that would have
+    /// to be enlarged by more than [`MatchParams::max_upsample`] is not searched (no detection;
+    /// see [`Line2dDetector::resolvable`]).
     pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
         let cam = self.camera_for(width, height, camera)?;
+        if rgb.len() != width * height * 3 {
+            return Err(Line2dError::invalid("image", format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
+        }
+        let (sx, sy) = self.scale_for(camera);
+        if !self.resolvable(camera) {
+            return Ok(Vec::new());
+        }
+        if sx == 1.0 && sy == 1.0 {
+            return self.detect_native(rgb, width, height, &cam, 1.0, 1.0, width, height);
+        }
+        let (nw, nh) = (((width as f64 * sx).round() as usize).max(1), ((height as f64 * sy).round() as usize).max(1));
+        let small = crate::scale::resample_rgb8(rgb, width, height, nw, nh);
+        self.detect_native(&small, nw, nh, &cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height)
+    }
+
+    /// The resampling factors `(sx, sy)` that bring an image of `camera` to the library's
+    /// pixel scale: `f_library / f_image` per axis, or `(1, 1)` without a camera or when both
+    /// focal lengths are within 2 percent of the library's. Factors are clamped to
+    /// `[1/8, 8]`.
+    pub fn scale_for(&self, camera: Option<&CameraModel>) -> (f64, f64) {
+        let k = &self.library.params.camera;
+        let Some(c) = camera else { return (1.0, 1.0) };
+        let rel = ((c.fx - k.fx) / k.fx).abs().max(((c.fy - k.fy) / k.fy).abs());
+        if rel <= 0.02 || !(c.fx > 0.0 && c.fy > 0.0) {
+            return (1.0, 1.0);
+        }
+        ((k.fx / c.fx).clamp(0.125, 8.0), (k.fy / c.fy).clamp(0.125, 8.0))
+    }
+
+    /// Whether an image of `camera` is searched: its resampling factors to the library's scale
+    /// ([`Line2dDetector::scale_for`]) are at most [`MatchParams::max_upsample`].
+    pub fn resolvable(&self, camera: Option<&CameraModel>) -> bool {
+        let (sx, sy) = self.scale_for(camera);
+        sx <= self.params.max_upsample && sy <= self.params.max_upsample
+    }
+
+    /// Matching, verification, NMS, re-ranking and the clutter verifier on an image already at
+    /// the library's scale (`w x h`, resampled from the original `ow x oh` image of camera
+    /// `cam` by `(sx, sy)`); detections in original pixels.
+    #[allow(clippy::too_many_arguments)]
+    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize) -> Result<Vec<Line2dDetection>, Line2dError> {
         let img = prepare_image(rgb, width, height, &self.params)?;
         let raw = match_all(&img, &self.library, &self.params);
+        let vp = self.params.verify.unwrap_or_default();
+        let need_luma = self.params.verify.is_some() || self.params.verifier.is_some();
+        let luma = need_luma.then(|| luminance(rgb));
         // Verified scores (percent scale, so that NMS and re-ranking margins keep their units);
         // `sims` keeps each match's Line2D similarity and contrast.
         let mut sims = std::collections::HashMap::new();
-        let raw = match &self.params.verify {
-            None => raw,
-            Some(v) => {
-                let luma = luminance(rgb);
+        let raw = match (&self.params.verify, &luma) {
+            (Some(v), Some(luma)) => {
                 let mut scored: Vec<(RawMatch, f32, Option<f32>)> = raw
                     .into_par_iter()
                     .take(MAX_NMS_INPUT * 4)
                     .filter_map(|m| {
                         let t = &self.library.templates[m.template as usize];
-                        let c = contrast(&luma, width, height, self.samples.get(t, v), m.x, m.y);
+                        let c = contrast(luma, width, height, self.samples.get(t, v), m.x, m.y);
                         verified_score(m.score, c, v).map(|s| (RawMatch { score: 100.0 * s / (1.0 + v.contrast_weight), ..m }, m.score, c))
                     })
                     .collect();
@@ -66,12 +116,12 @@ impl Line2dDetector {
                     })
                     .collect()
             }
+            _ => raw,
         };
         let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
-        let luma = self.params.verify.is_some().then(|| luminance(rgb));
-        Ok(clusters
+        let mut dets: Vec<Line2dDetection> = clusters
             .iter()
-            .map(|c| {
+            .filter_map(|c| {
                 // Verification picks the cluster (where); the Line2D similarity, re-ranked,
                 // picks the template (pose) within it.
                 let mut by_sim: Vec<RawMatch> = c.iter().map(|m| RawMatch { score: sims.get(&(m.template, m.x, m.y)).map_or(m.score, |s| s.0), ..*m }).collect();
@@ -87,32 +137,68 @@ impl Line2dDetector {
                     _ => by_sim[0],
                 };
                 let t = &self.library.templates[m.template as usize];
-                let mut d = Line2dDetection::from_match(&m, t, &cam, width, height);
+                let mut d = Line2dDetection::from_match_scaled(&m, t, cam, ow, oh, sx, sy);
                 if let (Some(v), Some(l)) = (&self.params.verify, &luma) {
                     d.score = (c[0].score / 100.0).max(0.0);
                     d.contrast = contrast(l, width, height, self.samples.get(t, v), m.x, m.y);
                 }
-                d
+                if let (Some(vf), Some(l)) = (&self.params.verifier, &luma) {
+                    let f = features(l, width, height, t, self.samples.get(t, &vp), m.x, m.y, m.score);
+                    let p = f.as_ref().map_or(0.0, |f| vf.probability(f));
+                    if p < vf.threshold {
+                        return None;
+                    }
+                    d.score = p;
+                    d.probability = Some(p);
+                    d.features = f;
+                }
+                Some(d)
             })
-            .collect())
+            .collect();
+        if self.params.verifier.is_some() {
+            dets.sort_by(|a, b| b.score.total_cmp(&a.score));
+            dets = suppress_overlapping(dets, self.params.verified_overlap);
+        }
+        Ok(dets)
     }
 
-    /// The camera used for poses: `camera`, checked against the library, or a pinhole with the
-    /// library's focal lengths centred on the image.
+    /// The camera used for poses: `camera` (any focal length: [`Line2dDetector::detect`]
+    /// resamples to the library's scale), or a pinhole with the library's focal lengths
+    /// centred on the image. A camera with a non-positive or non-finite focal length is refused.
     pub fn camera_for(&self, width: usize, height: usize, camera: Option<&CameraModel>) -> Result<CameraModel, Line2dError> {
         let k = &self.library.params.camera;
         match camera {
             Some(c) => {
-                let rel = ((c.fx - k.fx) / k.fx).abs().max(((c.fy - k.fy) / k.fy).abs());
-                if rel > 0.02 {
-                    return Err(Line2dError::invalid(
-                        "camera",
-                        format!("focal length {:.1}x{:.1} px differs from the library's {:.1}x{:.1} px by {:.0}%: rebuild the templates with this camera (tubeloc templates build --camera)", c.fx, c.fy, k.fx, k.fy, rel * 100.0),
-                    ));
+                if !(c.fx.is_finite() && c.fy.is_finite() && c.fx > 0.0 && c.fy > 0.0) {
+                    return Err(Line2dError::invalid("camera", format!("focal length {}x{} px must be positive and finite", c.fx, c.fy)));
                 }
                 Ok(c.clone())
             }
             None => Ok(CameraModel { width: width as u32, height: height as u32, fx: k.fx, fy: k.fy, cx: (width as f64 - 1.0) / 2.0, cy: (height as f64 - 1.0) / 2.0, distortion: Default::default() }),
         }
     }
+}
+
+/// Greedy suppression over detections sorted by decreasing score: a detection is dropped when
+/// the intersection of its mask with a kept detection's mask exceeds `max_overlap` times the
+/// smaller mask's area.
+fn suppress_overlapping(dets: Vec<Line2dDetection>, max_overlap: f32) -> Vec<Line2dDetection> {
+    let mut kept: Vec<Line2dDetection> = Vec::with_capacity(dets.len());
+    for d in dets {
+        let ad = d.mask.area() as f64;
+        let hit = kept.iter().any(|k| {
+            let (b, c) = (&d.bbox, &k.bbox);
+            if b[0] >= c[0] + c[2] || c[0] >= b[0] + b[2] || b[1] >= c[1] + c[3] || c[1] >= b[1] + b[3] {
+                return false;
+            }
+            let ak = k.mask.area() as f64;
+            // With `iscrowd`, the COCO IoU is intersection / area of the first mask.
+            let inter = tubeloc_core::Rle::iou(std::slice::from_ref(&d.mask), std::slice::from_ref(&k.mask), &[true])[0] * ad;
+            inter > max_overlap as f64 * ad.min(ak).max(1.0)
+        });
+        if !hit {
+            kept.push(d);
+        }
+    }
+    kept
 }

@@ -17,6 +17,7 @@
 //! wrap, vectorized 32 lanes wide), and each block is widened into `u16` totals (up to
 //! 16383 features). Rayon runs across templates.
 
+use crate::line2d::classify::Verifier;
 use crate::line2d::gradient::{downsample_rgb, quantize_rgb, GradientParams};
 use crate::line2d::response::{linearize, response_maps, spread, LinearMemories, ResponseMaps};
 use crate::line2d::template::{Template, TemplateLibrary};
@@ -59,6 +60,19 @@ pub struct MatchParams {
     /// threshold at hundreds of places (rock edges, layers); the cap bounds the fine search
     /// there and does not bind on rendered frames.
     pub max_candidates: usize,
+    /// Clutter verifier applied to each detection after NMS (None = off): its probability
+    /// becomes the score, and detections below its `threshold` are dropped
+    /// ([`crate::line2d::classify`]).
+    pub verifier: Option<Verifier>,
+    /// With the verifier: a detection whose mask overlaps a more probable detection's mask by
+    /// more than this fraction of the smaller of the two masks is dropped (a second NMS, in
+    /// probability order, for partial matches on one tube that the first NMS keeps apart).
+    pub verified_overlap: f32,
+    /// Largest resampling factor by which an image is enlarged to the library's scale. An
+    /// image whose camera needs more (its pixels are over this many times coarser than the
+    /// library's: tubes at the library's ranges span too few pixels to carry their contour,
+    /// e.g. Navcam frames binned 4x4 on board) is not searched and gives no detection.
+    pub max_upsample: f64,
 }
 
 impl Default for MatchParams {
@@ -76,6 +90,9 @@ impl Default for MatchParams {
             verify: Some(VerifyParams::default()),
             rerank_area_weight: 0.3,
             max_candidates: MAX_CANDIDATES,
+            verifier: Some(Verifier::shipped()),
+            verified_overlap: 0.5,
+            max_upsample: 2.0,
         }
     }
 }

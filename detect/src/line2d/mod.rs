@@ -18,9 +18,13 @@
 //!   across templates, non-maximum suppression.
 //! - [`verify`]: radiometric verification (bright silhouette against a ring around it)
 //!   rescoring raw matches before NMS.
+//! - [`classify`]: the clutter verifier: per-detection features (contrast against each long
+//!   side, surface texture, edge strength...) and a logistic classifier fitted on composites of
+//!   rendered tubes on real training frames; its probability is the detection score.
 //! - [`detection`]: [`Line2dDetection`] with the coarse 6D pose and COCO output.
 //! - [`detector`]: [`Line2dDetector`], the library and parameters run end to end on an image.
 
+pub mod classify;
 pub mod detection;
 pub mod detector;
 pub mod format;
@@ -34,6 +38,7 @@ pub mod template;
 pub mod verify;
 pub mod viewpoints;
 
+pub use classify::Verifier;
 pub use detection::Line2dDetection;
 pub use detector::Line2dDetector;
 pub use gradient::GradientParams;

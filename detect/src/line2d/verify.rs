@@ -48,6 +48,10 @@ pub struct TemplateSamples {
     pub inside: Vec<(i16, i16)>,
     /// Ring samples `(dx, dy)` (may be negative or beyond the template box).
     pub ring: Vec<(i16, i16)>,
+    /// Side of each ring sample relative to the silhouette's principal axis: 0 and 1 for the
+    /// two long sides (within 80 % of the half-length from the centroid along the axis),
+    /// 2 beyond the ends.
+    pub side: Vec<u8>,
 }
 
 /// Square (Chebyshev) morphology of a 0/1 mask clipped to its `w x h` box: `out[p] = 1` when
@@ -123,7 +127,49 @@ pub fn template_samples(t: &Template, p: &VerifyParams) -> TemplateSamples {
     if inside.is_empty() {
         inside = (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).filter(|&(x, y)| t.mask[y * tw + x] != 0).map(|(x, y)| (x as i16, y as i16)).collect();
     }
-    TemplateSamples { inside: thin(inside, p.samples), ring: thin(ring, p.samples) }
+    let ring = thin(ring, p.samples);
+    let side = ring_sides(t, &ring);
+    TemplateSamples { inside: thin(inside, p.samples), ring, side }
+}
+
+/// Side of each ring sample (see [`TemplateSamples::side`]), from the second moments of the
+/// template's silhouette.
+fn ring_sides(t: &Template, ring: &[(i16, i16)]) -> Vec<u8> {
+    let tw = t.levels[0].width as usize;
+    let (mut n, mut sx, mut sy) = (0f64, 0f64, 0f64);
+    for (i, _) in t.mask.iter().enumerate().filter(|(_, &v)| v != 0) {
+        n += 1.0;
+        sx += (i % tw) as f64;
+        sy += (i / tw) as f64;
+    }
+    if n == 0.0 {
+        return vec![2; ring.len()];
+    }
+    let (cx, cy) = (sx / n, sy / n);
+    let (mut mxx, mut myy, mut mxy) = (0f64, 0f64, 0f64);
+    for (i, _) in t.mask.iter().enumerate().filter(|(_, &v)| v != 0) {
+        let (dx, dy) = ((i % tw) as f64 - cx, (i / tw) as f64 - cy);
+        mxx += dx * dx;
+        myy += dy * dy;
+        mxy += dx * dy;
+    }
+    let th = 0.5 * (2.0 * mxy).atan2(mxx - myy);
+    let (ux, uy) = (th.cos(), th.sin());
+    let half = t.mask.iter().enumerate().filter(|(_, &v)| v != 0).map(|(i, _)| (((i % tw) as f64 - cx) * ux + ((i / tw) as f64 - cy) * uy).abs()).fold(0.0, f64::max);
+    ring.iter()
+        .map(|&(x, y)| {
+            let (dx, dy) = (x as f64 - cx, y as f64 - cy);
+            let along = dx * ux + dy * uy;
+            let across = -dx * uy + dy * ux;
+            if along.abs() > 0.8 * half {
+                2
+            } else if across > 0.0 {
+                0
+            } else {
+                1
+            }
+        })
+        .collect()
 }
 
 /// Per-template samples of a library, computed on first use (only templates that match).
@@ -213,6 +259,25 @@ mod tests {
             let d = (-x).max(x - 29).max(-y).max(y - 11);
             assert!((3..=6).contains(&d), "ring sample ({x},{y}) at distance {d}");
         }
+    }
+
+    #[test]
+    fn ring_samples_are_split_into_the_two_long_sides_and_the_ends() {
+        let t = rect_template(40, 10);
+        let s = template_samples(&t, &VerifyParams { samples: 400, ..VerifyParams::default() });
+        assert_eq!(s.side.len(), s.ring.len());
+        let (mut top, mut bottom) = (None, None);
+        for (&(x, y), &side) in s.ring.iter().zip(&s.side) {
+            if !(0..40).contains(&x) {
+                assert_eq!(side, 2, "({x},{y}) beyond an end");
+            } else if (6..34).contains(&x) {
+                // Samples along the long sides, well inside the 80 % of the half-length.
+                let slot = if y < 0 { &mut top } else { &mut bottom };
+                assert_ne!(side, 2, "({x},{y}) on a long side");
+                assert_eq!(*slot.get_or_insert(side), side, "one side, one label");
+            }
+        }
+        assert!(top.is_some() && bottom.is_some() && top != bottom);
     }
 
     /// The separable square morphology equals the definition: the brute-force Chebyshev
