@@ -283,33 +283,15 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "Composites of rendered tubes on real rover frames of the test sols (`tubeloc synth real --split test`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
     writeln!(md, "| set | images | tubes | AP50 | AR | ms / image | precision / recall at P >= {:.3} | ECE |", stage.calibration.threshold).ok();
     writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|").ok();
+    // One row: the columns every detector has, then the learned one's precision / recall and
+    // ECE, or Line2D's false detections per image.
+    let num = |v: &Value, key: &str| v[key].as_f64().unwrap_or(f64::NAN);
+    let row = |name: &str, v: &Value, rest: String| format!("| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {rest} |", v["images"], v["tubes"], num(v, "ap50"), num(v, "ar"), num(v, "ms_per_image"));
     for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
-        writeln!(
-            md,
-            "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.3} / {:.3} | {:.3} |",
-            v["images"],
-            v["tubes"],
-            v["ap50"].as_f64().unwrap_or(f64::NAN),
-            v["ar"].as_f64().unwrap_or(f64::NAN),
-            v["ms_per_image"].as_f64().unwrap_or(f64::NAN),
-            v["precision_at_threshold"].as_f64().unwrap_or(f64::NAN),
-            v["recall_at_threshold"].as_f64().unwrap_or(f64::NAN),
-            v["ece"].as_f64().unwrap_or(f64::NAN)
-        )
-        .ok();
+        writeln!(md, "{}", row(name, v, format!("{:.3} / {:.3} | {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold"), num(v, "ece")))).ok();
     }
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
-        writeln!(
-            md,
-            "| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {:.2} false / image | - |",
-            v["images"],
-            v["tubes"],
-            v["ap50"].as_f64().unwrap_or(f64::NAN),
-            v["ar"].as_f64().unwrap_or(f64::NAN),
-            v["ms_per_image"].as_f64().unwrap_or(f64::NAN),
-            v["false_per_image"].as_f64().unwrap_or(f64::NAN)
-        )
-        .ok();
+        writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), detections kept at the shipped clutter verifier's threshold P >= {threshold:.2}; their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
