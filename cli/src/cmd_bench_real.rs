@@ -50,6 +50,16 @@ fn negative_view(grey: bool) -> AssumedView {
     }
 }
 
+/// Writes a detector's results on the composite set `set` to `<out>/detections.json` and reads
+/// them back as COCO results with the set's ground truth, as `tubeloc eval` would.
+fn saved_results(set: &Path, out: &Path, dets: &impl serde::Serialize) -> Result<(CocoDataset, Vec<tubeloc_core::coco::CocoResult>)> {
+    let path = out.join("detections.json");
+    files::write_json(&path, dets)?;
+    let gt = CocoDataset::load(&set.join("annotations.json"))?;
+    let dt = tubeloc_core::coco::load_results(&path, &gt)?;
+    Ok((gt, dt))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<()> {
     if out.join("annotations.json").exists() {
@@ -81,10 +91,7 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
     let t = Instant::now();
     let dets = crate::cmd_detect_learned::run_learned(model, &images, &scales, &DecodeConfig::default())?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / images.len().max(1) as f64;
-    let path = out.join("detections.json");
-    files::write_json(&path, &dets)?;
-    let gt = CocoDataset::load(&set.join("annotations.json"))?;
-    let dt = tubeloc_core::coco::load_results(&path, &gt)?;
+    let (gt, dt) = saved_results(set, out, &dets)?;
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
     let probs: Vec<(f64, bool)> = ev.outcomes_at_iou50().iter().map(|&(_, s, y)| (cal.probability(s), y)).collect();
@@ -214,10 +221,7 @@ fn line2d_eval(set: &Path, lib: &Path, out: &Path) -> Result<Value> {
         ms += t.elapsed().as_secs_f64() * 1e3;
         dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
     }
-    let path = out.join("detections.json");
-    files::write_json(&path, &dets)?;
-    let gt = CocoDataset::load(&set.join("annotations.json"))?;
-    let dt = tubeloc_core::coco::load_results(&path, &gt)?;
+    let (gt, dt) = saved_results(set, out, &dets)?;
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
     let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
