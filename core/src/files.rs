@@ -289,6 +289,20 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, CoreError> {
     serde_json::from_slice(&text).map_err(|e| CoreError::parse(path, format!("invalid JSON: {e}")))
 }
 
+/// Parses TOML text into `T` and checks it with `validate`; `origin` names the source in
+/// errors (the TOML error with its line and column, or the validation error).
+pub fn parse_toml_checked<T: DeserializeOwned>(text: &str, origin: &Path, validate: impl FnOnce(&T) -> Result<(), CoreError>) -> Result<T, CoreError> {
+    let value: T = toml::from_str(text).map_err(|e| CoreError::parse(origin, e.to_string().trim_end().to_string()))?;
+    validate(&value).map_err(|e| CoreError::parse(origin, e.to_string()))?;
+    Ok(value)
+}
+
+/// Reads a TOML file into `T` and checks it ([`parse_toml_checked`]).
+pub fn read_toml_checked<T: DeserializeOwned>(path: &Path, validate: impl FnOnce(&T) -> Result<(), CoreError>) -> Result<T, CoreError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
+    parse_toml_checked(&text, path, validate)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

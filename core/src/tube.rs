@@ -81,15 +81,12 @@ impl Default for TubeModel {
 impl TubeModel {
     /// Parses and validates a model from TOML text; `origin` names the source in errors.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Self, CoreError> {
-        let m: TubeModel = toml::from_str(text).map_err(|e| CoreError::parse(origin, e.to_string()))?;
-        m.validate().map_err(|e| CoreError::parse(origin, e.to_string()))?;
-        Ok(m)
+        crate::files::parse_toml_checked(text, origin, TubeModel::validate)
     }
 
     /// Reads a model from a TOML file.
     pub fn load(path: &Path) -> Result<Self, CoreError> {
-        let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
-        Self::from_toml_str(&text, path)
+        crate::files::read_toml_checked(path, TubeModel::validate)
     }
 
     /// Checks positive finite sizes and ordered, in-range sections.

@@ -85,15 +85,12 @@ impl GripperModel {
     /// Parses and validates a gripper from TOML text; `origin` names the source in errors.
     /// Unknown and missing fields are refused by name.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Self, CoreError> {
-        let m: GripperModel = toml::from_str(text).map_err(|e| CoreError::parse(origin, e.to_string().trim_end().to_string()))?;
-        m.validate().map_err(|e| CoreError::parse(origin, e.to_string()))?;
-        Ok(m)
+        tubeloc_core::files::parse_toml_checked(text, origin, GripperModel::validate)
     }
 
     /// Reads a gripper from a TOML file.
     pub fn load(path: &Path) -> Result<Self, CoreError> {
-        let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
-        Self::from_toml_str(&text, path)
+        tubeloc_core::files::read_toml_checked(path, GripperModel::validate)
     }
 
     /// Checks that every size is a finite positive number of metres (`tip_depth` may be 0);
