@@ -7,7 +7,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tubeloc_core::{Pose, TubeModel};
 use tubeloc_detect::line2d::gradient::{downsample_rgb, quantize_rgb};
-use tubeloc_detect::line2d::matching::{coarse_scores, fine_score_at, fine_search, match_template, prepare_image};
+use tubeloc_detect::line2d::matching::{coarse_scores, fine_score_at, fine_search, fine_search_at_least, match_template, prepare_image};
 use tubeloc_detect::line2d::render::{intersect_tube, Pinhole};
 use tubeloc_detect::line2d::response::similarity;
 use tubeloc_detect::line2d::template::{LibraryParams, TemplateLibrary};
@@ -210,6 +210,21 @@ fn response_maps_and_linear_memories_equal_brute_force() {
         let (e2, x2, y2) = fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, 2);
         assert!(e2 >= even && e2 <= best.0);
         assert_eq!(e2, fine_score_at(&prep.resp0, &t, x2, y2));
+        // With a required score the search gives the same best when it reaches it, else none
+        // (rows are abandoned early only when they cannot reach it); with every second row,
+        // the same when an even row reaches it.
+        for step in [1, 2] {
+            let full = fine_search(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, step);
+            let best_even = (y_lo..=y_hi).step_by(2).flat_map(|y| (x_lo..=x_hi).map(move |x| (x, y))).map(|(x, y)| fine_score_at(&prep.resp0, &t, x, y)).max().unwrap();
+            for need in [0, full.0 / 2, best_even.saturating_sub(3), best_even, best_even + 1, full.0, full.0 + 1, 4 * t.levels[0].features.len() as u32] {
+                let got = fine_search_at_least(&prep.resp0, &t, x_lo, x_hi, y_lo, y_hi, step, need);
+                if step == 1 || best_even >= need {
+                    assert_eq!(got, (full.0 >= need).then_some(full), "need {need}, row step {step}");
+                } else {
+                    assert_eq!(got, None, "need {need} above every even row, row step {step}");
+                }
+            }
+        }
     }
     // Level 1: linearized memories at every valid grid position.
     let (rgb1, w1, h1) = downsample_rgb(&img, w, h);

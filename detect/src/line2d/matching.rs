@@ -9,8 +9,12 @@
 //! every grid position `(c T, r T)` through the linearized memories; grid positions that reach
 //! the coarse threshold and are local maxima of the template's score map become candidates.
 //! Level 0 (full resolution, spreading `t0`, default 4) then evaluates the template's level-0
-//! features at every pixel of a `(2 t1 + 5)²` window around `2 (c T, r T)` and keeps the best;
-//! a row of the window is 32 lanes scored at once from contiguous response-map bytes.
+//! features at every second row of a `(2 t1 + 5)²` window around `2 (c T, r T)`, then at the
+//! rows next to the best one, and keeps the best if it reaches the threshold; a row of the
+//! window is 32 lanes scored at once from contiguous response-map bytes. A row is abandoned
+//! as soon as its best partial sum plus [`SIM_MAX`] for every feature still to add stays below
+//! both the threshold and the best score so far (on clutter most rows stop after 24-40 of 64
+//! features).
 //!
 //! Accumulation is integer and cannot overflow: per-feature values are at most 4, so blocks of
 //! up to 63 features are summed in `u8` (`63 · 4 = 252 <= 255`, plain wrapping adds that never
@@ -58,7 +62,7 @@ pub struct MatchParams {
     /// At most this many coarse candidates per template go to the level-0 search, the best by
     /// coarse score (0 = all). On textured real frames one template reaches the coarse
     /// threshold at hundreds of places (rock edges, layers); the cap bounds the fine search
-    /// there and does not bind on rendered frames.
+    /// there. The default was chosen on validation composites (design record 0042).
     pub max_candidates: usize,
     /// Clutter verifier applied to each detection after NMS (None = off): its probability
     /// becomes the score, and detections below its `threshold` are dropped
@@ -98,7 +102,7 @@ impl Default for MatchParams {
 }
 
 /// Default [`MatchParams::max_candidates`].
-pub const MAX_CANDIDATES: usize = 128;
+pub const MAX_CANDIDATES: usize = 48;
 
 /// The precomputed image side: response maps at level 0, linearized memories at level 1.
 #[derive(Clone, Debug)]
@@ -273,7 +277,8 @@ fn fine_lanes(resp: &ResponseMaps, t: &Template, x_lo: usize, y: usize, out: &mu
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
+#[allow(clippy::too_many_arguments)]
+unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize, need: u32) -> (u32, usize, usize) {
     use std::arch::x86_64::*;
     let w = resp.width;
     let feats = &t.levels[0].features;
@@ -281,20 +286,34 @@ unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi:
     // Fast path: every 32-byte load of the window lies inside the maps.
     let max_off = feats.iter().map(|f| (y_hi + f.y as usize) * w + x_lo + f.x as usize).max().unwrap_or(0);
     if x_hi - x_lo + 1 > FINE_LANES || max_off + FINE_LANES > n_map {
-        return fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step);
+        return fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step, need);
     }
     let nx = x_hi - x_lo + 1;
     let maps: [*const u8; 8] = std::array::from_fn(|o| resp.maps[o].as_ptr());
+    // Lanes of the window (the rest hold positions outside it and must not raise a bound).
+    let lane_ids = _mm256_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31);
+    let in_window = _mm256_cmpgt_epi8(_mm256_set1_epi8(nx as i8), lane_ids);
+    let n = feats.len() as u32;
     let mut row = [0u16; FINE_LANES];
     let score_row = |y: usize, best: &mut (u32, usize, usize)| {
+        // A row that cannot reach `need`, nor the best so far, cannot hold the result.
+        let bar = need.max(best.0);
         let mut lo16 = _mm256_setzero_si256();
         let mut hi16 = _mm256_setzero_si256();
-        for block in feats.chunks(63) {
+        for (b, block) in feats.chunks(63).enumerate() {
             let mut acc = _mm256_setzero_si256();
-            for f in block {
+            for (k, f) in block.iter().enumerate() {
                 // SAFETY: offset + 32 <= n_map checked above for the largest row y_hi.
                 let ptr = maps[f.ori as usize & 7].add((y + f.y as usize) * w + x_lo + f.x as usize);
                 acc = _mm256_add_epi8(acc, _mm256_loadu_si256(ptr as *const __m256i));
+                // Early exit within the first block: the row's best partial sum plus the most
+                // the remaining features can add cannot reach `need`.
+                if b == 0 && (k + 1) % PRUNE_EVERY == 0 && k + 1 >= PRUNE_FIRST && k + 1 < block.len() {
+                    let part = max_u8(_mm256_and_si256(acc, in_window));
+                    if part + SIM_MAX * (n - k as u32 - 1) < bar {
+                        return;
+                    }
+                }
             }
             let z = _mm256_setzero_si256();
             // Widen: unpack interleaves within 128-bit lanes; undone when storing below.
@@ -308,7 +327,27 @@ unsafe fn fine_search_avx2(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi:
         _mm256_storeu_si256(row.as_mut_ptr().add(16) as *mut __m256i, b);
         keep_best(&row[..nx], x_lo, y, best);
     };
-    scan_rows(x_lo, y_lo, y_hi, row_step, score_row)
+    scan_rows(x_lo, y_lo, y_hi, row_step, need, score_row)
+}
+
+/// Features accumulated between two early-exit tests of a row in the fine search.
+const PRUNE_EVERY: usize = 8;
+
+/// Features accumulated before the first early-exit test (before it the bound rarely binds).
+const PRUNE_FIRST: usize = 24;
+
+/// Largest of the 32 unsigned bytes of `v`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn max_u8(v: std::arch::x86_64::__m256i) -> u32 {
+    use std::arch::x86_64::*;
+    let mut x = _mm_max_epu8(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    x = _mm_max_epu8(x, _mm_srli_si128(x, 8));
+    x = _mm_max_epu8(x, _mm_srli_si128(x, 4));
+    x = _mm_max_epu8(x, _mm_srli_si128(x, 2));
+    x = _mm_max_epu8(x, _mm_srli_si128(x, 1));
+    (_mm_cvtsi128_si32(x) & 0xff) as u32
 }
 
 /// Keeps in `best` the higher of it and the scores `row[i]` at `(x0 + i, y)`; ties go to the
@@ -325,14 +364,14 @@ fn keep_best(row: &[u16], x0: usize, y: usize, best: &mut (u32, usize, usize)) {
 
 /// Scores rows `y_lo..=y_hi` (every `row_step`-th) through `score_row` and returns the best
 /// `(score, x, y)`; with `row_step = 2` the two skipped rows next to the best one are scored
-/// too.
+/// too when it reaches `need`.
 #[inline(always)]
-fn scan_rows(x_lo: usize, y_lo: usize, y_hi: usize, row_step: usize, mut score_row: impl FnMut(usize, &mut (u32, usize, usize))) -> (u32, usize, usize) {
+fn scan_rows(x_lo: usize, y_lo: usize, y_hi: usize, row_step: usize, need: u32, mut score_row: impl FnMut(usize, &mut (u32, usize, usize))) -> (u32, usize, usize) {
     let mut best = (0u32, x_lo, y_lo);
     for y in (y_lo..=y_hi).step_by(row_step) {
         score_row(y, &mut best);
     }
-    if row_step == 2 {
+    if row_step == 2 && best.0 >= need {
         let by = best.2;
         for y in [by.wrapping_sub(1), by + 1] {
             if y >= y_lo && y <= y_hi && (y - y_lo) % 2 == 1 {
@@ -344,7 +383,8 @@ fn scan_rows(x_lo: usize, y_lo: usize, y_hi: usize, row_step: usize, mut score_r
 }
 
 #[inline(always)]
-fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
+#[allow(clippy::too_many_arguments)]
+fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize, need: u32) -> (u32, usize, usize) {
     let mut row = [0u16; FINE_LANES];
     let score_row = |y: usize, best: &mut (u32, usize, usize)| {
         let mut x0 = x_lo;
@@ -355,7 +395,7 @@ fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usiz
             x0 += FINE_LANES;
         }
     };
-    scan_rows(x_lo, y_lo, y_hi, row_step, score_row)
+    scan_rows(x_lo, y_lo, y_hi, row_step, need, score_row)
 }
 
 /// Best level-0 position in the window `[x_lo, x_hi] x [y_lo, y_hi]` (inclusive, valid).
@@ -365,13 +405,29 @@ fn fine_search_scalar(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usiz
 /// then the two rows next to the best one. Ties go to the first position in row-major order.
 /// Returns `(E, x, y)`.
 pub fn fine_search(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize) -> (u32, usize, usize) {
+    fine_search_at_least(resp, t, x_lo, x_hi, y_lo, y_hi, row_step, 0).expect("every score reaches 0")
+}
+
+/// [`fine_search`] when only a score of at least `need` matters, with rows abandoned early: a
+/// row whose best partial sum plus [`SIM_MAX`] per feature still to add stays below `need` and
+/// below the best score so far cannot hold the result. With `row_step = 1` the result is
+/// [`fine_search`]'s when it scores `>= need`, else None. With `row_step = 2` it is None when
+/// no even row reaches `need` (the rows next to the best even row are scored only when it
+/// does; [`fine_search`] would sometimes find an odd row reaching `need` there: about 1 % of
+/// its raw matches on a rendered frame), else [`fine_search`]'s.
+#[allow(clippy::too_many_arguments)]
+pub fn fine_search_at_least(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize, need: u32) -> Option<(u32, usize, usize)> {
     let row_step = row_step.clamp(1, 2);
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
+    let best = if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked at run time).
-        return unsafe { fine_search_avx2(resp, t, x_lo, x_hi, y_lo, y_hi, row_step) };
-    }
-    fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step)
+        unsafe { fine_search_avx2(resp, t, x_lo, x_hi, y_lo, y_hi, row_step, need) }
+    } else {
+        fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step, need)
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let best = fine_search_scalar(resp, t, x_lo, x_hi, y_lo, y_hi, row_step, need);
+    (best.0 >= need).then_some(best)
 }
 
 /// Raw matches of one template (coarse candidates verified at level 0), before NMS.
@@ -380,6 +436,33 @@ pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16:
 }
 
 fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<RawMatch> {
+    coarse_candidates(img, t, p, acc16, acc8, tail_max).into_iter().filter_map(|(r, c)| fine_match(img, t, p, r as usize, c as usize)).collect()
+}
+
+/// The level-0 match of template `t` around the level-1 grid position `(r, c)` (the best in
+/// the window, if it reaches the threshold).
+fn fine_match(img: &PreparedImage, t: &Template, p: &MatchParams, r: usize, c: usize) -> Option<RawMatch> {
+    let l0 = &t.levels[0];
+    let (w0, h0) = (img.resp0.width, img.resp0.height);
+    let tt = img.lm1.t;
+    let rad = tt + 2;
+    let n0 = l0.features.len() as f32;
+    let need0 = (p.threshold / 100.0 * SIM_MAX as f32 * n0).ceil().max(1.0) as u32;
+    let (gx, gy) = (2 * c * tt, 2 * r * tt);
+    let x_lo = gx.saturating_sub(rad);
+    let y_lo = gy.saturating_sub(rad);
+    let x_hi = (gx + rad).min(w0 - l0.width as usize);
+    let y_hi = (gy + rad).min(h0 - l0.height as usize);
+    if x_lo > x_hi || y_lo > y_hi {
+        return None;
+    }
+    fine_search_at_least(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, 2, need0).map(|(e, x, y)| RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) })
+}
+
+/// The level-1 grid positions `(r, c)` of template `t` that go to the level-0 search: local
+/// maxima reaching the coarse threshold, at most [`MatchParams::max_candidates`] (the best
+/// by coarse score), in row-major order.
+fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<(u16, u16)> {
     let simd = Simd::detect();
     let lm = &img.lm1;
     let l1 = &t.levels[1];
@@ -398,26 +481,8 @@ fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16
     let n1 = l1.features.len();
     let coarse_thr = p.coarse_threshold.unwrap_or(p.threshold);
     let need1 = (coarse_thr / 100.0 * SIM_MAX as f32 * n1 as f32).ceil().max(1.0) as u16;
-    let n0 = l0.features.len() as f32;
-    let need0 = (p.threshold / 100.0 * SIM_MAX as f32 * n0).ceil().max(1.0) as u32;
     let gw = lm.grid_w;
     let n = gw * lm.grid_h;
-    let rad = tt + 2;
-    let mut out = Vec::new();
-    let fine_at = |r: usize, c: usize, out: &mut Vec<RawMatch>| {
-        let (gx, gy) = (2 * c * tt, 2 * r * tt);
-        let x_lo = gx.saturating_sub(rad);
-        let y_lo = gy.saturating_sub(rad);
-        let x_hi = (gx + rad).min(w0 - l0.width as usize);
-        let y_hi = (gy + rad).min(h0 - l0.height as usize);
-        if x_lo > x_hi || y_lo > y_hi {
-            return;
-        }
-        let (e, x, y) = fine_search(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, 2);
-        if e >= need0 {
-            out.push(RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) });
-        }
-    };
     // Coarse candidates `(score, r, c)` in row-major order.
     let mut cands: Vec<(u16, usize, usize)> = Vec::new();
     let head = n1.min(63);
@@ -458,10 +523,7 @@ fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16
         cands.truncate(p.max_candidates);
         cands.sort_by_key(|&(_, r, c)| (r, c));
     }
-    for &(_, r, c) in &cands {
-        fine_at(r, c, &mut out);
-    }
-    out
+    cands.into_iter().map(|(_, r, c)| (r as u16, c as u16)).collect()
 }
 
 /// Level-1 features beyond the first u8 block of 63 that are added per surviving grid position
