@@ -278,9 +278,10 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_grey = line2d_eval(&grey_set, &lib, &dir.join("line2d_grey"))?;
     let l2_colour = line2d_eval(&colour_set, &lib, &dir.join("line2d_colour"))?;
     let l2_neg = line2d_negatives(&stage.data, &lib, stage.frames)?;
-    let threshold = tubeloc_detect::line2d::Verifier::shipped().threshold;
+    let verifier = tubeloc_detect::line2d::Verifier::shipped();
+    let (threshold, threshold_grey) = (verifier.threshold, verifier.threshold_for(true));
     let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg, "grasp_grey": grasp,
-        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -297,13 +298,13 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
-    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), detections kept at the shipped clutter verifier's threshold P >= {threshold:.2}; their precision column gives the false detections per image instead.").ok();
+    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones); their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\nMono refinement of the learned detections on the grey test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", grey_poses["matched"], grey_poses["truths"], f(&grey_poses["axis_deg_median"]), f(&grey_poses["axis_deg_p90"]), f(&grey_poses["across_mm_median"]), f(&grey_poses["across_mm_p90"])).ok();
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
-        "Line2D on the same frames (assumed cameras, resampled to the library's scale, verifier threshold {threshold:.2}): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
+        "Line2D on the same frames (assumed cameras, resampled to the library's scale, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
         l2_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
         l2_neg["max_per_frame"],
         l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)

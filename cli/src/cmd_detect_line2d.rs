@@ -119,7 +119,7 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
             None => Verifier::shipped(),
         };
         if let Some(t) = opts.min_probability {
-            v.threshold = t;
+            v.set_threshold(t);
         }
         Some(v)
     };

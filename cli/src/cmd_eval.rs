@@ -67,6 +67,11 @@ pub struct EvalArgs {
     /// image of the ground truth (the lowest threshold meeting both bounds).
     #[arg(long, requires = "calibrate", value_parser = crate::args::non_negative_f64)]
     pub(crate) max_false_per_image: Option<f64>,
+    /// With --calibrate: the threshold also keeps at most this many false detections per
+    /// image of the ground truth without any tube, counting the detections on those images
+    /// only (the analogue of real frames without tubes; needs such images).
+    #[arg(long, requires = "calibrate", value_parser = crate::args::non_negative_f64)]
+    pub(crate) max_false_per_negative_image: Option<f64>,
     /// Check a fitted calibration on these (held-out) detections: reliability diagram,
     /// expected calibration error, precision and recall at its threshold.
     #[arg(long, value_name = "CAL.json", conflicts_with = "calibrate")]
@@ -109,6 +114,7 @@ impl EvalArgs {
             target_precision: DEFAULT_TARGET_PRECISION,
             calibration: None,
             max_false_per_image: None,
+            max_false_per_negative_image: None,
             fitted_on: String::new(),
             by: Vec::new(),
         }
@@ -144,10 +150,28 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         (Some(_), _) => {
             let outcomes: Vec<(f64, bool)> = evaluator.outcomes_at_iou50().into_iter().map(|(_, s, y)| (s, y)).collect();
             let (a, b) = tubeloc_eval::calibration::fit_platt(&outcomes);
-            let mut c = tubeloc_core::ScoreCalibration { a, b, threshold: 1.0, target_precision: args.target_precision, fitted_on: args.fitted_on.clone(), max_false_per_image: args.max_false_per_image };
+            let mut c = tubeloc_core::ScoreCalibration {
+                a,
+                b,
+                threshold: 1.0,
+                target_precision: args.target_precision,
+                fitted_on: args.fitted_on.clone(),
+                max_false_per_image: args.max_false_per_image,
+                max_false_per_negative_image: args.max_false_per_negative_image,
+            };
             let probs: Vec<(f64, bool)> = outcomes.iter().map(|&(s, y)| (c.probability(s), y)).collect();
             let bound = args.max_false_per_image.map(|f| (f, gt.images.len()));
             c.threshold = tubeloc_eval::calibration::choose_threshold_bounded(&probs, args.target_precision, bound);
+            if let Some(f) = args.max_false_per_negative_image {
+                let with_tubes: std::collections::HashSet<u64> = gt.annotations.iter().filter(|a| a.iscrowd == 0).map(|a| a.image_id).collect();
+                let negatives = gt.images.iter().filter(|i| !with_tubes.contains(&i.id)).count();
+                if negatives == 0 {
+                    anyhow::bail!("--max-false-per-negative-image: {} has no image without a tube", args.gt.display());
+                }
+                let counted: Vec<bool> = evaluator.outcomes_at_iou50().iter().map(|o| !with_tubes.contains(&o.0)).collect();
+                let t = tubeloc_eval::calibration::choose_threshold_counted(&probs, Some(&counted), args.target_precision, Some((f, negatives)));
+                c.threshold = c.threshold.max(t);
+            }
             Some(c)
         }
         (None, Some(p)) => {
@@ -167,8 +191,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         let precision = if kept.is_empty() { f64::NAN } else { tp as f64 / kept.len() as f64 };
         let recall = if gt_n == 0 { f64::NAN } else { tp as f64 / gt_n as f64 };
         let fp_per_image = (kept.len() - tp) as f64 / gt.images.len().max(1) as f64;
-        eprintln!("calibration a {:.4} b {:.4} threshold {:.4}: ECE {ece:.4}; kept {} of {} detections, precision {precision:.4}, recall {recall:.4}, false positives per image {fp_per_image:.4}", c.a, c.b, c.threshold, kept.len(), probs.len());
-        serde_json::json!({"calibration": c, "ece": ece, "bins": bins, "kept": kept.len(), "detections": probs.len(), "precision_at_threshold": precision, "recall_at_threshold": recall, "false_positives_per_image": fp_per_image})
+        // On the images without a tube (every detection there is false).
+        let with_tubes: std::collections::HashSet<u64> = gt.annotations.iter().filter(|a| a.iscrowd == 0).map(|a| a.image_id).collect();
+        let negatives = gt.images.iter().filter(|i| !with_tubes.contains(&i.id)).count();
+        let fp_negative = outcomes.iter().filter(|o| !with_tubes.contains(&o.0) && c.probability(o.1) >= c.threshold).count();
+        let fp_per_negative = (negatives > 0).then(|| fp_negative as f64 / negatives as f64);
+        eprintln!("calibration a {:.4} b {:.4} threshold {:.4}: ECE {ece:.4}; kept {} of {} detections, precision {precision:.4}, recall {recall:.4}, false positives per image {fp_per_image:.4}{}", c.a, c.b, c.threshold, kept.len(), probs.len(), fp_per_negative.map_or(String::new(), |f| format!(", per image without a tube {f:.4} ({negatives} images)")));
+        serde_json::json!({"calibration": c, "ece": ece, "bins": bins, "kept": kept.len(), "detections": probs.len(), "precision_at_threshold": precision, "recall_at_threshold": recall, "false_positives_per_image": fp_per_image, "false_positives_per_negative_image": fp_per_negative})
     });
     if let (Some(c), Some(p)) = (&calibration, &args.calibrate) {
         write_json(p, c).with_context(|| format!("writing {}", p.display()))?;

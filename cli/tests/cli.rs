@@ -380,3 +380,63 @@ fn train_average_writes_the_weight_average_and_refuses_mismatched_models() {
     // One model is not an average.
     assert_eq!(tubeloc(&["train", "--average", p(&rgb), "--out", p(&bad)]).status.code(), Some(2));
 }
+
+/// Scores of the false detections on the tube-free frames of the calibration test.
+const FALSE_SCORES: [f64; 4] = [0.5, 0.6, 0.7, 0.9];
+
+#[test]
+fn calibrate_bounds_false_detections_on_frames_without_tubes() {
+    // Four images with a tube each, four without. Four true detections at 0.95 and four at
+    // 0.85, one false one on each tube-free frame (0.5, 0.6, 0.7, 0.9): precision alone (0.3)
+    // keeps everything; at most 0.25 false detections per tube-free frame keeps at most one of
+    // the four false ones, so the threshold must rise above at least three of them.
+    let dir = tempfile::tempdir().unwrap();
+    let mut images = Vec::new();
+    let mut anns = Vec::new();
+    let mut dets = Vec::new();
+    for id in 1..=8u64 {
+        images.push(serde_json::json!({"id": id, "file_name": format!("{id}.png"), "width": 100, "height": 100}));
+        if id <= 4 {
+            anns.push(serde_json::json!({"id": id, "image_id": id, "category_id": 1, "bbox": [10, 10, 30, 10], "area": 300, "iscrowd": 0}));
+            dets.push(serde_json::json!({"image_id": id, "category_id": 1, "bbox": [10, 10, 30, 10], "score": 0.95}));
+            anns.push(serde_json::json!({"id": id + 10, "image_id": id, "category_id": 1, "bbox": [60, 60, 30, 10], "area": 300, "iscrowd": 0}));
+            dets.push(serde_json::json!({"image_id": id, "category_id": 1, "bbox": [60, 60, 30, 10], "score": 0.85}));
+        } else {
+            dets.push(serde_json::json!({"image_id": id, "category_id": 1, "bbox": [50, 50, 30, 10], "score": FALSE_SCORES[id as usize - 5]}));
+        }
+    }
+    let gt = dir.path().join("gt.json");
+    std::fs::write(&gt, serde_json::json!({"images": images, "annotations": anns, "categories": [{"id": 1, "name": "tube"}]}).to_string()).unwrap();
+    let dt = dir.path().join("dt.json");
+    std::fs::write(&dt, serde_json::json!(dets).to_string()).unwrap();
+    let cal = dir.path().join("cal.json");
+    let run = |extra: &[&str]| {
+        let mut a = vec!["eval", "--gt", p(&gt), "--dt", p(&dt), "--iou-type", "bbox", "--calibrate", p(&cal), "--target-precision", "0.3"];
+        a.extend_from_slice(extra);
+        ok(&a);
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&cal).unwrap()).unwrap()
+    };
+    let free = run(&[]);
+    let bounded = run(&["--max-false-per-negative-image", "0.25"]);
+    let (a, b) = (bounded["a"].as_f64().unwrap(), bounded["b"].as_f64().unwrap());
+    let prob = |s: f64| {
+        let l = (s / (1.0 - s)).ln();
+        1.0 / (1.0 + (-(a * l + b)).exp())
+    };
+    let t = bounded["threshold"].as_f64().unwrap();
+    let kept_false = FALSE_SCORES.iter().filter(|&&s| prob(s) >= t).count();
+    assert!(kept_false <= 1, "threshold {t} keeps {kept_false} false detections on 4 tube-free frames");
+    assert!(t > free["threshold"].as_f64().unwrap(), "bounded {t} vs free {}", free["threshold"]);
+    assert_eq!(bounded["max_false_per_negative_image"], 0.25);
+    // A ground truth with a tube in every image cannot bound per tube-free image.
+    let all = dir.path().join("all.json");
+    let mut g: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&gt).unwrap()).unwrap();
+    g["images"] = serde_json::json!(g["images"].as_array().unwrap()[..4]);
+    std::fs::write(&all, g.to_string()).unwrap();
+    let dt4 = dir.path().join("dt4.json");
+    std::fs::write(&dt4, serde_json::json!(dets[..8]).to_string()).unwrap();
+    let o = tubeloc(&["eval", "--gt", p(&all), "--dt", p(&dt4), "--iou-type", "bbox", "--calibrate", p(&dir.path().join("c2.json")), "--max-false-per-negative-image", "0.25"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("has no image without a tube"), "{}", stderr(&o));
+    assert!(!dir.path().join("c2.json").exists());
+}

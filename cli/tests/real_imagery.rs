@@ -168,3 +168,70 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
     let dets: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(dets.as_array().unwrap().len(), 0);
 }
+
+#[test]
+fn fit_verifier_chooses_a_cut_per_image_kind_that_detect_uses() {
+    // Training composites on real training backgrounds, validation composites and tube-free
+    // validation frames of both kinds (grey Navcam with PDS geometry, colour under the assumed
+    // view): the fit writes one cut for colour images and one for grey ones, each meeting the
+    // false-detection bound on the tube-free validation frames of its kind (a loose bound: the
+    // training set is tiny here).
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n);
+    let data = real_data();
+    let synth = |args: &[&str], out: &Path| {
+        let mut a = vec!["synth", "real", "--data", p(&data), "--out", p(out)];
+        a.extend_from_slice(args);
+        ok(&a);
+    };
+    synth(&["--split", "train", "--kind", "all", "--limit", "8", "--tubes", "3:3", "--seed", "1"], &d("train"));
+    synth(&["--split", "train", "--kind", "all", "--limit", "4", "--tubes", "0:0", "--seed", "2"], &d("train_neg"));
+    synth(&["--split", "val", "--kind", "grey", "--limit", "2", "--seed", "3"], &d("val_grey"));
+    synth(&["--split", "val", "--kind", "colour", "--limit", "2", "--min-size", "300", "--seed", "4"], &d("val_colour"));
+    synth(&["--split", "val", "--kind", "grey", "--limit", "2", "--tubes", "0:0", "--seed", "5"], &d("neg_grey"));
+    synth(&["--split", "val", "--kind", "colour", "--limit", "2", "--min-size", "300", "--tubes", "0:0", "--seed", "6"], &d("neg_colour"));
+    let lib = d("default.tlt");
+    ok(&["templates", "build", "--out", p(&lib)]);
+    let out = d("verifier.json");
+    let work = d("work");
+    let (train, train_neg) = (d("train"), d("train_neg"));
+    let mut args = vec!["templates", "fit-verifier", "--templates", p(&lib), "--work", p(&work), "--out", p(&out), "--max-fp-per-frame", "20", "--train", p(&train), "--train", p(&train_neg)];
+    let vals = [d("val_grey"), d("val_colour"), d("neg_grey"), d("neg_colour")];
+    for v in &vals {
+        args.extend_from_slice(&["--val", p(v)]);
+    }
+    ok(&args);
+    let v: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let at = &v["provenance"]["thresholds"]["val_at_threshold"];
+    for (kind, field) in [("colour", "threshold"), ("grey", "threshold_grey")] {
+        let t = v[field].as_f64().unwrap_or_else(|| panic!("no {field}: {v}"));
+        assert!((0.0..=1.0).contains(&t), "{field} {t}");
+        assert!((at[kind]["threshold"].as_f64().unwrap() - t).abs() < 1e-6, "{at}");
+        assert!(at[kind]["fp_per_image"].as_f64().unwrap() <= 20.0, "{at}");
+    }
+    // Choosing the cuts again for the fitted weights (`--weights`) gives the same file but for
+    // the provenance, which keeps the weights' own.
+    let again = d("again.json");
+    let mut args = vec!["templates", "fit-verifier", "--weights", p(&out), "--templates", p(&lib), "--work", p(&work), "--out", p(&again), "--max-fp-per-frame", "20"];
+    for v in &vals {
+        args.extend_from_slice(&["--val", p(v)]);
+    }
+    ok(&args);
+    let w: Value = serde_json::from_str(&std::fs::read_to_string(&again).unwrap()).unwrap();
+    for f in ["weights", "mean", "std", "bias", "threshold", "threshold_grey"] {
+        assert_eq!(w[f], v[f], "{f}");
+    }
+    assert_eq!(w["provenance"]["weights"]["provenance"]["weights"], v["provenance"]["weights"]);
+    // `detect` takes the fitted file; a cut that is not a probability is refused, naming the file.
+    let dets = d("dets.json");
+    ok(&["detect", "--method", "line2d", "--templates", p(&lib), "--verifier", p(&out), "--dataset", p(&d("neg_grey")), "--out", p(&dets)]);
+    let mut bad = v.clone();
+    bad["threshold_grey"] = serde_json::json!(1.5);
+    let bad_path = d("bad.json");
+    std::fs::write(&bad_path, bad.to_string()).unwrap();
+    let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--verifier", p(&bad_path), "--dataset", p(&d("neg_grey")), "--out", p(&d("bad_dets.json"))]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("bad.json") && err.contains("threshold_grey 1.5 is not a probability"), "{err}");
+    assert!(!d("bad_dets.json").exists());
+}

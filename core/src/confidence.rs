@@ -4,7 +4,8 @@
 //! `[1e-6, 1 - 1e-6]`) and `σ(x) = 1 / (1 + e^-x)`. `a` and `b` are fitted on real validation
 //! composites (`tubeloc eval --calibrate`); `threshold` is the lowest probability at which the
 //! validation detections kept have a precision of at least `target_precision` and, when
-//! `max_false_per_image` is set, at most that many false detections per validation image.
+//! `max_false_per_image` is set, at most that many false detections per validation image
+//! (`max_false_per_negative_image`: per tube-free validation image, counting those only).
 
 use serde::{Deserialize, Serialize};
 
@@ -27,12 +28,16 @@ pub struct ScoreCalibration {
     /// such bound).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_false_per_image: Option<f64>,
+    /// Most false detections per tube-free image the threshold allowed on the fitting data,
+    /// counting the detections on tube-free images only (`None`: no such bound).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_false_per_negative_image: Option<f64>,
 }
 
 impl ScoreCalibration {
     /// The identity map (`P = s`) with threshold 0.5.
     pub fn identity() -> Self {
-        ScoreCalibration { a: 1.0, b: 0.0, threshold: 0.5, target_precision: 0.0, fitted_on: "identity".into(), max_false_per_image: None }
+        ScoreCalibration { a: 1.0, b: 0.0, threshold: 0.5, target_precision: 0.0, fitted_on: "identity".into(), max_false_per_image: None, max_false_per_negative_image: None }
     }
 
     /// `logit(s)` with `s` clamped to `[1e-6, 1 - 1e-6]`.

@@ -396,3 +396,36 @@ fn a_camera_of_another_focal_length_is_matched_at_the_library_scale() {
     let (u, v) = (k2.fx * c.x / c.z + k2.cx, k2.fy * c.y / c.z + k2.cy);
     assert!((u - b.centre_px[0]).abs() < 0.5 && (v - b.centre_px[1]).abs() < 0.5, "pose centre ({u:.1}, {v:.1}) vs {:?}", b.centre_px);
 }
+
+/// The verifier's grey cut applies to grey images only: with a grey cut above every
+/// probability, the grey version of a scene gives no detection while its colour version keeps
+/// the same detections as with the colour cut alone.
+#[test]
+fn grey_threshold_applies_to_grey_images_only() {
+    let (w, h) = (384usize, 320usize);
+    let mut params = small_params(1.9, 2.1, 64);
+    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let rot = Rotation3::rotation_between(&Vector3::z(), &Vector3::new(0.7, 0.2, -0.4).normalize()).unwrap();
+    let colour = scene(w, h, &params.camera, &Pose::from_parts(rot, Vector3::new(0.02, 0.01, 2.0)), 3);
+    let grey: Vec<u8> = colour
+        .chunks_exact(3)
+        .flat_map(|p| {
+            let g = ((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8;
+            [g, g, g]
+        })
+        .collect();
+    let base = MatchParams::default();
+    let plain = Line2dDetector::new(lib.clone(), base.clone()).unwrap();
+    let mut v = base.verifier.clone().unwrap();
+    v.threshold_grey = Some(1.0);
+    let split = Line2dDetector::new(lib, MatchParams { verifier: Some(v.clone()), ..base }).unwrap();
+    let c_plain = plain.detect(&colour, w, h, None).unwrap();
+    assert!(!c_plain.is_empty(), "no detection in the colour scene");
+    assert_eq!(split.detect(&colour, w, h, None).unwrap(), c_plain);
+    assert!(!plain.detect(&grey, w, h, None).unwrap().is_empty(), "no detection in the grey scene with one cut");
+    assert!(split.detect(&grey, w, h, None).unwrap().is_empty(), "the grey cut of 1 kept a detection");
+    // `--min-probability` sets one cut for both kinds.
+    v.set_threshold(0.0);
+    assert_eq!((v.threshold_for(true), v.threshold_for(false)), (0.0, 0.0));
+}

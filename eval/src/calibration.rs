@@ -55,17 +55,24 @@ pub fn choose_threshold(probs: &[(f64, bool)], target: f64) -> f64 {
 /// [`choose_threshold`] with, when `max_false` is `Some((f, images))`, also at most `f · images`
 /// false detections (`p >= t`, not a tube) kept: the lowest `t` meeting both bounds.
 pub fn choose_threshold_bounded(probs: &[(f64, bool)], target: f64, max_false: Option<(f64, usize)>) -> f64 {
-    let mut v: Vec<(f64, bool)> = probs.to_vec();
+    choose_threshold_counted(probs, None, target, max_false)
+}
+
+/// [`choose_threshold_bounded`] where only the detections flagged in `counted` (one flag per
+/// detection; None = all) count toward the false-detection bound: e.g. the detections on
+/// tube-free images, with `images` their number, for a bound per frame without a tube.
+pub fn choose_threshold_counted(probs: &[(f64, bool)], counted: Option<&[bool]>, target: f64, max_false: Option<(f64, usize)>) -> f64 {
+    let mut v: Vec<(f64, bool, bool)> = probs.iter().enumerate().map(|(i, &(p, y))| (p, y, counted.is_none_or(|c| c[i]))).collect();
     v.sort_by(|x, y| y.0.total_cmp(&x.0));
-    let (mut tp, mut best) = (0usize, 1.0f64);
-    for (i, &(p, y)) in v.iter().enumerate() {
+    let (mut tp, mut false_counted, mut best) = (0usize, 0usize, 1.0f64);
+    for (i, &(p, y, c)) in v.iter().enumerate() {
         tp += y as usize;
+        false_counted += (!y && c) as usize;
         // Only cut between distinct probabilities.
         if i + 1 < v.len() && v[i + 1].0 == p {
             continue;
         }
-        let false_kept = (i + 1 - tp) as f64;
-        if max_false.is_some_and(|(f, images)| false_kept > f * images as f64) {
+        if max_false.is_some_and(|(f, images)| false_counted as f64 > f * images as f64) {
             // More false detections only come with lower thresholds.
             break;
         }
@@ -123,7 +130,7 @@ mod tests {
 
     /// Scores whose true-positive rate is exactly sigmoid(2 logit(s) - 1), drawn on a grid.
     fn synthetic() -> Vec<(f64, bool)> {
-        let truth = ScoreCalibration { a: 2.0, b: -1.0, threshold: 0.5, target_precision: 0.0, fitted_on: String::new(), max_false_per_image: None };
+        let truth = ScoreCalibration { a: 2.0, b: -1.0, threshold: 0.5, target_precision: 0.0, fitted_on: String::new(), max_false_per_image: None, max_false_per_negative_image: None };
         let mut v = Vec::new();
         for i in 1..100 {
             let s = i as f64 / 100.0;
@@ -144,7 +151,7 @@ mod tests {
     fn calibrated_probabilities_have_small_ece_and_the_threshold_meets_the_precision() {
         let data = synthetic();
         let (a, b) = fit_platt(&data);
-        let c = ScoreCalibration { a, b, threshold: 0.5, target_precision: 0.95, fitted_on: String::new(), max_false_per_image: None };
+        let c = ScoreCalibration { a, b, threshold: 0.5, target_precision: 0.95, fitted_on: String::new(), max_false_per_image: None, max_false_per_negative_image: None };
         let probs: Vec<(f64, bool)> = data.iter().map(|&(s, y)| (c.probability(s), y)).collect();
         let (_, ece) = reliability(&probs, 10);
         assert!(ece < 0.02, "{ece}");
@@ -178,5 +185,14 @@ mod tests {
         assert!(false_at(next) as f64 > f * images as f64);
         // No bound: the same as the precision bound alone.
         assert_eq!(choose_threshold_bounded(&probs, 0.5, None), free);
+        // Counting only some detections (every other one, e.g. those on tube-free frames):
+        // the bound holds on the counted false detections, and the threshold lies between the
+        // unbounded one and the one counting all.
+        let counted: Vec<bool> = (0..probs.len()).map(|i| i % 2 == 0).collect();
+        let tc = choose_threshold_counted(&probs, Some(&counted), 0.5, Some((f, images)));
+        let counted_false = |t: f64| probs.iter().zip(&counted).filter(|(p, &c)| c && p.0 >= t && !p.1).count();
+        assert!(counted_false(tc) as f64 <= f * images as f64);
+        assert!(tc <= t && tc >= free, "counted {tc}, all {t}, free {free}");
+        assert_eq!(choose_threshold_counted(&probs, None, 0.5, Some((f, images))), t);
     }
 }

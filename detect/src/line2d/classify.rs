@@ -78,6 +78,12 @@ pub struct Verifier {
     pub bias: f32,
     /// Default cut on the probability: detections below it are dropped.
     pub threshold: f32,
+    /// Cut on the probability for grey images (all three channels equal, e.g. Navcam), when
+    /// it differs from `threshold` (which then applies to colour images). Chosen on tube-free
+    /// grey validation frames: grey clutter (bright clasts on darker ground) passes the
+    /// verifier more often than colour clutter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threshold_grey: Option<f32>,
     /// How the weights and the threshold were obtained (command, data, figures).
     #[serde(default)]
     pub provenance: serde_json::Value,
@@ -113,10 +119,27 @@ impl Verifier {
         if all.clone().any(|x| !x.is_finite()) || self.std.iter().any(|&s| s <= 0.0) {
             return Err("non-finite value or non-positive std".into());
         }
-        if !(0.0..=1.0).contains(&self.threshold) {
-            return Err(format!("threshold {} is not a probability", self.threshold));
+        for (name, t) in [("threshold", Some(self.threshold)), ("threshold_grey", self.threshold_grey)] {
+            if let Some(t) = t.filter(|t| !(0.0..=1.0).contains(t)) {
+                return Err(format!("{name} {t} is not a probability"));
+            }
         }
         Ok(())
+    }
+
+    /// The cut on the probability for an image that is grey (`grey`) or colour.
+    pub fn threshold_for(&self, grey: bool) -> f32 {
+        if grey {
+            self.threshold_grey.unwrap_or(self.threshold)
+        } else {
+            self.threshold
+        }
+    }
+
+    /// Sets one cut for every image (`tubeloc detect --min-probability`).
+    pub fn set_threshold(&mut self, t: f32) {
+        self.threshold = t;
+        self.threshold_grey = None;
     }
 
     /// Log-odds of a feature vector.
@@ -195,6 +218,7 @@ impl Verifier {
             weights: (1..D).map(|i| beta[i] as f32).collect(),
             bias: beta[0] as f32,
             threshold: 0.5,
+            threshold_grey: None,
             provenance: serde_json::Value::Null,
         };
         v.check()?;

@@ -119,6 +119,7 @@ impl Line2dDetector {
             _ => raw,
         };
         let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
+        let grey = self.params.verifier.is_some() && is_grey(rgb);
         let mut dets: Vec<Line2dDetection> = clusters
             .iter()
             .filter_map(|c| {
@@ -145,7 +146,7 @@ impl Line2dDetector {
                 if let (Some(vf), Some(l)) = (&self.params.verifier, &luma) {
                     let f = features(l, width, height, t, self.samples.get(t, &vp), m.x, m.y, m.score);
                     let p = f.as_ref().map_or(0.0, |f| vf.probability(f));
-                    if p < vf.threshold {
+                    if p < vf.threshold_for(grey) {
                         return None;
                     }
                     d.score = p;
@@ -177,6 +178,11 @@ impl Line2dDetector {
             None => Ok(CameraModel { width: width as u32, height: height as u32, fx: k.fx, fy: k.fy, cx: (width as f64 - 1.0) / 2.0, cy: (height as f64 - 1.0) / 2.0, distortion: Default::default() }),
         }
     }
+}
+
+/// Whether an interleaved RGB8 image is grey: its three channels are equal at every pixel.
+fn is_grey(rgb: &[u8]) -> bool {
+    rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
 }
 
 /// Greedy suppression over detections sorted by decreasing score: a detection is dropped when
