@@ -60,6 +60,10 @@ pub struct Line2dOpts {
     /// search, the best by coarse score (0 = all).
     #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_CANDIDATES)]
     pub max_candidates: usize,
+    /// Line2D: at most this many coarse candidates per megapixel over all templates go to the
+    /// full-resolution search, the best by coarse similarity (0 = no budget)
+    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_CANDIDATES_PER_MPX)]
+    pub max_candidates_per_mpx: usize,
     /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
     #[arg(long)]
     pub no_verify: bool,
@@ -97,6 +101,7 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
         rerank_margin: opts.rerank_margin,
         rerank_area_weight: opts.rerank_area_weight,
         max_candidates: opts.max_candidates,
+        max_candidates_per_mpx: opts.max_candidates_per_mpx,
         ..MatchParams::default()
     };
     params.gradient.mag_threshold = opts.grad_threshold;

@@ -14,7 +14,8 @@
 //! frame; default the first frame of `../shared/data/real_mars/backgrounds/msl_navcam_1024`,
 //! skipped when absent), `LINE2D_BENCH_REPEATS` (default 5), `LINE2D_BENCH_PYTHON` (the Python
 //! with `opencv-contrib-python-headless`, default `python3`), `LINE2D_BENCH_QUICK=1` (a ~700
-//! template library), `LINE2D_BENCH_MAX_CANDIDATES` (the candidate cap), `LINE2D_BENCH_PEER=0`
+//! template library), `LINE2D_BENCH_MAX_CANDIDATES` (the candidate cap), `LINE2D_BENCH_CANDIDATES_PER_MPX`
+//! (the candidate budget), `LINE2D_BENCH_PEER=0`
 //! (ours only). The library is cached in the target folder.
 
 use nalgebra::Point3;
@@ -138,6 +139,9 @@ fn main() {
     let mut p = MatchParams::default();
     if let Some(k) = std::env::var("LINE2D_BENCH_MAX_CANDIDATES").ok().and_then(|v| v.parse().ok()) {
         p.max_candidates = k;
+    }
+    if let Some(k) = std::env::var("LINE2D_BENCH_CANDIDATES_PER_MPX").ok().and_then(|v| v.parse().ok()) {
+        p.max_candidates_per_mpx = k;
     }
     let det = Line2dDetector::new(lib.clone(), p.clone()).expect("detector");
     let mut frames: Vec<(String, String, Vec<u8>)> = vec![("paper".into(), "rendered paper frame (flagstone, paper rig at half resolution, 1024x1024 crop)".into(), paper_frame())];

@@ -64,6 +64,9 @@ pub struct MatchParams {
     /// threshold at hundreds of places (rock edges, layers); the cap bounds the fine search
     /// there. The default was chosen on validation composites (design record 0042).
     pub max_candidates: usize,
+    /// At most this many coarse candidates per megapixel of the image go to the level-0 search
+    /// over all templates, the best by coarse similarity (0 = no budget; see [`match_all`]).
+    pub max_candidates_per_mpx: usize,
     /// Clutter verifier applied to each detection after NMS (None = off): its probability
     /// becomes the score, and detections below its `threshold` are dropped
     /// ([`crate::line2d::classify`]).
@@ -94,12 +97,16 @@ impl Default for MatchParams {
             verify: Some(VerifyParams::default()),
             rerank_area_weight: 0.3,
             max_candidates: MAX_CANDIDATES,
+            max_candidates_per_mpx: MAX_CANDIDATES_PER_MPX,
             verifier: Some(Verifier::shipped()),
             verified_overlap: 0.5,
             max_upsample: 2.0,
         }
     }
 }
+
+/// Default [`MatchParams::max_candidates_per_mpx`].
+pub const MAX_CANDIDATES_PER_MPX: usize = 200_000;
 
 /// Default [`MatchParams::max_candidates`].
 pub const MAX_CANDIDATES: usize = 48;
@@ -436,7 +443,7 @@ pub fn match_template(img: &PreparedImage, t: &Template, p: &MatchParams, acc16:
 }
 
 fn match_template_impl(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<RawMatch> {
-    coarse_candidates(img, t, p, acc16, acc8, tail_max).into_iter().filter_map(|(r, c)| fine_match(img, t, p, r as usize, c as usize)).collect()
+    coarse_candidates(img, t, p, acc16, acc8, tail_max).into_iter().filter_map(|(_, r, c)| fine_match(img, t, p, r as usize, c as usize)).collect()
 }
 
 /// The level-0 match of template `t` around the level-1 grid position `(r, c)` (the best in
@@ -459,10 +466,10 @@ fn fine_match(img: &PreparedImage, t: &Template, p: &MatchParams, r: usize, c: u
     fine_search_at_least(&img.resp0, t, x_lo, x_hi, y_lo, y_hi, 2, need0).map(|(e, x, y)| RawMatch { template: t.id, x: x as i32, y: y as i32, score: 100.0 * e as f32 / (SIM_MAX as f32 * n0) })
 }
 
-/// The level-1 grid positions `(r, c)` of template `t` that go to the level-0 search: local
-/// maxima reaching the coarse threshold, at most [`MatchParams::max_candidates`] (the best
-/// by coarse score), in row-major order.
-fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<(u16, u16)> {
+/// The level-1 grid positions `(coarse score, r, c)` of template `t` that go to the level-0
+/// search: local maxima reaching the coarse threshold, at most [`MatchParams::max_candidates`]
+/// (the best by coarse score), in row-major order. The score is the raw level-1 sum.
+fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: &mut Vec<u16>, acc8: &mut Vec<u8>, tail_max: usize) -> Vec<(u16, u16, u16)> {
     let simd = Simd::detect();
     let lm = &img.lm1;
     let l1 = &t.levels[1];
@@ -523,7 +530,7 @@ fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: 
         cands.truncate(p.max_candidates);
         cands.sort_by_key(|&(_, r, c)| (r, c));
     }
-    cands.into_iter().map(|(_, r, c)| (r as u16, c as u16)).collect()
+    cands.into_iter().map(|(v, r, c)| (v, r as u16, c as u16)).collect()
 }
 
 /// Level-1 features beyond the first u8 block of 63 that are added per surviving grid position
@@ -576,8 +583,36 @@ fn candidates(rmax: usize, cmax: usize, gw: usize, row_may_pass: impl Fn(usize) 
 }
 
 /// All raw matches of a library (rayon across templates), sorted by decreasing score.
+///
+/// With a candidate budget ([`MatchParams::max_candidates_per_mpx`]) the coarse candidates
+/// of all templates beyond `budget · max(1, width · height / 10⁶)` keep only the best by coarse
+/// similarity (raw level-1 sum over `4 n`, the same scale for every template; ties in
+/// template, row, column order) before the level-0 search: on a textured frame every template
+/// reaches the coarse threshold in many places, and the budget bounds the level-0 work per
+/// pixel whatever the texture.
 pub fn match_all(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchParams) -> Vec<RawMatch> {
-    let mut all: Vec<RawMatch> = lib.templates.par_iter().map_init(|| (Vec::new(), Vec::new()), |(a16, a8), t| match_template(img, t, p, a16, a8)).flatten().collect();
+    let mut cands: Vec<Vec<(u16, u16, u16)>> = lib.templates.par_iter().map_init(|| (Vec::new(), Vec::new()), |(a16, a8), t| coarse_candidates(img, t, p, a16, a8, TAIL_MAX)).collect();
+    let total: usize = cands.iter().map(Vec::len).sum();
+    let budget = (p.max_candidates_per_mpx as f64 * ((img.width * img.height) as f64 / 1e6).max(1.0)).ceil() as usize;
+    if p.max_candidates_per_mpx > 0 && total > budget {
+        // Coarse similarity in 1/65536 of the maximum, comparable across templates.
+        let key = |t: &Template, v: u16| (v as u64 * 65536 / (SIM_MAX as u64 * t.levels[1].features.len().max(1) as u64)) as u32;
+        let mut keys: Vec<u32> = cands.iter().zip(&lib.templates).flat_map(|(c, t)| c.iter().map(move |&(v, _, _)| key(t, v))).collect();
+        let cut = *keys.select_nth_unstable_by(budget.max(1) - 1, |a, b| b.cmp(a)).1;
+        // Above the cut all are kept; at the cut, the first in template order fill the budget.
+        let mut at_cut = budget - keys.iter().filter(|&&k| k > cut).count();
+        for (c, t) in cands.iter_mut().zip(&lib.templates) {
+            c.retain(|&(v, _, _)| {
+                let k = key(t, v);
+                k > cut
+                    || (k == cut && at_cut > 0 && {
+                        at_cut -= 1;
+                        true
+                    })
+            });
+        }
+    }
+    let mut all: Vec<RawMatch> = cands.par_iter().zip(&lib.templates).flat_map_iter(|(c, t)| c.iter().filter_map(|&(_, r, cc)| fine_match(img, t, p, r as usize, cc as usize))).collect();
     all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
     all
 }
@@ -719,6 +754,36 @@ mod tests {
             for m in mine {
                 assert!(all.contains(m), "capped match {m:?} is not an uncapped match");
             }
+        }
+    }
+
+    /// The candidate budget keeps the coarse candidates with the best coarse similarity over
+    /// all templates: a budget above their number changes nothing; a small one keeps a strict
+    /// subset of the unbudgeted matches.
+    #[test]
+    fn candidate_budget_keeps_the_best_coarse_candidates_over_all_templates() {
+        let (w, h) = (320usize, 256usize);
+        let mut lp = LibraryParams { views: ViewParams { dist_min: 1.6, dist_max: 1.6, step_deg: 30.0, ..ViewParams::default() }, ..LibraryParams::default() };
+        lp.camera.cx = w as f64 / 2.0;
+        lp.camera.cy = h as f64 / 2.0;
+        let lib = TemplateLibrary::build(&TubeModel::default(), &lp, &|_| {}).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let mut img: Vec<u8> = (0..w * h * 3).map(|i| if (i / 3 / w / 5 + i / 3 % w / 7) % 2 == 0 { 160 } else { rng.random_range(30..=100u8) }).collect();
+        let pose = Pose::from_parts(Rotation3::from_axis_angle(&Vector3::y_axis(), 1.1), Vector3::new(0.01, 0.02, 1.6));
+        draw_tube_rgb(&mut img, w, h, &TubeModel::default(), &lp.camera, &pose);
+        let base = MatchParams { threshold: 55.0, max_candidates: 0, max_candidates_per_mpx: 0, ..MatchParams::default() };
+        let prep = prepare_image(&img, w, h, &base).unwrap();
+        let (mut a16, mut a8) = (Vec::new(), Vec::new());
+        let total: usize = lib.templates.iter().map(|t| coarse_candidates(&prep, t, &base, &mut a16, &mut a8, TAIL_MAX).len()).sum();
+        assert!(total > 50, "{total} candidates");
+        let all = match_all(&prep, &lib, &base);
+        // Budgets are per megapixel, and images under 1 MP get the 1 MP budget.
+        let wide = match_all(&prep, &lib, &MatchParams { max_candidates_per_mpx: total, ..base.clone() });
+        assert_eq!(wide, all);
+        let small = match_all(&prep, &lib, &MatchParams { max_candidates_per_mpx: total / 4, ..base.clone() });
+        assert!(small.len() < all.len(), "a budget of {} of {total} candidates removed nothing", total / 4);
+        for m in &small {
+            assert!(all.contains(m), "budgeted match {m:?} is not an unbudgeted match");
         }
     }
 
