@@ -420,8 +420,8 @@ pub fn fine_search(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, 
 /// below the best score so far cannot hold the result. With `row_step = 1` the result is
 /// [`fine_search`]'s when it scores `>= need`, else None. With `row_step = 2` it is None when
 /// no even row reaches `need` (the rows next to the best even row are scored only when it
-/// does; [`fine_search`] would sometimes find an odd row reaching `need` there: about 1 % of
-/// its raw matches on a rendered frame), else [`fine_search`]'s.
+/// does; [`fine_search`] would sometimes find an odd row reaching `need` there: 18 % of the
+/// raw matches of a rendered paper frame, all near the threshold), else [`fine_search`]'s.
 #[allow(clippy::too_many_arguments)]
 pub fn fine_search_at_least(resp: &ResponseMaps, t: &Template, x_lo: usize, x_hi: usize, y_lo: usize, y_hi: usize, row_step: usize, need: u32) -> Option<(u32, usize, usize)> {
     let row_step = row_step.clamp(1, 2);
