@@ -132,7 +132,11 @@ fn cached(opts: &Line2dOpts, set: &Path, max_images: Option<usize>, work: &Path)
     let name: String = format!("{}_{}", set.display(), max_images.map_or("all".to_string(), |n| n.to_string())).chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
     let path = work.join(format!("{name}.json"));
     if path.exists() {
-        return files::read_json(&path).with_context(|| format!("reading {}", path.display()));
+        match files::read_json::<SetSamples>(&path) {
+            Ok(s) => return Ok(s),
+            // A cache of an older format: computed again.
+            Err(e) => eprintln!("warning: {}: {e:#}; computing it again", path.display()),
+        }
     }
     let s = set_samples(opts, set, max_images)?;
     files::write_json(&path, &s)?;
