@@ -44,7 +44,8 @@ pub struct FitArgs {
     /// Use at most this many images of each set, spread evenly over it (file order).
     #[arg(long)]
     pub max_images: Option<usize>,
-    /// Folder caching each set's detections and features (`<name>.json`), reused when present.
+    /// Folder caching each set's detections and features (`<name>_<images>_<options hash>.json`),
+    /// reused when present.
     #[arg(long)]
     pub work: PathBuf,
     /// Output verifier JSON (e.g. detect/src/line2d/verifier.json).
@@ -129,7 +130,15 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
 }
 
 fn cached(opts: &Line2dOpts, set: &Path, max_images: Option<usize>, work: &Path) -> Result<SetSamples> {
-    let name: String = format!("{}_{}", set.display(), max_images.map_or("all".to_string(), |n| n.to_string())).chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
+    // Keyed by the set, the image subset and the Line2D options (a cache made with other
+    // options is not reused).
+    let key = {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        format!("{opts:?}").hash(&mut h);
+        h.finish()
+    };
+    let name: String = format!("{}_{}_{key:016x}", set.display(), max_images.map_or("all".to_string(), |n| n.to_string())).chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
     let path = work.join(format!("{name}.json"));
     if path.exists() {
         match files::read_json::<SetSamples>(&path) {
