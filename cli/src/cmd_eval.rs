@@ -146,9 +146,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if !(args.target_precision > 0.0 && args.target_precision <= 1.0) {
         anyhow::bail!("--target-precision {} must be in (0, 1]", args.target_precision);
     }
+    // Each detection's (image, score, is a tube at IoU 0.5), for the calibration and its
+    // report, and the images holding a tube (the others are tube-free frames).
+    let (outcomes50, with_tubes) =
+        if args.calibrate.is_some() || args.calibration.is_some() { (evaluator.outcomes_at_iou50(), gt.annotations.iter().filter(|a| a.iscrowd == 0).map(|a| a.image_id).collect::<std::collections::HashSet<u64>>()) } else { Default::default() };
+    let negatives = gt.images.iter().filter(|i| !with_tubes.contains(&i.id)).count();
     let calibration = match (&args.calibrate, &args.calibration) {
         (Some(_), _) => {
-            let outcomes: Vec<(f64, bool)> = evaluator.outcomes_at_iou50().into_iter().map(|(_, s, y)| (s, y)).collect();
+            let outcomes: Vec<(f64, bool)> = outcomes50.iter().map(|&(_, s, y)| (s, y)).collect();
             let (a, b) = tubeloc_eval::calibration::fit_platt(&outcomes);
             let mut c = tubeloc_core::ScoreCalibration {
                 a,
@@ -163,12 +168,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             let bound = args.max_false_per_image.map(|f| (f, gt.images.len()));
             c.threshold = tubeloc_eval::calibration::choose_threshold_bounded(&probs, args.target_precision, bound);
             if let Some(f) = args.max_false_per_negative_image {
-                let with_tubes: std::collections::HashSet<u64> = gt.annotations.iter().filter(|a| a.iscrowd == 0).map(|a| a.image_id).collect();
-                let negatives = gt.images.iter().filter(|i| !with_tubes.contains(&i.id)).count();
                 if negatives == 0 {
                     anyhow::bail!("--max-false-per-negative-image: {} has no image without a tube", args.gt.display());
                 }
-                let counted: Vec<bool> = evaluator.outcomes_at_iou50().iter().map(|o| !with_tubes.contains(&o.0)).collect();
+                let counted: Vec<bool> = outcomes50.iter().map(|o| !with_tubes.contains(&o.0)).collect();
                 let t = tubeloc_eval::calibration::choose_threshold_counted(&probs, Some(&counted), args.target_precision, Some((f, negatives)));
                 c.threshold = c.threshold.max(t);
             }
@@ -182,7 +185,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         (None, None) => None,
     };
     let calibration_report = calibration.as_ref().map(|c| {
-        let outcomes = evaluator.outcomes_at_iou50();
+        let outcomes = &outcomes50;
         let probs: Vec<(f64, bool)> = outcomes.iter().map(|&(_, s, y)| (c.probability(s), y)).collect();
         let (bins, ece) = tubeloc_eval::calibration::reliability(&probs, 10);
         let kept: Vec<&(f64, bool)> = probs.iter().filter(|p| p.0 >= c.threshold).collect();
@@ -192,9 +195,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         let recall = if gt_n == 0 { f64::NAN } else { tp as f64 / gt_n as f64 };
         let fp_per_image = (kept.len() - tp) as f64 / gt.images.len().max(1) as f64;
         // On the images without a tube (every detection there is false).
-        let with_tubes: std::collections::HashSet<u64> = gt.annotations.iter().filter(|a| a.iscrowd == 0).map(|a| a.image_id).collect();
-        let negatives = gt.images.iter().filter(|i| !with_tubes.contains(&i.id)).count();
-        let fp_negative = outcomes.iter().filter(|o| !with_tubes.contains(&o.0) && c.probability(o.1) >= c.threshold).count();
+        let fp_negative = outcomes.iter().zip(&probs).filter(|(o, p)| !with_tubes.contains(&o.0) && p.0 >= c.threshold).count();
         let fp_per_negative = (negatives > 0).then(|| fp_negative as f64 / negatives as f64);
         eprintln!("calibration a {:.4} b {:.4} threshold {:.4}: ECE {ece:.4}; kept {} of {} detections, precision {precision:.4}, recall {recall:.4}, false positives per image {fp_per_image:.4}{}", c.a, c.b, c.threshold, kept.len(), probs.len(), fp_per_negative.map_or(String::new(), |f| format!(", per image without a tube {f:.4} ({negatives} images)")));
         serde_json::json!({"calibration": c, "ece": ece, "bins": bins, "kept": kept.len(), "detections": probs.len(), "precision_at_threshold": precision, "recall_at_threshold": recall, "false_positives_per_image": fp_per_image, "false_positives_per_negative_image": fp_per_negative})

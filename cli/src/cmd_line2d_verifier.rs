@@ -117,7 +117,7 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
         let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let dets = det.detect(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref()))?;
-        per_image.push((*id, gts.len(), img.as_raw().chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])));
+        per_image.push((*id, gts.len(), tubeloc_detect::input::is_grey_rgb8(img.as_raw())));
         for d in dets {
             let ious = Rle::iou(std::slice::from_ref(&d.mask), &gts, &vec![false; gts.len()]);
             samples.push(Sample { image_id: *id, features: d.features, ious });

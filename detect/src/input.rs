@@ -50,6 +50,12 @@ pub struct DetectorInput {
 }
 
 /// Bits needed for `max` (at least 8, at most `container`).
+/// Whether an interleaved RGB8 image is grey: its three channels are equal at every pixel
+/// (a grey camera's frame replicated to RGB, e.g. Navcam).
+pub fn is_grey_rgb8(rgb: &[u8]) -> bool {
+    rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
+}
+
 fn data_bits(max: u32, container: u8) -> u8 {
     let bits = 32 - max.leading_zeros();
     (bits as u8).clamp(8, container)
@@ -74,7 +80,7 @@ pub fn rgb8_of(img: &image::DynamicImage) -> DetectorInput {
         }
         _ => (img.to_rgb8().into_raw(), 8, 8),
     };
-    let grey = channels <= 2 || rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2]);
+    let grey = channels <= 2 || is_grey_rgb8(&rgb);
     let n = (w * h).max(1) as f64;
     let (mut s, mut s2) = (0.0f64, 0.0f64);
     for p in rgb.chunks_exact(3) {

@@ -119,7 +119,7 @@ impl Line2dDetector {
             _ => raw,
         };
         let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
-        let grey = self.params.verifier.is_some() && is_grey(rgb);
+        let grey = self.params.verifier.is_some() && crate::input::is_grey_rgb8(rgb);
         let mut dets: Vec<Line2dDetection> = clusters
             .iter()
             .filter_map(|c| {
@@ -178,11 +178,6 @@ impl Line2dDetector {
             None => Ok(CameraModel { width: width as u32, height: height as u32, fx: k.fx, fy: k.fy, cx: (width as f64 - 1.0) / 2.0, cy: (height as f64 - 1.0) / 2.0, distortion: Default::default() }),
         }
     }
-}
-
-/// Whether an interleaved RGB8 image is grey: its three channels are equal at every pixel.
-fn is_grey(rgb: &[u8]) -> bool {
-    rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
 }
 
 /// Greedy suppression over detections sorted by decreasing score: a detection is dropped when
