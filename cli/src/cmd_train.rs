@@ -98,6 +98,11 @@ pub struct TrainArgs {
     /// or block-patterned fill whose pixels become background; 0 = off).
     #[arg(long, default_value_t = 0.0, value_parser = crate::args::unit_interval)]
     pub occluders: f64,
+    /// Probability that a training crop is seen as by a camera with 1.5-3 times coarser pixels
+    /// (averaged, noised at that resolution and enlarged back, as inference enlarges a coarse
+    /// camera's frame to the working scale; 0 = off)
+    #[arg(long, default_value_t = 0.0, value_parser = crate::args::unit_interval)]
+    pub resolution_drop: f64,
     /// Peak learning rate.
     #[arg(long, default_value_t = 2e-3, value_parser = crate::args::positive_f64)]
     pub lr: f64,
@@ -236,7 +241,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         lr: args.lr,
         total_steps: total,
         seed: args.seed,
-        augment: AugmentConfig { crop: args.crop, upright: args.upright, occluders: args.occluders, photometric: args.photometric, ..Default::default() },
+        augment: AugmentConfig { crop: args.crop, upright: args.upright, occluders: args.occluders, photometric: args.photometric, resolution_drop: args.resolution_drop, ..Default::default() },
         ..Default::default()
     };
     let mut trainer = match &args.resume {
@@ -306,6 +311,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     };
     let crops = if args.upright { " upright crops" } else { "" };
     let crops = if args.occluders > 0.0 { format!("{crops} occluders {}", args.occluders) } else { crops.to_string() };
+    let crops = if args.resolution_drop > 0.0 { format!("{crops} resolution drop {}", args.resolution_drop) } else { crops };
     trainer.model.meta.notes = format!("steps {} seed {}{crops} val AP50 {ap:.4}{warm}", trainer.model.meta.steps, args.seed);
     trainer.model.save(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!("saved {} ({} steps, loss {ema:.4}, val AP50 {ap:.4}, {:.0} s this run)", args.out.display(), trainer.model.meta.steps, t0.elapsed().as_secs_f64());

@@ -67,6 +67,7 @@ fn bad_numbers_and_argument_errors_exit_2_naming_the_flag_and_writing_nothing() 
         (vec!["train", "--train", "ds", "--lr", "NaN", "--out", oj], "--lr"),
         (vec!["train", "--train", "ds", "--crop", "100", "--out", oj], "--crop"),
         (vec!["train", "--train", "ds", "--occluders", "2", "--out", oj], "--occluders"),
+        (vec!["train", "--train", "ds", "--resolution-drop", "NaN", "--out", oj], "--resolution-drop"),
         (vec!["train", "--train", "ds", "--batch", "0", "--out", oj], "--batch"),
         (vec!["templates", "build", "--features", "0", "--out", ot], "--features"),
         (vec!["templates", "build", "--distances", "4:1:0.1", "--out", ot], "--distances"),

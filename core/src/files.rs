@@ -303,6 +303,18 @@ pub fn read_toml_checked<T: DeserializeOwned>(path: &Path, validate: impl FnOnce
     parse_toml_checked(&text, path, validate)
 }
 
+/// Reads a settings file as `T`: TOML when its extension is `.toml` (any case), else JSON. A
+/// parse error names the file and `what` (`invalid refine config: ...`) with the line and
+/// column.
+pub fn read_toml_or_json<T: DeserializeOwned>(path: &Path, what: &str) -> Result<T, CoreError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
+        toml::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid {what}: {}", e.to_string().trim_end())))
+    } else {
+        serde_json::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid {what}: {e}")))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

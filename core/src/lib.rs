@@ -11,6 +11,7 @@ pub mod coco;
 pub mod confidence;
 pub mod detection;
 pub mod error;
+pub mod field_range;
 pub mod files;
 pub mod geometry;
 pub mod ground;

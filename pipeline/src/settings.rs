@@ -137,13 +137,7 @@ impl StageSettings {
 /// defaults; unknown ones are refused; the error names the file and the field.
 pub fn load_settings_file(path: &std::path::Path) -> Result<(RefineConfig, StageSettings), tubeloc_core::CoreError> {
     use tubeloc_core::CoreError;
-    let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
-    let is_toml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-    let mut doc: serde_json::Value = if is_toml {
-        toml::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid settings: {}", e.to_string().trim_end())))?
-    } else {
-        serde_json::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid settings: {e}")))?
-    };
+    let mut doc: serde_json::Value = tubeloc_core::files::read_toml_or_json(path, "settings")?;
     let Some(table) = doc.as_object_mut() else { return Err(CoreError::parse(path, "invalid settings: expected a table of groups")) };
     let stages = match table.remove("stages") {
         Some(v) => serde_json::from_value::<StageSettings>(v).map_err(|e| CoreError::parse(path, format!("invalid settings: stages: {e}")))?,

@@ -393,13 +393,7 @@ impl RefineConfig {
     /// the groups and fields, the rest at their defaults; unknown fields are refused. The
     /// error names the file and the field ([`RefineConfig::validate`] for values out of range).
     pub fn load(path: &std::path::Path) -> Result<RefineConfig, RefineError> {
-        let text = std::fs::read_to_string(path).map_err(|e| CoreError::io(path, e))?;
-        let is_toml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-        let config: RefineConfig = if is_toml {
-            toml::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid refine config: {}", e.to_string().trim_end())))?
-        } else {
-            serde_json::from_str(&text).map_err(|e| CoreError::parse(path, format!("invalid refine config: {e}")))?
-        };
+        let config: RefineConfig = tubeloc_core::files::read_toml_or_json(path, "refine config")?;
         config.validate().map_err(|e| CoreError::parse(path, e.to_string()))?;
         Ok(config)
     }

@@ -89,6 +89,7 @@ impl TwoViewConfig {
     /// Checks every value (positive and finite where a scale, `distance_sigma_m` may be
     /// infinite); the error names the field and its value.
     pub fn validate(&self) -> Result<(), String> {
+        use tubeloc_core::field_range::{check_all, check_count, check_real, Bound::{Closed, Open}};
         let positive = [
             ("spacing_px", self.spacing_px),
             ("tukey_px", self.tukey_px),
@@ -99,20 +100,12 @@ impl TwoViewConfig {
             ("max_turn_deg", self.max_turn_deg),
             ("limb_offset_sigma_px", self.limb_offset_sigma_px),
         ];
-        for (field, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{field} = {v}: expected a positive finite number"));
-            }
-        }
-        if !(self.end_limb_weight.is_finite() && self.end_limb_weight >= 0.0) {
-            return Err(format!("end_limb_weight = {}: expected a finite number >= 0", self.end_limb_weight));
-        }
+        check_all(&positive, Open(0.0), Open(f64::INFINITY))?;
+        check_real("end_limb_weight", self.end_limb_weight, Closed(0.0), Open(f64::INFINITY))?;
         if self.distance_sigma_m.is_nan() || self.distance_sigma_m <= 0.0 {
             return Err(format!("distance_sigma_m = {}: expected a positive number (inf: no prior)", self.distance_sigma_m));
         }
-        if !(1..=1000).contains(&self.iterations) {
-            return Err(format!("iterations = {}: expected 1..=1000", self.iterations));
-        }
+        check_count("iterations", self.iterations, 1, 1000)?;
         if self.min_samples < 3 {
             return Err(format!("min_samples = {}: expected at least 3", self.min_samples));
         }

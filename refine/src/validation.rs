@@ -3,49 +3,16 @@
 
 use crate::error::RefineError;
 use crate::settings::{Acceptance, EdgeSearch, EndDecision, MaskUse, MonoDepth, Priors, RefineConfig, SeedProfile, SeedSearch, Solver};
-use std::fmt::Display;
+use tubeloc_core::field_range::{check_count, check_real, Bound};
 
-/// An interval bound of a real-valued field.
-#[derive(Clone, Copy)]
-enum Bound {
-    /// The value itself is allowed.
-    Closed(f64),
-    /// Only values beyond it are allowed.
-    Open(f64),
+/// [`check_count`] as a [`RefineError::Config`].
+fn count<T: PartialOrd + std::fmt::Display + Copy>(field: &str, v: T, lo: T, hi: T) -> Result<(), RefineError> {
+    check_count(field, v, lo, hi).map_err(RefineError::Config)
 }
 
-/// `field = value is out of range RANGE` unless `lo <= v <= hi` (integers).
-fn count<T: PartialOrd + Display + Copy>(field: &str, v: T, lo: T, hi: T) -> Result<(), RefineError> {
-    if v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(RefineError::Config(format!("{field} = {v} is out of range {lo}..={hi}")))
-    }
-}
-
-/// `field = value is out of range (lo, hi]` (interval notation) unless `v` is finite and within
-/// the bounds.
+/// [`check_real`] as a [`RefineError::Config`].
 fn real(field: &str, v: f64, lo: Bound, hi: Bound) -> Result<(), RefineError> {
-    let above = match lo {
-        Bound::Closed(l) => v >= l,
-        Bound::Open(l) => v > l,
-    };
-    let below = match hi {
-        Bound::Closed(h) => v <= h,
-        Bound::Open(h) => v < h,
-    };
-    if v.is_finite() && above && below {
-        return Ok(());
-    }
-    let (open, lo) = match lo {
-        Bound::Closed(l) => ('[', l),
-        Bound::Open(l) => ('(', l),
-    };
-    let (close, hi) = match hi {
-        Bound::Closed(h) => (']', h),
-        Bound::Open(h) => (')', h),
-    };
-    Err(RefineError::Config(format!("{field} = {v} is out of range {open}{lo}, {hi}{close}")))
+    check_real(field, v, lo, hi).map_err(RefineError::Config)
 }
 
 use Bound::{Closed, Open};

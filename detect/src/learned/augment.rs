@@ -1,6 +1,7 @@
 //! Training images and augmentation: random crops with flips, rotations by 90° (unless
 //! [`AugmentConfig::upright`]) plus a small angle, brightness/contrast and Gaussian noise, and
-//! optional occluders ([`AugmentConfig::occluders`]: random erasing, Zhong et al. 2017).
+//! optional occluders ([`AugmentConfig::occluders`]: random erasing, Zhong et al. 2017) and
+//! an optional resolution drop ([`AugmentConfig::resolution_drop`]).
 //!
 //! A crop of size `S` around centre `c` with angle `θ` and optional mirror samples the source
 //! at `c + R(θ) · (±(x - S/2 + ½), y - S/2 + ½)` for output pixel `(x, y)`: bilinear for the
@@ -78,11 +79,20 @@ pub struct AugmentConfig {
     /// normalized range), Gaussian blur (σ up to 1.3 px, half the crops), vignetting (up to
     /// 1 normalized unit darker in the corners) and sensor noise. Off by default.
     pub photometric: bool,
+    /// Probability that a crop is seen as by a camera with `k` times coarser pixels, `k` in
+    /// [`RESOLUTION_DROP_FACTORS`]: the crop is averaged over `k x k` footprints, sensor noise
+    /// (σ up to 0.2 normalized units) is added at that resolution, and it is resampled back
+    /// bilinearly. This is what a coarse camera's frame looks like once inference brings it to
+    /// the working scale (a Navcam frame is enlarged about 2.5 times); 0 = off.
+    pub resolution_drop: f64,
 }
+
+/// Range of the pixel-size factor `k` of [`AugmentConfig::resolution_drop`].
+pub const RESOLUTION_DROP_FACTORS: std::ops::RangeInclusive<f32> = 1.5..=3.0;
 
 impl Default for AugmentConfig {
     fn default() -> Self {
-        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false, occluders: 0.0, photometric: false }
+        AugmentConfig { crop: 256, p_object: 0.75, max_angle_deg: 20.0, gain: 0.3, offset: 0.4, noise: 0.15, upright: false, occluders: 0.0, photometric: false, resolution_drop: 0.0 }
     }
 }
 
@@ -131,6 +141,11 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
             }
         }
     }
+    if cfg.resolution_drop > 0.0 && rng.random_bool(cfg.resolution_drop) {
+        let k = rng.random_range(RESOLUTION_DROP_FACTORS);
+        let sigma = rng.random_range(0.0f32..0.2);
+        drop_resolution(&mut input, s, ch, k, sigma, rng);
+    }
     let gain = 1.0 + rng.random_range(-cfg.gain..=cfg.gain);
     let offset = rng.random_range(-cfg.offset..=cfg.offset);
     let sigma = rng.random_range(0.0..=cfg.noise);
@@ -147,6 +162,48 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
         }
     }
     (input, labels)
+}
+
+/// The resolution drop of [`AugmentConfig::resolution_drop`] on an `s x s` crop of `channels`
+/// planes: low-resolution pixel `(i, j)` (side `m = ⌈s / k⌉`) is the mean of the crop pixels
+/// whose centres fall in `[i k, (i + 1) k) x [j k, (j + 1) k)`, plus Gaussian noise of `sigma`;
+/// crop pixel `(x, y)` is then the bilinear sample of the low-resolution plane at
+/// `((x + ½) / k - ½, (y + ½) / k - ½)` (clamped at the border).
+pub fn drop_resolution(input: &mut [f32], s: usize, channels: usize, k: f32, sigma: f32, rng: &mut ChaCha8Rng) {
+    let m = (s as f32 / k).ceil() as usize;
+    let normal = Normal::new(0.0f32, sigma.max(1e-6)).expect("finite sigma");
+    let cell = |x: usize| (((x as f32 + 0.5) / k) as usize).min(m - 1);
+    let mut sum = vec![0f32; m * m];
+    let mut count = vec![0u32; m * m];
+    for c in 0..channels {
+        let p = &mut input[c * s * s..(c + 1) * s * s];
+        sum.fill(0.0);
+        count.fill(0);
+        for y in 0..s {
+            let row = cell(y) * m;
+            for x in 0..s {
+                sum[row + cell(x)] += p[y * s + x];
+                count[row + cell(x)] += 1;
+            }
+        }
+        for (v, &n) in sum.iter_mut().zip(&count) {
+            *v = *v / n.max(1) as f32 + if sigma > 0.0 { normal.sample(rng) } else { 0.0 };
+        }
+        let last = (m - 1) as f32;
+        for y in 0..s {
+            let ly = ((y as f32 + 0.5) / k - 0.5).clamp(0.0, last);
+            let (y0, fy) = (ly.floor() as usize, ly.fract());
+            let y1 = (y0 + 1).min(m - 1);
+            for x in 0..s {
+                let lx = ((x as f32 + 0.5) / k - 0.5).clamp(0.0, last);
+                let (x0, fx) = (lx.floor() as usize, lx.fract());
+                let x1 = (x0 + 1).min(m - 1);
+                let a = sum[y0 * m + x0] * (1.0 - fx) + sum[y0 * m + x1] * fx;
+                let b = sum[y1 * m + x0] * (1.0 - fx) + sum[y1 * m + x1] * fx;
+                p[y * s + x] = a * (1.0 - fy) + b * fy;
+            }
+        }
+    }
 }
 
 /// The camera-like changes of [`AugmentConfig::photometric`] on an `s x s` crop.
@@ -247,6 +304,25 @@ mod tests {
         // quarter-turned ones (whose rows are source columns) end upside down, ~1/2 in all.
         let f = upside_down_fraction(false);
         assert!((0.35..0.65).contains(&f), "{f}");
+    }
+
+    #[test]
+    fn a_resolution_drop_keeps_flat_planes_and_means_and_removes_fine_detail() {
+        let s = 64;
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        // A flat plane stays flat (no noise).
+        let mut flat = vec![1.5f32; s * s];
+        drop_resolution(&mut flat, s, 1, 2.5, 0.0, &mut rng);
+        assert!(flat.iter().all(|v| (v - 1.5).abs() < 1e-5));
+        // A one-pixel checkerboard averages out at k = 2: every pixel becomes its mean.
+        let mut checker: Vec<f32> = (0..s * s).map(|i| ((i % s + i / s) % 2) as f32).collect();
+        drop_resolution(&mut checker, s, 1, 2.0, 0.0, &mut rng);
+        assert!(checker.iter().all(|v| (v - 0.5).abs() < 1e-5), "{:?}", &checker[..8]);
+        // A ramp keeps its slope and mean away from the border.
+        let mut ramp: Vec<f32> = (0..s * s).map(|i| (i % s) as f32).collect();
+        drop_resolution(&mut ramp, s, 1, 3.0, 0.0, &mut rng);
+        let row = &ramp[32 * s..33 * s];
+        assert!((row[40] - row[20] - 20.0).abs() < 1.0, "{} {}", row[20], row[40]);
     }
 
     #[test]

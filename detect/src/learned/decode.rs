@@ -116,12 +116,8 @@ impl DecodeConfig {
     /// Checks the ranges: probabilities in `[0, 1]`, weights, distances and exponents `>= 0`,
     /// thresholds finite. The error names the first field out of range.
     pub fn validate(&self) -> Result<(), String> {
-        let unit = [("fg_threshold", self.fg_threshold), ("peak_threshold", self.peak_threshold), ("mask_logit_rel", self.mask_logit_rel)];
-        for (name, v) in unit {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(format!("{name} = {v}: expected a value in [0, 1]"));
-            }
-        }
+        use tubeloc_core::field_range::{check_all, check_real, Bound::{Closed, Open}};
+        check_all(&[("fg_threshold", self.fg_threshold), ("peak_threshold", self.peak_threshold), ("mask_logit_rel", self.mask_logit_rel)], Closed(0.0), Closed(1.0))?;
         let non_negative = [
             ("across_weight", self.across_weight),
             ("min_score", self.min_score),
@@ -132,14 +128,8 @@ impl DecodeConfig {
             ("fill_weight", self.fill_weight),
             ("mask_direction_weight", self.mask_direction_weight),
         ];
-        for (name, v) in non_negative {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(format!("{name} = {v}: expected a finite value >= 0"));
-            }
-        }
-        if !self.mask_logit.is_finite() {
-            return Err(format!("mask_logit = {}: expected a finite value", self.mask_logit));
-        }
+        check_all(&non_negative, Closed(0.0), Open(f64::INFINITY))?;
+        check_real("mask_logit", self.mask_logit, Closed(f64::NEG_INFINITY), Closed(f64::INFINITY))?;
         Ok(())
     }
 }
