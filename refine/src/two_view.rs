@@ -89,7 +89,10 @@ impl TwoViewConfig {
     /// Checks every value (positive and finite where a scale, `distance_sigma_m` may be
     /// infinite); the error names the field and its value.
     pub fn validate(&self) -> Result<(), String> {
-        use tubeloc_core::field_range::{check_all, check_count, check_real, Bound::{Closed, Open}};
+        use tubeloc_core::field_range::{
+            check_all, check_count, check_real,
+            Bound::{Closed, Open},
+        };
         let positive = [
             ("spacing_px", self.spacing_px),
             ("tukey_px", self.tukey_px),

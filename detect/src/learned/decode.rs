@@ -116,7 +116,10 @@ impl DecodeConfig {
     /// Checks the ranges: probabilities in `[0, 1]`, weights, distances and exponents `>= 0`,
     /// thresholds finite. The error names the first field out of range.
     pub fn validate(&self) -> Result<(), String> {
-        use tubeloc_core::field_range::{check_all, check_real, Bound::{Closed, Open}};
+        use tubeloc_core::field_range::{
+            check_all, check_real,
+            Bound::{Closed, Open},
+        };
         check_all(&[("fg_threshold", self.fg_threshold), ("peak_threshold", self.peak_threshold), ("mask_logit_rel", self.mask_logit_rel)], Closed(0.0), Closed(1.0))?;
         let non_negative = [
             ("across_weight", self.across_weight),
