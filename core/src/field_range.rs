@@ -23,8 +23,9 @@ pub fn check_count<T: PartialOrd + Display + Copy>(field: &str, v: T, lo: T, hi:
     }
 }
 
-/// `Ok` when `value` (`f32` or `f64`, shown as given) is finite and within `lo` and `hi`, else `field = v is out of range [lo, hi)`
-/// (brackets after the bounds' kinds). NaN and infinities are always out of range.
+/// `Ok` when `value` (`f32` or `f64`, shown as given) is finite and within `lo` and `hi`,
+/// else `field = value is out of range [lo, hi)` (brackets after the bounds' kinds). NaN and
+/// infinities are always out of range.
 pub fn check_real<T: Into<f64> + Display + Copy>(field: &str, value: T, lo: Bound, hi: Bound) -> Result<(), String> {
     let v: f64 = value.into();
     let above = match lo {

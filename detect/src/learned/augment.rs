@@ -169,35 +169,40 @@ pub fn sample_crop(img: &TrainImage, cfg: &AugmentConfig, rng: &mut ChaCha8Rng) 
 /// whose centres fall in `[i k, (i + 1) k) x [j k, (j + 1) k)`, plus Gaussian noise of `sigma`;
 /// crop pixel `(x, y)` is then the bilinear sample of the low-resolution plane at
 /// `((x + ½) / k - ½, (y + ½) / k - ½)` (clamped at the border).
-pub fn drop_resolution(input: &mut [f32], s: usize, channels: usize, k: f32, sigma: f32, rng: &mut ChaCha8Rng) {
+fn drop_resolution(input: &mut [f32], s: usize, channels: usize, k: f32, sigma: f32, rng: &mut ChaCha8Rng) {
     let m = (s as f32 / k).ceil() as usize;
     let normal = Normal::new(0.0f32, sigma.max(1e-6)).expect("finite sigma");
-    let cell = |x: usize| (((x as f32 + 0.5) / k) as usize).min(m - 1);
-    let mut sum = vec![0f32; m * m];
+    // Per crop coordinate (the same for rows and columns): its low-resolution cell, and the two
+    // cells and weight it is sampled back from.
+    let cell: Vec<usize> = (0..s).map(|x| (((x as f32 + 0.5) / k) as usize).min(m - 1)).collect();
+    let last = (m - 1) as f32;
+    let back: Vec<(usize, usize, f32)> = (0..s)
+        .map(|x| {
+            let l = ((x as f32 + 0.5) / k - 0.5).clamp(0.0, last);
+            let l0 = l.floor() as usize;
+            (l0, (l0 + 1).min(m - 1), l.fract())
+        })
+        .collect();
     let mut count = vec![0u32; m * m];
+    for &cy in &cell {
+        for &cx in &cell {
+            count[cy * m + cx] += 1;
+        }
+    }
+    let mut sum = vec![0f32; m * m];
     for c in 0..channels {
         let p = &mut input[c * s * s..(c + 1) * s * s];
         sum.fill(0.0);
-        count.fill(0);
-        for y in 0..s {
-            let row = cell(y) * m;
-            for x in 0..s {
-                sum[row + cell(x)] += p[y * s + x];
-                count[row + cell(x)] += 1;
+        for (y, &cy) in cell.iter().enumerate() {
+            for (x, &cx) in cell.iter().enumerate() {
+                sum[cy * m + cx] += p[y * s + x];
             }
         }
         for (v, &n) in sum.iter_mut().zip(&count) {
             *v = *v / n.max(1) as f32 + if sigma > 0.0 { normal.sample(rng) } else { 0.0 };
         }
-        let last = (m - 1) as f32;
-        for y in 0..s {
-            let ly = ((y as f32 + 0.5) / k - 0.5).clamp(0.0, last);
-            let (y0, fy) = (ly.floor() as usize, ly.fract());
-            let y1 = (y0 + 1).min(m - 1);
-            for x in 0..s {
-                let lx = ((x as f32 + 0.5) / k - 0.5).clamp(0.0, last);
-                let (x0, fx) = (lx.floor() as usize, lx.fract());
-                let x1 = (x0 + 1).min(m - 1);
+        for (y, &(y0, y1, fy)) in back.iter().enumerate() {
+            for (x, &(x0, x1, fx)) in back.iter().enumerate() {
                 let a = sum[y0 * m + x0] * (1.0 - fx) + sum[y0 * m + x1] * fx;
                 let b = sum[y1 * m + x0] * (1.0 - fx) + sum[y1 * m + x1] * fx;
                 p[y * s + x] = a * (1.0 - fy) + b * fy;
