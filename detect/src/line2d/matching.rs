@@ -494,8 +494,8 @@ fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: 
     let mut cands: Vec<(u16, usize, usize)> = Vec::new();
     let head = n1.min(63);
     if n1 - head <= tail_max && n1 > 0 {
-        // Head block in u8 over all grid positions; the tail only where the head can still
-        // reach `need1` (each tail feature adds at most SIM_MAX).
+        // Head block in u8 over all grid positions; the tail only on rows where the head can
+        // still reach `need1` (each tail feature adds at most SIM_MAX).
         let tail = &l1.features[head..];
         let Some(need_head) = need1.checked_sub((SIM_MAX as usize * tail.len()) as u16).map(|v| v.max(1)) else {
             return vec![];
@@ -507,23 +507,28 @@ fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: 
         acc8.clear();
         acc8.resize(n, 0);
         add_features_u8(simd, lm, &l1.features[..head], acc8);
-        let tails: Vec<(&[u8], usize)> = tail.iter().map(|f| ((f.y as usize / tt) * gw + f.x as usize / tt, lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt))).map(|(start, m)| (m, start)).collect();
-        // Exact score of a valid grid index, or None when it is surely below need1.
-        let score = |i: usize| -> Option<u16> {
-            let h = acc8[i];
-            if h < need_head {
-                return None;
+        // Exact u16 scores, only on the rows where the head alone can reach `need_head` (the
+        // other rows hold no candidate and stay 0 < need1): the row's head sums widened, plus
+        // each tail feature's memory row, vectorized.
+        acc16.clear();
+        acc16.resize(n, 0);
+        for r in 0..=rmax {
+            let row = r * gw..r * gw + cmax + 1;
+            if acc8[row.clone()].iter().copied().max().unwrap_or(0) < need_head {
+                continue;
             }
-            let v = h as u16 + tails.iter().map(|&(m, s)| m[s + i] as u16).sum::<u16>();
-            (v >= need1).then_some(v)
-        };
-        let score = &score;
-        candidates(rmax, cmax, gw, |r| acc8[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need_head, score, &mut |r, c| cands.push((score(r * gw + c).unwrap_or(0), r, c)));
+            let out = &mut acc16[row.clone()];
+            simd.widen_add(out, &acc8[row.clone()]);
+            for f in tail {
+                let start = (f.y as usize / tt) * gw + f.x as usize / tt;
+                let m = lm.memory(f.ori as usize, f.x as usize % tt, f.y as usize % tt);
+                simd.widen_add(out, &m[start + row.start..start + row.end]);
+            }
+        }
     } else {
         coarse_scores_with(simd, lm, t, acc16, acc8);
-        let score = |i: usize| (acc16[i] >= need1).then_some(acc16[i]);
-        candidates(rmax, cmax, gw, |r| acc16[r * gw..r * gw + cmax + 1].iter().copied().max().unwrap_or(0) >= need1, score, &mut |r, c| cands.push((acc16[r * gw + c], r, c)));
     }
+    candidates(acc16, need1, rmax, cmax, gw, &mut |r, c, v| cands.push((v, r, c)));
     if p.max_candidates > 0 && cands.len() > p.max_candidates {
         // The best by coarse score (ties: row-major order), then back in row-major order.
         cands.sort_by(|a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
@@ -533,8 +538,9 @@ fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: 
     cands.into_iter().map(|(v, r, c)| (v, r as u16, c as u16)).collect()
 }
 
-/// Level-1 features beyond the first u8 block of 63 that are added per surviving grid position
-/// (scalar) instead of over the whole grid; longer templates use the u16 path.
+/// Level-1 features beyond the first u8 block of 63 that are added only on the grid rows whose
+/// head block can still reach the threshold instead of over the whole grid; longer templates
+/// use the u16 path.
 const TAIL_MAX: usize = 8;
 
 /// Sums `features` (at most 63) into the u8 grid accumulator `acc` over the linearized memories.
@@ -551,32 +557,38 @@ fn add_features_u8(simd: Simd, lm: &LinearMemories, features: &[crate::line2d::F
     }
 }
 
-/// Calls `found(r, c)` for every grid position `(r <= rmax, c <= cmax)` whose score (`score`
-/// returns None below the threshold) is a strict local maximum among its valid 8-neighbours
-/// (ties go to the first in row-major order). `row_may_pass(r)` is a cheap upper-bound test.
-fn candidates(rmax: usize, cmax: usize, gw: usize, row_may_pass: impl Fn(usize) -> bool, score: impl Fn(usize) -> Option<u16>, found: &mut impl FnMut(usize, usize)) {
+/// Calls `found(r, c, v)` for every grid position `(r <= rmax, c <= cmax)` whose score
+/// `v = scores[r gw + c]` reaches `need` and is a strict local maximum among its valid
+/// 8-neighbours (ties go to the first in row-major order). Runs of 16 positions are skipped
+/// at once when none reaches `need` (a vectorized maximum).
+fn candidates(scores: &[u16], need: u16, rmax: usize, cmax: usize, gw: usize, found: &mut impl FnMut(usize, usize, u16)) {
+    const RUN: usize = 16;
     for r in 0..=rmax {
-        if !row_may_pass(r) {
-            continue;
-        }
-        for c in 0..=cmax {
-            let Some(v) = score(r * gw + c) else { continue };
-            let mut is_max = true;
-            'n: for rr in r.saturating_sub(1)..=(r + 1).min(rmax) {
-                for cc in c.saturating_sub(1)..=(c + 1).min(cmax) {
-                    if (rr, cc) == (r, c) {
-                        continue;
-                    }
-                    if let Some(u) = score(rr * gw + cc) {
+        let row = &scores[r * gw..r * gw + cmax + 1];
+        for (k, run) in row.chunks(RUN).enumerate() {
+            if run.iter().copied().max().unwrap_or(0) < need {
+                continue;
+            }
+            for (j, &v) in run.iter().enumerate() {
+                if v < need {
+                    continue;
+                }
+                let c = k * RUN + j;
+                // A neighbour below `need` is below `v` too, so plain comparisons suffice.
+                let mut is_max = true;
+                'n: for rr in r.saturating_sub(1)..=(r + 1).min(rmax) {
+                    let nrow = &scores[rr * gw..rr * gw + cmax + 1];
+                    for cc in c.saturating_sub(1)..=(c + 1).min(cmax) {
+                        let u = nrow[cc];
                         if u > v || (u == v && (rr, cc) < (r, c)) {
                             is_max = false;
                             break 'n;
                         }
                     }
                 }
-            }
-            if is_max {
-                found(r, c);
+                if is_max {
+                    found(r, c, v);
+                }
             }
         }
     }
@@ -787,7 +799,41 @@ mod tests {
         }
     }
 
-    /// The head-block + per-position tail path finds exactly the matches of the full u16 path.
+    /// `candidates` returns exactly the strict local maxima (ties to the first in row-major
+    /// order) reaching the threshold, found by brute force over random score grids with
+    /// plateaus, including the positions on the last valid row and column.
+    #[test]
+    fn candidates_are_the_thresholded_local_maxima() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for trial in 0..40 {
+            let (gw, gh) = (rng.random_range(3..40usize), rng.random_range(3..30usize));
+            let (cmax, rmax) = (rng.random_range(0..gw), rng.random_range(0..gh));
+            let scores: Vec<u16> = (0..gw * gh).map(|_| rng.random_range(0..12u16)).collect();
+            let need = rng.random_range(1..10u16);
+            let mut found = Vec::new();
+            candidates(&scores, need, rmax, cmax, gw, &mut |r, c, v| found.push((r, c, v)));
+            let mut brute = Vec::new();
+            for r in 0..=rmax {
+                for c in 0..=cmax {
+                    let v = scores[r * gw + c];
+                    let beaten = (r.saturating_sub(1)..=(r + 1).min(rmax)).any(|rr| {
+                        (c.saturating_sub(1)..=(c + 1).min(cmax)).any(|cc| {
+                            (rr, cc) != (r, c) && {
+                                let u = scores[rr * gw + cc];
+                                u >= need && (u > v || (u == v && (rr, cc) < (r, c)))
+                            }
+                        })
+                    });
+                    if v >= need && !beaten {
+                        brute.push((r, c, v));
+                    }
+                }
+            }
+            assert_eq!(found, brute, "trial {trial}: {gw}x{gh}, cmax {cmax}, rmax {rmax}, need {need}");
+        }
+    }
+
+    /// The head-block + tail-rows path finds exactly the matches of the full u16 path.
     #[test]
     fn head_tail_path_equals_full_u16_path() {
         let (w, h) = (320usize, 256usize);
