@@ -107,7 +107,8 @@ impl Line2dDetector {
                         verified_score(m.score, c, v).map(|s| (RawMatch { score: 100.0 * s / (1.0 + v.contrast_weight), ..m }, m.score, c))
                     })
                     .collect();
-                scored.sort_by(|a, b| b.0.score.total_cmp(&a.0.score).then(a.0.template.cmp(&b.0.template)).then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x))));
+                // Equal keys are equal matches (with equal similarity and contrast): unstable is exact.
+                scored.sort_unstable_by(|a, b| b.0.score.total_cmp(&a.0.score).then(a.0.template.cmp(&b.0.template)).then((a.0.y, a.0.x).cmp(&(b.0.y, b.0.x))));
                 scored
                     .into_iter()
                     .map(|(m, sim, c)| {

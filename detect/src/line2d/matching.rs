@@ -106,7 +106,7 @@ impl Default for MatchParams {
 }
 
 /// Default [`MatchParams::max_candidates_per_mpx`].
-pub const MAX_CANDIDATES_PER_MPX: usize = 200_000;
+pub const MAX_CANDIDATES_PER_MPX: usize = 175_000;
 
 /// Default [`MatchParams::max_candidates`].
 pub const MAX_CANDIDATES: usize = 48;
@@ -530,10 +530,11 @@ fn coarse_candidates(img: &PreparedImage, t: &Template, p: &MatchParams, acc16: 
     }
     candidates(acc16, need1, rmax, cmax, gw, &mut |r, c, v| cands.push((v, r, c)));
     if p.max_candidates > 0 && cands.len() > p.max_candidates {
-        // The best by coarse score (ties: row-major order), then back in row-major order.
-        cands.sort_by(|a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        // The best by coarse score (ties: row-major order), then back in row-major order
+        // (positions are distinct, so the order is total and selection is exact).
+        cands.select_nth_unstable_by(p.max_candidates - 1, |a, b| b.0.cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
         cands.truncate(p.max_candidates);
-        cands.sort_by_key(|&(_, r, c)| (r, c));
+        cands.sort_unstable_by_key(|&(_, r, c)| (r, c));
     }
     cands.into_iter().map(|(v, r, c)| (v, r as u16, c as u16)).collect()
 }
@@ -559,37 +560,36 @@ fn add_features_u8(simd: Simd, lm: &LinearMemories, features: &[crate::line2d::F
 
 /// Calls `found(r, c, v)` for every grid position `(r <= rmax, c <= cmax)` whose score
 /// `v = scores[r gw + c]` reaches `need` and is a strict local maximum among its valid
-/// 8-neighbours (ties go to the first in row-major order). Runs of 16 positions are skipped
-/// at once when none reaches `need` (a vectorized maximum).
+/// 8-neighbours (ties go to the first in row-major order): `v` exceeds the neighbours before
+/// it in row-major order and is at least those after it. Branch-free per row: the three rows
+/// are copied between zero borders (a missing neighbour counts 0 < need <= v, so it never
+/// decides) and the test runs over the whole row in vector lanes; rows whose maximum stays
+/// below `need` are skipped.
 fn candidates(scores: &[u16], need: u16, rmax: usize, cmax: usize, gw: usize, found: &mut impl FnMut(usize, usize, u16)) {
-    const RUN: usize = 16;
+    let wv = cmax + 1;
+    let wp = wv + 2;
+    // Rows r - 1, r, r + 1 with a zero on each side, then the per-position flags.
+    let mut pad = vec![0u16; 3 * wp];
+    let mut flags = vec![false; wv];
+    let row_of = |r: usize| &scores[r * gw..r * gw + wv];
     for r in 0..=rmax {
-        let row = &scores[r * gw..r * gw + cmax + 1];
-        for (k, run) in row.chunks(RUN).enumerate() {
-            if run.iter().copied().max().unwrap_or(0) < need {
-                continue;
+        if row_of(r).iter().copied().max().unwrap_or(0) < need {
+            continue;
+        }
+        let (up, rest) = pad.split_at_mut(wp);
+        let (cur, dn) = rest.split_at_mut(wp);
+        for (dst, src) in [(&mut *up, r.checked_sub(1)), (&mut *cur, Some(r)), (&mut *dn, (r < rmax).then_some(r + 1))] {
+            match src {
+                Some(rr) => dst[1..=wv].copy_from_slice(row_of(rr)),
+                None => dst.fill(0),
             }
-            for (j, &v) in run.iter().enumerate() {
-                if v < need {
-                    continue;
-                }
-                let c = k * RUN + j;
-                // A neighbour below `need` is below `v` too, so plain comparisons suffice.
-                let mut is_max = true;
-                'n: for rr in r.saturating_sub(1)..=(r + 1).min(rmax) {
-                    let nrow = &scores[rr * gw..rr * gw + cmax + 1];
-                    for cc in c.saturating_sub(1)..=(c + 1).min(cmax) {
-                        let u = nrow[cc];
-                        if u > v || (u == v && (rr, cc) < (r, c)) {
-                            is_max = false;
-                            break 'n;
-                        }
-                    }
-                }
-                if is_max {
-                    found(r, c, v);
-                }
-            }
+        }
+        for (c, flag) in flags.iter_mut().enumerate() {
+            let v = cur[c + 1];
+            *flag = (v >= need) & (v > up[c]) & (v > up[c + 1]) & (v > up[c + 2]) & (v > cur[c]) & (v >= cur[c + 2]) & (v >= dn[c]) & (v >= dn[c + 1]) & (v >= dn[c + 2]);
+        }
+        for (c, _) in flags.iter().enumerate().filter(|(_, &f)| f) {
+            found(r, c, cur[c + 1]);
         }
     }
 }
@@ -625,7 +625,8 @@ pub fn match_all(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchParams) ->
         }
     }
     let mut all: Vec<RawMatch> = cands.par_iter().zip(&lib.templates).flat_map_iter(|(c, t)| c.iter().filter_map(|&(_, r, cc)| fine_match(img, t, p, r as usize, cc as usize))).collect();
-    all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
+    // Matches equal in this order are equal in every field, so an unstable sort is exact.
+    all.sort_unstable_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
     all
 }
 
