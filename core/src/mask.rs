@@ -282,14 +282,35 @@ impl Rle {
         self.size[1]
     }
 
-    /// Encodes a mask (any non-zero byte counts as set), like `rleEncode`.
+    /// Encodes a mask (any non-zero byte counts as set), like `rleEncode`: column-major runs,
+    /// starting with a (possibly empty) run of clear pixels. Only the set pixels' bounding box
+    /// ([`BinaryMask::bbox`], word-wise) is read pixel by pixel; the clear pixels around it
+    /// join the runs by count, so a small tube on a 20-megapixel frame costs its box, not the
+    /// frame.
     pub fn from_mask(mask: &BinaryMask) -> Rle {
         let (w, h) = (mask.width, mask.height);
+        let [bx, by, bw, bh] = mask.bbox();
+        if bw == 0.0 {
+            return Rle { size: [h as u32, w as u32], counts: vec![(w * h) as u32] };
+        }
+        let (x0, y0) = (bx as usize, by as usize);
+        let (x1, y1) = (x0 + bw as usize - 1, y0 + bh as usize - 1);
         let mut counts = Vec::new();
         let mut prev = false;
-        let mut run: u32 = 0;
-        for x in 0..w {
-            for y in 0..h {
+        // Clear pixels before (x0, y0) in column-major order.
+        let mut run = (x0 * h + y0) as u32;
+        let mut clear = |n: usize, prev: &mut bool, run: &mut u32, counts: &mut Vec<u32>| {
+            if n > 0 {
+                if *prev {
+                    counts.push(*run);
+                    *run = 0;
+                    *prev = false;
+                }
+                *run += n as u32;
+            }
+        };
+        for x in x0..=x1 {
+            for y in y0..=y1 {
                 let v = mask.data[y * w + x] != 0;
                 if v != prev {
                     counts.push(run);
@@ -298,12 +319,17 @@ impl Rle {
                 }
                 run += 1;
             }
+            // Below the box in this column, and above it in the next one (all clear).
+            clear(h - 1 - y1 + if x < x1 { y0 } else { 0 }, &mut prev, &mut run, &mut counts);
         }
+        // The columns right of the box.
+        clear((w - 1 - x1) * h, &mut prev, &mut run, &mut counts);
         counts.push(run);
         Rle { size: [h as u32, w as u32], counts }
     }
 
-    /// Decodes into a row-major mask. Errors when the counts do not sum to `h * w`.
+    /// Decodes into a row-major mask. Errors when the counts do not sum to `h * w`. A run of
+    /// set pixels is written column segment by column segment.
     pub fn to_mask(&self) -> Result<BinaryMask, CoreError> {
         self.check()?;
         let (h, w) = (self.size[0] as usize, self.size[1] as usize);
@@ -311,13 +337,19 @@ impl Rle {
         let mut pos = 0usize;
         let mut value = false;
         for &c in &self.counts {
+            let end = pos + c as usize;
             if value {
-                for i in pos..pos + c as usize {
+                let mut i = pos;
+                while i < end {
                     let (x, y) = (i / h, i % h);
-                    mask.data[y * w + x] = 1;
+                    let n = (end - i).min(h - y);
+                    for yy in y..y + n {
+                        mask.data[yy * w + x] = 1;
+                    }
+                    i += n;
                 }
             }
-            pos += c as usize;
+            pos = end;
             value = !value;
         }
         Ok(mask)
