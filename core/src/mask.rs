@@ -299,7 +299,7 @@ impl Rle {
         let mut prev = false;
         // Clear pixels before (x0, y0) in column-major order.
         let mut run = (x0 * h + y0) as u32;
-        let mut clear = |n: usize, prev: &mut bool, run: &mut u32, counts: &mut Vec<u32>| {
+        let clear = |n: usize, prev: &mut bool, run: &mut u32, counts: &mut Vec<u32>| {
             if n > 0 {
                 if *prev {
                     counts.push(*run);

@@ -8,6 +8,7 @@ use crate::stages::after_fit;
 use crate::stereo::{points_per_region, region_of};
 use image::DynamicImage;
 use nalgebra::Point3;
+use rayon::prelude::*;
 use tubeloc_core::{BinaryMask, CameraModel, Plane, Pose, TubeAxisPose, TubeDetection};
 use tubeloc_refine::seal_end::ColourImage;
 use tubeloc_refine::seed::reanchored_pose;
@@ -169,40 +170,42 @@ pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame
     let masks: Vec<Option<BinaryMask>> = if opts.mask_term { items.iter().map(SeedItem::mask).collect() } else { vec![None; items.len()] };
     let base = RefineInput { image: &image, camera, ground, scene: Scene::default() };
     let mut out = FrameRefinement { poses: Vec::with_capacity(items.len()), fit_ms: Vec::with_capacity(items.len()), ..Default::default() };
-    for (k, item) in items.iter().enumerate() {
-        let input = RefineInput { ground: grounds[k], scene: Scene { depth: occlusion_depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, camera)), ..Scene::default() }, ..base };
-        match item {
-            SeedItem::Detection(d) => {
-                let mut d = d.clone();
-                if let (Some(from), Some(t)) = (&opts.detections_camera, &d.t_cam_tube) {
-                    if let Some(t) = reanchored_pose(t, from, camera) {
-                        d.t_cam_tube = Some(t);
+    // Each item is fitted on its own (the fit reads the shared frame, writes nothing shared):
+    // in parallel, collected in item order, so the result does not depend on the threads.
+    let fitted: Vec<(TubeAxisPose, f64, Option<TubeAxisPose>)> = items
+        .par_iter()
+        .enumerate()
+        .map(|(k, item)| {
+            let input = RefineInput { ground: grounds[k], scene: Scene { depth: occlusion_depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, camera)), ..Scene::default() }, ..base };
+            let t0 = std::time::Instant::now();
+            match item {
+                SeedItem::Detection(d) => {
+                    let mut d = d.clone();
+                    if let (Some(from), Some(t)) = (&opts.detections_camera, &d.t_cam_tube) {
+                        if let Some(t) = reanchored_pose(t, from, camera) {
+                            d.t_cam_tube = Some(t);
+                        }
                     }
+                    let pose = refiner.refine(&input, &d, colour.as_ref());
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let seed = opts.seeds.then(|| refiner.seed(&input, &d, colour.as_ref()).ok()).flatten().and_then(|sd| TubeAxisPose::new(frame.image_id, d.score, sd.state.c, sd.state.a, 0.5).ok());
+                    (pose, ms, seed)
                 }
-                let t0 = std::time::Instant::now();
-                out.poses.push(refiner.refine(&input, &d, colour.as_ref()));
-                out.fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                if let (true, Ok(sd)) = (opts.seeds, refiner.seed(&input, &d, colour.as_ref())) {
-                    if let Ok(p) = TubeAxisPose::new(frame.image_id, d.score, sd.state.c, sd.state.a, 0.5) {
-                        out.seeds.push(p);
-                    }
+                SeedItem::Explicit { state, .. } => {
+                    let pose = refiner.refine_seed(&input, &Seed { state: *state, end_known: true }, frame.image_id, 1.0, None);
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let seed = opts.seeds.then(|| TubeAxisPose::new(frame.image_id, 1.0, state.c, state.a, 0.5).ok()).flatten();
+                    (pose, ms, seed)
                 }
             }
-            SeedItem::Explicit { state, .. } => {
-                let t0 = std::time::Instant::now();
-                out.poses.push(refiner.refine_seed(&input, &Seed { state: *state, end_known: true }, frame.image_id, 1.0, None));
-                out.fit_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                if opts.seeds {
-                    if let Ok(p) = TubeAxisPose::new(frame.image_id, 1.0, state.c, state.a, 0.5) {
-                        out.seeds.push(p);
-                    }
-                }
-            }
-        }
+        })
+        .collect();
+    for (pose, ms, seed) in fitted {
+        out.poses.push(pose);
+        out.fit_ms.push(ms);
+        out.seeds.extend(seed);
     }
-    for ((p, item), g) in out.poses.iter_mut().zip(items).zip(&grounds) {
-        after_fit(st, p, item.detection(), depth.as_ref(), pair.as_ref(), g.as_ref(), refiner, camera);
-    }
+    out.poses.par_iter_mut().zip(items).zip(&grounds).for_each(|((p, item), g)| after_fit(st, p, item.detection(), depth.as_ref(), pair.as_ref(), g.as_ref(), refiner, camera));
     out.stereo_points = if frame.stereo.is_some() { stereo_pts } else { Vec::new() };
     out.scene_depth = depth;
     out.grounds = grounds;
