@@ -131,12 +131,29 @@ impl<'a> FramePixels<'a> {
     }
 }
 
-/// Refines every seed item of one frame: stereo points per item (with a right view), the fit
-/// (sequential over the items), then the stages after the fit ([`after_fit`]).
+/// Refines every seed item of one frame: stereo points per item (with a right view), the fit,
+/// then the stages after the fit ([`after_fit`]). Items are fitted in parallel, at most
+/// [`concurrent_fits`] at once, and the results come in item order whatever the threads.
 pub fn refine_frame(refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, items: &[SeedItem], opts: &FrameOptions) -> Result<FrameRefinement> {
     refine_pixels(refiner, settings, frame, &FramePixels::of(frame.image, settings.colour_ends), items, opts)
 }
 
+/// Memory the fits of one frame that run at once may hold together, bytes.
+const FIT_MEMORY_BYTES: u64 = 256 << 20;
+
+/// Memory one fit holds per image pixel, bytes: the detection's mask decoded at full
+/// resolution and the masks derived from it (1 byte per pixel each).
+const FIT_BYTES_PER_PIXEL: u64 = 4;
+
+/// How many fits may run at once on a frame of `pixels` pixels: `FIT_MEMORY_BYTES /
+/// (FIT_BYTES_PER_PIXEL · pixels)`, at least 1. A 20-megapixel frame allows 3; frames above
+/// 33.5 megapixels, up to the locator's 100-megapixel bound, are fitted one tube at a time, as
+/// its stated memory bound assumes ([`crate::locator::MAX_IMAGE_PIXELS`]).
+pub(crate) fn concurrent_fits(pixels: u64) -> usize {
+    (FIT_MEMORY_BYTES / (FIT_BYTES_PER_PIXEL * pixels.max(1))).max(1) as usize
+}
+
+/// [`refine_frame`] with the frame's pixels already converted.
 pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, px: &FramePixels, items: &[SeedItem], opts: &FrameOptions) -> Result<FrameRefinement> {
     let camera = frame.camera;
     let gray = &px.gray;
@@ -171,43 +188,63 @@ pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame
     let base = RefineInput { image: &image, camera, ground, scene: Scene::default() };
     let mut out = FrameRefinement { poses: Vec::with_capacity(items.len()), fit_ms: Vec::with_capacity(items.len()), ..Default::default() };
     // Each item is fitted on its own (the fit reads the shared frame, writes nothing shared):
-    // in parallel, collected in item order, so the result does not depend on the threads.
-    let fitted: Vec<(TubeAxisPose, f64, Option<TubeAxisPose>)> = items
-        .par_iter()
-        .enumerate()
-        .map(|(k, item)| {
-            let input = RefineInput { ground: grounds[k], scene: Scene { depth: occlusion_depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, camera)), ..Scene::default() }, ..base };
-            let t0 = std::time::Instant::now();
-            match item {
-                SeedItem::Detection(d) => {
-                    let mut d = d.clone();
-                    if let (Some(from), Some(t)) = (&opts.detections_camera, &d.t_cam_tube) {
-                        if let Some(t) = reanchored_pose(t, from, camera) {
-                            d.t_cam_tube = Some(t);
-                        }
+    // in parallel, in waves of at most `wave` fits (memory), collected in item order, so the
+    // result does not depend on the threads.
+    let wave = concurrent_fits(camera.width as u64 * camera.height as u64);
+    let fit = |k: usize, item: &SeedItem| {
+        let input = RefineInput { ground: grounds[k], scene: Scene { depth: occlusion_depth, stereo_points: &stereo_pts[k], mask: masks[k].as_ref().map(|m| (m, camera)), ..Scene::default() }, ..base };
+        let t0 = std::time::Instant::now();
+        match item {
+            SeedItem::Detection(d) => {
+                let mut d = d.clone();
+                if let (Some(from), Some(t)) = (&opts.detections_camera, &d.t_cam_tube) {
+                    if let Some(t) = reanchored_pose(t, from, camera) {
+                        d.t_cam_tube = Some(t);
                     }
-                    let pose = refiner.refine(&input, &d, colour.as_ref());
-                    let ms = t0.elapsed().as_secs_f64() * 1e3;
-                    let seed = opts.seeds.then(|| refiner.seed(&input, &d, colour.as_ref()).ok()).flatten().and_then(|sd| TubeAxisPose::new(frame.image_id, d.score, sd.state.c, sd.state.a, 0.5).ok());
-                    (pose, ms, seed)
                 }
-                SeedItem::Explicit { state, .. } => {
-                    let pose = refiner.refine_seed(&input, &Seed { state: *state, end_known: true }, frame.image_id, 1.0, None);
-                    let ms = t0.elapsed().as_secs_f64() * 1e3;
-                    let seed = opts.seeds.then(|| TubeAxisPose::new(frame.image_id, 1.0, state.c, state.a, 0.5).ok()).flatten();
-                    (pose, ms, seed)
-                }
+                let pose = refiner.refine(&input, &d, colour.as_ref());
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                let seed = opts.seeds.then(|| refiner.seed(&input, &d, colour.as_ref()).ok()).flatten().and_then(|sd| TubeAxisPose::new(frame.image_id, d.score, sd.state.c, sd.state.a, 0.5).ok());
+                (pose, ms, seed)
             }
-        })
-        .collect();
+            SeedItem::Explicit { state, .. } => {
+                let pose = refiner.refine_seed(&input, &Seed { state: *state, end_known: true }, frame.image_id, 1.0, None);
+                let ms = t0.elapsed().as_secs_f64() * 1e3;
+                let seed = opts.seeds.then(|| TubeAxisPose::new(frame.image_id, 1.0, state.c, state.a, 0.5).ok()).flatten();
+                (pose, ms, seed)
+            }
+        }
+    };
+    let fitted: Vec<(TubeAxisPose, f64, Option<TubeAxisPose>)> = items.chunks(wave).enumerate().flat_map(|(w, its)| its.par_iter().enumerate().map(|(j, item)| fit(w * wave + j, item)).collect::<Vec<_>>()).collect();
     for (pose, ms, seed) in fitted {
         out.poses.push(pose);
         out.fit_ms.push(ms);
         out.seeds.extend(seed);
     }
-    out.poses.par_iter_mut().zip(items).zip(&grounds).for_each(|((p, item), g)| after_fit(st, p, item.detection(), depth.as_ref(), pair.as_ref(), g.as_ref(), refiner, camera));
+    for ((ps, its), gs) in out.poses.chunks_mut(wave).zip(items.chunks(wave)).zip(grounds.chunks(wave)) {
+        ps.par_iter_mut().zip(its).zip(gs).for_each(|((p, item), g)| after_fit(st, p, item.detection(), depth.as_ref(), pair.as_ref(), g.as_ref(), refiner, camera));
+    }
     out.stereo_points = if frame.stereo.is_some() { stereo_pts } else { Vec::new() };
     out.scene_depth = depth;
     out.grounds = grounds;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Large frames are fitted one tube at a time (the locator's memory bound assumes it),
+    /// a 20-megapixel frame three at a time, small frames all at once on common machines.
+    #[test]
+    fn concurrent_fits_bound_the_fits_memory() {
+        assert_eq!(concurrent_fits(crate::locator::MAX_IMAGE_PIXELS), 1);
+        assert_eq!(concurrent_fits(40_000_000), 1);
+        assert_eq!(concurrent_fits(5472 * 3648), 3);
+        assert!(concurrent_fits(1024 * 1024) >= 32);
+        assert_eq!(concurrent_fits(0), (FIT_MEMORY_BYTES / FIT_BYTES_PER_PIXEL) as usize);
+        for p in [1u64, 1 << 20, 20_000_000, 100_000_000] {
+            assert!(concurrent_fits(p) as u64 * FIT_BYTES_PER_PIXEL * p <= FIT_MEMORY_BYTES.max(FIT_BYTES_PER_PIXEL * p), "{p} px");
+        }
+    }
 }
