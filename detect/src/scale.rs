@@ -108,29 +108,16 @@ pub fn scaled_size(width: usize, height: usize, s: f64) -> (usize, usize) {
 /// Bilinear resampling of `channels` channel-major planes from `width x height` to
 /// `nw x nh`: output pixel `(x', y')` reads the source at `((x' + ½) w / nw - ½, ...)`,
 /// clamped to the border. When shrinking by more than 2 the source is first box-averaged so
-/// that every source pixel contributes.
+/// that every source pixel contributes ([`box_factors`], [`box_average`]).
 pub fn resample_planes(src: &[f32], channels: usize, width: usize, height: usize, nw: usize, nh: usize) -> Vec<f32> {
     use rayon::prelude::*;
     let n = width * height;
     let (sx, sy) = (width as f32 / nw as f32, height as f32 / nh as f32);
-    let (kx, ky) = ((sx / 2.0).floor().max(1.0) as usize, (sy / 2.0).floor().max(1.0) as usize);
+    let (kx, ky) = box_factors(width, height, nw, nh);
     if kx > 1 || ky > 1 {
         // Box-average to at most twice the target first.
-        let (bw, bh) = (width / kx, height / ky);
-        let mut boxed = vec![0f32; channels * bw * bh];
-        for c in 0..channels {
-            let p = &src[c * n..(c + 1) * n];
-            boxed[c * bw * bh..(c + 1) * bw * bh].par_chunks_mut(bw).enumerate().for_each(|(y, row)| {
-                for (x, o) in row.iter_mut().enumerate() {
-                    let mut acc = 0.0;
-                    for yy in y * ky..(y + 1) * ky {
-                        acc += p[yy * width + x * kx..yy * width + (x + 1) * kx].iter().sum::<f32>();
-                    }
-                    *o = acc / (kx * ky) as f32;
-                }
-            });
-        }
-        return resample_planes(&boxed, channels, bw, bh, nw, nh);
+        let boxed = box_average(channels, width, height, kx, ky, |c, y, row| row.copy_from_slice(&src[c * n + y * width..c * n + (y + 1) * width]));
+        return resample_planes(&boxed, channels, width / kx, height / ky, nw, nh);
     }
     let xs: Vec<(usize, usize, f32)> = (0..nw)
         .map(|x| {
@@ -155,6 +142,43 @@ pub fn resample_planes(src: &[f32], channels: usize, width: usize, height: usize
         });
     }
     out
+}
+
+/// The box of [`resample_planes`]'s first step from `width x height` to `nw x nh`:
+/// `(kx, ky) = (max(1, ⌊w / 2nw⌋), max(1, ⌊h / 2nh⌋))` source pixels per averaged pixel; `(1, 1)`
+/// when no box step is needed.
+pub fn box_factors(width: usize, height: usize, nw: usize, nh: usize) -> (usize, usize) {
+    let (sx, sy) = (width as f32 / nw as f32, height as f32 / nh as f32);
+    ((sx / 2.0).floor().max(1.0) as usize, (sy / 2.0).floor().max(1.0) as usize)
+}
+
+/// Box average of `channels` planes of `width x height` over `kx x ky` blocks: planes of
+/// `⌊w / kx⌋ x ⌊h / ky⌋`, channel-major, each value the mean of its block (sums row by row,
+/// left to right). The source is read a row at a time: `source_row(c, y, row)` fills `row`
+/// (`width` values) with row `y` of channel `c`, so a per-pixel transform of the input (e.g.
+/// [`crate::learned::Preprocess::apply_resampled`]) never needs a full-resolution plane.
+pub fn box_average(channels: usize, width: usize, height: usize, kx: usize, ky: usize, source_row: impl Fn(usize, usize, &mut [f32]) + Sync) -> Vec<f32> {
+    use rayon::prelude::*;
+    let (bw, bh) = (width / kx, height / ky);
+    let mut boxed = vec![0f32; channels * bw * bh];
+    for c in 0..channels {
+        boxed[c * bw * bh..(c + 1) * bw * bh].par_chunks_mut(bw.max(1)).enumerate().for_each_init(
+            || vec![0f32; ky * width],
+            |rows, (y, out)| {
+                for (k, row) in rows.chunks_exact_mut(width).enumerate() {
+                    source_row(c, y * ky + k, row);
+                }
+                for (x, o) in out.iter_mut().enumerate() {
+                    let mut acc = 0.0;
+                    for row in rows.chunks_exact(width) {
+                        acc += row[x * kx..(x + 1) * kx].iter().sum::<f32>();
+                    }
+                    *o = acc / (kx * ky) as f32;
+                }
+            },
+        );
+    }
+    boxed
 }
 
 /// [`resample_planes`] of an interleaved RGB8 image from `width x height` to `nw x nh`,

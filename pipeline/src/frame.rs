@@ -118,17 +118,37 @@ pub(crate) struct FramePixels<'a> {
 impl<'a> FramePixels<'a> {
     /// The grey levels of `image`, and its colours when `colour` is set.
     pub fn of(image: &'a DynamicImage, colour: bool) -> Self {
-        let luma = image.to_luma8();
         let rgb = colour.then(|| match image {
             DynamicImage::ImageRgb8(img) => std::borrow::Cow::Borrowed(img.as_raw().as_slice()),
             _ => std::borrow::Cow::Owned(image.to_rgb8().into_raw()),
         });
-        FramePixels { gray: Plane::from_vec(luma.width() as usize, luma.height() as usize, luma.into_raw()), rgb }
+        FramePixels { gray: grey_levels(image), rgb }
     }
 
     fn colour(&self, wanted: bool) -> Option<ColourImage<'_>> {
         self.rgb.as_deref().filter(|_| wanted).map(|rgb| ColourImage { width: self.gray.width, height: self.gray.height, rgb })
     }
+}
+
+/// The grey levels of `image`, as [`DynamicImage::to_luma8`] gives them (the image crate's
+/// conversion in the image's colour space). An RGB8 image is converted in bands of rows in
+/// parallel; the conversion is per pixel, so the levels are the same.
+pub(crate) fn grey_levels(image: &DynamicImage) -> Plane<u8> {
+    const BAND_ROWS: usize = 64;
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let DynamicImage::ImageRgb8(img) = image else {
+        return Plane::from_vec(w, h, image.to_luma8().into_raw());
+    };
+    let mut gray = vec![0u8; w * h];
+    let space = img.color_space();
+    gray.par_chunks_mut((w * BAND_ROWS).max(1)).zip(img.as_raw().par_chunks((3 * w * BAND_ROWS).max(1))).for_each(|(out, src)| {
+        let rows = out.len() / w.max(1);
+        let mut band = image::RgbImage::from_raw(w as u32, rows as u32, src.to_vec()).expect("a band of whole rows");
+        // The image's colour space is a valid one, so it is accepted.
+        let _ = band.set_color_space(space);
+        out.copy_from_slice(DynamicImage::ImageRgb8(band).to_luma8().as_raw());
+    });
+    Plane::from_vec(w, h, gray)
 }
 
 /// Refines every seed item of one frame: stereo points per item (with a right view), the fit,
@@ -246,5 +266,27 @@ mod tests {
         for p in [1u64, 1 << 20, 20_000_000, 100_000_000] {
             assert!(concurrent_fits(p) as u64 * FIT_BYTES_PER_PIXEL * p <= FIT_MEMORY_BYTES.max(FIT_BYTES_PER_PIXEL * p), "{p} px");
         }
+    }
+
+    /// The banded conversion gives the image crate's grey levels, bands of every height and a
+    /// non-sRGB colour space included.
+    #[test]
+    fn grey_levels_are_the_image_crates() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for (w, h) in [(37u32, 150u32), (5, 64), (1, 1), (200, 129)] {
+            let raw: Vec<u8> = (0..3 * w * h).map(|_| rng.random()).collect();
+            let mut img = image::RgbImage::from_raw(w, h, raw).unwrap();
+            let plain = DynamicImage::ImageRgb8(img.clone());
+            assert_eq!(grey_levels(&plain).data, plain.to_luma8().into_raw(), "{w}x{h}");
+            img.set_rgb_primaries(image::metadata::CicpColorPrimaries::Rgb240m);
+            let wide = DynamicImage::ImageRgb8(img);
+            assert_eq!(grey_levels(&wide).data, wide.to_luma8().into_raw(), "{w}x{h} SMPTE 240M");
+            if w * h > 100 {
+                assert_ne!(wide.to_luma8(), plain.to_luma8(), "the colour space changes the levels");
+            }
+        }
+        let grey = DynamicImage::ImageLuma8(image::GrayImage::from_fn(9, 7, |x, y| image::Luma([(x * 7 + y) as u8])));
+        assert_eq!(grey_levels(&grey).data, grey.to_luma8().into_raw());
     }
 }

@@ -1,6 +1,7 @@
 //! The overlay image: fitted contours and the chosen gripper poses drawn over the grey image.
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 use tubeloc_core::{CameraModel, Plane, TubeAxisPose};
 use tubeloc_refine::Refiner;
 
@@ -8,10 +9,9 @@ use tubeloc_refine::Refiner;
 /// centre drawn, green for converged poses and red for rejected ones, in order.
 pub fn draw<'a>(gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: impl IntoIterator<Item = &'a TubeAxisPose>) -> image::RgbImage {
     let (w, h) = (gray.width as u32, gray.height as u32);
-    let mut img = image::RgbImage::from_fn(w, h, |x, y| {
-        let v = gray.get(x as usize, y as usize);
-        image::Rgb([v, v, v])
-    });
+    let mut rgb = vec![0u8; 3 * gray.data.len()];
+    rgb.par_chunks_mut(3 << 14).zip(gray.data.par_chunks(1 << 14)).for_each(|(out, g)| out.chunks_exact_mut(3).zip(g).for_each(|(p, &v)| p.fill(v)));
+    let mut img = image::RgbImage::from_raw(w, h, rgb).expect("3 bytes per pixel");
     for p in poses {
         let col = if p.converged { [40, 230, 60] } else { [240, 40, 40] };
         for u in refiner.contour_pixels(cam, p, 0.5) {

@@ -53,8 +53,11 @@ pub fn detect_rgb_at_scale(model: &LearnedModel, rgb: &[u8], width: usize, heigh
     if rgb.len() != width * height * 3 {
         return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
-    let input = model.meta.preprocess.apply(rgb, width, height);
-    detect_planes_at_scale(model, input, width, height, s, cfg)
+    if !(s.is_finite() && s > 0.0) || s == 1.0 {
+        return detect_planes_at_scale(model, model.meta.preprocess.apply(rgb, width, height), width, height, s, cfg);
+    }
+    let (nw, nh) = crate::scale::scaled_size(width, height, s);
+    detect_scaled(model, &model.meta.preprocess.apply_resampled(rgb, width, height, nw, nh), (nw, nh), (width, height), cfg)
 }
 
 /// [`detect_rgb_at_scale`] on preprocessed input planes (`channels * width * height`).
@@ -69,7 +72,13 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
     let c = model.meta.preprocess.channels();
     let scaled = crate::scale::resample_planes(&input, c, width, height, nw, nh);
     drop(input);
-    let found = decode(&predict_for(model, &scaled, nw, nh, cfg)?, cfg);
+    detect_scaled(model, &scaled, (nw, nh), (width, height), cfg)
+}
+
+/// Detects on input planes resampled to `(nw, nh)` and maps every instance back to the
+/// original `(width, height)` pixels, as [`detect_rgb_at_scale`] describes.
+fn detect_scaled(model: &LearnedModel, scaled: &[f32], (nw, nh): (usize, usize), (width, height): (usize, usize), cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    let found = decode(&predict_for(model, scaled, nw, nh, cfg)?, cfg);
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
     Ok(found
         .into_par_iter()

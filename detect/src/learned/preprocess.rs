@@ -65,7 +65,7 @@ impl Preprocess {
                 out
             }
             Preprocess::GrayBox { radius } => {
-                let gray: Vec<f32> = rgb.chunks_exact(3).take(n).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0).collect();
+                let gray: Vec<f32> = rgb.chunks_exact(3).take(n).map(luminance).collect();
                 let mut out = box_filter(&gray, width, height, radius);
                 out.iter_mut().for_each(|v| *v = (*v - 0.5) / 0.25);
                 out
@@ -73,46 +73,100 @@ impl Preprocess {
             Preprocess::GrayNorm => gray_norm(rgb, n),
         }
     }
+
+    /// [`Preprocess::apply`] resampled to `nw x nh` ([`crate::scale::resample_planes`]), with
+    /// the same values. When the resampling starts with a box step and the preprocessing is
+    /// per pixel (`rgb`, `gray-norm`), the box averages are taken of input rows computed on the
+    /// fly, without the full-resolution planes (80 MB a plane for a 20-megapixel frame).
+    pub fn apply_resampled(&self, rgb: &[u8], width: usize, height: usize, nw: usize, nh: usize) -> Vec<f32> {
+        use crate::scale::{box_average, box_factors, resample_planes};
+        let (kx, ky) = box_factors(width, height, nw, nh);
+        let c = self.channels();
+        let boxed = match (*self, kx > 1 || ky > 1) {
+            (Preprocess::GrayNorm, true) => {
+                let map = GrayNormMap::fit(rgb, width * height);
+                box_average(1, width, height, kx, ky, |_, y, row| {
+                    for (o, p) in row.iter_mut().zip(rgb[3 * y * width..3 * (y + 1) * width].chunks_exact(3)) {
+                        *o = map.apply(p);
+                    }
+                })
+            }
+            (Preprocess::Rgb, true) => box_average(3, width, height, kx, ky, |c, y, row| {
+                for (o, p) in row.iter_mut().zip(rgb[3 * y * width..3 * (y + 1) * width].chunks_exact(3)) {
+                    *o = (p[c] as f32 / 255.0 - 0.5) / 0.25;
+                }
+            }),
+            _ => return resample_planes(&self.apply(rgb, width, height), c, width, height, nw, nh),
+        };
+        resample_planes(&boxed, c, width / kx, height / ky, nw, nh)
+    }
 }
 
-/// [`Preprocess::GrayNorm`] of interleaved RGB8: luminance `0.299 R + 0.587 G + 0.114 B`,
-/// percentiles from a 1024-bin histogram.
+/// Luminance of an RGB8 pixel in `[0, 1]`: `(0.299 R + 0.587 G + 0.114 B) / 255`.
+#[inline]
+fn luminance(p: &[u8]) -> f32 {
+    (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0
+}
+
+/// [`Preprocess::GrayNorm`]'s map from luminance to network input, fitted on one image:
+/// `clamp((v - p_50) · inv, -6, 6)` with `inv = 1 / (0.5 max(p_98 - p_2, 0.02))`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrayNormMap {
+    p50: f32,
+    inv: f32,
+}
+
+impl GrayNormMap {
+    /// The map of the first `n` pixels of interleaved RGB8 `rgb`: percentiles of their
+    /// luminance from a 1024-bin histogram.
+    pub fn fit(rgb: &[u8], n: usize) -> Self {
+        use rayon::prelude::*;
+        let px = &rgb[..3 * n.min(rgb.len() / 3)];
+        let count = px.len() / 3;
+        // Per-chunk histograms summed (counts are integers: the same whatever the split).
+        let hist = px
+            .par_chunks(3 << 16)
+            .map(|chunk| {
+                let mut h = [0u32; 1024];
+                for p in chunk.chunks_exact(3) {
+                    h[((luminance(p) * 1023.0).round() as usize).min(1023)] += 1;
+                }
+                h
+            })
+            .reduce(
+                || [0u32; 1024],
+                |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                    a
+                },
+            );
+        let pct = |q: f64| -> f32 {
+            let target = (q * count as f64).ceil().max(1.0) as u64;
+            let mut acc = 0u64;
+            for (i, &c) in hist.iter().enumerate() {
+                acc += c as u64;
+                if acc >= target {
+                    return i as f32 / 1023.0;
+                }
+            }
+            1.0
+        };
+        let (p2, p50, p98) = (pct(0.02), pct(0.5), pct(0.98));
+        GrayNormMap { p50, inv: 1.0 / (0.5 * (p98 - p2).max(0.02)) }
+    }
+
+    /// The network input of an RGB8 pixel `p`.
+    #[inline]
+    pub fn apply(&self, p: &[u8]) -> f32 {
+        ((luminance(p) - self.p50) * self.inv).clamp(-6.0, 6.0)
+    }
+}
+
+/// [`Preprocess::GrayNorm`] of interleaved RGB8 (its first `n` pixels) ([`GrayNormMap`]).
 pub fn gray_norm(rgb: &[u8], n: usize) -> Vec<f32> {
     use rayon::prelude::*;
-    let lum: Vec<f32> = rgb[..3 * n.min(rgb.len() / 3)].par_chunks_exact(3).map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0).collect();
-    // Per-chunk histograms summed (counts are integers: the same whatever the split).
-    let hist = lum
-        .par_chunks(1 << 16)
-        .map(|chunk| {
-            let mut h = [0u32; 1024];
-            for &v in chunk {
-                h[((v * 1023.0).round() as usize).min(1023)] += 1;
-            }
-            h
-        })
-        .reduce(
-            || [0u32; 1024],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            },
-        );
-    let pct = |q: f64| -> f32 {
-        let target = (q * lum.len() as f64).ceil().max(1.0) as u64;
-        let mut acc = 0u64;
-        for (i, &c) in hist.iter().enumerate() {
-            acc += c as u64;
-            if acc >= target {
-                return i as f32 / 1023.0;
-            }
-        }
-        1.0
-    };
-    let (p2, p50, p98) = (pct(0.02), pct(0.5), pct(0.98));
-    let inv = 1.0 / (0.5 * (p98 - p2).max(0.02));
-    let mut lum = lum;
-    lum.par_iter_mut().for_each(|v| *v = ((*v - p50) * inv).clamp(-6.0, 6.0));
-    lum
+    let map = GrayNormMap::fit(rgb, n);
+    rgb[..3 * n.min(rgb.len() / 3)].par_chunks_exact(3).map(|p| map.apply(p)).collect()
 }
 
 /// Mean over a `(2r+1)^2` window with clamped (replicated) borders; separable running sums.
@@ -167,5 +221,22 @@ mod tests {
         assert_eq!(Preprocess::parse("gray-box:2"), Some(Preprocess::GrayBox { radius: 2 }));
         assert_eq!(Preprocess::parse("rgb"), Some(Preprocess::Rgb));
         assert_eq!(Preprocess::parse("hsv"), None);
+    }
+
+    #[test]
+    fn resampled_input_equals_resampling_the_full_resolution_input() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        // Shrinks with and without the box step, odd sizes, an enlargement.
+        for (w, h, nw, nh) in [(97, 61, 20, 13), (64, 64, 16, 16), (50, 30, 40, 24), (33, 47, 9, 30), (20, 10, 41, 21)] {
+            let rgb: Vec<u8> = (0..3 * w * h).map(|_| rng.random()).collect();
+            for pre in [Preprocess::GrayNorm, Preprocess::Rgb, Preprocess::GrayBox { radius: 1 }] {
+                let full = crate::scale::resample_planes(&pre.apply(&rgb, w, h), pre.channels(), w, h, nw, nh);
+                let fused = pre.apply_resampled(&rgb, w, h, nw, nh);
+                assert_eq!(fused.len(), full.len(), "{pre:?} {w}x{h} -> {nw}x{nh}");
+                // Bit for bit: the same sums in the same order.
+                assert!(fused.iter().zip(&full).all(|(a, b)| a.to_bits() == b.to_bits()), "{pre:?} {w}x{h} -> {nw}x{nh}");
+            }
+        }
     }
 }
