@@ -79,14 +79,14 @@ impl BinaryMask {
     /// pixels' bounding box grown by `r + 1` (clipped to the image): nothing outside that
     /// window is set, so the image-sized copy is not made.
     pub fn dilated_window(&self, r: usize) -> MaskWindow {
-        self.morphed_window(r, true, true)
+        self.morphed_window(self.bbox(), r, true, true)
     }
 
     /// `r` steps of 4-neighbour dilation (`grow`) or erosion (which clears the pixels on the
     /// image border when `border_erodes`) of the whole mask: [`BinaryMask::morphed_window`]
     /// written over a copy of `self`.
     fn morphed(&self, r: usize, grow: bool, border_erodes: bool) -> BinaryMask {
-        let win = self.morphed_window(r, grow, border_erodes);
+        let win = self.morphed_window(self.bbox(), r, grow, border_erodes);
         let mut out = self.clone();
         let ww = win.mask.width;
         for (j, row) in win.mask.data.chunks_exact(ww.max(1)).enumerate().take(win.mask.height) {
@@ -103,8 +103,9 @@ impl BinaryMask {
     /// pixels within city-block distance `r`. The window is padded by one pixel: clear, except
     /// beyond the image border in an erosion without `border_erodes`, where it counts as set
     /// (the border does not erode). Each step is a few byte-wise ORs or ANDs of whole rows.
-    fn morphed_window(&self, r: usize, grow: bool, border_erodes: bool) -> MaskWindow {
-        let [bx, by, bw, bh] = self.bbox();
+    /// `bbox` is the set pixels' bounding box ([`BinaryMask::bbox`]).
+    fn morphed_window(&self, bbox: [f64; 4], r: usize, grow: bool, border_erodes: bool) -> MaskWindow {
+        let [bx, by, bw, bh] = bbox;
         if bw == 0.0 {
             return MaskWindow { x0: 0, y0: 0, mask: BinaryMask::new(0, 0) };
         }
@@ -192,6 +193,54 @@ impl BinaryMask {
             }
         }
         [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64]
+    }
+}
+
+/// A [`BinaryMask`] whose set pixels' bounding box is known: what a detection's mask is decoded
+/// into ([`Rle::to_bounded_mask`]). The operations that only need the box and what lies in it
+/// ([`BoundedMask::bbox`], [`BoundedMask::dilated_window`], [`Rle::from_bounded_mask`]) then
+/// cost the box, not the image (a 20-megapixel frame's scan for each). Read-only (it derefs to
+/// the mask), so the box stays right.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoundedMask {
+    mask: BinaryMask,
+    bbox: [f64; 4],
+}
+
+impl BoundedMask {
+    /// `mask` with its bounding box found by one scan ([`BinaryMask::bbox`]).
+    pub fn new(mask: BinaryMask) -> Self {
+        let bbox = mask.bbox();
+        BoundedMask { mask, bbox }
+    }
+
+    /// Tight bounding box of the set pixels, COCO `[x, y, w, h]` in pixels, as
+    /// [`BinaryMask::bbox`] gives it.
+    pub fn bbox(&self) -> [f64; 4] {
+        self.bbox
+    }
+
+    /// [`BinaryMask::dilated_window`] within the known box.
+    pub fn dilated_window(&self, r: usize) -> MaskWindow {
+        self.mask.morphed_window(self.bbox, r, true, true)
+    }
+
+    /// The mask itself.
+    pub fn into_mask(self) -> BinaryMask {
+        self.mask
+    }
+}
+
+impl From<BinaryMask> for BoundedMask {
+    fn from(mask: BinaryMask) -> Self {
+        BoundedMask::new(mask)
+    }
+}
+
+impl std::ops::Deref for BoundedMask {
+    type Target = BinaryMask;
+    fn deref(&self) -> &BinaryMask {
+        &self.mask
     }
 }
 
@@ -288,8 +337,18 @@ impl Rle {
     /// join the runs by count, so a small tube on a 20-megapixel frame costs its box, not the
     /// frame.
     pub fn from_mask(mask: &BinaryMask) -> Rle {
+        Rle::from_mask_in(mask, mask.bbox())
+    }
+
+    /// [`Rle::from_mask`] of a mask whose bounding box is known: only the box is read.
+    pub fn from_bounded_mask(mask: &BoundedMask) -> Rle {
+        Rle::from_mask_in(mask, mask.bbox())
+    }
+
+    /// [`Rle::from_mask`] with the set pixels' bounding box `bbox` given.
+    fn from_mask_in(mask: &BinaryMask, bbox: [f64; 4]) -> Rle {
         let (w, h) = (mask.width, mask.height);
-        let [bx, by, bw, bh] = mask.bbox();
+        let [bx, by, bw, bh] = bbox;
         if bw == 0.0 {
             return Rle { size: [h as u32, w as u32], counts: vec![(w * h) as u32] };
         }
@@ -331,11 +390,18 @@ impl Rle {
     /// Decodes into a row-major mask. Errors when the counts do not sum to `h * w`. A run of
     /// set pixels is written column segment by column segment.
     pub fn to_mask(&self) -> Result<BinaryMask, CoreError> {
+        Ok(self.to_bounded_mask()?.into_mask())
+    }
+
+    /// [`Rle::to_mask`] with the set pixels' tight bounding box ([`BinaryMask::bbox`]), found
+    /// while decoding.
+    pub fn to_bounded_mask(&self) -> Result<BoundedMask, CoreError> {
         self.check()?;
         let (h, w) = (self.size[0] as usize, self.size[1] as usize);
         let mut mask = BinaryMask::new(w, h);
         let mut pos = 0usize;
         let mut value = false;
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
         for &c in &self.counts {
             let end = pos + c as usize;
             if value {
@@ -346,13 +412,15 @@ impl Rle {
                     for yy in y..y + n {
                         mask.data[yy * w + x] = 1;
                     }
+                    (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y + n - 1));
                     i += n;
                 }
             }
             pos = end;
             value = !value;
         }
-        Ok(mask)
+        let bbox = if x0 == usize::MAX { [0.0; 4] } else { [x0 as f64, y0 as f64, (x1 - x0 + 1) as f64, (y1 - y0 + 1) as f64] };
+        Ok(BoundedMask { mask, bbox })
     }
 
     /// Checks that the counts sum to `h * w` (what every valid COCO RLE satisfies).

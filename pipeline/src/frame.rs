@@ -185,8 +185,7 @@ pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame
     let ground = frame.ground;
     let (stereo_pts, depth, pair, grounds) = match &frame.stereo {
         Some(view) => {
-            let right = view.right.to_luma8();
-            let right = Plane::from_vec(right.width() as usize, right.height() as usize, right.into_raw());
+            let right = grey_levels(view.right);
             let (h, w) = (camera.height, camera.width);
             let regions: Vec<StereoRegion> = items
                 .iter()
@@ -202,7 +201,7 @@ pub(crate) fn refine_pixels(refiner: &Refiner, settings: &LocatorSettings, frame
         }
         None => (vec![Vec::new(); items.len()], None, None, vec![ground; items.len()]),
     };
-    let image = Plane::from_vec(gray.width, gray.height, gray.data.iter().map(|&v| v as f32 / 255.0).collect());
+    let image = Plane::from_vec(gray.width, gray.height, gray.data.par_iter().map(|&v| v as f32 / 255.0).collect());
     let occlusion_depth = depth.as_ref().filter(|_| st.scene_occlusion).map(|d| (d, camera));
     let masks: Vec<Option<BinaryMask>> = if opts.mask_term { items.iter().map(SeedItem::mask).collect() } else { vec![None; items.len()] };
     let base = RefineInput { image: &image, camera, ground, scene: Scene::default() };

@@ -25,7 +25,7 @@ use tubeloc_refine::{GroundPlane, Refiner, SeedKind};
 #[allow(clippy::too_many_arguments)]
 pub fn after_fit(settings: &StageSettings, pose: &mut TubeAxisPose, det: Option<&TubeDetection>, depth: Option<&Plane<f32>>, pair: Option<&RectifiedPair>, ground: Option<&GroundPlane>, refiner: &Refiner, camera: &CameraModel) {
     // The mask of a mask seed (the learned segmenter's kind; not a template pose's).
-    let mask = det.filter(|d| d.t_cam_tube.is_none()).and_then(|d| d.mask.as_ref()).and_then(|m| m.to_mask().ok());
+    let mask = det.filter(|d| d.t_cam_tube.is_none()).and_then(|d| d.mask.as_ref()).and_then(|m| m.to_bounded_mask().ok());
     if let (Some(depth), Some(mask), true) = (depth, &mask, settings.hidden_end) {
         anchor_visible_end(pose, refiner.model.length, mask, depth, camera, &HiddenEnd::default());
     }

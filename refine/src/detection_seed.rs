@@ -6,7 +6,7 @@ use crate::priors::ImageAxisPrior;
 use crate::refiner::{RefineInput, Refiner};
 use crate::seal_end::{self, ColourImage};
 use crate::seed::{self, Seed};
-use tubeloc_core::{AxisSeed, BinaryMask, MaskWindow, TubeDetection};
+use tubeloc_core::{AxisSeed, BoundedMask, MaskWindow, TubeDetection};
 
 /// The colour image and the detection's mask for the colour end decision ([`seal_end`]).
 #[derive(Clone, Copy)]
@@ -14,7 +14,7 @@ pub(crate) struct EndColour<'a> {
     /// The image's colours.
     pub image: &'a ColourImage<'a>,
     /// The detection's mask (pixels where the tube is visible), if any.
-    pub visible: Option<&'a BinaryMask>,
+    pub visible: Option<&'a BoundedMask>,
 }
 
 /// The detection with its template pose replaced by the pose's image axis
@@ -31,7 +31,7 @@ pub(crate) fn template_as_image_axis(refiner: &Refiner, input: &RefineInput, det
 /// ([`crate::settings::MaskUse::end_colour_corr`]); `None` keeps `det` (no colour image or
 /// mask, a template pose, no axis seed, too little colour evidence, or the axis already points
 /// to the seal end).
-pub(crate) fn turned_by_colour(min_corr: f64, det: &TubeDetection, mask: Option<&BinaryMask>, image: Option<&ColourImage>) -> Option<TubeDetection> {
+pub(crate) fn turned_by_colour(min_corr: f64, det: &TubeDetection, mask: Option<&BoundedMask>, image: Option<&ColourImage>) -> Option<TubeDetection> {
     let (mask, image) = (mask?, image?);
     if det.t_cam_tube.is_some() {
         return None;
@@ -48,7 +48,7 @@ pub(crate) fn turned_by_colour(min_corr: f64, det: &TubeDetection, mask: Option<
 /// with a ground plane, the mask's axis line as a prior on the fitted axis's image direction
 /// (used by the fits without stereo points: mono, and the stereo edge polish); in mono, the
 /// mask grown by [`crate::settings::MaskUse::visibility_px`] as the visible region.
-pub(crate) fn mask_scene(refiner: &Refiner, input: &RefineInput, det: &TubeDetection, mask: Option<&BinaryMask>, seed: &Seed) -> (Option<ImageAxisPrior>, Option<MaskWindow>) {
+pub(crate) fn mask_scene(refiner: &Refiner, input: &RefineInput, det: &TubeDetection, mask: Option<&BoundedMask>, seed: &Seed) -> (Option<ImageAxisPrior>, Option<MaskWindow>) {
     let use_mask = &refiner.config().mask;
     let has_ground = input.ground.is_some() || input.scene.ground.is_some();
     let image_axis = match (&det.axis_seed, mask, det.t_cam_tube.is_none() && has_ground) {
@@ -56,7 +56,7 @@ pub(crate) fn mask_scene(refiner: &Refiner, input: &RefineInput, det: &TubeDetec
         _ => None,
     };
     let mono_mask = det.t_cam_tube.is_none() && input.scene.stereo_points.is_empty() && use_mask.visibility_px > 0;
-    let of_image = |m: &&BinaryMask| m.width == input.camera.width as usize && m.height == input.camera.height as usize;
+    let of_image = |m: &&BoundedMask| m.width == input.camera.width as usize && m.height == input.camera.height as usize;
     let shown = mask.filter(|_| mono_mask).filter(of_image).map(|m| m.dilated_window(use_mask.visibility_px));
     (image_axis, shown)
 }

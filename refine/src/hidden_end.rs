@@ -24,7 +24,7 @@
 //! [`widen_along_axis`] add that to the centre's covariance (any mask seed, mono or stereo).
 
 use nalgebra::{Point2, Point3, Vector2};
-use tubeloc_core::{BinaryMask, CameraModel, Plane, TubeAxisPose};
+use tubeloc_core::{BoundedMask, CameraModel, Plane, TubeAxisPose};
 
 /// Settings of [`anchor_visible_end`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,7 +65,7 @@ enum EndView {
 /// the detector's `mask` when the other end is hidden (module docs); `depth` is the scene's
 /// depth map (Z, metres, non-finite or ≤ 0 unknown) in `camera`'s image, `length_m` the tube's
 /// length. Returns the move (metres along `pose.end_direction`), or `None` when nothing moved.
-pub fn anchor_visible_end(pose: &mut TubeAxisPose, length_m: f64, mask: &BinaryMask, depth: &Plane<f32>, camera: &CameraModel, cfg: &HiddenEnd) -> Option<f64> {
+pub fn anchor_visible_end(pose: &mut TubeAxisPose, length_m: f64, mask: &BoundedMask, depth: &Plane<f32>, camera: &CameraModel, cfg: &HiddenEnd) -> Option<f64> {
     if !pose.converged || mask.width != camera.width as usize || mask.height != camera.height as usize || depth.width != mask.width || depth.height != mask.height {
         return None;
     }
@@ -109,7 +109,7 @@ pub fn anchor_visible_end(pose: &mut TubeAxisPose, length_m: f64, mask: &BinaryM
 /// `h² / 12`. A tube anchored at its visible end ([`anchor_visible_end`]) keeps that end's
 /// uncertainty instead, `(anchor_px · L / ℓ)²`. `None` when the pose did not converge, the
 /// mask is empty or of another size, or the tube projects shorter than 10 px.
-pub fn unseen_length_variance(pose: &TubeAxisPose, length_m: f64, mask: &BinaryMask, camera: &CameraModel, anchor_px: f64) -> Option<f64> {
+pub fn unseen_length_variance(pose: &TubeAxisPose, length_m: f64, mask: &BoundedMask, camera: &CameraModel, anchor_px: f64) -> Option<f64> {
     if !pose.converged || mask.width != camera.width as usize || mask.height != camera.height as usize {
         return None;
     }
@@ -140,7 +140,7 @@ pub fn widen_along_axis(pose: &mut TubeAxisPose, variance: f64) {
 
 /// The 1st and 99th percentiles of the mask pixels' positions along `u` from `mid` (pixels);
 /// `None` for an empty mask.
-fn mask_span(mask: &BinaryMask, mid: &Point2<f64>, u: &Vector2<f64>) -> Option<(f64, f64)> {
+fn mask_span(mask: &BoundedMask, mid: &Point2<f64>, u: &Vector2<f64>) -> Option<(f64, f64)> {
     let [bx, by, bw, bh] = mask.bbox();
     let mut t = Vec::new();
     for y in by as usize..(by + bh) as usize {
@@ -199,6 +199,7 @@ fn end_view(t_end: f64, side: f64, mid: &Point2<f64>, u: &Vector2<f64>, depth: &
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+    use tubeloc_core::BinaryMask;
 
     /// A tube 1 m ahead across the view, its foot half hidden by a rock 5 cm nearer: the mask
     /// covers the seal half, and the pose, centred on what is visible, moves back by the hidden
@@ -210,7 +211,7 @@ mod tests {
         let px = |x: f64| cam.project(&Point3::new(x, 0.0, 1.0)).unwrap().x;
         // Visible: the axis from x = 0 (hidden beyond) to x = +L/2 (seal end).
         let (x_lo, x_hi) = (px(0.0), px(0.5 * len));
-        let mask = BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= x_lo && (x as f64) <= x_hi && (y as f64 - cam.cy).abs() <= 8.0);
+        let mask = BoundedMask::new(BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= x_lo && (x as f64) <= x_hi && (y as f64 - cam.cy).abs() <= 8.0));
         // Ground 5 cm behind the tube, a rock 5 cm in front of it left of x = 0.
         let depth = Plane::from_vec(400, 300, (0..400 * 300).map(|i| if ((i % 400) as f64) < x_lo { 0.95f32 } else { 1.05 }).collect());
         let fitted = Vector3::new(0.25 * len, 0.0, 1.0);
@@ -224,7 +225,7 @@ mod tests {
         assert_eq!(anchor_visible_end(&mut pose, len, &mask, &open, &cam, &HiddenEnd::default()), None);
         assert_eq!(pose.centre, fitted);
         // A mask covering the whole tube: nothing is hidden.
-        let whole = BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= px(-0.5 * len) && (x as f64) <= x_hi && (y as f64 - cam.cy).abs() <= 8.0);
+        let whole = BoundedMask::new(BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= px(-0.5 * len) && (x as f64) <= x_hi && (y as f64 - cam.cy).abs() <= 8.0));
         let mut pose = TubeAxisPose::new(0, 1.0, truth, Vector3::x(), 0.9).unwrap();
         assert_eq!(anchor_visible_end(&mut pose, len, &whole, &depth, &cam, &HiddenEnd::default()), None);
     }
@@ -237,7 +238,7 @@ mod tests {
         let cam = CameraModel::from_hfov(400, 300, 40.0);
         let len = 0.15;
         let px = |x: f64| cam.project(&Point3::new(x, 0.0, 1.0)).unwrap().x;
-        let band = |x0: f64, x1: f64| BinaryMask::from_fn(400, 300, move |x, y| (x as f64) >= px(x0) && (x as f64) <= px(x1) && (y as f64 - cam.cy).abs() <= 8.0);
+        let band = |x0: f64, x1: f64| BoundedMask::new(BinaryMask::from_fn(400, 300, move |x, y| (x as f64) >= px(x0) && (x as f64) <= px(x1) && (y as f64 - cam.cy).abs() <= 8.0));
         let pose = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), Vector3::x(), 0.9).unwrap();
         let half = unseen_length_variance(&pose, len, &band(0.0, 0.5 * len), &cam, 3.0).unwrap();
         let expected = (0.5 * len).powi(2) / 12.0;
@@ -249,7 +250,7 @@ mod tests {
         anchored.end_anchored = Some("test".into());
         let v = unseen_length_variance(&anchored, len, &band(0.0, 0.5 * len), &cam, 3.0).unwrap();
         assert!((v.sqrt() - 3.0 * len / ell).abs() < 1e-9);
-        assert_eq!(unseen_length_variance(&pose, len, &BinaryMask::new(40, 30), &cam, 3.0), None, "a mask of another size");
+        assert_eq!(unseen_length_variance(&pose, len, &BoundedMask::new(BinaryMask::new(40, 30)), &cam, 3.0), None, "a mask of another size");
         let mut widened = pose.clone();
         widen_along_axis(&mut widened, half);
         assert!((widened.covariance[0][0] - pose.covariance[0][0] - half).abs() < 1e-15);
@@ -270,7 +271,7 @@ mod tests {
         // 45 mm of the tube are in view, from its foot.
         let foot = x_edge - 0.045;
         let truth = Vector3::new(foot + 0.5 * len, 0.0, z);
-        let mask = BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= cam.project(&Point3::new(foot, 0.0, z)).unwrap().x && (y as f64 - cam.cy).abs() <= 8.0);
+        let mask = BoundedMask::new(BinaryMask::from_fn(400, 300, |x, y| (x as f64) >= cam.project(&Point3::new(foot, 0.0, z)).unwrap().x && (y as f64 - cam.cy).abs() <= 8.0));
         let depth = Plane::from_vec(400, 300, vec![1.05f32; 400 * 300]);
         // The fit centred on the visible part.
         let fitted = Vector3::new(0.5 * (foot + x_edge), 0.0, z);

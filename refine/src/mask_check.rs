@@ -5,14 +5,14 @@
 use crate::refiner::Refiner;
 use crate::seed::Seed;
 use crate::silhouette;
-use tubeloc_core::{BinaryMask, CameraModel, TubeAxisPose};
+use tubeloc_core::{BoundedMask, CameraModel, TubeAxisPose};
 
 /// `pose` of a mask seed, checked against the detector's mask: when
 /// `IoU(silhouette ∩ dilate(mask, 4 px), mask) < mask.min_agreement` (see
 /// [`silhouette::snap_mask`]), the seed's centre and axis are returned instead, with the fit's
 /// end decision, the covariance widened by the squared fit-to-seed differences, and
 /// [`TubeAxisPose::seed_kept`] saying why.
-pub(crate) fn checked_against_mask(refiner: &Refiner, mut pose: TubeAxisPose, seed: &Seed, mask: &BinaryMask, camera: &CameraModel) -> TubeAxisPose {
+pub(crate) fn checked_against_mask(refiner: &Refiner, mut pose: TubeAxisPose, seed: &Seed, mask: &BoundedMask, camera: &CameraModel) -> TubeAxisPose {
     let tau = refiner.config().mask.min_agreement;
     if !(pose.converged && tau > 0.0) {
         return pose;

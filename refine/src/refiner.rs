@@ -12,7 +12,7 @@ use crate::seed_fit::{failed, SeedToFit};
 use crate::seed_policy::{FitSettings, SeedKind};
 use crate::settings::RefineConfig;
 use nalgebra::Point2;
-use tubeloc_core::{BinaryMask, CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
+use tubeloc_core::{BoundedMask, CameraModel, FailureReason, Plane, TubeAxisPose, TubeDetection, TubeModel};
 
 /// One image (grayscale, intensities in [0, 1]) with its camera and optional scene data.
 #[derive(Clone, Copy, Debug)]
@@ -85,7 +85,7 @@ impl Refiner {
     pub fn refine(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> TubeAxisPose {
         let axis = detection_seed::template_as_image_axis(self, input, det);
         let det = axis.as_ref().unwrap_or(det);
-        let mask = det.mask.as_ref().and_then(|m| m.to_mask().ok());
+        let mask = det.mask.as_ref().and_then(|m| m.to_bounded_mask().ok());
         let turned = detection_seed::turned_by_colour(self.config.mask.end_colour_corr, det, mask.as_ref(), colour);
         let det = turned.as_ref().unwrap_or(det);
         let seed = match crate::seed::seed_from_detection(det, input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points) {
@@ -118,7 +118,7 @@ impl Refiner {
     pub fn seed(&self, input: &RefineInput, det: &TubeDetection, colour: Option<&ColourImage>) -> Result<Seed, RefineError> {
         let axis = detection_seed::template_as_image_axis(self, input, det);
         let det = axis.as_ref().unwrap_or(det);
-        let mask: Option<BinaryMask> = colour.and(det.mask.as_ref()).and_then(|m| m.to_mask().ok());
+        let mask: Option<BoundedMask> = colour.and(det.mask.as_ref()).and_then(|m| m.to_bounded_mask().ok());
         let turned = detection_seed::turned_by_colour(self.config.mask.end_colour_corr, det, mask.as_ref(), colour);
         crate::seed::seed_from_detection(turned.as_ref().unwrap_or(det), input.camera, &self.model, input.ground.as_ref(), input.scene.stereo_points)
     }

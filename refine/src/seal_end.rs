@@ -21,7 +21,7 @@
 use crate::model::CylinderModel;
 use crate::silhouette::{silhouette_mask, PixelRays};
 use nalgebra::Point2;
-use tubeloc_core::{AxisSeed, BinaryMask, CameraModel, TubeAxisPose};
+use tubeloc_core::{AxisSeed, BoundedMask, CameraModel, TubeAxisPose};
 
 /// An interleaved 8-bit RGB image, row-major, `width x height x 3` bytes.
 #[derive(Clone, Copy, Debug)]
@@ -60,7 +60,7 @@ pub const CONFIDENCE_SCALE: f64 = 8.0;
 /// The colour evidence of `image` (same size as the camera) for `pose`'s end direction, or
 /// `None` when the seal section or the body covers fewer than 10 pixels (tube cut by the
 /// border, hidden, end-on) or the sizes differ. `visible`: the detector's mask of the tube.
-pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, image: &ColourImage, visible: Option<&BinaryMask>) -> Option<SealEndEvidence> {
+pub fn seal_end_evidence(model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, image: &ColourImage, visible: Option<&BoundedMask>) -> Option<SealEndEvidence> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     if image.width != w || image.height != h || image.rgb.len() != w * h * 3 {
         return None;
@@ -158,7 +158,7 @@ const MIN_MASK_PIXELS: usize = 20;
 /// ([`crate::settings::MaskUse::end_colour_corr`]), whose image axis has no end of its
 /// own. `None` when the sizes differ, the mask has fewer than 20 pixels, or `t` or the colour
 /// is constant over it.
-pub fn seal_end_along_axis(mask: &BinaryMask, axis: &AxisSeed, image: &ColourImage) -> Option<f64> {
+pub fn seal_end_along_axis(mask: &BoundedMask, axis: &AxisSeed, image: &ColourImage) -> Option<f64> {
     let (w, h) = (image.width, image.height);
     if mask.width != w || mask.height != h || image.rgb.len() != w * h * 3 {
         return None;
@@ -202,6 +202,7 @@ pub fn seal_end_along_axis(mask: &BinaryMask, axis: &AxisSeed, image: &ColourIma
 mod tests {
     use super::*;
     use nalgebra::{Point3, Vector3};
+    use tubeloc_core::BinaryMask;
     use tubeloc_core::TubeModel;
 
     /// A tube across the view at 1 m painted as the real one: the seal section gold
@@ -277,7 +278,7 @@ mod tests {
         let image = ColourImage { width: 640, height: 480, rgb: &rgb };
         // The mask shows only the seal half: no body pixels.
         let sil = silhouette_mask(&model, &pose, &cam);
-        let seal_only = BinaryMask::from_fn(640, 480, |x, y| sil.get(x, y) && x as f64 > cam.cx + 0.03 * cam.fx);
+        let seal_only = BoundedMask::new(BinaryMask::from_fn(640, 480, |x, y| sil.get(x, y) && x as f64 > cam.cx + 0.03 * cam.fx));
         assert!(seal_end_evidence(&model, &pose, &cam, &image, Some(&seal_only)).is_none());
         // A wrongly sized image gives no evidence rather than a panic.
         let small = ColourImage { width: 10, height: 10, rgb: &rgb[..300] };
@@ -287,7 +288,7 @@ mod tests {
     #[test]
     fn the_mask_axis_correlates_with_the_gold_end_in_colour_and_in_grey() {
         let PaintedScene { cam, model, axis, truth, rgb, grey } = painted_scene();
-        let mask = silhouette_mask(&model, &truth, &cam);
+        let mask = BoundedMask::new(silhouette_mask(&model, &truth, &cam));
         let pixels = (0..480).flat_map(|y| (0..640).map(move |x| (x, y))).filter(|&(x, y)| mask.get(x, y)).map(|(x, y)| (x as f64, y as f64));
         let ax = AxisSeed::from_pixels(pixels).unwrap();
         // Orient the seed toward the projected seal end.
@@ -304,7 +305,7 @@ mod tests {
             assert!((back + rho).abs() < 1e-9, "{back} {rho}");
         }
         // Too few pixels, or an image of another size: no evidence.
-        let tiny = BinaryMask::from_fn(640, 480, |x, y| mask.get(x, y) && (x + y) % 97 == 0 && y % 13 == 0);
+        let tiny = BoundedMask::new(BinaryMask::from_fn(640, 480, |x, y| mask.get(x, y) && (x + y) % 97 == 0 && y % 13 == 0));
         assert!(tiny.area() < 20);
         assert!(seal_end_along_axis(&tiny, &toward, &ColourImage { width: 640, height: 480, rgb: &rgb }).is_none());
         assert!(seal_end_along_axis(&mask, &toward, &ColourImage { width: 10, height: 10, rgb: &rgb[..300] }).is_none());
@@ -316,7 +317,7 @@ mod tests {
         // it is the whole silhouette here, so the sums (same pixels, same order) are identical.
         let PaintedScene { cam, model, truth, rgb, .. } = painted_scene();
         let image = ColourImage { width: 640, height: 480, rgb: &rgb };
-        let sil = silhouette_mask(&model, &truth, &cam);
+        let sil = BoundedMask::new(silhouette_mask(&model, &truth, &cam));
         let bare = seal_end_evidence(&model, &truth, &cam, &image, None).unwrap();
         assert_eq!(seal_end_evidence(&model, &truth, &cam, &image, Some(&sil)), Some(bare));
         assert!(bare.seal_pixels > 100 && bare.body_pixels > 100, "{bare:?}");

@@ -13,7 +13,7 @@
 
 use crate::model::CylinderModel;
 use nalgebra::{Point2, Point3};
-use tubeloc_core::{BinaryMask, CameraModel, TubeAxisPose};
+use tubeloc_core::{BinaryMask, BoundedMask, CameraModel, TubeAxisPose};
 
 /// Settings of [`snap_mask`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -93,12 +93,18 @@ impl PixelWindow {
     /// The set pixels' bounding box of `mask` grown by `margin` pixels on every side, within
     /// the mask's image; `None` for an empty mask.
     pub fn around(mask: &BinaryMask, margin: usize) -> Option<PixelWindow> {
-        let (x0, y0, x1, y1) = box_corners(mask);
-        if x1 == x0 {
+        PixelWindow::around_box(mask.bbox(), mask.width, mask.height, margin)
+    }
+
+    /// [`PixelWindow::around`] of a mask of `width x height` whose set pixels' box is `bbox`
+    /// (COCO `[x, y, w, h]`).
+    pub fn around_box(bbox: [f64; 4], width: usize, height: usize, margin: usize) -> Option<PixelWindow> {
+        let [x, y, w, h] = bbox;
+        if w == 0.0 {
             return None;
         }
-        let (x0, y0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
-        let (x1, y1) = ((x1 + margin).min(mask.width), (y1 + margin).min(mask.height));
+        let (x0, y0) = ((x as usize).saturating_sub(margin), (y as usize).saturating_sub(margin));
+        let (x1, y1) = (((x + w) as usize + margin).min(width), ((y + h) as usize + margin).min(height));
         Some(PixelWindow { x0, y0, width: x1 - x0, height: y1 - y0 })
     }
 }
@@ -235,7 +241,7 @@ impl<'a> PixelRays<'a> {
 /// it counts), so it costs the mask's pixels rather than the image's, on the
 /// [`Raster::Adaptive`] silhouette (within a few pixels of the exact one). `None` when the mask
 /// is not of `camera`'s size; 0 for an empty mask.
-pub fn mask_agreement(mask: &BinaryMask, model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, dilate_px: usize) -> Option<f64> {
+pub fn mask_agreement(mask: &BoundedMask, model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, dilate_px: usize) -> Option<f64> {
     mask_agreement_raster(mask, model, pose, camera, dilate_px, Raster::Adaptive)
 }
 
@@ -245,11 +251,11 @@ pub fn mask_agreement(mask: &BinaryMask, model: &CylinderModel, pose: &TubeAxisP
 /// With `m` the mask and `s` the silhouette, `s ∩ dilate(m)` meets `m` in `s ∩ m`, and adds
 /// to `m` only the pixels of `s` outside `m` within `dilate_px` (L1) of it, so no dilated
 /// mask is built: those pixels look for a mask pixel in their diamond.
-pub fn mask_agreement_raster(mask: &BinaryMask, model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, dilate_px: usize, raster: Raster) -> Option<f64> {
+pub fn mask_agreement_raster(mask: &BoundedMask, model: &CylinderModel, pose: &TubeAxisPose, camera: &CameraModel, dilate_px: usize, raster: Raster) -> Option<f64> {
     if mask.width != camera.width as usize || mask.height != camera.height as usize {
         return None;
     }
-    let Some(win) = PixelWindow::around(mask, dilate_px) else { return Some(0.0) };
+    let Some(win) = PixelWindow::around_box(mask.bbox(), mask.width, mask.height, dilate_px) else { return Some(0.0) };
     let sil = silhouette_mask_raster(model, pose, camera, win, raster);
     let r = dilate_px as isize;
     let near = |x: usize, y: usize| {
@@ -497,7 +503,7 @@ mod tests {
             let win = PixelWindow { x0: (uniform() * 380.0) as usize, y0: (uniform() * 280.0) as usize, width: 1 + (uniform() * 150.0) as usize, height: 1 + (uniform() * 150.0) as usize };
             assert_eq!(silhouette_mask_in(&model, &pose, &cam, win), full.crop(win.x0, win.y0, win.width, win.height), "window {win:?}");
             let (dx, dy) = ((uniform() * 8.0) as usize, (uniform() * 8.0) as usize);
-            let mask = BinaryMask::from_fn(400, 300, |x, y| x >= dx && y >= dy && full.get(x - dx, y - dy)).dilated((uniform() * 3.0) as usize);
+            let mask = BoundedMask::new(BinaryMask::from_fn(400, 300, |x, y| x >= dx && y >= dy && full.get(x - dx, y - dy)).dilated((uniform() * 3.0) as usize));
             let whole = snap_candidate(&mask, &full, 4).unwrap().1;
             let windowed = mask_agreement_raster(&mask, &model, &pose, &cam, 4, Raster::EveryPixel).unwrap();
             assert_eq!(windowed, whole, "agreement for the tube at {:?}", pose.centre);
@@ -506,10 +512,10 @@ mod tests {
             compared += (mask.area() > 0) as usize;
         }
         assert!(compared > 20, "only {compared} tubes in view");
-        let small = BinaryMask::new(10, 10);
+        let small = BoundedMask::new(BinaryMask::new(10, 10));
         let pose = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 1.0), Vector3::x(), 1.0).unwrap();
         assert_eq!(mask_agreement(&small, &model, &pose, &cam, 4), None, "a mask of another size");
-        assert_eq!(mask_agreement(&BinaryMask::new(400, 300), &model, &pose, &cam, 4), Some(0.0), "an empty mask");
+        assert_eq!(mask_agreement(&BoundedMask::new(BinaryMask::new(400, 300)), &model, &pose, &cam, 4), Some(0.0), "an empty mask");
     }
 
     /// The rows' hull culling tests a subset of the bounding box's pixels; no silhouette pixel
