@@ -12,24 +12,40 @@
 pub const HEAP_BLOCK_MAX_BYTES: usize = 8 << 20;
 
 /// Free memory at the top of a heap that `malloc` keeps rather than returning it to the kernel
-/// (32 MiB: several tubes' buffers, per allocator arena).
-pub const HEAP_KEEP_FREE_BYTES: usize = 32 << 20;
+/// (128 MiB per allocator arena: the freed buffers of one large frame's stages are reused by
+/// the next stage instead of being returned and faulted in again). `tubeloc locate` on a
+/// 5472 x 3648 frame (2 cores): 32 MiB gave 273,000 page faults, 0.7 s system time and
+/// 1.3-1.6 s wall; 128 MiB 104,000, 0.3 s and 0.9-1.2 s, peak 293 -> 305 MiB; 256 MiB and
+/// 1 GiB no faster, peak 351 MiB.
+pub const HEAP_KEEP_FREE_BYTES: usize = 128 << 20;
+
+/// Most allocator arenas (`M_ARENA_MAX`). glibc gives each thread that meets a locked arena
+/// a new one, up to 8 per core, and each keeps its freed top ([`HEAP_KEEP_FREE_BYTES`]), so
+/// peak memory grew with the core count: `locate` on a 5472 x 3648 frame with 16 threads
+/// peaked at 533 MiB (664 MiB with the 128 MiB top kept); with 2 arenas 373 MiB, with 1
+/// 306 MiB, as fast on 2 cores. The hot loops allocate per tube or per row, not per pixel,
+/// so two arenas shared by the threads do not contend measurably.
+pub const ALLOCATOR_ARENAS: usize = 2;
 
 /// Asks the C allocator to keep freed memory for reuse: blocks up to
 /// [`HEAP_BLOCK_MAX_BYTES`] come from the heap, freed heap tops of up to
-/// [`HEAP_KEEP_FREE_BYTES`] are not returned to the kernel, and no block is served by its own
+/// [`HEAP_KEEP_FREE_BYTES`] are not returned to the kernel, at most [`ALLOCATOR_ARENAS`]
+/// arenas keep them, and no block is served by its own
 /// `mmap` (`M_MMAP_MAX` = 0): the segmenter's activations (tens to hundreds of MiB per layer
 /// on a large frame, above glibc's 32 MiB ceiling for `M_MMAP_THRESHOLD`) then reuse freed
-/// heap instead of faulting in fresh zeroed pages each layer. `tubeloc locate` on a
-/// 5472 x 3648 frame (2 cores): 1.6-1.8 s -> 1.26-1.43 s wall, system time 1.0 -> 0.6 s, peak
-/// memory 282 -> 284 MiB. Call it once at program start (the `tubeloc` binary and the
+/// heap instead of faulting in fresh zeroed pages each layer. Call it once at program start (the `tubeloc` binary and the
 /// refinement benchmark do). Returns false where it does not apply (not glibc) or `mallopt`
 /// refused.
 pub fn keep_freed_memory() -> bool {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     {
         // SAFETY: mallopt only sets allocator parameters; all values are in range.
-        unsafe { libc::mallopt(libc::M_MMAP_THRESHOLD, HEAP_BLOCK_MAX_BYTES as libc::c_int) == 1 && libc::mallopt(libc::M_TRIM_THRESHOLD, HEAP_KEEP_FREE_BYTES as libc::c_int) == 1 && libc::mallopt(libc::M_MMAP_MAX, 0) == 1 }
+        unsafe {
+            libc::mallopt(libc::M_MMAP_THRESHOLD, HEAP_BLOCK_MAX_BYTES as libc::c_int) == 1
+                && libc::mallopt(libc::M_TRIM_THRESHOLD, HEAP_KEEP_FREE_BYTES as libc::c_int) == 1
+                && libc::mallopt(libc::M_MMAP_MAX, 0) == 1
+                && libc::mallopt(libc::M_ARENA_MAX, ALLOCATOR_ARENAS as libc::c_int) == 1
+        }
     }
     #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
     {

@@ -233,22 +233,24 @@ pub fn mask_back(mask: &[u8], nw: usize, nh: usize, width: usize, height: usize)
 /// `Rle::from_mask(&mask_back(..))` and the box its `BinaryMask::bbox`; memory is
 /// `O(width + height)` besides the runs.
 pub fn mask_back_rle(mask: &[u8], nw: usize, nh: usize, width: usize, height: usize) -> (tubeloc_core::Rle, [f64; 4]) {
+    let bbox = tubeloc_core::BinaryMask { width: nw, height: nh, data: mask.to_vec() }.bbox();
+    mask_back_rle_in(mask, nw, nh, width, height, bbox)
+}
+
+/// [`mask_back_rle`] of a resampled mask whose set pixels' bounding box `bbox` (COCO
+/// `[x, y, w, h]`, [`tubeloc_core::BinaryMask::bbox`]) is known, e.g. from
+/// [`tubeloc_core::Rle::to_bounded_mask`]: only the box is read.
+pub fn mask_back_rle_in(mask: &[u8], nw: usize, nh: usize, width: usize, height: usize, bbox: [f64; 4]) -> (tubeloc_core::Rle, [f64; 4]) {
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
     let xs: Vec<usize> = (0..width).map(|x| (((x as f64 + 0.5) * sx - 0.5).round().max(0.0) as usize).min(nw - 1)).collect();
     let ys: Vec<usize> = (0..height).map(|y| (((y as f64 + 0.5) * sy - 0.5).round().max(0.0) as usize).min(nh - 1)).collect();
     // The rows and columns of the resampled mask that hold a pixel (`r0..=r1`, `c0..=c1`):
     // everything outside maps to runs of zeros without reading the mask.
-    let rows_set: Vec<usize> = (0..nh).filter(|&yy| mask[yy * nw..(yy + 1) * nw].iter().any(|&v| v != 0)).collect();
-    let (Some(&r0), Some(&r1)) = (rows_set.first(), rows_set.last()) else {
+    if bbox[2] == 0.0 {
         return (tubeloc_core::Rle { size: [height as u32, width as u32], counts: vec![(width * height) as u32] }, [0.0; 4]);
-    };
-    let (mut c0, mut c1) = (nw, 0);
-    for &yy in &rows_set {
-        let row = &mask[yy * nw..(yy + 1) * nw];
-        if let (Some(a), Some(b)) = (row.iter().position(|&v| v != 0), row.iter().rposition(|&v| v != 0)) {
-            (c0, c1) = (c0.min(a), c1.max(b));
-        }
     }
+    let (c0, r0) = (bbox[0] as usize, bbox[1] as usize);
+    let (c1, r1) = (c0 + bbox[2] as usize - 1, r0 + bbox[3] as usize - 1);
     // Original rows before / after the set rows (ys is non-decreasing).
     let (y_lo, y_hi) = (ys.partition_point(|&yy| yy < r0), ys.partition_point(|&yy| yy <= r1));
     // Column-major runs: each original column is the resampled column xs[x] read at rows ys.

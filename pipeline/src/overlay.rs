@@ -37,9 +37,11 @@ pub fn draw<'a>(gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: i
 pub fn png_bytes(img: &image::RgbImage) -> Result<Vec<u8>, image::ImageError> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     use image::ImageEncoder;
-    // Fast compression: the overlay is for viewing (5.86 MB at 5472x3648, as with the default).
+    // Fast compression, Paeth filter: the overlay is for viewing. On a 5472x3648 overlay of
+    // a rendered frame: 0.114 s and 13.9 MB, against 0.145 s and 13.9 MB with the adaptive
+    // filter choice (no filter: 0.21 s, 60 MB).
     let mut buf = Vec::new();
-    PngEncoder::new_with_quality(&mut buf, CompressionType::Fast, FilterType::Adaptive).write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgb8)?;
+    PngEncoder::new_with_quality(&mut buf, CompressionType::Fast, FilterType::Paeth).write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgb8)?;
     Ok(buf)
 }
 

@@ -83,8 +83,8 @@ fn detect_scaled(model: &LearnedModel, scaled: &[f32], (nw, nh): (usize, usize),
     Ok(found
         .into_par_iter()
         .filter_map(|i| {
-            let small = i.mask.to_mask().ok()?;
-            let (mask, bbox) = crate::scale::mask_back_rle(&small.data, nw, nh, width, height);
+            let small = i.mask.to_bounded_mask().ok()?;
+            let (mask, bbox) = crate::scale::mask_back_rle_in(&small.data, nw, nh, width, height, small.bbox());
             if mask.area() == 0 {
                 return None;
             }
