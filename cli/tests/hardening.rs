@@ -250,3 +250,28 @@ fn train_with_the_same_seed_writes_the_same_bytes() {
     }
     assert!(bytes[0] == bytes[1], "same seed, different bytes");
 }
+
+/// A missing input file is named once with the system's reason once, whichever reader meets
+/// it (rig, template library, model).
+#[test]
+fn a_missing_file_is_reported_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = png(d, 64, 64);
+    let missing = d.join("missing.json");
+    let out = d.join("p.json");
+    // (arguments, how often the system's reason appears: the model's own message has none).
+    let cases: [(Vec<&str>, usize); 3] = [
+        (vec!["locate", "--rig", p(&missing), "--image", p(&img), "--out", p(&out)], 1),
+        (vec!["detect", "--method", "line2d", "--image", p(&img), "--templates", p(&missing), "--out", p(&out)], 1),
+        (vec!["detect", "--method", "learned", "--image", p(&img), "--model", p(&missing), "--out", p(&out)], 0),
+    ];
+    for (args, reasons) in cases {
+        let o = tubeloc(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(err.contains("missing.json"), "{args:?}: {err}");
+        assert_eq!(err.matches("No such file or directory").count(), reasons, "{args:?}: {err}");
+        assert!(!out.exists());
+    }
+}

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum LearnedError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
+        /// The underlying error (in the message, not a `source()`: chains print it once).
+        error: std::io::Error,
     },
     /// A weights file is not a valid tubeloc model (corrupt, truncated, wrong format version,
     /// checksum mismatch, missing or mis-shaped tensors).

@@ -288,12 +288,12 @@ impl LearnedModel {
     /// Writes the model atomically to `path`.
     pub fn save(&self, path: &Path) -> Result<(), LearnedError> {
         let bytes = self.to_bytes()?;
-        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: std::io::Error::other(e.to_string()) })
+        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), error: std::io::Error::other(e.to_string()) })
     }
 
     /// Reads a model file; see [`LearnedModel::from_bytes`].
     pub fn load(path: &Path) -> Result<Self, LearnedError> {
-        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: e })?;
+        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io { path: path.to_path_buf(), error: e })?;
         Self::from_bytes(&bytes, path)
     }
 

@@ -73,14 +73,14 @@ impl AdamW {
             blobs.iter().map(|(n, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)?))).collect::<Result<Vec<_>, safetensors::SafeTensorError>>().map_err(|e| LearnedError::Invalid(e.to_string()))?;
         let md = HashMap::from([("format".to_string(), FORMAT.to_string()), ("t".to_string(), self.t.to_string())]);
         let bytes = safetensors::serialize(views, Some(md)).map_err(|e| LearnedError::Invalid(e.to_string()))?;
-        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: std::io::Error::other(e.to_string()) })
+        tubeloc_core::files::write_atomic(path, &bytes).map_err(|e| LearnedError::Io { path: path.to_path_buf(), error: std::io::Error::other(e.to_string()) })
     }
 
     /// Restores the state written by [`AdamW::save`]; every parameter's moments must be
     /// present with the parameter's shape.
     pub fn load_state(&mut self, path: &Path) -> Result<(), LearnedError> {
         let bad = |m: String| LearnedError::bad_model(path, m);
-        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io { path: path.to_path_buf(), source: e })?;
+        let bytes = std::fs::read(path).map_err(|e| LearnedError::Io { path: path.to_path_buf(), error: e })?;
         let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| bad(format!("not a safetensors file ({e})")))?;
         let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| bad(e.to_string()))?;
         let md = header.metadata().clone().unwrap_or_default();

@@ -145,7 +145,7 @@ impl TemplateLibrary {
     /// Reads a library file; refuses wrong magic, version, length or checksum, and invalid
     /// content, with an error naming the file.
     pub fn load(path: &Path) -> Result<TemplateLibrary, Line2dError> {
-        let bytes = std::fs::read(path).map_err(|e| Line2dError::Io { path: path.into(), source: e })?;
+        let bytes = std::fs::read(path).map_err(|e| Line2dError::Io { path: path.into(), error: e })?;
         Self::from_bytes(&bytes).map_err(|message| Line2dError::Format { path: path.into(), message })
     }
 

@@ -60,12 +60,12 @@ pub const SIM_MAX: u32 = 4;
 #[derive(Debug, thiserror::Error)]
 pub enum Line2dError {
     /// A library file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// File concerned.
         path: PathBuf,
-        /// Underlying error.
-        source: std::io::Error,
+        /// Underlying error (in the message, not a `source()`: chains print it once).
+        error: std::io::Error,
     },
     /// A library file is not a valid template library (magic, version, length, checksum...).
     #[error("{path}: {message}")]
