@@ -213,3 +213,13 @@ mod tests {
         assert!(require_at_most(("--a", 7), ("--b", 6)).unwrap_err().to_string().contains("--a (7) must not exceed --b (6)"));
     }
 }
+
+/// A Line2D far-search factor: finite, in `[1, 4]`.
+pub fn far_scale(s: &str) -> Result<f64, String> {
+    let v = finite_f64(s)?;
+    if (1.0..=4.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not in [1, 4]"))
+    }
+}

@@ -64,6 +64,11 @@ pub struct Line2dOpts {
     /// full-resolution search, the best by coarse similarity (0 = no budget)
     #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_CANDIDATES_PER_MPX)]
     pub max_candidates_per_mpx: usize,
+    /// Line2D: also search the image enlarged by this factor beyond the library's scale (at
+    /// most --max-upsample in all), for tubes up to that many times farther than the library's
+    /// farthest templates (1 = one search)
+    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::FAR_SCALE, value_parser = crate::args::far_scale)]
+    pub far_scale: f64,
     /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
     #[arg(long)]
     pub no_verify: bool,
@@ -102,6 +107,7 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
         rerank_area_weight: opts.rerank_area_weight,
         max_candidates: opts.max_candidates,
         max_candidates_per_mpx: opts.max_candidates_per_mpx,
+        far_scale: opts.far_scale,
         ..MatchParams::default()
     };
     params.gradient.mag_threshold = opts.grad_threshold;

@@ -359,7 +359,8 @@ fn a_camera_of_another_focal_length_is_matched_at_the_library_scale() {
     let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
     let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.04));
-    let det = Line2dDetector::new(lib, MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
+    // One search: this test is about the focal-length resampling alone.
+    let det = Line2dDetector::new(lib, MatchParams { verifier: None, far_scale: 1.0, ..MatchParams::default() }).unwrap();
     let k = params.camera;
     let native_cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
     let native = det.detect(&scene(w, h, &k, &t_true, 7), w, h, Some(&native_cam)).unwrap();
@@ -428,4 +429,33 @@ fn grey_threshold_applies_to_grey_images_only() {
     // `--min-probability` sets one cut for both kinds.
     v.set_threshold(0.0);
     assert_eq!((v.threshold_for(true), v.threshold_for(false)), (0.0, 0.0));
+}
+
+/// A tube farther than the library's farthest templates is found by the far search (the image
+/// enlarged by `far_scale`), with its coarse pose placed that many times farther along its ray;
+/// without the far search it is not found.
+#[test]
+fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
+    let (w, h) = (512usize, 384usize);
+    let mut params = small_params(1.8, 2.2, 64);
+    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let k = params.camera;
+    let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
+    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
+    // 1.4 times the library's middle distance, 0.6 m beyond its farthest templates.
+    let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
+    let img = scene(w, h, &k, &t_true, 11);
+    let c = t_true.translation();
+    let truth_px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
+    let near_truth = |d: &tubeloc_detect::line2d::Line2dDetection| ((d.centre_px[0] - truth_px[0]).powi(2) + (d.centre_px[1] - truth_px[1]).powi(2)).sqrt() <= 6.0;
+    let one = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: 1.0, ..MatchParams::default() }).unwrap();
+    assert!(!one.detect(&img, w, h, Some(&cam)).unwrap().iter().any(near_truth), "found without the far search");
+    let far = Line2dDetector::new(lib, MatchParams { verifier: None, far_scale: 1.4, ..MatchParams::default() }).unwrap();
+    let dets = far.detect(&img, w, h, Some(&cam)).unwrap();
+    let d = dets.iter().find(|d| near_truth(d)).expect("the far tube is found");
+    assert!((d.scale - 1.4).abs() < 0.01, "scale {}", d.scale);
+    let z = d.t_cam_tube.translation().norm();
+    assert!((z - c.norm()).abs() <= 0.15, "coarse distance {z:.2} m vs {:.2} m", c.norm());
+    assert_eq!(d.mask.size, [h as u32, w as u32]);
 }

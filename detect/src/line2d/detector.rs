@@ -54,12 +54,29 @@ impl Line2dDetector {
         if !self.resolvable(camera) {
             return Ok(Vec::new());
         }
+        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy)?;
+        let k = self.params.far_scale;
+        if k > 1.0 && sx * k <= self.params.max_upsample && sy * k <= self.params.max_upsample {
+            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k)?;
+            dets.extend(far.into_iter().map(|mut d| {
+                d.t_cam_tube.0.translation.vector *= k;
+                d
+            }));
+            dets.sort_by(|a, b| b.score.total_cmp(&a.score));
+            dets = suppress_overlapping(dets, self.params.verified_overlap);
+            dets.truncate(self.params.max_detections);
+        }
+        Ok(dets)
+    }
+
+    /// [`Line2dDetector::detect_native`] on the image resampled by `(sx, sy)` (none at 1).
+    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64) -> Result<Vec<Line2dDetection>, Line2dError> {
         if sx == 1.0 && sy == 1.0 {
-            return self.detect_native(rgb, width, height, &cam, 1.0, 1.0, width, height);
+            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height);
         }
         let (nw, nh) = (((width as f64 * sx).round() as usize).max(1), ((height as f64 * sy).round() as usize).max(1));
         let small = crate::scale::resample_rgb8(rgb, width, height, nw, nh);
-        self.detect_native(&small, nw, nh, &cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height)
+        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height)
     }
 
     /// The resampling factors `(sx, sy)` that bring an image of `camera` to the library's
