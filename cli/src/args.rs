@@ -186,6 +186,16 @@ pub fn require_at_most<T: PartialOrd + std::fmt::Display>(a: (&str, T), b: (&str
     }
 }
 
+/// A Line2D far-search factor: finite, in `[1, 4]`.
+pub fn far_scale(s: &str) -> Result<f64, String> {
+    let v = finite_f64(s)?;
+    if (1.0..=4.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not in [1, 4]"))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -211,15 +221,5 @@ mod tests {
         assert!(decimation("200").is_err() && decimation("2.5").is_err() && decimation("1.5").is_ok() && decimation("NaN").is_err());
         assert!(require_at_most(("--a", 2), ("--b", 6)).is_ok() && require_at_most(("--a", 6), ("--b", 6)).is_ok());
         assert!(require_at_most(("--a", 7), ("--b", 6)).unwrap_err().to_string().contains("--a (7) must not exceed --b (6)"));
-    }
-}
-
-/// A Line2D far-search factor: finite, in `[1, 4]`.
-pub fn far_scale(s: &str) -> Result<f64, String> {
-    let v = finite_f64(s)?;
-    if (1.0..=4.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("{v} is not in [1, 4]"))
     }
 }
