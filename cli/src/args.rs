@@ -186,13 +186,13 @@ pub fn require_at_most<T: PartialOrd + std::fmt::Display>(a: (&str, T), b: (&str
     }
 }
 
-/// A Line2D far-search factor: finite, in `[1, 4]`.
+/// A Line2D far-search factor: a number in [1, 4].
 pub fn far_scale(s: &str) -> Result<f64, String> {
-    let v = finite_f64(s)?;
+    let v = parse_f64(s)?;
     if (1.0..=4.0).contains(&v) {
         Ok(v)
     } else {
-        Err(format!("{v} is not in [1, 4]"))
+        Err(format!("must be in [1, 4], got {v}"))
     }
 }
 
