@@ -57,6 +57,8 @@ fn bad_numbers_and_argument_errors_exit_2_naming_the_flag_and_writing_nothing() 
         (vec!["eval", "--gt", "gt.json", "--poses", "p.json", "--match-mm=-5", "--out", o], "--match-mm"),
         (vec!["detect", "--method", "line2d", "--image", img, "--threshold", "120", "--out", oj], "--threshold"),
         (vec!["detect", "--method", "line2d", "--image", img, "--max-detections", "0", "--out", oj], "--max-detections"),
+        (vec!["detect", "--method", "line2d", "--image", img, "--far-scale", "0.5", "--out", oj], "--far-scale"),
+        (vec!["detect", "--method", "line2d", "--image", img, "--far-scale", "NaN", "--out", oj], "--far-scale"),
         (vec!["synth", "--scale", "NaN", "--out", o], "--scale"),
         (vec!["synth", "--shard", "1", "--out", o], "--shard"),
         (vec!["synth", "calib", "--noise", "NaN", "--out", o], "--noise"),
