@@ -46,22 +46,22 @@ pub fn non_negative_f64(s: &str) -> Result<f64, String> {
 
 /// A number in [0, 1].
 pub fn unit_interval(s: &str) -> Result<f64, String> {
+    in_closed(s, 0.0, 1.0)
+}
+
+/// A finite number in `[lo, hi]`; the message names the interval and the value.
+fn in_closed(s: &str, lo: f64, hi: f64) -> Result<f64, String> {
     let v = parse_f64(s)?;
-    if (0.0..=1.0).contains(&v) {
+    if (lo..=hi).contains(&v) {
         Ok(v)
     } else {
-        Err(format!("must be in [0, 1], got {v}"))
+        Err(format!("must be in [{lo}, {hi}], got {v}"))
     }
 }
 
 /// A number in [0, 100] (a percentage).
 pub fn percent(s: &str) -> Result<f64, String> {
-    let v = parse_f64(s)?;
-    if (0.0..=100.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("must be in [0, 100], got {v}"))
-    }
+    in_closed(s, 0.0, 100.0)
 }
 
 /// `f32` versions of the parsers above (the value is also finite as an `f32`).
@@ -188,12 +188,7 @@ pub fn require_at_most<T: PartialOrd + std::fmt::Display>(a: (&str, T), b: (&str
 
 /// A Line2D far-search factor: a number in [1, 4].
 pub fn far_scale(s: &str) -> Result<f64, String> {
-    let v = parse_f64(s)?;
-    if (1.0..=4.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("must be in [1, 4], got {v}"))
-    }
+    in_closed(s, 1.0, 4.0)
 }
 
 #[cfg(test)]
