@@ -35,7 +35,7 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
             let camera = crate::cmd_refine::dataset::camera_of(im)?;
             let ground = crate::cmd_refine::dataset::ground_of(im)?;
             let path = [set.join(&im.file_name), set.join("images").join(&im.file_name)].into_iter().find(|p| p.exists()).with_context(|| format!("{}: image {} not found", set.display(), im.file_name))?;
-            let image = image::open(&path).with_context(|| format!("reading {}", path.display()))?;
+            let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
             let right = if stereo { Some(crate::cmd_refine::dataset::right_view_of(set, im)?) } else { None };
             let mut cameras = vec![RigCamera { name: "left".into(), model: camera, t_rig_cam: Pose::identity() }];
             let mut pairs = Vec::new();

@@ -137,7 +137,7 @@ fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &
     let mut per_frame = Vec::new();
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     for p in &paths {
-        let image = image::open(p).with_context(|| format!("reading {}", p.display()))?;
+        let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
         let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
         let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
@@ -214,7 +214,7 @@ fn line2d_eval(set: &Path, lib: &Path, out: &Path) -> Result<Value> {
     let mut dets = Vec::new();
     let mut ms = 0.0;
     for (id, path) in &images {
-        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
+        let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let t = Instant::now();
         let found = det.detect(img.as_raw(), w, h, cameras.get(id))?;
@@ -238,7 +238,7 @@ fn line2d_negatives(data: &Path, lib: &Path, frames: Option<usize>) -> Result<Va
     let mut per_frame = Vec::new();
     let mut ms = 0.0;
     for p in &paths {
-        let image = image::open(p).with_context(|| format!("reading {}", p.display()))?;
+        let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
         let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
         let rgb = image.to_rgb8();

@@ -148,7 +148,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let mut out = Vec::new();
     for (id, path) in images {
-        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
+        let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let cam = cameras.get(id).or(camera.as_ref());
         if !det.resolvable(cam) {

@@ -114,7 +114,7 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
     for (id, path) in &images {
         let im = gt.images.iter().find(|i| i.id == *id).context("image missing from annotations")?;
         let gts: Vec<Rle> = gt.annotations.iter().filter(|a| a.image_id == *id).filter_map(|a| a.segmentation.as_ref().map(|s| s.to_rle(im.height, im.width))).collect::<Result<_, _>>()?;
-        let img = image::open(path).with_context(|| format!("reading {}", path.display()))?.to_rgb8();
+        let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let dets = det.detect(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref()))?;
         per_image.push((*id, gts.len(), tubeloc_detect::input::is_grey_rgb8(img.as_raw())));

@@ -282,9 +282,9 @@ pub fn run(args: RefineArgs) -> Result<()> {
     };
     let detector = Box::new(ExternalDetections::new(Vec::new(), det_path.display().to_string()));
     let locator = Locator::new(&rig, &selection, detector, settings)?;
-    let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?;
+    let image = tubeloc_detect::input::open_eight_bit(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?;
     let right = match &args.right {
-        Some(r) => Some(image::open(r).with_context(|| format!("cannot read image {}", r.display()))?),
+        Some(r) => Some(tubeloc_detect::input::open_eight_bit(r).with_context(|| format!("cannot read image {}", r.display()))?),
         None => None,
     };
     let input = LocateInput { image: &image, right: right.as_ref(), ground, up: None };

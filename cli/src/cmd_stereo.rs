@@ -72,7 +72,7 @@ pub struct StereoArgs {
 
 /// Reads an image as 8-bit grey, naming the file on error.
 pub(crate) fn load_gray(path: &Path) -> Result<Plane<u8>> {
-    let img = image::open(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
+    let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("cannot read image {}", path.display()))?.to_luma8();
     Ok(Plane::from_vec(img.width() as usize, img.height() as usize, img.into_raw()))
 }
 

@@ -93,6 +93,41 @@ pub fn rgb8_of(img: &image::DynamicImage) -> DetectorInput {
     DetectorInput { width: w, height: h, rgb, info }
 }
 
+/// The interleaved RGB8 pixels of `img` as the detectors read them: an RGB8 image's own bytes,
+/// borrowed; any other format converted by [`rgb8_of`] (16-bit data at their real bit depth).
+pub fn rgb8_pixels(img: &image::DynamicImage) -> std::borrow::Cow<'_, [u8]> {
+    match img {
+        image::DynamicImage::ImageRgb8(rgb) => std::borrow::Cow::Borrowed(rgb.as_raw().as_slice()),
+        _ => std::borrow::Cow::Owned(rgb8_of(img).rgb),
+    }
+}
+
+/// A decoded image at 8 bits per channel, as every stage reads it (detectors, refiner,
+/// stereo, tags): 8-bit images come back unchanged; 16-bit and float images are mapped by
+/// [`rgb8_of`] (their real bit depth, never a fixed division by 257), grey ones to 8-bit grey
+/// and the others to RGB8 (alpha dropped).
+pub fn eight_bit(img: image::DynamicImage) -> image::DynamicImage {
+    use image::DynamicImage as D;
+    match img {
+        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => img,
+        other => {
+            let (w, h) = (other.width(), other.height());
+            let grey = other.color().channel_count() <= 2;
+            let c = rgb8_of(&other);
+            if grey {
+                D::ImageLuma8(image::GrayImage::from_raw(w, h, c.rgb.chunks_exact(3).map(|p| p[0]).collect()).expect("w x h levels"))
+            } else {
+                D::ImageRgb8(image::RgbImage::from_raw(w, h, c.rgb).expect("w x h x 3 bytes"))
+            }
+        }
+    }
+}
+
+/// Opens an image file (PNG, JPEG, TIFF, ...) as [`eight_bit`].
+pub fn open_eight_bit(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
+    image::open(path).map(eight_bit)
+}
+
 /// Reads an image file (PNG, JPEG) and converts it (see the module doc). The error names the
 /// file.
 pub fn load(path: &Path) -> Result<DetectorInput, String> {
@@ -125,6 +160,22 @@ mod tests {
         assert_eq!(b.info.data_bits, 16);
         assert_eq!(a.rgb, b.rgb);
         assert!(!a.info.grey);
+    }
+
+    /// 16-bit frames become 8-bit frames of the same kind at their real bit depth, and 8-bit
+    /// ones are kept as they are.
+    #[test]
+    fn eight_bit_keeps_the_kind_and_uses_the_real_bit_depth() {
+        let grey = ImageBuffer::<Luma<u16>, _>::from_fn(4, 1, |x, _| Luma([[0u16, 1000, 2000, 4095][x as usize]]));
+        let g = eight_bit(image::DynamicImage::ImageLuma16(grey));
+        assert_eq!(g.as_luma8().expect("grey stays grey").as_raw(), &vec![0, 62, 125, 255]);
+        let rgb = ImageBuffer::<Rgb<u16>, _>::from_fn(2, 1, |x, _| Rgb([4095 * x as u16, 2000, 0]));
+        let c = eight_bit(image::DynamicImage::ImageRgb16(rgb));
+        assert_eq!(c.as_rgb8().expect("colour becomes RGB8").as_raw(), &vec![0, 125, 0, 255, 125, 0]);
+        let eight = image::DynamicImage::ImageRgba8(ImageBuffer::from_pixel(2, 2, Rgba([1, 2, 3, 4])));
+        assert_eq!(eight_bit(eight.clone()), eight);
+        assert_eq!(rgb8_pixels(&c).as_ref(), c.as_rgb8().unwrap().as_raw().as_slice());
+        assert_eq!(rgb8_pixels(&g).as_ref(), &[0, 0, 0, 62, 62, 62, 125, 125, 125, 255, 255, 255]);
     }
 
     #[test]

@@ -182,23 +182,54 @@ pub fn box_average(channels: usize, width: usize, height: usize, kx: usize, ky: 
 }
 
 /// [`resample_planes`] of an interleaved RGB8 image from `width x height` to `nw x nh`,
-/// rounded back to interleaved RGB8.
+/// rounded back to interleaved RGB8. The same values as converting the image to three f32
+/// planes first, without those full-size planes: the box step reads the bytes row by row, and
+/// a bilinear step at full size reads them in place (an 80-megapixel frame would need 960 MB
+/// of planes).
 pub fn resample_rgb8(rgb: &[u8], width: usize, height: usize, nw: usize, nh: usize) -> Vec<u8> {
-    let n = width * height;
-    let mut planes = vec![0f32; 3 * n];
-    for (i, px) in rgb.chunks_exact(3).enumerate() {
-        for c in 0..3 {
-            planes[c * n + i] = px[c] as f32;
-        }
+    use rayon::prelude::*;
+    let (kx, ky) = box_factors(width, height, nw, nh);
+    if kx > 1 || ky > 1 {
+        let boxed = box_average(3, width, height, kx, ky, |c, y, row| {
+            for (o, p) in row.iter_mut().zip(rgb[3 * y * width..3 * (y + 1) * width].chunks_exact(3)) {
+                *o = p[c] as f32;
+            }
+        });
+        let out = resample_planes(&boxed, 3, width / kx, height / ky, nw, nh);
+        let m = nw * nh;
+        let mut rgb_out = vec![0u8; 3 * m];
+        rgb_out.par_chunks_mut(3 * nw).enumerate().for_each(|(y, row)| {
+            for (x, px) in row.chunks_exact_mut(3).enumerate() {
+                for c in 0..3 {
+                    px[c] = out[c * m + y * nw + x].round().clamp(0.0, 255.0) as u8;
+                }
+            }
+        });
+        return rgb_out;
     }
-    let out = resample_planes(&planes, 3, width, height, nw, nh);
-    let m = nw * nh;
-    let mut rgb_out = vec![0u8; 3 * m];
-    for (i, px) in rgb_out.chunks_exact_mut(3).enumerate() {
-        for c in 0..3 {
-            px[c] = out[c * m + i].round().clamp(0.0, 255.0) as u8;
+    let (sx, sy) = (width as f32 / nw as f32, height as f32 / nh as f32);
+    let xs: Vec<(usize, usize, f32)> = (0..nw)
+        .map(|x| {
+            let fx = ((x as f32 + 0.5) * sx - 0.5).clamp(0.0, (width - 1) as f32);
+            let x0 = fx.floor() as usize;
+            (3 * x0, 3 * (x0 + 1).min(width - 1), fx - x0 as f32)
+        })
+        .collect();
+    let mut rgb_out = vec![0u8; 3 * nw * nh];
+    rgb_out.par_chunks_mut(3 * nw).enumerate().for_each(|(y, row)| {
+        let fy = ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (height - 1) as f32);
+        let y0 = fy.floor() as usize;
+        let (y1, ty) = ((y0 + 1).min(height - 1), fy - y0 as f32);
+        let (r0, r1) = (&rgb[3 * y0 * width..3 * (y0 + 1) * width], &rgb[3 * y1 * width..3 * (y1 + 1) * width]);
+        for (px, &(x0, x1, tx)) in row.chunks_exact_mut(3).zip(&xs) {
+            for c in 0..3 {
+                let (a0, a1, b0, b1) = (r0[x0 + c] as f32, r0[x1 + c] as f32, r1[x0 + c] as f32, r1[x1 + c] as f32);
+                let a = a0 + (a1 - a0) * tx;
+                let b = b0 + (b1 - b0) * tx;
+                px[c] = (a + (b - a) * ty).round().clamp(0.0, 255.0) as u8;
+            }
         }
-    }
+    });
     rgb_out
 }
 
@@ -316,6 +347,31 @@ pub fn point_back(p: [f64; 2], sx: f64, sy: f64) -> [f64; 2] {
 
 #[cfg(test)]
 mod tests {
+    /// The streamed RGB8 resampling gives exactly the bytes of resampling three full-size f32
+    /// planes: shrinking by more than 2 (box step), by less, enlarging, odd and mixed factors.
+    #[test]
+    fn resample_rgb8_equals_resampling_full_size_planes() {
+        let mut state = 99u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 56) as u8
+        };
+        for &(w, h, nw, nh) in &[(97usize, 61usize, 20usize, 13usize), (64, 48, 40, 30), (31, 17, 55, 30), (50, 9, 11, 17), (8, 8, 8, 8), (1, 1, 3, 2), (300, 200, 37, 101)] {
+            let rgb: Vec<u8> = (0..3 * w * h).map(|_| next()).collect();
+            let n = w * h;
+            let mut planes = vec![0f32; 3 * n];
+            for (i, px) in rgb.chunks_exact(3).enumerate() {
+                for c in 0..3 {
+                    planes[c * n + i] = px[c] as f32;
+                }
+            }
+            let out = super::resample_planes(&planes, 3, w, h, nw, nh);
+            let m = nw * nh;
+            let want: Vec<u8> = (0..3 * m).map(|i| out[(i % 3) * m + i / 3].round().clamp(0.0, 255.0) as u8).collect();
+            assert_eq!(super::resample_rgb8(&rgb, w, h, nw, nh), want, "{w}x{h} -> {nw}x{nh}");
+        }
+    }
+
     #[test]
     fn mask_back_rle_equals_the_rle_of_mask_back() {
         use tubeloc_core::{BinaryMask, Rle};

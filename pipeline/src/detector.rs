@@ -63,20 +63,13 @@ impl TubeDetector for LearnedDetector {
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
         // An RGB8 image is read in place; other formats go through the shared conversion.
-        let converted;
-        let rgb: &[u8] = match image {
-            DynamicImage::ImageRgb8(img) => img.as_raw(),
-            _ => {
-                converted = tubeloc_detect::input::rgb8_of(image).rgb;
-                &converted
-            }
-        };
+        let rgb = tubeloc_detect::input::rgb8_pixels(image);
         let (w, h) = (image.width() as usize, image.height() as usize);
         let s = match self.range {
             Some(band) => tubeloc_detect::scale::working_scale(camera, ground.map(|g| (g.normal, g.offset)), band),
             None => 1.0,
         };
-        let inst = detect_rgb_at_scale(&self.model, rgb, w, h, s, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
+        let inst = detect_rgb_at_scale(&self.model, &rgb, w, h, s, &self.decode).map_err(|e| PipelineError::Detect(format!("{}: {e}", self.origin)))?;
         Ok(inst
             .into_par_iter()
             .map(|i| {
@@ -107,9 +100,10 @@ impl TubeDetector for Line2dTubeDetector {
     }
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, _ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
-        let rgb = image.to_rgb8();
-        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-        let dets = self.detector.detect(rgb.as_raw(), w, h, Some(camera)).map_err(|e| PipelineError::Detect(e.to_string()))?;
+        // An RGB8 image is read in place; other formats go through the shared conversion.
+        let rgb = tubeloc_detect::input::rgb8_pixels(image);
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        let dets = self.detector.detect(&rgb, w, h, Some(camera)).map_err(|e| PipelineError::Detect(e.to_string()))?;
         Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
     }
 }

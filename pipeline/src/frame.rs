@@ -118,10 +118,7 @@ pub(crate) struct FramePixels<'a> {
 impl<'a> FramePixels<'a> {
     /// The grey levels of `image`, and its colours when `colour` is set.
     pub fn of(image: &'a DynamicImage, colour: bool) -> Self {
-        let rgb = colour.then(|| match image {
-            DynamicImage::ImageRgb8(img) => std::borrow::Cow::Borrowed(img.as_raw().as_slice()),
-            _ => std::borrow::Cow::Owned(image.to_rgb8().into_raw()),
-        });
+        let rgb = colour.then(|| tubeloc_detect::input::rgb8_pixels(image));
         FramePixels { gray: grey_levels(image), rgb }
     }
 
@@ -137,7 +134,12 @@ pub(crate) fn grey_levels(image: &DynamicImage) -> Plane<u8> {
     const BAND_ROWS: usize = 64;
     let (w, h) = (image.width() as usize, image.height() as usize);
     let DynamicImage::ImageRgb8(img) = image else {
-        return Plane::from_vec(w, h, image.to_luma8().into_raw());
+        // 16-bit and float frames at their real bit depth, as the detectors read them.
+        let levels = match image.color().bytes_per_pixel() / image.color().channel_count() {
+            1 => image.to_luma8(),
+            _ => tubeloc_detect::input::eight_bit(image.clone()).to_luma8(),
+        };
+        return Plane::from_vec(w, h, levels.into_raw());
     };
     let mut gray = vec![0u8; w * h];
     let space = img.color_space();

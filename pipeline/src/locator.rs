@@ -174,8 +174,8 @@ pub struct Locator {
 /// Most pixels of an image the locator takes (100 megapixels, e.g. 10000 x 10000). Peak
 /// memory is about 200 MB plus 12 bytes per pixel (the decoded image, its grey levels and
 /// the refiner's float copy at full resolution; the detector runs at its working scale in
-/// bands of bounded size): ~290 MB at 5472 x 3648, ~1.4 GB at this bound, with the learned
-/// detector. The Line2D detector needs more on large frames (1.8 GB at 80 megapixels).
+/// bands of bounded size): ~290 MB at 5472 x 3648 with either detector, ~1.4 GB at this
+/// bound (80 megapixels: 760 MB learned, 820 MB Line2D).
 pub const MAX_IMAGE_PIXELS: u64 = 100_000_000;
 
 /// Refuses cameras whose images exceed [`MAX_IMAGE_PIXELS`], before any image is read.

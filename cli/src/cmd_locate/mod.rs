@@ -445,5 +445,5 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
 }
 
 fn open_image(p: &Path) -> Result<image::DynamicImage> {
-    image::open(p).with_context(|| format!("cannot read image {}", p.display()))
+    tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("cannot read image {}", p.display()))
 }

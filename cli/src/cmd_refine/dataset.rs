@@ -61,7 +61,7 @@ pub(crate) fn right_view_of(dir: &std::path::Path, im: &CocoImage) -> Result<(im
     let rcam: CameraModel = serde_json::from_value(field("right_camera")?.clone()).with_context(|| format!("image {}: right_camera", im.id))?;
     let t_lr: Pose = serde_json::from_value(field("T_left_right")?.clone()).with_context(|| format!("image {}: T_left_right", im.id))?;
     let rpath = dir.join("right").join(rname);
-    let right = image::open(&rpath).with_context(|| format!("cannot read image {}", rpath.display()))?;
+    let right = tubeloc_detect::input::open_eight_bit(&rpath).with_context(|| format!("cannot read image {}", rpath.display()))?;
     Ok((right, rcam, t_lr))
 }
 
@@ -229,7 +229,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
                     dir.join("images").join(&im.file_name)
                 }
             };
-            let image = image::open(&path).with_context(|| format!("cannot read image {}", path.display()))?;
+            let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("cannot read image {}", path.display()))?;
             if image.width() != camera.width || image.height() != camera.height {
                 bail!("{} is {}x{} but its camera is {}x{}", path.display(), image.width(), image.height(), camera.width, camera.height);
             }
