@@ -109,14 +109,22 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
 
 /// Mono refinement of a set's learned detections on each image's own ground (`--ground
 /// auto`: the composites' `T_world_cam` has the ground at z = 0) and pose errors against the
-/// composite truth; returns the `mono` summaries (axis degrees, across-axis millimetres).
+/// composite truth; returns the `mono` summaries (axis degrees, across-axis millimetres) and
+/// the segm AP50 / AR of the detections with their masks snapped to the poses' silhouettes
+/// (`refine --snapped-out`, default settings).
 fn poses(set: &Path, dir: &Path) -> Result<Value> {
     use crate::cmd_refine::dataset::{refine_dataset, DatasetJob, DatasetSeeds};
-    let (dets, poses, seeds) = (dir.join("detections.json"), dir.join("poses.json"), dir.join("seeds.json"));
+    let (dets, poses, seeds, snapped) = (dir.join("detections.json"), dir.join("poses.json"), dir.join("seeds.json"), dir.join("snapped.json"));
+    let t = Instant::now();
     let mut job = DatasetJob::new(set.to_path_buf(), DatasetSeeds::Detections(dets), poses.clone());
     job.ground = Some(crate::cmd_refine::GroundArg::Auto);
     job.seeds_out = Some(seeds.clone());
+    job.snapped_out = Some(snapped.clone());
     refine_dataset(&job)?;
+    let refine_ms = t.elapsed().as_secs_f64() * 1e3;
+    let snapped_dets: Value = files::read_json(&snapped)?;
+    let (gt, dt) = saved_results(set, &dir.join("snapped_eval"), &snapped_dets)?;
+    let snapped_eval = CocoEvaluator::new(&gt, &dt, IouType::Segm)?.evaluate();
     let filter = crate::cmd_eval::poses::TruthFilter { field: "T_cam_tube", min_visible: 0.5, in_both_views: false };
     let labels = [("coarse".to_string(), seeds.clone()), ("mono".to_string(), poses.clone())];
     crate::cmd_eval::poses::run(&set.join("annotations.json"), &labels, &filter, 50.0, Some(&dir.join("pose_eval")))?;
@@ -126,6 +134,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
         "truths": mono["n_truths"], "matched": mono["n_matched"],
         "axis_deg_median": mono["summaries"]["axis_angle_deg"]["median"], "axis_deg_p90": mono["summaries"]["axis_angle_deg"]["p90"],
         "across_mm_median": mono["summaries"]["perpendicular_mm"]["median"], "across_mm_p90": mono["summaries"]["perpendicular_mm"]["p90"],
+        "snapped": {"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64},
     }))
 }
 
@@ -270,6 +279,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let grey = detect_eval(&grey_set, &stage.model, &stage.calibration, &dir.join("learned_grey"))?;
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
+    let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
     let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
     // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
@@ -280,7 +290,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_neg = line2d_negatives(&stage.data, &lib, stage.frames)?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey) = (verifier.threshold, verifier.threshold_for(true));
-    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "negatives": neg, "grasp_grey": grasp,
+    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "grasp_grey": grasp,
         "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
@@ -295,12 +305,22 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.3} / {:.3} | {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold"), num(v, "ece")))).ok();
     }
+    // The same detections with their masks snapped to their mono-refined poses: the masks of a
+    // learned detection followed by `tubeloc refine --snapped-out`.
+    for (name, v, p) in [("grey, snapped to poses", &grey, &grey_poses), ("colour, snapped to poses", &colour, &colour_poses)] {
+        let s = &p["snapped"];
+        let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ar": s["ar"], "ms_per_image": num(v, "ms_per_image") + num(s, "refine_ms_per_image")});
+        writeln!(md, "{}", row(name, &merged, "- | -".into())).ok();
+    }
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones); their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
-    writeln!(md, "\nMono refinement of the learned detections on the grey test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", grey_poses["matched"], grey_poses["truths"], f(&grey_poses["axis_deg_median"]), f(&grey_poses["axis_deg_p90"]), f(&grey_poses["across_mm_median"]), f(&grey_poses["across_mm_p90"])).ok();
+    writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
+    for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
+        writeln!(md, "\nMono refinement of the learned detections on the {kind} test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"])).ok();
+    }
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,

@@ -80,6 +80,11 @@ fn bench_real_stage_runs_at_a_small_size() {
         let ap = v["ap50"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&ap), "{set}: AP50 {ap}");
     }
+    // The learned masks snapped to their mono-refined poses, scored beside the network's.
+    for set in ["poses_grey", "poses_colour"] {
+        let ap = summary[set]["snapped"]["ap50"].as_f64().unwrap_or(-1.0);
+        assert!((0.0..=1.0).contains(&ap), "{set}: snapped AP50 {}", summary[set]);
+    }
     assert_eq!(summary["negatives"]["frames"], 2);
     assert!(summary["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
     // Line2D beside the learned detector: the default library built once in the stage's
@@ -96,6 +101,7 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert!(summary["line2d"]["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
     let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
+    assert!(real_md.contains("| colour, snapped to poses |"), "{real_md}");
 }
 
 #[test]

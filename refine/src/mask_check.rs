@@ -7,6 +7,10 @@ use crate::seed::Seed;
 use crate::silhouette;
 use tubeloc_core::{BoundedMask, CameraModel, TubeAxisPose};
 
+/// Dilation of the detector's mask in the agreement test, pixels (the snapping default before
+/// it was chosen again on real frames; `mask.min_agreement` was chosen with it).
+const MASK_CHECK_DILATE_PX: usize = 4;
+
 /// `pose` of a mask seed, checked against the detector's mask: when
 /// `IoU(silhouette ∩ dilate(mask, 4 px), mask) < mask.min_agreement` (see
 /// [`silhouette::snap_mask`]), the seed's centre and axis are returned instead, with the fit's
@@ -17,7 +21,7 @@ pub(crate) fn checked_against_mask(refiner: &Refiner, mut pose: TubeAxisPose, se
     if !(pose.converged && tau > 0.0) {
         return pose;
     }
-    let Some(iou) = silhouette::mask_agreement(mask, &refiner.model, &pose, camera, silhouette::MaskSnap::default().dilate_px) else { return pose };
+    let Some(iou) = silhouette::mask_agreement(mask, &refiner.model, &pose, camera, MASK_CHECK_DILATE_PX) else { return pose };
     if iou >= tau {
         return pose;
     }

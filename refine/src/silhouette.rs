@@ -38,19 +38,18 @@ pub struct MaskSnap {
 }
 
 impl Default for MaskSnap {
-    /// `r = 4 px`, `τ = 0.6`: chosen on two generated validation sets (val9, val21; never the
-    /// test splits), learned masks IoU-snapped to mono-refined poses: segm AP50 0.726 -> 0.770
-    /// and 0.810 -> 0.824, AR 0.312 -> 0.458 and 0.346 -> 0.500.
-    /// `kept_erode_px = 1`, chosen on the same sets with the two cross-split RGB
-    /// models among 0, 1, 1.5, 2, 2.5 px (disk radii; 1 is the 4-neighbour step): the unsnapped
-    /// masks cover 1.1-1.5 times the tube's area at the median; mean of snapped AP50 and AR over
-    /// both sets and models 0.7350 -> 0.7398.
-    /// `min_area_px = 500`, chosen on the same sets and models among 0, 300, 400,
-    /// 450, 500, 600, 700 and 800 px: among masks under 600 px, snapping lost 12 matches at
-    /// IoU 0.5 and won 3; mean snapped AP50 0.8819 -> 0.8896 and AR 0.6006 -> 0.6021 (a plateau
-    /// from 450 to 700 px).
+    /// `r = 8 px`, `τ = 0.4`, no erosion of the masks that are not snapped, no least area:
+    /// chosen on the real validation composites (`docs/design/0048-mask-snapping-on-real-frames.md`),
+    /// the shipped model's masks snapped to mono-refined poses, by the mean of segm AP50 and AR
+    /// over the grey (`val_grey11`, Navcam frames with their PDS geometry, tubes 4-7 px wide) and
+    /// colour (`val_colour12`) sets, over `r` in 2-20 px, `τ` in 0.2-0.6, erosion 0 / 1 px and
+    /// least areas 0 / 150 / 300 px: 0.6505 at the former defaults' `r` and `τ` with no erosion
+    /// and no least area, **0.6635** here (a plateau from `r` = 6 to 14 px and for `τ` up to 0.45);
+    /// the network's own masks score 0.5395. The former defaults (`r` 4, `τ` 0.6, 1 px erosion,
+    /// 500 px least area), chosen on rendered validation scenes, left the real composites' small
+    /// masks unsnapped and eroded them: 0.4448.
     fn default() -> Self {
-        MaskSnap { dilate_px: 4, min_agreement: 0.6, kept_erode_px: 1, min_area_px: 500 }
+        MaskSnap { dilate_px: 8, min_agreement: 0.4, kept_erode_px: 0, min_area_px: 0 }
     }
 }
 
@@ -454,7 +453,8 @@ mod tests {
         let cx = cam.cx as usize;
         let visible = BinaryMask::from_fn(sil.width, sil.height, |x, y| x > cx && sil.get(x, y));
         let snapped = snap_mask(&visible, &sil, &MaskSnap::default()).expect("agrees");
-        let leak = (0..sil.height).flat_map(|y| (0..=cx.saturating_sub(5)).map(move |x| (x, y))).filter(|&(x, y)| snapped.get(x, y)).count();
+        let r = MaskSnap::default().dilate_px;
+        let leak = (0..sil.height).flat_map(|y| (0..=cx.saturating_sub(r + 1)).map(move |x| (x, y))).filter(|&(x, y)| snapped.get(x, y)).count();
         assert_eq!(leak, 0, "snapped mask leaked into the hidden half");
         // A pose 30 px off: no agreement, no snap.
         let off = silhouette_mask(&model, &pose(Vector3::new(0.0, 30.0 / cam.fy, 1.0), Vector3::x()), &cam);
@@ -478,10 +478,11 @@ mod tests {
         let model = CylinderModel::plain(0.1, 0.01).unwrap();
         let sil = silhouette_mask(&model, &pose(Vector3::new(0.0, 0.0, 1.0), Vector3::new(1.0, 0.3, 0.0)), &cam);
         let fat = sil.dilated(1);
-        let trimmed = trim_kept_mask(&fat, &MaskSnap::default()).expect("trimmed");
+        let erode = MaskSnap { kept_erode_px: 1, ..MaskSnap::default() };
+        let trimmed = trim_kept_mask(&fat, &erode).expect("trimmed");
         assert!(mask_iou(&trimmed, &sil) > mask_iou(&fat, &sil) + 0.1, "{} vs {}", mask_iou(&trimmed, &sil), mask_iou(&fat, &sil));
         let speck = BinaryMask::from_fn(20, 20, |x, y| (5..9).contains(&x) && (5..9).contains(&y));
-        assert!(trim_kept_mask(&speck, &MaskSnap::default()).is_none(), "a 4x4 mask erodes below the least area");
+        assert!(trim_kept_mask(&speck, &erode).is_none(), "a 4x4 mask erodes below the least area");
         assert!(trim_kept_mask(&fat, &MaskSnap { kept_erode_px: 0, ..MaskSnap::default() }).is_none());
     }
 
