@@ -30,6 +30,16 @@ def test_sixteen_bit_full_range_equals_eight_bit(scene):
     assert poses(locator, img.astype(np.uint16) * 257, ground) == poses(locator, img, ground)
 
 
+def test_twelve_bit_grey_equals_eight_bit_grey(scene):
+    # A rover EDR's 12-bit data in a uint16 array: detection and refinement read them at their
+    # real depth (16 v + 8 maps back to v), not divided by 257.
+    locator, img, ground = scene
+    grey = np.ascontiguousarray(img[..., 0])
+    eight = poses(locator, grey, ground)
+    assert any(t["converged"] for t in eight)
+    assert poses(locator, grey.astype(np.uint16) * 16 + 8, ground) == eight
+
+
 def test_rgba_with_opaque_alpha_equals_rgb(scene):
     locator, img, ground = scene
     rgb = img[..., :3]
