@@ -49,7 +49,19 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
 /// sampling, box from the mapped mask, axis centre by `p = (p' + ½) / s - ½`, lengths by
 /// `1 / s`). `s = 1` is [`detect_rgb`]. Instances whose mask vanishes on the way back are
 /// dropped.
+///
+/// With [`DecodeConfig::second_scale`] `k > 0` and `s > 1`, the image is also detected at
+/// `k s` (clamped to `[1/4, 4]`) and the two lists are merged in score order: an instance whose
+/// mask overlaps a kept one at IoU > [`SCALE_MERGE_IOU`] is dropped.
 pub fn detect_rgb_at_scale(model: &LearnedModel, rgb: &[u8], width: usize, height: usize, s: f64, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
+    let k = cfg.second_scale as f64;
+    if k > 0.0 && s.is_finite() && s > 1.0 {
+        let second = (k * s).clamp(0.25, 4.0);
+        let one = DecodeConfig { second_scale: 0.0, ..*cfg };
+        let mut all = detect_rgb_at_scale(model, rgb, width, height, s, &one)?;
+        all.extend(detect_rgb_at_scale(model, rgb, width, height, second, &one)?);
+        return Ok(merge_scales(all));
+    }
     if rgb.len() != width * height * 3 {
         return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
@@ -58,6 +70,26 @@ pub fn detect_rgb_at_scale(model: &LearnedModel, rgb: &[u8], width: usize, heigh
     }
     let (nw, nh) = crate::scale::scaled_size(width, height, s);
     detect_scaled(model, &model.meta.preprocess.apply_resampled(rgb, width, height, nw, nh), (nw, nh), (width, height), cfg)
+}
+
+/// Mask IoU above which an instance found at the second scale is the same tube as a stronger
+/// one ([`DecodeConfig::second_scale`]).
+pub const SCALE_MERGE_IOU: f64 = 0.5;
+
+/// Instances of several scales, strongest first, without those whose mask overlaps a stronger
+/// kept one at IoU > [`SCALE_MERGE_IOU`] (ties in score keep the earlier instance).
+fn merge_scales(mut all: Vec<LearnedInstance>) -> Vec<LearnedInstance> {
+    all.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut kept: Vec<LearnedInstance> = Vec::with_capacity(all.len());
+    for inst in all {
+        let boxes: Vec<[f64; 4]> = kept.iter().map(|k| k.bbox).collect();
+        let near: Vec<tubeloc_core::Rle> = tubeloc_core::mask::bbox_iou(&[inst.bbox], &boxes, &vec![false; boxes.len()]).iter().zip(&kept).filter(|(&b, _)| b > 0.0).map(|(_, k)| k.mask.clone()).collect();
+        let same = !near.is_empty() && tubeloc_core::Rle::iou(std::slice::from_ref(&inst.mask), &near, &vec![false; near.len()]).iter().any(|&v| v > SCALE_MERGE_IOU);
+        if !same {
+            kept.push(inst);
+        }
+    }
+    kept
 }
 
 /// [`detect_rgb_at_scale`] on preprocessed input planes (`channels * width * height`).
@@ -101,4 +133,42 @@ fn detect_scaled(model: &LearnedModel, scaled: &[f32], (nw, nh): (usize, usize),
             Some(LearnedInstance { score: i.score, mask, bbox, axis })
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tubeloc_core::{AxisSeed, BinaryMask, Rle};
+
+    fn instance(score: f64, x0: usize, x1: usize) -> LearnedInstance {
+        let mask = BinaryMask::from_fn(40, 10, |x, y| (x0..x1).contains(&x) && (3..6).contains(&y));
+        let axis = AxisSeed { centre_px: [(x0 + x1) as f64 / 2.0, 4.0], direction_px: [1.0, 0.0], length_px: (x1 - x0) as f64, width_px: 3.0 };
+        LearnedInstance { score, bbox: mask.bbox(), mask: Rle::from_mask(&mask), axis }
+    }
+
+    /// Two scales' instances merge strongest first: the weaker copy of a tube (mask IoU > 0.5)
+    /// goes, a partly overlapping or separate tube stays.
+    #[test]
+    fn scales_merge_by_mask_overlap_in_score_order() {
+        let merged = merge_scales(vec![instance(0.4, 0, 10), instance(0.9, 1, 11), instance(0.5, 6, 16), instance(0.3, 25, 35)]);
+        let kept: Vec<f64> = merged.iter().map(|i| i.score).collect();
+        assert_eq!(kept, vec![0.9, 0.5, 0.3], "IoU(0-10, 1-11) = 9/11 merges; IoU(1-11, 6-16) = 5/15 does not");
+    }
+
+    /// The second scale runs only for enlarged images: a frame at scale 1 or shrunk gives the
+    /// same instances with and without it.
+    #[test]
+    fn second_scale_runs_only_for_enlarged_images() {
+        assert_eq!(DecodeConfig::default().second_scale, 0.0, "off by default");
+        let model = shipped_model().unwrap();
+        let rgb: Vec<u8> = (0..96 * 80 * 3).map(|i| ((i * 37 + i / 7) % 251) as u8).collect();
+        let (on, off) = (DecodeConfig { second_scale: 0.6, ..DecodeConfig::default() }, DecodeConfig { second_scale: 0.0, ..DecodeConfig::default() });
+        for s in [1.0, 0.5] {
+            let a = detect_rgb_at_scale(&model, &rgb, 96, 80, s, &off).unwrap();
+            let b = detect_rgb_at_scale(&model, &rgb, 96, 80, s, &on).unwrap();
+            assert_eq!(a.iter().map(|i| (i.score, i.bbox)).collect::<Vec<_>>(), b.iter().map(|i| (i.score, i.bbox)).collect::<Vec<_>>(), "scale {s}");
+        }
+        let bad = DecodeConfig { second_scale: -1.0, ..DecodeConfig::default() };
+        assert!(bad.validate().unwrap_err().contains("second_scale"));
+    }
 }
