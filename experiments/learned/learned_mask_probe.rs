@@ -18,9 +18,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let old = DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, mask_logit: 0.5, mask_logit_rel: 0.0, ..d };
     let variants = vec![
         ("default".to_string(), d),
-        ("session-3 decoder".into(), old),
-        ("session-3 masks, new score".into(), DecodeConfig { mask_logit: 0.5, mask_logit_rel: 0.0, ..d }),
-        ("session-3 score, new masks".into(), DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..d }),
+        ("earlier decoder".into(), old),
+        ("earlier masks, new score".into(), DecodeConfig { mask_logit: 0.5, mask_logit_rel: 0.0, ..d }),
+        ("earlier score, new masks".into(), DecodeConfig { mask_logit_weight: 0.0, length_weight: 0.0, fill_weight: 0.0, ..d }),
         ("score: mask logit only".into(), DecodeConfig { length_weight: 0.0, fill_weight: 0.0, ..d }),
         ("score: no fill".into(), DecodeConfig { fill_weight: 0.0, ..d }),
         ("score: mask logit^2".into(), DecodeConfig { mask_logit_weight: 2.0, ..d }),
