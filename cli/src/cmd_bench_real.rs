@@ -248,12 +248,11 @@ fn line2d_negatives(data: &Path, lib: &Path, frames: Option<usize>) -> Result<Va
     let mut ms = 0.0;
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
-        let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
+        let input = tubeloc_detect::input::rgb8_of(&image);
+        let grey = input.info.grey;
         let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
-        let rgb = image.to_rgb8();
-        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
         let t = Instant::now();
-        let found = det.detect(rgb.as_raw(), w, h, Some(&view.camera))?;
+        let found = det.detect(&input.rgb, input.width, input.height, Some(&view.camera))?;
         let dt = t.elapsed().as_secs_f64() * 1e3;
         ms += dt;
         let (sx, sy) = det.scale_for(Some(&view.camera));

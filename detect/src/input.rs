@@ -107,20 +107,22 @@ pub fn rgb8_pixels(img: &image::DynamicImage) -> std::borrow::Cow<'_, [u8]> {
 /// [`rgb8_of`] (their real bit depth, never a fixed division by 257), grey ones to 8-bit grey
 /// and the others to RGB8 (alpha dropped).
 pub fn eight_bit(img: image::DynamicImage) -> image::DynamicImage {
+    to_eight_bit(&img).unwrap_or(img)
+}
+
+/// [`eight_bit`] of an image that is not 8-bit; `None` for an 8-bit one (nothing to convert).
+pub fn to_eight_bit(img: &image::DynamicImage) -> Option<image::DynamicImage> {
     use image::DynamicImage as D;
-    match img {
-        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => img,
-        other => {
-            let (w, h) = (other.width(), other.height());
-            let grey = other.color().channel_count() <= 2;
-            let c = rgb8_of(&other);
-            if grey {
-                D::ImageLuma8(image::GrayImage::from_raw(w, h, c.rgb.chunks_exact(3).map(|p| p[0]).collect()).expect("w x h levels"))
-            } else {
-                D::ImageRgb8(image::RgbImage::from_raw(w, h, c.rgb).expect("w x h x 3 bytes"))
-            }
-        }
+    if matches!(img, D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_)) {
+        return None;
     }
+    let (w, h) = (img.width(), img.height());
+    let c = rgb8_of(img);
+    Some(if img.color().channel_count() <= 2 {
+        D::ImageLuma8(image::GrayImage::from_raw(w, h, c.rgb.chunks_exact(3).map(|p| p[0]).collect()).expect("w x h levels"))
+    } else {
+        D::ImageRgb8(image::RgbImage::from_raw(w, h, c.rgb).expect("w x h x 3 bytes"))
+    })
 }
 
 /// Opens an image file (PNG, JPEG, TIFF, ...) as [`eight_bit`].

@@ -60,12 +60,19 @@ fn small_params(dmin: f64, dmax: f64, features: u32) -> LibraryParams {
     LibraryParams { views: ViewParams { dist_min: dmin, dist_max: dmax, ..ViewParams::default() }, features, ..LibraryParams::default() }
 }
 
+/// A library of 64-feature templates at `dmin..dmax` metres for a `w x h` image whose principal
+/// point is its centre, with its parameters.
+fn centred_library(w: usize, h: usize, dmin: f64, dmax: f64) -> (LibraryParams, TemplateLibrary) {
+    let mut params = small_params(dmin, dmax, 64);
+    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
+    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    (params, lib)
+}
+
 #[test]
 fn rendered_tube_is_found_with_coarse_pose_within_one_step() {
     let (w, h) = (512usize, 384usize);
-    let mut params = small_params(1.8, 2.2, 64);
-    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
-    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let (params, lib) = centred_library(w, h, 1.8, 2.2);
     assert!(lib.len() > 500, "{} templates", lib.len());
     // True pose: axis 60 degrees off the line of sight, between template views, off-centre.
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
@@ -354,9 +361,7 @@ fn mesh_silhouettes_match_the_parametric_model_and_build_a_library() {
 #[test]
 fn a_camera_of_another_focal_length_is_matched_at_the_library_scale() {
     let (w, h) = (512usize, 384usize);
-    let mut params = small_params(1.8, 2.2, 64);
-    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
-    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let (params, lib) = centred_library(w, h, 1.8, 2.2);
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
     let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.04));
     // One search: this test is about the focal-length resampling alone.
@@ -404,9 +409,7 @@ fn a_camera_of_another_focal_length_is_matched_at_the_library_scale() {
 #[test]
 fn grey_threshold_applies_to_grey_images_only() {
     let (w, h) = (384usize, 320usize);
-    let mut params = small_params(1.9, 2.1, 64);
-    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
-    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let (params, lib) = centred_library(w, h, 1.9, 2.1);
     let rot = Rotation3::rotation_between(&Vector3::z(), &Vector3::new(0.7, 0.2, -0.4).normalize()).unwrap();
     let colour = scene(w, h, &params.camera, &Pose::from_parts(rot, Vector3::new(0.02, 0.01, 2.0)), 3);
     let grey: Vec<u8> = colour
@@ -437,9 +440,7 @@ fn grey_threshold_applies_to_grey_images_only() {
 #[test]
 fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     let (w, h) = (512usize, 384usize);
-    let mut params = small_params(1.8, 2.2, 64);
-    params.camera = Pinhole { fx: params.camera.fx, fy: params.camera.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0 };
-    let lib = TemplateLibrary::build(&TubeModel::default(), &params, &|_| {}).unwrap();
+    let (params, lib) = centred_library(w, h, 1.8, 2.2);
     let k = params.camera;
     let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();

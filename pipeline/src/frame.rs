@@ -135,9 +135,9 @@ pub(crate) fn grey_levels(image: &DynamicImage) -> Plane<u8> {
     let (w, h) = (image.width() as usize, image.height() as usize);
     let DynamicImage::ImageRgb8(img) = image else {
         // 16-bit and float frames at their real bit depth, as the detectors read them.
-        let levels = match image.color().bytes_per_pixel() / image.color().channel_count() {
-            1 => image.to_luma8(),
-            _ => tubeloc_detect::input::eight_bit(image.clone()).to_luma8(),
+        let levels = match tubeloc_detect::input::to_eight_bit(image) {
+            Some(eight) => eight.to_luma8(),
+            None => image.to_luma8(),
         };
         return Plane::from_vec(w, h, levels.into_raw());
     };

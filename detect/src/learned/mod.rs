@@ -82,14 +82,18 @@ fn merge_scales(mut all: Vec<LearnedInstance>) -> Vec<LearnedInstance> {
     all.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut kept: Vec<LearnedInstance> = Vec::with_capacity(all.len());
     for inst in all {
-        let boxes: Vec<[f64; 4]> = kept.iter().map(|k| k.bbox).collect();
-        let near: Vec<tubeloc_core::Rle> = tubeloc_core::mask::bbox_iou(&[inst.bbox], &boxes, &vec![false; boxes.len()]).iter().zip(&kept).filter(|(&b, _)| b > 0.0).map(|(_, k)| k.mask.clone()).collect();
-        let same = !near.is_empty() && tubeloc_core::Rle::iou(std::slice::from_ref(&inst.mask), &near, &vec![false; near.len()]).iter().any(|&v| v > SCALE_MERGE_IOU);
+        // Masks are compared only where their boxes overlap.
+        let same = kept.iter().filter(|k| boxes_overlap(&inst.bbox, &k.bbox)).any(|k| tubeloc_core::Rle::iou(std::slice::from_ref(&inst.mask), std::slice::from_ref(&k.mask), &[false])[0] > SCALE_MERGE_IOU);
         if !same {
             kept.push(inst);
         }
     }
     kept
+}
+
+/// Whether two COCO boxes `[x, y, w, h]` overlap with a positive area.
+fn boxes_overlap(a: &[f64; 4], b: &[f64; 4]) -> bool {
+    a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3]
 }
 
 /// [`detect_rgb_at_scale`] on preprocessed input planes (`channels * width * height`).
