@@ -17,6 +17,7 @@ pub mod calibrate;
 pub mod detect;
 pub mod error;
 pub mod geometry;
+pub mod grey;
 pub mod interchange;
 pub mod lm;
 pub mod mount;

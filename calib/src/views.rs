@@ -105,7 +105,7 @@ pub fn load_calib_set(dir: &Path, source: CornerSource, detector: Option<&mut Ta
                 CornerSource::Detect => {
                     let name = o.image.as_ref().ok_or_else(|| CalibError::parse(&path, format!("views[{}] camera {}: no image to detect in (set made without rendering)", v.index, o.camera)))?;
                     let ip = dir.join(name);
-                    let img = image::open(&ip).map_err(|e| CalibError::parse(&ip, e.to_string()))?.to_luma8();
+                    let img = crate::grey::open_grey(&ip)?;
                     let det = detector.as_deref_mut().ok_or_else(|| CalibError::invalid("detector", "corner source Detect needs a detector"))?;
                     det.detect_image(&img)?.into_iter().map(|d| (d.id, d.corners)).collect()
                 }

@@ -133,7 +133,7 @@ fn run_detect(a: DetectArgs) -> Result<()> {
     let mut det = a.detector.detector()?;
     let mut all = serde_json::Map::new();
     for p in &a.images {
-        let img = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?.to_luma8();
+        let img = tubeloc_calib::grey::open_grey(p)?;
         let d = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()))?;
         all.insert(p.display().to_string(), serde_json::to_value(d)?);
     }
@@ -287,7 +287,7 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
         };
         let direct = a.dataset.join(file);
         let path = if direct.is_file() { direct } else { a.dataset.join("images").join(file) };
-        let img = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?.to_luma8();
+        let img = tubeloc_calib::grey::open_grey(&path)?;
         let dets = det.detect_image(&img)?;
         let est = match estimate_tube_pose(&camera, &mount, &dets) {
             Ok(e) => e,

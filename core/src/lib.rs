@@ -6,6 +6,7 @@
 //! and +z along the axis toward the seal end.
 #![warn(missing_docs)]
 
+pub mod bit_depth;
 pub mod camera;
 pub mod coco;
 pub mod confidence;

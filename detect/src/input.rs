@@ -3,10 +3,9 @@
 //! Every detector and the training loader go through [`rgb8_of`], so training and inference
 //! see the same conversion:
 //! - 8-bit grey, grey + alpha, RGB and RGBA (alpha dropped; grey replicated to three channels);
-//! - 16-bit containers hold data of some real bit depth (12-bit for rover EDRs). The depth is
-//!   taken as the bits of the largest value, at least 8 (`b = max(8, ⌈log2(max + 1)⌉)`), and
-//!   values map to `v · 255 / (2^b - 1)`: 12-bit data fill the 8-bit range instead of being
-//!   divided by 257 into the bottom sixteenth;
+//! - 16-bit containers hold data of some real bit depth (12-bit for rover EDRs), mapped by
+//!   [`tubeloc_core::bit_depth`]: `v · 255 / (2^b - 1)` with `b` the bits of the largest value
+//!   (at least 8), so 12-bit data fill the 8-bit range instead of being divided by 257;
 //! - 32-bit float images are taken as `[0, 1]`.
 //!
 //! [`InputInfo`] says what was found, and [`InputInfo::warning`] flags inputs that cannot give
@@ -49,16 +48,10 @@ pub struct DetectorInput {
     pub info: InputInfo,
 }
 
-/// Bits needed for `max` (at least 8, at most `container`).
 /// Whether an interleaved RGB8 image is grey: its three channels are equal at every pixel
 /// (a grey camera's frame replicated to RGB, e.g. Navcam).
 pub fn is_grey_rgb8(rgb: &[u8]) -> bool {
     rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
-}
-
-fn data_bits(max: u32, container: u8) -> u8 {
-    let bits = 32 - max.leading_zeros();
-    (bits as u8).clamp(8, container)
 }
 
 /// Converts a decoded image (see the module doc).
@@ -68,11 +61,8 @@ pub fn rgb8_of(img: &image::DynamicImage) -> DetectorInput {
     let channels = img.color().channel_count();
     let (rgb, container_bits, bits): (Vec<u8>, u8, u8) = match img {
         D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
-            let wide = img.to_rgb16();
-            let max = wide.as_raw().iter().copied().max().unwrap_or(0) as u32;
-            let b = data_bits(max, 16);
-            let scale = 255.0 / ((1u32 << b) - 1) as f32;
-            (wide.as_raw().iter().map(|&v| (v as f32 * scale).round().min(255.0) as u8).collect(), 16, b)
+            let (levels, b) = tubeloc_core::bit_depth::eight_bit_levels(img.to_rgb16().as_raw());
+            (levels, 16, b)
         }
         D::ImageRgb32F(_) | D::ImageRgba32F(_) => {
             let f = img.to_rgb32f();
