@@ -355,14 +355,18 @@ pub fn snap_candidate(mask: &BinaryMask, silhouette: &BinaryMask, dilate_px: usi
     if mask.width != silhouette.width || mask.height != silhouette.height {
         return None;
     }
-    let near = mask.dilated(dilate_px);
+    // The dilated mask within its own window (no image-sized copy).
+    let near = mask.dilated_window(dilate_px);
     let mut snapped = BinaryMask::new(mask.width, mask.height);
-    // Only the silhouette's box can be set, and only it and the mask's box hold set pixels.
+    // Only the silhouette's box within the dilated window can be set, and only it and the
+    // mask's box hold set pixels.
     let (sx0, sy0, sx1, sy1) = box_corners(silhouette);
-    for y in sy0..sy1 {
-        for x in sx0..sx1 {
+    let (wx0, wy0) = (near.x0, near.y0);
+    let (wx1, wy1) = (wx0 + near.mask.width, wy0 + near.mask.height);
+    for y in sy0.max(wy0)..sy1.min(wy1) {
+        for x in sx0.max(wx0)..sx1.min(wx1) {
             let i = y * mask.width + x;
-            snapped.data[i] = (silhouette.data[i] != 0 && near.data[i] != 0) as u8;
+            snapped.data[i] = (silhouette.data[i] != 0 && near.mask.data[(y - wy0) * near.mask.width + x - wx0] != 0) as u8;
         }
     }
     let (mx0, my0, mx1, my1) = box_corners(mask);
@@ -484,6 +488,31 @@ mod tests {
         let speck = BinaryMask::from_fn(20, 20, |x, y| (5..9).contains(&x) && (5..9).contains(&y));
         assert!(trim_kept_mask(&speck, &erode).is_none(), "a 4x4 mask erodes below the least area");
         assert!(trim_kept_mask(&fat, &MaskSnap { kept_erode_px: 0, ..MaskSnap::default() }).is_none());
+    }
+
+    /// `snap_candidate` equals its definition on whole images, `silhouette ∩ dilate(mask)`, for
+    /// masks on the image border, far from the silhouette, and empty.
+    #[test]
+    fn snap_candidate_is_the_silhouette_within_the_dilated_mask() {
+        let mut u = uniform_stream(0x5eed);
+        for case in 0..60 {
+            let (w, h) = (40 + (u() * 30.0) as usize, 30 + (u() * 30.0) as usize);
+            let rect = |u: &mut dyn FnMut() -> f64| {
+                let (x0, y0) = ((u() * w as f64) as usize, (u() * h as f64) as usize);
+                let (x1, y1) = (x0 + (u() * 25.0) as usize, y0 + (u() * 12.0) as usize);
+                BinaryMask::from_fn(w, h, move |x, y| (x0..x1).contains(&x) && (y0..y1).contains(&y))
+            };
+            let mask = if case % 10 == 0 { BinaryMask::new(w, h) } else { rect(&mut u) };
+            let sil = rect(&mut u);
+            for r in [0, 3, 8] {
+                let near = mask.dilated(r);
+                let expected = BinaryMask::from_fn(w, h, |x, y| sil.get(x, y) && near.get(x, y));
+                let (snapped, agreement) = snap_candidate(&mask, &sil, r).unwrap();
+                assert_eq!(snapped, expected, "case {case}, r {r}");
+                let (inter, union) = (0..w * h).fold((0, 0), |(i, n), k| (i + (snapped.data[k] & mask.data[k]) as u32, n + (snapped.data[k] | mask.data[k]) as u32));
+                assert_eq!(agreement, if union == 0 { 0.0 } else { inter as f64 / union as f64 });
+            }
+        }
     }
 
     /// The windowed silhouette is the crop of the whole image's, and the windowed agreement is
