@@ -43,9 +43,11 @@ pub fn eight_bit_grey(img: &image::DynamicImage) -> image::GrayImage {
 }
 
 /// Reads an image file as 8-bit grey for tag detection: a JPEG's luma plane
-/// ([`jpeg_luma`]), any other format by [`eight_bit_grey`]. The error names the file.
+/// ([`jpeg_luma`]), any other format by [`eight_bit_grey`]. The error names the file; a JPEG cut
+/// short is one ([`tubeloc_core::image_file::check_complete`]).
 pub fn open_grey(path: &Path) -> Result<image::GrayImage, CalibError> {
     let bytes = std::fs::read(path).map_err(|e| CalibError::parse(path, e.to_string()))?;
+    tubeloc_core::image_file::check_complete(&bytes).map_err(|e| CalibError::parse(path, e))?;
     if is_jpeg(&bytes) {
         return jpeg_luma(&bytes).map_err(|e| CalibError::parse(path, e));
     }

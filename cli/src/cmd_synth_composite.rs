@@ -56,7 +56,7 @@ fn numbers(s: &str, n: usize, what: &str) -> Result<Vec<f64>> {
 pub fn run(a: CompositeArgs) -> Result<()> {
     let s = numbers(&a.sun, 2, "sun")?;
     let cam = CameraModel::load_json(&a.camera).with_context(|| format!("reading camera {}", a.camera.display()))?;
-    let img = image::open(&a.background).with_context(|| format!("reading background {}", a.background.display()))?.to_rgb8();
+    let img = tubeloc_detect::input::open_image(&a.background).with_context(|| format!("reading background {}", a.background.display()))?.to_rgb8();
     if img.width() != cam.width || img.height() != cam.height {
         bail!("{}: photo is {}x{} but camera {} is {}x{}", a.background.display(), img.width(), img.height(), a.camera.display(), cam.width, cam.height);
     }

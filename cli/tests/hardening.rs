@@ -277,3 +277,32 @@ fn a_missing_file_is_reported_once() {
         assert!(!out.exists());
     }
 }
+
+/// A JPEG cut short (a partial download) decodes to an image with blank rows, so every
+/// command that reads images refuses it, naming the file and saying it is truncated, and
+/// writes nothing.
+#[test]
+fn a_truncated_jpeg_is_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let full = d.join("whole.jpg");
+    image::RgbImage::from_fn(320, 240, |x, y| image::Rgb([(x % 256) as u8, (y % 256) as u8, ((x * y) % 256) as u8])).save(&full).unwrap();
+    let bytes = std::fs::read(&full).unwrap();
+    let cut = d.join("cut.jpg");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let cam = serde_json::json!({"width": 320, "height": 240, "fx": 300.0, "fy": 300.0, "cx": 159.5, "cy": 119.5});
+    let rig = serde_json::json!({"cameras": [{"name": "C", "model": cam, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}}], "stereo_pairs": []});
+    std::fs::write(d.join("rig.json"), rig.to_string()).unwrap();
+    let out = d.join("out.json");
+    let rig_path = d.join("rig.json");
+    let (c, r, o) = (p(&cut), p(&rig_path), p(&out));
+    for args in [vec!["detect", "--method", "learned", "--image", c, "--out", o], vec!["locate", "--rig", r, "--image", c, "--out", o], vec!["calib", "detect", c, "--out", o]] {
+        let run = tubeloc(&args);
+        let err = stderr(&run);
+        assert!(!run.status.success(), "{args:?}");
+        assert!(err.contains("cut.jpg") && err.contains("truncated"), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    }
+    // The whole file is read.
+    ok(&["calib", "detect", p(&full), "--out", o]);
+}

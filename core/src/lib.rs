@@ -17,6 +17,7 @@ pub mod files;
 pub mod geometry;
 pub mod ground;
 pub mod heap;
+pub mod image_file;
 pub mod mask;
 pub mod plane;
 pub mod pose;

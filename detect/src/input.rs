@@ -115,15 +115,23 @@ pub fn to_eight_bit(img: &image::DynamicImage) -> Option<image::DynamicImage> {
     })
 }
 
-/// Opens an image file (PNG, JPEG, TIFF, ...) as [`eight_bit`].
-pub fn open_eight_bit(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
-    image::open(path).map(eight_bit)
+/// Decodes an image file (PNG, JPEG), its format told by its bytes; a JPEG cut short is an
+/// error ([`tubeloc_core::image_file::check_complete`]), not an image with blank rows.
+pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
+    let bytes = std::fs::read(path)?;
+    tubeloc_core::image_file::check_complete(&bytes).map_err(|e| image::ImageError::IoError(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
+    image::load_from_memory(&bytes)
 }
 
-/// Reads an image file (PNG, JPEG) and converts it (see the module doc). The error names the
-/// file.
+/// Opens an image file (PNG, JPEG) by [`open_image`] as [`eight_bit`].
+pub fn open_eight_bit(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
+    open_image(path).map(eight_bit)
+}
+
+/// Reads an image file (PNG, JPEG) by [`open_image`] and converts it (see the module doc). The
+/// error names the file.
 pub fn load(path: &Path) -> Result<DetectorInput, String> {
-    let img = image::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let img = open_image(path).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(rgb8_of(&img))
 }
 

@@ -81,6 +81,6 @@ pub fn array_of<'py>(py: Python<'py>, img: &DynamicImage) -> Bound<'py, PyAny> {
 /// HxW (grey), HxWx2, HxWx3 (RGB) or HxWx4 (RGBA), as stored in the file.
 #[pyfunction]
 pub fn read_image<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    let img = py.detach(|| image::open(&path)).map_err(|e| to_py(format!("cannot read image {}: {e}", path.display())))?;
+    let img = py.detach(|| tubeloc_detect::input::open_image(&path)).map_err(|e| to_py(format!("cannot read image {}: {e}", path.display())))?;
     Ok(array_of(py, &img))
 }

@@ -82,3 +82,39 @@ fn grey_sixteen_bit_rgba_and_jpeg_give_the_detections_of_the_eight_bit_colour_im
         }
     }
 }
+
+/// Every real JPEG in `../shared/data` (rover frames, tag photos) reads as complete, and each
+/// cut short at a few points is refused by `open_image` with a message saying it is truncated,
+/// where the decoder alone would return an image with blank rows.
+#[test]
+fn real_jpegs_read_whole_and_cut_ones_are_refused() {
+    fn jpegs(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                jpegs(&p, out);
+            } else if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("jpg") || e.eq_ignore_ascii_case("jpeg")) {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    jpegs(&data(), &mut files);
+    jpegs(&data().join("../apriltag"), &mut files);
+    files.sort();
+    assert!(files.len() > 300, "{} JPEGs", files.len());
+    let dir = tempfile::tempdir().unwrap();
+    for (k, f) in files.iter().enumerate() {
+        let bytes = std::fs::read(f).unwrap();
+        assert!(!tubeloc_core::image_file::jpeg_ends_early(&bytes), "{} reads as truncated", f.display());
+        if k % 50 == 0 {
+            for frac in [0.3, 0.9] {
+                let cut = dir.path().join(format!("cut_{k}.jpg"));
+                std::fs::write(&cut, &bytes[..(bytes.len() as f64 * frac) as usize]).unwrap();
+                assert!(image::open(&cut).is_ok(), "the decoder alone accepts the cut {}", f.display());
+                let e = tubeloc_detect::input::open_image(&cut).unwrap_err().to_string();
+                assert!(e.contains("truncated"), "{}: {e}", f.display());
+            }
+        }
+    }
+}
