@@ -1,5 +1,7 @@
 """numpy images: dtypes and shapes go through the same input conversion as image files."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -83,3 +85,17 @@ def test_a_list_is_not_an_image(scene):
     locator, _, _ = scene
     with pytest.raises(tubeloc.TubelocError, match="left: expected a numpy array, got list"):
         locator.locate([[0, 1], [2, 3]])
+
+
+def test_a_truncated_jpeg_is_refused_naming_the_file(tmp_path):
+    # A JPEG cut short decodes to an image with blank rows; read_image refuses it instead.
+    photos = Path(__file__).resolve().parents[2].parent / "shared/data/apriltag/apriltag_test_data"
+    whole = sorted(photos.glob("*.jpg"))
+    if not whole:
+        pytest.skip(f"{photos} is absent")
+    data = whole[0].read_bytes()
+    assert tubeloc.read_image(whole[0]).std() > 1.0
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(tubeloc.TubelocError, match=r"cut\.jpg.*truncated"):
+        tubeloc.read_image(cut)
