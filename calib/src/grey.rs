@@ -10,11 +10,6 @@
 use crate::CalibError;
 use std::path::Path;
 
-/// Whether `bytes` start like a JPEG stream (SOI marker `FF D8 FF`).
-pub fn is_jpeg(bytes: &[u8]) -> bool {
-    bytes.starts_with(&[0xFF, 0xD8, 0xFF])
-}
-
 /// The luma plane of a JPEG stream (its `Y` component; a grey JPEG's only one), decoded
 /// without a colour conversion. The error says why the stream cannot be decoded (a side over
 /// [`crate::detect::MAX_IMAGE_SIDE`] is refused before anything is allocated).
@@ -44,11 +39,10 @@ pub fn eight_bit_grey(img: &image::DynamicImage) -> image::GrayImage {
 
 /// Reads an image file as 8-bit grey for tag detection: a JPEG's luma plane
 /// ([`jpeg_luma`]), any other format by [`eight_bit_grey`]. The error names the file; a JPEG cut
-/// short is one ([`tubeloc_core::image_file::check_complete`]).
+/// short is one ([`tubeloc_core::image_file::read_whole`]).
 pub fn open_grey(path: &Path) -> Result<image::GrayImage, CalibError> {
-    let bytes = std::fs::read(path).map_err(|e| CalibError::parse(path, e.to_string()))?;
-    tubeloc_core::image_file::check_complete(&bytes).map_err(|e| CalibError::parse(path, e))?;
-    if is_jpeg(&bytes) {
+    let bytes = tubeloc_core::image_file::read_whole(path).map_err(|e| CalibError::parse(path, e.to_string()))?;
+    if tubeloc_core::image_file::is_jpeg(&bytes) {
         return jpeg_luma(&bytes).map_err(|e| CalibError::parse(path, e));
     }
     let img = image::load_from_memory(&bytes).map_err(|e| CalibError::parse(path, e.to_string()))?;

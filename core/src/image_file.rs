@@ -7,10 +7,15 @@
 //! followed by neither `00`, a stuffed byte, nor `D0`-`D7`, a restart marker), until the
 //! end-of-image marker `FF D9`. A stream that runs out first ends early.
 
-/// Whether `bytes` are a JPEG stream (SOI marker `FF D8`) that ends before its end-of-image
-/// marker: the file was cut short. `false` for other formats. O(bytes), no allocation.
+/// Whether `bytes` start like a JPEG stream (SOI marker `FF D8`).
+pub fn is_jpeg(bytes: &[u8]) -> bool {
+    bytes.starts_with(&[0xFF, 0xD8])
+}
+
+/// Whether `bytes` are a JPEG stream ([`is_jpeg`]) that ends before its end-of-image marker:
+/// the file was cut short. `false` for other formats. O(bytes), no allocation.
 pub fn jpeg_ends_early(bytes: &[u8]) -> bool {
-    if !bytes.starts_with(&[0xFF, 0xD8]) {
+    if !is_jpeg(bytes) {
         return false;
     }
     let mut at = 2;
@@ -58,6 +63,14 @@ pub fn check_complete(bytes: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
+/// The bytes of an image file, refused when it is a JPEG cut short ([`check_complete`]; an
+/// [`std::io::ErrorKind::InvalidData`] error saying so), for a decoder to read from memory.
+pub fn read_whole(path: &std::path::Path) -> std::io::Result<Vec<u8>> {
+    let bytes = std::fs::read(path)?;
+    check_complete(&bytes).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+    Ok(bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -84,6 +97,14 @@ mod tests {
             assert!(jpeg_ends_early(&full[..cut]), "cut at {cut}");
             assert!(check_complete(&full[..cut]).unwrap_err().contains("truncated"));
         }
+        // Files: the whole stream is read, the cut one refused as invalid data.
+        let dir = tempfile::tempdir().unwrap();
+        let (whole, cut) = (dir.path().join("whole.jpg"), dir.path().join("cut.jpg"));
+        std::fs::write(&whole, &full).unwrap();
+        std::fs::write(&cut, &full[..13]).unwrap();
+        assert_eq!(read_whole(&whole).unwrap(), full);
+        let e = read_whole(&cut).unwrap_err();
+        assert!(e.kind() == std::io::ErrorKind::InvalidData && e.to_string().contains("truncated"), "{e}");
         // Not a JPEG: nothing to say.
         assert!(!jpeg_ends_early(b"\x89PNG\r\n\x1a\n"));
         assert!(!jpeg_ends_early(&[]));

@@ -116,11 +116,9 @@ pub fn to_eight_bit(img: &image::DynamicImage) -> Option<image::DynamicImage> {
 }
 
 /// Decodes an image file (PNG, JPEG), its format told by its bytes; a JPEG cut short is an
-/// error ([`tubeloc_core::image_file::check_complete`]), not an image with blank rows.
+/// error ([`tubeloc_core::image_file::read_whole`]), not an image with blank rows.
 pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
-    let bytes = std::fs::read(path)?;
-    tubeloc_core::image_file::check_complete(&bytes).map_err(|e| image::ImageError::IoError(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
-    image::load_from_memory(&bytes)
+    image::load_from_memory(&tubeloc_core::image_file::read_whole(path.as_ref())?)
 }
 
 /// Opens an image file (PNG, JPEG) by [`open_image`] as [`eight_bit`].

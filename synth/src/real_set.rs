@@ -178,8 +178,7 @@ pub const MIN_TUBE_WIDTH_PX: f64 = 3.5;
 /// the range band of this view (e.g. a frame looking over the horizon).
 pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) -> Result<Option<RealSample>, SynthError> {
     let err = |m: String| SynthError::Invalid(format!("{}: {m}", view.image.display()));
-    let bytes = std::fs::read(&view.image).map_err(|e| err(e.to_string()))?;
-    tubeloc_core::image_file::check_complete(&bytes).map_err(err)?;
+    let bytes = tubeloc_core::image_file::read_whole(&view.image).map_err(|e| err(e.to_string()))?;
     let img = image::load_from_memory(&bytes).map_err(|e| err(e.to_string()))?.to_rgb8();
     if (img.width(), img.height()) != (view.camera.width, view.camera.height) {
         return Err(err(format!("image is {}x{} but its camera is {}x{}", img.width(), img.height(), view.camera.width, view.camera.height)));
