@@ -67,13 +67,16 @@ pub fn photo_stage(settings: &StageSettings, ground: Option<&GroundPlane>, refin
 }
 
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
-/// (and is the fit's, not a kept seed) and agrees with the mask; otherwise with its mask
-/// trimmed ([`trim_kept_mask`]), or unchanged without a mask. Returns whether it was snapped.
-/// `camera` is the image's camera.
+/// and agrees with the mask; otherwise with its mask trimmed ([`trim_kept_mask`]), or unchanged
+/// without a mask. Returns whether it was snapped. `camera` is the image's camera.
+///
+/// A pose that kept its detector seed ([`TubeAxisPose::seed_kept`]) is snapped too, to the
+/// silhouette of the seed's centre and axis: the seed was kept because the fitted silhouette
+/// disagreed with the mask, which on small tubes is mostly the mask being too narrow
+/// (`docs/design/0051-verifier-features-and-seed-keeping-on-real-grey.md`).
 pub fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
     let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return false };
-    let fitted = pose.converged && pose.seed_kept.is_none();
-    let snapped = fitted.then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
+    let snapped = pose.converged.then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
     let was_snapped = snapped.is_some();
     if let Some(m) = snapped.or_else(|| trim_kept_mask(&mask, snap)) {
         det.bbox = m.bbox();

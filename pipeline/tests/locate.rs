@@ -113,3 +113,36 @@ fn cameras_beyond_the_pixel_bound_are_refused_up_front() {
     let ok = tubeloc_core::CameraModel::from_hfov(10000, 10000, 60.0);
     assert!(Locator::new(&rig(&ok, 0.2), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![], "r")), LocatorSettings::default()).is_ok());
 }
+
+/// A mask seed whose fit kept the detector's seed (`seed_kept`: the fitted silhouette
+/// disagreed with a mask too narrow for it) is still snapped, to the silhouette of the pose it
+/// returns: the segmenter's narrow mask of a small tube takes the tube's full width. A pose that
+/// did not converge leaves the mask as it is.
+#[test]
+fn a_kept_seed_is_snapped_to_the_silhouette_of_its_pose() {
+    use tubeloc_core::TubeAxisPose;
+    use tubeloc_refine::silhouette::{mask_iou, MaskSnap};
+    let model = common::default_model();
+    let cam = common::camera(false);
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let (truth, up, gd) = common::random_truth(&mut rng, &model, &cam, (1.2, 1.6));
+    let scene = common::render(&model, &cam, truth, up, gd, None, 11, 0.01);
+    let full = common::tube_mask(&model, &scene);
+    // Narrower than the tube, as the segmenter's masks of small grey tubes are: eroded until
+    // it covers at most 70 % of the tube.
+    let narrow = (1..20).map(|r| full.eroded(r)).find(|m| mask_iou(m, &full) <= 0.7).unwrap();
+    let before = mask_iou(&narrow, &full);
+    assert!(before > 0.2 && before < 0.8, "narrow mask IoU {before:.3}");
+    let locator = Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![], "test")), LocatorSettings::default()).unwrap();
+    let mut kept = TubeAxisPose::new(0, 0.5, truth.centre, truth.axis, 0.5).unwrap();
+    kept.seed_kept = Some("the fitted silhouette agrees with the detector's mask at IoU 0.45 < 0.6".into());
+    let mut det = common::mask_detection(&narrow);
+    assert!(tubeloc_pipeline::stages::snapped_detection(&mut det, &kept, locator.refiner(), &cam, &MaskSnap::default()));
+    let after = mask_iou(&det.mask.as_ref().unwrap().to_mask().unwrap(), &full);
+    assert!(after > 0.9 && after > before + 0.1, "snapped mask IoU {after:.3}, narrow {before:.3}");
+    // Not converged: nothing to snap to.
+    let failed = kept.fail(tubeloc_core::FailureReason::Diverged, "test");
+    let mut det = common::mask_detection(&narrow);
+    assert!(!tubeloc_pipeline::stages::snapped_detection(&mut det, &failed, locator.refiner(), &cam, &MaskSnap::default()));
+    assert_eq!(mask_iou(&det.mask.as_ref().unwrap().to_mask().unwrap(), &full), before);
+}
