@@ -113,7 +113,7 @@ pub struct RefineArgs {
     pub(crate) overlay: Option<PathBuf>,
     /// Also write the detections with each mask snapped to its converged pose's silhouette
     /// (`tubeloc_refine::silhouette`: silhouette ∩ mask dilated by `stages.snap.dilate_px`, 8 px,
-    /// where they agree at IoU >= `stages.snap.min_agreement`, 0.4; `--config`); same format as
+    /// where they agree at IoU >= `stages.snap.min_agreement`, 0.3; `--config`); same format as
     /// --detections, in the order of --out. Detections without a converged pose or agreement
     /// keep their mask (eroded by `stages.snap.kept_erode_px`, 0 by default).
     #[arg(long)]

@@ -123,6 +123,9 @@ impl StageSettings {
         if !(self.snap.min_agreement.is_finite() && (0.0..=1.0).contains(&self.snap.min_agreement)) {
             return bad("snap.min_agreement", &self.snap.min_agreement, "expected an IoU in [0, 1]");
         }
+        if !(self.snap.kept_seed_max_width_px.is_finite() && self.snap.kept_seed_max_width_px >= 0.0) {
+            return bad("snap.kept_seed_max_width_px", &self.snap.kept_seed_max_width_px, "expected a width in pixels >= 0");
+        }
         if let Some(t) = &self.two_view {
             t.validate().map_err(|e| format!("stages.two_view: {e}"))?;
         }

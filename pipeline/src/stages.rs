@@ -66,17 +66,29 @@ pub fn photo_stage(settings: &StageSettings, ground: Option<&GroundPlane>, refin
     }
 }
 
+/// Width of `pose`'s tube body in the image, pixels: `2 r f_x / z` at its centre's depth
+/// (infinite behind the camera).
+fn tube_width_px(refiner: &Refiner, pose: &TubeAxisPose, camera: &CameraModel) -> f64 {
+    if pose.centre.z > 0.0 {
+        2.0 * refiner.model.body_radius() * camera.fx / pose.centre.z
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// `det` with its mask snapped to `pose`'s silhouette ([`snap_mask`]) when the pose converged
 /// and agrees with the mask; otherwise with its mask trimmed ([`trim_kept_mask`]), or unchanged
 /// without a mask. Returns whether it was snapped. `camera` is the image's camera.
 ///
 /// A pose that kept its detector seed ([`TubeAxisPose::seed_kept`]) is snapped too, to the
-/// silhouette of the seed's centre and axis: the seed was kept because the fitted silhouette
+/// silhouette of the seed's centre and axis, when the tube is narrower than
+/// `snap.kept_seed_max_width_px` in the image: the seed was kept because the fitted silhouette
 /// disagreed with the mask, which on small tubes is mostly the mask being too narrow
 /// (`docs/design/0051-verifier-features-and-seed-keeping-on-real-grey.md`).
 pub fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
     let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return false };
-    let snapped = pose.converged.then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
+    let kept_too_wide = pose.seed_kept.is_some() && !(tube_width_px(refiner, pose, camera) < snap.kept_seed_max_width_px);
+    let snapped = (pose.converged && !kept_too_wide).then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
     let was_snapped = snapped.is_some();
     if let Some(m) = snapped.or_else(|| trim_kept_mask(&mask, snap)) {
         det.bbox = m.bbox();

@@ -116,8 +116,9 @@ fn cameras_beyond_the_pixel_bound_are_refused_up_front() {
 
 /// A mask seed whose fit kept the detector's seed (`seed_kept`: the fitted silhouette
 /// disagreed with a mask too narrow for it) is still snapped, to the silhouette of the pose it
-/// returns: the segmenter's narrow mask of a small tube takes the tube's full width. A pose that
-/// did not converge leaves the mask as it is.
+/// returns, when the tube is narrower than `kept_seed_max_width_px`: the segmenter's narrow
+/// mask takes the tube's full width. A wider tube's kept seed, or a pose that did not
+/// converge, leaves the mask as it is.
 #[test]
 fn a_kept_seed_is_snapped_to_the_silhouette_of_its_pose() {
     use tubeloc_core::TubeAxisPose;
@@ -136,13 +137,22 @@ fn a_kept_seed_is_snapped_to_the_silhouette_of_its_pose() {
     let locator = Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![], "test")), LocatorSettings::default()).unwrap();
     let mut kept = TubeAxisPose::new(0, 0.5, truth.centre, truth.axis, 0.5).unwrap();
     kept.seed_kept = Some("the fitted silhouette agrees with the detector's mask at IoU 0.45 < 0.6".into());
+    // This tube is wider than the default bound of 8 px: its kept seed is left alone.
+    let width_px = 2.0 * locator.refiner().model.body_radius() * cam.fx / truth.centre.z;
+    assert!(width_px > MaskSnap::default().kept_seed_max_width_px, "tube {width_px:.1} px wide");
+    let unchanged = |pose: &TubeAxisPose, snap: &MaskSnap| {
+        let mut det = common::mask_detection(&narrow);
+        let snapped = tubeloc_pipeline::stages::snapped_detection(&mut det, pose, locator.refiner(), &cam, snap);
+        !snapped && mask_iou(&det.mask.as_ref().unwrap().to_mask().unwrap(), &full) == before
+    };
+    assert!(unchanged(&kept, &MaskSnap::default()));
+    // With the bound above its width it is snapped to the kept pose's silhouette.
+    let wide_enough = MaskSnap { kept_seed_max_width_px: width_px + 1.0, ..MaskSnap::default() };
     let mut det = common::mask_detection(&narrow);
-    assert!(tubeloc_pipeline::stages::snapped_detection(&mut det, &kept, locator.refiner(), &cam, &MaskSnap::default()));
+    assert!(tubeloc_pipeline::stages::snapped_detection(&mut det, &kept, locator.refiner(), &cam, &wide_enough));
     let after = mask_iou(&det.mask.as_ref().unwrap().to_mask().unwrap(), &full);
     assert!(after > 0.9 && after > before + 0.1, "snapped mask IoU {after:.3}, narrow {before:.3}");
     // Not converged: nothing to snap to.
-    let failed = kept.fail(tubeloc_core::FailureReason::Diverged, "test");
-    let mut det = common::mask_detection(&narrow);
-    assert!(!tubeloc_pipeline::stages::snapped_detection(&mut det, &failed, locator.refiner(), &cam, &MaskSnap::default()));
-    assert_eq!(mask_iou(&det.mask.as_ref().unwrap().to_mask().unwrap(), &full), before);
+    let failed = kept.clone().fail(tubeloc_core::FailureReason::Diverged, "test");
+    assert!(unchanged(&failed, &wide_enough));
 }

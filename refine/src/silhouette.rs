@@ -35,21 +35,32 @@ pub struct MaskSnap {
     /// disagree): a tube that shows this little (cut by the image border, mostly buried, or far)
     /// constrains its fit too weakly for the silhouette to beat the segmenter's outline.
     pub min_area_px: u64,
+    /// A pose that kept its detector seed ([`TubeAxisPose::seed_kept`]) is snapped, to the
+    /// seed's silhouette, only when the tube's body is narrower than this in the image,
+    /// pixels (`2 r f_x / z`): two cells of the segmenter's stride-4 output, below which its
+    /// masks are too narrow for the fitted silhouette to agree with them and the seed was kept
+    /// for that reason (`docs/design/0051-verifier-features-and-seed-keeping-on-real-grey.md`).
+    /// 0: kept seeds are never snapped.
+    pub kept_seed_max_width_px: f64,
 }
 
 impl Default for MaskSnap {
-    /// `r = 8 px`, `τ = 0.4`, no erosion of the masks that are not snapped, no least area:
+    /// `r = 8 px`, `τ = 0.3`, no erosion of the masks that are not snapped, no least area:
     /// chosen on the real validation composites (`docs/design/0048-mask-snapping-on-real-frames.md`),
     /// the shipped model's masks snapped to mono-refined poses, by the mean of segm AP50 and AR
     /// over the grey (`val_grey11`, Navcam frames with their PDS geometry, tubes 4-7 px wide) and
     /// colour (`val_colour12`) sets, over `r` in 2-20 px, `τ` in 0.2-0.6, erosion 0 / 1 px and
     /// least areas 0 / 150 / 300 px: 0.6505 at the former defaults' `r` and `τ` with no erosion
-    /// and no least area, **0.6635** here (a plateau from `r` = 6 to 14 px and for `τ` up to 0.45);
-    /// the network's own masks score 0.5395. The former defaults (`r` 4, `τ` 0.6, 1 px erosion,
-    /// 500 px least area), chosen on rendered validation scenes, left the real composites' small
-    /// masks unsnapped and eroded them: 0.4448.
+    /// and no least area, 0.6635 at `r` 8, `τ` 0.4 (a plateau from `r` = 6 to 14 px and for `τ`
+    /// up to 0.45); the network's own masks score 0.5395. The former defaults (`r` 4, `τ` 0.6,
+    /// 1 px erosion, 500 px least area), chosen on rendered validation scenes, left the real
+    /// composites' small masks unsnapped and eroded them: 0.4448. Once kept seeds were snapped
+    /// too (`docs/design/0051-verifier-features-and-seed-keeping-on-real-grey.md`), `τ` was
+    /// chosen again over 0.2-0.5 with `r` in 6-12 px: 0.689 at `τ` 0.4, **0.698** at 0.3 (0.2-0.3
+    /// within 0.002). Kept seeds are snapped for tubes narrower than 8 px (see
+    /// [`MaskSnap::kept_seed_max_width_px`]).
     fn default() -> Self {
-        MaskSnap { dilate_px: 8, min_agreement: 0.4, kept_erode_px: 0, min_area_px: 0 }
+        MaskSnap { dilate_px: 8, min_agreement: 0.3, kept_erode_px: 0, min_area_px: 0, kept_seed_max_width_px: 8.0 }
     }
 }
 
