@@ -87,7 +87,8 @@ fn tube_width_px(refiner: &Refiner, pose: &TubeAxisPose, camera: &CameraModel) -
 /// (`docs/design/0051-verifier-features-and-seed-keeping-on-real-grey.md`).
 pub fn snapped_detection(det: &mut TubeDetection, pose: &TubeAxisPose, refiner: &Refiner, camera: &CameraModel, snap: &MaskSnap) -> bool {
     let Some(mask) = det.mask.as_ref().and_then(|m| m.to_mask().ok()) else { return false };
-    let kept_too_wide = pose.seed_kept.is_some() && !(tube_width_px(refiner, pose, camera) < snap.kept_seed_max_width_px);
+    let width = tube_width_px(refiner, pose, camera);
+    let kept_too_wide = pose.seed_kept.is_some() && (width.is_nan() || width >= snap.kept_seed_max_width_px);
     let snapped = (pose.converged && !kept_too_wide).then(|| snap_mask(&mask, &silhouette_mask(&refiner.model, pose, camera), snap)).flatten();
     let was_snapped = snapped.is_some();
     if let Some(m) = snapped.or_else(|| trim_kept_mask(&mask, snap)) {
