@@ -114,8 +114,10 @@ pub struct RefineArgs {
     /// Also write the detections with each mask snapped to its converged pose's silhouette
     /// (`tubeloc_refine::silhouette`: silhouette ∩ mask dilated by `stages.snap.dilate_px`, 8 px,
     /// where they agree at IoU >= `stages.snap.min_agreement`, 0.3; `--config`); same format as
-    /// --detections, in the order of --out. Detections without a converged pose or agreement
-    /// keep their mask (eroded by `stages.snap.kept_erode_px`, 0 by default).
+    /// --detections, in the order of --out. A pose that kept its detector seed snaps only for
+    /// tubes narrower than `stages.snap.kept_seed_max_width_px` (8 px). Detections without a
+    /// converged pose or agreement keep their mask (eroded by `stages.snap.kept_erode_px`, 0 by
+    /// default).
     #[arg(long)]
     pub(crate) snapped_out: Option<PathBuf>,
     /// Decide which end is the seal end from the image's edges only. By default the tube's
