@@ -134,6 +134,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
         "truths": mono["n_truths"], "matched": mono["n_matched"],
         "axis_deg_median": mono["summaries"]["axis_angle_deg"]["median"], "axis_deg_p90": mono["summaries"]["axis_angle_deg"]["p90"],
         "across_mm_median": mono["summaries"]["perpendicular_mm"]["median"], "across_mm_p90": mono["summaries"]["perpendicular_mm"]["p90"],
+        "along_mm_median": mono["summaries"]["along_axis_abs_mm"]["median"], "along_mm_p90": mono["summaries"]["along_axis_abs_mm"]["p90"],
         "snapped": {"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64},
     }))
 }
@@ -318,7 +319,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
-        writeln!(md, "\nMono refinement of the learned detections on the {kind} test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"])).ok();
+        writeln!(md, "\nMono refinement of the learned detections on the {kind} test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
     }
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(

@@ -84,6 +84,14 @@ fn bench_real_stage_runs_at_a_small_size() {
     for set in ["poses_grey", "poses_colour"] {
         let ap = summary[set]["snapped"]["ap50"].as_f64().unwrap_or(-1.0);
         assert!((0.0..=1.0).contains(&ap), "{set}: snapped AP50 {}", summary[set]);
+        // The centre's offset along the axis beside the one across it, within the 50 mm
+        // matching radius.
+        if summary[set]["matched"].as_u64().unwrap_or(0) > 0 {
+            for key in ["along_mm_median", "along_mm_p90", "across_mm_median"] {
+                let mm = summary[set][key].as_f64().unwrap_or(-1.0);
+                assert!((0.0..=50.0).contains(&mm), "{set}: {key} {}", summary[set]);
+            }
+        }
     }
     assert_eq!(summary["negatives"]["frames"], 2);
     assert!(summary["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
@@ -102,6 +110,7 @@ fn bench_real_stage_runs_at_a_small_size() {
     let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
     assert!(real_md.contains("| colour, snapped to poses |"), "{real_md}");
+    assert_eq!(real_md.matches("centre along the axis").count(), 2, "{real_md}");
 }
 
 #[test]
