@@ -612,9 +612,11 @@ fn finish(p: &Problem, lv: &GradientLevel, st: AxisState, iterations: usize, mon
     if wsum > 6.0 {
         if let Some(inv) = h.try_inverse() {
             let s2 = (wrr / (wsum - 5.0)).max(1e-12);
+            // D Σ D with D = diag(1, 1, 1, k, k): the axis's σ times k (`axis_sigma_scale`).
+            let d = |i: usize| if i >= 3 { cfg.solver.axis_sigma_scale } else { 1.0 };
             for i in 0..5 {
                 for j in 0..5 {
-                    let v = inv[(i, j)] * s2;
+                    let v = inv[(i, j)] * s2 * d(i) * d(j);
                     cov[i][j] = if v.is_finite() { v } else { 0.0 };
                 }
             }

@@ -49,7 +49,8 @@ impl Solver {
         real("solver.converged_px", self.converged_px, Closed(0.0), Closed(10.0))?;
         real("solver.edge_sigma_px", self.edge_sigma_px, Open(0.0), Closed(100.0))?;
         real("solver.stereo_sigma_m", self.stereo_sigma_m, Open(0.0), Closed(1.0))?;
-        real("solver.stereo_points_per_measurement", self.stereo_points_per_measurement, Closed(1.0), Closed(1e4))
+        real("solver.stereo_points_per_measurement", self.stereo_points_per_measurement, Closed(1.0), Closed(1e4))?;
+        real("solver.axis_sigma_scale", self.axis_sigma_scale, Closed(1.0), Closed(100.0))
     }
 }
 

@@ -484,6 +484,33 @@ fn correlated_stereo_points_widen_the_covariance_not_the_fit() {
     assert_eq!(config(|c| c.solver.stereo_points_per_measurement = 0.5).validate().unwrap_err().to_string(), "refine config: solver.stereo_points_per_measurement = 0.5 is out of range [1, 10000]");
 }
 
+/// `solver.axis_sigma_scale` k widens the axis's σ by k in the output covariance (D Σ D with
+/// D = diag(1, 1, 1, k, k)) and changes nothing else: not the fit, not the centre's block.
+#[test]
+fn axis_sigma_scale_widens_the_axis_covariance_not_the_fit() {
+    let (sc, pts) = one_scene();
+    let t = sc.truth;
+    let refine = |k: f64| {
+        let refiner = Refiner::new(&tubeloc_core::TubeModel::default(), config(|c| c.solver.axis_sigma_scale = k)).unwrap();
+        let input = RefineInput { image: &sc.image, camera: &sc.camera, ground: None, scene: FitScene { stereo_points: &pts, ..FitScene::default() } };
+        refiner.refine_seed(&input, &Seed { state: AxisState { c: t.centre, a: t.axis }, end_known: true }, 0, 1.0, None)
+    };
+    let (one, wide) = (refine(1.0), refine(1.5));
+    assert!(one.converged && wide.converged, "{:?} {:?}", one.failure, wide.failure);
+    assert_eq!((one.centre, one.axis, one.end_direction), (wide.centre, wide.axis, wide.end_direction), "the fit does not depend on it");
+    assert!(one.axis_std_rad() > 0.0);
+    assert!((wide.axis_std_rad() / one.axis_std_rad() - 1.5).abs() < 1e-9, "{} vs {}", wide.axis_std_rad(), one.axis_std_rad());
+    for i in 0..5 {
+        for j in 0..5 {
+            let k = [i, j].iter().filter(|&&m| m >= 3).count() as i32;
+            let want = one.covariance[i][j] * 1.5f64.powi(k);
+            assert!((wide.covariance[i][j] - want).abs() <= 1e-12 * want.abs().max(1e-30), "entry {i},{j}: {} vs {want}", wide.covariance[i][j]);
+        }
+    }
+    assert_eq!(wide.centre_std_m(), one.centre_std_m());
+    assert_eq!(config(|c| c.solver.axis_sigma_scale = 0.9).validate().unwrap_err().to_string(), "refine config: solver.axis_sigma_scale = 0.9 is out of range [1, 100]");
+}
+
 #[test]
 fn stereo_polish_keeps_the_stereo_distance_over_a_lower_ground() {
     // The tube lies 20 mm above the given ground plane (terrain relief over the nominal ground).
