@@ -13,7 +13,7 @@ use tubeloc_synth::TubeShape;
 /// Arguments of `tubeloc synth composite`.
 #[derive(Args)]
 pub struct CompositeArgs {
-    /// Background photograph (PNG or JPEG).
+    /// Background photograph (PNG, JPEG or TIFF).
     #[arg(long)]
     pub background: PathBuf,
     /// Camera model JSON (CameraModel) of the photograph; its size must match the photo.

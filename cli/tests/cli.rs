@@ -76,17 +76,19 @@ fn locate_errors_name_the_file_and_the_problem() {
     assert!(!out.exists(), "a failed run must not leave an output");
 }
 
-/// A rover EDR stores 12-bit data in a 16-bit file. Line2D (`detect` and `locate`) and the
-/// refiner read it at its real depth, as the learned detector does: the same detections and
-/// poses as the 8-bit grey frame (`16 v + 8` maps back to `v` exactly), not a frame divided by
-/// 257 into the bottom sixteenth of the range.
+/// A rover EDR stores 12-bit data in a 16-bit file (PNG or TIFF). Line2D (`detect` and
+/// `locate`) and the refiner read it at its real depth, as the learned detector does: the same
+/// detections and poses as the 8-bit grey frame (`16 v + 8` maps back to `v` exactly), not a
+/// frame divided by 257 into the bottom sixteenth of the range.
 #[test]
 fn twelve_bit_data_in_a_sixteen_bit_file_give_the_eight_bit_frames_detections_and_poses() {
     let s = Scene::new("1", "512");
     let grey8 = image::open(s.image(0)).unwrap().to_luma8();
-    let (eight, twelve) = (s.path("grey8.png"), s.path("grey12.png"));
+    let (eight, twelve, twelve_tiff) = (s.path("grey8.png"), s.path("grey12.png"), s.path("grey12.tif"));
     grey8.save(&eight).unwrap();
-    image::ImageBuffer::<image::Luma<u16>, _>::from_fn(grey8.width(), grey8.height(), |x, y| image::Luma([grey8.get_pixel(x, y).0[0] as u16 * 16 + 8])).save(&twelve).unwrap();
+    let edr = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(grey8.width(), grey8.height(), |x, y| image::Luma([grey8.get_pixel(x, y).0[0] as u16 * 16 + 8]));
+    edr.save(&twelve).unwrap();
+    edr.save(&twelve_tiff).unwrap();
     let (lib, cam) = (s.path("lib.tlt"), s.path("camera.json"));
     let detect = |img: &Path, name: &str| -> Value {
         let out = s.path(name);
@@ -96,6 +98,7 @@ fn twelve_bit_data_in_a_sixteen_bit_file_give_the_eight_bit_frames_detections_an
     let (a, b) = (detect(&eight, "d8.json"), detect(&twelve, "d12.json"));
     assert!(!a.as_array().unwrap().is_empty(), "Line2D finds the scene's tubes on the 8-bit frame");
     assert_eq!(a, b, "Line2D detections on the 16-bit file");
+    assert_eq!(a, detect(&twelve_tiff, "d12t.json"), "Line2D detections on the 16-bit TIFF");
     let locate = |img: &Path, name: &str, detector: &str| -> Value {
         let out = s.path(name);
         let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(img), "--detector", detector, "--templates", p(&lib), "--out", p(&out)]);
@@ -107,6 +110,7 @@ fn twelve_bit_data_in_a_sixteen_bit_file_give_the_eight_bit_frames_detections_an
         let (a, b) = (locate(&eight, "p8.json", detector), locate(&twelve, "p12.json", detector));
         assert!(a.as_array().unwrap().iter().any(|t| t["converged"] == true), "{detector}: a tube is located on the 8-bit frame");
         assert_eq!(a, b, "{detector}: located tubes on the 16-bit file");
+        assert_eq!(a, locate(&twelve_tiff, "p12t.json", detector), "{detector}: located tubes on the 16-bit TIFF");
     }
 }
 

@@ -115,18 +115,18 @@ pub fn to_eight_bit(img: &image::DynamicImage) -> Option<image::DynamicImage> {
     })
 }
 
-/// Decodes an image file (PNG, JPEG), its format told by its bytes; a JPEG cut short is an
+/// Decodes an image file (PNG, JPEG, TIFF), its format told by its bytes; a JPEG cut short is an
 /// error ([`tubeloc_core::image_file::read_whole`]), not an image with blank rows.
 pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
     image::load_from_memory(&tubeloc_core::image_file::read_whole(path.as_ref())?)
 }
 
-/// Opens an image file (PNG, JPEG) by [`open_image`] as [`eight_bit`].
+/// Opens an image file (PNG, JPEG, TIFF) by [`open_image`] as [`eight_bit`].
 pub fn open_eight_bit(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
     open_image(path).map(eight_bit)
 }
 
-/// Reads an image file (PNG, JPEG) by [`open_image`] and converts it (see the module doc). The
+/// Reads an image file (PNG, JPEG, TIFF) by [`open_image`] and converts it (see the module doc). The
 /// error names the file.
 pub fn load(path: &Path) -> Result<DetectorInput, String> {
     let img = open_image(path).map_err(|e| format!("{}: {e}", path.display()))?;
