@@ -99,3 +99,28 @@ def test_a_truncated_jpeg_is_refused_naming_the_file(tmp_path):
     cut.write_bytes(data[: len(data) // 2])
     with pytest.raises(tubeloc.TubelocError, match=r"cut\.jpg.*truncated"):
         tubeloc.read_image(cut)
+
+
+def _grey16_tiff(path, a):
+    """A baseline TIFF (little endian, one strip, no compression) of a uint16 HxW array."""
+    import struct
+
+    h, w = a.shape
+    data = np.ascontiguousarray(a, dtype="<u2").tobytes()
+    entries = [(256, 3, 1, w), (257, 3, 1, h), (258, 3, 1, 16), (259, 3, 1, 1), (262, 3, 1, 1),
+               (273, 4, 1, 8), (277, 3, 1, 1), (278, 3, 1, h), (279, 4, 1, len(data))]
+    ifd = struct.pack("<H", len(entries))
+    for tag, kind, count, value in entries:
+        ifd += struct.pack("<HHI", tag, kind, count) + (struct.pack("<HH", value, 0) if kind == 3 else struct.pack("<I", value))
+    ifd += struct.pack("<I", 0)
+    path.write_bytes(b"II*\x00" + struct.pack("<I", 8 + len(data)) + data + ifd)
+
+
+def test_a_sixteen_bit_tiff_reads_as_its_pixels(tmp_path):
+    # 12-bit data in a 16-bit TIFF, as rover products are often converted: read as stored.
+    a = (np.arange(37 * 53, dtype=np.uint32).reshape(37, 53) * 7 % 4096).astype(np.uint16)
+    path = tmp_path / "edr.tif"
+    _grey16_tiff(path, a)
+    img = tubeloc.read_image(str(path))
+    assert img.dtype == np.uint16 and img.shape == a.shape
+    assert np.array_equal(img, a)
