@@ -153,6 +153,24 @@ pub fn range_band(s: &str) -> Result<String, String> {
     Ok(s.to_string())
 }
 
+/// A Line2D ground-consistency band "MIN:MAX" (ratios of a match's template distance to the
+/// ground's distance along its ray, `0 < MIN <= MAX`, finite) or "off", checked when the
+/// command line is parsed; the text is kept and read by [`parse_ground_range`].
+pub fn ground_range(s: &str) -> Result<String, String> {
+    parse_ground_range(s)?;
+    Ok(s.to_string())
+}
+
+/// The band of [`ground_range`]'s text: `None` for "off".
+pub fn parse_ground_range(s: &str) -> Result<Option<tubeloc_detect::line2d::GroundRange>, String> {
+    if s.trim() == "off" {
+        return Ok(None);
+    }
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected MIN:MAX (ratios) or off"))?;
+    let (lo, hi) = (parse_f64(a.trim())?, parse_f64(b.trim())?);
+    tubeloc_detect::line2d::GroundRange::new(lo, hi).map(Some).map_err(|e| format!("{s:?}: {e}"))
+}
+
 /// A range "NEAR:FAR" in metres with `0 <= NEAR < FAR`, finite (composite placement).
 pub fn range_m(s: &str) -> Result<(f64, f64), String> {
     let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected NEAR:FAR in metres"))?;
@@ -212,6 +230,11 @@ mod tests {
         assert_eq!(shard("1/4"), Ok((1, 4)));
         for s in ["3/2", "2/2", "0/0", "1", "a/2", "-1/2"] {
             assert!(shard(s).is_err(), "{s}");
+        }
+        assert_eq!(parse_ground_range("off"), Ok(None));
+        assert_eq!(parse_ground_range("0.5:1.5").unwrap().map(|g| (g.min_ratio, g.max_ratio)), Some((0.5, 1.5)));
+        for s in ["1.5:0.5", "0:1", "-1:1", "1", "a:b", "1:inf"] {
+            assert!(ground_range(s).is_err(), "{s}");
         }
         assert!(decimation("200").is_err() && decimation("2.5").is_err() && decimation("1.5").is_ok() && decimation("NaN").is_err());
         assert!(require_at_most(("--a", 2), ("--b", 6)).is_ok() && require_at_most(("--a", 6), ("--b", 6)).is_ok());

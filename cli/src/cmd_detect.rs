@@ -42,7 +42,8 @@ pub struct DetectArgs {
     #[arg(long)]
     pub results: Option<PathBuf>,
     /// Ground plane "nx,ny,nz,d" in the camera frame (`n·X = d`, n up, metres) for the learned
-    /// detector's working scale (with `--camera`); dataset images use their own `ground`.
+    /// detector's working scale and Line2D's ground consistency (with `--camera`); dataset
+    /// images use their own `ground`.
     #[arg(long, allow_hyphen_values = true)]
     pub ground: Option<tubeloc_core::GroundPlane>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
@@ -83,11 +84,14 @@ pub fn run(args: DetectArgs) -> Result<()> {
     let dets = match args.method {
         Method::Line2d => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
-            let cameras = match &args.dataset {
-                Some(d) => crate::cmd_detect_learned::dataset_cameras(d)?,
+            let (cameras, grounds) = match &args.dataset {
+                Some(d) => (crate::cmd_detect_learned::dataset_cameras(d)?, crate::cmd_detect_learned::dataset_grounds(d)?),
                 None => Default::default(),
             };
-            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras)?;
+            if args.ground.is_some() && args.line2d.camera.is_none() && args.dataset.is_none() {
+                return Err(crate::args::usage("--ground needs --camera (the rays along which the ground's distance is measured)"));
+            }
+            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras, &grounds, args.ground.as_ref())?;
             tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
             eprintln!("{} detections -> {}", dets.len(), args.out.display());
             return Ok(());

@@ -98,6 +98,14 @@ pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64,
     Ok(out)
 }
 
+/// The ground planes of a dataset's images that carry one (`images[].ground`, as `tubeloc
+/// synth real` writes it; [`tubeloc_detect::learned::dataset::image_ground`]), by image id.
+pub fn dataset_grounds(dataset: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::GroundPlane>> {
+    let ann = dataset.join("annotations.json");
+    let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+    Ok(ds.images.iter().filter_map(|im| Some((im.id, tubeloc_detect::learned::dataset::image_ground(im)?))).collect())
+}
+
 /// Parses a tube-range band ([`tubeloc_pipeline::shipped::parse_range_band`]).
 pub fn parse_range_band(s: &str) -> Result<Option<tubeloc_detect::scale::RangeBand>> {
     Ok(tubeloc_pipeline::shipped::parse_range_band(s)?)

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use tubeloc_core::CameraModel;
+use tubeloc_core::{CameraModel, GroundPlane};
 use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
 
 /// Line2D options of `tubeloc detect`.
@@ -69,6 +69,12 @@ pub struct Line2dOpts {
     /// farthest templates (1 = one search)
     #[arg(long, default_value_t = tubeloc_detect::line2d::matching::FAR_SCALE, value_parser = crate::args::far_scale)]
     pub far_scale: f64,
+    /// Line2D ground consistency, where the image's ground plane is known (a dataset image's
+    /// `ground`, or --ground): a match is kept only when its template's distance is within
+    /// MIN:MAX times the ground's distance along its centre's ray (a tube lies on the ground;
+    /// matches in the sky go too), or "off"
+    #[arg(long, default_value = DEFAULT_GROUND_RANGE, value_parser = crate::args::ground_range)]
+    pub ground_range: String,
     /// Line2D: no radiometric verification (rank by the Line2D similarity alone).
     #[arg(long)]
     pub no_verify: bool,
@@ -93,6 +99,9 @@ impl Line2dOpts {
     }
 }
 
+/// Default `--ground-range`: [`tubeloc_detect::line2d::GroundRange::default`].
+pub const DEFAULT_GROUND_RANGE: &str = "0.55:1.25";
+
 /// The Line2D detector and the fallback camera (`--camera`) that `opts` describe.
 pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<CameraModel>)> {
     let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
@@ -108,6 +117,7 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
         max_candidates: opts.max_candidates,
         max_candidates_per_mpx: opts.max_candidates_per_mpx,
         far_scale: opts.far_scale,
+        ground_range: crate::args::parse_ground_range(&opts.ground_range).map_err(|e| anyhow::anyhow!("--ground-range {e}"))?,
         ..MatchParams::default()
     };
     params.gradient.mag_threshold = opts.grad_threshold;
@@ -141,8 +151,10 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
 /// pose of a detection uses the image's own camera from `cameras` (a dataset's
 /// `images[].camera`: crops have their own principal points) when present, else `--camera`;
 /// an image whose camera's focal length differs from the library's is matched resampled to
-/// the library's scale and its detections mapped back.
-pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>) -> Result<Vec<serde_json::Value>> {
+/// the library's scale and its detections mapped back. The image's ground from `grounds` (a
+/// dataset's `images[].ground`), else `ground` (`--ground`), drives the ground-consistency
+/// check.
+pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>, grounds: &BTreeMap<u64, GroundPlane>, ground: Option<&GroundPlane>) -> Result<Vec<serde_json::Value>> {
     let (det, camera) = detector_from_opts(opts)?;
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
@@ -155,7 +167,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
             let (sx, sy) = det.scale_for(cam);
             bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
         }
-        let dets = det.detect(img.as_raw(), w, h, cam).with_context(|| format!("detecting in {}", path.display()))?;
+        let dets = det.detect_on_ground(img.as_raw(), w, h, cam, grounds.get(id).or(ground)).with_context(|| format!("detecting in {}", path.display()))?;
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }

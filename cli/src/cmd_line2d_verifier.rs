@@ -92,7 +92,8 @@ impl SetSamples {
     }
 }
 
-/// Runs Line2D (verifier keeping everything) on a COCO set and labels each detection.
+/// Runs Line2D (verifier keeping everything; each image's ground, when the set gives one, for
+/// the ground-consistency check) on a COCO set and labels each detection.
 pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> Result<SetSamples> {
     let mut o = opts.clone();
     o.min_probability = Some(0.0);
@@ -108,6 +109,7 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
         images = (0..n).map(|i| images[(i as f64 * step) as usize].clone()).collect();
     }
     let cameras = crate::cmd_detect_learned::dataset_cameras(set)?;
+    let grounds = crate::cmd_detect_learned::dataset_grounds(set)?;
     let bar = indicatif::ProgressBar::new(images.len() as u64);
     let mut samples = Vec::new();
     let mut per_image = Vec::new();
@@ -116,7 +118,7 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
         let gts: Vec<Rle> = gt.annotations.iter().filter(|a| a.image_id == *id).filter_map(|a| a.segmentation.as_ref().map(|s| s.to_rle(im.height, im.width))).collect::<Result<_, _>>()?;
         let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let dets = det.detect(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref()))?;
+        let dets = det.detect_on_ground(img.as_raw(), w, h, cameras.get(id).or(camera.as_ref()), grounds.get(id))?;
         per_image.push((*id, gts.len(), tubeloc_detect::input::is_grey_rgb8(img.as_raw())));
         for d in dets {
             let ious = Rle::iou(std::slice::from_ref(&d.mask), &gts, &vec![false; gts.len()]);

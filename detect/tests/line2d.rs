@@ -460,3 +460,49 @@ fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     assert!((z - c.norm()).abs() <= 0.15, "coarse distance {z:.2} m vs {:.2} m", c.norm());
     assert_eq!(d.mask.size, [h as u32, w as u32]);
 }
+
+/// The plane on which a tube at `t_cam_tube` lies (its axis in the plane, its centre one body
+/// radius above it), facing the camera: upward normal in the camera frame and offset.
+fn ground_under(t_cam_tube: &Pose) -> tubeloc_core::GroundPlane {
+    let c = t_cam_tube.translation();
+    let a = t_cam_tube.rotation() * Vector3::z();
+    let u = -c.normalize();
+    let n = (u - a * u.dot(&a)).normalize();
+    tubeloc_core::GroundPlane::new(n, n.dot(&c) - tubeloc_detect::line2d::ground::CENTRE_HEIGHT_M).unwrap()
+}
+
+/// With its ground known, a tube lying on it is still found (the far search's distances
+/// included), while the same tube is dropped under a ground that puts its ray's ground point
+/// twice as far or under a ground its ray never reaches; without the check it stays.
+#[test]
+fn ground_consistency_keeps_a_tube_on_its_ground_and_drops_it_elsewhere() {
+    let (w, h) = (512usize, 384usize);
+    let (params, lib) = centred_library(w, h, 1.8, 2.2);
+    let k = params.camera;
+    let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
+    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
+    let found = |det: &Line2dDetector, t: &Pose, img: &[u8], ground: Option<&tubeloc_core::GroundPlane>| {
+        let c = t.translation();
+        let px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
+        det.detect_on_ground(img, w, h, Some(&cam), ground).unwrap().iter().any(|d| ((d.centre_px[0] - px[0]).powi(2) + (d.centre_px[1] - px[1]).powi(2)).sqrt() <= 6.0)
+    };
+    let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.0));
+    let img = scene(w, h, &k, &t_true, 11);
+    let det = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
+    let ground = ground_under(&t_true);
+    assert!(found(&det, &t_true, &img, Some(&ground)), "the tube on its own ground is dropped");
+    let twice = tubeloc_core::GroundPlane::new(ground.normal, 2.0 * ground.offset).unwrap();
+    assert!(!found(&det, &t_true, &img, Some(&twice)), "kept under a ground twice as far");
+    // The same plane lifted above the camera: the descending ray never meets it.
+    let sky = tubeloc_core::GroundPlane::new(ground.normal, -ground.offset).unwrap();
+    assert!(!found(&det, &t_true, &img, Some(&sky)), "kept where its ray never reaches the ground");
+    let off = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, ground_range: None, ..MatchParams::default() }).unwrap();
+    assert!(found(&off, &t_true, &img, Some(&twice)), "dropped with the check off");
+    // A tube 1.4 times farther than the library's middle is found by the far search; its
+    // templates' distances count 1.4 times (a tight band that the plain distances miss).
+    let t_far = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
+    let img = scene(w, h, &k, &t_far, 11);
+    let tight = Some(tubeloc_detect::line2d::GroundRange::new(0.85, 1.2).unwrap());
+    let far = Line2dDetector::new(lib, MatchParams { verifier: None, far_scale: 1.4, ground_range: tight, ..MatchParams::default() }).unwrap();
+    assert!(found(&far, &t_far, &img, Some(&ground_under(&t_far))), "the far tube on its ground is dropped");
+}

@@ -82,7 +82,9 @@ impl TubeDetector for LearnedDetector {
     }
 }
 
-/// Line2D template matching with a library built for the camera (coarse template poses).
+/// Line2D template matching with a library built for the camera (coarse template poses);
+/// with the ground known, matches inconsistent with a tube lying on it are dropped
+/// ([`tubeloc_detect::line2d::ground`]).
 pub struct Line2dTubeDetector {
     detector: Line2dDetector,
 }
@@ -99,11 +101,11 @@ impl TubeDetector for Line2dTubeDetector {
         "line2d"
     }
 
-    fn detect(&self, image: &DynamicImage, camera: &CameraModel, _ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
         // An RGB8 image is read in place; other formats go through the shared conversion.
         let rgb = tubeloc_detect::input::rgb8_pixels(image);
         let (w, h) = (image.width() as usize, image.height() as usize);
-        let dets = self.detector.detect(&rgb, w, h, Some(camera)).map_err(|e| PipelineError::Detect(e.to_string()))?;
+        let dets = self.detector.detect_on_ground(&rgb, w, h, Some(camera), ground).map_err(|e| PipelineError::Detect(e.to_string()))?;
         Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
     }
 }

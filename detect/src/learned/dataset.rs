@@ -24,12 +24,23 @@ pub fn load_coco_dir(dir: &Path, pre: Preprocess, limit: Option<usize>) -> Resul
 /// fields; 1 without a camera.
 pub fn image_working_scale(im: &tubeloc_core::CocoImage, band: crate::scale::RangeBand) -> f64 {
     let Some(cam) = im.extra.get("camera").and_then(|c| serde_json::from_value::<tubeloc_core::CameraModel>(c.clone()).ok()) else { return 1.0 };
-    let ground = im.extra.get("ground").and_then(|g| {
-        let n = g.get("normal")?.as_array()?;
-        let d = g.get("d")?.as_f64()?;
-        Some((nalgebra::Vector3::new(n.first()?.as_f64()?, n.get(1)?.as_f64()?, n.get(2)?.as_f64()?), d))
-    });
-    crate::scale::working_scale(&cam, ground, band)
+    crate::scale::working_scale(&cam, ground_field(im), band)
+}
+
+/// The `ground` field of a dataset image as written: `(n, d)` of `n · X = d` (n up, camera
+/// frame, metres).
+fn ground_field(im: &tubeloc_core::CocoImage) -> Option<(nalgebra::Vector3<f64>, f64)> {
+    let g = im.extra.get("ground")?;
+    let n = g.get("normal")?.as_array()?;
+    let d = g.get("d")?.as_f64()?;
+    Some((nalgebra::Vector3::new(n.first()?.as_f64()?, n.get(1)?.as_f64()?, n.get(2)?.as_f64()?), d))
+}
+
+/// The ground plane of a dataset image from its `ground` field (`{"normal": [nx, ny, nz],
+/// "d": d}`, `n · X = d`, n up, camera frame, metres, as `tubeloc synth real` writes it);
+/// `None` without one or when it is not a valid plane.
+pub fn image_ground(im: &tubeloc_core::CocoImage) -> Option<tubeloc_core::GroundPlane> {
+    ground_field(im).and_then(|(n, d)| tubeloc_core::GroundPlane::new(n, d).ok())
 }
 
 /// [`load_coco_dir`] with each image's working scale set from its camera and ground

@@ -1,16 +1,18 @@
 //! `Line2dDetector`: a template library with its matching parameters, run end to end on an
-//! image: matching ([`crate::line2d::matching`]), radiometric verification
+//! image: matching ([`crate::line2d::matching`]), the ground-consistency check where the
+//! ground is known ([`crate::line2d::ground`]), radiometric verification
 //! ([`crate::line2d::verify`]), non-maximum suppression, re-ranking within each cluster, and
 //! the detections with their coarse poses ([`crate::line2d::detection`]).
 
 use crate::line2d::classify::features;
 use crate::line2d::detection::Line2dDetection;
+use crate::line2d::ground::GroundRange;
 use crate::line2d::matching::{match_all, nms_clusters, prepare_image, rerank_with, MatchParams, RawMatch, MAX_NMS_INPUT};
 use crate::line2d::template::TemplateLibrary;
 use crate::line2d::verify::{contrast, luminance, verified_score, SampleCache};
 use crate::line2d::Line2dError;
 use rayon::prelude::*;
-use tubeloc_core::CameraModel;
+use tubeloc_core::{CameraModel, GroundPlane};
 
 /// A ready-to-run detector: a library and matching parameters.
 pub struct Line2dDetector {
@@ -46,6 +48,18 @@ impl Line2dDetector {
     /// to be enlarged by more than [`MatchParams::max_upsample`] is not searched (no detection;
     /// see [`Line2dDetector::resolvable`]).
     pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
+        self.detect_on_ground(rgb, width, height, camera, None)
+    }
+
+    /// [`Line2dDetector::detect`] with the image's ground plane (camera frame, `n · X = d`, `n`
+    /// up) when it is known: with [`MatchParams::ground_range`] set, every raw match whose
+    /// template distance disagrees with the ground's distance along its centre's ray is
+    /// dropped before verification and NMS ([`crate::line2d::ground`]): a tube lies on the
+    /// ground, so a match in the sky or at a scale the ground does not allow there is not one.
+    /// The ground needs the image's own `camera` (the rays); without either this is
+    /// [`Line2dDetector::detect`].
+    pub fn detect_on_ground(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>, ground: Option<&GroundPlane>) -> Result<Vec<Line2dDetection>, Line2dError> {
+        let ground = ground.filter(|_| camera.is_some());
         let cam = self.camera_for(width, height, camera)?;
         if rgb.len() != width * height * 3 {
             return Err(Line2dError::invalid("image", format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
@@ -54,10 +68,10 @@ impl Line2dDetector {
         if !self.resolvable(camera) {
             return Ok(Vec::new());
         }
-        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy)?;
+        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy, ground.map(|g| (g, 1.0)))?;
         let k = self.params.far_scale;
         if k > 1.0 && sx * k <= self.params.max_upsample && sy * k <= self.params.max_upsample {
-            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k)?;
+            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k, ground.map(|g| (g, k)))?;
             dets.extend(far.into_iter().map(|mut d| {
                 d.t_cam_tube.0.translation.vector *= k;
                 d
@@ -70,13 +84,26 @@ impl Line2dDetector {
     }
 
     /// [`Line2dDetector::detect_native`] on the image resampled by `(sx, sy)` (none at 1).
-    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64) -> Result<Vec<Line2dDetection>, Line2dError> {
+    /// `ground`: the ground plane and the factor by which this search's template distances
+    /// are multiplied (the far search's).
+    #[allow(clippy::too_many_arguments)]
+    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ground: Option<(&GroundPlane, f64)>) -> Result<Vec<Line2dDetection>, Line2dError> {
         if sx == 1.0 && sy == 1.0 {
-            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height);
+            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height, ground);
         }
         let (nw, nh) = (((width as f64 * sx).round() as usize).max(1), ((height as f64 * sy).round() as usize).max(1));
         let small = crate::scale::resample_rgb8(rgb, width, height, nw, nh);
-        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height)
+        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height, ground)
+    }
+
+    /// Whether raw match `m` (resampled pixels, scale `(sx, sy)` of camera `cam`'s image) is
+    /// consistent with a tube lying on `ground`, its template distance multiplied by `k`.
+    #[allow(clippy::too_many_arguments)]
+    fn on_ground(&self, range: &GroundRange, ground: &GroundPlane, k: f64, cam: &CameraModel, m: &RawMatch, sx: f64, sy: f64) -> bool {
+        let t = &self.library.templates[m.template as usize];
+        let c = crate::scale::point_back([m.x as f64 + t.centre[0] as f64, m.y as f64 + t.centre[1] as f64], sx, sy);
+        let ray = cam.unproject(&nalgebra::Point2::new(c[0], c[1]));
+        range.admits(ground, &ray, k * t.t_cam_tube.translation().norm())
     }
 
     /// The resampling factors `(sx, sy)` that bring an image of `camera` to the library's
@@ -104,9 +131,12 @@ impl Line2dDetector {
     /// the library's scale (`w x h`, resampled from the original `ow x oh` image of camera
     /// `cam` by `(sx, sy)`); detections in original pixels.
     #[allow(clippy::too_many_arguments)]
-    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize) -> Result<Vec<Line2dDetection>, Line2dError> {
+    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize, ground: Option<(&GroundPlane, f64)>) -> Result<Vec<Line2dDetection>, Line2dError> {
         let img = prepare_image(rgb, width, height, &self.params)?;
-        let raw = match_all(&img, &self.library, &self.params);
+        let mut raw = match_all(&img, &self.library, &self.params);
+        if let (Some(range), Some((g, k))) = (&self.params.ground_range, ground) {
+            raw.retain(|m| self.on_ground(range, g, k, cam, m, sx, sy));
+        }
         let vp = self.params.verify.unwrap_or_default();
         let need_luma = self.params.verify.is_some() || self.params.verifier.is_some();
         let luma = need_luma.then(|| luminance(rgb));

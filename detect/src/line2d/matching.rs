@@ -23,6 +23,7 @@
 
 use crate::line2d::classify::Verifier;
 use crate::line2d::gradient::{downsample_rgb, quantize_rgb, GradientParams};
+use crate::line2d::ground::GroundRange;
 use crate::line2d::response::{linearize, response_maps, spread, LinearMemories, ResponseMaps};
 use crate::line2d::template::{Template, TemplateLibrary};
 use crate::line2d::verify::VerifyParams;
@@ -86,6 +87,11 @@ pub struct MatchParams {
     /// many times farther along their rays. Detections of both searches are merged by the
     /// verified-overlap suppression.
     pub far_scale: f64,
+    /// Ground consistency of raw matches, applied when the image's ground plane is known
+    /// ([`crate::line2d::Line2dDetector::detect_on_ground`]): a match whose template distance
+    /// disagrees with the ground's distance along its centre's ray is dropped before
+    /// verification and NMS ([`crate::line2d::ground`]). `None`: off.
+    pub ground_range: Option<GroundRange>,
 }
 
 /// Default [`MatchParams::far_scale`]: one search. `--far-scale 1.4` (a Navcam frame, f ~ 1220
@@ -113,6 +119,7 @@ impl Default for MatchParams {
             verified_overlap: 0.5,
             max_upsample: 2.0,
             far_scale: FAR_SCALE,
+            ground_range: Some(GroundRange::default()),
         }
     }
 }

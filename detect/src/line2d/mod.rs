@@ -16,6 +16,8 @@
 //!   linearized memories.
 //! - [`matching`]: coarse-to-fine matching with saturation-free integer accumulation, rayon
 //!   across templates, non-maximum suppression.
+//! - [`ground`]: ground consistency: where the ground plane is known, a match's template
+//!   distance must agree with the ground's distance along its ray.
 //! - [`verify`]: radiometric verification (bright silhouette against a ring around it)
 //!   rescoring raw matches before NMS.
 //! - [`classify`]: the clutter verifier: per-detection features (contrast against each long
@@ -29,6 +31,7 @@ pub mod detection;
 pub mod detector;
 pub mod format;
 pub mod gradient;
+pub mod ground;
 pub mod mask;
 pub mod matching;
 pub mod mesh;
@@ -42,6 +45,7 @@ pub use classify::Verifier;
 pub use detection::Line2dDetection;
 pub use detector::Line2dDetector;
 pub use gradient::GradientParams;
+pub use ground::GroundRange;
 pub use matching::MatchParams;
 pub use render::{render_silhouette, Silhouette};
 pub use template::{Feature, LibraryEstimate, LibraryParams, Template, TemplateLevel, TemplateLibrary};
