@@ -182,6 +182,40 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
     assert!(String::from_utf8_lossy(&o.stderr).contains("not searched"), "{}", String::from_utf8_lossy(&o.stderr));
     let dets: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(dets.as_array().unwrap().len(), 0);
+
+    // A Navcam frame of saturated bright patches on dark ground (sol 987), under the bench's
+    // assumed Navcam view (45 degree field of view, 1.9 m above level ground, 30 degrees down).
+    // Without its ground the verifier keeps many patches; with it, matches whose template
+    // distance disagrees with the ground's along their ray are dropped, so fewer remain and
+    // every one lies within the band (0.55-1.25) of the ground's distance.
+    let image = neg.join("msl_navcam_1024/NLB_485117349EDR_F0480412NCAM00385M_.jpg");
+    let cam = dir.path().join("navcam1024.json");
+    camera_json(&cam, 1024, 1024, 45.0);
+    let p30 = 30f64.to_radians();
+    let (n, d) = (nalgebra::Vector3::new(0.0, -p30.cos(), -p30.sin()), -1.9);
+    let ground = format!("--ground={},{},{},{d}", n.x, n.y, n.z);
+    let run = |extra: &[&str], name: &str| -> Vec<Value> {
+        let out = dir.path().join(name);
+        let mut args = vec!["detect", "--method", "line2d", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&image), "--out", p(&out)];
+        args.extend_from_slice(extra);
+        ok(&args);
+        serde_json::from_str::<Value>(&std::fs::read_to_string(&out).unwrap()).unwrap().as_array().unwrap().clone()
+    };
+    let without = run(&[], "no_ground.json");
+    let with = run(&[&ground], "ground.json");
+    let off = run(&[&ground, "--ground-range", "off"], "ground_off.json");
+    assert_eq!(off.len(), without.len(), "--ground-range off is the plain search");
+    assert!(without.len() >= 10, "the patches are matched without the ground: {}", without.len());
+    assert!(with.len() < without.len(), "with the ground {} of {}", with.len(), without.len());
+    for det in &with {
+        let t: Vec<f64> = det["T_cam_tube"]["translation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let c = nalgebra::Vector3::new(t[0], t[1], t[2]);
+        // The coarse pose's centre is on the match centre's ray: its ground distance there.
+        let ray = c.normalize();
+        let tg = (d + 0.00855) / n.dot(&ray);
+        let q = c.norm() / tg;
+        assert!(tg > 0.0 && (0.55 - 1e-6..=1.25 + 1e-6).contains(&q), "ratio {q} at ground distance {tg}: {det}");
+    }
 }
 
 #[test]
