@@ -434,15 +434,22 @@ fn grey_threshold_applies_to_grey_images_only() {
     assert_eq!((v.threshold_for(true), v.threshold_for(false)), (0.0, 0.0));
 }
 
+/// A library of templates at 1.8-2.2 m for a `w x h` image ([`centred_library`]), with its
+/// pinhole and the same camera as a [`tubeloc_core::CameraModel`].
+fn library_of_1_8_to_2_2_m(w: usize, h: usize) -> (Pinhole, tubeloc_core::CameraModel, TemplateLibrary) {
+    let (params, lib) = centred_library(w, h, 1.8, 2.2);
+    let k = params.camera;
+    let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
+    (k, cam, lib)
+}
+
 /// A tube farther than the library's farthest templates is found by the far search (the image
 /// enlarged by `far_scale`), with its coarse pose placed that many times farther along its ray;
 /// without the far search it is not found.
 #[test]
 fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     let (w, h) = (512usize, 384usize);
-    let (params, lib) = centred_library(w, h, 1.8, 2.2);
-    let k = params.camera;
-    let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
+    let (k, cam, lib) = library_of_1_8_to_2_2_m(w, h);
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
     // 1.4 times the library's middle distance, 0.6 m beyond its farthest templates.
     let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
@@ -477,9 +484,7 @@ fn ground_under(t_cam_tube: &Pose) -> tubeloc_core::GroundPlane {
 #[test]
 fn ground_consistency_keeps_a_tube_on_its_ground_and_drops_it_elsewhere() {
     let (w, h) = (512usize, 384usize);
-    let (params, lib) = centred_library(w, h, 1.8, 2.2);
-    let k = params.camera;
-    let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
+    let (k, cam, lib) = library_of_1_8_to_2_2_m(w, h);
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
     let found = |det: &Line2dDetector, t: &Pose, img: &[u8], ground: Option<&tubeloc_core::GroundPlane>| {
         let c = t.translation();
