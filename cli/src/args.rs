@@ -232,6 +232,8 @@ mod tests {
             assert!(shard(s).is_err(), "{s}");
         }
         assert_eq!(parse_ground_range("off"), Ok(None));
+        // The flag's default is the library's.
+        assert_eq!(parse_ground_range(crate::cmd_detect_line2d::DEFAULT_GROUND_RANGE), Ok(Some(tubeloc_detect::line2d::GroundRange::default())));
         assert_eq!(parse_ground_range("0.5:1.5").unwrap().map(|g| (g.min_ratio, g.max_ratio)), Some((0.5, 1.5)));
         for s in ["1.5:0.5", "0:1", "-1:1", "1", "a:b", "1:inf"] {
             assert!(ground_range(s).is_err(), "{s}");

@@ -217,8 +217,7 @@ fn line2d_opts(lib: &Path) -> Result<crate::cmd_detect_line2d::Line2dOpts> {
 fn line2d_eval(set: &Path, lib: &Path, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
-    let cameras = crate::cmd_detect_learned::dataset_cameras(set)?;
-    let grounds = crate::cmd_detect_learned::dataset_grounds(set)?;
+    let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
     let opts = line2d_opts(lib)?;
     // Load the library outside the timing.
     let (det, _) = crate::cmd_detect_line2d::detector_from_opts(&opts)?;

@@ -85,7 +85,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
         Method::Line2d => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
             let (cameras, grounds) = match &args.dataset {
-                Some(d) => (crate::cmd_detect_learned::dataset_cameras(d)?, crate::cmd_detect_learned::dataset_grounds(d)?),
+                Some(d) => crate::cmd_detect_learned::dataset_cameras_and_grounds(d)?,
                 None => Default::default(),
             };
             if args.ground.is_some() && args.line2d.camera.is_none() && args.dataset.is_none() {

@@ -83,27 +83,23 @@ impl ModelChoice {
     }
 }
 
-/// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`), by id;
-/// images without one are left out.
-pub fn dataset_cameras(dataset: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {
+/// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`; images
+/// without one are left out) and the ground planes of those that carry one (`images[].ground`,
+/// as `tubeloc synth real` writes it; [`tubeloc_detect::learned::dataset::image_ground`]), by
+/// image id, from one read of the file.
+#[allow(clippy::type_complexity)]
+pub fn dataset_cameras_and_grounds(dataset: &Path) -> Result<(std::collections::BTreeMap<u64, tubeloc_core::CameraModel>, std::collections::BTreeMap<u64, tubeloc_core::GroundPlane>)> {
     let ann = dataset.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-    let mut out = std::collections::BTreeMap::new();
+    let mut cameras = std::collections::BTreeMap::new();
     for im in &ds.images {
         if let Some(c) = im.extra.get("camera") {
             let cam = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {}: camera", ann.display(), im.id))?;
-            out.insert(im.id, cam);
+            cameras.insert(im.id, cam);
         }
     }
-    Ok(out)
-}
-
-/// The ground planes of a dataset's images that carry one (`images[].ground`, as `tubeloc
-/// synth real` writes it; [`tubeloc_detect::learned::dataset::image_ground`]), by image id.
-pub fn dataset_grounds(dataset: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::GroundPlane>> {
-    let ann = dataset.join("annotations.json");
-    let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-    Ok(ds.images.iter().filter_map(|im| Some((im.id, tubeloc_detect::learned::dataset::image_ground(im)?))).collect())
+    let grounds = ds.images.iter().filter_map(|im| Some((im.id, tubeloc_detect::learned::dataset::image_ground(im)?))).collect();
+    Ok((cameras, grounds))
 }
 
 /// Parses a tube-range band ([`tubeloc_pipeline::shipped::parse_range_band`]).

@@ -108,8 +108,7 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
         let step = images.len() as f64 / n.max(1) as f64;
         images = (0..n).map(|i| images[(i as f64 * step) as usize].clone()).collect();
     }
-    let cameras = crate::cmd_detect_learned::dataset_cameras(set)?;
-    let grounds = crate::cmd_detect_learned::dataset_grounds(set)?;
+    let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
     let bar = indicatif::ProgressBar::new(images.len() as u64);
     let mut samples = Vec::new();
     let mut per_image = Vec::new();

@@ -475,7 +475,7 @@ fn ground_under(t_cam_tube: &Pose) -> tubeloc_core::GroundPlane {
     let a = t_cam_tube.rotation() * Vector3::z();
     let u = -c.normalize();
     let n = (u - a * u.dot(&a)).normalize();
-    tubeloc_core::GroundPlane::new(n, n.dot(&c) - tubeloc_detect::line2d::ground::CENTRE_HEIGHT_M).unwrap()
+    tubeloc_core::GroundPlane::new(n, n.dot(&c) - TubeModel::default().body_radius()).unwrap()
 }
 
 /// With its ground known, a tube lying on it is still found (the far search's distances

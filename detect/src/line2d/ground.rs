@@ -5,8 +5,8 @@
 //! A template was rendered with the tube centre at distance `d_t` on the optical axis (times
 //! the far search's factor, [`crate::line2d::MatchParams::far_scale`]). Placed at pixel `p`,
 //! the centre's unit ray is `r = unproject(p)`; a tube lying on the plane `n · X = d` (`n` up,
-//! camera frame) has its centre at height `ρ` (the body radius) above it, so the ray meets the
-//! centre's plane at
+//! camera frame) has its centre at height `ρ` (the tube model's body radius) above it, so the
+//! ray meets the centre's plane at
 //!
 //! `t_g = (d + ρ) / (n · r)`  (only when `t_g > 0`: the ray descends to the ground).
 //!
@@ -14,11 +14,7 @@
 //! ground (the sky, the horizon) admits no tube.
 
 use serde::{Deserialize, Serialize};
-use tubeloc_core::GroundPlane;
-
-/// Height of a lying tube's centre above the ground, metres: the body radius of the sample
-/// tube (17.1 mm body diameter, `data/tube.toml`).
-pub const CENTRE_HEIGHT_M: f64 = 0.00855;
+use tubeloc_core::{GroundPlane, TubeModel};
 
 /// Bounds on the ratio `q = d_t / t_g` of a match's template distance to the ground's distance
 /// along its centre's ray (dimensionless).
@@ -33,28 +29,32 @@ pub struct GroundRange {
     pub min_ratio: f64,
     /// Largest admitted ratio `d_t / t_g`.
     pub max_ratio: f64,
+    /// Height `ρ` of a lying tube's centre above the ground, metres: the body radius of the
+    /// default tube model ([`TubeModel::body_radius`], `data/tube.toml`: 8.55 mm).
+    pub centre_height_m: f64,
 }
 
 impl Default for GroundRange {
     fn default() -> Self {
-        GroundRange { min_ratio: 0.55, max_ratio: 1.25 }
+        GroundRange { min_ratio: 0.55, max_ratio: 1.25, centre_height_m: TubeModel::default().body_radius() }
     }
 }
 
 impl GroundRange {
-    /// Bounds `[min_ratio, max_ratio]`; both finite, `0 < min_ratio <= max_ratio`.
+    /// Bounds `[min_ratio, max_ratio]`; both finite, `0 < min_ratio <= max_ratio`; the default
+    /// tube's centre height.
     pub fn new(min_ratio: f64, max_ratio: f64) -> Result<Self, crate::line2d::Line2dError> {
         if !(min_ratio.is_finite() && max_ratio.is_finite() && min_ratio > 0.0 && min_ratio <= max_ratio) {
             return Err(crate::line2d::Line2dError::invalid("ground range", format!("ratios {min_ratio}:{max_ratio} must be finite with 0 < min <= max")));
         }
-        Ok(GroundRange { min_ratio, max_ratio })
+        Ok(GroundRange { min_ratio, max_ratio, ..GroundRange::default() })
     }
 
     /// Whether a tube centre at `distance` metres along the unit ray `ray` (camera frame) is
     /// consistent with lying on `ground`: `min_ratio ≤ distance / t_g ≤ max_ratio` with
     /// [`ground_distance`] `t_g`; false when the ray does not reach the ground.
     pub fn admits(&self, ground: &GroundPlane, ray: &nalgebra::Vector3<f64>, distance: f64) -> bool {
-        match ground_distance(ground, ray) {
+        match ground_distance(ground, ray, self.centre_height_m) {
             Some(t) => {
                 let q = distance / t;
                 q >= self.min_ratio && q <= self.max_ratio
@@ -65,10 +65,10 @@ impl GroundRange {
 }
 
 /// Distance along the unit ray `ray` (camera frame) at which it meets the plane of a lying
-/// tube's centres, [`CENTRE_HEIGHT_M`] above `ground`: `t_g = (d + ρ) / (n · r)`, metres; `None`
-/// when the ray does not descend to it (`t_g` not positive and finite).
-pub fn ground_distance(ground: &GroundPlane, ray: &nalgebra::Vector3<f64>) -> Option<f64> {
-    let t = (ground.offset + CENTRE_HEIGHT_M) / ground.normal.dot(ray);
+/// tube's centres, `centre_height_m` (`ρ`) above `ground`: `t_g = (d + ρ) / (n · r)`, metres;
+/// `None` when the ray does not descend to it (`t_g` not positive and finite).
+pub fn ground_distance(ground: &GroundPlane, ray: &nalgebra::Vector3<f64>, centre_height_m: f64) -> Option<f64> {
+    let t = (ground.offset + centre_height_m) / ground.normal.dot(ray);
     (t.is_finite() && t > 0.0).then_some(t)
 }
 
@@ -87,8 +87,9 @@ mod tests {
     fn the_optical_axis_meets_the_ground_at_its_slant_range() {
         // Down the optical axis, 30 degrees below level from 1.9 m: the centres' plane is
         // (1.9 - ρ) / sin 30° away.
-        let t = ground_distance(&mast_ground(), &Vector3::z()).unwrap();
-        assert!((t - (1.9 - CENTRE_HEIGHT_M) / 0.5).abs() < 1e-12, "{t}");
+        let t = ground_distance(&mast_ground(), &Vector3::z(), 0.00855).unwrap();
+        assert!((t - (1.9 - 0.00855) / 0.5).abs() < 1e-12, "{t}");
+        assert_eq!(GroundRange::default().centre_height_m, 0.00855, "the default tube's body radius");
     }
 
     #[test]
@@ -96,15 +97,15 @@ mod tests {
         // 40 degrees above the optical axis is 10 degrees above level.
         let a = 40f64.to_radians();
         let up = Vector3::new(0.0, -a.sin(), a.cos());
-        assert_eq!(ground_distance(&mast_ground(), &up), None);
+        assert_eq!(ground_distance(&mast_ground(), &up, 0.00855), None);
         assert!(!GroundRange::default().admits(&mast_ground(), &up, 3.0));
     }
 
     #[test]
     fn the_ratio_bounds_are_inclusive_and_checked() {
         let g = mast_ground();
-        let t = ground_distance(&g, &Vector3::z()).unwrap();
         let r = GroundRange::default();
+        let t = ground_distance(&g, &Vector3::z(), r.centre_height_m).unwrap();
         assert!(r.admits(&g, &Vector3::z(), t));
         assert!(r.admits(&g, &Vector3::z(), 0.55 * t * (1.0 + 1e-12)));
         assert!(!r.admits(&g, &Vector3::z(), 0.5 * t));
