@@ -204,9 +204,14 @@ pub fn require_at_most<T: PartialOrd + std::fmt::Display>(a: (&str, T), b: (&str
     }
 }
 
-/// A Line2D far-search factor: a number in [1, 4].
-pub fn far_scale(s: &str) -> Result<f64, String> {
-    in_closed(s, 1.0, 4.0)
+/// Line2D far-search factors `(colour, grey)`, each in [1, 4]: "K" for both kinds of image,
+/// or "COLOUR:GREY".
+pub fn far_scale(s: &str) -> Result<(f64, f64), String> {
+    let one = |t: &str| in_closed(t.trim(), 1.0, 4.0).map_err(|e| format!("{s:?}: {e}"));
+    match s.split_once(':') {
+        Some((c, g)) => Ok((one(c)?, one(g)?)),
+        None => one(s).map(|k| (k, k)),
+    }
 }
 
 #[cfg(test)]
@@ -231,6 +236,14 @@ mod tests {
         for s in ["3/2", "2/2", "0/0", "1", "a/2", "-1/2"] {
             assert!(shard(s).is_err(), "{s}");
         }
+        assert_eq!(far_scale("1.4"), Ok((1.4, 1.4)));
+        assert_eq!(far_scale("1:1.4"), Ok((1.0, 1.4)));
+        for s in ["0.9", "1:5", "1:", ":1.4", "1.4:x", "1:1:1"] {
+            assert!(far_scale(s).is_err(), "{s}");
+        }
+        let (c, g) = far_scale(crate::cmd_detect_line2d::DEFAULT_FAR_SCALE).unwrap();
+        let p = tubeloc_detect::line2d::MatchParams::default();
+        assert_eq!((c, g), (p.far_scale, p.far_scale_grey), "--far-scale's default is the library's");
         assert_eq!(parse_ground_range("off"), Ok(None));
         // The flag's default is the library's.
         assert_eq!(parse_ground_range(crate::cmd_detect_line2d::DEFAULT_GROUND_RANGE), Ok(Some(tubeloc_detect::line2d::GroundRange::default())));

@@ -317,7 +317,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
-    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones); their precision column gives the false detections per image instead.").ok();
+    let far_grey = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`) and grey frames searched again {far_grey}x enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones); their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
@@ -326,7 +327,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
-        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
+        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
         l2_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
         l2_neg["max_per_frame"],
         l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)

@@ -66,9 +66,10 @@ pub struct Line2dOpts {
     pub max_candidates_per_mpx: usize,
     /// Line2D: also search the image enlarged by this factor beyond the library's scale (at
     /// most --max-upsample in all), for tubes up to that many times farther than the library's
-    /// farthest templates (1 = one search)
-    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::FAR_SCALE, value_parser = crate::args::far_scale)]
-    pub far_scale: f64,
+    /// farthest templates (1 = one search); "K" for every image, or COLOUR:GREY for colour and
+    /// grey (mono camera) images apart
+    #[arg(long, default_value = DEFAULT_FAR_SCALE, value_parser = crate::args::far_scale)]
+    pub far_scale: (f64, f64),
     /// Line2D ground consistency, where the image's ground plane is known (a dataset image's
     /// `ground`, or --ground): a match is kept only when its template's distance is within
     /// MIN:MAX times the ground's distance along its centre's ray (a tube lies on the ground;
@@ -99,6 +100,10 @@ impl Line2dOpts {
     }
 }
 
+/// Default `--far-scale` (colour:grey): [`MatchParams::far_scale`] and
+/// [`MatchParams::far_scale_grey`] of [`MatchParams::default`].
+pub const DEFAULT_FAR_SCALE: &str = "1:1.4";
+
 /// Default `--ground-range`: [`tubeloc_detect::line2d::GroundRange::default`].
 pub const DEFAULT_GROUND_RANGE: &str = "0.55:1.25";
 
@@ -116,7 +121,8 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
         rerank_area_weight: opts.rerank_area_weight,
         max_candidates: opts.max_candidates,
         max_candidates_per_mpx: opts.max_candidates_per_mpx,
-        far_scale: opts.far_scale,
+        far_scale: opts.far_scale.0,
+        far_scale_grey: opts.far_scale.1,
         ground_range: crate::args::parse_ground_range(&opts.ground_range).map_err(|e| anyhow::anyhow!("--ground-range {e}"))?,
         ..MatchParams::default()
     };

@@ -459,13 +459,28 @@ fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     let near_truth = |d: &tubeloc_detect::line2d::Line2dDetection| ((d.centre_px[0] - truth_px[0]).powi(2) + (d.centre_px[1] - truth_px[1]).powi(2)).sqrt() <= 6.0;
     let one = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: 1.0, ..MatchParams::default() }).unwrap();
     assert!(!one.detect(&img, w, h, Some(&cam)).unwrap().iter().any(near_truth), "found without the far search");
-    let far = Line2dDetector::new(lib, MatchParams { verifier: None, far_scale: 1.4, ..MatchParams::default() }).unwrap();
+    let far = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: 1.4, ..MatchParams::default() }).unwrap();
     let dets = far.detect(&img, w, h, Some(&cam)).unwrap();
     let d = dets.iter().find(|d| near_truth(d)).expect("the far tube is found");
     assert!((d.scale - 1.4).abs() < 0.01, "scale {}", d.scale);
     let z = d.t_cam_tube.translation().norm();
     assert!((z - c.norm()).abs() <= 0.15, "coarse distance {z:.2} m vs {:.2} m", c.norm());
     assert_eq!(d.mask.size, [h as u32, w as u32]);
+    // By default only a grey image (a mono camera's frame) gets the far search: the colour
+    // frame's far tube is missed, the same frame in grey finds it at the grey far scale.
+    let default = Line2dDetector::new(lib, MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
+    assert!(!default.detect(&img, w, h, Some(&cam)).unwrap().iter().any(near_truth), "a colour frame searched far by default");
+    let grey: Vec<u8> = img
+        .chunks_exact(3)
+        .flat_map(|p| {
+            let l = ((299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32) / 1000) as u8;
+            [l, l, l]
+        })
+        .collect();
+    assert_eq!(default.far_scale_for(&grey), tubeloc_detect::line2d::matching::FAR_SCALE_GREY);
+    let dets = default.detect(&grey, w, h, Some(&cam)).unwrap();
+    let d = dets.iter().find(|d| near_truth(d)).expect("the grey frame's far tube is found by default");
+    assert!((d.scale - tubeloc_detect::line2d::matching::FAR_SCALE_GREY).abs() < 0.01, "scale {}", d.scale);
 }
 
 /// The plane on which a tube at `t_cam_tube` lies (its axis in the plane, its centre one body

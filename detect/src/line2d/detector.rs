@@ -7,7 +7,7 @@
 use crate::line2d::classify::features;
 use crate::line2d::detection::Line2dDetection;
 use crate::line2d::ground::GroundRange;
-use crate::line2d::matching::{match_all, nms_clusters, prepare_image, rerank_with, MatchParams, RawMatch, MAX_NMS_INPUT};
+use crate::line2d::matching::{match_all_within, nms_clusters, prepare_image, rerank_with, MatchParams, RawMatch, MAX_NMS_INPUT};
 use crate::line2d::template::TemplateLibrary;
 use crate::line2d::verify::{contrast, luminance, verified_score, SampleCache};
 use crate::line2d::Line2dError;
@@ -68,10 +68,10 @@ impl Line2dDetector {
         if !self.resolvable(camera) {
             return Ok(Vec::new());
         }
-        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy, ground.map(|g| (g, 1.0)))?;
-        let k = self.params.far_scale;
+        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy, ground, 1.0)?;
+        let k = self.far_scale_for(rgb);
         if k > 1.0 && sx * k <= self.params.max_upsample && sy * k <= self.params.max_upsample {
-            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k, ground.map(|g| (g, k)))?;
+            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k, ground, k)?;
             dets.extend(far.into_iter().map(|mut d| {
                 d.t_cam_tube.0.translation.vector *= k;
                 d
@@ -83,17 +83,32 @@ impl Line2dDetector {
         Ok(dets)
     }
 
+    /// The far search's factor for interleaved RGB8 image `rgb`: [`MatchParams::far_scale_grey`]
+    /// when it is grey, else [`MatchParams::far_scale`].
+    pub fn far_scale_for(&self, rgb: &[u8]) -> f64 {
+        let (colour, grey) = (self.params.far_scale, self.params.far_scale_grey);
+        if colour == grey || !(colour > 1.0 || grey > 1.0) {
+            return colour;
+        }
+        if crate::input::is_grey_rgb8(rgb) {
+            grey
+        } else {
+            colour
+        }
+    }
+
     /// [`Line2dDetector::detect_native`] on the image resampled by `(sx, sy)` (none at 1).
-    /// `ground`: the ground plane and the factor by which this search's template distances
-    /// are multiplied (the far search's).
+    /// `far`: 1 for the search at the library's scale, the far search's factor `k` for the far
+    /// search (its template distances count `k` times; its candidate budget is that of the
+    /// search at the library's scale, whose image is `k²` times smaller).
     #[allow(clippy::too_many_arguments)]
-    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ground: Option<(&GroundPlane, f64)>) -> Result<Vec<Line2dDetection>, Line2dError> {
+    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ground: Option<&GroundPlane>, far: f64) -> Result<Vec<Line2dDetection>, Line2dError> {
         if sx == 1.0 && sy == 1.0 {
-            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height, ground);
+            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height, ground, far);
         }
         let (nw, nh) = (((width as f64 * sx).round() as usize).max(1), ((height as f64 * sy).round() as usize).max(1));
         let small = crate::scale::resample_rgb8(rgb, width, height, nw, nh);
-        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height, ground)
+        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height, ground, far)
     }
 
     /// Whether raw match `m` (resampled pixels, scale `(sx, sy)` of camera `cam`'s image) is
@@ -131,11 +146,11 @@ impl Line2dDetector {
     /// the library's scale (`w x h`, resampled from the original `ow x oh` image of camera
     /// `cam` by `(sx, sy)`); detections in original pixels.
     #[allow(clippy::too_many_arguments)]
-    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize, ground: Option<(&GroundPlane, f64)>) -> Result<Vec<Line2dDetection>, Line2dError> {
+    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize, ground: Option<&GroundPlane>, far: f64) -> Result<Vec<Line2dDetection>, Line2dError> {
         let img = prepare_image(rgb, width, height, &self.params)?;
-        let mut raw = match_all(&img, &self.library, &self.params);
-        if let (Some(range), Some((g, k))) = (&self.params.ground_range, ground) {
-            raw.retain(|m| self.on_ground(range, g, k, cam, m, sx, sy));
+        let mut raw = match_all_within(&img, &self.library, &self.params, (width * height) as f64 / (far * far));
+        if let (Some(range), Some(g)) = (&self.params.ground_range, ground) {
+            raw.retain(|m| self.on_ground(range, g, far, cam, m, sx, sy));
         }
         let vp = self.params.verify.unwrap_or_default();
         let need_luma = self.params.verify.is_some() || self.params.verifier.is_some();
