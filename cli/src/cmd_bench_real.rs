@@ -291,9 +291,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_colour = line2d_eval(&colour_set, &lib, &dir.join("line2d_colour"))?;
     let l2_neg = line2d_negatives(&stage.data, &lib, stage.frames)?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
-    let (threshold, threshold_grey) = (verifier.threshold, verifier.threshold_for(true));
+    let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "grasp_grey": grasp,
-        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -318,7 +318,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
     let far_grey = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
-    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`) and grey frames searched again {far_grey}x enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones); their precision column gives the false detections per image instead.").ok();
+    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones searched once, {threshold_far:.3} on grey ones searched twice); their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
@@ -327,7 +327,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
-        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
+        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
         l2_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
         l2_neg["max_per_frame"],
         l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)

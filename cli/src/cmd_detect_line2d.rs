@@ -66,8 +66,9 @@ pub struct Line2dOpts {
     pub max_candidates_per_mpx: usize,
     /// Line2D: also search the image enlarged by this factor beyond the library's scale (at
     /// most --max-upsample in all), for tubes up to that many times farther than the library's
-    /// farthest templates (1 = one search); "K" for every image, or COLOUR:GREY for colour and
-    /// grey (mono camera) images apart
+    /// farthest templates (1 = one search); "K" for every image, or COLOUR:GREY where GREY is
+    /// for grey images enlarged to the library's scale (a mono camera with coarser pixels than
+    /// the library's, e.g. Navcam)
     #[arg(long, default_value = DEFAULT_FAR_SCALE, value_parser = crate::args::far_scale)]
     pub far_scale: (f64, f64),
     /// Line2D ground consistency, where the image's ground plane is known (a dataset image's

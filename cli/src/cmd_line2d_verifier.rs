@@ -268,10 +268,12 @@ pub fn run(a: FitArgs) -> Result<()> {
         }
     }
     // Colour images take `threshold`; grey ones `threshold_grey` (the one threshold when the
-    // validation sets hold a single kind).
+    // validation sets hold a single kind), chosen on the detections of the searches these
+    // options run: no separate cut for images searched twice.
     let (colour, grey) = (chosen[0], chosen[1]);
     v.threshold = colour.or(grey).expect("checked above").0;
     v.threshold_grey = colour.and(grey).map(|g| g.0);
+    v.threshold_far = None;
     // AP50 over all validation composites with each image kind at its own cut.
     let (vc, pc): (Vec<SetSamples>, Vec<Vec<f32>>) = val
         .iter()

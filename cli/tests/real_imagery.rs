@@ -258,10 +258,16 @@ fn fit_verifier_chooses_a_cut_per_image_kind_that_detect_uses() {
         assert!((at[kind]["threshold"].as_f64().unwrap() - t).abs() < 1e-6, "{at}");
         assert!(at[kind]["fp_per_image"].as_f64().unwrap() <= 20.0, "{at}");
     }
+    assert!(v.get("threshold_far").is_none(), "{v}");
     // Choosing the cuts again for the fitted weights (`--weights`) gives the same file but for
-    // the provenance, which keeps the weights' own.
+    // the provenance, which keeps the weights' own; a cut for images searched twice in the
+    // weights' file is not carried over (the cuts are chosen for the searches run here).
+    let mut with_far = v.clone();
+    with_far["threshold_far"] = serde_json::json!(0.99);
+    let weights = d("with_far.json");
+    std::fs::write(&weights, with_far.to_string()).unwrap();
     let again = d("again.json");
-    let mut args = vec!["templates", "fit-verifier", "--weights", p(&out), "--templates", p(&lib), "--work", p(&work), "--out", p(&again), "--max-fp-per-frame", "20"];
+    let mut args = vec!["templates", "fit-verifier", "--weights", p(&weights), "--templates", p(&lib), "--work", p(&work), "--out", p(&again), "--max-fp-per-frame", "20"];
     for v in &vals {
         args.extend_from_slice(&["--val", p(v)]);
     }
@@ -270,6 +276,7 @@ fn fit_verifier_chooses_a_cut_per_image_kind_that_detect_uses() {
     for f in ["weights", "mean", "std", "bias", "threshold", "threshold_grey"] {
         assert_eq!(w[f], v[f], "{f}");
     }
+    assert!(w.get("threshold_far").is_none(), "{w}");
     assert_eq!(w["provenance"]["weights"]["provenance"]["weights"], v["provenance"]["weights"]);
     // `detect` takes the fitted file; a cut that is not a probability is refused, naming the file.
     let dets = d("dets.json");

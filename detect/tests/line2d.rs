@@ -430,8 +430,9 @@ fn grey_threshold_applies_to_grey_images_only() {
     assert!(!plain.detect(&grey, w, h, None).unwrap().is_empty(), "no detection in the grey scene with one cut");
     assert!(split.detect(&grey, w, h, None).unwrap().is_empty(), "the grey cut of 1 kept a detection");
     // `--min-probability` sets one cut for both kinds.
+    v.threshold_far = Some(0.99);
     v.set_threshold(0.0);
-    assert_eq!((v.threshold_for(true), v.threshold_for(false)), (0.0, 0.0));
+    assert_eq!((v.threshold_for(true), v.threshold_for(false), v.threshold_for_search(true, true)), (0.0, 0.0, 0.0));
 }
 
 /// A library of templates at 1.8-2.2 m for a `w x h` image ([`centred_library`]), with its
@@ -466,21 +467,62 @@ fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     let z = d.t_cam_tube.translation().norm();
     assert!((z - c.norm()).abs() <= 0.15, "coarse distance {z:.2} m vs {:.2} m", c.norm());
     assert_eq!(d.mask.size, [h as u32, w as u32]);
-    // By default only a grey image (a mono camera's frame) gets the far search: the colour
-    // frame's far tube is missed, the same frame in grey finds it at the grey far scale.
-    let default = Line2dDetector::new(lib, MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
-    assert!(!default.detect(&img, w, h, Some(&cam)).unwrap().iter().any(near_truth), "a colour frame searched far by default");
-    let grey: Vec<u8> = img
-        .chunks_exact(3)
-        .flat_map(|p| {
-            let l = ((299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32) / 1000) as u8;
-            [l, l, l]
-        })
-        .collect();
-    assert_eq!(default.far_scale_for(&grey), tubeloc_detect::line2d::matching::FAR_SCALE_GREY);
-    let dets = default.detect(&grey, w, h, Some(&cam)).unwrap();
-    let d = dets.iter().find(|d| near_truth(d)).expect("the grey frame's far tube is found by default");
-    assert!((d.scale - tubeloc_detect::line2d::matching::FAR_SCALE_GREY).abs() < 0.01, "scale {}", d.scale);
+}
+
+/// By default the far search runs on a grey image enlarged to the library's scale (a mono
+/// camera with coarser pixels than the library's): its far tube is found there, under the
+/// verifier's cut for frames searched twice, while the same frame in colour, or a grey frame
+/// at the library's scale, is searched once.
+#[test]
+fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
+    let (w, h) = (512usize, 384usize);
+    let (k, _, lib) = library_of_1_8_to_2_2_m(w, h);
+    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
+    let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
+    let to_grey = |rgb: &[u8]| -> Vec<u8> {
+        rgb.chunks_exact(3)
+            .flat_map(|p| {
+                let l = ((299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32) / 1000) as u8;
+                [l, l, l]
+            })
+            .collect()
+    };
+    // Detections as (resampling factor, whether the centre is within 6 px of the tube's).
+    let detect = |det: &Line2dDetector, img: &[u8], kk: &Pinhole| -> Vec<(f64, bool)> {
+        let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: kk.fx, fy: kk.fy, cx: kk.cx, cy: kk.cy, distortion: Default::default() };
+        let c = t_true.translation();
+        let px = [kk.fx * c.x / c.z + kk.cx, kk.fy * c.y / c.z + kk.cy];
+        det.detect(img, w, h, Some(&cam)).unwrap().into_iter().map(|d| (d.scale, ((d.centre_px[0] - px[0]).powi(2) + (d.centre_px[1] - px[1]).powi(2)).sqrt() <= 6.0)).collect()
+    };
+    let far = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    let default = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
+    // A camera with 1.2x coarser pixels: its frames are enlarged 1.2x, grey ones then 1.4x more.
+    let coarse = Pinhole { fx: k.fx / 1.2, fy: k.fy / 1.2, ..k };
+    let colour = scene(w, h, &coarse, &t_true, 11);
+    let grey = to_grey(&colour);
+    let is_far = |s: f64| (s - 1.2 * far).abs() < 0.01;
+    let c = detect(&default, &colour, &coarse);
+    assert!(!c.is_empty() && c.iter().all(|&(s, _)| (s - 1.2).abs() < 0.01), "a colour frame searched far by default: {c:?}");
+    let g = detect(&default, &grey, &coarse);
+    assert!(g.iter().any(|&(s, near)| near && is_far(s)), "the coarser grey frame's tube is not found by the far search: {g:?}");
+    // A grey frame at the library's own scale is searched once by default; with `--far-scale
+    // 1.4` for every image its tube is found by the far search.
+    let grey1 = to_grey(&scene(w, h, &k, &t_true, 11));
+    let g1 = detect(&default, &grey1, &k);
+    assert!(!g1.iter().any(|&(s, _)| (s - far).abs() < 0.01), "a grey frame at the library's scale searched far: {g1:?}");
+    let both = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: far, far_scale_grey: far, ..MatchParams::default() }).unwrap();
+    assert!(detect(&both, &grey1, &k).iter().any(|&(s, near)| near && (s - far).abs() < 0.01), "the far search misses the grey frame's tube");
+    // Every detection of a frame searched twice takes the verifier's cut for such frames,
+    // whatever the kind's cut.
+    let mut v = tubeloc_detect::line2d::Verifier::shipped();
+    v.threshold_grey = Some(0.0);
+    v.threshold_far = Some(1.0);
+    let strict = Line2dDetector::new(lib.clone(), MatchParams { verifier: Some(v.clone()), ..MatchParams::default() }).unwrap();
+    let gs = detect(&strict, &grey, &coarse);
+    assert!(gs.is_empty(), "a detection of a frame searched twice kept under its cut of 1: {gs:?}");
+    v.threshold_far = Some(0.0);
+    let open = Line2dDetector::new(lib, MatchParams { verifier: Some(v), ..MatchParams::default() }).unwrap();
+    assert!(detect(&open, &grey, &coarse).iter().any(|&(s, near)| near && is_far(s)), "the far tube dropped under a far cut of 0");
 }
 
 /// The plane on which a tube at `t_cam_tube` lies (its axis in the plane, its centre one body

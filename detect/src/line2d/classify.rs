@@ -84,6 +84,11 @@ pub struct Verifier {
     /// verifier more often than colour clutter.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threshold_grey: Option<f32>,
+    /// Cut on the probability for every detection of an image searched twice (the far search
+    /// ran on it too, [`crate::line2d::MatchParams::far_scale_grey`]), of either kind, when it
+    /// differs from the image kind's cut: the second search adds its own clutter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threshold_far: Option<f32>,
     /// How the weights and the threshold were obtained (command, data, figures).
     #[serde(default)]
     pub provenance: serde_json::Value,
@@ -119,7 +124,7 @@ impl Verifier {
         if all.clone().any(|x| !x.is_finite()) || self.std.iter().any(|&s| s <= 0.0) {
             return Err("non-finite value or non-positive std".into());
         }
-        for (name, t) in [("threshold", Some(self.threshold)), ("threshold_grey", self.threshold_grey)] {
+        for (name, t) in [("threshold", Some(self.threshold)), ("threshold_grey", self.threshold_grey), ("threshold_far", self.threshold_far)] {
             if let Some(t) = t.filter(|t| !(0.0..=1.0).contains(t)) {
                 return Err(format!("{name} {t} is not a probability"));
             }
@@ -136,10 +141,20 @@ impl Verifier {
         }
     }
 
-    /// Sets one cut for every image (`tubeloc detect --min-probability`).
+    /// The cut on the probability for a detection of a grey or colour image searched once
+    /// (`two_searches` false) or also by the far search (`two_searches` true).
+    pub fn threshold_for_search(&self, grey: bool, two_searches: bool) -> f32 {
+        match self.threshold_far {
+            Some(t) if two_searches => t,
+            _ => self.threshold_for(grey),
+        }
+    }
+
+    /// Sets one cut for every image and search (`tubeloc detect --min-probability`).
     pub fn set_threshold(&mut self, t: f32) {
         self.threshold = t;
         self.threshold_grey = None;
+        self.threshold_far = None;
     }
 
     /// Log-odds of a feature vector.
@@ -219,6 +234,7 @@ impl Verifier {
             bias: beta[0] as f32,
             threshold: 0.5,
             threshold_grey: None,
+            threshold_far: None,
             provenance: serde_json::Value::Null,
         };
         v.check()?;

@@ -88,8 +88,9 @@ pub struct MatchParams {
     /// verified-overlap suppression.
     pub far_scale: f64,
     /// [`MatchParams::far_scale`] for a grey image (three equal channels,
-    /// [`crate::input::is_grey_rgb8`]): a mono camera's frame, e.g. Navcam, whose tubes lie
-    /// beyond the library's farthest templates.
+    /// [`crate::input::is_grey_rgb8`]) that is enlarged to the library's scale: a mono camera
+    /// whose pixels are coarser than the library's, e.g. Navcam, with tubes 6-10 px wide at
+    /// the library's scale. Other grey images take [`MatchParams::far_scale`].
     pub far_scale_grey: f64,
     /// Ground consistency of raw matches, applied when the image's ground plane is known
     /// ([`crate::line2d::Line2dDetector::detect_on_ground`]): a match whose template distance
@@ -103,9 +104,10 @@ pub struct MatchParams {
 /// (design records 0047, 0054).
 pub const FAR_SCALE: f64 = 1.0;
 
-/// Default [`MatchParams::far_scale_grey`] (grey images): a Navcam frame (f ~ 1220 px, enlarged
-/// 1.41x to the default library's 1720 px) is searched again at 1.97x, where its tubes at 4-5
-/// m match; the verifier's grey cut is chosen for this search (design record 0055).
+/// Default [`MatchParams::far_scale_grey`] (grey images enlarged to the library's scale): a
+/// Navcam frame (f ~ 1220 px, enlarged 1.41x to the default library's 1720 px) is searched
+/// again at 1.97x, where its tubes at 3-5 m are found more often; the far search's detections
+/// have their own verifier cut (`Verifier::threshold_far`, design record 0055).
 pub const FAR_SCALE_GREY: f64 = 1.4;
 
 impl Default for MatchParams {
