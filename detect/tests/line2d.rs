@@ -436,12 +436,27 @@ fn grey_threshold_applies_to_grey_images_only() {
 }
 
 /// A library of templates at 1.8-2.2 m for a `w x h` image ([`centred_library`]), with its
+/// Whether detection `d` lies within 6 px of the image of the centre of the tube at `t` under
+/// the pinhole `k`.
+fn centred_on(d: &tubeloc_detect::line2d::Line2dDetection, k: &Pinhole, t: &Pose) -> bool {
+    let c = t.translation();
+    let px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
+    ((d.centre_px[0] - px[0]).powi(2) + (d.centre_px[1] - px[1]).powi(2)).sqrt() <= 6.0
+}
+
 /// pinhole and the same camera as a [`tubeloc_core::CameraModel`].
 fn library_of_1_8_to_2_2_m(w: usize, h: usize) -> (Pinhole, tubeloc_core::CameraModel, TemplateLibrary) {
     let (params, lib) = centred_library(w, h, 1.8, 2.2);
     let k = params.camera;
     let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy, distortion: Default::default() };
     (k, cam, lib)
+}
+
+/// A tube at 2.8 m, 1.4 times the middle distance of [`library_of_1_8_to_2_2_m`] and 0.6 m
+/// beyond its farthest templates.
+fn tube_beyond_1_8_to_2_2_m() -> Pose {
+    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
+    Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8))
 }
 
 /// A tube farther than the library's farthest templates is found by the far search (the image
@@ -451,13 +466,10 @@ fn library_of_1_8_to_2_2_m(w: usize, h: usize) -> (Pinhole, tubeloc_core::Camera
 fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     let (w, h) = (512usize, 384usize);
     let (k, cam, lib) = library_of_1_8_to_2_2_m(w, h);
-    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
-    // 1.4 times the library's middle distance, 0.6 m beyond its farthest templates.
-    let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
+    let t_true = tube_beyond_1_8_to_2_2_m();
     let img = scene(w, h, &k, &t_true, 11);
     let c = t_true.translation();
-    let truth_px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
-    let near_truth = |d: &tubeloc_detect::line2d::Line2dDetection| ((d.centre_px[0] - truth_px[0]).powi(2) + (d.centre_px[1] - truth_px[1]).powi(2)).sqrt() <= 6.0;
+    let near_truth = |d: &tubeloc_detect::line2d::Line2dDetection| centred_on(d, &k, &t_true);
     let one = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: 1.0, ..MatchParams::default() }).unwrap();
     assert!(!one.detect(&img, w, h, Some(&cam)).unwrap().iter().any(near_truth), "found without the far search");
     let far = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: 1.4, ..MatchParams::default() }).unwrap();
@@ -477,8 +489,7 @@ fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
 fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     let (w, h) = (512usize, 384usize);
     let (k, _, lib) = library_of_1_8_to_2_2_m(w, h);
-    let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
-    let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
+    let t_true = tube_beyond_1_8_to_2_2_m();
     let to_grey = |rgb: &[u8]| -> Vec<u8> {
         rgb.chunks_exact(3)
             .flat_map(|p| {
@@ -490,9 +501,7 @@ fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     // Detections as (resampling factor, whether the centre is within 6 px of the tube's).
     let detect = |det: &Line2dDetector, img: &[u8], kk: &Pinhole| -> Vec<(f64, bool)> {
         let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: kk.fx, fy: kk.fy, cx: kk.cx, cy: kk.cy, distortion: Default::default() };
-        let c = t_true.translation();
-        let px = [kk.fx * c.x / c.z + kk.cx, kk.fy * c.y / c.z + kk.cy];
-        det.detect(img, w, h, Some(&cam)).unwrap().into_iter().map(|d| (d.scale, ((d.centre_px[0] - px[0]).powi(2) + (d.centre_px[1] - px[1]).powi(2)).sqrt() <= 6.0)).collect()
+        det.detect(img, w, h, Some(&cam)).unwrap().iter().map(|d| (d.scale, centred_on(d, kk, &t_true))).collect()
     };
     let far = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
     let default = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
@@ -543,11 +552,7 @@ fn ground_consistency_keeps_a_tube_on_its_ground_and_drops_it_elsewhere() {
     let (w, h) = (512usize, 384usize);
     let (k, cam, lib) = library_of_1_8_to_2_2_m(w, h);
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
-    let found = |det: &Line2dDetector, t: &Pose, img: &[u8], ground: Option<&tubeloc_core::GroundPlane>| {
-        let c = t.translation();
-        let px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
-        det.detect_on_ground(img, w, h, Some(&cam), ground).unwrap().iter().any(|d| ((d.centre_px[0] - px[0]).powi(2) + (d.centre_px[1] - px[1]).powi(2)).sqrt() <= 6.0)
-    };
+    let found = |det: &Line2dDetector, t: &Pose, img: &[u8], ground: Option<&tubeloc_core::GroundPlane>| det.detect_on_ground(img, w, h, Some(&cam), ground).unwrap().iter().any(|d| centred_on(d, &k, t));
     let t_true = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.0));
     let img = scene(w, h, &k, &t_true, 11);
     let det = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
@@ -562,7 +567,7 @@ fn ground_consistency_keeps_a_tube_on_its_ground_and_drops_it_elsewhere() {
     assert!(found(&off, &t_true, &img, Some(&twice)), "dropped with the check off");
     // A tube 1.4 times farther than the library's middle is found by the far search; its
     // templates' distances count 1.4 times (a tight band that the plain distances miss).
-    let t_far = Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8));
+    let t_far = tube_beyond_1_8_to_2_2_m();
     let img = scene(w, h, &k, &t_far, 11);
     let tight = Some(tubeloc_detect::line2d::GroundRange::new(0.85, 1.2).unwrap());
     let far = Line2dDetector::new(lib, MatchParams { verifier: None, far_scale: 1.4, ground_range: tight, ..MatchParams::default() }).unwrap();
