@@ -403,6 +403,11 @@ fn a_camera_of_another_focal_length_is_matched_at_the_library_scale() {
     assert!((u - b.centre_px[0]).abs() < 0.5 && (v - b.centre_px[1]).abs() < 0.5, "pose centre ({u:.1}, {v:.1}) vs {:?}", b.centre_px);
 }
 
+/// An RGB8 frame as a grey camera gives it: the luminance in all three channels.
+fn grey_of(rgb: &[u8]) -> Vec<u8> {
+    tubeloc_detect::line2d::verify::luminance(rgb).into_iter().flat_map(|l| [l, l, l]).collect()
+}
+
 /// The verifier's grey cut applies to grey images only: with a grey cut above every
 /// probability, the grey version of a scene gives no detection while its colour version keeps
 /// the same detections as with the colour cut alone.
@@ -412,13 +417,7 @@ fn grey_threshold_applies_to_grey_images_only() {
     let (params, lib) = centred_library(w, h, 1.9, 2.1);
     let rot = Rotation3::rotation_between(&Vector3::z(), &Vector3::new(0.7, 0.2, -0.4).normalize()).unwrap();
     let colour = scene(w, h, &params.camera, &Pose::from_parts(rot, Vector3::new(0.02, 0.01, 2.0)), 3);
-    let grey: Vec<u8> = colour
-        .chunks_exact(3)
-        .flat_map(|p| {
-            let g = ((p[0] as u32 + p[1] as u32 + p[2] as u32) / 3) as u8;
-            [g, g, g]
-        })
-        .collect();
+    let grey = grey_of(&colour);
     let base = MatchParams::default();
     let plain = Line2dDetector::new(lib.clone(), base.clone()).unwrap();
     let mut v = base.verifier.clone().unwrap();
@@ -490,14 +489,6 @@ fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     let (w, h) = (512usize, 384usize);
     let (k, _, lib) = library_of_1_8_to_2_2_m(w, h);
     let t_true = tube_beyond_1_8_to_2_2_m();
-    let to_grey = |rgb: &[u8]| -> Vec<u8> {
-        rgb.chunks_exact(3)
-            .flat_map(|p| {
-                let l = ((299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32) / 1000) as u8;
-                [l, l, l]
-            })
-            .collect()
-    };
     // Detections as (resampling factor, whether the centre is within 6 px of the tube's).
     let detect = |det: &Line2dDetector, img: &[u8], kk: &Pinhole| -> Vec<(f64, bool)> {
         let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: kk.fx, fy: kk.fy, cx: kk.cx, cy: kk.cy, distortion: Default::default() };
@@ -508,7 +499,7 @@ fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     // A camera with 1.2x coarser pixels: its frames are enlarged 1.2x, grey ones then 1.4x more.
     let coarse = Pinhole { fx: k.fx / 1.2, fy: k.fy / 1.2, ..k };
     let colour = scene(w, h, &coarse, &t_true, 11);
-    let grey = to_grey(&colour);
+    let grey = grey_of(&colour);
     let is_far = |s: f64| (s - 1.2 * far).abs() < 0.01;
     let c = detect(&default, &colour, &coarse);
     assert!(!c.is_empty() && c.iter().all(|&(s, _)| (s - 1.2).abs() < 0.01), "a colour frame searched far by default: {c:?}");
@@ -516,7 +507,7 @@ fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     assert!(g.iter().any(|&(s, near)| near && is_far(s)), "the coarser grey frame's tube is not found by the far search: {g:?}");
     // A grey frame at the library's own scale is searched once by default; with `--far-scale
     // 1.4` for every image its tube is found by the far search.
-    let grey1 = to_grey(&scene(w, h, &k, &t_true, 11));
+    let grey1 = grey_of(&scene(w, h, &k, &t_true, 11));
     let g1 = detect(&default, &grey1, &k);
     assert!(!g1.iter().any(|&(s, _)| (s - far).abs() < 0.01), "a grey frame at the library's scale searched far: {g1:?}");
     let both = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: far, far_scale_grey: far, ..MatchParams::default() }).unwrap();

@@ -68,11 +68,15 @@ impl Line2dDetector {
         if !self.resolvable(camera) {
             return Ok(Vec::new());
         }
-        let k = self.far_scale_for(rgb, sx, sy);
+        // Whether the image is grey decides the far search and the verifier's cut: read once.
+        let (colour_k, grey_k) = (self.params.far_scale, self.params.far_scale_grey);
+        let grey = (self.params.verifier.is_some() || colour_k != grey_k) && crate::input::is_grey_rgb8(rgb);
+        let k = self.far_scale_for(grey, sx, sy);
         let two = k > 1.0 && sx * k <= self.params.max_upsample && sy * k <= self.params.max_upsample;
-        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy, ground, 1.0, two)?;
+        let cut = self.params.verifier.as_ref().map(|v| v.threshold_for_search(grey, two));
+        let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy, ground, 1.0, cut)?;
         if two {
-            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k, ground, k, true)?;
+            let far = self.detect_at(rgb, width, height, &cam, sx * k, sy * k, ground, k, cut)?;
             dets.extend(far.into_iter().map(|mut d| {
                 d.t_cam_tube.0.translation.vector *= k;
                 d
@@ -84,35 +88,32 @@ impl Line2dDetector {
         Ok(dets)
     }
 
-    /// The far search's factor for interleaved RGB8 image `rgb`, resampled by `(sx, sy)` to
-    /// the library's scale ([`Line2dDetector::scale_for`]): [`MatchParams::far_scale_grey`]
-    /// when it is grey and enlarged (`sx > 1` or `sy > 1`: a mono camera whose pixels are
-    /// coarser than the library's, e.g. Navcam), else [`MatchParams::far_scale`].
-    pub fn far_scale_for(&self, rgb: &[u8], sx: f64, sy: f64) -> f64 {
-        let (colour, grey) = (self.params.far_scale, self.params.far_scale_grey);
-        if colour == grey || !(sx > 1.0 || sy > 1.0) {
-            return colour;
-        }
-        if crate::input::is_grey_rgb8(rgb) {
-            grey
+    /// The far search's factor for an image that is `grey` (three equal channels,
+    /// [`crate::input::is_grey_rgb8`]) or colour, resampled by `(sx, sy)` to the library's
+    /// scale ([`Line2dDetector::scale_for`]): [`MatchParams::far_scale_grey`] when it is grey
+    /// and enlarged (`sx > 1` or `sy > 1`: a mono camera whose pixels are coarser than the
+    /// library's, e.g. Navcam), else [`MatchParams::far_scale`].
+    pub fn far_scale_for(&self, grey: bool, sx: f64, sy: f64) -> f64 {
+        if grey && (sx > 1.0 || sy > 1.0) {
+            self.params.far_scale_grey
         } else {
-            colour
+            self.params.far_scale
         }
     }
 
     /// [`Line2dDetector::detect_native`] on the image resampled by `(sx, sy)` (none at 1).
     /// `far`: 1 for the search at the library's scale, the far search's factor `k` for the far
     /// search (its template distances count `k` times; its candidate budget is that of the
-    /// search at the library's scale, whose image is `k²` times smaller). `two`: whether the
-    /// image is searched twice (the verifier's cut for such images applies).
+    /// search at the library's scale, whose image is `k²` times smaller). `cut`: the clutter
+    /// verifier's cut for this image (its kind, and whether it is searched twice).
     #[allow(clippy::too_many_arguments)]
-    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ground: Option<&GroundPlane>, far: f64, two: bool) -> Result<Vec<Line2dDetection>, Line2dError> {
+    fn detect_at(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ground: Option<&GroundPlane>, far: f64, cut: Option<f32>) -> Result<Vec<Line2dDetection>, Line2dError> {
         if sx == 1.0 && sy == 1.0 {
-            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height, ground, far, two);
+            return self.detect_native(rgb, width, height, cam, 1.0, 1.0, width, height, ground, far, cut);
         }
         let (nw, nh) = (((width as f64 * sx).round() as usize).max(1), ((height as f64 * sy).round() as usize).max(1));
         let small = crate::scale::resample_rgb8(rgb, width, height, nw, nh);
-        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height, ground, far, two)
+        self.detect_native(&small, nw, nh, cam, nw as f64 / width as f64, nh as f64 / height as f64, width, height, ground, far, cut)
     }
 
     /// Whether raw match `m` (resampled pixels, scale `(sx, sy)` of camera `cam`'s image) is
@@ -148,10 +149,10 @@ impl Line2dDetector {
 
     /// Matching, verification, NMS, re-ranking and the clutter verifier on an image already at
     /// the library's scale (`w x h`, resampled from the original `ow x oh` image of camera
-    /// `cam` by `(sx, sy)`); detections in original pixels. `far` and `two` as in
+    /// `cam` by `(sx, sy)`); detections in original pixels. `far` and `cut` as in
     /// [`Line2dDetector::detect_at`].
     #[allow(clippy::too_many_arguments)]
-    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize, ground: Option<&GroundPlane>, far: f64, two: bool) -> Result<Vec<Line2dDetection>, Line2dError> {
+    fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize, ground: Option<&GroundPlane>, far: f64, cut: Option<f32>) -> Result<Vec<Line2dDetection>, Line2dError> {
         let img = prepare_image(rgb, width, height, &self.params)?;
         let mut raw = match_all_within(&img, &self.library, &self.params, (width * height) as f64 / (far * far));
         if let (Some(range), Some(g)) = (&self.params.ground_range, ground) {
@@ -187,7 +188,6 @@ impl Line2dDetector {
             _ => raw,
         };
         let clusters = nms_clusters(&raw, &self.library, self.params.nms_iou, self.params.max_detections);
-        let grey = self.params.verifier.is_some() && crate::input::is_grey_rgb8(rgb);
         let mut dets: Vec<Line2dDetection> = clusters
             .iter()
             .filter_map(|c| {
@@ -211,10 +211,10 @@ impl Line2dDetector {
                     d.score = (c[0].score / 100.0).max(0.0);
                     d.contrast = contrast(l, width, height, self.samples.get(t, v), m.x, m.y);
                 }
-                if let (Some(vf), Some(l)) = (&self.params.verifier, &luma) {
+                if let (Some(vf), Some(l), Some(cut)) = (&self.params.verifier, &luma, cut) {
                     let f = features(l, width, height, t, self.samples.get(t, &vp), m.x, m.y, m.score);
                     let p = f.as_ref().map_or(0.0, |f| vf.probability(f));
-                    if p < vf.threshold_for_search(grey, two) {
+                    if p < cut {
                         return None;
                     }
                     d.score = p;
