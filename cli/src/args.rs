@@ -204,6 +204,11 @@ pub fn require_at_most<T: PartialOrd + std::fmt::Display>(a: (&str, T), b: (&str
     }
 }
 
+/// A resampling limit in [1, 8] (`--max-upsample`: the library's scale clamps factors to 8).
+pub fn upsample_limit(s: &str) -> Result<f64, String> {
+    in_closed(s.trim(), 1.0, 8.0).map_err(|e| format!("{s:?}: {e}"))
+}
+
 /// Line2D far-search factors `(colour, grey)`, each in [1, 4]: "K" for both kinds of image,
 /// or "COLOUR:GREY".
 pub fn far_scale(s: &str) -> Result<(f64, f64), String> {
@@ -238,6 +243,8 @@ mod tests {
         }
         assert_eq!(far_scale("1.4"), Ok((1.4, 1.4)));
         assert_eq!(far_scale("1:1.4"), Ok((1.0, 1.4)));
+        assert_eq!(upsample_limit("2.5"), Ok(2.5));
+        assert!(upsample_limit("0.9").is_err() && upsample_limit("9").is_err() && upsample_limit("nan").is_err());
         for s in ["0.9", "1:5", "1:", ":1.4", "1.4:x", "1:1:1"] {
             assert!(far_scale(s).is_err(), "{s}");
         }

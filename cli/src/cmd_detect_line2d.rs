@@ -71,6 +71,11 @@ pub struct Line2dOpts {
     /// the library's, e.g. Navcam)
     #[arg(long, default_value = DEFAULT_FAR_SCALE, value_parser = crate::args::far_scale)]
     pub far_scale: (f64, f64),
+    /// Line2D: largest factor by which an image is enlarged to the library's scale: an image
+    /// of a camera that needs more is not searched (with a warning), and the far search runs
+    /// only where the image enlarged --far-scale times more stays within it
+    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_UPSAMPLE, value_parser = crate::args::upsample_limit)]
+    pub max_upsample: f64,
     /// Line2D ground consistency, where the image's ground plane is known (a dataset image's
     /// `ground`, or --ground): a match is kept only when its template's distance is within
     /// MIN:MAX times the ground's distance along its centre's ray (a tube lies on the ground;
@@ -124,6 +129,7 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
         max_candidates_per_mpx: opts.max_candidates_per_mpx,
         far_scale: opts.far_scale.0,
         far_scale_grey: opts.far_scale.1,
+        max_upsample: opts.max_upsample,
         ground_range: crate::args::parse_ground_range(&opts.ground_range).map_err(|e| anyhow::anyhow!("--ground-range {e}"))?,
         ..MatchParams::default()
     };

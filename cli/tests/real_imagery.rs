@@ -182,6 +182,10 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
     assert!(String::from_utf8_lossy(&o.stderr).contains("not searched"), "{}", String::from_utf8_lossy(&o.stderr));
     let dets: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(dets.as_array().unwrap().len(), 0);
+    // `--max-upsample` above its enlargement: searched, without the warning.
+    let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&image), "--max-upsample", "6", "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("not searched"), "{}", String::from_utf8_lossy(&o.stderr));
 
     // A Navcam frame of saturated bright patches on dark ground (sol 987), under the bench's
     // assumed Navcam view (45 degree field of view, 1.9 m above level ground, 30 degrees down).

@@ -147,9 +147,11 @@ fn main() {
         p.max_candidates_per_mpx = k;
     }
     // The peer searches the frame at one scale: so does the detector compared with it. The
-    // detector that also searches the frame enlarged 1.4x (`--far-scale 1.4`; the default for
-    // grey frames of a camera coarser than the library's, such as Navcam) is timed beside.
-    let far = Line2dDetector::new(lib.clone(), MatchParams { far_scale: 1.4, far_scale_grey: 1.4, ..p.clone() }).expect("detector");
+    // detector that also searches the frame enlarged by the grey far factor (`--far-scale K`;
+    // the default for grey frames of a camera coarser than the library's, such as Navcam) is
+    // timed beside.
+    let k = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    let far = Line2dDetector::new(lib.clone(), MatchParams { far_scale: k, far_scale_grey: k, ..p.clone() }).expect("detector");
     p.far_scale = 1.0;
     p.far_scale_grey = 1.0;
     let det = Line2dDetector::new(lib.clone(), p.clone()).expect("detector");

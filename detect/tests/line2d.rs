@@ -451,11 +451,11 @@ fn library_of_1_8_to_2_2_m(w: usize, h: usize) -> (Pinhole, tubeloc_core::Camera
     (k, cam, lib)
 }
 
-/// A tube at 2.8 m, 1.4 times the middle distance of [`library_of_1_8_to_2_2_m`] and 0.6 m
-/// beyond its farthest templates.
-fn tube_beyond_1_8_to_2_2_m() -> Pose {
+/// A tube `k` times as far as the middle distance (2 m) of [`library_of_1_8_to_2_2_m`], at
+/// the same place in the image: beyond its farthest templates for `k` > 1.1.
+fn tube_times_1_8_to_2_2_m(k: f64) -> Pose {
     let axis = Vector3::new(0.62, 0.35, -0.5).normalize();
-    Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.07, -0.04, 2.8))
+    Pose::from_parts(Rotation3::rotation_between(&Vector3::z(), &axis).unwrap(), Vector3::new(0.05, -0.04 / 1.4, 2.0) * k)
 }
 
 /// A tube farther than the library's farthest templates is found by the far search (the image
@@ -465,7 +465,7 @@ fn tube_beyond_1_8_to_2_2_m() -> Pose {
 fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
     let (w, h) = (512usize, 384usize);
     let (k, cam, lib) = library_of_1_8_to_2_2_m(w, h);
-    let t_true = tube_beyond_1_8_to_2_2_m();
+    let t_true = tube_times_1_8_to_2_2_m(1.4);
     let img = scene(w, h, &k, &t_true, 11);
     let c = t_true.translation();
     let near_truth = |d: &tubeloc_detect::line2d::Line2dDetection| centred_on(d, &k, &t_true);
@@ -488,25 +488,27 @@ fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
 fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     let (w, h) = (512usize, 384usize);
     let (k, _, lib) = library_of_1_8_to_2_2_m(w, h);
-    let t_true = tube_beyond_1_8_to_2_2_m();
+    let far = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    let t_true = tube_times_1_8_to_2_2_m(far);
     // Detections as (resampling factor, whether the centre is within 6 px of the tube's).
     let detect = |det: &Line2dDetector, img: &[u8], kk: &Pinhole| -> Vec<(f64, bool)> {
         let cam = tubeloc_core::CameraModel { width: w as u32, height: h as u32, fx: kk.fx, fy: kk.fy, cx: kk.cx, cy: kk.cy, distortion: Default::default() };
         det.detect(img, w, h, Some(&cam)).unwrap().iter().map(|d| (d.scale, centred_on(d, kk, &t_true))).collect()
     };
-    let far = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
     let default = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, ..MatchParams::default() }).unwrap();
-    // A camera with 1.2x coarser pixels: its frames are enlarged 1.2x, grey ones then 1.4x more.
+    // A camera with 1.2x coarser pixels: its frames are enlarged 1.2x, grey ones then `far` x more.
     let coarse = Pinhole { fx: k.fx / 1.2, fy: k.fy / 1.2, ..k };
     let colour = scene(w, h, &coarse, &t_true, 11);
     let grey = grey_of(&colour);
     let is_far = |s: f64| (s - 1.2 * far).abs() < 0.01;
     let c = detect(&default, &colour, &coarse);
-    assert!(!c.is_empty() && c.iter().all(|&(s, _)| (s - 1.2).abs() < 0.01), "a colour frame searched far by default: {c:?}");
+    assert!(c.iter().all(|&(s, _)| (s - 1.2).abs() < 0.01), "a colour frame searched far by default: {c:?}");
+    let colour_far = Line2dDetector::new(lib.clone(), MatchParams { verifier: None, far_scale: far, ..MatchParams::default() }).unwrap();
+    assert!(detect(&colour_far, &colour, &coarse).iter().any(|&(s, near)| near && is_far(s)), "the far search misses the colour frame's tube");
     let g = detect(&default, &grey, &coarse);
     assert!(g.iter().any(|&(s, near)| near && is_far(s)), "the coarser grey frame's tube is not found by the far search: {g:?}");
     // A grey frame at the library's own scale is searched once by default; with `--far-scale
-    // 1.4` for every image its tube is found by the far search.
+    // K` for every image its tube is found by the far search.
     let grey1 = grey_of(&scene(w, h, &k, &t_true, 11));
     let g1 = detect(&default, &grey1, &k);
     assert!(!g1.iter().any(|&(s, _)| (s - far).abs() < 0.01), "a grey frame at the library's scale searched far: {g1:?}");
@@ -558,7 +560,7 @@ fn ground_consistency_keeps_a_tube_on_its_ground_and_drops_it_elsewhere() {
     assert!(found(&off, &t_true, &img, Some(&twice)), "dropped with the check off");
     // A tube 1.4 times farther than the library's middle is found by the far search; its
     // templates' distances count 1.4 times (a tight band that the plain distances miss).
-    let t_far = tube_beyond_1_8_to_2_2_m();
+    let t_far = tube_times_1_8_to_2_2_m(1.4);
     let img = scene(w, h, &k, &t_far, 11);
     let tight = Some(tubeloc_detect::line2d::GroundRange::new(0.85, 1.2).unwrap());
     let far = Line2dDetector::new(lib, MatchParams { verifier: None, far_scale: 1.4, ground_range: tight, ..MatchParams::default() }).unwrap();

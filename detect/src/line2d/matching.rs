@@ -79,7 +79,8 @@ pub struct MatchParams {
     /// Largest resampling factor by which an image is enlarged to the library's scale. An
     /// image whose camera needs more (its pixels are over this many times coarser than the
     /// library's: tubes at the library's ranges span too few pixels to carry their contour,
-    /// e.g. Navcam frames binned 4x4 on board) is not searched and gives no detection.
+    /// e.g. Navcam frames binned 4x4 on board) is not searched and gives no detection. The
+    /// far search ([`MatchParams::far_scale`]) runs only within it.
     pub max_upsample: f64,
     /// A second search on a colour image enlarged by this factor beyond the library's scale
     /// (1 = none), within [`MatchParams::max_upsample`]: tubes up to this many times farther
@@ -99,6 +100,10 @@ pub struct MatchParams {
     pub ground_range: Option<GroundRange>,
 }
 
+/// Default [`MatchParams::max_upsample`]: an image is enlarged at most 2x to the library's
+/// scale, the far search's factor included.
+pub const MAX_UPSAMPLE: f64 = 2.0;
+
 /// Default [`MatchParams::far_scale`] (colour images): one search. A far search on colour
 /// frames finds more far tubes but more false ones, and its cut costs the synthetic benchmark
 /// (design records 0047, 0054).
@@ -107,7 +112,8 @@ pub const FAR_SCALE: f64 = 1.0;
 /// Default [`MatchParams::far_scale_grey`] (grey images enlarged to the library's scale): a
 /// Navcam frame (f ~ 1220 px, enlarged 1.41x to the default library's 1720 px) is searched
 /// again at 1.97x, where its tubes at 3-5 m are found more often; the far search's detections
-/// have their own verifier cut (`Verifier::threshold_far`, design record 0055).
+/// have their own verifier cut (`Verifier::threshold_far`, design record 0055). A farther
+/// search (2.0, beyond [`MAX_UPSAMPLE`]) lost on the test part (record 0056).
 pub const FAR_SCALE_GREY: f64 = 1.4;
 
 impl Default for MatchParams {
@@ -128,7 +134,7 @@ impl Default for MatchParams {
             max_candidates_per_mpx: MAX_CANDIDATES_PER_MPX,
             verifier: Some(Verifier::shipped()),
             verified_overlap: 0.5,
-            max_upsample: 2.0,
+            max_upsample: MAX_UPSAMPLE,
             far_scale: FAR_SCALE,
             far_scale_grey: FAR_SCALE_GREY,
             ground_range: Some(GroundRange::default()),
