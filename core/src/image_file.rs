@@ -56,7 +56,11 @@ pub fn jpeg_ends_early(bytes: &[u8]) -> bool {
 }
 
 /// [`jpeg_ends_early`] as an error message, or `Ok` for a complete stream or another format.
+/// An empty file is refused too (a decoder would only say that it cannot tell the format).
 pub fn check_complete(bytes: &[u8]) -> Result<(), String> {
+    if bytes.is_empty() {
+        return Err("the file is empty (0 bytes)".into());
+    }
     if jpeg_ends_early(bytes) {
         return Err(format!("the JPEG data end before the end-of-image marker ({} bytes): the file is truncated, and a decoded image would be partly blank", bytes.len()));
     }
@@ -108,5 +112,9 @@ mod tests {
         // Not a JPEG: nothing to say.
         assert!(!jpeg_ends_early(b"\x89PNG\r\n\x1a\n"));
         assert!(!jpeg_ends_early(&[]));
+        let empty = dir.path().join("empty.png");
+        std::fs::write(&empty, []).unwrap();
+        let e = read_whole(&empty).unwrap_err();
+        assert!(e.kind() == std::io::ErrorKind::InvalidData && e.to_string().contains("empty (0 bytes)"), "{e}");
     }
 }
