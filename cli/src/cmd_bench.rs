@@ -95,6 +95,13 @@ pub struct BenchArgs {
     /// Real stage: score calibration JSON (default: the one beside the model).
     #[arg(long)]
     pub calibration: Option<PathBuf>,
+    /// Line2D stages: far-search factors, as `tubeloc detect --far-scale` ("K" or COLOUR:GREY)
+    #[arg(long, default_value = crate::cmd_detect_line2d::DEFAULT_FAR_SCALE, value_parser = crate::args::far_scale)]
+    pub line2d_far_scale: (f64, f64),
+    /// Line2D stages: largest enlargement to the library's scale, as `tubeloc detect
+    /// --max-upsample`
+    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_UPSAMPLE, value_parser = crate::args::upsample_limit)]
+    pub line2d_max_upsample: f64,
     /// Redo every stage even if recorded as done.
     #[arg(long)]
     pub fresh: bool,
@@ -250,6 +257,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             st.run(&format!("line2d/{sp}"), &[dir.join("eval/metrics.json")], || {
                 let mut detect = DetectArgs::dataset(Method::Line2d, &split_dir(sp), &dir);
                 (detect.line2d.templates, detect.line2d.camera) = (Some(lib.clone()), Some(camera.clone()));
+                (detect.line2d.far_scale, detect.line2d.max_upsample) = (a.line2d_far_scale, a.line2d_max_upsample);
                 detect_and_eval(detect, &split_dir(sp), &dir, n_img[sp])
             })?;
         }
@@ -412,7 +420,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if !a.skip.contains(&Part::Real) {
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let calibration = model.calibration(a.calibration.as_deref())?;
-        let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4, grasp_images: None };
+        let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4, grasp_images: None, line2d_far_scale: a.line2d_far_scale, line2d_max_upsample: a.line2d_max_upsample };
         st.run("real", &[out.join("real").join("report.md")], || {
             crate::cmd_bench_real::run(&stage, &out)?;
             Ok(json!({}))

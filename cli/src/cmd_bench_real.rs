@@ -39,6 +39,10 @@ pub struct RealStage {
     pub per_grey_frame: u32,
     /// Grasp checks on at most this many grey composites (all when `None`).
     pub grasp_images: Option<usize>,
+    /// Line2D far-search factors (colour, grey) (`tubeloc detect --far-scale`).
+    pub line2d_far_scale: (f64, f64),
+    /// Line2D largest enlargement to the library's scale (`tubeloc detect --max-upsample`).
+    pub line2d_max_upsample: f64,
 }
 
 /// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
@@ -205,22 +209,23 @@ fn line2d_library(dir: &Path) -> Result<PathBuf> {
     Ok(lib)
 }
 
-/// Line2D options at their defaults (shipped verifier and threshold) with library `lib`.
-fn line2d_opts(lib: &Path) -> Result<crate::cmd_detect_line2d::Line2dOpts> {
+/// Line2D options at their defaults (shipped verifier and threshold) with library `lib` and
+/// the stage's far search and enlargement limit.
+fn line2d_opts(lib: &Path, stage: &RealStage) -> crate::cmd_detect_line2d::Line2dOpts {
     let mut opts = crate::cmd_detect::line2d_defaults();
     opts.templates = Some(lib.to_path_buf());
-    Ok(opts)
+    (opts.far_scale, opts.max_upsample) = (stage.line2d_far_scale, stage.line2d_max_upsample);
+    opts
 }
 
 /// Line2D on a composite set (each image's own camera, resampled to the library's scale):
 /// COCO segm AP50 / AR, false detections per image, time per image.
-fn line2d_eval(set: &Path, lib: &Path, out: &Path) -> Result<Value> {
+fn line2d_eval(set: &Path, opts: &crate::cmd_detect_line2d::Line2dOpts, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
     let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
-    let opts = line2d_opts(lib)?;
     // Load the library outside the timing.
-    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(&opts)?;
+    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(opts)?;
     let mut dets = Vec::new();
     let mut ms = 0.0;
     for (id, path) in &images {
@@ -241,9 +246,9 @@ fn line2d_eval(set: &Path, lib: &Path, out: &Path) -> Result<Value> {
 
 /// Line2D detections (default threshold) on each real negative frame, under the same assumed
 /// cameras as the learned detector's negatives.
-fn line2d_negatives(data: &Path, lib: &Path, frames: Option<usize>) -> Result<Value> {
+fn line2d_negatives(data: &Path, opts: &crate::cmd_detect_line2d::Line2dOpts, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
-    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(&line2d_opts(lib)?)?;
+    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(opts)?;
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     let mut per_frame = Vec::new();
     let mut ms = 0.0;
@@ -287,13 +292,14 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
-    let l2_grey = line2d_eval(&grey_set, &lib, &dir.join("line2d_grey"))?;
-    let l2_colour = line2d_eval(&colour_set, &lib, &dir.join("line2d_colour"))?;
-    let l2_neg = line2d_negatives(&stage.data, &lib, stage.frames)?;
+    let l2_opts = line2d_opts(&lib, stage);
+    let l2_grey = line2d_eval(&grey_set, &l2_opts, &dir.join("line2d_grey"))?;
+    let l2_colour = line2d_eval(&colour_set, &l2_opts, &dir.join("line2d_colour"))?;
+    let l2_neg = line2d_negatives(&stage.data, &l2_opts, stage.frames)?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "grasp_grey": grasp,
-        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -317,7 +323,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
-    let far_grey = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    let far_grey = stage.line2d_far_scale.1;
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones searched once, {threshold_far:.3} on grey ones searched twice); their precision column gives the false detections per image instead.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();

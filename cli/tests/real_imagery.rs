@@ -70,7 +70,8 @@ fn bench_real_stage_runs_at_a_small_size() {
     let ds = dir.path().join("dataset");
     ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
     let out = dir.path().join("bench");
-    ok(&["bench", "--dataset", p(&ds), "--skip", "line2d,learned,poses,stereo,fullres,tags", "--real-data", p(&real_data()), "--real-frames", "2", "--out", p(&out)]);
+    // Line2D's far search on grey frames set for the bench (default 1.4): recorded and reported.
+    ok(&["bench", "--dataset", p(&ds), "--skip", "line2d,learned,poses,stereo,fullres,tags", "--real-data", p(&real_data()), "--real-frames", "2", "--line2d-far-scale", "1:1.2", "--out", p(&out)]);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("## Real imagery"), "{report}");
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/summary.json")).unwrap()).unwrap();
@@ -105,10 +106,13 @@ fn bench_real_stage_runs_at_a_small_size() {
         assert!((0.0..=1.0).contains(&ap), "line2d {set}: AP50 {ap}");
         assert!(v["ms_per_image"].as_f64().unwrap() > 0.0);
     }
+    assert_eq!(summary["line2d"]["far_scale"], serde_json::json!([1.0, 1.2]));
+    assert_eq!(summary["line2d"]["max_upsample"], 2.0);
     assert_eq!(summary["line2d"]["negatives"]["frames"], 2);
     assert!(summary["line2d"]["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
     let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
+    assert!(real_md.contains("searched again 1.2x further enlarged"), "{real_md}");
     assert!(real_md.contains("| colour, snapped to poses |"), "{real_md}");
     assert_eq!(real_md.matches("centre along the axis").count(), 2, "{real_md}");
 }
