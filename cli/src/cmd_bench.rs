@@ -100,7 +100,7 @@ pub struct BenchArgs {
     pub line2d_far_scale: (f64, f64),
     /// Line2D stages: largest enlargement to the library's scale, as `tubeloc detect
     /// --max-upsample`
-    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_UPSAMPLE, value_parser = crate::args::upsample_limit)]
+    #[arg(long, default_value_t = tubeloc_detect::line2d::params::MAX_UPSAMPLE, value_parser = crate::args::upsample_limit)]
     pub line2d_max_upsample: f64,
     /// Redo every stage even if recorded as done.
     #[arg(long)]

@@ -58,11 +58,11 @@ pub struct Line2dOpts {
     pub rerank_area_weight: f32,
     /// Line2D: at most this many coarse candidates per template go to the full-resolution
     /// search, the best by coarse score (0 = all).
-    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_CANDIDATES)]
+    #[arg(long, default_value_t = tubeloc_detect::line2d::params::MAX_CANDIDATES)]
     pub max_candidates: usize,
     /// Line2D: at most this many coarse candidates per megapixel over all templates go to the
     /// full-resolution search, the best by coarse similarity (0 = no budget)
-    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_CANDIDATES_PER_MPX)]
+    #[arg(long, default_value_t = tubeloc_detect::line2d::params::MAX_CANDIDATES_PER_MPX)]
     pub max_candidates_per_mpx: usize,
     /// Line2D: also search the image enlarged by this factor beyond the library's scale (at
     /// most --max-upsample in all), for tubes up to that many times farther than the library's
@@ -74,7 +74,7 @@ pub struct Line2dOpts {
     /// Line2D: largest factor by which an image is enlarged to the library's scale: an image
     /// of a camera that needs more is not searched (with a warning), and the far search runs
     /// only where the image enlarged --far-scale times more stays within it
-    #[arg(long, default_value_t = tubeloc_detect::line2d::matching::MAX_UPSAMPLE, value_parser = crate::args::upsample_limit)]
+    #[arg(long, default_value_t = tubeloc_detect::line2d::params::MAX_UPSAMPLE, value_parser = crate::args::upsample_limit)]
     pub max_upsample: f64,
     /// Line2D ground consistency, where the image's ground plane is known (a dataset image's
     /// `ground`, or --ground): a match is kept only when its template's distance is within

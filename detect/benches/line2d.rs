@@ -28,7 +28,8 @@ use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tubeloc_core::TubeModel;
-use tubeloc_detect::line2d::matching::{match_all, nms, prepare_image};
+use tubeloc_detect::line2d::matching::{match_all, prepare_image};
+use tubeloc_detect::line2d::nms::nms;
 use tubeloc_detect::line2d::{LibraryParams, Line2dDetector, MatchParams, TemplateLibrary};
 use tubeloc_synth::{dataset::crop_around_a_tube, render, rig, RenderOptions, Scene, SceneConfig, TerrainKind, TimeOfDay};
 
@@ -150,7 +151,7 @@ fn main() {
     // detector that also searches the frame enlarged by the grey far factor (`--far-scale K`;
     // the default for grey frames of a camera coarser than the library's, such as Navcam) is
     // timed beside.
-    let k = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    let k = tubeloc_detect::line2d::params::FAR_SCALE_GREY;
     let far = Line2dDetector::new(lib.clone(), MatchParams { far_scale: k, far_scale_grey: k, ..p.clone() }).expect("detector");
     p.far_scale = 1.0;
     p.far_scale_grey = 1.0;

@@ -488,7 +488,7 @@ fn a_tube_beyond_the_library_range_is_found_by_the_far_search() {
 fn grey_frames_of_a_coarser_camera_get_the_far_search_by_default() {
     let (w, h) = (512usize, 384usize);
     let (k, _, lib) = library_of_1_8_to_2_2_m(w, h);
-    let far = tubeloc_detect::line2d::matching::FAR_SCALE_GREY;
+    let far = tubeloc_detect::line2d::params::FAR_SCALE_GREY;
     let t_true = tube_times_1_8_to_2_2_m(far);
     // Detections as (resampling factor, whether the centre is within 6 px of the tube's).
     let detect = |det: &Line2dDetector, img: &[u8], kk: &Pinhole| -> Vec<(f64, bool)> {

@@ -4,7 +4,7 @@
 //! `docs/design/0003-candle-with-own-convolution.md` for the choice of candle.
 //! Pipeline: [`preprocess`] (gray + box filter by default) →
 //! [`net::TubeNet`] (stride-4 foreground, centre heatmap, axis angle, half-length) →
-//! [`decode`] (instances with mask, score and [`tubeloc_core::AxisSeed`]). Training:
+//! [`decode`](mod@decode) (instances with mask, score and [`tubeloc_core::AxisSeed`]). Training:
 //! [`augment`] crops, [`targets`], [`train::Trainer`]; weights: [`model::LearnedModel`]
 //! (safetensors with format version and checksum); [`soup`] averages fine-tuned models;
 //! [`shipped`] is the shipped model, embedded in the library.

@@ -7,7 +7,9 @@
 use crate::line2d::classify::features;
 use crate::line2d::detection::Line2dDetection;
 use crate::line2d::ground::GroundRange;
-use crate::line2d::matching::{match_all_within, nms_clusters, prepare_image, rerank_with, MatchParams, RawMatch, MAX_NMS_INPUT};
+use crate::line2d::matching::{match_all_within, prepare_image, RawMatch};
+use crate::line2d::nms::{nms_clusters, rerank_with, MAX_NMS_INPUT};
+use crate::line2d::params::MatchParams;
 use crate::line2d::template::TemplateLibrary;
 use crate::line2d::verify::{contrast, luminance, verified_score, SampleCache};
 use crate::line2d::Line2dError;

@@ -1,4 +1,5 @@
-//! Coarse-to-fine matching of a template library against an image, and non-maximum suppression.
+//! Coarse-to-fine matching of a template library against an image (raw matches; their
+//! suppression and re-ranking: [`crate::line2d::nms`]).
 //!
 //! Similarity of template `T` placed with its top-left pixel at `c` (Hinterstoisser et al.):
 //! `E(c) = Σ_f S_{o_f}(c + p_f)` where `S_o` is the response map of orientation `o`
@@ -21,132 +22,12 @@
 //! wrap, vectorized 32 lanes wide), and each block is widened into `u16` totals (up to
 //! 16383 features). Rayon runs across templates.
 
-use crate::line2d::classify::Verifier;
-use crate::line2d::gradient::{downsample_rgb, quantize_rgb, GradientParams};
-use crate::line2d::ground::GroundRange;
+use crate::line2d::gradient::{downsample_rgb, quantize_rgb};
+use crate::line2d::params::MatchParams;
 use crate::line2d::response::{linearize, response_maps, spread, LinearMemories, ResponseMaps};
 use crate::line2d::template::{Template, TemplateLibrary};
-use crate::line2d::verify::VerifyParams;
 use crate::line2d::{Line2dError, SIM_MAX};
 use rayon::prelude::*;
-
-/// Matching knobs.
-#[derive(Clone, Debug, PartialEq)]
-pub struct MatchParams {
-    /// Gradient quantization.
-    pub gradient: GradientParams,
-    /// Spreading / grid step at level 0 (full resolution), pixels.
-    pub t0: usize,
-    /// Spreading / grid step at level 1 (half resolution), pixels.
-    pub t1: usize,
-    /// Detection threshold, percent of the maximal similarity (0..100).
-    pub threshold: f32,
-    /// Threshold of the coarse level, percent (defaults to `threshold`).
-    pub coarse_threshold: Option<f32>,
-    /// Two detections whose placed silhouettes overlap with IoU above this are merged (NMS).
-    pub nms_iou: f32,
-    /// Maximum detections returned per image.
-    pub max_detections: usize,
-    /// Pose re-ranking spreading `T` at level 0 (0 = off): within each NMS cluster, the matches
-    /// scoring within `rerank_margin` of the best are re-scored with this tighter spreading
-    /// (best over +-1 px) and the winner gives the detection's template, pose and mask. This
-    /// separates views that the coarser `t0` scores alike (a thin tube's tilt vs distance).
-    pub rerank_t: usize,
-    /// Score margin (percentage points) of the matches re-ranked within a cluster.
-    pub rerank_margin: f32,
-    /// Radiometric verification of raw matches before NMS (None = Line2D score only).
-    pub verify: Option<VerifyParams>,
-    /// Re-ranking bonus for larger silhouettes: `w · area / max area` among the re-ranked
-    /// matches of a cluster. A tube's white body alone looks like a whole, farther tube; this
-    /// prefers the template covering the whole tube when it scores nearly as well.
-    pub rerank_area_weight: f32,
-    /// At most this many coarse candidates per template go to the level-0 search, the best by
-    /// coarse score (0 = all). On textured real frames one template reaches the coarse
-    /// threshold at hundreds of places (rock edges, layers); the cap bounds the fine search
-    /// there. The default was chosen on validation composites (design record 0042).
-    pub max_candidates: usize,
-    /// At most this many coarse candidates per megapixel of the image go to the level-0 search
-    /// over all templates, the best by coarse similarity (0 = no budget; see [`match_all`]).
-    pub max_candidates_per_mpx: usize,
-    /// Clutter verifier applied to each detection after NMS (None = off): its probability
-    /// becomes the score, and detections below its `threshold` are dropped
-    /// ([`crate::line2d::classify`]).
-    pub verifier: Option<Verifier>,
-    /// With the verifier: a detection whose mask overlaps a more probable detection's mask by
-    /// more than this fraction of the smaller of the two masks is dropped (a second NMS, in
-    /// probability order, for partial matches on one tube that the first NMS keeps apart).
-    pub verified_overlap: f32,
-    /// Largest resampling factor by which an image is enlarged to the library's scale. An
-    /// image whose camera needs more (its pixels are over this many times coarser than the
-    /// library's: tubes at the library's ranges span too few pixels to carry their contour,
-    /// e.g. Navcam frames binned 4x4 on board) is not searched and gives no detection. The
-    /// far search ([`MatchParams::far_scale`]) runs only within it.
-    pub max_upsample: f64,
-    /// A second search on a colour image enlarged by this factor beyond the library's scale
-    /// (1 = none), within [`MatchParams::max_upsample`]: tubes up to this many times farther
-    /// than the library's farthest templates match there, and their poses are placed that
-    /// many times farther along their rays. Detections of both searches are merged by the
-    /// verified-overlap suppression.
-    pub far_scale: f64,
-    /// [`MatchParams::far_scale`] for a grey image (three equal channels,
-    /// [`crate::input::is_grey_rgb8`]) that is enlarged to the library's scale: a mono camera
-    /// whose pixels are coarser than the library's, e.g. Navcam, with tubes 6-10 px wide at
-    /// the library's scale. Other grey images take [`MatchParams::far_scale`].
-    pub far_scale_grey: f64,
-    /// Ground consistency of raw matches, applied when the image's ground plane is known
-    /// ([`crate::line2d::Line2dDetector::detect_on_ground`]): a match whose template distance
-    /// disagrees with the ground's distance along its centre's ray is dropped before
-    /// verification and NMS ([`crate::line2d::ground`]). `None`: off.
-    pub ground_range: Option<GroundRange>,
-}
-
-/// Default [`MatchParams::max_upsample`]: an image is enlarged at most 2x to the library's
-/// scale, the far search's factor included.
-pub const MAX_UPSAMPLE: f64 = 2.0;
-
-/// Default [`MatchParams::far_scale`] (colour images): one search. A far search on colour
-/// frames finds more far tubes but more false ones, and its cut costs the synthetic benchmark
-/// (design records 0047, 0054).
-pub const FAR_SCALE: f64 = 1.0;
-
-/// Default [`MatchParams::far_scale_grey`] (grey images enlarged to the library's scale): a
-/// Navcam frame (f ~ 1220 px, enlarged 1.41x to the default library's 1720 px) is searched
-/// again at 1.97x, where its tubes at 3-5 m are found more often; the far search's detections
-/// have their own verifier cut (`Verifier::threshold_far`, design record 0055). A farther
-/// search (2.0, beyond [`MAX_UPSAMPLE`]) lost on the test part (record 0056).
-pub const FAR_SCALE_GREY: f64 = 1.4;
-
-impl Default for MatchParams {
-    fn default() -> Self {
-        MatchParams {
-            gradient: GradientParams::default(),
-            t0: 4,
-            t1: 8,
-            threshold: 80.0,
-            coarse_threshold: None,
-            nms_iou: 0.3,
-            max_detections: 100,
-            rerank_t: 2,
-            rerank_margin: 15.0,
-            verify: Some(VerifyParams::default()),
-            rerank_area_weight: 0.3,
-            max_candidates: MAX_CANDIDATES,
-            max_candidates_per_mpx: MAX_CANDIDATES_PER_MPX,
-            verifier: Some(Verifier::shipped()),
-            verified_overlap: 0.5,
-            max_upsample: MAX_UPSAMPLE,
-            far_scale: FAR_SCALE,
-            far_scale_grey: FAR_SCALE_GREY,
-            ground_range: Some(GroundRange::default()),
-        }
-    }
-}
-
-/// Default [`MatchParams::max_candidates_per_mpx`].
-pub const MAX_CANDIDATES_PER_MPX: usize = 175_000;
-
-/// Default [`MatchParams::max_candidates`].
-pub const MAX_CANDIDATES: usize = 48;
 
 /// The precomputed image side: response maps at level 0, linearized memories at level 1.
 #[derive(Clone, Debug)]
@@ -672,105 +553,6 @@ pub fn match_all_within(img: &PreparedImage, lib: &TemplateLibrary, p: &MatchPar
     // Matches equal in this order are equal in every field, so an unstable sort is exact.
     all.sort_unstable_by(|a, b| b.score.total_cmp(&a.score).then(a.template.cmp(&b.template)).then((a.y, a.x).cmp(&(b.y, b.x))));
     all
-}
-
-/// IoU of two templates' silhouettes placed at their match positions.
-pub fn placed_mask_iou(ta: &Template, a: &RawMatch, tb: &Template, b: &RawMatch) -> f32 {
-    let (aw, ah) = (ta.levels[0].width as i32, ta.levels[0].height as i32);
-    let (bw, bh) = (tb.levels[0].width as i32, tb.levels[0].height as i32);
-    let (x0, y0) = (a.x.max(b.x), a.y.max(b.y));
-    let (x1, y1) = ((a.x + aw).min(b.x + bw), (a.y + ah).min(b.y + bh));
-    if x1 <= x0 || y1 <= y0 {
-        return 0.0;
-    }
-    let (aa, ab) = (ta.area, tb.area);
-    let mut inter = 0u32;
-    let ub = ((x1 - x0) * (y1 - y0)) as u32;
-    let ub = ub.min(aa).min(ab);
-    if ub == 0 {
-        return 0.0;
-    }
-    for y in y0..y1 {
-        let ra = &ta.mask[((y - a.y) * aw + (x0 - a.x)) as usize..((y - a.y) * aw + (x1 - a.x)) as usize];
-        let rb = &tb.mask[((y - b.y) * bw + (x0 - b.x)) as usize..((y - b.y) * bw + (x1 - b.x)) as usize];
-        inter += ra.iter().zip(rb).map(|(&p, &q)| (p & q) as u32).sum::<u32>();
-    }
-    let uni = aa + ab - inter;
-    if uni == 0 {
-        0.0
-    } else {
-        inter as f32 / uni as f32
-    }
-}
-
-/// Greedy NMS over matches sorted by decreasing score: a match is dropped when its placed
-/// silhouette overlaps an already kept one with IoU above `iou`. Keeps at most `max`.
-pub fn nms(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: usize) -> Vec<RawMatch> {
-    nms_clusters(matches, lib, iou, max).into_iter().map(|c| c[0]).collect()
-}
-
-/// At most this many raw matches (the best-scoring) enter NMS.
-pub const MAX_NMS_INPUT: usize = 20_000;
-
-/// NMS returning each kept match (first) with the matches it suppressed (its cluster), in
-/// decreasing score order. A suppressed match joins the first kept match it overlaps.
-pub fn nms_clusters(matches: &[RawMatch], lib: &TemplateLibrary, iou: f32, max: usize) -> Vec<Vec<RawMatch>> {
-    let mut clusters: Vec<Vec<RawMatch>> = Vec::new();
-    for m in matches.iter().take(MAX_NMS_INPUT) {
-        let tm = &lib.templates[m.template as usize];
-        let hit = clusters.iter().position(|c| {
-            let tk = &lib.templates[c[0].template as usize];
-            // Upper bound first: IoU <= min(areas, box overlap) / (sum of areas - that).
-            let k = &c[0];
-            let ox = (k.x + tk.levels[0].width as i32).min(m.x + tm.levels[0].width as i32) - k.x.max(m.x);
-            let oy = (k.y + tk.levels[0].height as i32).min(m.y + tm.levels[0].height as i32) - k.y.max(m.y);
-            if ox <= 0 || oy <= 0 {
-                return false;
-            }
-            let ub = ((ox * oy) as u32).min(tk.area).min(tm.area) as f32;
-            ub / ((tk.area + tm.area) as f32 - ub) > iou && placed_mask_iou(tk, k, tm, m) > iou
-        });
-        match hit {
-            Some(i) => clusters[i].push(*m),
-            None if clusters.len() < max => clusters.push(vec![*m]),
-            None => {}
-        }
-    }
-    clusters
-}
-
-/// Re-ranks a cluster: among matches within `margin` points of the best, the one with the best
-/// re-ranking score (response maps `rr`, best over +-1 px) wins; returns it with its position
-/// moved to that best pixel and the cluster's best LINE-2D score.
-pub fn rerank(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32) -> RawMatch {
-    rerank_with(cluster, lib, rr, margin, |_, _, _| 0.0)
-}
-
-/// [`rerank`] with a bonus: the key of a candidate placed at `(x, y)` is
-/// `E_rr / (4 n) + bonus(template, x, y)` (fraction of the maximal re-ranking similarity plus
-/// e.g. the weighted verification contrast).
-pub fn rerank_with(cluster: &[RawMatch], lib: &TemplateLibrary, rr: &ResponseMaps, margin: f32, bonus: impl Fn(&Template, i32, i32) -> f32) -> RawMatch {
-    let top = cluster[0];
-    let mut best = (f64::NEG_INFINITY, top);
-    for m in cluster.iter().filter(|m| m.score >= top.score - margin) {
-        let t = &lib.templates[m.template as usize];
-        let (tw, th) = (t.levels[0].width as i32, t.levels[0].height as i32);
-        let n = t.levels[0].features.len().max(1) as f64;
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let (x, y) = (m.x + dx, m.y + dy);
-                if x < 0 || y < 0 || x + tw > rr.width as i32 || y + th > rr.height as i32 {
-                    continue;
-                }
-                let e = fine_score_at(rr, t, x as usize, y as usize) as f64;
-                let key = e / (SIM_MAX as f64 * n) + bonus(t, x, y) as f64;
-                if key > best.0 {
-                    best = (key, RawMatch { template: m.template, x, y, score: top.score });
-                }
-            }
-        }
-    }
-    best.1
 }
 
 #[cfg(test)]

@@ -11,11 +11,13 @@
 //!   modulo 180 degrees, 3x3 majority vote, magnitude threshold.
 //! - [`template`]: contour features of a silhouette (spread-out selection) on a 2-level pyramid,
 //!   and the [`TemplateLibrary`] built from the tube model.
-//! - [`format`]: the versioned, checksummed binary library file (`.tlt`).
+//! - [`format`](mod@format): the versioned, checksummed binary library file (`.tlt`).
 //! - [`response`]: spreading over `T`, the 8 response maps via two 4-bit lookup tables and the
 //!   linearized memories.
+//! - [`params`]: [`MatchParams`], the detector's settings and their chosen defaults.
 //! - [`matching`]: coarse-to-fine matching with saturation-free integer accumulation, rayon
-//!   across templates, non-maximum suppression.
+//!   across templates.
+//! - [`nms`]: non-maximum suppression by placed silhouettes, and re-ranking within clusters.
 //! - [`ground`]: ground consistency: where the ground plane is known, a match's template
 //!   distance must agree with the ground's distance along its ray.
 //! - [`verify`]: radiometric verification (bright silhouette against a ring around it)
@@ -35,6 +37,8 @@ pub mod ground;
 pub mod mask;
 pub mod matching;
 pub mod mesh;
+pub mod nms;
+pub mod params;
 pub mod render;
 pub mod response;
 pub mod template;
@@ -46,7 +50,7 @@ pub use detection::Line2dDetection;
 pub use detector::Line2dDetector;
 pub use gradient::GradientParams;
 pub use ground::GroundRange;
-pub use matching::MatchParams;
+pub use params::MatchParams;
 pub use render::{render_silhouette, Silhouette};
 pub use template::{Feature, LibraryEstimate, LibraryParams, Template, TemplateLevel, TemplateLibrary};
 pub use verify::VerifyParams;
