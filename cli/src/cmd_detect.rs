@@ -119,7 +119,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
                 let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
                 sizes.extend(ds.images.iter().map(|im| (im.id, (im.width, im.height))));
             } else if let Some(p) = &args.image {
-                let (w, h) = image::image_dimensions(p).with_context(|| format!("reading {}", p.display()))?;
+                let (w, h) = tubeloc_detect::input::image_size(p).with_context(|| format!("reading {}", p.display()))?;
                 sizes.insert(args.image_id, (w, h));
             }
             crate::cmd_detect_learned::run_external(results, &|id| sizes.get(&id).copied())?

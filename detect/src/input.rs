@@ -121,6 +121,16 @@ pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::
     image::load_from_memory(&tubeloc_core::image_file::read_whole(path.as_ref())?)
 }
 
+/// The width and height of an image file from its header (the pixels are not decoded); an
+/// empty file is refused as such ([`tubeloc_core::image_file::check_complete`]).
+pub fn image_size(path: impl AsRef<Path>) -> Result<(u32, u32), image::ImageError> {
+    let path = path.as_ref();
+    if std::fs::metadata(path)?.len() == 0 {
+        tubeloc_core::image_file::check_complete(&[]).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+    }
+    image::image_dimensions(path)
+}
+
 /// Opens an image file (PNG, JPEG, TIFF) by [`open_image`] as [`eight_bit`].
 pub fn open_eight_bit(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
     open_image(path).map(eight_bit)
@@ -137,6 +147,18 @@ pub fn load(path: &Path) -> Result<DetectorInput, String> {
 mod tests {
     use super::*;
     use image::{ImageBuffer, Luma, Rgb, Rgba};
+
+    #[test]
+    fn image_size_reads_the_header_and_refuses_an_empty_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let png = dir.path().join("a.png");
+        image::GrayImage::new(7, 5).save(&png).unwrap();
+        assert_eq!(image_size(&png).unwrap(), (7, 5));
+        let empty = dir.path().join("empty.png");
+        std::fs::write(&empty, []).unwrap();
+        assert!(image_size(&empty).unwrap_err().to_string().contains("empty (0 bytes)"));
+        assert!(image_size(dir.path().join("missing.png")).is_err());
+    }
 
     #[test]
     fn twelve_bit_data_fill_the_eight_bit_range() {

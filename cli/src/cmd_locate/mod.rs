@@ -409,7 +409,7 @@ pub struct FrameOutcome {
 /// Locates the tubes of one frame and encodes its document (with run statistics since
 /// `started` when given) and, with `overlay`, the overlay PNG. Nothing is written.
 pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Option<std::time::Instant>, overlay: bool) -> Result<FrameOutcome> {
-    let size = image::image_dimensions(&frame.image).with_context(|| format!("reading {}", frame.image.display()))?;
+    let size = tubeloc_detect::input::image_size(&frame.image).with_context(|| format!("reading {}", frame.image.display()))?;
     setup.check_size(&frame.image, size)?;
     setup.with_locator(&frame.image, size, |locator| {
         let cam = locator.camera().clone();
