@@ -409,10 +409,11 @@ impl Locator {
         refined.scene_depth.is_some()
     }
 
-    /// The input image in grey with each located tube's fitted contour, centre and chosen
-    /// gripper pose drawn ([`crate::overlay::draw_located`]).
-    pub fn overlay_located<'a>(&self, image: &DynamicImage, tubes: impl IntoIterator<Item = &'a LocatedTube>) -> image::RgbImage {
-        crate::overlay::draw_located(&FramePixels::of(image, false).gray, &self.refiner, &self.planner, &self.camera.model, tubes)
+    /// The input image in grey with what [`Locator::locate`] found in it drawn: each tube's
+    /// fitted contour and centre, coloured by its status (located, rejected, fit failed), and
+    /// the chosen gripper poses ([`crate::overlay::draw_located`]).
+    pub fn overlay_located(&self, image: &DynamicImage, found: &LocateOutput) -> image::RgbImage {
+        crate::overlay::draw_located(&FramePixels::of(image, false).gray, &self.refiner, &self.planner, &self.camera.model, found)
     }
 
     /// The input image in grey with each tube's fitted contour and centre drawn (green:

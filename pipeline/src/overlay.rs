@@ -5,15 +5,32 @@ use rayon::prelude::*;
 use tubeloc_core::{CameraModel, Plane, TubeAxisPose};
 use tubeloc_refine::Refiner;
 
+/// Contour colour of a located tube.
+pub const LOCATED: [u8; 3] = [40, 230, 60];
+/// Contour colour of a converged fit that was rejected (probability under the threshold, or
+/// interpenetrating a stronger tube): not handed to the planner.
+pub const REJECTED_CONVERGED: [u8; 3] = [250, 230, 40];
+/// Contour colour of a fit that did not converge.
+pub const NOT_CONVERGED: [u8; 3] = [240, 40, 40];
+/// Gripper outline colour of a feasible grasp.
+pub const GRASP_FEASIBLE: [u8; 3] = [0, 210, 255];
+/// Gripper outline colour where no grasp candidate is feasible.
+pub const GRASP_INFEASIBLE: [u8; 3] = [255, 150, 0];
+
 /// An RGB copy of `gray` with each pose's fitted contour (every 0.5 px) and a 7 px cross at its
-/// centre drawn, green for converged poses and red for rejected ones, in order.
+/// centre drawn, [`LOCATED`] green for converged poses and [`NOT_CONVERGED`] red for the
+/// others, in order.
 pub fn draw<'a>(gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: impl IntoIterator<Item = &'a TubeAxisPose>) -> image::RgbImage {
+    draw_coloured(gray, refiner, cam, poses.into_iter().map(|p| (p, if p.converged { LOCATED } else { NOT_CONVERGED })))
+}
+
+/// [`draw`] with a colour per pose.
+fn draw_coloured<'a>(gray: &Plane<u8>, refiner: &Refiner, cam: &CameraModel, poses: impl IntoIterator<Item = (&'a TubeAxisPose, [u8; 3])>) -> image::RgbImage {
     let (w, h) = (gray.width as u32, gray.height as u32);
     let mut rgb = vec![0u8; 3 * gray.data.len()];
     rgb.par_chunks_mut(3 << 14).zip(gray.data.par_chunks(1 << 14)).for_each(|(out, g)| out.chunks_exact_mut(3).zip(g).for_each(|(p, &v)| p.fill(v)));
     let mut img = image::RgbImage::from_raw(w, h, rgb).expect("3 bytes per pixel");
-    for p in poses {
-        let col = if p.converged { [40, 230, 60] } else { [240, 40, 40] };
+    for (p, col) in poses {
         for u in refiner.contour_pixels(cam, p, 0.5) {
             let (x, y) = (u.x.round(), u.y.round());
             if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
@@ -45,17 +62,23 @@ pub fn png_bytes(img: &image::RgbImage) -> Result<Vec<u8>, image::ImageError> {
     Ok(buf)
 }
 
-/// [`draw`] for located tubes, with each checked tube's chosen gripper pose: the outlines of its
-/// fingers and palm at `grasp.t_cam_grasp` ([`tubeloc_grasp::GripperModel::parts`]) projected
-/// every 1 mm along their edges, cyan for a feasible grasp, orange for none feasible (the plain
-/// grasp drawn). Tubes rejected before the grasp check (`candidates_tried` 0) get no gripper.
-pub fn draw_located<'a>(gray: &Plane<u8>, refiner: &Refiner, planner: &tubeloc_grasp::GraspPlanner, cam: &CameraModel, tubes: impl IntoIterator<Item = &'a crate::LocatedTube>) -> image::RgbImage {
-    let tubes: Vec<&crate::LocatedTube> = tubes.into_iter().collect();
-    let mut img = draw(gray, refiner, cam, tubes.iter().map(|t| &t.pose));
+/// [`draw`] for what [`crate::Locator::locate`] found: located tubes in [`LOCATED`] green,
+/// rejected detections whose fit converged (low probability, interpenetration) in
+/// [`REJECTED_CONVERGED`] yellow, failed fits in [`NOT_CONVERGED`] red; rejected ones drawn
+/// first, so located tubes stay on top. Each checked tube's chosen gripper pose is drawn too:
+/// the outlines of its fingers and palm at `grasp.t_cam_grasp`
+/// ([`tubeloc_grasp::GripperModel::parts`]) projected every 1 mm along their edges, cyan for a
+/// feasible grasp ([`GRASP_FEASIBLE`]), orange for none feasible ([`GRASP_INFEASIBLE`]; the plain
+/// grasp drawn). Tubes rejected before the
+/// grasp check (`candidates_tried` 0) get no gripper.
+pub fn draw_located(gray: &Plane<u8>, refiner: &Refiner, planner: &tubeloc_grasp::GraspPlanner, cam: &CameraModel, found: &crate::LocateOutput) -> image::RgbImage {
+    let rejected = found.rejected.iter().map(|r| (&r.tube.pose, if r.tube.pose.converged { REJECTED_CONVERGED } else { NOT_CONVERGED }));
+    let mut img = draw_coloured(gray, refiner, cam, rejected.chain(found.tubes.iter().map(|t| (&t.pose, LOCATED))));
+    let tubes: Vec<&crate::LocatedTube> = found.tubes.iter().chain(found.rejected.iter().map(|r| &r.tube)).collect();
     let (w, h) = (img.width() as f64, img.height() as f64);
     let parts = planner.gripper().parts();
     for t in tubes.iter().filter(|t| t.grasp.candidates_tried > 0) {
-        let col = if t.grasp.feasible { [0, 210, 255] } else { [255, 150, 0] };
+        let col = if t.grasp.feasible { GRASP_FEASIBLE } else { GRASP_INFEASIBLE };
         for part in &parts {
             let pose = t.grasp.t_cam_grasp.0 * part.pose;
             let e = part.shape.half_extents;

@@ -79,6 +79,18 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     let (poses, fit_ms) = locator.refine(&LocateInput { image: &li, right: None, ground: Some(ground), up: None }, &mono.detections).unwrap();
     assert_eq!(fit_ms.len(), 1);
     assert_eq!(poses[0], mono.tubes[0].pose);
+    // The overlay tells a located tube (green, with its gripper) from a converged fit that was
+    // rejected (yellow, no gripper), so a rejected tube never looks handed to the planner.
+    let count = |img: &image::RgbImage, c: [u8; 3]| img.pixels().filter(|p| p.0 == c).count();
+    use tubeloc_pipeline::overlay::{GRASP_FEASIBLE, LOCATED, REJECTED_CONVERGED};
+    let shown = locator.overlay_located(&li, &mono);
+    assert!(count(&shown, LOCATED) > 50 && count(&shown, REJECTED_CONVERGED) == 0);
+    assert!(count(&shown, GRASP_FEASIBLE) > 0, "the feasible grasp's gripper is not drawn");
+    let mut low = mono.clone();
+    let tube = low.tubes.remove(0);
+    low.rejected.push(tubeloc_pipeline::RejectedTube { tube, reason: tubeloc_pipeline::Rejection::LowProbability { probability: 0.1, threshold: 0.8 } });
+    let shown = locator.overlay_located(&li, &low);
+    assert!(count(&shown, LOCATED) == 0 && count(&shown, REJECTED_CONVERGED) > 50);
 }
 
 #[test]

@@ -419,7 +419,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
-            true => Some(tubeloc_pipeline::overlay::png_bytes(&locator.overlay_located(&image, tubes.iter().map(|t| t.tube))).context("encoding the overlay PNG")?),
+            true => Some(tubeloc_pipeline::overlay::png_bytes(&locator.overlay_located(&image, &found)).context("encoding the overlay PNG")?),
             false => None,
         };
         let doc = LocateDoc {
