@@ -172,10 +172,16 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let mut out = Vec::new();
+    let mut warned_no_camera = false;
     for (id, path) in images {
         let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let cam = cameras.get(id).or(camera.as_ref());
+        if cam.is_none() && !warned_no_camera {
+            warned_no_camera = true;
+            let fx = det.library.params.camera.fx;
+            bar.suspend(|| eprintln!("note: {} has no camera (--camera, or a dataset's images[].camera): matched at the library's focal length ({fx:.0} px); an image of a camera with another pixel scale misses its tubes", path.display()));
+        }
         if !det.resolvable(cam) {
             let (sx, sy) = det.scale_for(cam);
             bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));

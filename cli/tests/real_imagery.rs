@@ -171,10 +171,17 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
         let cam = dir.path().join("camera.json");
         camera_json(&cam, w, h, hfov);
         let out = dir.path().join("dets.json");
-        ok(&["detect", "--method", "line2d", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&image), "--out", p(&out)]);
+        let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&image), "--out", p(&out)]);
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(!String::from_utf8_lossy(&o.stderr).contains("has no camera"), "{}", String::from_utf8_lossy(&o.stderr));
         let dets: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
         assert_eq!(dets.as_array().unwrap().len(), 0, "{rel}: {dets}");
     }
+    // Without a camera the frame is matched at the library's focal length, with a note saying so.
+    let image = neg.join("msl_mastcam_marsdata/0402ML1667000000E1.jpg");
+    let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--image", p(&image), "--out", p(&dir.path().join("nocam.json"))]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("has no camera (--camera"), "{}", String::from_utf8_lossy(&o.stderr));
     // A Navcam frame binned 4x4 on board (256 px, 45 degree field of view) would need a 5.6x
     // enlargement to the library's scale: it is not searched, with a warning.
     let image = neg.join("msl_navcam_256/NLB_462565295EDR_D0402262TRAV00273M_.jpg");
