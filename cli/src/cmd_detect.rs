@@ -109,6 +109,9 @@ pub fn run(args: DetectArgs) -> Result<()> {
             };
             let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
             let scales = crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_ref(), band)?;
+            if band.is_some() && args.dataset.is_none() && args.line2d.camera.is_none() {
+                eprintln!("note: no --camera: images are detected as they are, not at the working scale of --range-m {} (tubes about 16 px wide); pass the camera for that, or --range-m off to silence this", args.range_m);
+            }
             crate::cmd_detect_learned::run_learned(&model, &images, &scales, &cfg)?
         }
         Method::External => {

@@ -182,6 +182,17 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
     let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--image", p(&image), "--out", p(&dir.path().join("nocam.json"))]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stderr).contains("has no camera (--camera"), "{}", String::from_utf8_lossy(&o.stderr));
+    // The learned detector says when --range-m cannot be used for want of a camera.
+    let out = dir.path().join("nocam_learned.json");
+    for (extra, noted) in [(None, true), (Some("off"), false)] {
+        let mut args = vec!["detect", "--method", "learned", "--image", p(&image), "--out", p(&out)];
+        if let Some(r) = extra {
+            args.extend(["--range-m", r]);
+        }
+        let o = tubeloc(&args);
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(String::from_utf8_lossy(&o.stderr).contains("note: no --camera"), noted, "{:?}: {}", extra, String::from_utf8_lossy(&o.stderr));
+    }
     // A Navcam frame binned 4x4 on board (256 px, 45 degree field of view) would need a 5.6x
     // enlargement to the library's scale: it is not searched, with a warning.
     let image = neg.join("msl_navcam_256/NLB_462565295EDR_D0402262TRAV00273M_.jpg");
