@@ -68,16 +68,14 @@ pub fn png_bytes(img: &image::RgbImage) -> Result<Vec<u8>, image::ImageError> {
 /// first, so located tubes stay on top. Each checked tube's chosen gripper pose is drawn too:
 /// the outlines of its fingers and palm at `grasp.t_cam_grasp`
 /// ([`tubeloc_grasp::GripperModel::parts`]) projected every 1 mm along their edges, cyan for a
-/// feasible grasp ([`GRASP_FEASIBLE`]), orange for none feasible ([`GRASP_INFEASIBLE`]; the plain
-/// grasp drawn). Tubes rejected before the
-/// grasp check (`candidates_tried` 0) get no gripper.
+/// feasible grasp ([`GRASP_FEASIBLE`]), orange for none feasible ([`GRASP_INFEASIBLE`]; the
+/// plain grasp drawn). Rejected tubes are not grasp-checked and get no gripper.
 pub fn draw_located(gray: &Plane<u8>, refiner: &Refiner, planner: &tubeloc_grasp::GraspPlanner, cam: &CameraModel, found: &crate::LocateOutput) -> image::RgbImage {
     let rejected = found.rejected.iter().map(|r| (&r.tube.pose, if r.tube.pose.converged { REJECTED_CONVERGED } else { NOT_CONVERGED }));
     let mut img = draw_coloured(gray, refiner, cam, rejected.chain(found.tubes.iter().map(|t| (&t.pose, LOCATED))));
-    let tubes: Vec<&crate::LocatedTube> = found.tubes.iter().chain(found.rejected.iter().map(|r| &r.tube)).collect();
     let (w, h) = (img.width() as f64, img.height() as f64);
     let parts = planner.gripper().parts();
-    for t in tubes.iter().filter(|t| t.grasp.candidates_tried > 0) {
+    for t in found.tubes.iter().filter(|t| t.grasp.candidates_tried > 0) {
         let col = if t.grasp.feasible { GRASP_FEASIBLE } else { GRASP_INFEASIBLE };
         for part in &parts {
             let pose = t.grasp.t_cam_grasp.0 * part.pose;
