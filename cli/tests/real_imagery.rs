@@ -146,6 +146,42 @@ fn locate_hands_the_planner_no_tube_on_a_real_frame_without_tubes() {
     }
 }
 
+#[test]
+fn locate_takes_the_camera_and_ground_of_a_pds_camera_list() {
+    // `cahv_to_pinhole.py`'s list as the rig: the camera is the one named after the image's
+    // file, in the rover frame, and the ground is the one under it. A real Navcam frame of a
+    // test sol without a tube: nothing is located.
+    let dir = tempfile::tempdir().unwrap();
+    let cams_path = real_data().join("with_cameras/cameras.json");
+    let cams: Value = serde_json::from_str(&std::fs::read_to_string(&cams_path).unwrap()).unwrap();
+    let entry = cams
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV") && TEST_SOLS.contains(&e["sol"].as_i64().unwrap()) && e["model_type"] == "CAHVOR")
+        .expect("a full-frame Navcam entry of a test sol");
+    let image = real_data().join("with_cameras").join(entry["image"].as_str().unwrap());
+    let name = image.file_name().unwrap().to_str().unwrap();
+    let out = dir.path().join("poses.json");
+    let o = tubeloc(&["locate", "--rig", p(&cams_path), "--image", p(&image), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(3), "exit 3: no tube located; stderr {}", stderr(&o));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(doc["camera"], name);
+    assert!(doc["tubes"].as_array().unwrap().iter().all(|t| t["status"] != "located"), "{}", doc["tubes"]);
+    let num = |v: &Value| v.as_f64().unwrap();
+    for k in 0..3 {
+        assert!((num(&doc["T_rig_cam"]["translation"][k]) - num(&entry["camera_center_ref_m"][k])).abs() < 1e-9, "{}", doc["T_rig_cam"]);
+        // The camera's up is the site frame's -z: the third column of R_cam_from_site, negated.
+        let up = -num(&entry["R_cam_from_site"][k][2]);
+        assert!((num(&doc["up_cam"][k]) - up).abs() < 1e-6, "up {} against {up} (axis {k})", doc["up_cam"]);
+    }
+    assert!((num(&doc["camera_model"]["fx"]) - num(&entry["fx"])).abs() < 1e-9);
+    // A batch run cannot tell one image's camera from the file name of all: it asks for one.
+    let o = tubeloc(&["locate", "--rig", p(&cams_path), "--images", p(image.parent().unwrap()), "--out", p(&dir.path().join("batch"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("PDS camera list") && stderr(&o).contains("--camera-name"), "{}", stderr(&o));
+}
+
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.
 fn camera_json(path: &Path, w: u32, h: u32, hfov_deg: f64) {
     let f = (w as f64 / 2.0) / (hfov_deg / 2.0).to_radians().tan();

@@ -6,10 +6,13 @@
 //! - [`kalibr`]: a kalibr `camchain.yaml`, read and written (refused for cameras with `k3 != 0`).
 //! - [`ros`]: ROS `camera_info` YAML, one file per camera with each stereo pair's rectification;
 //!   written, and read as one camera.
+//! - [`pds`]: rover cameras from their PDS camera models (`cahv_to_pinhole.py`'s JSON list),
+//!   read: one camera per image, in the rover frame, with the ground under it.
 //!
 //! [`read_rig`] tells the formats apart by content, not by file name.
 
 pub mod kalibr;
+pub mod pds;
 pub mod ros;
 pub mod yaml_fields;
 
@@ -28,6 +31,8 @@ pub enum RigFormat {
     KalibrCamchain,
     /// ROS `camera_info` (a YAML mapping with `camera_matrix`): a one-camera rig.
     RosCameraInfo,
+    /// A JSON list of PDS cameras (first character `[`, [`pds`]): one camera per image.
+    PdsCameras,
 }
 
 impl RigFormat {
@@ -38,6 +43,7 @@ impl RigFormat {
             RigFormat::OpencvYaml => "OpenCV FileStorage YAML",
             RigFormat::KalibrCamchain => "kalibr camchain",
             RigFormat::RosCameraInfo => "ROS camera_info",
+            RigFormat::PdsCameras => "PDS camera list",
         }
     }
 }
@@ -49,6 +55,9 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
     let first = body.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
     if first.starts_with('{') {
         return Ok(RigFormat::TubelocJson);
+    }
+    if first.starts_with('[') {
+        return Ok(RigFormat::PdsCameras);
     }
     if first.starts_with("%YAML:") {
         return Ok(RigFormat::OpencvYaml);
@@ -63,18 +72,19 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
         },
         Err(e) => format!("not YAML ({e})"),
     };
-    Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
+    Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
 }
 
 /// Reads a rig from tubeloc JSON, OpenCV FileStorage YAML, a kalibr camchain, or a single ROS
-/// `camera_info` file (a one-camera rig with the camera at the rig origin), recognised by
-/// content. Errors name the file, and the field where one is wrong.
+/// `camera_info` file (a one-camera rig with the camera at the rig origin), or a PDS camera
+/// list (one camera per image, in the rover frame; [`pds`]), recognised by content. Errors name the file, and the field where one is wrong.
 pub fn read_rig(path: &Path) -> Result<Rig, CalibError> {
     let text = std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
     match detect_rig_format(&text).map_err(|m| CalibError::parse(path, m))? {
         RigFormat::TubelocJson => Ok(Rig::load_json(path)?),
         RigFormat::OpencvYaml => crate::yaml::rig_from_yaml(&text, path),
         RigFormat::KalibrCamchain => kalibr::rig_from_camchain(&text, path),
+        RigFormat::PdsCameras => pds::rig_from_pds(&text, path),
         RigFormat::RosCameraInfo => {
             let info = ros::CameraInfo::from_yaml(&text, path)?;
             let name = if info.name.is_empty() { "camera".to_string() } else { info.name };

@@ -312,6 +312,9 @@ pub struct Setup {
     settings: LocatorSettings,
     locators: FrameLocators,
     camera: tubeloc_core::RigCamera,
+    /// The ground under the camera where the rig file gives one (a PDS camera list), used
+    /// when `--ground` is not given.
+    ground: Option<GroundPlane>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
@@ -321,6 +324,7 @@ impl Setup {
     pub fn new(a: &LocateArgs) -> Result<Self> {
         let rig_path = a.rig_path()?.to_path_buf();
         let rig: Rig = tubeloc_calib::read_rig(&rig_path).with_context(|| format!("rig {}", rig_path.display()))?;
+        let pds = pds_cameras_of(&rig_path)?;
         let pair = match &a.pair {
             Some(p) => {
                 let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
@@ -328,7 +332,12 @@ impl Setup {
             }
             None => None,
         };
-        let selection = CameraSelection { camera: a.camera_name.clone(), pair };
+        let camera_name = match (&pds, &a.camera_name, &pair) {
+            // A PDS camera list holds one camera per image, named after the image's file.
+            (Some(_), None, None) => Some(pds_camera_for(a, &rig_path)?),
+            _ => a.camera_name.clone(),
+        };
+        let selection = CameraSelection { camera: camera_name, pair };
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let mut settings = LocatorSettings::default();
         settings.calibration = match (&a.calibration, a.detector) {
@@ -362,7 +371,8 @@ impl Setup {
             Some(ext) => FrameLocators::External(ext),
             None => FrameLocators::Shared(Box::new(locator)),
         };
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, detector_name })
+        let ground = pds.and_then(|list| list.into_iter().find(|c| c.camera.name == camera.name)).map(|c| c.ground);
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, ground, detector_name })
     }
 
     /// Checks that `image` (`size` pixels) is the size of the rig camera the images come from.
@@ -385,6 +395,25 @@ impl Setup {
             }
         }
     }
+}
+
+/// The cameras of `rig_path` when it is a PDS camera list (`cahv_to_pinhole.py`'s JSON list).
+fn pds_cameras_of(rig_path: &Path) -> Result<Option<Vec<tubeloc_calib::interchange::pds::PdsCamera>>> {
+    use tubeloc_calib::interchange::pds;
+    let text = std::fs::read_to_string(rig_path).with_context(|| format!("reading {}", rig_path.display()))?;
+    if !pds::looks_like_pds_cameras(&text) {
+        return Ok(None);
+    }
+    Ok(Some(pds::pds_cameras(&text, rig_path)?))
+}
+
+/// The camera of a PDS camera list that took `--image`: the one named after its file name.
+fn pds_camera_for(a: &LocateArgs, rig_path: &Path) -> Result<String> {
+    let Some(image) = &a.image else {
+        return Err(crate::args::usage(format!("{} is a PDS camera list (one camera per image): a batch run needs --camera-name (the image file name of the camera), or run one --image at a time", rig_path.display())));
+    };
+    let name = image.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+    Ok(name.to_string())
 }
 
 /// The inputs of one frame.
@@ -415,7 +444,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         let cam = locator.camera().clone();
         let image = open_image(&frame.image)?;
         let right = frame.right.as_deref().map(open_image).transpose()?;
-        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground, up: a.up };
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or(setup.ground), up: a.up };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {

@@ -1,0 +1,160 @@
+//! Rover cameras from their PDS camera models, linearized: the JSON list that
+//! `cahv_to_pinhole.py` writes (`with_cameras/cameras.json` of the real rover data), one entry
+//! per image.
+//!
+//! Each CAHV / CAHVOR entry becomes a rig camera named after its image's file name, placed in
+//! the rover's frame of that image (`ROVER_NAV_FRAME` for MSL: x forward, y right, z down, origin
+//! at ground level), and the ground under it: the plane `camera_height_m` below the camera,
+//! level in the site frame (`R_cam_from_site`, site z down):
+//!
+//! ```text
+//! T_rover_cam = [R_cam_from_ref^T | camera_center_ref_m]
+//! ground (camera frame): n = R_cam_from_site (0, 0, -1),  n · X = -camera_height_m
+//! ```
+//!
+//! CAHVORE (fisheye) entries are left out: a pinhole does not describe them. The pinhole's skew
+//! (under 1 px for the MSL and MER cameras) is dropped; an entry with more is refused.
+
+use crate::error::CalibError;
+use nalgebra::{Matrix3, Vector3};
+use serde_json::Value;
+use std::path::Path;
+use tubeloc_core::{CameraModel, GroundPlane, Pose, Rig, RigCamera};
+
+/// Largest pinhole skew (px) dropped without changing a projection by more than about a pixel
+/// across the frame.
+pub const MAX_SKEW_PX: f64 = 1.0;
+
+/// One camera of a PDS camera list: the rig camera and the ground plane under it.
+#[derive(Clone, Debug)]
+pub struct PdsCamera {
+    /// The camera, named after its image's file name, in the rover frame of its image.
+    pub camera: RigCamera,
+    /// The local ground in this camera's frame (`n · X = d`, n up, metres).
+    pub ground: GroundPlane,
+}
+
+/// Whether `text` is a JSON list (the first character that is not white space is `[`).
+pub fn looks_like_pds_cameras(text: &str) -> bool {
+    text.trim_start_matches('\u{feff}').trim_start().starts_with('[')
+}
+
+/// Reads every pinhole camera of a `cahv_to_pinhole.py` list (`path` names the file in errors).
+pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError> {
+    let list: Vec<Value> = serde_json::from_str(text).map_err(|e| CalibError::parse(path, format!("not a JSON list of PDS cameras: {e}")))?;
+    let mut out: Vec<PdsCamera> = Vec::with_capacity(list.len());
+    for (k, e) in list.iter().enumerate() {
+        let fail = |m: String| CalibError::parse(path, format!("entry {k}: {m}"));
+        if e.get("model_type").and_then(Value::as_str) == Some("CAHVORE") {
+            continue;
+        }
+        let cam = entry(e).map_err(fail)?;
+        if out.iter().any(|c| c.camera.name == cam.camera.name) {
+            return Err(fail(format!("a second camera for image {:?}", cam.camera.name)));
+        }
+        out.push(cam);
+    }
+    if out.is_empty() {
+        return Err(CalibError::parse(path, "no CAHV or CAHVOR camera in the list"));
+    }
+    Ok(out)
+}
+
+/// The rig of a PDS camera list: its cameras, no stereo pair.
+pub fn rig_from_pds(text: &str, path: &Path) -> Result<Rig, CalibError> {
+    Ok(Rig { cameras: pds_cameras(text, path)?.into_iter().map(|c| c.camera).collect(), stereo_pairs: Vec::new() })
+}
+
+/// One entry's camera and ground; `Err` names the field at fault.
+fn entry(e: &Value) -> Result<PdsCamera, String> {
+    let num = |key: &str| e.get(key).and_then(Value::as_f64).filter(|v| v.is_finite()).ok_or_else(|| format!("missing or non-finite `{key}`"));
+    let vec3 = |v: &Value| -> Option<Vector3<f64>> {
+        let a = v.as_array().filter(|a| a.len() == 3)?;
+        Some(Vector3::new(a[0].as_f64()?, a[1].as_f64()?, a[2].as_f64()?))
+    };
+    let mat3 = |key: &str| -> Result<Matrix3<f64>, String> {
+        let rows = e.get(key).and_then(Value::as_array).filter(|r| r.len() == 3).ok_or_else(|| format!("missing `{key}` (3x3)"))?;
+        let rows: Vec<Vector3<f64>> = rows.iter().map(vec3).collect::<Option<_>>().ok_or_else(|| format!("`{key}` is not 3x3 numbers"))?;
+        Ok(Matrix3::from_rows(&[rows[0].transpose(), rows[1].transpose(), rows[2].transpose()]))
+    };
+    let image = e.get("image").and_then(Value::as_str).ok_or("missing `image`")?;
+    let name = Path::new(image).file_name().and_then(|n| n.to_str()).filter(|n| !n.is_empty()).ok_or_else(|| format!("`image` {image:?} has no file name"))?;
+    let skew = e.get("skew").and_then(Value::as_f64).unwrap_or(0.0);
+    if skew.is_nan() || skew.abs() > MAX_SKEW_PX {
+        return Err(format!("skew {skew} px: more than {MAX_SKEW_PX} px, which a pinhole without skew cannot carry"));
+    }
+    let size = |key: &str| -> Result<u32, String> {
+        let v = num(key)?;
+        (v >= 1.0 && v.fract() == 0.0 && v <= u32::MAX as f64).then_some(v as u32).ok_or_else(|| format!("`{key}` {v} is not a positive whole number of pixels"))
+    };
+    let model = CameraModel { width: size("image_width")?, height: size("image_height")?, fx: num("fx")?, fy: num("fy")?, cx: num("cx")?, cy: num("cy")?, distortion: Default::default() };
+    model.validate().map_err(|err| err.to_string())?;
+    let centre = e.get("camera_center_ref_m").and_then(vec3).ok_or("missing `camera_center_ref_m` (3 numbers)")?;
+    let t_rig_cam = Pose::try_from_matrix(&mat3("R_cam_from_ref")?.transpose(), centre).map_err(|err| format!("`R_cam_from_ref`: {err}"))?;
+    let height = num("camera_height_m")?;
+    if height <= 0.0 {
+        return Err(format!("`camera_height_m` {height} must be > 0"));
+    }
+    let up = mat3("R_cam_from_site")? * Vector3::new(0.0, 0.0, -1.0);
+    let ground = GroundPlane::new(up, -height * up.norm()).map_err(|err| format!("`R_cam_from_site`: {err}"))?;
+    Ok(PdsCamera { camera: RigCamera { name: name.to_string(), model, t_rig_cam }, ground })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+    use serde_json::json;
+
+    /// A level camera 2 m above the ground looking along the rover's +x, pitched down 30 deg.
+    fn navcam_entry() -> Value {
+        let (s, c) = (30f64.to_radians().sin(), 30f64.to_radians().cos());
+        // Rover/site frame: x forward, y right, z down. Camera: x right, y down, z forward.
+        let r_cam_from_ref = [[0.0, 1.0, 0.0], [-s, 0.0, c], [c, 0.0, s]];
+        json!({"image": "images/NLB_1.jpg", "model_type": "CAHVOR", "image_width": 1024, "image_height": 1024,
+               "fx": 1222.0, "fy": 1221.0, "cx": 511.5, "cy": 510.0, "skew": -0.13,
+               "R_cam_from_ref": r_cam_from_ref, "camera_center_ref_m": [0.8, 0.4, -2.0],
+               "R_cam_from_site": r_cam_from_ref, "camera_height_m": 2.0})
+    }
+
+    #[test]
+    fn a_ground_point_projects_where_the_rover_frame_puts_it_and_lies_on_the_ground() {
+        let text = json!([navcam_entry(), {"image": "images/fisheye.png", "model_type": "CAHVORE"}]).to_string();
+        let cams = pds_cameras(&text, Path::new("cameras.json")).unwrap();
+        assert_eq!(cams.len(), 1, "the CAHVORE entry is left out");
+        let c = &cams[0];
+        assert_eq!(c.camera.name, "NLB_1.jpg");
+        // A point on the ground (z = 0, rover frame) 3 m ahead of the camera, in the camera
+        // frame: on the ground plane, and in front of the camera.
+        let p_rover = Point3::new(0.8 + 3.0, 0.4, 0.0);
+        let p_cam = c.camera.t_rig_cam.inverse().transform_point(&p_rover);
+        assert!(p_cam.z > 0.0, "{p_cam}");
+        assert!(c.ground.height_of(&p_cam.coords).abs() < 1e-9, "{}", c.ground.height_of(&p_cam.coords));
+        // The camera is 2 m above its ground.
+        assert!((c.ground.height_of(&Vector3::zeros()) - 2.0).abs() < 1e-9);
+        assert!(looks_like_pds_cameras(&text));
+    }
+
+    #[test]
+    fn a_bad_entry_is_refused_with_its_index_and_field() {
+        let path = Path::new("cams.json");
+        let mut e = navcam_entry();
+        e["skew"] = json!(3.0);
+        let err = pds_cameras(&json!([navcam_entry(), e]).to_string(), path).unwrap_err().to_string();
+        assert!(err.contains("cams.json") && err.contains("entry 1") && err.contains("skew"), "{err}");
+        let mut e = navcam_entry();
+        e.as_object_mut().unwrap().remove("camera_height_m");
+        let err = pds_cameras(&json!([e]).to_string(), path).unwrap_err().to_string();
+        assert!(err.contains("entry 0") && err.contains("camera_height_m"), "{err}");
+        let err = pds_cameras(&json!([navcam_entry(), navcam_entry()]).to_string(), path).unwrap_err().to_string();
+        assert!(err.contains("second camera") && err.contains("NLB_1.jpg"), "{err}");
+        let err = pds_cameras("[1, 2", path).unwrap_err().to_string();
+        assert!(err.contains("not a JSON list"), "{err}");
+        // Every prefix of a valid list is refused, naming the file, never a panic.
+        let text = serde_json::to_string_pretty(&json!([navcam_entry()])).unwrap();
+        for cut in 0..text.len() - 1 {
+            let err = pds_cameras(&text[..cut], path).unwrap_err().to_string();
+            assert!(err.contains("cams.json"), "cut {cut}: {err}");
+        }
+    }
+}
