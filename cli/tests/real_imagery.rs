@@ -176,10 +176,27 @@ fn locate_takes_the_camera_and_ground_of_a_pds_camera_list() {
         assert!((num(&doc["up_cam"][k]) - up).abs() < 1e-6, "up {} against {up} (axis {k})", doc["up_cam"]);
     }
     assert!((num(&doc["camera_model"]["fx"]) - num(&entry["fx"])).abs() < 1e-9);
-    // A batch run cannot tell one image's camera from the file name of all: it asks for one.
-    let o = tubeloc(&["locate", "--rig", p(&cams_path), "--images", p(image.parent().unwrap()), "--out", p(&dir.path().join("batch"))]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("PDS camera list") && stderr(&o).contains("--camera-name"), "{}", stderr(&o));
+    // A batch run takes each frame's camera and ground by its file name.
+    let navcams: Vec<&Value> = cams.as_array().unwrap().iter().filter(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV")).take(2).collect();
+    let list = dir.path().join("frames.txt");
+    let paths: Vec<PathBuf> = navcams.iter().map(|e| real_data().join("with_cameras").join(e["image"].as_str().unwrap())).collect();
+    std::fs::write(&list, paths.iter().map(|q| format!("{}\n", q.display())).collect::<String>()).unwrap();
+    let batch = dir.path().join("batch");
+    let o = tubeloc(&["locate", "--rig", p(&cams_path), "--images", p(&list), "--out", p(&batch)]);
+    assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+    for (e, q) in navcams.iter().zip(&paths) {
+        let stem = q.file_stem().unwrap().to_str().unwrap();
+        let doc: Value = serde_json::from_str(&std::fs::read_to_string(batch.join("frames").join(format!("{stem}.json"))).unwrap()).unwrap();
+        assert_eq!(doc["camera"], q.file_name().unwrap().to_str().unwrap());
+        for k in 0..3 {
+            assert!((num(&doc["up_cam"][k]) + num(&e["R_cam_from_site"][k][2])).abs() < 1e-6, "{}", doc["up_cam"]);
+        }
+    }
+    // An image the list has no camera for is named, with the way out.
+    let other = real_data().join("negatives_val/msl_navcam_1024/NLB_462567671EDR_F0402448NCAM00385M_.jpg");
+    let o = tubeloc(&["locate", "--rig", p(&cams_path), "--image", p(&other), "--out", p(&dir.path().join("o.json"))]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("NLB_462567671EDR_F0402448NCAM00385M_.jpg") && stderr(&o).contains("--camera-name"), "{}", stderr(&o));
 }
 
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.

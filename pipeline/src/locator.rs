@@ -209,6 +209,20 @@ impl Locator {
         Ok(Locator { rig: rig.clone(), camera, pair, detector, refiner, planner, settings })
     }
 
+    /// Makes the rig camera `name` the one the (left) images come from, e.g. per frame for a
+    /// rig of one camera per image (a PDS camera list). The stereo pair stays: a right image
+    /// is refused unless `name` is its left camera.
+    pub fn select_camera(&mut self, name: &str) -> Result<()> {
+        if self.camera.name == name {
+            return Ok(());
+        }
+        let camera = self.rig.camera(name).ok_or_else(|| PipelineError::Input(format!("the rig has no camera named {name:?}")))?.clone();
+        camera.model.validate()?;
+        check_image_pixels(camera.model.width, camera.model.height, &camera.name)?;
+        self.camera = camera;
+        Ok(())
+    }
+
     /// The rig camera the (left) images come from.
     pub fn camera(&self) -> &RigCamera {
         &self.camera

@@ -299,7 +299,8 @@ impl ExternalResults {
 /// How each frame's locator is had: one locator (its detector loaded once) for every frame, or
 /// (external results) one per frame with that frame's detections.
 enum FrameLocators {
-    Shared(Box<Locator>),
+    /// One locator; with a camera per image (a PDS camera list), switched to each frame's.
+    Shared(std::sync::Mutex<Box<Locator>>),
     External(ExternalResults),
 }
 
@@ -312,9 +313,12 @@ pub struct Setup {
     settings: LocatorSettings,
     locators: FrameLocators,
     camera: tubeloc_core::RigCamera,
-    /// The ground under the camera where the rig file gives one (a PDS camera list), used
+    /// A rig of one camera per image (a PDS camera list, without `--camera-name`): each frame
+    /// is taken by the camera named after its file.
+    per_image: bool,
+    /// The ground under each camera where the rig file gives one (a PDS camera list), used
     /// when `--ground` is not given.
-    ground: Option<GroundPlane>,
+    grounds: BTreeMap<String, GroundPlane>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
@@ -332,9 +336,10 @@ impl Setup {
             }
             None => None,
         };
-        let camera_name = match (&pds, &a.camera_name, &pair) {
-            // A PDS camera list holds one camera per image, named after the image's file.
-            (Some(_), None, None) => Some(pds_camera_for(a, &rig_path)?),
+        // A PDS camera list holds one camera per image, named after the image's file.
+        let per_image = pds.is_some() && a.camera_name.is_none() && pair.is_none();
+        let camera_name = match (per_image, &a.image) {
+            (true, Some(image)) => Some(pds_camera_name(&rig, &rig_path, image)?.to_string()),
             _ => a.camera_name.clone(),
         };
         let selection = CameraSelection { camera: camera_name, pair };
@@ -369,15 +374,25 @@ impl Setup {
         let (camera, detector_name) = (locator.camera().clone(), locator.detector().name().to_string());
         let locators = match external {
             Some(ext) => FrameLocators::External(ext),
-            None => FrameLocators::Shared(Box::new(locator)),
+            None => FrameLocators::Shared(std::sync::Mutex::new(Box::new(locator))),
         };
-        let ground = pds.and_then(|list| list.into_iter().find(|c| c.camera.name == camera.name)).map(|c| c.ground);
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, ground, detector_name })
+        let grounds = pds.unwrap_or_default().into_iter().map(|c| (c.camera.name, c.ground)).collect();
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, grounds, detector_name })
     }
 
-    /// Checks that `image` (`size` pixels) is the size of the rig camera the images come from.
+    /// The rig camera that took `image`: the run's, or with a camera per image the one named
+    /// after its file.
+    fn camera_of(&self, image: &Path) -> Result<&tubeloc_core::RigCamera> {
+        if !self.per_image {
+            return Ok(&self.camera);
+        }
+        let name = pds_camera_name(&self.rig, &self.rig_path, image)?;
+        Ok(self.rig.camera(name).expect("checked by pds_camera_name"))
+    }
+
+    /// Checks that `image` (`size` pixels) is the size of the rig camera that took it.
     fn check_size(&self, image: &Path, (w, h): (u32, u32)) -> Result<()> {
-        let cam = &self.camera;
+        let cam = self.camera_of(image)?;
         if (w, h) != (cam.model.width, cam.model.height) {
             bail!("{} is {w}x{h} but rig camera {:?} in {} is {}x{}", image.display(), cam.name, self.rig_path.display(), cam.model.width, cam.model.height);
         }
@@ -387,10 +402,20 @@ impl Setup {
     /// Runs `f` with the locator of the frame `image` (of `size` pixels).
     fn with_locator<R>(&self, image: &Path, size: (u32, u32), f: impl FnOnce(&Locator) -> Result<R>) -> Result<R> {
         match &self.locators {
-            FrameLocators::Shared(l) => f(l),
+            FrameLocators::Shared(l) => {
+                let mut l = l.lock().unwrap_or_else(|e| e.into_inner());
+                if self.per_image {
+                    l.select_camera(&self.camera_of(image)?.name)?;
+                }
+                f(&l)
+            }
             FrameLocators::External(ext) => {
                 let dets = ext.detections_for(image, size)?;
-                let l = Locator::new(&self.rig, &self.selection, Box::new(dets), self.settings.clone()).with_context(|| self.rig_path.display().to_string())?;
+                let mut selection = self.selection.clone();
+                if self.per_image {
+                    selection.camera = Some(self.camera_of(image)?.name.clone());
+                }
+                let l = Locator::new(&self.rig, &selection, Box::new(dets), self.settings.clone()).with_context(|| self.rig_path.display().to_string())?;
                 f(&l)
             }
         }
@@ -407,13 +432,19 @@ fn pds_cameras_of(rig_path: &Path) -> Result<Option<Vec<tubeloc_calib::interchan
     Ok(Some(pds::pds_cameras(&text, rig_path)?))
 }
 
-/// The camera of a PDS camera list that took `--image`: the one named after its file name.
-fn pds_camera_for(a: &LocateArgs, rig_path: &Path) -> Result<String> {
-    let Some(image) = &a.image else {
-        return Err(crate::args::usage(format!("{} is a PDS camera list (one camera per image): a batch run needs --camera-name (the image file name of the camera), or run one --image at a time", rig_path.display())));
-    };
-    let name = image.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-    Ok(name.to_string())
+/// The camera of a PDS camera list `rig` (read from `rig_path`) that took `image`: the one
+/// named after its file.
+fn pds_camera_name<'a>(rig: &Rig, rig_path: &Path, image: &'a Path) -> Result<&'a str> {
+    let name = file_name(image);
+    if rig.camera(name).is_none() {
+        bail!("{} (a PDS camera list) has no camera for the image file {name:?}; give --camera-name", rig_path.display());
+    }
+    Ok(name)
+}
+
+/// An image path's file name ("" when it has none).
+fn file_name(image: &Path) -> &str {
+    image.file_name().and_then(|n| n.to_str()).unwrap_or_default()
 }
 
 /// The inputs of one frame.
@@ -444,7 +475,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         let cam = locator.camera().clone();
         let image = open_image(&frame.image)?;
         let right = frame.right.as_deref().map(open_image).transpose()?;
-        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or(setup.ground), up: a.up };
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.grounds.get(&cam.name).copied()), up: a.up };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
