@@ -172,6 +172,35 @@ fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &
     Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "per_frame": per_frame}))
 }
 
+/// `locate` at its defaults on the real frames of the test sols that come with PDS camera
+/// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
+/// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
+/// None shows a tube, so every located tube is false.
+fn pds_negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+    use tubeloc_synth::real_set::{split_of_sol, RealSplit};
+    let list = data.join("with_cameras").join("cameras.json");
+    let text = std::fs::read_to_string(&list).with_context(|| format!("reading {}", list.display()))?;
+    let cams = tubeloc_calib::interchange::pds::pds_cameras(&text, &list)?;
+    let entries: Vec<Value> = serde_json::from_str(&text).with_context(|| list.display().to_string())?;
+    let sol_of = |name: &str| entries.iter().find(|e| e["image"].as_str().is_some_and(|i| Path::new(i).file_name().is_some_and(|f| f == name))).and_then(|e| e["sol"].as_i64());
+    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(sol_of(&c.camera.name)) == RealSplit::Test).collect();
+    chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));
+    chosen.truncate(frames.unwrap_or(usize::MAX));
+    let mut settings = tubeloc_pipeline::LocatorSettings::default();
+    settings.calibration = cal.clone();
+    let mut per_frame = Vec::new();
+    for c in &chosen {
+        let path = data.join("with_cameras/images").join(&c.camera.name);
+        let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
+        let rig = tubeloc_core::Rig { cameras: vec![c.camera.clone()], stereo_pairs: Vec::new() };
+        let locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings.clone())?;
+        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None }).with_context(|| path.display().to_string())?;
+        per_frame.push(json!({"image": c.camera.name, "sol": sol_of(&c.camera.name), "detections": out.detections.len(), "located": out.tubes.len()}));
+    }
+    let located = per_frame.iter().filter_map(|f| f["located"].as_u64()).sum::<u64>();
+    Ok(json!({"frames": per_frame.len(), "located_per_frame": located as f64 / per_frame.len().max(1) as f64, "per_frame": per_frame}))
+}
+
 /// The `negatives_val` frames (all, or `frames` spread over the folders), sorted.
 fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
     let dir = data.join("negatives_val");
@@ -288,6 +317,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
     let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
+    let neg_pds = pds_negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
     // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
@@ -298,7 +328,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_neg = line2d_negatives(&stage.data, &l2_opts, stage.frames)?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
-    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "grasp_grey": grasp,
+    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp,
         "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
@@ -331,6 +361,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         writeln!(md, "\nMono refinement of the learned detections on the {kind} test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
     }
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
         "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",

@@ -95,6 +95,13 @@ fn bench_real_stage_runs_at_a_small_size() {
         }
     }
     assert_eq!(summary["negatives"]["frames"], 2);
+    // The test-sol frames with PDS cameras, each under its own camera and ground.
+    assert_eq!(summary["negatives_pds"]["frames"], 2);
+    assert!(summary["negatives_pds"]["located_per_frame"].as_f64().unwrap() >= 0.0);
+    for f in summary["negatives_pds"]["per_frame"].as_array().unwrap() {
+        let sol = f["sol"].as_i64().unwrap();
+        assert!(TEST_SOLS.iter().any(|t| (t - sol).abs() <= 1), "sol {sol} of {} is not a test sol", f["image"]);
+    }
     assert!(summary["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
     // Line2D beside the learned detector: the default library built once in the stage's
     // folder, every frame resampled to its scale.
