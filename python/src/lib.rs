@@ -30,6 +30,7 @@ fn tubeloc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<poses::PyTube>()?;
     m.add_class::<locator::PyLocator>()?;
     m.add_function(wrap_pyfunction!(rig::read_rig, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::read_pds_grounds, m)?)?;
     m.add_function(wrap_pyfunction!(rig::write_rig, m)?)?;
     m.add_function(wrap_pyfunction!(image_array::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(locator::detect, m)?)?;

@@ -74,19 +74,32 @@ fn is_yaml(path: &Path) -> bool {
 }
 
 /// Reads the rig file at `path` as `tubeloc --rig` does (tubeloc JSON, OpenCV YAML, a kalibr
-/// camchain or one ROS `camera_info`, recognised by content); errors start with "rig PATH:" as
-/// the CLI's.
+/// camchain, one ROS `camera_info`, or a PDS camera list, recognised by content); errors start
+/// with "rig PATH:" as the CLI's.
 pub fn load(path: &Path) -> PyResult<Rig> {
     tubeloc_calib::read_rig(path).map_err(|e| context_to_py(format!("rig {}", path.display()), &e))
 }
 
 /// read_rig(path) -> Rig
 ///
-/// Reads and checks a rig file: tubeloc JSON, OpenCV YAML, a kalibr camchain or one ROS
-/// `camera_info` (recognised by content).
+/// Reads and checks a rig file: tubeloc JSON, OpenCV YAML, a kalibr camchain, one ROS
+/// `camera_info`, or a PDS camera list (`cahv_to_pinhole.py`'s JSON: one camera per image,
+/// named after its file, in the rover frame), recognised by content.
 #[pyfunction]
 pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
     Ok(PyRig { rig: load(&path)? })
+}
+
+/// read_pds_grounds(path) -> dict[str, tuple[float, float, float, float]]
+///
+/// The ground under each camera of a PDS camera list (`cahv_to_pinhole.py`'s JSON), by camera
+/// name (the image's file name): (nx, ny, nz, d) in that camera's frame, n up, n·X = d,
+/// metres, as `Locator.locate(ground=...)` takes it (what `tubeloc locate` uses by itself).
+#[pyfunction]
+pub fn read_pds_grounds(path: PathBuf) -> PyResult<std::collections::BTreeMap<String, (f64, f64, f64, f64)>> {
+    let text = std::fs::read_to_string(&path).map_err(|e| to_py(format!("{}: {e}", path.display())))?;
+    let cams = tubeloc_calib::interchange::pds::pds_cameras(&text, &path).map_err(|e| chain_to_py(&e))?;
+    Ok(cams.into_iter().map(|c| (c.camera.name, (c.ground.normal.x, c.ground.normal.y, c.ground.normal.z, c.ground.offset))).collect())
 }
 
 /// write_rig(rig, path)

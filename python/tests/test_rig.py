@@ -51,3 +51,27 @@ def test_opencv_yaml_round_trip(demo_scene, tmp_path):
     assert a["cameras"][0]["model"]["width"] == b["cameras"][0]["model"]["width"]
     for k in ("fx", "fy", "cx", "cy"):
         assert a["cameras"][0]["model"][k] == pytest.approx(b["cameras"][0]["model"][k], rel=1e-12)
+
+
+def test_pds_camera_list_gives_cameras_by_image_and_their_grounds(tmp_path):
+    # A level camera 2 m above the ground, looking along the rover's +x, 30 degrees down
+    # (rover frame: x forward, y right, z down; camera: x right, y down, z forward).
+    s, c = 0.5, 0.8660254037844386
+    r = [[0.0, 1.0, 0.0], [-s, 0.0, c], [c, 0.0, s]]
+    entry = {"image": "images/NLB_1.jpg", "model_type": "CAHVOR", "image_width": 640, "image_height": 480,
+             "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 239.5, "skew": 0.1,
+             "R_cam_from_ref": r, "camera_center_ref_m": [0.8, 0.4, -2.0],
+             "R_cam_from_site": r, "camera_height_m": 2.0}
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([entry, dict(entry, image="images/NLB_2.jpg", camera_height_m=1.5)]))
+    rig = tubeloc.read_rig(path)
+    assert rig.camera_names == ["NLB_1.jpg", "NLB_2.jpg"] and rig.image_size("NLB_2.jpg") == (640, 480)
+    grounds = tubeloc.read_pds_grounds(path)
+    nx, ny, nz, d = grounds["NLB_1.jpg"]
+    # Up in the camera frame is -z of the site frame: (0, -c, -s); the camera is 2 m above.
+    assert abs(nx) < 1e-12 and abs(ny + c) < 1e-12 and abs(nz + s) < 1e-12 and abs(d + 2.0) < 1e-12
+    assert abs(grounds["NLB_2.jpg"][3] + 1.5) < 1e-12
+    assert tubeloc.Locator(rig, camera="NLB_2.jpg").camera == "NLB_2.jpg"
+    path.write_text(json.dumps([dict(entry, skew=5.0)]))
+    with pytest.raises(tubeloc.TubelocError, match="entry 0: skew"):
+        tubeloc.read_pds_grounds(path)
