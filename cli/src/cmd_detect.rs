@@ -78,17 +78,34 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
     crate::cmd_detect_line2d::Line2dOpts::from_arg_matches(&matches).expect("every Line2D option has a default")
 }
 
+/// With a PDS camera list as `--camera` (`cahv_to_pinhole.py`'s JSON): the camera of `--image`
+/// (named after its file) and its ground (`--ground` when given), and `--camera` cleared so
+/// that nothing reads the list as one camera. `None` for any other `--camera`.
+fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
+    let Some(path) = args.line2d.camera.clone() else { return Ok(None) };
+    let Some(cams) = tubeloc_calib::interchange::pds::read_pds_cameras(&path)? else { return Ok(None) };
+    let Some(image) = &args.image else {
+        return Err(crate::args::usage(format!("--camera {} is a PDS camera list (one camera per image): it takes one --image, whose file names its camera", path.display())));
+    };
+    let c = tubeloc_calib::interchange::pds::camera_of_image(&cams, &path, image)?;
+    args.line2d.camera = None;
+    Ok(Some((c.camera.model.clone(), args.ground.unwrap_or(c.ground))))
+}
+
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
+    let mut args = args;
+    let pds = pds_camera(&mut args)?;
     let dets = match args.method {
         Method::Line2d => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
-            let (cameras, grounds) = match &args.dataset {
-                Some(d) => crate::cmd_detect_learned::dataset_cameras_and_grounds(d)?,
-                None => Default::default(),
+            let (cameras, grounds) = match (&args.dataset, &pds) {
+                (Some(d), _) => crate::cmd_detect_learned::dataset_cameras_and_grounds(d)?,
+                (None, Some((cam, ground))) => ([(args.image_id, cam.clone())].into(), [(args.image_id, *ground)].into()),
+                (None, None) => Default::default(),
             };
-            if args.ground.is_some() && args.line2d.camera.is_none() && args.dataset.is_none() {
+            if args.ground.is_some() && args.line2d.camera.is_none() && args.dataset.is_none() && pds.is_none() {
                 return Err(crate::args::usage("--ground needs --camera (the rays along which the ground's distance is measured)"));
             }
             let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras, &grounds, args.ground.as_ref())?;
@@ -108,8 +125,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
                 None => Default::default(),
             };
             let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
-            let scales = crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_ref(), band)?;
-            if band.is_some() && args.dataset.is_none() && args.line2d.camera.is_none() {
+            let scales = match (&pds, band) {
+                (Some((cam, ground)), Some(band)) => vec![tubeloc_detect::scale::working_scale(cam, Some((ground.normal, ground.offset)), band)],
+                _ => crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_ref(), band)?,
+            };
+            if band.is_some() && args.dataset.is_none() && args.line2d.camera.is_none() && pds.is_none() {
                 eprintln!("note: no --camera: images are detected as they are, not at the working scale of --range-m {} (tubes about 16 px wide); pass the camera for that, or --range-m off to silence this", args.range_m);
             }
             crate::cmd_detect_learned::run_learned(&model, &images, &scales, &cfg)?

@@ -206,6 +206,47 @@ fn locate_takes_the_camera_and_ground_of_a_pds_camera_list() {
     assert!(stderr(&o).contains("NLB_462567671EDR_F0402448NCAM00385M_.jpg") && stderr(&o).contains("--camera-name"), "{}", stderr(&o));
 }
 
+#[test]
+fn detect_with_a_pds_camera_list_equals_detect_with_that_camera_and_ground_by_hand() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams_path = real_data().join("with_cameras/cameras.json");
+    let cams: Value = serde_json::from_str(&std::fs::read_to_string(&cams_path).unwrap()).unwrap();
+    let e = cams.as_array().unwrap().iter().find(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV") && TEST_SOLS.contains(&e["sol"].as_i64().unwrap())).unwrap();
+    let image = real_data().join("with_cameras").join(e["image"].as_str().unwrap());
+    // The same camera and ground written by hand: a camera JSON, and n = -(third column of
+    // R_cam_from_site), d = -camera_height_m.
+    let cam = serde_json::json!({"width": 1024, "height": 1024, "fx": e["fx"], "fy": e["fy"], "cx": e["cx"], "cy": e["cy"]});
+    let cam_path = dir.path().join("cam.json");
+    std::fs::write(&cam_path, cam.to_string()).unwrap();
+    let r = &e["R_cam_from_site"];
+    let ground = format!("--ground={},{},{},{}", -r[0][2].as_f64().unwrap(), -r[1][2].as_f64().unwrap(), -r[2][2].as_f64().unwrap(), -e["camera_height_m"].as_f64().unwrap());
+    for method in ["learned", "line2d"] {
+        let lib = dir.path().join("lib.tlt");
+        let mut extra: Vec<&str> = vec![];
+        if method == "line2d" {
+            if !lib.exists() {
+                ok(&["templates", "build", "--distances", "2:4:1", "--step-deg", "20", "--out", p(&lib)]);
+            }
+            // Without the verifier, so that there are detections to compare.
+            extra = vec!["--templates", p(&lib), "--no-verifier"];
+        }
+        let (a, b) = (dir.path().join(format!("{method}_pds.json")), dir.path().join(format!("{method}_hand.json")));
+        let mut args = vec!["detect", "--method", method, "--image", p(&image), "--camera", p(&cams_path), "--out", p(&a)];
+        args.extend(&extra);
+        ok(&args);
+        let mut args = vec!["detect", "--method", method, "--image", p(&image), "--camera", p(&cam_path), &ground, "--out", p(&b)];
+        args.extend(&extra);
+        ok(&args);
+        let (da, db): (Value, Value) = (serde_json::from_str(&std::fs::read_to_string(&a).unwrap()).unwrap(), serde_json::from_str(&std::fs::read_to_string(&b).unwrap()).unwrap());
+        assert!(!da.as_array().unwrap().is_empty(), "{method}: no detection to compare");
+        assert_eq!(da, db, "{method}: the list's camera and ground, or the same by hand");
+    }
+    // The list names one camera per image: a dataset run is refused, naming the file.
+    let o = tubeloc(&["detect", "--method", "learned", "--dataset", p(dir.path()), "--camera", p(&cams_path), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("PDS camera list") && stderr(&o).contains("cameras.json"), "{}", stderr(&o));
+}
+
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.
 fn camera_json(path: &Path, w: u32, h: u32, hfov_deg: f64) {
     let f = (w as f64 / 2.0) / (hfov_deg / 2.0).to_radians().tan();

@@ -60,6 +60,23 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
     Ok(out)
 }
 
+/// The cameras of the file `path` when it is a PDS camera list, `Ok(None)` when it is some
+/// other file (e.g. a tubeloc camera or rig JSON).
+pub fn read_pds_cameras(path: &Path) -> Result<Option<Vec<PdsCamera>>, CalibError> {
+    let text = std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    if !looks_like_pds_cameras(&text) {
+        return Ok(None);
+    }
+    pds_cameras(&text, path).map(Some)
+}
+
+/// The camera of a PDS camera list (`cameras`, read from `path`) that took `image`: the one
+/// named after the image's file; the error names both files.
+pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) -> Result<&'a PdsCamera, CalibError> {
+    let name = image.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+    cameras.iter().find(|c| c.camera.name == name).ok_or_else(|| CalibError::parse(path, format!("no camera for the image file {name:?} (a PDS camera list names each camera after its image)")))
+}
+
 /// The rig of a PDS camera list: its cameras, no stereo pair.
 pub fn rig_from_pds(text: &str, path: &Path) -> Result<Rig, CalibError> {
     Ok(Rig { cameras: pds_cameras(text, path)?.into_iter().map(|c| c.camera).collect(), stereo_pairs: Vec::new() })

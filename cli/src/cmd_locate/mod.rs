@@ -328,7 +328,7 @@ impl Setup {
     pub fn new(a: &LocateArgs) -> Result<Self> {
         let rig_path = a.rig_path()?.to_path_buf();
         let rig: Rig = tubeloc_calib::read_rig(&rig_path).with_context(|| format!("rig {}", rig_path.display()))?;
-        let pds = pds_cameras_of(&rig_path)?;
+        let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path)?;
         let pair = match &a.pair {
             Some(p) => {
                 let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
@@ -420,16 +420,6 @@ impl Setup {
             }
         }
     }
-}
-
-/// The cameras of `rig_path` when it is a PDS camera list (`cahv_to_pinhole.py`'s JSON list).
-fn pds_cameras_of(rig_path: &Path) -> Result<Option<Vec<tubeloc_calib::interchange::pds::PdsCamera>>> {
-    use tubeloc_calib::interchange::pds;
-    let text = std::fs::read_to_string(rig_path).with_context(|| format!("reading {}", rig_path.display()))?;
-    if !pds::looks_like_pds_cameras(&text) {
-        return Ok(None);
-    }
-    Ok(Some(pds::pds_cameras(&text, rig_path)?))
 }
 
 /// The camera of a PDS camera list `rig` (read from `rig_path`) that took `image`: the one
