@@ -264,7 +264,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
     // The camera(s): the rig's pair (stereo), or --camera alone.
     let (rig, selection) = match &args.rig {
         Some(p) => {
-            let rig = tubeloc_calib::read_rig(p).with_context(|| format!("rig {}", p.display()))?;
+            let rig = tubeloc_calib::read_rig(p).context("rig")?;
             let pair = match &args.pair {
                 Some(s) => Some(s.split_once(',').map(|(l, r)| (l.trim().to_string(), r.trim().to_string())).with_context(|| format!("--pair {s:?}: expected LEFT,RIGHT"))?),
                 None => Some(rig.stereo_pairs.first().cloned().with_context(|| format!("{}: no stereo_pairs; pass --pair LEFT,RIGHT", p.display()))?),

@@ -59,7 +59,7 @@ impl PyRig {
 }
 
 /// The rig of an argument: a `Rig`, or the path of a rig file (read as `tubeloc --rig` reads
-/// it; errors start with "rig PATH:" as the CLI's).
+/// it; errors start with "rig: PATH:" as the CLI's).
 pub fn rig_of(obj: &Bound<'_, PyAny>) -> PyResult<Rig> {
     if let Ok(r) = obj.cast::<PyRig>() {
         return Ok(r.get().rig.clone());
@@ -75,9 +75,9 @@ fn is_yaml(path: &Path) -> bool {
 
 /// Reads the rig file at `path` as `tubeloc --rig` does (tubeloc JSON, OpenCV YAML, a kalibr
 /// camchain, one ROS `camera_info`, or a PDS camera list, recognised by content); errors start
-/// with "rig PATH:" as the CLI's.
+/// with "rig: PATH:" as the CLI's.
 pub fn load(path: &Path) -> PyResult<Rig> {
-    tubeloc_calib::read_rig(path).map_err(|e| context_to_py(format!("rig {}", path.display()), &e))
+    tubeloc_calib::read_rig(path).map_err(|e| context_to_py("rig", &e))
 }
 
 /// read_rig(path) -> Rig

@@ -327,7 +327,7 @@ impl Setup {
     /// Reads the rig, builds the detector and the settings (score calibration) of `a`.
     pub fn new(a: &LocateArgs) -> Result<Self> {
         let rig_path = a.rig_path()?.to_path_buf();
-        let rig: Rig = tubeloc_calib::read_rig(&rig_path).with_context(|| format!("rig {}", rig_path.display()))?;
+        let rig: Rig = tubeloc_calib::read_rig(&rig_path).context("rig")?;
         let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path)?;
         let pair = match &a.pair {
             Some(p) => {
