@@ -179,23 +179,23 @@ fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &
 fn pds_negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
     use tubeloc_synth::real_set::{split_of_sol, RealSplit};
     let list = data.join("with_cameras").join("cameras.json");
-    let text = std::fs::read_to_string(&list).with_context(|| format!("reading {}", list.display()))?;
-    let cams = tubeloc_calib::interchange::pds::pds_cameras(&text, &list)?;
-    let entries: Vec<Value> = serde_json::from_str(&text).with_context(|| list.display().to_string())?;
-    let sol_of = |name: &str| entries.iter().find(|e| e["image"].as_str().is_some_and(|i| Path::new(i).file_name().is_some_and(|f| f == name))).and_then(|e| e["sol"].as_i64());
-    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(sol_of(&c.camera.name)) == RealSplit::Test).collect();
+    let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
+    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == RealSplit::Test).collect();
     chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));
     chosen.truncate(frames.unwrap_or(usize::MAX));
-    let mut settings = tubeloc_pipeline::LocatorSettings::default();
-    settings.calibration = cal.clone();
     let mut per_frame = Vec::new();
-    for c in &chosen {
-        let path = data.join("with_cameras/images").join(&c.camera.name);
-        let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
-        let rig = tubeloc_core::Rig { cameras: vec![c.camera.clone()], stereo_pairs: Vec::new() };
-        let locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings.clone())?;
-        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None }).with_context(|| path.display().to_string())?;
-        per_frame.push(json!({"image": c.camera.name, "sol": sol_of(&c.camera.name), "detections": out.detections.len(), "located": out.tubes.len()}));
+    if !chosen.is_empty() {
+        let mut settings = tubeloc_pipeline::LocatorSettings::default();
+        settings.calibration = cal.clone();
+        let rig = tubeloc_calib::interchange::pds::rig_of(&chosen);
+        let mut locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings)?;
+        for c in &chosen {
+            let path = data.join("with_cameras/images").join(&c.camera.name);
+            let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
+            locator.select_camera(&c.camera.name)?;
+            let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None }).with_context(|| path.display().to_string())?;
+            per_frame.push(json!({"image": c.camera.name, "sol": c.sol, "detections": out.detections.len(), "located": out.tubes.len()}));
+        }
     }
     let located = per_frame.iter().filter_map(|f| f["located"].as_u64()).sum::<u64>();
     Ok(json!({"frames": per_frame.len(), "located_per_frame": located as f64 / per_frame.len().max(1) as f64, "per_frame": per_frame}))

@@ -32,6 +32,8 @@ pub struct PdsCamera {
     pub camera: RigCamera,
     /// The local ground in this camera's frame (`n · X = d`, n up, metres).
     pub ground: GroundPlane,
+    /// The image's sol (`sol`), when the entry gives one.
+    pub sol: Option<i64>,
 }
 
 /// Whether `text` is a JSON list (the first character that is not white space is `[`).
@@ -79,7 +81,12 @@ pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) 
 
 /// The rig of a PDS camera list: its cameras, no stereo pair.
 pub fn rig_from_pds(text: &str, path: &Path) -> Result<Rig, CalibError> {
-    Ok(Rig { cameras: pds_cameras(text, path)?.into_iter().map(|c| c.camera).collect(), stereo_pairs: Vec::new() })
+    Ok(rig_of(&pds_cameras(text, path)?))
+}
+
+/// The rig of PDS cameras: the cameras, no stereo pair.
+pub fn rig_of(cameras: &[PdsCamera]) -> Rig {
+    Rig { cameras: cameras.iter().map(|c| c.camera.clone()).collect(), stereo_pairs: Vec::new() }
 }
 
 /// One entry's camera and ground; `Err` names the field at fault.
@@ -114,7 +121,7 @@ fn entry(e: &Value) -> Result<PdsCamera, String> {
     }
     let up = mat3("R_cam_from_site")? * Vector3::new(0.0, 0.0, -1.0);
     let ground = GroundPlane::new(up, -height * up.norm()).map_err(|err| format!("`R_cam_from_site`: {err}"))?;
-    Ok(PdsCamera { camera: RigCamera { name: name.to_string(), model, t_rig_cam }, ground })
+    Ok(PdsCamera { camera: RigCamera { name: name.to_string(), model, t_rig_cam }, ground, sol: e.get("sol").and_then(Value::as_i64) })
 }
 
 #[cfg(test)]
@@ -140,7 +147,7 @@ mod tests {
         let cams = pds_cameras(&text, Path::new("cameras.json")).unwrap();
         assert_eq!(cams.len(), 1, "the CAHVORE entry is left out");
         let c = &cams[0];
-        assert_eq!(c.camera.name, "NLB_1.jpg");
+        assert_eq!((c.camera.name.as_str(), c.sol), ("NLB_1.jpg", None));
         // A point on the ground (z = 0, rover frame) 3 m ahead of the camera, in the camera
         // frame: on the ground plane, and in front of the camera.
         let p_rover = Point3::new(0.8 + 3.0, 0.4, 0.0);

@@ -300,7 +300,7 @@ impl ExternalResults {
 /// (external results) one per frame with that frame's detections.
 enum FrameLocators {
     /// One locator; with a camera per image (a PDS camera list), switched to each frame's.
-    Shared(std::sync::Mutex<Box<Locator>>),
+    Shared(Box<std::sync::Mutex<Locator>>),
     External(ExternalResults),
 }
 
@@ -316,9 +316,9 @@ pub struct Setup {
     /// A rig of one camera per image (a PDS camera list, without `--camera-name`): each frame
     /// is taken by the camera named after its file.
     per_image: bool,
-    /// The ground under each camera where the rig file gives one (a PDS camera list), used
-    /// when `--ground` is not given.
-    grounds: BTreeMap<String, GroundPlane>,
+    /// The cameras of a PDS camera list with their grounds (used when `--ground` is not
+    /// given); empty for other rig files.
+    pds: Vec<tubeloc_calib::interchange::pds::PdsCamera>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
@@ -327,8 +327,11 @@ impl Setup {
     /// Reads the rig, builds the detector and the settings (score calibration) of `a`.
     pub fn new(a: &LocateArgs) -> Result<Self> {
         let rig_path = a.rig_path()?.to_path_buf();
-        let rig: Rig = tubeloc_calib::read_rig(&rig_path).context("rig")?;
-        let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path)?;
+        let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?;
+        let rig: Rig = match &pds {
+            Some(cams) => tubeloc_calib::interchange::pds::rig_of(cams),
+            None => tubeloc_calib::read_rig(&rig_path).context("rig")?,
+        };
         let pair = match &a.pair {
             Some(p) => {
                 let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
@@ -338,8 +341,9 @@ impl Setup {
         };
         // A PDS camera list holds one camera per image, named after the image's file.
         let per_image = pds.is_some() && a.camera_name.is_none() && pair.is_none();
+        let pds = pds.unwrap_or_default();
         let camera_name = match (per_image, &a.image) {
-            (true, Some(image)) => Some(pds_camera_name(&rig, &rig_path, image)?.to_string()),
+            (true, Some(image)) => Some(pds_camera_of(&pds, &rig_path, image)?.camera.name.clone()),
             _ => a.camera_name.clone(),
         };
         let selection = CameraSelection { camera: camera_name, pair };
@@ -374,10 +378,9 @@ impl Setup {
         let (camera, detector_name) = (locator.camera().clone(), locator.detector().name().to_string());
         let locators = match external {
             Some(ext) => FrameLocators::External(ext),
-            None => FrameLocators::Shared(std::sync::Mutex::new(Box::new(locator))),
+            None => FrameLocators::Shared(Box::new(std::sync::Mutex::new(locator))),
         };
-        let grounds = pds.unwrap_or_default().into_iter().map(|c| (c.camera.name, c.ground)).collect();
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, grounds, detector_name })
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, detector_name })
     }
 
     /// The rig camera that took `image`: the run's, or with a camera per image the one named
@@ -386,8 +389,7 @@ impl Setup {
         if !self.per_image {
             return Ok(&self.camera);
         }
-        let name = pds_camera_name(&self.rig, &self.rig_path, image)?;
-        Ok(self.rig.camera(name).expect("checked by pds_camera_name"))
+        Ok(&pds_camera_of(&self.pds, &self.rig_path, image)?.camera)
     }
 
     /// Checks that `image` (`size` pixels) is the size of the rig camera that took it.
@@ -422,19 +424,10 @@ impl Setup {
     }
 }
 
-/// The camera of a PDS camera list `rig` (read from `rig_path`) that took `image`: the one
-/// named after its file.
-fn pds_camera_name<'a>(rig: &Rig, rig_path: &Path, image: &'a Path) -> Result<&'a str> {
-    let name = file_name(image);
-    if rig.camera(name).is_none() {
-        bail!("{} (a PDS camera list) has no camera for the image file {name:?}; give --camera-name", rig_path.display());
-    }
-    Ok(name)
-}
-
-/// An image path's file name ("" when it has none).
-fn file_name(image: &Path) -> &str {
-    image.file_name().and_then(|n| n.to_str()).unwrap_or_default()
+/// The camera of the PDS camera list `cameras` (read from `rig_path`) that took `image`: the
+/// one named after its file.
+fn pds_camera_of<'a>(cameras: &'a [tubeloc_calib::interchange::pds::PdsCamera], rig_path: &Path, image: &Path) -> Result<&'a tubeloc_calib::interchange::pds::PdsCamera> {
+    tubeloc_calib::interchange::pds::camera_of_image(cameras, rig_path, image).map_err(|e| anyhow::anyhow!("{e}; give --camera-name"))
 }
 
 /// The inputs of one frame.
@@ -465,7 +458,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         let cam = locator.camera().clone();
         let image = open_image(&frame.image)?;
         let right = frame.right.as_deref().map(open_image).transpose()?;
-        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.grounds.get(&cam.name).copied()), up: a.up };
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
