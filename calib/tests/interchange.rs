@@ -188,7 +188,7 @@ fn read_rig_names_the_file_and_the_formats_it_tried() {
     let e = read_rig(&p).unwrap_err().to_string();
     assert_eq!(
         e,
-        format!("{}: not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info (a YAML mapping without `cam0` (kalibr) or `camera_matrix` (ROS))", p.display())
+        format!("{}: not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), a PDS3 label (does not start with `PDS_VERSION_ID`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info (a YAML mapping without `cam0` (kalibr) or `camera_matrix` (ROS))", p.display())
     );
     let e = read_rig(&write(dir.path(), "bad.yaml", "cam0: [unclosed\n")).unwrap_err().to_string();
     assert!(e.starts_with(&format!("{}: not a rig file", dir.path().join("bad.yaml").display())) && e.contains("not YAML"), "{e}");

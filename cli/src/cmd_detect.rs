@@ -78,14 +78,15 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
     crate::cmd_detect_line2d::Line2dOpts::from_arg_matches(&matches).expect("every Line2D option has a default")
 }
 
-/// With a PDS camera list as `--camera` (`cahv_to_pinhole.py`'s JSON): the camera of `--image`
-/// (named after its file) and its ground (`--ground` when given), and `--camera` cleared so
+/// With a PDS camera list as `--camera` (`cahv_to_pinhole.py`'s JSON) or a PDS3 label: the
+/// camera of `--image` (the list's camera named after its file, the label's one camera) and its
+/// ground (`--ground` when given), and `--camera` cleared so
 /// that nothing reads the list as one camera. `None` for any other `--camera`.
 fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     let Some(path) = args.line2d.camera.clone() else { return Ok(None) };
     let Some(cams) = tubeloc_calib::interchange::pds::read_pds_cameras(&path)? else { return Ok(None) };
     let Some(image) = &args.image else {
-        return Err(crate::args::usage(format!("--camera {} is a PDS camera list (one camera per image): it takes one --image, whose file names its camera", path.display())));
+        return Err(crate::args::usage(format!("--camera {} is a PDS camera list or label (one camera per image): it takes one --image, the image it describes", path.display())));
     };
     let c = tubeloc_calib::interchange::pds::camera_of_image(&cams, &path, image)?;
     args.line2d.camera = None;

@@ -16,8 +16,9 @@ pub struct Line2dOpts {
     pub templates: Option<PathBuf>,
     /// Camera JSON of the images (coarse poses; an image whose focal length differs from the
     /// library's is resampled to the library's scale). `tubeloc detect --image F` also takes a
-    /// PDS camera list (`cahv_to_pinhole.py`'s JSON): F's camera, named after its file, and the
-    /// ground under it (unless --ground).
+    /// PDS camera list (`cahv_to_pinhole.py`'s JSON: F's camera, named after its file) or F's
+    /// PDS3 label (`.LBL`, or an `.IMG` with its label), and the ground under the camera (unless
+    /// --ground).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// Line2D detection threshold, percent of the maximal similarity.

@@ -247,6 +247,60 @@ fn detect_with_a_pds_camera_list_equals_detect_with_that_camera_and_ground_by_ha
     assert!(stderr(&o).contains("PDS camera list") && stderr(&o).contains("cameras.json"), "{}", stderr(&o));
 }
 
+/// Whether two JSON documents are equal, numbers to `tol` relative (at least absolute 1e-9),
+/// the keys in `skip` left out; `Err` says where they differ.
+fn json_close(a: &Value, b: &Value, tol: f64, skip: &[&str], at: &str) -> Result<(), String> {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            ((x - y).abs() <= tol * x.abs().max(y.abs()).max(1e-3)).then_some(()).ok_or_else(|| format!("{at}: {x} against {y}"))
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => x.iter().zip(y).enumerate().try_for_each(|(k, (x, y))| json_close(x, y, tol, skip, &format!("{at}[{k}]"))),
+        (Value::Object(x), Value::Object(y)) => {
+            for (k, v) in x.iter().filter(|(k, _)| !skip.contains(&k.as_str())) {
+                json_close(v, y.get(k).ok_or_else(|| format!("{at}.{k}: missing"))?, tol, skip, &format!("{at}.{k}"))?;
+            }
+            Ok(())
+        }
+        _ => (a == b).then_some(()).ok_or_else(|| format!("{at}: {a} against {b}")),
+    }
+}
+
+#[test]
+fn a_pds3_label_as_rig_or_camera_gives_what_the_python_list_gives() {
+    // The label of a full-frame Navcam image of a test sol, read by tubeloc itself, against
+    // `cahv_to_pinhole.py`'s list: the same camera, ground, detections and located tubes.
+    let dir = tempfile::tempdir().unwrap();
+    let with = real_data().join("with_cameras");
+    let cams_path = with.join("cameras.json");
+    let cams: Value = serde_json::from_str(&std::fs::read_to_string(&cams_path).unwrap()).unwrap();
+    let e = cams.as_array().unwrap().iter().find(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV") && TEST_SOLS.contains(&e["sol"].as_i64().unwrap()) && e["model_type"] == "CAHVOR").unwrap();
+    let (image, label) = (with.join(e["image"].as_str().unwrap()), with.join(e["label_file"].as_str().unwrap()));
+    let run = |rig: &Path, out: &str| -> Value {
+        let out = dir.path().join(out);
+        let o = tubeloc(&["locate", "--rig", p(rig), "--image", p(&image), "--out", p(&out)]);
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap()
+    };
+    let (by_label, by_list) = (run(&label, "label.json"), run(&cams_path, "list.json"));
+    assert_eq!(by_label["camera"], e["product_id"], "the label's camera is named after its PRODUCT_ID");
+    assert!(!by_label["tubes"].as_array().unwrap().is_empty(), "no detection to compare");
+    json_close(&by_label, &by_list, 1e-6, &["camera", "rig", "overlay", "image", "run"], "").unwrap();
+    // detect --camera LABEL: the detections of --camera cameras.json.
+    let (a, b) = (dir.path().join("d_label.json"), dir.path().join("d_list.json"));
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--camera", p(&label), "--out", p(&a)]);
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--camera", p(&cams_path), "--out", p(&b)]);
+    let (da, db): (Value, Value) = (serde_json::from_str(&std::fs::read_to_string(&a).unwrap()).unwrap(), serde_json::from_str(&std::fs::read_to_string(&b).unwrap()).unwrap());
+    assert!(!da.as_array().unwrap().is_empty());
+    json_close(&da, &db, 1e-6, &[], "").unwrap();
+    // A label of another size than the image is refused, naming both.
+    let small = cams.as_array().unwrap().iter().find(|e| e["image_width"] == 256 && e["model_type"] == "CAHVOR").unwrap();
+    let small_label = with.join(small["label_file"].as_str().unwrap());
+    let o = tubeloc(&["locate", "--rig", p(&small_label), "--image", p(&image), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("1024x1024") && stderr(&o).contains("256x256") && stderr(&o).contains(small_label.file_name().unwrap().to_str().unwrap()), "{}", stderr(&o));
+}
+
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.
 fn camera_json(path: &Path, w: u32, h: u32, hfov_deg: f64) {
     let f = (w as f64 / 2.0) / (hfov_deg / 2.0).to_radians().tan();

@@ -8,7 +8,7 @@ use crate::rig::rig_of;
 use nalgebra::Vector3;
 use pyo3::prelude::*;
 use std::path::PathBuf;
-use std::sync::Mutex;
+use std::sync::{Mutex, RwLock};
 use tubeloc_core::{GroundPlane, Rig, TubeDetection};
 use tubeloc_pipeline::{shipped, CameraSelection, ExternalDetections, LocateInput, Locator, LocatorSettings, Timings, TubeDetector};
 
@@ -122,7 +122,8 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 /// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".
 #[pyclass(name = "Locator", module = "tubeloc", frozen)]
 pub struct PyLocator {
-    locator: Locator,
+    /// Read-locked by every call, write-locked by `select_camera`.
+    locator: RwLock<Locator>,
     min_probability: f64,
     /// Stage timings of the last `locate` call, measured inside the Rust pipeline.
     last_timings: Mutex<Option<Timings>>,
@@ -154,7 +155,7 @@ impl PyLocator {
             let threshold = settings.calibration.threshold;
             Ok((build(&rig, &origin, &selection_of(camera, pair), det, settings)?, threshold))
         })?;
-        Ok(PyLocator { locator, min_probability, last_timings: Mutex::new(None) })
+        Ok(PyLocator { locator: RwLock::new(locator), min_probability, last_timings: Mutex::new(None) })
     }
 
     /// locate(left, right=None, ground=None, up=None) -> list[Tube]
@@ -169,7 +170,7 @@ impl PyLocator {
         let image = image_of(left, "left")?;
         let right = right.filter(|r| !r.is_none()).map(|r| image_of(r, "right")).transpose()?;
         let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: up_of(up)? };
-        let found = py.detach(|| self.locator.locate(&input)).map_err(|e| chain_to_py(&e))?;
+        let found = py.detach(|| self.read().locate(&input)).map_err(|e| chain_to_py(&e))?;
         *self.last_timings.lock().unwrap_or_else(|e| e.into_inner()) = Some(found.timings.clone());
         Ok(found.tubes.iter().map(|t| PyTube::from_located(py, t, "located")).chain(found.rejected.iter().map(|r| PyTube::from_located(py, &r.tube, r.reason.name()))).collect())
     }
@@ -182,7 +183,7 @@ impl PyLocator {
     fn detect<'py>(&self, py: Python<'py>, image: &Bound<'py, PyAny>, ground: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyAny>> {
         let image = image_of(image, "image")?;
         let ground = ground_of(ground)?;
-        let dets = py.detach(|| self.locator.detect(&image, ground.as_ref())).map_err(|e| chain_to_py(&e))?;
+        let dets = py.detach(|| self.read().detect(&image, ground.as_ref())).map_err(|e| chain_to_py(&e))?;
         detections_to_py(py, &dets)
     }
 
@@ -192,19 +193,27 @@ impl PyLocator {
     /// locator's settings.
     #[pyo3(signature = (image, detections, right = None, ground = None))]
     fn refine<'py>(&self, py: Python<'py>, image: &Bound<'py, PyAny>, detections: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>) -> PyResult<Vec<PyTube>> {
-        refine_with(py, &self.locator, image, detections, right, ground)
+        refine_with(py, &self.read(), image, detections, right, ground)
+    }
+
+    /// select_camera(name)
+    ///
+    /// Takes the next images with rig camera `name` (e.g. the next frame's camera of a PDS
+    /// camera list, whose ground `read_pds_grounds` gives); the detector stays loaded.
+    fn select_camera(&self, py: Python<'_>, name: &str) -> PyResult<()> {
+        py.detach(|| self.locator.write().unwrap_or_else(|e| e.into_inner()).select_camera(name)).map_err(|e| chain_to_py(&e))
     }
 
     /// The rig camera the (left) images come from.
     #[getter]
     fn camera(&self) -> String {
-        self.locator.camera().name.clone()
+        self.read().camera().name.clone()
     }
 
     /// The detector's name (`learned`, `line2d`).
     #[getter]
     fn detector(&self) -> String {
-        self.locator.detector().name().to_string()
+        self.read().detector().name().to_string()
     }
 
     /// Wall times of the last `locate` call's stages, measured inside the pipeline (seconds;
@@ -224,6 +233,12 @@ impl PyLocator {
 
     fn __repr__(&self) -> String {
         format!("tubeloc.Locator(camera={:?}, detector={:?}, min_probability={})", self.camera(), self.detector(), self.min_probability)
+    }
+}
+
+impl PyLocator {
+    fn read(&self) -> std::sync::RwLockReadGuard<'_, Locator> {
+        self.locator.read().unwrap_or_else(|e| e.into_inner())
     }
 }
 

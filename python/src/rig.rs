@@ -74,7 +74,7 @@ fn is_yaml(path: &Path) -> bool {
 }
 
 /// Reads the rig file at `path` as `tubeloc --rig` does (tubeloc JSON, OpenCV YAML, a kalibr
-/// camchain, one ROS `camera_info`, or a PDS camera list, recognised by content); errors start
+/// camchain, one ROS `camera_info`, a PDS camera list or a PDS3 label, recognised by content); errors start
 /// with "rig: PATH:" as the CLI's.
 pub fn load(path: &Path) -> PyResult<Rig> {
     tubeloc_calib::read_rig(path).map_err(|e| context_to_py("rig", &e))
@@ -83,8 +83,10 @@ pub fn load(path: &Path) -> PyResult<Rig> {
 /// read_rig(path) -> Rig
 ///
 /// Reads and checks a rig file: tubeloc JSON, OpenCV YAML, a kalibr camchain, one ROS
-/// `camera_info`, or a PDS camera list (`cahv_to_pinhole.py`'s JSON: one camera per image,
-/// named after its file, in the rover frame), recognised by content.
+/// `camera_info`, a PDS camera list (`cahv_to_pinhole.py`'s JSON: one camera per image,
+/// named after its file, in the rover frame), or the PDS3 label of one image (`.LBL`, or an
+/// `.IMG` with its label: its CAHV/CAHVOR camera, named after its PRODUCT_ID, in the rover
+/// frame), recognised by content.
 #[pyfunction]
 pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
     Ok(PyRig { rig: load(&path)? })
@@ -92,13 +94,13 @@ pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
 
 /// read_pds_grounds(path) -> dict[str, tuple[float, float, float, float]]
 ///
-/// The ground under each camera of a PDS camera list (`cahv_to_pinhole.py`'s JSON), by camera
-/// name (the image's file name): (nx, ny, nz, d) in that camera's frame, n up, n·X = d,
+/// The ground under each camera of a PDS camera list (`cahv_to_pinhole.py`'s JSON) or of a
+/// PDS3 label, by camera name (the list's image file name, the label's PRODUCT_ID): (nx, ny, nz, d) in that camera's frame, n up, n·X = d,
 /// metres, as `Locator.locate(ground=...)` takes it (what `tubeloc locate` uses by itself).
 #[pyfunction]
 pub fn read_pds_grounds(path: PathBuf) -> PyResult<std::collections::BTreeMap<String, (f64, f64, f64, f64)>> {
-    let text = std::fs::read_to_string(&path).map_err(|e| to_py(format!("{}: {e}", path.display())))?;
-    let cams = tubeloc_calib::interchange::pds::pds_cameras(&text, &path).map_err(|e| chain_to_py(&e))?;
+    let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&path).map_err(|e| chain_to_py(&e))?;
+    let cams = cams.ok_or_else(|| to_py(format!("{}: neither a PDS camera list (a JSON list) nor a PDS3 label", path.display())))?;
     Ok(cams.into_iter().map(|c| (c.camera.name, (c.ground.normal.x, c.ground.normal.y, c.ground.normal.z, c.ground.offset))).collect())
 }
 

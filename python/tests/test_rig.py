@@ -71,7 +71,46 @@ def test_pds_camera_list_gives_cameras_by_image_and_their_grounds(tmp_path):
     # Up in the camera frame is -z of the site frame: (0, -c, -s); the camera is 2 m above.
     assert abs(nx) < 1e-12 and abs(ny + c) < 1e-12 and abs(nz + s) < 1e-12 and abs(d + 2.0) < 1e-12
     assert abs(grounds["NLB_2.jpg"][3] + 1.5) < 1e-12
-    assert tubeloc.Locator(rig, camera="NLB_2.jpg").camera == "NLB_2.jpg"
+    loc = tubeloc.Locator(rig, camera="NLB_2.jpg")
+    assert loc.camera == "NLB_2.jpg"
+    # One locator for every frame of the list: the camera switches, the model stays loaded.
+    loc.select_camera("NLB_1.jpg")
+    assert loc.camera == "NLB_1.jpg"
+    with pytest.raises(tubeloc.TubelocError, match="no camera named \"NLB_9.jpg\""):
+        loc.select_camera("NLB_9.jpg")
+    assert loc.camera == "NLB_1.jpg"
     path.write_text(json.dumps([dict(entry, skew=5.0)]))
     with pytest.raises(tubeloc.TubelocError, match="entry 0: skew"):
         tubeloc.read_pds_grounds(path)
+
+
+PDS3_LABEL = """PDS_VERSION_ID = PDS3
+PRODUCT_ID = "NLB_7"
+PLANET_DAY_NUMBER = 1431
+GROUP = GEOMETRIC_CAMERA_MODEL_PARMS
+  MODEL_TYPE = CAHV
+  MODEL_COMPONENT_1 = (0.8, 0.3, -1.95)
+  MODEL_COMPONENT_2 = (1.0, 0.0, 0.0)
+  MODEL_COMPONENT_3 = (319.5, 500.0, 0.0)
+  MODEL_COMPONENT_4 = (239.5, 0.0, 500.0)
+END_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS
+OBJECT = IMAGE
+  LINES = 480
+  LINE_SAMPLES = 640
+END_OBJECT = IMAGE
+END
+"""
+
+
+def test_pds3_label_gives_its_camera_and_ground(tmp_path):
+    # A camera 1.95 m above the rover frame's origin looking along the rover's +x (level).
+    path = tmp_path / "NLB_7.LBL"
+    path.write_text(PDS3_LABEL)
+    rig = tubeloc.read_rig(path)
+    assert rig.camera_names == ["NLB_7"] and rig.image_size("NLB_7") == (640, 480)
+    nx, ny, nz, d = tubeloc.read_pds_grounds(path)["NLB_7"]
+    # Up in the camera frame (x right, y down) is -y; the camera is 1.95 m above its ground.
+    assert abs(nx) < 1e-12 and abs(ny + 1.0) < 1e-12 and abs(nz) < 1e-12 and abs(d + 1.95) < 1e-12
+    path.write_text(PDS3_LABEL.replace("MODEL_TYPE = CAHV", "MODEL_TYPE = CAHVORE"))
+    with pytest.raises(tubeloc.TubelocError, match="NLB_7.LBL.*CAHVORE"):
+        tubeloc.read_rig(path)

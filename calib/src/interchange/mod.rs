@@ -7,12 +7,17 @@
 //! - [`ros`]: ROS `camera_info` YAML, one file per camera with each stereo pair's rectification;
 //!   written, and read as one camera.
 //! - [`pds`]: rover cameras from their PDS camera models (`cahv_to_pinhole.py`'s JSON list),
-//!   read: one camera per image, in the rover frame, with the ground under it.
+//!   read: one camera per image, in the rover frame, with the ground under it; and
+//!   [`pds_label`]: the PDS3 label of one image (its CAHV / CAHVOR model, [`cahv`], read from
+//!   the label's ODL, [`odl`]), read the same way.
 //!
 //! [`read_rig`] tells the formats apart by content, not by file name.
 
+pub mod cahv;
 pub mod kalibr;
+pub mod odl;
 pub mod pds;
+pub mod pds_label;
 pub mod ros;
 pub mod yaml_fields;
 
@@ -33,6 +38,9 @@ pub enum RigFormat {
     RosCameraInfo,
     /// A JSON list of PDS cameras (first character `[`, [`pds`]): one camera per image.
     PdsCameras,
+    /// A PDS3 label (first keyword `PDS_VERSION_ID`, [`pds_label`]): a one-camera rig in the
+    /// rover frame.
+    Pds3Label,
 }
 
 impl RigFormat {
@@ -44,6 +52,7 @@ impl RigFormat {
             RigFormat::KalibrCamchain => "kalibr camchain",
             RigFormat::RosCameraInfo => "ROS camera_info",
             RigFormat::PdsCameras => "PDS camera list",
+            RigFormat::Pds3Label => "PDS3 label",
         }
     }
 }
@@ -59,6 +68,9 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
     if first.starts_with('[') {
         return Ok(RigFormat::PdsCameras);
     }
+    if odl::looks_like_pds3_label(first.as_bytes()) {
+        return Ok(RigFormat::Pds3Label);
+    }
     if first.starts_with("%YAML:") {
         return Ok(RigFormat::OpencvYaml);
     }
@@ -72,19 +84,27 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
         },
         Err(e) => format!("not YAML ({e})"),
     };
-    Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
+    Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), a PDS3 label (does not start with `PDS_VERSION_ID`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
 }
 
 /// Reads a rig from tubeloc JSON, OpenCV FileStorage YAML, a kalibr camchain, or a single ROS
-/// `camera_info` file (a one-camera rig with the camera at the rig origin), or a PDS camera
-/// list (one camera per image, in the rover frame; [`pds`]), recognised by content. Errors name the file, and the field where one is wrong.
+/// `camera_info` file (a one-camera rig with the camera at the rig origin), a PDS camera list
+/// (one camera per image, in the rover frame; [`pds`]), or a PDS3 label (its camera, in the
+/// rover frame; [`pds_label`]), recognised by content. Errors name the file, and the field
+/// where one is wrong.
 pub fn read_rig(path: &Path) -> Result<Rig, CalibError> {
-    let text = std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    if odl::looks_like_pds3_label(&bytes) {
+        // Read as bytes: an `.IMG` carries its image after the label.
+        return Ok(pds::rig_of(&[pds_label::label_camera(&bytes, path)?]));
+    }
+    let text = String::from_utf8(bytes).map_err(|_| CalibError::parse(path, "neither UTF-8 text nor a PDS3 label"))?;
     match detect_rig_format(&text).map_err(|m| CalibError::parse(path, m))? {
         RigFormat::TubelocJson => Ok(Rig::load_json(path)?),
         RigFormat::OpencvYaml => crate::yaml::rig_from_yaml(&text, path),
         RigFormat::KalibrCamchain => kalibr::rig_from_camchain(&text, path),
         RigFormat::PdsCameras => pds::rig_from_pds(&text, path),
+        RigFormat::Pds3Label => Ok(pds::rig_of(&[pds_label::label_camera(text.as_bytes(), path)?])),
         RigFormat::RosCameraInfo => {
             let info = ros::CameraInfo::from_yaml(&text, path)?;
             let name = if info.name.is_empty() { "camera".to_string() } else { info.name };

@@ -12,6 +12,8 @@
 //! ground (camera frame): n = R_cam_from_site (0, 0, -1),  n · X = -camera_height_m
 //! ```
 //!
+//! [`read_pds_cameras`] also reads the PDS3 label of one image ([`super::pds_label`]).
+//!
 //! CAHVORE (fisheye) entries are left out: a pinhole does not describe them. The pinhole's skew
 //! (under 1 px for the MSL and MER cameras) is dropped; an entry with more is refused.
 
@@ -34,6 +36,49 @@ pub struct PdsCamera {
     pub ground: GroundPlane,
     /// The image's sol (`sol`), when the entry gives one.
     pub sol: Option<i64>,
+    /// The file name of the image the camera took, when its source names it (a list entry's
+    /// `image`); `None` for a PDS3 label, which describes the image it is given with.
+    pub image: Option<String>,
+}
+
+/// The linearized pinhole of a PDS camera model and where it stands: the parts of a
+/// [`PdsCamera`] before checking.
+#[derive(Clone, Debug)]
+pub struct PdsPinhole {
+    /// Image size (px).
+    pub size: (u32, u32),
+    /// `fx, fy, cx, cy` (px, the centre of the first pixel at (0, 0)).
+    pub intrinsics: [f64; 4],
+    /// `K12` (px), dropped when at most [`MAX_SKEW_PX`].
+    pub skew: f64,
+    /// Rotation taking rover-frame vectors into the camera frame.
+    pub r_cam_from_ref: Matrix3<f64>,
+    /// Camera centre in the rover frame (m).
+    pub centre: Vector3<f64>,
+    /// Rotation taking site-frame (local level, z down) vectors into the camera frame.
+    pub r_cam_from_site: Matrix3<f64>,
+    /// Height of the camera above its ground (m, along the site's vertical).
+    pub height_m: f64,
+}
+
+impl PdsCamera {
+    /// The camera `name` and its ground from a linearized model; `Err` names the quantity at
+    /// fault.
+    pub fn from_pinhole(name: &str, p: &PdsPinhole, sol: Option<i64>, image: Option<String>) -> Result<Self, String> {
+        if p.skew.is_nan() || p.skew.abs() > MAX_SKEW_PX {
+            return Err(format!("skew {} px: more than {MAX_SKEW_PX} px, which a pinhole without skew cannot carry", p.skew));
+        }
+        let [fx, fy, cx, cy] = p.intrinsics;
+        let model = CameraModel { width: p.size.0, height: p.size.1, fx, fy, cx, cy, distortion: Default::default() };
+        model.validate().map_err(|err| err.to_string())?;
+        let t_rig_cam = Pose::try_from_matrix(&p.r_cam_from_ref.transpose(), p.centre).map_err(|err| format!("`R_cam_from_ref`: {err}"))?;
+        if p.height_m.is_nan() || p.height_m <= 0.0 {
+            return Err(format!("camera height (`camera_height_m`) {} m must be > 0: the camera is not above its ground", p.height_m));
+        }
+        let up = p.r_cam_from_site * Vector3::new(0.0, 0.0, -1.0);
+        let ground = GroundPlane::new(up, -p.height_m * up.norm()).map_err(|err| format!("`R_cam_from_site`: {err}"))?;
+        Ok(PdsCamera { camera: RigCamera { name: name.to_string(), model, t_rig_cam }, ground, sol, image })
+    }
 }
 
 /// Whether `text` is a JSON list (the first character that is not white space is `[`).
@@ -62,21 +107,33 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
     Ok(out)
 }
 
-/// The cameras of the file `path` when it is a PDS camera list, `Ok(None)` when it is some
-/// other file (e.g. a tubeloc camera or rig JSON).
+/// The cameras of the file `path` when it is a PDS camera list, or the one camera of a PDS3
+/// label (a detached `.LBL`, or an `.IMG` with its label at the head; [`super::pds_label`]);
+/// `Ok(None)` when it is some other file (e.g. a tubeloc camera or rig JSON).
 pub fn read_pds_cameras(path: &Path) -> Result<Option<Vec<PdsCamera>>, CalibError> {
-    let text = std::fs::read_to_string(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    let bytes = std::fs::read(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    if super::odl::looks_like_pds3_label(&bytes) {
+        return super::pds_label::label_camera(&bytes, path).map(|c| Some(vec![c]));
+    }
+    let text = String::from_utf8(bytes).map_err(|_| CalibError::parse(path, "neither UTF-8 text nor a PDS3 label"))?;
     if !looks_like_pds_cameras(&text) {
         return Ok(None);
     }
     pds_cameras(&text, path).map(Some)
 }
 
-/// The camera of a PDS camera list (`cameras`, read from `path`) that took `image`: the one
-/// named after the image's file; the error names both files.
+/// The camera of `cameras` (read from `path`) that took `image`: the one named after the
+/// image's file, or the camera of a PDS3 label (which describes the image it is given with);
+/// the error names both files.
 pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) -> Result<&'a PdsCamera, CalibError> {
     let name = image.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-    cameras.iter().find(|c| c.camera.name == name).ok_or_else(|| CalibError::parse(path, format!("no camera for the image file {name:?} (a PDS camera list names each camera after its image)")))
+    if let Some(c) = cameras.iter().find(|c| c.image.as_deref() == Some(name)) {
+        return Ok(c);
+    }
+    match cameras {
+        [label] if label.image.is_none() => Ok(label),
+        _ => Err(CalibError::parse(path, format!("no camera for the image file {name:?} (a PDS camera list names each camera after its image)"))),
+    }
 }
 
 /// The rig of a PDS camera list: its cameras, no stereo pair.
@@ -103,25 +160,20 @@ fn entry(e: &Value) -> Result<PdsCamera, String> {
     };
     let image = e.get("image").and_then(Value::as_str).ok_or("missing `image`")?;
     let name = Path::new(image).file_name().and_then(|n| n.to_str()).filter(|n| !n.is_empty()).ok_or_else(|| format!("`image` {image:?} has no file name"))?;
-    let skew = e.get("skew").and_then(Value::as_f64).unwrap_or(0.0);
-    if skew.is_nan() || skew.abs() > MAX_SKEW_PX {
-        return Err(format!("skew {skew} px: more than {MAX_SKEW_PX} px, which a pinhole without skew cannot carry"));
-    }
     let size = |key: &str| -> Result<u32, String> {
         let v = num(key)?;
         (v >= 1.0 && v.fract() == 0.0 && v <= u32::MAX as f64).then_some(v as u32).ok_or_else(|| format!("`{key}` {v} is not a positive whole number of pixels"))
     };
-    let model = CameraModel { width: size("image_width")?, height: size("image_height")?, fx: num("fx")?, fy: num("fy")?, cx: num("cx")?, cy: num("cy")?, distortion: Default::default() };
-    model.validate().map_err(|err| err.to_string())?;
-    let centre = e.get("camera_center_ref_m").and_then(vec3).ok_or("missing `camera_center_ref_m` (3 numbers)")?;
-    let t_rig_cam = Pose::try_from_matrix(&mat3("R_cam_from_ref")?.transpose(), centre).map_err(|err| format!("`R_cam_from_ref`: {err}"))?;
-    let height = num("camera_height_m")?;
-    if height <= 0.0 {
-        return Err(format!("`camera_height_m` {height} must be > 0"));
-    }
-    let up = mat3("R_cam_from_site")? * Vector3::new(0.0, 0.0, -1.0);
-    let ground = GroundPlane::new(up, -height * up.norm()).map_err(|err| format!("`R_cam_from_site`: {err}"))?;
-    Ok(PdsCamera { camera: RigCamera { name: name.to_string(), model, t_rig_cam }, ground, sol: e.get("sol").and_then(Value::as_i64) })
+    let pinhole = PdsPinhole {
+        size: (size("image_width")?, size("image_height")?),
+        intrinsics: [num("fx")?, num("fy")?, num("cx")?, num("cy")?],
+        skew: e.get("skew").and_then(Value::as_f64).unwrap_or(0.0),
+        r_cam_from_ref: mat3("R_cam_from_ref")?,
+        centre: e.get("camera_center_ref_m").and_then(vec3).ok_or("missing `camera_center_ref_m` (3 numbers)")?,
+        r_cam_from_site: mat3("R_cam_from_site")?,
+        height_m: num("camera_height_m")?,
+    };
+    PdsCamera::from_pinhole(name, &pinhole, e.get("sol").and_then(Value::as_i64), Some(name.to_string()))
 }
 
 #[cfg(test)]

@@ -53,7 +53,10 @@ pub struct LocateArgs {
     #[command(subcommand)]
     pub command: Option<LocateCommand>,
     /// Rig file: tubeloc JSON (`tubeloc calib rig`, a synthetic dataset's `rig.json`), OpenCV YAML,
-    /// a kalibr camchain or one ROS `camera_info`, recognised by content.
+    /// a kalibr camchain, one ROS `camera_info`, a PDS camera list (`cahv_to_pinhole.py`'s JSON:
+    /// each image's camera, by file name, and ground) or the PDS3 label of the image (`.LBL`, or
+    /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground),
+    /// recognised by content.
     #[arg(long, required = true)]
     pub rig: Option<PathBuf>,
     /// The (left) image.
@@ -314,7 +317,8 @@ pub struct Setup {
     locators: FrameLocators,
     camera: tubeloc_core::RigCamera,
     /// A rig of one camera per image (a PDS camera list, without `--camera-name`): each frame
-    /// is taken by the camera named after its file.
+    /// is taken by the camera named after its file (a PDS3 label's one camera takes every
+    /// frame).
     per_image: bool,
     /// The cameras of a PDS camera list with their grounds (used when `--ground` is not
     /// given); empty for other rig files.

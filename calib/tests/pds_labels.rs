@@ -1,0 +1,94 @@
+//! The PDS3 labels of the real rover data read as cameras: the same cameras and grounds as
+//! `cahv_to_pinhole.py`'s list of them (`with_cameras/cameras.json`), and what dropping
+//! CAHVOR's radial terms costs. These need `../shared/data/real_mars` beside the repository.
+
+use nalgebra::Vector3;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use tubeloc_calib::interchange::cahv::Cahvor;
+use tubeloc_calib::interchange::odl::OdlLabel;
+use tubeloc_calib::interchange::pds::read_pds_cameras;
+use tubeloc_calib::interchange::pds_label::{label_model, LabelModel};
+
+fn with_cameras() -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars/with_cameras");
+    assert!(d.join("cameras.json").exists(), "{} is missing: these tests need ../shared/data beside the repository", d.display());
+    d
+}
+
+fn list() -> Vec<Value> {
+    serde_json::from_str::<Value>(&std::fs::read_to_string(with_cameras().join("cameras.json")).unwrap()).unwrap().as_array().unwrap().clone()
+}
+
+#[test]
+fn every_label_gives_the_camera_and_ground_of_the_python_list() {
+    let (mut read, mut refused) = (0, 0);
+    for e in list() {
+        let label = with_cameras().join(e["label_file"].as_str().unwrap());
+        let got = read_pds_cameras(&label);
+        if e["model_type"] == "CAHVORE" {
+            let err = got.unwrap_err().to_string();
+            assert!(err.contains("CAHVORE") && err.contains(label.file_name().unwrap().to_str().unwrap()), "{err}");
+            refused += 1;
+            continue;
+        }
+        let cams = got.unwrap().expect("a label is a PDS camera source");
+        assert_eq!(cams.len(), 1);
+        let c = &cams[0];
+        let num = |v: &Value| v.as_f64().unwrap();
+        let m = &c.camera.model;
+        assert_eq!((m.width as i64, m.height as i64), (e["image_width"].as_i64().unwrap(), e["image_height"].as_i64().unwrap()), "{}", label.display());
+        for (got, key) in [(m.fx, "fx"), (m.fy, "fy"), (m.cx, "cx"), (m.cy, "cy")] {
+            assert!((got - num(&e[key])).abs() < 1e-9 * num(&e[key]).abs().max(1.0), "{}: {key} {got} against {}", label.display(), e[key]);
+        }
+        let t = &c.camera.t_rig_cam;
+        for k in 0..3 {
+            assert!((t.translation()[k] - num(&e["camera_center_ref_m"][k])).abs() < 1e-12);
+            for j in 0..3 {
+                // T_rig_cam's rotation is R_cam_from_ref transposed.
+                assert!((t.rotation()[(j, k)] - num(&e["R_cam_from_ref"][k][j])).abs() < 1e-9, "{}", label.display());
+            }
+            let up = -num(&e["R_cam_from_site"][k][2]);
+            assert!((c.ground.normal[k] - up).abs() < 1e-9, "{}: ground normal {} against up {up} (axis {k})", label.display(), c.ground.normal);
+        }
+        assert!((c.ground.offset + num(&e["camera_height_m"])).abs() < 1e-9, "{}", label.display());
+        assert_eq!(c.sol, e["sol"].as_i64());
+        assert!(c.image.is_none(), "a label describes the image it is given with");
+        read += 1;
+    }
+    assert!(read >= 110 && refused >= 1, "{read} read, {refused} CAHVORE refused");
+}
+
+/// The largest image displacement (px) between a CAHVOR model and its linearized pinhole over
+/// a 33x33 grid of pixels of the pinhole image.
+fn largest_radial_displacement(m: &Cahvor, size: (u32, u32)) -> f64 {
+    let lin = m.cahv.linearize().unwrap();
+    let mut worst: f64 = 0.0;
+    for i in 0..=32 {
+        for j in 0..=32 {
+            let (u, v) = (i as f64 / 32.0 * (size.0 - 1) as f64, j as f64 / 32.0 * (size.1 - 1) as f64);
+            let y = (v - lin.cy) / lin.fy;
+            let ray = Vector3::new((u - lin.cx - lin.skew * y) / lin.fx, y, 1.0);
+            let p = lin.centre + lin.r_cam_from_ref.transpose() * ray;
+            let (x1, y1) = m.project(&p).unwrap();
+            worst = worst.max(((x1 - u).powi(2) + (y1 - v).powi(2)).sqrt());
+        }
+    }
+    worst
+}
+
+#[test]
+fn dropping_cahvor_radial_terms_moves_navcam_pixels_by_under_a_pixel() {
+    let mut worst: Vec<(f64, String)> = Vec::new();
+    for e in list().iter().filter(|e| e["model_type"] == "CAHVOR") {
+        let path = with_cameras().join(e["label_file"].as_str().unwrap());
+        let label = OdlLabel::parse(&std::fs::read(&path).unwrap()).unwrap();
+        let LabelModel::Cahvor(m) = label_model(&label).unwrap() else { panic!("{} is CAHVOR", path.display()) };
+        let size = (e["image_width"].as_u64().unwrap() as u32, e["image_height"].as_u64().unwrap() as u32);
+        worst.push((largest_radial_displacement(&m, size), format!("{} {}x{}", e["instrument_id"], size.0, size.1)));
+    }
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    eprintln!("largest CAHVOR-pinhole displacement: {:?}", &worst[..3.min(worst.len())]);
+    assert!(worst.len() >= 100, "{} CAHVOR labels", worst.len());
+    assert!(worst[0].0 < 1.0, "{:?}", &worst[..3]);
+}
