@@ -301,6 +301,57 @@ fn a_pds3_label_as_rig_or_camera_gives_what_the_python_list_gives() {
     assert!(stderr(&o).contains("1024x1024") && stderr(&o).contains("256x256") && stderr(&o).contains(small_label.file_name().unwrap().to_str().unwrap()), "{}", stderr(&o));
 }
 
+#[test]
+fn a_pds3_product_is_read_as_its_image_and_camera() {
+    // A test-sol Navcam frame as the archive holds it: its real detached label beside a data
+    // file with the frame's 12-bit samples (big-endian 16-bit) at the label's record. `locate`
+    // and `detect` given the label as image and camera see what they see given the same
+    // samples as a 16-bit PNG and the label as camera.
+    let dir = tempfile::tempdir().unwrap();
+    let with = real_data().join("with_cameras");
+    let cams: Value = serde_json::from_str(&std::fs::read_to_string(with.join("cameras.json")).unwrap()).unwrap();
+    let e = cams
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV") && TEST_SOLS.contains(&e["sol"].as_i64().unwrap()) && e["label_file"].as_str().unwrap().ends_with(".LBL"))
+        .unwrap();
+    let label_src = with.join(e["label_file"].as_str().unwrap());
+    let text = std::fs::read_to_string(&label_src).unwrap();
+    // `^IMAGE = ("NAME.IMG"\n ,23)`: the data file and its first record.
+    let pointer: String = text.split("^IMAGE ").nth(1).unwrap().split(')').next().unwrap().chars().filter(|c| !c.is_whitespace()).collect();
+    let (name, record) = pointer.trim_start_matches("=(").split_once(',').unwrap();
+    let (name, record): (&str, usize) = (name.trim_matches('"'), record.parse().unwrap());
+    let label = dir.path().join(label_src.file_name().unwrap());
+    std::fs::copy(&label_src, &label).unwrap();
+    let grey = image::open(with.join(e["image"].as_str().unwrap())).unwrap().to_luma8();
+    let twelve: Vec<u16> = grey.as_raw().iter().map(|&v| v as u16 * 16 + 7).collect();
+    let mut data = vec![0u8; (record - 1) * 2048];
+    data.extend(twelve.iter().flat_map(|v| v.to_be_bytes()));
+    std::fs::write(dir.path().join(name), &data).unwrap();
+    let png16 = dir.path().join("frame16.png");
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(grey.width(), grey.height(), twelve).unwrap().save(&png16).unwrap();
+    let run = |image: &Path, out: &str| -> Value {
+        let out = dir.path().join(out);
+        let o = tubeloc(&["locate", "--rig", p(&label), "--image", p(image), "--out", p(&out)]);
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap()
+    };
+    let (by_product, by_png) = (run(&label, "product.json"), run(&png16, "png.json"));
+    assert!(!by_product["tubes"].as_array().unwrap().is_empty(), "no detection to compare");
+    json_close(&by_product, &by_png, 1e-9, &["image", "overlay", "run"], "").unwrap();
+    let (a, b) = (dir.path().join("d_product.json"), dir.path().join("d_png.json"));
+    ok(&["detect", "--method", "learned", "--image", p(&label), "--camera", p(&label), "--out", p(&a)]);
+    ok(&["detect", "--method", "learned", "--image", p(&png16), "--camera", p(&label), "--out", p(&b)]);
+    let (da, db): (Value, Value) = (serde_json::from_str(&std::fs::read_to_string(&a).unwrap()).unwrap(), serde_json::from_str(&std::fs::read_to_string(&b).unwrap()).unwrap());
+    assert_eq!(da, db);
+    // The data file cut short: refused, naming it and the extent.
+    std::fs::write(dir.path().join(name), &data[..data.len() - 2]).unwrap();
+    let o = tubeloc(&["locate", "--rig", p(&label), "--image", p(&label), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains(name) && stderr(&o).contains("cut short"), "{}", stderr(&o));
+}
+
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.
 fn camera_json(path: &Path, w: u32, h: u32, hfov_deg: f64) {
     let f = (w as f64 / 2.0) / (hfov_deg / 2.0).to_radians().tan();

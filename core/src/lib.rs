@@ -19,6 +19,7 @@ pub mod ground;
 pub mod heap;
 pub mod image_file;
 pub mod mask;
+pub mod odl;
 pub mod plane;
 pub mod pose;
 pub mod rectification;

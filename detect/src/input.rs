@@ -1,4 +1,5 @@
-//! Rover camera images of any format as the detectors' input: 8-bit sRGB, interleaved RGB.
+//! Rover camera images of any format (PNG, JPEG, TIFF, PDS3 products) as the detectors' input:
+//! 8-bit sRGB, interleaved RGB.
 //!
 //! Every detector and the training loader go through [`rgb8_of`], so training and inference
 //! see the same conversion:
@@ -115,18 +116,37 @@ pub fn to_eight_bit(img: &image::DynamicImage) -> Option<image::DynamicImage> {
     })
 }
 
-/// Decodes an image file (PNG, JPEG, TIFF), its format told by its bytes; a JPEG cut short is an
-/// error ([`tubeloc_core::image_file::read_whole`]), not an image with blank rows.
+/// Decodes an image file (PNG, JPEG, TIFF, or a PDS3 product: [`crate::pds3_image`]), its
+/// format told by its bytes; a JPEG cut short is an error
+/// ([`tubeloc_core::image_file::read_whole`]), not an image with blank rows.
 pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
-    image::load_from_memory(&tubeloc_core::image_file::read_whole(path.as_ref())?)
+    let path = path.as_ref();
+    let bytes = tubeloc_core::image_file::read_whole(path)?;
+    if tubeloc_core::odl::looks_like_pds3_label(&bytes) {
+        return crate::pds3_image::decode(&bytes, path).map_err(invalid_data);
+    }
+    image::load_from_memory(&bytes)
 }
 
-/// The width and height of an image file from its header (the pixels are not decoded); an
+fn invalid_data(message: String) -> image::ImageError {
+    image::ImageError::IoError(std::io::Error::new(std::io::ErrorKind::InvalidData, message))
+}
+
+/// The width and height of an image file (or PDS3 product) from its header (the pixels are not decoded); an
 /// empty file is refused as such ([`tubeloc_core::image_file::check_complete`]).
 pub fn image_size(path: impl AsRef<Path>) -> Result<(u32, u32), image::ImageError> {
     let path = path.as_ref();
     if std::fs::metadata(path)?.len() == 0 {
         tubeloc_core::image_file::check_complete(&[]).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+    }
+    // A PDS3 label (tens of kB) gives the size without the samples.
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let mut head = Vec::new();
+    (&mut file).take(64).read_to_end(&mut head)?;
+    if tubeloc_core::odl::looks_like_pds3_label(&head) {
+        file.take(tubeloc_core::odl::MAX_LABEL_BYTES as u64).read_to_end(&mut head)?;
+        return crate::pds3_image::size(&head, path).map_err(invalid_data);
     }
     image::image_dimensions(path)
 }

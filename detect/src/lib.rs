@@ -4,4 +4,5 @@
 pub mod input;
 pub mod learned;
 pub mod line2d;
+pub mod pds3_image;
 pub mod scale;

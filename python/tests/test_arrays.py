@@ -124,3 +124,20 @@ def test_a_sixteen_bit_tiff_reads_as_its_pixels(tmp_path):
     img = tubeloc.read_image(str(path))
     assert img.dtype == np.uint16 and img.shape == a.shape
     assert np.array_equal(img, a)
+
+
+def test_read_image_decodes_a_pds3_product(tmp_path):
+    # A 3x2 product as the PDS archives a Navcam frame: the label at the head, 12-bit data in
+    # big-endian 16-bit samples from record 3 (records of 256 bytes).
+    label = ("PDS_VERSION_ID = PDS3\nRECORD_TYPE = FIXED_LENGTH\nRECORD_BYTES = 256\n^IMAGE = 3\n"
+             "OBJECT = IMAGE\n  LINES = 2\n  LINE_SAMPLES = 3\n  SAMPLE_TYPE = MSB_INTEGER\n"
+             "  SAMPLE_BITS = 16\nEND_OBJECT = IMAGE\nEND\n").encode().ljust(512, b" ")
+    data = np.array([[0, 100, 4095], [7, 2048, 1]], dtype=">i2")
+    path = tmp_path / "frame.IMG"
+    path.write_bytes(label + data.tobytes())
+    img = tubeloc.read_image(path)
+    assert img.dtype == np.uint16 and img.shape == (2, 3)
+    assert (img == data.astype(np.uint16)).all()
+    path.write_bytes(label + data.tobytes()[:-1])
+    with pytest.raises(tubeloc.TubelocError, match="frame.IMG.*cut short"):
+        tubeloc.read_image(path)

@@ -15,11 +15,13 @@
 
 pub mod cahv;
 pub mod kalibr;
-pub mod odl;
 pub mod pds;
 pub mod pds_label;
 pub mod ros;
 pub mod yaml_fields;
+
+/// PDS3 labels (ODL), shared with the image readers: [`tubeloc_core::odl`].
+pub use tubeloc_core::odl;
 
 use crate::error::CalibError;
 use std::path::Path;
