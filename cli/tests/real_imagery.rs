@@ -301,36 +301,61 @@ fn a_pds3_label_as_rig_or_camera_gives_what_the_python_list_gives() {
     assert!(stderr(&o).contains("1024x1024") && stderr(&o).contains("256x256") && stderr(&o).contains(small_label.file_name().unwrap().to_str().unwrap()), "{}", stderr(&o));
 }
 
-#[test]
-fn a_pds3_product_is_read_as_its_image_and_camera() {
-    // A test-sol Navcam frame as the archive holds it: its real detached label beside a data
-    // file with the frame's 12-bit samples (big-endian 16-bit) at the label's record. `locate`
-    // and `detect` given the label as image and camera see what they see given the same
-    // samples as a 16-bit PNG and the label as camera.
-    let dir = tempfile::tempdir().unwrap();
+/// Writes the test-sol frame of `with_cameras` entry `e` as the archive holds it into `dir`:
+/// its real detached label beside a data file with the frame's 12-bit samples (big-endian
+/// 16-bit) at the label's record.
+fn write_product(dir: &Path, e: &Value) -> Product {
     let with = real_data().join("with_cameras");
-    let cams: Value = serde_json::from_str(&std::fs::read_to_string(with.join("cameras.json")).unwrap()).unwrap();
-    let e = cams
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV") && TEST_SOLS.contains(&e["sol"].as_i64().unwrap()) && e["label_file"].as_str().unwrap().ends_with(".LBL"))
-        .unwrap();
     let label_src = with.join(e["label_file"].as_str().unwrap());
     let text = std::fs::read_to_string(&label_src).unwrap();
     // `^IMAGE = ("NAME.IMG"\n ,23)`: the data file and its first record.
     let pointer: String = text.split("^IMAGE ").nth(1).unwrap().split(')').next().unwrap().chars().filter(|c| !c.is_whitespace()).collect();
     let (name, record) = pointer.trim_start_matches("=(").split_once(',').unwrap();
     let (name, record): (&str, usize) = (name.trim_matches('"'), record.parse().unwrap());
-    let label = dir.path().join(label_src.file_name().unwrap());
+    let label = dir.join(label_src.file_name().unwrap());
     std::fs::copy(&label_src, &label).unwrap();
     let grey = image::open(with.join(e["image"].as_str().unwrap())).unwrap().to_luma8();
     let twelve: Vec<u16> = grey.as_raw().iter().map(|&v| v as u16 * 16 + 7).collect();
     let mut data = vec![0u8; (record - 1) * 2048];
     data.extend(twelve.iter().flat_map(|v| v.to_be_bytes()));
-    std::fs::write(dir.path().join(name), &data).unwrap();
+    std::fs::write(dir.join(name), &data).unwrap();
+    Product { label, data_file: name.to_string(), data, samples: image::ImageBuffer::from_raw(grey.width(), grey.height(), twelve).unwrap() }
+}
+
+/// A PDS3 product written by [`write_product`].
+struct Product {
+    /// The label's path.
+    label: PathBuf,
+    /// The data file's name (beside the label).
+    data_file: String,
+    /// The data file's bytes.
+    data: Vec<u8>,
+    /// The 12-bit samples.
+    samples: image::ImageBuffer<image::Luma<u16>, Vec<u16>>,
+}
+
+/// The full-frame Navcam entries of `with_cameras` of test sols with a detached label.
+fn test_sol_navcam_products() -> Vec<Value> {
+    let cams: Value = serde_json::from_str(&std::fs::read_to_string(real_data().join("with_cameras/cameras.json")).unwrap()).unwrap();
+    cams.as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["image_width"] == 1024 && e["instrument_id"].as_str().unwrap_or("").starts_with("NAV") && TEST_SOLS.contains(&e["sol"].as_i64().unwrap()) && e["label_file"].as_str().unwrap().ends_with(".LBL"))
+        .cloned()
+        .collect()
+}
+
+#[test]
+fn a_pds3_product_is_read_as_its_image_and_camera() {
+    // A test-sol Navcam frame as the archive holds it (`write_product`): `locate` and `detect`
+    // given the label as image and camera see what they see given the same samples as a
+    // 16-bit PNG and the label as camera.
+    let dir = tempfile::tempdir().unwrap();
+    let e = &test_sol_navcam_products()[0];
+    let Product { label, data_file, data, samples } = write_product(dir.path(), e);
+    let name = data_file.as_str();
     let png16 = dir.path().join("frame16.png");
-    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(grey.width(), grey.height(), twelve).unwrap().save(&png16).unwrap();
+    samples.save(&png16).unwrap();
     let run = |image: &Path, out: &str| -> Value {
         let out = dir.path().join(out);
         let o = tubeloc(&["locate", "--rig", p(&label), "--image", p(image), "--out", p(&out)]);
@@ -350,6 +375,40 @@ fn a_pds3_product_is_read_as_its_image_and_camera() {
     let o = tubeloc(&["locate", "--rig", p(&label), "--image", p(&label), "--out", p(&dir.path().join("x.json"))]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains(name) && stderr(&o).contains("cut short"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_batch_of_pds3_products_takes_each_frames_camera_from_its_own_label() {
+    // Two test-sol Navcam products and a PNG in one batch with --label-cameras (no rig file):
+    // each product's frame is located as a one-image run with its label as the rig does it;
+    // the PNG, which carries no camera, fails alone, named.
+    let dir = tempfile::tempdir().unwrap();
+    let entries = test_sol_navcam_products();
+    let labels: Vec<PathBuf> = entries.iter().take(2).map(|e| write_product(dir.path(), e).label).collect();
+    let png = real_data().join("with_cameras").join(entries[0]["image"].as_str().unwrap());
+    let list = dir.path().join("frames.txt");
+    std::fs::write(&list, format!("{}\n{}\n{}\n", labels[0].display(), labels[1].display(), png.display())).unwrap();
+    let out = dir.path().join("batch");
+    let o = tubeloc(&["locate", "--label-cameras", "--images", p(&list), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(1), "one frame failed: {}", stderr(&o));
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let failed: Vec<&Value> = summary["frames"].as_array().unwrap().iter().filter(|f| f["error"].is_string()).collect();
+    assert_eq!(failed.len(), 1, "{summary}");
+    assert!(failed[0]["image"].as_str().unwrap().ends_with(png.file_name().unwrap().to_str().unwrap()));
+    assert!(failed[0]["error"].as_str().unwrap().contains("not a PDS3 product"), "{}", failed[0]);
+    for label in &labels {
+        let stem = label.file_stem().unwrap().to_str().unwrap();
+        let batch: Value = serde_json::from_str(&std::fs::read_to_string(out.join("frames").join(format!("{stem}.json"))).unwrap()).unwrap();
+        assert_eq!(batch["camera"], label.file_name().unwrap().to_str().unwrap(), "each frame's camera is named after its file");
+        let single_out = dir.path().join(format!("{stem}.single.json"));
+        let o = tubeloc(&["locate", "--rig", p(label), "--image", p(label), "--out", p(&single_out)]);
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+        let single: Value = serde_json::from_str(&std::fs::read_to_string(&single_out).unwrap()).unwrap();
+        json_close(&batch, &single, 1e-9, &["camera", "run", "overlay"], "").unwrap();
+    }
+    // --label-cameras takes no rig.
+    let o = tubeloc(&["locate", "--label-cameras", "--rig", p(&labels[0]), "--image", p(&labels[0]), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
 
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.

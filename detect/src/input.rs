@@ -125,7 +125,15 @@ pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::
     if tubeloc_core::odl::looks_like_pds3_label(&bytes) {
         return crate::pds3_image::decode(&bytes, path).map_err(invalid_data);
     }
+    if bytes.starts_with(b"LBLSIZE=") {
+        return Err(invalid_data(vicar_without_label(path)));
+    }
     image::load_from_memory(&bytes)
+}
+
+/// The error for a VICAR file without a PDS3 label at its head.
+fn vicar_without_label(path: &Path) -> String {
+    format!("{}: a VICAR image without a PDS3 label at its head; give its detached PDS3 label (.LBL), whose ^IMAGE points into it", path.display())
 }
 
 fn invalid_data(message: String) -> image::ImageError {
@@ -148,6 +156,9 @@ pub fn image_size(path: impl AsRef<Path>) -> Result<(u32, u32), image::ImageErro
         file.take(tubeloc_core::odl::MAX_LABEL_BYTES as u64).read_to_end(&mut head)?;
         return crate::pds3_image::size(&head, path).map_err(invalid_data);
     }
+    if head.starts_with(b"LBLSIZE=") {
+        return Err(invalid_data(vicar_without_label(path)));
+    }
     image::image_dimensions(path)
 }
 
@@ -167,6 +178,16 @@ pub fn load(path: &Path) -> Result<DetectorInput, String> {
 mod tests {
     use super::*;
     use image::{ImageBuffer, Luma, Rgb, Rgba};
+
+    #[test]
+    fn a_vicar_file_without_a_pds3_label_is_refused_with_the_way_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let vic = dir.path().join("n.IMG");
+        std::fs::write(&vic, b"LBLSIZE=2048   FORMAT='BYTE'  TYPE='IMAGE'").unwrap();
+        for err in [open_image(&vic).unwrap_err().to_string(), image_size(&vic).unwrap_err().to_string()] {
+            assert!(err.contains("n.IMG") && err.contains("VICAR") && err.contains(".LBL"), "{err}");
+        }
+    }
 
     #[test]
     fn image_size_reads_the_header_and_refuses_an_empty_file() {

@@ -125,7 +125,7 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
     let (index, count) = a.shard.unwrap_or((0, 1));
     let shard = Shard { index, count };
     let mine: Vec<usize> = shard_indices(frames.len(), (index, count)).collect();
-    let setup = Setup::new(a)?;
+    let setup = Setup::new(a, &mine.iter().map(|&k| frames[k].image.as_path()).collect::<Vec<_>>())?;
     std::fs::create_dir_all(out.join("frames")).with_context(|| format!("creating {}", out.join("frames").display()))?;
 
     let bar = ProgressBar::new(mine.len() as u64);

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Image file extensions a folder given to `--images` is read for (any case).
-pub const IMAGE_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
+pub const IMAGE_EXTENSIONS: [&str; 4] = ["png", "jpg", "jpeg", "img"];
 
 /// The image paths of `--images`/`--right-images` (`flag` names it in errors), sorted: a
 /// folder's files with an [`IMAGE_EXTENSIONS`] extension (not its subfolders), or a list file's
@@ -30,7 +30,7 @@ pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
         }
     }
     if paths.is_empty() {
-        bail!("{flag} {}: no images (a folder's .png/.jpg/.jpeg files, or a list file of image paths)", arg.display());
+        bail!("{flag} {}: no images (a folder's .png/.jpg/.jpeg/.img files, or a list file of image paths)", arg.display());
     }
     paths.sort();
     Ok(paths)

@@ -57,15 +57,20 @@ pub struct LocateArgs {
     /// each image's camera, by file name, and ground) or the PDS3 label of the image (`.LBL`, or
     /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground),
     /// recognised by content.
-    #[arg(long, required = true)]
+    #[arg(long, required_unless_present = "label_cameras", conflicts_with = "label_cameras")]
     pub rig: Option<PathBuf>,
+    /// Instead of --rig: each image is a PDS3 product (`.IMG` with its label, or a `.LBL` beside
+    /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground.
+    /// A batch of products then needs no rig file; each frame's camera is named after its file.
+    #[arg(long, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
+    pub label_cameras: bool,
     /// The (left) image.
     #[arg(long, required_unless_present = "images", conflicts_with = "images")]
     pub image: Option<PathBuf>,
     /// Right image of a stereo pair: adds the stereo term to the refinement.
     #[arg(long, conflicts_with = "images")]
     pub right: Option<PathBuf>,
-    /// Batch run: the (left) frames, a folder (its .png/.jpg/.jpeg files) or a list file (one
+    /// Batch run: the (left) frames, a folder (its .png/.jpg/.jpeg/.img files) or a list file (one
     /// image path a line, relative to the list's folder; blank lines and `#` comments skipped).
     /// Frames are taken in sorted path order; each frame's result is `--out DIR/frames/<image
     /// file stem>.json` (image file stems must be unique), plus `DIR/summary.json`. A frame
@@ -147,6 +152,7 @@ impl LocateArgs {
         LocateArgs {
             command: None,
             rig: Some(rig),
+            label_cameras: false,
             image: Some(image),
             right: None,
             images: None,
@@ -323,15 +329,28 @@ pub struct Setup {
     /// The cameras of a PDS camera list with their grounds (used when `--ground` is not
     /// given); empty for other rig files.
     pds: Vec<tubeloc_calib::interchange::pds::PdsCamera>,
+    /// With `--label-cameras`: why an image's label gives no camera, by image file name (that
+    /// frame fails; the others run).
+    label_errors: BTreeMap<String, String>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
 
 impl Setup {
-    /// Reads the rig, builds the detector and the settings (score calibration) of `a`.
-    pub fn new(a: &LocateArgs) -> Result<Self> {
-        let rig_path = a.rig_path()?.to_path_buf();
-        let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?;
+    /// Reads the rig (with `--label-cameras`, the labels of `images`), builds the detector and
+    /// the settings (score calibration) of `a`.
+    pub fn new(a: &LocateArgs, images: &[&Path]) -> Result<Self> {
+        let (rig_path, pds, label_errors) = if a.label_cameras {
+            let (cams, errors) = label_cameras(images);
+            if cams.is_empty() {
+                bail!("{}", errors.into_values().next().unwrap_or_else(|| "--label-cameras: no image".into()));
+            }
+            (PathBuf::from("the images' PDS3 labels (--label-cameras)"), Some(cams), errors)
+        } else {
+            let rig_path = a.rig_path()?.to_path_buf();
+            let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?;
+            (rig_path, pds, BTreeMap::new())
+        };
         let rig: Rig = match &pds {
             Some(cams) => tubeloc_calib::interchange::pds::rig_of(cams),
             None => tubeloc_calib::read_rig(&rig_path).context("rig")?,
@@ -384,7 +403,7 @@ impl Setup {
             Some(ext) => FrameLocators::External(ext),
             None => FrameLocators::Shared(Box::new(std::sync::Mutex::new(locator))),
         };
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, detector_name })
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, detector_name })
     }
 
     /// The rig camera that took `image`: the run's, or with a camera per image the one named
@@ -392,6 +411,9 @@ impl Setup {
     fn camera_of(&self, image: &Path) -> Result<&tubeloc_core::RigCamera> {
         if !self.per_image {
             return Ok(&self.camera);
+        }
+        if let Some(e) = image.file_name().and_then(|n| self.label_errors.get(n.to_string_lossy().as_ref())) {
+            bail!("{e}");
         }
         Ok(&pds_camera_of(&self.pds, &self.rig_path, image)?.camera)
     }
@@ -426,6 +448,33 @@ impl Setup {
             }
         }
     }
+}
+
+/// The cameras of `--label-cameras`: each image's own PDS3 label, the camera named after the
+/// image's file; and, by image file name, why an image gives none.
+fn label_cameras(images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
+    let read = |image: &Path, name: &str| -> Result<tubeloc_calib::interchange::pds::PdsCamera> {
+        let mut head = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::Read::take(std::fs::File::open(image).with_context(|| format!("{}", image.display()))?, 64), &mut head).with_context(|| format!("{}", image.display()))?;
+        if !tubeloc_core::odl::looks_like_pds3_label(&head) {
+            bail!("--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL): it carries no camera", image.display());
+        }
+        let cams = tubeloc_calib::interchange::pds::read_pds_cameras(image).context("--label-cameras")?;
+        let mut c = cams.and_then(|c| c.into_iter().next()).with_context(|| format!("--label-cameras: {}: no camera", image.display()))?;
+        (c.camera.name, c.image) = (name.to_string(), Some(name.to_string()));
+        Ok(c)
+    };
+    let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
+    for image in images {
+        let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        match read(image, &name) {
+            Ok(c) => cams.push(c),
+            Err(e) => {
+                errors.insert(name, format!("{e:#}"));
+            }
+        }
+    }
+    (cams, errors)
 }
 
 /// The camera of the PDS camera list `cameras` (read from `rig_path`) that took `image`: the

@@ -17,8 +17,8 @@ pub fn sidecar(out: &Path, suffix: &str) -> PathBuf {
 pub fn run(a: &LocateArgs) -> Result<usize> {
     let t0 = std::time::Instant::now();
     let out = a.out_path()?;
-    let setup = Setup::new(a)?;
     let frame = Frame { image: a.image.clone().context("--image or --images is required")?, right: a.right.clone() };
+    let setup = Setup::new(a, &[frame.image.as_path()])?;
     let done = locate_frame(&setup, a, &frame, Some(t0), true)?;
 
     // Outputs: the overlay, then the poses, each written atomically; nothing printed before.
