@@ -35,6 +35,19 @@ pub fn looks_like_pds3_label(bytes: &[u8]) -> bool {
     rest.starts_with(b"PDS_VERSION_ID") || rest.starts_with(b"ODL_VERSION_ID")
 }
 
+/// The start of the file `path`: its label (up to [`MAX_LABEL_BYTES`]) when it starts with one
+/// ([`looks_like_pds3_label`]), else its first 64 bytes (enough to tell a format by).
+pub fn read_head(path: &std::path::Path) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let mut head = Vec::new();
+    (&mut file).take(64).read_to_end(&mut head)?;
+    if looks_like_pds3_label(&head) {
+        file.take(MAX_LABEL_BYTES as u64 - head.len() as u64).read_to_end(&mut head)?;
+    }
+    Ok(head)
+}
+
 impl OdlLabel {
     /// Parses the label at the start of `bytes` (Latin-1; what follows its `END` line, such
     /// as an attached image, is not read). `Err` names the line at fault.

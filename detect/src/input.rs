@@ -148,12 +148,8 @@ pub fn image_size(path: impl AsRef<Path>) -> Result<(u32, u32), image::ImageErro
         tubeloc_core::image_file::check_complete(&[]).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
     }
     // A PDS3 label (tens of kB) gives the size without the samples.
-    use std::io::Read;
-    let mut file = std::fs::File::open(path)?;
-    let mut head = Vec::new();
-    (&mut file).take(64).read_to_end(&mut head)?;
+    let head = tubeloc_core::odl::read_head(path)?;
     if tubeloc_core::odl::looks_like_pds3_label(&head) {
-        file.take(tubeloc_core::odl::MAX_LABEL_BYTES as u64).read_to_end(&mut head)?;
         return crate::pds3_image::size(&head, path).map_err(invalid_data);
     }
     if head.starts_with(b"LBLSIZE=") {

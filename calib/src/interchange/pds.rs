@@ -111,17 +111,13 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
 /// label (a detached `.LBL`, or an `.IMG` with its label at the head; [`super::pds_label`]);
 /// `Ok(None)` when it is some other file (e.g. a tubeloc camera or rig JSON).
 pub fn read_pds_cameras(path: &Path) -> Result<Option<Vec<PdsCamera>>, CalibError> {
-    use std::io::Read;
     let io = |e| CalibError::from(tubeloc_core::CoreError::io(path, e));
-    let mut file = std::fs::File::open(path).map_err(io)?;
-    let mut bytes = Vec::new();
-    (&mut file).take(64).read_to_end(&mut bytes).map_err(io)?;
-    if super::odl::looks_like_pds3_label(&bytes) {
-        // The label only: an `.IMG`'s samples follow it.
-        file.take(super::odl::MAX_LABEL_BYTES as u64).read_to_end(&mut bytes).map_err(io)?;
-        return super::pds_label::label_camera(&bytes, path).map(|c| Some(vec![c]));
+    // The label only: an `.IMG`'s samples follow it.
+    let head = super::odl::read_head(path).map_err(io)?;
+    if super::odl::looks_like_pds3_label(&head) {
+        return super::pds_label::label_camera(&head, path).map(|c| Some(vec![c]));
     }
-    file.read_to_end(&mut bytes).map_err(io)?;
+    let bytes = std::fs::read(path).map_err(io)?;
     let text = String::from_utf8(bytes).map_err(|_| CalibError::parse(path, "neither UTF-8 text nor a PDS3 label"))?;
     if !looks_like_pds_cameras(&text) {
         return Ok(None);

@@ -454,13 +454,11 @@ impl Setup {
 /// image's file; and, by image file name, why an image gives none.
 fn label_cameras(images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
     let read = |image: &Path, name: &str| -> Result<tubeloc_calib::interchange::pds::PdsCamera> {
-        let mut head = Vec::new();
-        std::io::Read::read_to_end(&mut std::io::Read::take(std::fs::File::open(image).with_context(|| format!("{}", image.display()))?, 64), &mut head).with_context(|| format!("{}", image.display()))?;
+        let head = tubeloc_core::odl::read_head(image).with_context(|| format!("--label-cameras: reading {}", image.display()))?;
         if !tubeloc_core::odl::looks_like_pds3_label(&head) {
             bail!("--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL): it carries no camera", image.display());
         }
-        let cams = tubeloc_calib::interchange::pds::read_pds_cameras(image).context("--label-cameras")?;
-        let mut c = cams.and_then(|c| c.into_iter().next()).with_context(|| format!("--label-cameras: {}: no camera", image.display()))?;
+        let mut c = tubeloc_calib::interchange::pds_label::label_camera(&head, image).context("--label-cameras")?;
         (c.camera.name, c.image) = (name.to_string(), Some(name.to_string()));
         Ok(c)
     };
