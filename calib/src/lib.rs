@@ -28,7 +28,7 @@ pub mod yaml;
 pub use calibrate::{calibrate, CalibrationInput, CalibrationOptions, CameraCalibration, CameraSpec, Observation, RigCalibration};
 pub use detect::{DetectorConfig, TagDetection, TagDetector, TagFamily};
 pub use error::CalibError;
-pub use interchange::{read_rig, RigFormat};
+pub use interchange::{read_camera, read_rig, RigFormat};
 pub use mount::{MountedTag, TagMount};
 pub use tagpose::{estimate_tube_pose, TagPoseEstimate};
 pub use views::{load_calib_set, Board, CornerSource, LoadedSet};

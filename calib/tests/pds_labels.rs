@@ -92,3 +92,17 @@ fn dropping_cahvor_radial_terms_moves_navcam_pixels_by_under_a_pixel() {
     assert!(worst.len() >= 100, "{} CAHVOR labels", worst.len());
     assert!(worst[0].0 < 1.0, "{:?}", &worst[..3]);
 }
+
+#[test]
+fn read_camera_takes_a_camera_json_or_a_label() {
+    let e = list().into_iter().find(|e| e["model_type"] == "CAHVOR").unwrap();
+    let label = with_cameras().join(e["label_file"].as_str().unwrap());
+    let from_label = tubeloc_calib::read_camera(&label).unwrap();
+    assert!((from_label.fx - e["fx"].as_f64().unwrap()).abs() < 1e-9);
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("cam.json");
+    std::fs::write(&json, serde_json::to_string(&from_label).unwrap()).unwrap();
+    assert_eq!(tubeloc_calib::read_camera(&json).unwrap(), from_label);
+    let err = tubeloc_calib::read_camera(&dir.path().join("missing.LBL")).unwrap_err().to_string();
+    assert!(err.contains("missing.LBL"), "{err}");
+}

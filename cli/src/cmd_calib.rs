@@ -113,7 +113,7 @@ pub struct GroundtruthArgs {
     /// `tubeloc synth`) when present, else the shipped data/tag_mount.toml.
     #[arg(long)]
     pub mount: Option<PathBuf>,
-    /// Camera model JSON for images whose entry has no `camera` field.
+    /// Camera model JSON (or a PDS3 label) for images whose entry has no `camera` field.
     #[arg(long)]
     pub camera: Option<PathBuf>,
     #[command(flatten)]
@@ -266,7 +266,7 @@ fn mount_from_image(im: &serde_json::Value) -> Option<TagMount> {
 
 fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
     let given_mount = a.mount.as_deref().map(TagMount::load).transpose()?;
-    let fallback_cam = a.camera.as_deref().map(CameraModel::load_json).transpose()?;
+    let fallback_cam = a.camera.as_deref().map(tubeloc_calib::read_camera).transpose()?;
     let ann_path = a.dataset.join("annotations.json");
     let mut coco: serde_json::Value = files::read_json(&ann_path)?;
     let images = coco.get("images").and_then(|v| v.as_array()).cloned().with_context(|| format!("{}: no `images` array", ann_path.display()))?;

@@ -37,7 +37,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::io::Write as _;
 use std::path::PathBuf;
-use tubeloc_core::{files, CameraModel, Pose, Rig, RigCamera, TubeDetection, TubeModel};
+use tubeloc_core::{files, Pose, Rig, RigCamera, TubeDetection, TubeModel};
 use tubeloc_pipeline::{CameraSelection, ExternalDetections, GroundPlane, LocateInput, Locator, LocatorSettings, StageSettings};
 
 pub(crate) mod dataset;
@@ -96,7 +96,8 @@ pub struct RefineArgs {
     /// by its mask's colours (unless --no-colour-ends; `Refiner::seed`).
     #[arg(long, requires = "dataset")]
     pub(crate) seeds_out: Option<PathBuf>,
-    /// Camera model JSON of the image (ignored for the left image when --rig is given).
+    /// Camera model JSON of the image, or its PDS3 label (ignored for the left image when --rig
+    /// is given).
     #[arg(long)]
     pub(crate) camera: Option<PathBuf>,
     /// Detections: JSON array of COCO results with tubeloc seeds (`tubeloc detect --out`).
@@ -279,7 +280,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
                 bail!("--right needs --rig (the pair's calibration)");
             }
             let p = args.camera.as_ref().context("--camera is required without --rig")?;
-            let model = CameraModel::load_json(p).with_context(|| format!("camera {}", p.display()))?;
+            let model = tubeloc_calib::read_camera(p).with_context(|| format!("camera {}", p.display()))?;
             (Rig { cameras: vec![RigCamera { name: "camera".into(), model, t_rig_cam: Pose::identity() }], stereo_pairs: Vec::new() }, CameraSelection::default())
         }
     };

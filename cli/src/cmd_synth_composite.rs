@@ -5,7 +5,7 @@ use clap::Args;
 use serde_json::{json, Map};
 use std::path::PathBuf;
 use std::sync::Arc;
-use tubeloc_core::{files, CameraModel, CocoDataset, CocoImage, TubeMesh, TubeModel};
+use tubeloc_core::{files, CocoDataset, CocoImage, TubeMesh, TubeModel};
 use tubeloc_synth::composite::{composite, CompositeConfig};
 use tubeloc_synth::dataset::{annotation_from_truth, encode_png, pose_json, tube_category};
 use tubeloc_synth::TubeShape;
@@ -16,7 +16,8 @@ pub struct CompositeArgs {
     /// Background photograph (PNG, JPEG or TIFF).
     #[arg(long)]
     pub background: PathBuf,
-    /// Camera model JSON (CameraModel) of the photograph; its size must match the photo.
+    /// Camera model JSON (CameraModel) of the photograph, or its PDS3 label; its size must match
+    /// the photo.
     #[arg(long)]
     pub camera: PathBuf,
     /// Ground plane in the camera frame as "nx,ny,nz,d" (`n·X = d`, n up, metres: the same
@@ -55,7 +56,7 @@ fn numbers(s: &str, n: usize, what: &str) -> Result<Vec<f64>> {
 /// Runs `tubeloc synth composite`.
 pub fn run(a: CompositeArgs) -> Result<()> {
     let s = numbers(&a.sun, 2, "sun")?;
-    let cam = CameraModel::load_json(&a.camera).with_context(|| format!("reading camera {}", a.camera.display()))?;
+    let cam = tubeloc_calib::read_camera(&a.camera).with_context(|| format!("reading camera {}", a.camera.display()))?;
     let img = tubeloc_detect::input::open_image(&a.background).with_context(|| format!("reading background {}", a.background.display()))?.to_rgb8();
     if img.width() != cam.width || img.height() != cam.height {
         bail!("{}: photo is {}x{} but camera {} is {}x{}", a.background.display(), img.width(), img.height(), a.camera.display(), cam.width, cam.height);

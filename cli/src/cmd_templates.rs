@@ -61,8 +61,8 @@ pub struct BuildArgs {
     /// Refuse to build a library whose build is estimated to need more memory than this, GiB.
     #[arg(long, default_value_t = DEFAULT_MAX_MEMORY_GIB, value_parser = crate::args::positive_f64)]
     max_memory_gib: f64,
-    /// Camera JSON whose focal lengths the templates are rendered with (default: the paper's
-    /// camera at half resolution, fx = fy ~ 1720 px).
+    /// Camera JSON (or a PDS3 label: its linearized camera) whose focal lengths the templates
+    /// are rendered with (default: the paper's camera at half resolution, fx = fy ~ 1720 px).
     #[arg(long)]
     camera: Option<PathBuf>,
     /// Tube model TOML (default: the embedded data/tube.toml).
@@ -180,7 +180,7 @@ fn build(a: BuildArgs) -> Result<()> {
         None => TubeModel::default(),
     };
     let cam = match &a.camera {
-        Some(p) => CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))?,
+        Some(p) => tubeloc_calib::read_camera(p).with_context(|| format!("reading {}", p.display()))?,
         None => LibraryParams::default_camera(),
     };
     let (dist_min, dist_max, dist_step) = a.distances;

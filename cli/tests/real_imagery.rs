@@ -293,6 +293,10 @@ fn a_pds3_label_as_rig_or_camera_gives_what_the_python_list_gives() {
     let (da, db): (Value, Value) = (serde_json::from_str(&std::fs::read_to_string(&a).unwrap()).unwrap(), serde_json::from_str(&std::fs::read_to_string(&b).unwrap()).unwrap());
     assert!(!da.as_array().unwrap().is_empty());
     json_close(&da, &db, 1e-6, &[], "").unwrap();
+    // Every other --camera takes the label too: a Line2D library for this Navcam.
+    let lib = dir.path().join("navcam.tlt");
+    let o = ok(&["templates", "build", "--camera", p(&label), "--distances", "2:4:1", "--step-deg", "30", "--out", p(&lib)]);
+    assert!(lib.exists(), "{}", stderr(&o));
     // A label of another size than the image is refused, naming both.
     let small = cams.as_array().unwrap().iter().find(|e| e["image_width"] == 256 && e["model_type"] == "CAHVOR").unwrap();
     let small_label = with.join(small["label_file"].as_str().unwrap());

@@ -89,6 +89,17 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
     Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), a PDS3 label (does not start with `PDS_VERSION_ID`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
 }
 
+/// Reads a camera model for a `--camera` argument: tubeloc camera JSON
+/// ([`tubeloc_core::CameraModel::load_json`]) or a PDS3 label (`.LBL`, or an `.IMG` with its
+/// label: the linearized CAHV / CAHVOR pinhole, [`pds_label`]), recognised by content.
+pub fn read_camera(path: &Path) -> Result<tubeloc_core::CameraModel, CalibError> {
+    let head = odl::read_head(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    if odl::looks_like_pds3_label(&head) {
+        return Ok(pds_label::label_camera(&head, path)?.camera.model);
+    }
+    Ok(tubeloc_core::CameraModel::load_json(path)?)
+}
+
 /// Reads a rig from tubeloc JSON, OpenCV FileStorage YAML, a kalibr camchain, or a single ROS
 /// `camera_info` file (a one-camera rig with the camera at the rig origin), a PDS camera list
 /// (one camera per image, in the rover frame; [`pds`]), or a PDS3 label (its camera, in the

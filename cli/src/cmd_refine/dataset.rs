@@ -200,7 +200,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
         }
     }
     let det_camera = match &args.detections_camera {
-        Some(p) => Some(CameraModel::load_json(p).with_context(|| format!("detections camera {}", p.display()))?),
+        Some(p) => Some(tubeloc_calib::read_camera(p).with_context(|| format!("detections camera {}", p.display()))?),
         None => None,
     };
     let fixed_ground = match args.ground {
