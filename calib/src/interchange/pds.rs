@@ -27,10 +27,12 @@ use tubeloc_core::{CameraModel, GroundPlane, Pose, Rig, RigCamera};
 /// across the frame.
 pub const MAX_SKEW_PX: f64 = 1.0;
 
-/// One camera of a PDS camera list: the rig camera and the ground plane under it.
+/// One camera from a PDS camera model (an entry of a PDS camera list, or a PDS3 label): the
+/// rig camera and the ground plane under it.
 #[derive(Clone, Debug)]
 pub struct PdsCamera {
-    /// The camera, named after its image's file name, in the rover frame of its image.
+    /// The camera, in the rover frame of its image; named after its image's file name (a list
+    /// entry) or its `PRODUCT_ID` (a label).
     pub camera: RigCamera,
     /// The local ground in this camera's frame (`n · X = d`, n up, metres).
     pub ground: GroundPlane,
