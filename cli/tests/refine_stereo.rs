@@ -288,3 +288,92 @@ fn mask_detections(ann: &Value) -> (Vec<Value>, Vec<Truth>) {
     }
     (dets, truths)
 }
+
+/// A PDS3 product of an RGB8 image whose camera is the CAHV model of the pinhole `cam`
+/// (`fx fy cx cy`) at `centre` with axes `r_rover_cam` (columns: x right, y down, z forward)
+/// in a rover frame (z down): the label at the head, the samples from record 4.
+fn pds3_product(path: &Path, rgb: &image::RgbImage, cam: &Value, r_rover_cam: &nalgebra::Matrix3<f64>, centre: &nalgebra::Vector3<f64>) {
+    let f = |k: &str| cam[k].as_f64().unwrap();
+    let (a, x, y) = (r_rover_cam.column(2).into_owned(), r_rover_cam.column(0).into_owned(), r_rover_cam.column(1).into_owned());
+    let (h, v) = (f("fx") * x + f("cx") * a, f("fy") * y + f("cy") * a);
+    let t = |w: &nalgebra::Vector3<f64>| format!("({:.17e},{:.17e},{:.17e})", w.x, w.y, w.z);
+    let label = format!(
+        "PDS_VERSION_ID = PDS3\nRECORD_TYPE = FIXED_LENGTH\nRECORD_BYTES = 1024\n^IMAGE = 4\nPRODUCT_ID = \"{}\"\n\
+GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\n  MODEL_TYPE = CAHV\n  MODEL_COMPONENT_1 = {}\n  MODEL_COMPONENT_2 = {}\n\
+  MODEL_COMPONENT_3 = {}\n  MODEL_COMPONENT_4 = {}\n  REFERENCE_COORD_SYSTEM_NAME = \"ROVER_NAV_FRAME\"\n\
+END_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\nOBJECT = IMAGE\n  LINES = {}\n  LINE_SAMPLES = {}\n  BANDS = 3\n\
+  SAMPLE_TYPE = UNSIGNED_INTEGER\n  SAMPLE_BITS = 8\n  BAND_STORAGE_TYPE = SAMPLE_INTERLEAVED\nEND_OBJECT = IMAGE\nEND\n",
+        path.file_stem().unwrap().to_str().unwrap(),
+        t(centre),
+        t(&a),
+        t(&h),
+        t(&v),
+        rgb.height(),
+        rgb.width()
+    );
+    let mut bytes = label.into_bytes();
+    assert!(bytes.len() <= 3 * 1024);
+    bytes.resize(3 * 1024, b' ');
+    bytes.extend_from_slice(rgb.as_raw());
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn a_stereo_pair_of_pds3_products_locates_as_its_rig_does() {
+    // A rendered stereo pair written as two PDS3 products whose labels place both cameras in
+    // one rover frame (the world with y and z flipped: z down): `locate --label-cameras
+    // --image L.IMG --right R.IMG` makes the pair from the two labels and finds the tubes of
+    // `locate --rig rig.json` with the rendered pair, with the stereo term in both.
+    use nalgebra::{Matrix3, Vector3};
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let set = tmp.path().join("st");
+    ok(&["synth", "stereo", "--out", set.to_str().unwrap(), "--scenes", "1", "--pairs-per-scene", "1", "--resolution", "384", "--seed", "1"]);
+    let im = read(&set.join("annotations.json"))["images"][0].clone();
+    let m3 = |v: &Value| Matrix3::from_fn(|i, j| v[i][j].as_f64().unwrap());
+    let v3 = |v: &Value| Vector3::from(vec3(v));
+    let (r_wl, t_wl) = (m3(&im["T_world_cam"]["rotation"]), v3(&im["T_world_cam"]["translation"]));
+    let (r_lr, t_lr) = (m3(&im["T_left_right"]["rotation"]), v3(&im["T_left_right"]["translation"]));
+    let (r_wr, t_wr) = (r_wl * r_lr, t_wl + r_wl * t_lr);
+    // The rig file of the crop: the rig frame is the world.
+    let pose = |r: &Matrix3<f64>, t: &Vector3<f64>| serde_json::json!({"rotation": [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]], "translation": [t.x, t.y, t.z]});
+    let rig = serde_json::json!({"cameras": [{"name": "L", "model": im["camera"], "T_rig_cam": pose(&r_wl, &t_wl)}, {"name": "R", "model": im["right_camera"], "T_rig_cam": pose(&r_wr, &t_wr)}], "stereo_pairs": [["L", "R"]]});
+    let rig_path = tmp.path().join("rig.json");
+    std::fs::write(&rig_path, rig.to_string()).unwrap();
+    let (left_png, right_png) = (set.join("images").join(im["file_name"].as_str().unwrap()), set.join("right").join(im["right_file_name"].as_str().unwrap()));
+    let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
+    let (left_img, right_img) = (tmp.path().join("L.IMG"), tmp.path().join("R.IMG"));
+    pds3_product(&left_img, &image::open(&left_png).unwrap().to_rgb8(), &im["camera"], &(flip * r_wl), &(flip * t_wl));
+    pds3_product(&right_img, &image::open(&right_png).unwrap().to_rgb8(), &im["right_camera"], &(flip * r_wr), &(flip * t_wr));
+    // The ground (world z = ground_height_m) in the left camera frame, given to both runs.
+    let n = r_wl.transpose() * Vector3::z();
+    let ground = format!("--ground={},{},{},{}", n.x, n.y, n.z, im["ground_height_m"].as_f64().unwrap() - t_wl.z);
+    let run = |args: &[&str], out: &str| -> Value {
+        let out = tmp.path().join(out);
+        let o = Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(args).args(["--out", out.to_str().unwrap(), &ground]).output().unwrap();
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", String::from_utf8_lossy(&o.stderr));
+        read(&out)
+    };
+    let by_rig = run(&["locate", "--rig", rig_path.to_str().unwrap(), "--image", left_png.to_str().unwrap(), "--right", right_png.to_str().unwrap()], "rig.json.out");
+    let by_labels = run(&["locate", "--label-cameras", "--image", left_img.to_str().unwrap(), "--right", right_img.to_str().unwrap()], "labels.json.out");
+    let (a, b) = (by_rig["tubes"].as_array().unwrap(), by_labels["tubes"].as_array().unwrap());
+    assert!(!a.is_empty() && a.len() == b.len(), "{} against {} tubes", a.len(), b.len());
+    // The labels carry the cameras to rounding, not bit for bit, so a tube at the edge of the
+    // right view (a few stereo points, near the stereo term's minimum) may fall either way:
+    // tubes well inside both views are compared.
+    let points = |t: &Value| t["residuals"]["stereo_points"].as_f64().unwrap_or(0.0);
+    let mut compared = 0;
+    for (ta, tb) in a.iter().zip(b).filter(|(ta, _)| points(ta) >= 50.0) {
+        assert_eq!(ta["status"], tb["status"]);
+        assert!((points(ta) - points(tb)).abs() <= 0.01 * points(ta), "{} against {} stereo points", points(ta), points(tb));
+        for k in ["centre", "axis"] {
+            let (pa, pb) = (vec3(&ta[k]), vec3(&tb[k]));
+            assert!(dist(&pa, &pb) < 1e-4, "{k}: {pa:?} against {pb:?}");
+        }
+        compared += 1;
+    }
+    assert!(compared >= 1, "no tube well inside both views: {a:?}");
+    // A right image without a label cannot make the pair.
+    let o = Command::new(env!("CARGO_BIN_EXE_tubeloc")).args(["locate", "--label-cameras", "--image", left_img.to_str().unwrap(), "--right", right_png.to_str().unwrap(), "--out", tmp.path().join("x.json").to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.contains("not a PDS3 product") && err.contains(right_png.file_name().unwrap().to_str().unwrap()), "{err}");
+}

@@ -62,7 +62,8 @@ pub struct LocateArgs {
     /// Instead of --rig: each image is a PDS3 product (`.IMG` with its label, or a `.LBL` beside
     /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground.
     /// A batch of products then needs no rig file; each frame's camera is named after its file.
-    #[arg(long, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
+    /// With --right (a product of the same moment), the two labels make the stereo pair.
+    #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
     /// The (left) image.
     #[arg(long, required_unless_present = "images", conflicts_with = "images")]
@@ -340,9 +341,11 @@ impl Setup {
     /// Reads the rig (with `--label-cameras`, the labels of `images`), builds the detector and
     /// the settings (score calibration) of `a`.
     pub fn new(a: &LocateArgs, images: &[&Path]) -> Result<Self> {
+        // With --label-cameras and --right (one stereo pair), both labels, the right one last.
+        let label_images: Vec<&Path> = images.iter().copied().chain(a.right.as_deref().filter(|_| a.label_cameras)).collect();
         let (rig_path, pds, label_errors) = if a.label_cameras {
-            let (cams, errors) = label_cameras(images);
-            if cams.is_empty() {
+            let (cams, errors) = label_cameras(&label_images);
+            if cams.is_empty() || (a.right.is_some() && !errors.is_empty()) {
                 bail!("{}", errors.into_values().next().unwrap_or_else(|| "--label-cameras: no image".into()));
             }
             (PathBuf::from("the images' PDS3 labels (--label-cameras)"), Some(cams), errors)
@@ -351,16 +354,25 @@ impl Setup {
             let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?;
             (rig_path, pds, BTreeMap::new())
         };
-        let rig: Rig = match &pds {
+        let mut rig: Rig = match &pds {
             Some(cams) => tubeloc_calib::interchange::pds::rig_of(cams),
             None => tubeloc_calib::read_rig(&rig_path).context("rig")?,
         };
+        // Two labels of one moment (a stereo pair): both cameras stand in the same rover frame,
+        // so the pair's geometry is theirs.
+        let label_pair = match (a.label_cameras, &rig.cameras[..]) {
+            (true, [left, right]) if a.right.is_some() => Some((left.name.clone(), right.name.clone())),
+            _ => None,
+        };
+        if let Some(p) = &label_pair {
+            rig.stereo_pairs.push(p.clone());
+        }
         let pair = match &a.pair {
             Some(p) => {
                 let (l, r) = p.split_once(',').with_context(|| format!("--pair {p:?}: expected LEFT,RIGHT"))?;
                 Some((l.trim().to_string(), r.trim().to_string()))
             }
-            None => None,
+            None => label_pair,
         };
         // A PDS camera list holds one camera per image, named after the image's file.
         let per_image = pds.is_some() && a.camera_name.is_none() && pair.is_none();
