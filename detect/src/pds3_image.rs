@@ -148,20 +148,15 @@ impl ImageLayout {
                 raw
             }
         };
-        let mut values: Vec<u16> = Vec::with_capacity(w * h * bands);
-        for y in 0..h {
-            for x in 0..w {
-                for b in 0..bands {
-                    values.push(sample(at(x, y, b)));
-                }
-            }
-        }
+        // Samples in pixel order (row by row, each pixel's bands together), straight into the
+        // image's own sample type.
+        let positions = || (0..h).flat_map(move |y| (0..w).flat_map(move |x| (0..bands).map(move |b| at(x, y, b))));
         let (w32, h32) = (w as u32, h as u32);
         let image = match (bytes, bands) {
-            (1, 1) => DynamicImage::ImageLuma8(image::GrayImage::from_raw(w32, h32, values.into_iter().map(|v| v as u8).collect()).expect("w x h")),
-            (1, _) => DynamicImage::ImageRgb8(image::RgbImage::from_raw(w32, h32, values.into_iter().map(|v| v as u8).collect()).expect("w x h x 3")),
-            (_, 1) => DynamicImage::ImageLuma16(image::ImageBuffer::from_raw(w32, h32, values).expect("w x h")),
-            _ => DynamicImage::ImageRgb16(image::ImageBuffer::from_raw(w32, h32, values).expect("w x h x 3")),
+            (1, 1) => DynamicImage::ImageLuma8(image::GrayImage::from_raw(w32, h32, positions().map(|p| sample(p) as u8).collect()).expect("w x h")),
+            (1, _) => DynamicImage::ImageRgb8(image::RgbImage::from_raw(w32, h32, positions().map(|p| sample(p) as u8).collect()).expect("w x h x 3")),
+            (_, 1) => DynamicImage::ImageLuma16(image::ImageBuffer::from_raw(w32, h32, positions().map(sample).collect()).expect("w x h")),
+            _ => DynamicImage::ImageRgb16(image::ImageBuffer::from_raw(w32, h32, positions().map(sample).collect()).expect("w x h x 3")),
         };
         Ok(image)
     }

@@ -93,11 +93,10 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
 /// ([`tubeloc_core::CameraModel::load_json`]) or a PDS3 label (`.LBL`, or an `.IMG` with its
 /// label: the linearized CAHV / CAHVOR pinhole, [`pds_label`]), recognised by content.
 pub fn read_camera(path: &Path) -> Result<tubeloc_core::CameraModel, CalibError> {
-    let head = odl::read_head(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
-    if odl::looks_like_pds3_label(&head) {
-        return Ok(pds_label::label_camera(&head, path)?.camera.model);
+    match pds_label::read_label_camera(path)? {
+        Some(c) => Ok(c.camera.model),
+        None => Ok(tubeloc_core::CameraModel::load_json(path)?),
     }
-    Ok(tubeloc_core::CameraModel::load_json(path)?)
 }
 
 /// Reads a rig from tubeloc JSON, OpenCV FileStorage YAML, a kalibr camchain, or a single ROS

@@ -113,13 +113,10 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
 /// label (a detached `.LBL`, or an `.IMG` with its label at the head; [`super::pds_label`]);
 /// `Ok(None)` when it is some other file (e.g. a tubeloc camera or rig JSON).
 pub fn read_pds_cameras(path: &Path) -> Result<Option<Vec<PdsCamera>>, CalibError> {
-    let io = |e| CalibError::from(tubeloc_core::CoreError::io(path, e));
-    // The label only: an `.IMG`'s samples follow it.
-    let head = super::odl::read_head(path).map_err(io)?;
-    if super::odl::looks_like_pds3_label(&head) {
-        return super::pds_label::label_camera(&head, path).map(|c| Some(vec![c]));
+    if let Some(c) = super::pds_label::read_label_camera(path)? {
+        return Ok(Some(vec![c]));
     }
-    let bytes = std::fs::read(path).map_err(io)?;
+    let bytes = std::fs::read(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
     let text = String::from_utf8(bytes).map_err(|_| CalibError::parse(path, "neither UTF-8 text nor a PDS3 label"))?;
     if !looks_like_pds_cameras(&text) {
         return Ok(None);

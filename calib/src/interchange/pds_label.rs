@@ -71,6 +71,16 @@ pub fn site_from_rover(label: &OdlLabel) -> Result<Option<Matrix3<f64>>, String>
     Ok(Some(UnitQuaternion::from_quaternion(q).to_rotation_matrix().into_inner()))
 }
 
+/// The camera and ground of the file `path` when it starts with a PDS3 label (a `.LBL`, or an
+/// `.IMG` whose samples follow its label and are not read), `Ok(None)` when it does not.
+pub fn read_label_camera(path: &Path) -> Result<Option<PdsCamera>, CalibError> {
+    let head = tubeloc_core::odl::read_head(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    if !tubeloc_core::odl::looks_like_pds3_label(&head) {
+        return Ok(None);
+    }
+    label_camera(&head, path).map(Some)
+}
+
 /// The camera and ground of a PDS3 label (`bytes`, read from `path`), named after the label's
 /// `PRODUCT_ID` (else the file name); every error names the file and, where one is at fault,
 /// the keyword and line.

@@ -466,11 +466,9 @@ impl Setup {
 /// image's file; and, by image file name, why an image gives none.
 fn label_cameras(images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
     let read = |image: &Path, name: &str| -> Result<tubeloc_calib::interchange::pds::PdsCamera> {
-        let head = tubeloc_core::odl::read_head(image).with_context(|| format!("--label-cameras: reading {}", image.display()))?;
-        if !tubeloc_core::odl::looks_like_pds3_label(&head) {
+        let Some(mut c) = tubeloc_calib::interchange::pds_label::read_label_camera(image).context("--label-cameras")? else {
             bail!("--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL): it carries no camera", image.display());
-        }
-        let mut c = tubeloc_calib::interchange::pds_label::label_camera(&head, image).context("--label-cameras")?;
+        };
         (c.camera.name, c.image) = (name.to_string(), Some(name.to_string()));
         Ok(c)
     };
