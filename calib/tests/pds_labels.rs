@@ -6,9 +6,10 @@ use nalgebra::Vector3;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use tubeloc_calib::interchange::cahv::Cahvor;
+use tubeloc_calib::interchange::linearize::LinearResampling;
 use tubeloc_calib::interchange::odl::OdlLabel;
 use tubeloc_calib::interchange::pds::read_pds_cameras;
-use tubeloc_calib::interchange::pds_label::{label_model, LabelModel};
+use tubeloc_calib::interchange::pds_label::{label_model, read_resampled_label_camera, LabelModel};
 
 fn with_cameras() -> PathBuf {
     let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars/with_cameras");
@@ -26,13 +27,17 @@ fn every_label_gives_the_camera_and_ground_of_the_python_list() {
     for e in list() {
         let label = with_cameras().join(e["label_file"].as_str().unwrap());
         let got = read_pds_cameras(&label);
-        if e["model_type"] == "CAHVORE" {
+        let (resampled, fisheye) = read_resampled_label_camera(&label).unwrap().expect("a label");
+        assert_eq!(fisheye.is_some(), e["model_type"] == "CAHVORE", "{}", label.display());
+        let cams = if e["model_type"] == "CAHVORE" {
+            // Refused as a plain camera; its linear part, the list's pinhole, once resampled.
             let err = got.unwrap_err().to_string();
             assert!(err.contains("CAHVORE") && err.contains(label.file_name().unwrap().to_str().unwrap()), "{err}");
             refused += 1;
-            continue;
-        }
-        let cams = got.unwrap().expect("a label is a PDS camera source");
+            vec![resampled]
+        } else {
+            got.unwrap().expect("a label is a PDS camera source")
+        };
         assert_eq!(cams.len(), 1);
         let c = &cams[0];
         let num = |v: &Value| v.as_f64().unwrap();
@@ -56,7 +61,7 @@ fn every_label_gives_the_camera_and_ground_of_the_python_list() {
         assert!(c.image.is_none(), "a label describes the image it is given with");
         read += 1;
     }
-    assert!(read >= 110 && refused >= 1, "{read} read, {refused} CAHVORE refused");
+    assert!(read >= 117 && refused == 2, "{read} read, {refused} CAHVORE refused as plain cameras");
 }
 
 /// The largest image displacement (px) between a CAHVOR model and its linearized pinhole over
@@ -105,4 +110,32 @@ fn read_camera_takes_a_camera_json_or_a_label() {
     assert_eq!(tubeloc_calib::read_camera(&json).unwrap(), from_label);
     let err = tubeloc_calib::read_camera(&dir.path().join("missing.LBL")).unwrap_err().to_string();
     assert!(err.contains("missing.LBL"), "{err}");
+}
+
+#[test]
+fn a_hazcam_fisheye_resampled_into_its_linear_part_fills_the_frame() {
+    for e in list().iter().filter(|e| e["model_type"] == "CAHVORE") {
+        let path = with_cameras().join(e["label_file"].as_str().unwrap());
+        let (cam, fisheye) = read_resampled_label_camera(&path).unwrap().unwrap();
+        let fisheye = fisheye.unwrap();
+        let size = (cam.camera.model.width, cam.camera.model.height);
+        let map = LinearResampling::new(&fisheye, &cam.camera, size);
+        // The fisheye sees more than the pinhole of its central scale: every pixel is covered.
+        assert_eq!(map.coverage(), 1.0, "{}", path.display());
+        // Taking the raw frame as the pinhole's would be far off: the corner pixel's source.
+        let far = map.source_of(0, 0).unwrap();
+        let centre = map.source_of(size.0 / 2, size.1 / 2).unwrap();
+        let at_centre = (centre.x - (size.0 / 2) as f64).hypot(centre.y - (size.1 / 2) as f64);
+        eprintln!("{}: pinhole corner (0, 0) takes raw ({:.1}, {:.1}); centre off by {at_centre:.2} px", path.display(), far.x, far.y);
+        assert!(far.x > 0.1 * size.0 as f64 && far.y > 0.1 * size.1 as f64, "{far:?}");
+        assert!(at_centre < 2.0, "{at_centre}");
+        // Every pinhole pixel's ray images at its source (the far point), to 0.01 px.
+        let m = &cam.camera;
+        for (u, v) in [(0, 0), (size.0 - 1, 0), (size.0 / 3, size.1 - 1), (size.0 / 2, size.1 / 2)] {
+            let s = map.source_of(u, v).unwrap();
+            let dir = m.t_rig_cam.rotation() * m.model.unproject(&nalgebra::Point2::new(u as f64, v as f64)).normalize();
+            let (x, y) = fisheye.project(&(m.t_rig_cam.translation() + 1000.0 * dir)).unwrap();
+            assert!((x - s.x).abs() < 0.01 && (y - s.y).abs() < 0.01);
+        }
+    }
 }

@@ -1,6 +1,8 @@
 //! `tubeloc refine --dataset --stereo` on a small rendered stereo set (3 pairs of 384 px crops
 //! of the paper preset, 20 cm baseline): seeds = exact poses perturbed by 10 mm / 5 degrees.
 
+mod common;
+
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
@@ -289,35 +291,6 @@ fn mask_detections(ann: &Value) -> (Vec<Value>, Vec<Truth>) {
     (dets, truths)
 }
 
-/// A PDS3 product of an RGB8 image whose camera is the CAHV model of the pinhole `cam`
-/// (`fx fy cx cy`) at `centre` with axes `r_rover_cam` (columns: x right, y down, z forward)
-/// in a rover frame (z down): the label at the head, the samples from record 4.
-fn pds3_product(path: &Path, rgb: &image::RgbImage, cam: &Value, r_rover_cam: &nalgebra::Matrix3<f64>, centre: &nalgebra::Vector3<f64>) {
-    let f = |k: &str| cam[k].as_f64().unwrap();
-    let (a, x, y) = (r_rover_cam.column(2).into_owned(), r_rover_cam.column(0).into_owned(), r_rover_cam.column(1).into_owned());
-    let (h, v) = (f("fx") * x + f("cx") * a, f("fy") * y + f("cy") * a);
-    let t = |w: &nalgebra::Vector3<f64>| format!("({:.17e},{:.17e},{:.17e})", w.x, w.y, w.z);
-    let label = format!(
-        "PDS_VERSION_ID = PDS3\nRECORD_TYPE = FIXED_LENGTH\nRECORD_BYTES = 1024\n^IMAGE = 4\nPRODUCT_ID = \"{}\"\n\
-GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\n  MODEL_TYPE = CAHV\n  MODEL_COMPONENT_1 = {}\n  MODEL_COMPONENT_2 = {}\n\
-  MODEL_COMPONENT_3 = {}\n  MODEL_COMPONENT_4 = {}\n  REFERENCE_COORD_SYSTEM_NAME = \"ROVER_NAV_FRAME\"\n\
-END_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\nOBJECT = IMAGE\n  LINES = {}\n  LINE_SAMPLES = {}\n  BANDS = 3\n\
-  SAMPLE_TYPE = UNSIGNED_INTEGER\n  SAMPLE_BITS = 8\n  BAND_STORAGE_TYPE = SAMPLE_INTERLEAVED\nEND_OBJECT = IMAGE\nEND\n",
-        path.file_stem().unwrap().to_str().unwrap(),
-        t(centre),
-        t(&a),
-        t(&h),
-        t(&v),
-        rgb.height(),
-        rgb.width()
-    );
-    let mut bytes = label.into_bytes();
-    assert!(bytes.len() <= 3 * 1024);
-    bytes.resize(3 * 1024, b' ');
-    bytes.extend_from_slice(rgb.as_raw());
-    std::fs::write(path, bytes).unwrap();
-}
-
 #[test]
 fn a_stereo_pair_of_pds3_products_locates_as_its_rig_does() {
     // A rendered stereo pair written as two PDS3 products whose labels place both cameras in
@@ -342,8 +315,8 @@ fn a_stereo_pair_of_pds3_products_locates_as_its_rig_does() {
     let (left_png, right_png) = (set.join("images").join(im["file_name"].as_str().unwrap()), set.join("right").join(im["right_file_name"].as_str().unwrap()));
     let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
     let (left_img, right_img) = (tmp.path().join("L.IMG"), tmp.path().join("R.IMG"));
-    pds3_product(&left_img, &image::open(&left_png).unwrap().to_rgb8(), &im["camera"], &(flip * r_wl), &(flip * t_wl));
-    pds3_product(&right_img, &image::open(&right_png).unwrap().to_rgb8(), &im["right_camera"], &(flip * r_wr), &(flip * t_wr));
+    common::pds3_product(&left_img, &image::open(&left_png).unwrap().to_rgb8(), &im["camera"], &(flip * r_wl), &(flip * t_wl), "");
+    common::pds3_product(&right_img, &image::open(&right_png).unwrap().to_rgb8(), &im["right_camera"], &(flip * r_wr), &(flip * t_wr), "");
     // The ground (world z = ground_height_m) in the left camera frame, given to both runs.
     let n = r_wl.transpose() * Vector3::z();
     let ground = format!("--ground={},{},{},{}", n.x, n.y, n.z, im["ground_height_m"].as_f64().unwrap() - t_wl.z);

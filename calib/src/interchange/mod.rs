@@ -14,7 +14,9 @@
 //! [`read_rig`] tells the formats apart by content, not by file name.
 
 pub mod cahv;
+pub mod cahvore;
 pub mod kalibr;
+pub mod linearize;
 pub mod pds;
 pub mod pds_label;
 pub mod ros;

@@ -9,10 +9,13 @@
 //! that group the rover frame is taken as level. These are the conventions of
 //! `cahv_to_pinhole.py` of the real rover data; the figures agree with its list to 1e-9.
 //!
-//! CAHVOR's radial terms are dropped (under 1 px over a Navcam frame: record 0059); CAHVORE
-//! (fisheye) models are refused, as is a skew over [`super::pds::MAX_SKEW_PX`].
+//! CAHVOR's radial terms are dropped (under 1 px over a Navcam frame: record 0059). A CAHVORE
+//! (fisheye) model's camera is its linear part, which describes the image only once resampled
+//! ([`super::linearize`]): [`label_camera`] refuses it, [`resampled_label_camera`] gives it with
+//! its model. A skew over [`super::pds::MAX_SKEW_PX`] is refused.
 
 use super::cahv::{Cahv, Cahvor};
+use super::cahvore::Cahvore;
 use super::odl::{OdlGroup, OdlLabel};
 use super::pds::{PdsCamera, PdsPinhole};
 use crate::error::CalibError;
@@ -26,6 +29,8 @@ pub enum LabelModel {
     Cahv(Cahv),
     /// A CAHVOR model.
     Cahvor(Cahvor),
+    /// A CAHVORE model.
+    Cahvore(Cahvore),
 }
 
 impl LabelModel {
@@ -34,6 +39,7 @@ impl LabelModel {
         match self {
             LabelModel::Cahv(m) => m,
             LabelModel::Cahvor(m) => &m.cahv,
+            LabelModel::Cahvore(m) => &m.cahvor.cahv,
         }
     }
 }
@@ -45,14 +51,20 @@ pub fn label_model(label: &OdlLabel) -> Result<LabelModel, String> {
     let kind = g.text("MODEL_TYPE").ok_or("no MODEL_TYPE in GEOMETRIC_CAMERA_MODEL_PARMS")?;
     let vec3 = |k: usize| -> Result<Vector3<f64>, String> { g.numbers(&format!("MODEL_COMPONENT_{k}"), 3).map(|v| Vector3::new(v[0], v[1], v[2])) };
     let cahv = || -> Result<Cahv, String> { Ok(Cahv { c: vec3(1)?, a: vec3(2)?, h: vec3(3)?, v: vec3(4)? }) };
+    let cahvor = || -> Result<Cahvor, String> {
+        let r = vec3(6)?;
+        Ok(Cahvor { cahv: cahv()?, o: vec3(5)?.try_normalize(1e-12).ok_or("MODEL_COMPONENT_5 (O) is zero")?, r: [r.x, r.y, r.z] })
+    };
     match kind {
         "CAHV" => Ok(LabelModel::Cahv(cahv()?)),
-        "CAHVOR" => {
-            let r = vec3(6)?;
-            Ok(LabelModel::Cahvor(Cahvor { cahv: cahv()?, o: vec3(5)?.normalize(), r: [r.x, r.y, r.z] }))
+        "CAHVOR" => Ok(LabelModel::Cahvor(cahvor()?)),
+        "CAHVORE" => {
+            let e = vec3(7)?;
+            let parm = g.get("MODEL_COMPONENT_9").map(|_| g.number("MODEL_COMPONENT_9")).transpose()?;
+            let linearity = Cahvore::linearity_of(g.number("MODEL_COMPONENT_8")?, parm).map_err(|m| format!("CAHVORE MODEL_COMPONENT_8/9: {m}"))?;
+            Ok(LabelModel::Cahvore(Cahvore { cahvor: cahvor()?, e: [e.x, e.y, e.z], linearity }))
         }
-        "CAHVORE" => Err("MODEL_TYPE CAHVORE (a fisheye camera): a pinhole does not describe it".into()),
-        other => Err(format!("MODEL_TYPE {other:?}: not CAHV or CAHVOR")),
+        other => Err(format!("MODEL_TYPE {other:?}: not CAHV, CAHVOR or CAHVORE")),
     }
 }
 
@@ -83,8 +95,34 @@ pub fn read_label_camera(path: &Path) -> Result<Option<PdsCamera>, CalibError> {
 
 /// The camera and ground of a PDS3 label (`bytes`, read from `path`), named after the label's
 /// `PRODUCT_ID` (else the file name); every error names the file and, where one is at fault,
-/// the keyword and line.
+/// the keyword and line. A CAHVORE (fisheye) label is refused: its pinhole describes its image
+/// only resampled ([`resampled_label_camera`]).
 pub fn label_camera(bytes: &[u8], path: &Path) -> Result<PdsCamera, CalibError> {
+    let (camera, fisheye) = resampled_label_camera(bytes, path)?;
+    match fisheye {
+        None => Ok(camera),
+        Some(_) => Err(CalibError::parse(
+            path,
+            "PDS3 label: MODEL_TYPE CAHVORE (a fisheye camera): a pinhole describes its image only once resampled, \
+             which `tubeloc locate` does (--rig LABEL or --label-cameras); give other commands the resampled image and a camera JSON"
+                .to_string(),
+        )),
+    }
+}
+
+/// [`read_label_camera`] that also takes CAHVORE labels: the camera, and the CAHVORE model its
+/// image must be resampled from ([`super::linearize::LinearResampling`]) when the label has one.
+pub fn read_resampled_label_camera(path: &Path) -> Result<Option<(PdsCamera, Option<Cahvore>)>, CalibError> {
+    let head = tubeloc_core::odl::read_head(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    if !tubeloc_core::odl::looks_like_pds3_label(&head) {
+        return Ok(None);
+    }
+    resampled_label_camera(&head, path).map(Some)
+}
+
+/// [`label_camera`] that also takes CAHVORE labels: the camera is the model's linear (CAHV)
+/// part, returned with the model its image must be resampled from.
+pub fn resampled_label_camera(bytes: &[u8], path: &Path) -> Result<(PdsCamera, Option<Cahvore>), CalibError> {
     let fail = |m: String| CalibError::parse(path, format!("PDS3 label: {m}"));
     let label = OdlLabel::parse(bytes).map_err(fail)?;
     let model = label_model(&label).map_err(fail)?;
@@ -104,7 +142,11 @@ pub fn label_camera(bytes: &[u8], path: &Path) -> Result<PdsCamera, CalibError> 
     let name = root.text("PRODUCT_ID").or_else(|| root.text("IMAGE_ID")).filter(|n| !n.is_empty()).map(str::to_string);
     let name = name.unwrap_or_else(|| path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
     let sol = root.number("PLANET_DAY_NUMBER").ok().filter(|s| s.fract() == 0.0).map(|s| s as i64);
-    PdsCamera::from_pinhole(&name, &pinhole, sol, None).map_err(fail)
+    let fisheye = match model {
+        LabelModel::Cahvore(m) => Some(m),
+        _ => None,
+    };
+    Ok((PdsCamera::from_pinhole(&name, &pinhole, sol, None).map_err(fail)?, fisheye))
 }
 
 #[cfg(test)]
@@ -137,11 +179,27 @@ OBJECT = IMAGE\n LINES = 1024\n LINE_SAMPLES = 1024\nEND_OBJECT = IMAGE\nEND\n"
     }
 
     #[test]
+    fn a_fisheye_label_gives_its_linear_part_and_its_model() {
+        let text = label("CAHVORE", "").replace(" MODEL_COMPONENT_6", " MODEL_COMPONENT_7 = (0.001,0.002,0)\n MODEL_COMPONENT_8 = 3.0\n MODEL_COMPONENT_9 = 0.37\n MODEL_COMPONENT_6");
+        let (cam, fisheye) = resampled_label_camera(text.as_bytes(), Path::new("x.LBL")).unwrap();
+        let fisheye = fisheye.expect("a CAHVORE model");
+        assert_eq!((fisheye.linearity, fisheye.e), (0.37, [0.001, 0.002, 0.0]));
+        let plain = label_camera(label("CAHV", "").as_bytes(), Path::new("x.LBL")).unwrap();
+        assert_eq!(cam.camera.model, plain.camera.model);
+        assert_eq!(cam.camera.t_rig_cam, plain.camera.t_rig_cam);
+        assert!(resampled_label_camera(label("CAHVOR", "").as_bytes(), Path::new("x.LBL")).unwrap().1.is_none());
+    }
+
+    #[test]
     fn labels_without_a_usable_pinhole_are_refused_naming_the_file_and_why() {
         let path = Path::new("dir/NLA_1.LBL");
         let err = |text: &str| label_camera(text.as_bytes(), path).unwrap_err().to_string();
         let e = err(&label("CAHVORE", ""));
-        assert!(e.contains("dir/NLA_1.LBL") && e.contains("CAHVORE"), "{e}");
+        assert!(e.contains("dir/NLA_1.LBL") && e.contains("MODEL_COMPONENT_7"), "{e}");
+        let e = err(&label("CAHVORE", "").replace(" MODEL_COMPONENT_6", " MODEL_COMPONENT_7 = (0.001,0,0)\n MODEL_COMPONENT_8 = 3.0\n MODEL_COMPONENT_6"));
+        assert!(e.contains("MPARM"), "{e}");
+        let e = err(&label("CAHVORE", "").replace(" MODEL_COMPONENT_6", " MODEL_COMPONENT_7 = (0.001,0,0)\n MODEL_COMPONENT_8 = 2\n MODEL_COMPONENT_6"));
+        assert!(e.contains("dir/NLA_1.LBL") && e.contains("CAHVORE") && e.contains("tubeloc locate"), "{e}");
         let e = err(&label("CAHVOR", "").replace("MODEL_COMPONENT_3 = (512.0,1200.0,0.0)", "MODEL_COMPONENT_3 = (512.0,1200.0)"));
         assert!(e.contains("MODEL_COMPONENT_3") && e.contains("line 8"), "{e}");
         let e = err(&label("CAHV", "").replace("LINES = 1024", "LINES = 0"));

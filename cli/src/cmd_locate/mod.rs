@@ -256,6 +256,11 @@ pub struct LocateDoc<'a> {
     pub run: Option<serde_json::Value>,
     /// The model of the camera that took `image`.
     pub camera_model: &'a CameraModel,
+    /// `CAHVORE` when `image` was taken through a fisheye (a CAHVORE label) and resampled into
+    /// `camera_model`, the model's linear part: the detections' pixels and the overlay are then
+    /// those of the resampled image.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub resampled_from: Option<&'static str>,
     /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
     pub detections: &'a [TubeDetection],
 }
@@ -333,6 +338,9 @@ pub struct Setup {
     /// With `--label-cameras`: why an image's label gives no camera, by image file name (that
     /// frame fails; the others run).
     label_errors: BTreeMap<String, String>,
+    /// The fisheye (CAHVORE) models of the cameras whose labels give one, by camera name: their
+    /// images are resampled into the camera, the model's linear part, before locating.
+    fisheyes: BTreeMap<String, tubeloc_calib::interchange::cahvore::Cahvore>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
@@ -343,15 +351,28 @@ impl Setup {
     pub fn new(a: &LocateArgs, images: &[&Path]) -> Result<Self> {
         // With --label-cameras and --right (one stereo pair), both labels, the right one last.
         let label_images: Vec<&Path> = images.iter().copied().chain(a.right.as_deref().filter(|_| a.label_cameras)).collect();
+        let mut fisheyes = BTreeMap::new();
         let (rig_path, pds, label_errors) = if a.label_cameras {
             let (cams, errors) = label_cameras(&label_images);
             if cams.is_empty() || (a.right.is_some() && !errors.is_empty()) {
                 bail!("{}", errors.into_values().next().unwrap_or_else(|| "--label-cameras: no image".into()));
             }
-            (PathBuf::from("the images' PDS3 labels (--label-cameras)"), Some(cams), errors)
+            let mut list = Vec::with_capacity(cams.len());
+            for (c, fisheye) in cams {
+                fisheyes.extend(fisheye.map(|m| (c.camera.name.clone(), m)));
+                list.push(c);
+            }
+            (PathBuf::from("the images' PDS3 labels (--label-cameras)"), Some(list), errors)
         } else {
             let rig_path = a.rig_path()?.to_path_buf();
-            let pds = tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?;
+            // A PDS3 label is read here with its fisheye model, if any; other rigs as rigs.
+            let pds = match tubeloc_calib::interchange::pds_label::read_resampled_label_camera(&rig_path).context("rig")? {
+                Some((c, fisheye)) => {
+                    fisheyes.extend(fisheye.map(|m| (c.camera.name.clone(), m)));
+                    Some(vec![c])
+                }
+                None => tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?,
+            };
             (rig_path, pds, BTreeMap::new())
         };
         let mut rig: Rig = match &pds {
@@ -415,7 +436,7 @@ impl Setup {
             Some(ext) => FrameLocators::External(ext),
             None => FrameLocators::Shared(Box::new(std::sync::Mutex::new(locator))),
         };
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, detector_name })
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, detector_name })
     }
 
     /// The rig camera that took `image`: the run's, or with a camera per image the one named
@@ -437,6 +458,15 @@ impl Setup {
             bail!("{} is {w}x{h} but rig camera {:?} in {} is {}x{}", image.display(), cam.name, self.rig_path.display(), cam.model.width, cam.model.height);
         }
         Ok(())
+    }
+
+    /// `image` as the camera `camera` sees it: resampled into it when the camera is a fisheye
+    /// model's linear part, with the model's name.
+    fn as_seen_by(&self, camera: &tubeloc_core::RigCamera, image: image::DynamicImage) -> (image::DynamicImage, Option<&'static str>) {
+        match self.fisheyes.get(&camera.name) {
+            Some(m) => (tubeloc_calib::interchange::linearize::LinearResampling::new(m, camera, (image.width(), image.height())).apply(&image), Some("CAHVORE")),
+            None => (image, None),
+        }
     }
 
     /// Runs `f` with the locator of the frame `image` (of `size` pixels).
@@ -462,15 +492,18 @@ impl Setup {
     }
 }
 
+/// A camera of a PDS3 label, with the fisheye model its image is resampled from, if any.
+type LabelCamera = (tubeloc_calib::interchange::pds::PdsCamera, Option<tubeloc_calib::interchange::cahvore::Cahvore>);
+
 /// The cameras of `--label-cameras`: each image's own PDS3 label, the camera named after the
 /// image's file; and, by image file name, why an image gives none.
-fn label_cameras(images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
-    let read = |image: &Path, name: &str| -> Result<tubeloc_calib::interchange::pds::PdsCamera> {
-        let Some(mut c) = tubeloc_calib::interchange::pds_label::read_label_camera(image).context("--label-cameras")? else {
+fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String>) {
+    let read = |image: &Path, name: &str| -> Result<LabelCamera> {
+        let Some((mut c, fisheye)) = tubeloc_calib::interchange::pds_label::read_resampled_label_camera(image).context("--label-cameras")? else {
             bail!("--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL): it carries no camera", image.display());
         };
         (c.camera.name, c.image) = (name.to_string(), Some(name.to_string()));
-        Ok(c)
+        Ok((c, fisheye))
     };
     let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
     for image in images {
@@ -517,8 +550,14 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
     setup.check_size(&frame.image, size)?;
     setup.with_locator(&frame.image, size, |locator| {
         let cam = locator.camera().clone();
-        let image = open_image(&frame.image)?;
-        let right = frame.right.as_deref().map(open_image).transpose()?;
+        let (image, resampled_from) = setup.as_seen_by(&cam, open_image(&frame.image)?);
+        // The right camera: the pair's second (with --label-cameras, named after its file).
+        let right_cam = setup.selection.pair.as_ref().and_then(|(_, r)| setup.rig.camera(r));
+        let right = match (frame.right.as_deref(), right_cam) {
+            (Some(p), Some(rc)) => Some(setup.as_seen_by(rc, open_image(p)?).0),
+            (Some(p), None) => Some(open_image(p)?),
+            (None, _) => None,
+        };
         let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
@@ -541,6 +580,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
                 serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb(), "detect_s": t.detect_s, "refine_s": t.refine_s, "grasp_ms": t.grasp_ms, "locate_s": t.total_s})
             }),
             camera_model: &cam.model,
+            resampled_from,
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;

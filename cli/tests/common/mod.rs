@@ -25,3 +25,34 @@ pub fn stderr(o: &Output) -> String {
 pub fn p(path: &Path) -> &str {
     path.to_str().unwrap()
 }
+
+/// A PDS3 product of an RGB8 image whose camera is the CAHV model of the pinhole `cam`
+/// (`fx fy cx cy`) at `centre` with axes `r_rover_cam` (columns: x right, y down, z forward)
+/// in a rover frame (z down): the label at the head, the samples from record 4. `fisheye`,
+/// when not empty, is `MODEL_COMPONENT_5` to `_9` of a CAHVORE model with that CAHV part.
+pub fn pds3_product(path: &Path, rgb: &image::RgbImage, cam: &serde_json::Value, r_rover_cam: &nalgebra::Matrix3<f64>, centre: &nalgebra::Vector3<f64>, fisheye: &str) {
+    let f = |k: &str| cam[k].as_f64().unwrap();
+    let (a, x, y) = (r_rover_cam.column(2).into_owned(), r_rover_cam.column(0).into_owned(), r_rover_cam.column(1).into_owned());
+    let (h, v) = (f("fx") * x + f("cx") * a, f("fy") * y + f("cy") * a);
+    let t = |w: &nalgebra::Vector3<f64>| format!("({:.17e},{:.17e},{:.17e})", w.x, w.y, w.z);
+    let model_type = if fisheye.is_empty() { "CAHV" } else { "CAHVORE" };
+    let label = format!(
+        "PDS_VERSION_ID = PDS3\nRECORD_TYPE = FIXED_LENGTH\nRECORD_BYTES = 1024\n^IMAGE = 4\nPRODUCT_ID = \"{}\"\n\
+GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\n  MODEL_TYPE = {model_type}\n  MODEL_COMPONENT_1 = {}\n  MODEL_COMPONENT_2 = {}\n\
+  MODEL_COMPONENT_3 = {}\n  MODEL_COMPONENT_4 = {}\n{fisheye}  REFERENCE_COORD_SYSTEM_NAME = \"ROVER_NAV_FRAME\"\n\
+END_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\nOBJECT = IMAGE\n  LINES = {}\n  LINE_SAMPLES = {}\n  BANDS = 3\n\
+  SAMPLE_TYPE = UNSIGNED_INTEGER\n  SAMPLE_BITS = 8\n  BAND_STORAGE_TYPE = SAMPLE_INTERLEAVED\nEND_OBJECT = IMAGE\nEND\n",
+        path.file_stem().unwrap().to_str().unwrap(),
+        t(centre),
+        t(&a),
+        t(&h),
+        t(&v),
+        rgb.height(),
+        rgb.width()
+    );
+    let mut bytes = label.into_bytes();
+    assert!(bytes.len() <= 3 * 1024);
+    bytes.resize(3 * 1024, b' ');
+    bytes.extend_from_slice(rgb.as_raw());
+    std::fs::write(path, bytes).unwrap();
+}

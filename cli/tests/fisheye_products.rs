@@ -1,0 +1,115 @@
+//! `tubeloc locate` on a fisheye (CAHVORE) product: a rendered frame seen through a CAHVORE
+//! lens whose linear part is the render's pinhole, written as a PDS3 product, locates as the
+//! render does once resampled, and far worse taken as its pinhole.
+
+mod common;
+
+use common::{ok, p, stderr, tubeloc};
+use nalgebra::{Matrix3, Vector3};
+use serde_json::Value;
+use std::path::Path;
+use tubeloc_calib::interchange::cahv::{Cahv, Cahvor};
+use tubeloc_calib::interchange::cahvore::Cahvore;
+
+fn read(path: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+fn vec3(v: &Value) -> Vector3<f64> {
+    Vector3::from_fn(|i, _| v[i].as_f64().unwrap())
+}
+
+/// The image `pinhole` (camera `fx fy cx cy`, axes `r` at `centre` in the rover frame) seen
+/// through the CAHVORE lens `lens`: each pixel samples the pinhole image bilinearly where its
+/// ray lands; black where the pinhole does not see.
+fn through_lens(pinhole: &image::RgbImage, cam: &Value, r: &Matrix3<f64>, centre: &Vector3<f64>, lens: &Cahvore) -> image::RgbImage {
+    let f = |k: &str| cam[k].as_f64().unwrap();
+    let (w, h) = pinhole.dimensions();
+    image::RgbImage::from_fn(w, h, |x, y| {
+        let Some((origin, dir)) = lens.ray(x as f64, y as f64) else { return image::Rgb([0; 3]) };
+        let q = r.transpose() * (origin + 1000.0 * dir - centre);
+        let (u, v) = (f("fx") * q.x / q.z + f("cx"), f("fy") * q.y / q.z + f("cy"));
+        // The render's border pixels stand for a pixel beyond it (a lens sees past the frame).
+        let inside = |t: f64, n: u32| (-2.0..=(n + 1) as f64).contains(&t);
+        if q.z <= 0.0 || !inside(u, w) || !inside(v, h) {
+            return image::Rgb([0; 3]);
+        }
+        let (u, v) = (u.clamp(0.0, (w - 1) as f64), v.clamp(0.0, (h - 1) as f64));
+        let (u0, v0) = ((u as u32).min(w - 2), (v as u32).min(h - 2));
+        let (fu, fv) = (u - u0 as f64, v - v0 as f64);
+        let at = |i: u32, j: u32, k: usize| pinhole.get_pixel(i, j).0[k] as f64;
+        image::Rgb([0, 1, 2].map(|k| {
+            let top = at(u0, v0, k) * (1.0 - fu) + at(u0 + 1, v0, k) * fu;
+            let bottom = at(u0, v0 + 1, k) * (1.0 - fu) + at(u0 + 1, v0 + 1, k) * fu;
+            (top * (1.0 - fv) + bottom * fv).round() as u8
+        }))
+    })
+}
+
+#[test]
+fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path();
+    let set = tmp.join("st");
+    // A 384 px crop of a rendered frame, f 430 px: it reaches 30 degrees off the axis.
+    ok(&["synth", "--preset", "tiny", "--out", p(&set), "--scenes", "1", "--resolution", "384"]);
+    let im = read(&set.join("annotations.json"))["images"][1].clone();
+    let m3 = |v: &Value| Matrix3::from_fn(|i, j| v[i][j].as_f64().unwrap());
+    let (r_wl, t_wl) = (m3(&im["T_world_cam"]["rotation"]), vec3(&im["T_world_cam"]["translation"]));
+    let cam = &im["camera"];
+    let rows = [0, 1, 2].map(|i| [0, 1, 2].map(|j| r_wl[(i, j)]));
+    let pose = serde_json::json!({"rotation": rows, "translation": [t_wl.x, t_wl.y, t_wl.z]});
+    let rig_path = tmp.join("rig.json");
+    std::fs::write(&rig_path, serde_json::json!({"cameras": [{"name": "L", "model": cam, "T_rig_cam": pose}]}).to_string()).unwrap();
+    let png = set.join("images").join(im["file_name"].as_str().unwrap());
+    let render = image::open(&png).unwrap().to_rgb8();
+    // The rover frame is the world with y and z flipped (z down).
+    let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
+    let (r, c) = (flip * r_wl, flip * t_wl);
+    let (a, x, y) = (r.column(2).into_owned(), r.column(0).into_owned(), r.column(1).into_owned());
+    let f = |k: &str| cam[k].as_f64().unwrap();
+    let cahv = Cahv { c, a, h: f("fx") * x + f("cx") * a, v: f("fy") * y + f("cy") * a };
+    // A general lens (type 3, linearity 0.37) with barrel distortion and a moving pupil: it
+    // moves the far edge of this frame by tens of pixels.
+    let lens = Cahvore { cahvor: Cahvor { cahv, o: a, r: [0.0, -0.04, 0.0] }, e: [0.002, 0.001, 0.0], linearity: 0.37 };
+    let t = |w: &Vector3<f64>| format!("({:.17e},{:.17e},{:.17e})", w.x, w.y, w.z);
+    let components = format!("  MODEL_COMPONENT_5 = {}\n  MODEL_COMPONENT_6 = (0.0,-0.04,0.0)\n  MODEL_COMPONENT_7 = (0.002,0.001,0.0)\n  MODEL_COMPONENT_8 = 3.0\n  MODEL_COMPONENT_9 = 0.37\n", t(&a));
+    let fish = through_lens(&render, cam, &r, &c, &lens);
+    let edge = {
+        let (x1, _) = lens.project(&(c + r * Vector3::new(((383.0 - f("cx")) / f("fx")) * 1000.0, 0.0, 1000.0))).unwrap();
+        383.0 - x1
+    };
+    assert!(edge > 10.0, "the lens moves the right edge by {edge} px only");
+    let (fish_img, as_pinhole) = (tmp.join("FISH.IMG"), tmp.join("PIN.IMG"));
+    common::pds3_product(&fish_img, &fish, cam, &r, &c, &components);
+    common::pds3_product(&as_pinhole, &fish, cam, &r, &c, "");
+    let n = r_wl.transpose() * Vector3::z();
+    let ground = format!("--ground={},{},{},{}", n.x, n.y, n.z, im["ground_height_m"].as_f64().unwrap() - t_wl.z);
+    let run = |args: &[&str], out: &str| -> Value {
+        let out = tmp.join(out);
+        let o = tubeloc(&[args, &["--out", p(&out), &ground]].concat());
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+        read(&out)
+    };
+    let by_render = run(&["locate", "--rig", p(&rig_path), "--image", p(&png)], "render.json");
+    let resampled = run(&["locate", "--label-cameras", "--image", p(&fish_img)], "fish.json");
+    let unresampled = run(&["locate", "--label-cameras", "--image", p(&as_pinhole)], "pin.json");
+    assert_eq!((resampled["resampled_from"].as_str(), unresampled.get("resampled_from")), (Some("CAHVORE"), None));
+    // Each tube of the scene against the nearest located tube of a run (centres in the camera
+    // frame, the same camera in every run).
+    let image_id = im["id"].clone();
+    let truth: Vec<Vector3<f64>> = read(&set.join("annotations.json"))["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == image_id).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();
+    let gaps = |doc: &Value| -> Vec<f64> {
+        let got: Vec<Vector3<f64>> = doc["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").map(|t| vec3(&t["centre"])).collect();
+        let mut g: Vec<f64> = truth.iter().map(|t| got.iter().map(|q| (q - t).norm()).fold(f64::INFINITY, f64::min)).collect();
+        g.sort_by(f64::total_cmp);
+        g
+    };
+    let (g_render, g_res, g_raw) = (gaps(&by_render), gaps(&resampled), gaps(&unresampled));
+    eprintln!("centre errors (m) of the {} tubes: render {g_render:.4?}; resampled {g_res:.4?}; taken as its pinhole {g_raw:.4?}", truth.len());
+    // Resampled, every tube is found about as well as in the render (3.9 mm median, 2.4 cm at
+    // worst, against 4.6 mm and 2.6 cm); taken as its pinhole, most are lost (0.44 m median).
+    let median = |g: &[f64]| g[g.len() / 2];
+    assert!(g_res.len() >= 5 && g_res[g_res.len() - 1] < 0.03 && median(&g_res) < 0.01, "resampled: {g_res:?}");
+    assert!(median(&g_raw) > 0.1, "taken as its pinhole: {g_raw:?}");
+}
