@@ -85,3 +85,27 @@ pub fn read_image<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     let img = py.detach(|| tubeloc_detect::input::open_image(&path)).map_err(|e| to_py(format!("cannot read image {}: {e}", path.display())))?;
     Ok(array_of(py, &img))
 }
+
+/// read_product(path) -> tuple[numpy.ndarray, Rig, tuple[float, float, float, float]]
+///
+/// Reads a PDS3 product (an `.IMG` with its label at the head, or a `.LBL` beside its data) as
+/// `tubeloc locate --rig F --image F` reads it: the image as stored (uint8 or uint16), the
+/// one-camera rig of its label (its CAHV / CAHVOR model linearized, named after PRODUCT_ID,
+/// in the rover frame) and the ground under it (nx, ny, nz, d; camera frame, n up, n·X = d).
+/// A fisheye (CAHVORE) product's image comes back resampled into the rig camera, the
+/// model's linear part, so that the three go together into `Locator.locate`.
+#[pyfunction]
+pub fn read_product<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<(Bound<'py, PyAny>, crate::rig::PyRig, (f64, f64, f64, f64))> {
+    use tubeloc_calib::interchange::{linearize::LinearResampling, pds, pds_label};
+    let (cam, img) = py.detach(|| -> PyResult<_> {
+        let (cam, fisheye) = pds_label::read_resampled_label_camera(&path).map_err(|e| crate::error::chain_to_py(&e))?.ok_or_else(|| to_py(format!("{}: not a PDS3 product (an .IMG with its label at the head, or a .LBL)", path.display())))?;
+        let img = tubeloc_detect::input::open_image(&path).map_err(|e| to_py(format!("cannot read image {}: {e}", path.display())))?;
+        let img = match fisheye {
+            Some(m) => LinearResampling::new(&m, &cam.camera, (img.width(), img.height())).apply(&img),
+            None => img,
+        };
+        Ok((cam, img))
+    })?;
+    let g = cam.ground;
+    Ok((array_of(py, &img), crate::rig::PyRig { rig: pds::rig_of(std::slice::from_ref(&cam)) }, (g.normal.x, g.normal.y, g.normal.z, g.offset)))
+}

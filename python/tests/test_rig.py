@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 import tubeloc
@@ -111,6 +112,39 @@ def test_pds3_label_gives_its_camera_and_ground(tmp_path):
     nx, ny, nz, d = tubeloc.read_pds_grounds(path)["NLB_7"]
     # Up in the camera frame (x right, y down) is -y; the camera is 1.95 m above its ground.
     assert abs(nx) < 1e-12 and abs(ny + 1.0) < 1e-12 and abs(nz) < 1e-12 and abs(d + 1.95) < 1e-12
-    path.write_text(PDS3_LABEL.replace("MODEL_TYPE = CAHV", "MODEL_TYPE = CAHVORE"))
-    with pytest.raises(tubeloc.TubelocError, match="NLB_7.LBL.*CAHVORE"):
+    path.write_text(fisheye(PDS3_LABEL))
+    with pytest.raises(tubeloc.TubelocError, match="NLB_7.LBL.*CAHVORE.*tubeloc locate"):
         tubeloc.read_rig(path)
+
+
+def fisheye(label):
+    """`label` with its CAHV model made a CAHVORE fisheye (type 2) with that linear part."""
+    return label.replace("MODEL_TYPE = CAHV", "MODEL_TYPE = CAHVORE").replace(
+        "END_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS",
+        "  MODEL_COMPONENT_5 = (1.0, 0.0, 0.0)\n  MODEL_COMPONENT_6 = (0.0, 0.0, 0.0)\n"
+        "  MODEL_COMPONENT_7 = (0.0, 0.0, 0.0)\n  MODEL_COMPONENT_8 = 2\nEND_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS")
+
+
+def test_read_product_gives_image_rig_and_ground_a_fisheye_resampled(tmp_path):
+    # A 64x48 8-bit product (label at the head, samples from record 5 of 256 bytes) whose
+    # columns are numbered 0..63, as a CAHV camera and as a fisheye with that linear part.
+    cahv = (PDS3_LABEL.replace("319.5, 500.0", "31.5, 40.0").replace("239.5, 0.0, 500.0", "23.5, 0.0, 40.0")
+            .replace("LINES = 480", "LINES = 48").replace("LINE_SAMPLES = 640", "LINE_SAMPLES = 64")
+            .replace("END_OBJECT", "  SAMPLE_TYPE = UNSIGNED_INTEGER\n  SAMPLE_BITS = 8\nEND_OBJECT")
+            .replace("PDS_VERSION_ID = PDS3\n", "PDS_VERSION_ID = PDS3\nRECORD_TYPE = FIXED_LENGTH\nRECORD_BYTES = 256\n^IMAGE = 5\n"))
+    columns = np.tile(np.arange(64, dtype=np.uint8) * 4, (48, 1))
+    for name, label in [("PIN.IMG", cahv), ("FISH.IMG", fisheye(cahv))]:
+        (tmp_path / name).write_bytes(label.encode().ljust(1024, b" ") + columns.tobytes())
+    image, rig, ground = tubeloc.read_product(tmp_path / "PIN.IMG")
+    assert np.array_equal(image, columns) and rig == tubeloc.read_rig(tmp_path / "PIN.IMG")
+    assert ground == tubeloc.read_pds_grounds(tmp_path / "PIN.IMG")["NLB_7"]
+    image, fish_rig, fish_ground = tubeloc.read_product(tmp_path / "FISH.IMG")
+    # The same pinhole and ground; the image resampled: the centre stays, the edges are drawn
+    # in from the fisheye's compressed rim (the pinhole's edge column lies nearer the centre
+    # in the raw frame).
+    assert fish_rig == rig and fish_ground == ground and image.shape == (48, 64)
+    assert abs(int(image[24, 32]) - int(columns[24, 32])) <= 2
+    assert image[24, 0] > columns[24, 0] + 8 and image[24, 63] < columns[24, 63] - 8
+    with pytest.raises(tubeloc.TubelocError, match="x.png: not a PDS3 product"):
+        (tmp_path / "x.png").write_bytes(b"\x89PNG")
+        tubeloc.read_product(tmp_path / "x.png")
