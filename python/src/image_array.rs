@@ -86,6 +86,9 @@ pub fn read_image<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     Ok(array_of(py, &img))
 }
 
+/// A product as Python gets it: the image array, the rig and the ground `(nx, ny, nz, d)`.
+pub type Product<'py> = (Bound<'py, PyAny>, crate::rig::PyRig, (f64, f64, f64, f64));
+
 /// read_product(path) -> tuple[numpy.ndarray, Rig, tuple[float, float, float, float]]
 ///
 /// Reads a PDS3 product (an `.IMG` with its label at the head, or a `.LBL` beside its data) as
@@ -95,7 +98,7 @@ pub fn read_image<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
 /// A fisheye (CAHVORE) product's image comes back resampled into the rig camera, the
 /// model's linear part, so that the three go together into `Locator.locate`.
 #[pyfunction]
-pub fn read_product<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<(Bound<'py, PyAny>, crate::rig::PyRig, (f64, f64, f64, f64))> {
+pub fn read_product<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Product<'py>> {
     use tubeloc_calib::interchange::{linearize::LinearResampling, pds, pds_label};
     let (cam, img) = py.detach(|| -> PyResult<_> {
         let (cam, fisheye) = pds_label::read_resampled_label_camera(&path).map_err(|e| crate::error::chain_to_py(&e))?.ok_or_else(|| to_py(format!("{}: not a PDS3 product (an .IMG with its label at the head, or a .LBL)", path.display())))?;
