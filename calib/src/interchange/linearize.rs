@@ -91,7 +91,7 @@ impl LinearResampling {
     }
 
     /// Bilinear samples of the `ch`-channel image `src` (`size` pixels) at each source
-    /// position, rounded by `back`.
+    /// position, rounded to the nearest level by `back` (which truncates: it gets `value + 0.5`).
     fn warp_samples<T: Copy + Into<f32> + Send + Sync + Default>(&self, src: &[T], size: (usize, usize), ch: usize, back: impl Fn(f32) -> T + Sync) -> Vec<T> {
         let (sw, sh) = size;
         let mut out = vec![T::default(); self.source.len() * ch];
@@ -100,14 +100,16 @@ impl LinearResampling {
                 if x.is_nan() {
                     continue;
                 }
-                let (x0, y0) = ((x.floor() as usize).min(sw - 1), (y.floor() as usize).min(sh - 1));
-                let (x1, y1) = ((x0 + 1).min(sw - 1), (y0 + 1).min(sh - 1));
-                let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-                let at = |xx: usize, yy: usize, k: usize| src[(yy * sw + xx) * ch + k].into();
+                // Sources lie within the raw frame (`new`): 0 <= x <= sw - 1, 0 <= y <= sh - 1.
+                let (xf, yf) = (x.floor(), y.floor());
+                let (x0, y0) = ((xf as usize).min(sw - 1), (yf as usize).min(sh - 1));
+                let (dx, dy) = (usize::from(x0 + 1 < sw) * ch, usize::from(y0 + 1 < sh) * sw * ch);
+                let (fx, fy) = (x - xf, y - yf);
+                let (w00, w01, w10, w11) = ((1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy);
+                let i = (y0 * sw + x0) * ch;
                 for (k, s) in px.iter_mut().enumerate() {
-                    let top = at(x0, y0, k) * (1.0 - fx) + at(x1, y0, k) * fx;
-                    let bottom = at(x0, y1, k) * (1.0 - fx) + at(x1, y1, k) * fx;
-                    *s = back((top * (1.0 - fy) + bottom * fy).round());
+                    let v = src[i + k].into() * w00 + src[i + dx + k].into() * w01 + src[i + dy + k].into() * w10 + src[i + dy + dx + k].into() * w11;
+                    *s = back(v + 0.5);
                 }
             }
         });
