@@ -112,4 +112,8 @@ fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     let median = |g: &[f64]| g[g.len() / 2];
     assert!(g_res.len() >= 5 && g_res[g_res.len() - 1] < 0.03 && median(&g_res) < 0.01, "resampled: {g_res:?}");
     assert!(median(&g_raw) > 0.1, "taken as its pinhole: {g_raw:?}");
+    // Commands that would take the raw frame as a pinhole refuse the label, naming `locate`.
+    let o = tubeloc(&["detect", "--method", "learned", "--image", p(&fish_img), "--camera", p(&fish_img), "--out", p(&tmp.join("d.json"))]);
+    let err = stderr(&o);
+    assert!(o.status.code() == Some(1) && err.contains("FISH.IMG") && err.contains("CAHVORE") && err.contains("tubeloc locate"), "{err}");
 }
