@@ -55,13 +55,15 @@ pub struct LocateArgs {
     /// Rig file: tubeloc JSON (`tubeloc calib rig`, a synthetic dataset's `rig.json`), OpenCV YAML,
     /// a kalibr camchain, one ROS `camera_info`, a PDS camera list (`cahv_to_pinhole.py`'s JSON:
     /// each image's camera, by file name, and ground) or the PDS3 label of the image (`.LBL`, or
-    /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground),
-    /// recognised by content.
+    /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground; a
+    /// CAHVORE fisheye's image is resampled into the model's linear camera), recognised by
+    /// content.
     #[arg(long, required_unless_present = "label_cameras", conflicts_with = "label_cameras")]
     pub rig: Option<PathBuf>,
     /// Instead of --rig: each image is a PDS3 product (`.IMG` with its label, or a `.LBL` beside
-    /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground.
-    /// A batch of products then needs no rig file; each frame's camera is named after its file.
+    /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground;
+    /// a CAHVORE fisheye's image is resampled into the model's linear camera first. A batch of
+    /// products then needs no rig file; each frame's camera is named after its file.
     /// With --right (a product of the same moment), the two labels make the stereo pair.
     #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
