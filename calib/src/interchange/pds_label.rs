@@ -85,12 +85,9 @@ pub fn site_from_rover(label: &OdlLabel) -> Result<Option<Matrix3<f64>>, String>
 
 /// The camera and ground of the file `path` when it starts with a PDS3 label (a `.LBL`, or an
 /// `.IMG` whose samples follow its label and are not read), `Ok(None)` when it does not.
+/// A CAHVORE (fisheye) label is refused, as by [`label_camera`].
 pub fn read_label_camera(path: &Path) -> Result<Option<PdsCamera>, CalibError> {
-    let head = tubeloc_core::odl::read_head(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
-    if !tubeloc_core::odl::looks_like_pds3_label(&head) {
-        return Ok(None);
-    }
-    label_camera(&head, path).map(Some)
+    read_resampled_label_camera(path)?.map(|c| pinhole_only(c, path)).transpose()
 }
 
 /// The camera and ground of a PDS3 label (`bytes`, read from `path`), named after the label's
@@ -98,7 +95,12 @@ pub fn read_label_camera(path: &Path) -> Result<Option<PdsCamera>, CalibError> {
 /// the keyword and line. A CAHVORE (fisheye) label is refused: its pinhole describes its image
 /// only resampled ([`resampled_label_camera`]).
 pub fn label_camera(bytes: &[u8], path: &Path) -> Result<PdsCamera, CalibError> {
-    let (camera, fisheye) = resampled_label_camera(bytes, path)?;
+    pinhole_only(resampled_label_camera(bytes, path)?, path)
+}
+
+/// The camera of a label (read from `path`) that is not a fisheye's linear part; `Err` for a
+/// fisheye, naming `tubeloc locate`, which resamples it.
+fn pinhole_only((camera, fisheye): (PdsCamera, Option<Cahvore>), path: &Path) -> Result<PdsCamera, CalibError> {
     match fisheye {
         None => Ok(camera),
         Some(_) => Err(CalibError::parse(
