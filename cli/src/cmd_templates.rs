@@ -61,7 +61,7 @@ pub struct BuildArgs {
     /// Refuse to build a library whose build is estimated to need more memory than this, GiB.
     #[arg(long, default_value_t = DEFAULT_MAX_MEMORY_GIB, value_parser = crate::args::positive_f64)]
     max_memory_gib: f64,
-    /// Camera JSON (or a PDS3 label: its linearized camera) whose focal lengths the templates
+    /// Camera JSON (or a PDS3 label: its linearized camera; a fisheye's linear part, which `locate` resamples into) whose focal lengths the templates
     /// are rendered with (default: the paper's camera at half resolution, fx = fy ~ 1720 px).
     #[arg(long)]
     camera: Option<PathBuf>,
@@ -180,7 +180,16 @@ fn build(a: BuildArgs) -> Result<()> {
         None => TubeModel::default(),
     };
     let cam = match &a.camera {
-        Some(p) => tubeloc_calib::read_camera(p).with_context(|| format!("reading {}", p.display()))?,
+        // A fisheye label's linear part: the camera of the image `locate` resamples it into.
+        Some(p) => match tubeloc_calib::interchange::pds_label::read_resampled_label_camera(p).with_context(|| format!("reading {}", p.display()))? {
+            Some((c, fisheye)) => {
+                if fisheye.is_some() {
+                    eprintln!("{}: a fisheye (CAHVORE): templates for its linear camera, which `tubeloc locate` resamples its images into", p.display());
+                }
+                c.camera.model
+            }
+            None => tubeloc_calib::read_camera(p).with_context(|| format!("reading {}", p.display()))?,
+        },
         None => LibraryParams::default_camera(),
     };
     let (dist_min, dist_max, dist_step) = a.distances;

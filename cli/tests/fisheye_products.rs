@@ -112,6 +112,17 @@ fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     let median = |g: &[f64]| g[g.len() / 2];
     assert!(g_res.len() >= 5 && g_res[g_res.len() - 1] < 0.03 && median(&g_res) < 0.01, "resampled: {g_res:?}");
     assert!(median(&g_raw) > 0.1, "taken as its pinhole: {g_raw:?}");
+    // Line2D templates built for the label are those of its linear camera, the resampled
+    // image's, and locate with them.
+    let lin_cam = tmp.join("linear.json");
+    std::fs::write(&lin_cam, resampled["camera_model"].to_string()).unwrap();
+    let coarse = ["templates", "build", "--step-deg", "30", "--distances", "2:3:0.5", "--inplane-range-deg", "0"];
+    let (lib_label, lib_json) = (tmp.join("label.tlt"), tmp.join("json.tlt"));
+    ok(&[&coarse[..], &["--camera", p(&fish_img), "--out", p(&lib_label)]].concat());
+    ok(&[&coarse[..], &["--camera", p(&lin_cam), "--out", p(&lib_json)]].concat());
+    assert!(std::fs::read(&lib_label).unwrap() == std::fs::read(&lib_json).unwrap(), "the label's library differs from its linear camera's");
+    let by_line2d = run(&["locate", "--label-cameras", "--image", p(&fish_img), "--detector", "line2d", "--templates", p(&lib_label)], "line2d.json");
+    assert_eq!((by_line2d["resampled_from"].as_str(), by_line2d["detector"].as_str()), (Some("CAHVORE"), Some("line2d")));
     // Commands that would take the raw frame as a pinhole refuse the label, naming `locate`.
     let o = tubeloc(&["detect", "--method", "learned", "--image", p(&fish_img), "--camera", p(&fish_img), "--out", p(&tmp.join("d.json"))]);
     let err = stderr(&o);
