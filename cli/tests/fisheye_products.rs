@@ -1,6 +1,6 @@
-//! `tubeloc locate` on a fisheye (CAHVORE) product: a rendered frame seen through a CAHVORE
-//! lens whose linear part is the render's pinhole, written as a PDS3 product, locates as the
-//! render does once resampled, and far worse taken as its pinhole.
+//! `tubeloc locate` on fisheye (CAHVORE) products: a rendered frame (or stereo pair) seen
+//! through a CAHVORE lens whose linear part is the render's pinhole, written as PDS3 products,
+//! locates as the render does once resampled, and worse taken as its pinhole.
 
 mod common;
 
@@ -46,6 +46,28 @@ fn through_lens(pinhole: &image::RgbImage, cam: &Value, r: &Matrix3<f64>, centre
     })
 }
 
+/// A general CAHVORE lens (type 3, linearity 0.37, a pupil moving 2 mm) whose linear part is
+/// the pinhole `cam` with axes `r` at `c` in the rover frame, with the barrel term `r1`; and its
+/// label lines `MODEL_COMPONENT_5` to `_9`.
+fn lens_of(cam: &Value, r: &Matrix3<f64>, c: &Vector3<f64>, r1: f64) -> (Cahvore, String) {
+    let (a, x, y) = (r.column(2).into_owned(), r.column(0).into_owned(), r.column(1).into_owned());
+    let f = |k: &str| cam[k].as_f64().unwrap();
+    let cahv = Cahv { c: *c, a, h: f("fx") * x + f("cx") * a, v: f("fy") * y + f("cy") * a };
+    let lens = Cahvore { cahvor: Cahvor { cahv, o: a, r: [0.0, r1, 0.0] }, e: [0.002, 0.001, 0.0], linearity: 0.37 };
+    let t = |w: &Vector3<f64>| format!("({:.17e},{:.17e},{:.17e})", w.x, w.y, w.z);
+    let lines = format!("  MODEL_COMPONENT_5 = {}\n  MODEL_COMPONENT_6 = (0.0,{r1:.17e},0.0)\n  MODEL_COMPONENT_7 = (0.002,0.001,0.0)\n  MODEL_COMPONENT_8 = 3.0\n  MODEL_COMPONENT_9 = 0.37\n", t(&a));
+    (lens, lines)
+}
+
+/// Distance (m) from each true tube centre of `truth` to the nearest located tube of `doc`
+/// (centres in the camera frame), sorted.
+fn centre_errors(truth: &[Vector3<f64>], doc: &Value) -> Vec<f64> {
+    let got: Vec<Vector3<f64>> = doc["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").map(|t| vec3(&t["centre"])).collect();
+    let mut g: Vec<f64> = truth.iter().map(|t| got.iter().map(|q| (q - t).norm()).fold(f64::INFINITY, f64::min)).collect();
+    g.sort_by(f64::total_cmp);
+    g
+}
+
 #[test]
 fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     let dir = tempfile::tempdir().unwrap();
@@ -66,14 +88,9 @@ fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     // The rover frame is the world with y and z flipped (z down).
     let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
     let (r, c) = (flip * r_wl, flip * t_wl);
-    let (a, x, y) = (r.column(2).into_owned(), r.column(0).into_owned(), r.column(1).into_owned());
     let f = |k: &str| cam[k].as_f64().unwrap();
-    let cahv = Cahv { c, a, h: f("fx") * x + f("cx") * a, v: f("fy") * y + f("cy") * a };
-    // A general lens (type 3, linearity 0.37) with barrel distortion and a moving pupil: it
-    // moves the far edge of this frame by tens of pixels.
-    let lens = Cahvore { cahvor: Cahvor { cahv, o: a, r: [0.0, -0.04, 0.0] }, e: [0.002, 0.001, 0.0], linearity: 0.37 };
-    let t = |w: &Vector3<f64>| format!("({:.17e},{:.17e},{:.17e})", w.x, w.y, w.z);
-    let components = format!("  MODEL_COMPONENT_5 = {}\n  MODEL_COMPONENT_6 = (0.0,-0.04,0.0)\n  MODEL_COMPONENT_7 = (0.002,0.001,0.0)\n  MODEL_COMPONENT_8 = 3.0\n  MODEL_COMPONENT_9 = 0.37\n", t(&a));
+    // Barrel distortion and the lens type move the far edge of this frame by tens of pixels.
+    let (lens, components) = lens_of(cam, &r, &c, -0.04);
     let fish = through_lens(&render, cam, &r, &c, &lens);
     let edge = {
         let (x1, _) = lens.project(&(c + r * Vector3::new(((383.0 - f("cx")) / f("fx")) * 1000.0, 0.0, 1000.0))).unwrap();
@@ -95,17 +112,10 @@ fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     let resampled = run(&["locate", "--label-cameras", "--image", p(&fish_img)], "fish.json");
     let unresampled = run(&["locate", "--label-cameras", "--image", p(&as_pinhole)], "pin.json");
     assert_eq!((resampled["resampled_from"].as_str(), unresampled.get("resampled_from")), (Some("CAHVORE"), None));
-    // Each tube of the scene against the nearest located tube of a run (centres in the camera
-    // frame, the same camera in every run).
+    // Each tube of the scene against the nearest located tube of a run.
     let image_id = im["id"].clone();
     let truth: Vec<Vector3<f64>> = read(&set.join("annotations.json"))["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == image_id).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();
-    let gaps = |doc: &Value| -> Vec<f64> {
-        let got: Vec<Vector3<f64>> = doc["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").map(|t| vec3(&t["centre"])).collect();
-        let mut g: Vec<f64> = truth.iter().map(|t| got.iter().map(|q| (q - t).norm()).fold(f64::INFINITY, f64::min)).collect();
-        g.sort_by(f64::total_cmp);
-        g
-    };
-    let (g_render, g_res, g_raw) = (gaps(&by_render), gaps(&resampled), gaps(&unresampled));
+    let (g_render, g_res, g_raw) = (centre_errors(&truth, &by_render), centre_errors(&truth, &resampled), centre_errors(&truth, &unresampled));
     eprintln!("centre errors (m) of the {} tubes: render {g_render:.4?}; resampled {g_res:.4?}; taken as its pinhole {g_raw:.4?}", truth.len());
     // Resampled, every tube is found about as well as in the render (3.9 mm median, 2.4 cm at
     // worst, against 4.6 mm and 2.6 cm); taken as its pinhole, most are lost (0.44 m median).
@@ -127,4 +137,58 @@ fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     let o = tubeloc(&["detect", "--method", "learned", "--image", p(&fish_img), "--camera", p(&fish_img), "--out", p(&tmp.join("d.json"))]);
     let err = stderr(&o);
     assert!(o.status.code() == Some(1) && err.contains("FISH.IMG") && err.contains("CAHVORE") && err.contains("tubeloc locate"), "{err}");
+}
+
+#[test]
+fn a_stereo_pair_of_fisheye_products_is_resampled_image_by_image() {
+    // Rendered stereo pairs (384 px crops, f 1720 px), each image seen through its own CAHVORE
+    // lens with a strong barrel term (the crops' far edges move by tens of pixels): `locate
+    // --label-cameras --image L --right R` resamples both images before the stereo term, and
+    // places the best tube of each pair as the rendered pair does; taken as pinholes, the pair
+    // places it centimetres off or loses it.
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path();
+    let set = tmp.join("st");
+    ok(&["synth", "stereo", "--out", p(&set), "--scenes", "1", "--pairs-per-scene", "3", "--resolution", "384", "--seed", "1"]);
+    let ann = read(&set.join("annotations.json"));
+    let m3 = |v: &Value| Matrix3::from_fn(|i, j| v[i][j].as_f64().unwrap());
+    let pose = |r: &Matrix3<f64>, t: &Vector3<f64>| {
+        let rows = [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[(i, j)]));
+        serde_json::json!({"rotation": rows, "translation": [t.x, t.y, t.z]})
+    };
+    let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
+    for (k, im) in ann["images"].as_array().unwrap().iter().enumerate() {
+        let (r_wl, t_wl) = (m3(&im["T_world_cam"]["rotation"]), vec3(&im["T_world_cam"]["translation"]));
+        let (r_lr, t_lr) = (m3(&im["T_left_right"]["rotation"]), vec3(&im["T_left_right"]["translation"]));
+        let (r_wr, t_wr) = (r_wl * r_lr, t_wl + r_wl * t_lr);
+        let rig = serde_json::json!({"cameras": [{"name": "L", "model": im["camera"], "T_rig_cam": pose(&r_wl, &t_wl)}, {"name": "R", "model": im["right_camera"], "T_rig_cam": pose(&r_wr, &t_wr)}], "stereo_pairs": [["L", "R"]]});
+        let rig_path = tmp.join(format!("rig{k}.json"));
+        std::fs::write(&rig_path, rig.to_string()).unwrap();
+        let (left_png, right_png) = (set.join("images").join(im["file_name"].as_str().unwrap()), set.join("right").join(im["right_file_name"].as_str().unwrap()));
+        let product = |name: &str| tmp.join(format!("{name}{k}.IMG"));
+        for (side, png, cam, r, c) in [("L", &left_png, &im["camera"], flip * r_wl, flip * t_wl), ("R", &right_png, &im["right_camera"], flip * r_wr, flip * t_wr)] {
+            let (lens, lines) = lens_of(cam, &r, &c, -1.0);
+            let fish = through_lens(&image::open(png).unwrap().to_rgb8(), cam, &r, &c, &lens);
+            common::pds3_product(&product(side), &fish, cam, &r, &c, &lines);
+            common::pds3_product(&product(&format!("P{side}")), &fish, cam, &r, &c, "");
+        }
+        let n = r_wl.transpose() * Vector3::z();
+        let ground = format!("--ground={},{},{},{}", n.x, n.y, n.z, im["ground_height_m"].as_f64().unwrap() - t_wl.z);
+        let run = |args: &[&str], out: &str| -> Value {
+            let out = tmp.join(format!("{out}{k}.json"));
+            let o = tubeloc(&[args, &["--out", p(&out), &ground]].concat());
+            assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+            read(&out)
+        };
+        let by_rig = run(&["locate", "--rig", p(&rig_path), "--image", p(&left_png), "--right", p(&right_png)], "rig");
+        let fish = run(&["locate", "--label-cameras", "--image", p(&product("L")), "--right", p(&product("R"))], "fish");
+        let raw = run(&["locate", "--label-cameras", "--image", p(&product("PL")), "--right", p(&product("PR"))], "raw");
+        assert_eq!(fish["resampled_from"].as_str(), Some("CAHVORE"));
+        let truth: Vec<Vector3<f64>> = ann["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == im["id"]).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();
+        let (g_rig, g_fish, g_raw) = (centre_errors(&truth, &by_rig), centre_errors(&truth, &fish), centre_errors(&truth, &raw));
+        let points = |doc: &Value| doc["tubes"].as_array().unwrap().iter().map(|t| t["residuals"]["stereo_points"].as_f64().unwrap_or(0.0)).sum::<f64>();
+        eprintln!("pair {k}: best centre error (m) rendered {:.4}, fisheye resampled {:.4}, taken as pinholes {:.4}; stereo points {} / {} / {}", g_rig[0], g_fish[0], g_raw[0], points(&by_rig), points(&fish), points(&raw));
+        assert!(g_rig[0] < 0.015 && g_fish[0] <= g_rig[0] + 0.002 && points(&fish) > 0.0, "pair {k}: {g_fish:?} against {g_rig:?}");
+        assert!(g_raw[0] >= g_fish[0] + 0.004, "pair {k}: taken as pinholes {g_raw:?} against {g_fish:?}");
+    }
 }
