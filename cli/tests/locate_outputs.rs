@@ -1,7 +1,8 @@
 //! `tubeloc locate`'s outputs and refusals: one JSON document and the overlay, written before
 //! anything is printed (a closed stdout is not an error); no file from a failed run; masks of
 //! the wrong size refused; external results selected by the image's file name; a bad --ground
-//! refused as a bad command line before any work.
+//! refused as a bad command line before any work; no tube handed over from an underexposed
+//! frame.
 
 mod common;
 
@@ -23,12 +24,17 @@ struct Painted {
 
 impl Painted {
     fn new() -> Painted {
+        Painted::with_levels(210, 60, 23)
+    }
+    /// The scene with the tube at grey level `tube` on ground of `ground` plus a texture of
+    /// `texture` levels.
+    fn with_levels(tube: u8, ground: u8, texture: u32) -> Painted {
         let dir = tempfile::tempdir().unwrap();
         let cam = CameraModel::from_hfov(320, 240, 60.0);
         let truth = TubeAxisPose::new(0, 1.0, Vector3::new(0.0, 0.0, 0.6), Vector3::new(1.0, 0.0, 0.1), 0.5).unwrap();
         let model = CylinderModel::new(&tubeloc_core::TubeModel::default()).unwrap();
         let mask = silhouette_mask(&model, &truth, &cam);
-        image::GrayImage::from_fn(320, 240, |x, y| image::Luma([if mask.get(x as usize, y as usize) { 210 } else { 60 + ((x + 2 * y) % 23) as u8 }])).save(dir.path().join("img.png")).unwrap();
+        image::GrayImage::from_fn(320, 240, |x, y| image::Luma([if mask.get(x as usize, y as usize) { tube } else { ground + ((x + 2 * y) % texture) as u8 }])).save(dir.path().join("img.png")).unwrap();
         let rig = json!({"cameras": [{"name": "C", "model": cam, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}}], "stereo_pairs": []});
         std::fs::write(dir.path().join("rig.json"), rig.to_string()).unwrap();
         std::fs::create_dir(dir.path().join("out")).unwrap();
@@ -176,4 +182,26 @@ fn a_bad_ground_is_a_bad_command_line_and_writes_nothing() {
     assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(s.path("out/poses.json")).unwrap()).unwrap();
     assert_eq!(doc["up_cam"], json!([0.0, -1.0, 0.0]));
+}
+
+#[test]
+fn no_tube_is_handed_over_from_an_underexposed_frame() {
+    // The painted scene at a fifth of its brightness (tube 42, ground 12-15): the fit
+    // converges, but the frame's highlights lie at grey level 15 < 48, so the tube is listed
+    // as `underexposed` and the run says why; with --min-highlight-level 0 it is located.
+    let s = Painted::with_levels(42, 12, 4);
+    let results = s.results(json!([s.entry(7)]));
+    let o = run(&s.locate_args(&results));
+    assert_eq!(o.status.code(), Some(3), "no tube located: {}", stderr(&o));
+    assert!(stderr(&o).contains("img.png is underexposed (its highlights lie at grey level 15 < 48)"), "{}", stderr(&o));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(s.path("out/poses.json")).unwrap()).unwrap();
+    assert_eq!((doc["tubes"][0]["status"].as_str(), doc["tubes"][0]["converged"].as_bool()), (Some("underexposed"), Some(true)));
+    let mut a = s.locate_args(&results);
+    a.extend(["--min-highlight-level".to_string(), "0".to_string()]);
+    let o = run(&a);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(s.path("out/poses.json")).unwrap()).unwrap();
+    assert_eq!(doc["tubes"][0]["status"], "located");
+    let o = run(&[&a[..a.len() - 1], &["300".to_string()]].concat());
+    assert!(o.status.code() == Some(2) && stderr(&o).contains("grey level in [0, 255]"), "{}", stderr(&o));
 }

@@ -90,15 +90,26 @@ pub enum Rejection {
         /// Index of the stronger tube in [`LocateOutput::tubes`].
         other: usize,
     },
+    /// The frame is underexposed: its highlights ([`highlight_level`]) lie below
+    /// [`LocatorSettings::min_highlight_level`], so what the detector sees is mostly sensor
+    /// noise, and a tube found in it is not handed to the planner (retake the frame).
+    Underexposed {
+        /// The frame's highlight level, 8-bit grey level.
+        highlight: f64,
+        /// The least highlight level a frame's tubes are handed over from.
+        min: f64,
+    },
 }
 
 impl Rejection {
-    /// A short machine-readable name (`fit_failed`, `low_probability`, `intersects_tube`).
+    /// A short machine-readable name (`fit_failed`, `low_probability`, `intersects_tube`,
+    /// `underexposed`).
     pub fn name(&self) -> &'static str {
         match self {
             Rejection::FitFailed(_) => "fit_failed",
             Rejection::LowProbability { .. } => "low_probability",
             Rejection::IntersectsTube { .. } => "intersects_tube",
+            Rejection::Underexposed { .. } => "underexposed",
         }
     }
 }
@@ -147,6 +158,9 @@ pub struct LocateOutput {
     pub terrain_checked: bool,
     /// Unit up direction used for the grasp frames, camera frame.
     pub up_cam: Vector3<f64>,
+    /// The frame's highlight level ([`highlight_level`]); under
+    /// [`LocatorSettings::min_highlight_level`] no tube is located.
+    pub highlight_level: f64,
     /// Stage timings.
     pub timings: Timings,
 }
@@ -348,12 +362,14 @@ impl Locator {
         let (mut tubes, mut rejected) = (Vec::new(), Vec::new());
         let mut tube_items = Vec::new();
         let cal = &self.settings.calibration;
+        let (highlight, min_highlight) = (highlight_level(&px.gray), self.settings.min_highlight_level);
         for (pose, item) in poses.into_iter().zip(seed_item) {
             let t_cam_grasp = pose.grasp_frame(&up);
             let failure = pose.failure.as_ref().map(|f| f.reason);
             let probability = cal.probability(pose.score);
             let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability };
             match (tube.pose.converged, failure) {
+                (true, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
                 (true, _) if probability >= cal.threshold => {
                     tubes.push(tube);
                     tube_items.push(item);
@@ -387,7 +403,7 @@ impl Locator {
         let grasp_ms = t2.elapsed().as_secs_f64() * 1e3;
         overlapping.extend(rejected);
         let rejected = overlapping;
-        Ok(LocateOutput { tubes, rejected, detections, merged, terrain_checked, up_cam: up, timings: Timings { detect_s, refine_s, fit_ms: refined.fit_ms, grasp_ms, total_s: t0.elapsed().as_secs_f64() } })
+        Ok(LocateOutput { tubes, rejected, detections, merged, terrain_checked, up_cam: up, highlight_level: highlight, timings: Timings { detect_s, refine_s, fit_ms: refined.fit_ms, grasp_ms, total_s: t0.elapsed().as_secs_f64() } })
     }
 
     /// The grasp check of each located tube (seed item `items[k]` of `refined`): the scene is
@@ -437,6 +453,26 @@ impl Locator {
     }
 }
 
+/// The grey level of a frame's highlights: the 99th percentile of its 8-bit grey levels. A
+/// well-exposed rover frame's lie far up the range (every real frame of the shared data at 72
+/// or more, as tubeloc reads it); an underexposed frame's, low, with sensor noise a large part
+/// of what is left.
+pub fn highlight_level(gray: &tubeloc_core::Plane<u8>) -> f64 {
+    let mut hist = [0u64; 256];
+    for &v in &gray.data {
+        hist[v as usize] += 1;
+    }
+    let need = ((0.99 * gray.data.len() as f64).ceil() as u64).max(1);
+    let mut seen = 0;
+    // The least level at or below which 99 % of the pixels lie (0 for an empty image).
+    hist.iter()
+        .position(|&c| {
+            seen += c;
+            seen >= need
+        })
+        .unwrap_or(0) as f64
+}
+
 /// The ground plane a tube's grasp is checked against: `given` (camera frame, n up), lowered to
 /// the tube's underside where it stands above it (a tube rests on the ground, so a plane above
 /// its underside is an error of the pose's height or of the plane; the terrain columns then
@@ -449,5 +485,23 @@ pub fn ground_under(given: Option<GroundPlane>, pose: &TubeAxisPose, model: &tub
     match given {
         Some(g) if g.height_of(&underside) >= 0.0 => g,
         _ => GroundPlane::from_point_normal(&underside, &normal),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tubeloc_core::Plane;
+
+    #[test]
+    fn the_highlight_level_is_the_99th_percentile_of_the_levels() {
+        // Levels 0..=99, 10 pixels each: 99 % of the pixels lie at or below 98.
+        let ramp = Plane::from_vec(100, 10, (0..1000).map(|k| (k % 100) as u8).collect());
+        assert_eq!(highlight_level(&ramp), 98.0);
+        // A dark frame with a few bright outliers (under 1 %) has dark highlights.
+        let mut dark = Plane::from_vec(100, 100, vec![20u8; 10_000]);
+        dark.data[..90].fill(255);
+        assert_eq!(highlight_level(&dark), 20.0);
+        assert_eq!(highlight_level(&Plane::from_vec(0, 0, Vec::new())), 0.0);
     }
 }

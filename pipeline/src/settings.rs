@@ -37,7 +37,17 @@ pub struct LocatorSettings {
     /// How grasp candidates are sampled, checked and ranked, and the tube-tube overlap
     /// tolerance ([`tubeloc_grasp::PlannerSettings`]).
     pub grasp: PlannerSettings,
+    /// The least highlight level ([`crate::highlight_level`], the 99th percentile of the
+    /// frame's 8-bit grey levels) a frame's tubes are handed to the planner from: in a darker
+    /// (underexposed) frame, converged tubes are rejected as `underexposed`. Default 48; 0
+    /// disables.
+    pub min_highlight_level: f64,
 }
+
+/// Default [`LocatorSettings::min_highlight_level`]: two thirds of the darkest real frame of
+/// the shared data as tubeloc reads it (72.7), about twice the underexposed rear Hazcam frame's
+/// (25; `docs/design/0062-underexposed-frames.md`).
+pub const DEFAULT_MIN_HIGHLIGHT_LEVEL: f64 = 48.0;
 
 impl Default for LocatorSettings {
     fn default() -> Self {
@@ -50,6 +60,7 @@ impl Default for LocatorSettings {
             calibration: ScoreCalibration { threshold: 0.0, ..ScoreCalibration::identity() },
             gripper: GripperModel::default(),
             grasp: PlannerSettings::default(),
+            min_highlight_level: DEFAULT_MIN_HIGHLIGHT_LEVEL,
         }
     }
 }

@@ -19,6 +19,7 @@ struct Options<'a> {
     templates: Option<PathBuf>,
     calibration: Option<PathBuf>,
     min_probability: Option<f64>,
+    min_highlight_level: Option<f64>,
     range_m: &'a str,
 }
 
@@ -50,6 +51,12 @@ fn settings_of(o: &Options) -> PyResult<LocatorSettings> {
             return Err(to_py(format!("min_probability {p}: expected a probability in [0, 1]")));
         }
         settings.calibration.threshold = p;
+    }
+    if let Some(v) = o.min_highlight_level {
+        if !(0.0..=255.0).contains(&v) {
+            return Err(to_py(format!("min_highlight_level {v}: expected a grey level in [0, 255]")));
+        }
+        settings.min_highlight_level = v;
     }
     Ok(settings)
 }
@@ -113,13 +120,16 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 /// the stages after the fit, duplicate merging and grasp frames -- `tubeloc locate`'s pipeline.
 ///
 /// Locator(rig, detector="learned", model=None, templates=None, camera=None, pair=None,
-///         calibration=None, min_probability=None, range_m="1:4")
+///         calibration=None, min_probability=None, range_m="1:4", min_highlight_level=None)
 ///
 /// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
 /// default the shipped model) or "line2d" (templates: a .tlt library for the camera). camera:
 /// the rig camera of the (left) images; pair: (left, right) camera names. calibration: score
 /// calibration JSON (default: the learned model's); min_probability: acceptance threshold
 /// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".
+/// min_highlight_level: no tube is located in an underexposed frame, whose highlights (99th
+/// percentile of its 8-bit grey levels) lie below this (default 48, as `tubeloc locate
+/// --min-highlight-level`; 0: off).
 #[pyclass(name = "Locator", module = "tubeloc", frozen)]
 pub struct PyLocator {
     /// Read-locked by every call, write-locked by `select_camera`.
@@ -132,7 +142,7 @@ pub struct PyLocator {
 #[pymethods]
 impl PyLocator {
     #[new]
-    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4"))]
+    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4", min_highlight_level = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -145,10 +155,11 @@ impl PyLocator {
         calibration: Option<PathBuf>,
         min_probability: Option<f64>,
         range_m: &str,
+        min_highlight_level: Option<f64>,
     ) -> PyResult<Self> {
         let origin = rig_origin(rig);
         let rig = rig_of(rig)?;
-        let o = Options { detector, model, templates, calibration, min_probability, range_m };
+        let o = Options { detector, model, templates, calibration, min_probability, min_highlight_level, range_m };
         let (locator, min_probability) = py.detach(|| -> PyResult<(Locator, f64)> {
             let det = detector_of(&o)?;
             let settings = settings_of(&o)?;
@@ -273,7 +284,7 @@ pub fn detect<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let origin = rig_origin(rig);
     let rig = rig_of(rig)?;
-    let o = Options { detector, model, templates, calibration: None, min_probability: None, range_m };
+    let o = Options { detector, model, templates, calibration: None, min_probability: None, min_highlight_level: None, range_m };
     let det = py.detach(|| detector_of(&o))?;
     let locator = build(&rig, &origin, &selection_of(camera, None), det, LocatorSettings::default())?;
     let image = image_of(image, "image")?;

@@ -79,3 +79,21 @@ def test_detect_then_refine_equals_the_cli(cli, demo_scene, tmp_path):
     for p, c in zip(poses, cli_poses):
         np.testing.assert_allclose(p.centre, c["centre"], rtol=0, atol=TOL)
         assert p.status is None and p.t_cam_grasp is None and p.probability is None
+
+
+def test_an_underexposed_frame_hands_over_no_tube(demo_scene):
+    # The demo scene at a sixth of its brightness: what was located is listed as
+    # `underexposed`, as `tubeloc locate` does; min_highlight_level=0 turns the guard off.
+    rig, image, ground = demo_scene
+    bright = tubeloc.read_image(image)
+    dark = bright // 6
+    found = tubeloc.Locator(str(rig)).locate(bright, ground=ground)
+    located = [t for t in found if t.status == "located"]
+    assert located, "the demo scene locates tubes"
+    dimmed = tubeloc.Locator(str(rig)).locate(dark, ground=ground)
+    assert not [t for t in dimmed if t.status == "located"]
+    assert [t for t in dimmed if t.status == "underexposed"]
+    unguarded = tubeloc.Locator(str(rig), min_highlight_level=0).locate(dark, ground=ground)
+    assert not [t for t in unguarded if t.status == "underexposed"]
+    with pytest.raises(tubeloc.TubelocError, match="grey level in \\[0, 255\\]"):
+        tubeloc.Locator(str(rig), min_highlight_level=300)

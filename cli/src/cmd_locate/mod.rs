@@ -136,6 +136,11 @@ pub struct LocateArgs {
     /// chosen for precision >= 0.95 on real validation composites).
     #[arg(long, value_parser = probability)]
     pub min_probability: Option<f64>,
+    /// Hand over no tube from a frame whose highlights (the 99th percentile of its 8-bit grey
+    /// levels) lie below this level: an underexposed frame, mostly sensor noise; its tubes are
+    /// listed as `underexposed` (0: off).
+    #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL, value_parser = grey_level)]
+    pub min_highlight_level: f64,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
     /// the working scale of this band (or of --ground), or "off" (the image as it is).
     #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
@@ -173,6 +178,7 @@ impl LocateArgs {
             up: None,
             calibration: None,
             min_probability: None,
+            min_highlight_level: tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL,
             range_m: "1:4".into(),
             out: Some(out),
             overlay: None,
@@ -206,6 +212,14 @@ pub fn run(a: LocateArgs) -> Result<u8> {
     }
     let located = if a.images.is_some() { batch::run(&a)? } else { single::run(&a)? };
     Ok(if located == 0 { EXIT_NO_TUBE } else { 0 })
+}
+
+/// An 8-bit grey level in [0, 255].
+fn grey_level(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=255.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: expected a grey level in [0, 255]")),
+    }
 }
 
 /// A probability in [0, 1].
@@ -412,6 +426,7 @@ impl Setup {
             (None, Detector::Learned) => model.calibration(None)?,
             (None, _) => settings.calibration,
         };
+        settings.min_highlight_level = a.min_highlight_level;
         if let Some(p) = a.min_probability {
             settings.calibration.threshold = p;
         }
@@ -562,6 +577,14 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         };
         let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
+        if found.highlight_level < setup.settings.min_highlight_level {
+            eprintln!(
+                "warning: {} is underexposed (its highlights lie at grey level {:.0} < {:.0}): no tube is handed over from it; retake the frame, or lower --min-highlight-level",
+                frame.image.display(),
+                found.highlight_level,
+                setup.settings.min_highlight_level
+            );
+        }
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
             true => Some(tubeloc_pipeline::overlay::png_bytes(&locator.overlay_located(&image, &found)).context("encoding the overlay PNG")?),

@@ -57,9 +57,16 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
             lines.push(format!("  tube {i}: rejected (probability of a tube {pr:.3} < {th:.3}), score {:.2}", p.score));
             continue;
         }
-        if let Some(tubeloc_pipeline::Rejection::IntersectsTube { other }) = i.checked_sub(found.tubes.len()).map(|k| &found.rejected[k].reason) {
-            lines.push(format!("  tube {i}: rejected (its solid intersects tube {other}'s), score {:.2}", p.score));
-            continue;
+        match i.checked_sub(found.tubes.len()).map(|k| &found.rejected[k].reason) {
+            Some(tubeloc_pipeline::Rejection::IntersectsTube { other }) => {
+                lines.push(format!("  tube {i}: rejected (its solid intersects tube {other}'s), score {:.2}", p.score));
+                continue;
+            }
+            Some(tubeloc_pipeline::Rejection::Underexposed { highlight, min }) => {
+                lines.push(format!("  tube {i}: rejected (the frame is underexposed: highlights at grey level {highlight:.0} < {min:.0}), score {:.2}", p.score));
+                continue;
+            }
+            _ => {}
         }
         let c = p.centre * 1e3;
         let g = t.t_rig_grasp.translation() * 1e3;
