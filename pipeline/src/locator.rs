@@ -454,9 +454,9 @@ impl Locator {
 }
 
 /// The grey level of a frame's highlights: the 99th percentile of its 8-bit grey levels. A
-/// well-exposed rover frame's lie far up the range (every real frame of the shared data at 72
-/// or more, as tubeloc reads it); an underexposed frame's, low, with sensor noise a large part
-/// of what is left.
+/// well-exposed rover frame's lie far up the range (every well-exposed real frame of the shared
+/// data at 81 or more, as tubeloc reads it); an underexposed frame's, low, with sensor noise a
+/// large part of what is left.
 pub fn highlight_level(gray: &tubeloc_core::Plane<u8>) -> f64 {
     let mut hist = [0u64; 256];
     for &v in &gray.data {

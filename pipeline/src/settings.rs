@@ -44,9 +44,9 @@ pub struct LocatorSettings {
     pub min_highlight_level: f64,
 }
 
-/// Default [`LocatorSettings::min_highlight_level`]: two thirds of the darkest real frame of
-/// the shared data as tubeloc reads it (72.7), about twice the underexposed rear Hazcam frame's
-/// (25; `docs/design/0062-underexposed-frames.md`).
+/// Default [`LocatorSettings::min_highlight_level`]: near the geometric mean of the darkest
+/// well-exposed real frame of the shared data as tubeloc reads it (81) and the underexposed
+/// rear Hazcam frame (25; `docs/design/0062-underexposed-frames.md`).
 pub const DEFAULT_MIN_HIGHLIGHT_LEVEL: f64 = 48.0;
 
 impl Default for LocatorSettings {
