@@ -67,6 +67,11 @@ pub struct LocateArgs {
     /// With --right (a product of the same moment), the two labels make the stereo pair.
     #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
+    /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
+    /// model's linear part: below 1 keeps more of the fisheye's field (its rim, the near
+    /// ground of a hazard camera) at a coarser scale; the corners beyond the field are black.
+    #[arg(long, default_value_t = 1.0, value_parser = fisheye_scale)]
+    pub fisheye_scale: f64,
     /// The (left) image.
     #[arg(long, required_unless_present = "images", conflicts_with = "images")]
     pub image: Option<PathBuf>,
@@ -161,6 +166,7 @@ impl LocateArgs {
             command: None,
             rig: Some(rig),
             label_cameras: false,
+            fisheye_scale: 1.0,
             image: Some(image),
             right: None,
             images: None,
@@ -212,6 +218,14 @@ pub fn run(a: LocateArgs) -> Result<u8> {
     }
     let located = if a.images.is_some() { batch::run(&a)? } else { single::run(&a)? };
     Ok(if located == 0 { EXIT_NO_TUBE } else { 0 })
+}
+
+/// A fisheye resampling scale in [0.2, 4].
+fn fisheye_scale(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.2..=4.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: expected a focal length scale in [0.2, 4]")),
+    }
 }
 
 /// An 8-bit grey level in [0, 255].
@@ -391,6 +405,11 @@ impl Setup {
             };
             (rig_path, pds, BTreeMap::new())
         };
+        // A fisheye's pinhole at the asked scale (same principal point, same pose and ground).
+        let mut pds = pds;
+        for c in pds.iter_mut().flatten().filter(|c| fisheyes.contains_key(&c.camera.name)) {
+            (c.camera.model.fx, c.camera.model.fy) = (c.camera.model.fx * a.fisheye_scale, c.camera.model.fy * a.fisheye_scale);
+        }
         let mut rig: Rig = match &pds {
             Some(cams) => tubeloc_calib::interchange::pds::rig_of(cams),
             None => tubeloc_calib::read_rig(&rig_path).context("rig")?,
