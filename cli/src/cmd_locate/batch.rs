@@ -141,6 +141,9 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
             skipped += 1;
         } else {
             let written = locate_frame(&setup, a, frame, None, a.overlays).and_then(|o| {
+                if let Some(w) = &o.warning {
+                    bar.suspend(|| eprintln!("warning: frame {k}: {w}"));
+                }
                 if let Some(png) = &o.overlay_png {
                     files::write_atomic(&out.join(&rel_overlay), png).with_context(|| format!("writing {}", out.join(&rel_overlay).display()))?;
                 }

@@ -577,6 +577,9 @@ pub struct FrameOutcome {
     pub overlay_png: Option<Vec<u8>>,
     /// What the pipeline found.
     pub found: tubeloc_pipeline::LocateOutput,
+    /// Why the frame's tubes could not be handed over as a whole (an underexposed frame), for
+    /// the caller to print.
+    pub warning: Option<String>,
 }
 
 /// Locates the tubes of one frame and encodes its document (with run statistics since
@@ -596,14 +599,14 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         };
         let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
-        if found.highlight_level < setup.settings.min_highlight_level {
-            eprintln!(
-                "warning: {} is underexposed (its highlights lie at grey level {:.0} < {:.0}): no tube is handed over from it; retake the frame, or lower --min-highlight-level",
+        let warning = (found.highlight_level < setup.settings.min_highlight_level).then(|| {
+            format!(
+                "{} is underexposed (its highlights lie at grey level {:.0} < {:.0}): no tube is handed over from it; retake the frame, or lower --min-highlight-level",
                 frame.image.display(),
                 found.highlight_level,
                 setup.settings.min_highlight_level
-            );
-        }
+            )
+        });
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
             true => Some(tubeloc_pipeline::overlay::png_bytes(&locator.overlay_located(&image, &found)).context("encoding the overlay PNG")?),
@@ -628,7 +631,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
-        Ok(FrameOutcome { json, overlay_png, found })
+        Ok(FrameOutcome { json, overlay_png, found, warning })
     })
 }
 

@@ -33,6 +33,9 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
     files::write_atomic_group(&[(out, &done.json), (&overlay_path, png)]).with_context(|| format!("writing {} and {}", out.display(), overlay_path.display()))?;
 
     let converged = done.found.tubes.len();
+    if let Some(w) = &done.warning {
+        eprintln!("warning: {w}");
+    }
     print_summary(&frame.image, &done.found, converged);
     eprintln!("poses -> {} (overlay {})", out.display(), overlay_path.display());
     Ok(converged)
