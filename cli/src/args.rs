@@ -49,6 +49,16 @@ pub fn unit_interval(s: &str) -> Result<f64, String> {
     in_closed(s, 0.0, 1.0)
 }
 
+/// An 8-bit grey level in [0, 255].
+pub fn grey_level(s: &str) -> Result<f64, String> {
+    in_closed(s, 0.0, 255.0).map_err(|_| format!("{s:?}: expected a grey level in [0, 255]"))
+}
+
+/// A fisheye resampling scale (a focal length ratio) in [0.2, 4].
+pub fn fisheye_scale(s: &str) -> Result<f64, String> {
+    in_closed(s, 0.2, 4.0).map_err(|_| format!("{s:?}: expected a focal length scale in [0.2, 4]"))
+}
+
 /// A finite number in `[lo, hi]`; the message names the interval and the value.
 fn in_closed(s: &str, lo: f64, hi: f64) -> Result<f64, String> {
     let v = parse_f64(s)?;

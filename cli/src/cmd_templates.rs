@@ -188,7 +188,7 @@ fn build(a: BuildArgs) -> Result<()> {
                 }
                 c.camera.model
             }
-            None => tubeloc_calib::read_camera(p).with_context(|| format!("reading {}", p.display()))?,
+            None => tubeloc_core::CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))?,
         },
         None => LibraryParams::default_camera(),
     };

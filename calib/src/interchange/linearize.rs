@@ -13,7 +13,7 @@
 
 use super::cahvore::Cahvore;
 use image::{DynamicImage, ImageBuffer, Luma, LumaA, Rgb, Rgba};
-use nalgebra::{Point2, Point3};
+use nalgebra::Point2;
 use rayon::prelude::*;
 use tubeloc_core::RigCamera;
 
@@ -117,19 +117,18 @@ impl LinearResampling {
     }
 }
 
-/// The pinhole pixel of the rig-frame point `p` and the raw pixel of the same point: for checks
-/// that a resampled image shows what the raw one does.
-pub fn pinhole_and_raw_pixel(raw: &Cahvore, pinhole: &RigCamera, p: &Point3<f64>) -> Option<(Point2<f64>, (f64, f64))> {
-    let in_cam = pinhole.t_rig_cam.inverse().transform_point(p);
-    Some((pinhole.model.project(&in_cam)?, raw.project(&p.coords)?))
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::cahv::{Cahv, Cahvor};
     use super::*;
-    use nalgebra::Vector3;
+    use nalgebra::{Point3, Vector3};
     use tubeloc_core::{CameraModel, Pose};
+
+    /// The pinhole pixel of the rig-frame point `p` and the raw pixel of the same point.
+    fn pinhole_and_raw_pixel(raw: &Cahvore, pinhole: &RigCamera, p: &Point3<f64>) -> Option<(Point2<f64>, (f64, f64))> {
+        let in_cam = pinhole.t_rig_cam.inverse().transform_point(p);
+        Some((pinhole.model.project(&in_cam)?, raw.project(&p.coords)?))
+    }
 
     /// A fisheye looking along the rig's +z with the CAHV part of a 200x160 pinhole, f 90 px.
     fn fisheye() -> (Cahvore, RigCamera) {

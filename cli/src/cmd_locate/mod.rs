@@ -70,7 +70,7 @@ pub struct LocateArgs {
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
     /// model's linear part: below 1 keeps more of the fisheye's field (its rim, the near
     /// ground of a hazard camera) at a coarser scale; the corners beyond the field are black.
-    #[arg(long, default_value_t = 1.0, value_parser = fisheye_scale)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::args::fisheye_scale)]
     pub fisheye_scale: f64,
     /// The (left) image.
     #[arg(long, required_unless_present = "images", conflicts_with = "images")]
@@ -144,7 +144,7 @@ pub struct LocateArgs {
     /// Hand over no tube from a frame whose highlights (the 99th percentile of its 8-bit grey
     /// levels) lie below this level: an underexposed frame, mostly sensor noise; its tubes are
     /// listed as `underexposed` (0: off).
-    #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL, value_parser = grey_level)]
+    #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL, value_parser = crate::args::grey_level)]
     pub min_highlight_level: f64,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
     /// the working scale of this band (or of --ground), or "off" (the image as it is).
@@ -218,22 +218,6 @@ pub fn run(a: LocateArgs) -> Result<u8> {
     }
     let located = if a.images.is_some() { batch::run(&a)? } else { single::run(&a)? };
     Ok(if located == 0 { EXIT_NO_TUBE } else { 0 })
-}
-
-/// A fisheye resampling scale in [0.2, 4].
-fn fisheye_scale(s: &str) -> std::result::Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(v) if (0.2..=4.0).contains(&v) => Ok(v),
-        _ => Err(format!("{s:?}: expected a focal length scale in [0.2, 4]")),
-    }
-}
-
-/// An 8-bit grey level in [0, 255].
-fn grey_level(s: &str) -> std::result::Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(v) if (0.0..=255.0).contains(&v) => Ok(v),
-        _ => Err(format!("{s:?}: expected a grey level in [0, 255]")),
-    }
 }
 
 /// A probability in [0, 1].
