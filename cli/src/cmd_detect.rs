@@ -11,6 +11,10 @@ pub enum Method {
     Line2d,
     /// The learned segmenter (`--model`, default: the shipped model, embedded in the program).
     Learned,
+    /// Line2D candidates (`--templates`) scored by the learned segmenter's agreement
+    /// (`--model`): score = P (ε + L) / (1 + ε), P the clutter verifier's probability, L the
+    /// best score of a learned instance overlapping the candidate (record 0063).
+    Fused,
     /// Detections made elsewhere (`--results coco_results.json`), passed through with an axis
     /// seed from each mask's principal axis.
     External,
@@ -93,13 +97,21 @@ fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel
     Ok(Some((c.camera.model.clone(), args.ground.unwrap_or(c.ground))))
 }
 
+/// The learned decoder settings of `--decode-config` (defaults without it).
+fn decode_config(path: Option<&Path>) -> Result<tubeloc_detect::learned::DecodeConfig> {
+    let Some(p) = path else { return Ok(Default::default()) };
+    let cfg: tubeloc_detect::learned::DecodeConfig = tubeloc_core::files::read_json(p).with_context(|| format!("decoder config {}", p.display()))?;
+    cfg.validate().map_err(|e| anyhow::anyhow!("decoder config {}: {e}", p.display()))?;
+    Ok(cfg)
+}
+
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
     let mut args = args;
     let pds = pds_camera(&mut args)?;
     let dets = match args.method {
-        Method::Line2d => {
+        Method::Line2d | Method::Fused => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
             let (cameras, grounds) = match (&args.dataset, &pds) {
                 (Some(d), _) => crate::cmd_detect_learned::dataset_cameras_and_grounds(d)?,
@@ -109,7 +121,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
             if args.ground.is_some() && args.line2d.camera.is_none() && args.dataset.is_none() && pds.is_none() {
                 return Err(crate::args::usage("--ground needs --camera (the rays along which the ground's distance is measured)"));
             }
-            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras, &grounds, args.ground.as_ref())?;
+            let fusion = match args.method {
+                Method::Fused => Some(crate::cmd_detect_line2d::Fusion { model: crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref()).load()?, decode: decode_config(args.decode_config.as_deref())?, range: crate::cmd_detect_learned::parse_range_band(&args.range_m)? }),
+                _ => None,
+            };
+            let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras, &grounds, args.ground.as_ref(), fusion)?;
             tubeloc_core::files::write_json(&args.out, &dets).with_context(|| format!("writing {}", args.out.display()))?;
             eprintln!("{} detections -> {}", dets.len(), args.out.display());
             return Ok(());
@@ -117,14 +133,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
         Method::Learned => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
             let model = crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref());
-            let cfg = match &args.decode_config {
-                Some(p) => {
-                    let cfg: tubeloc_detect::learned::DecodeConfig = tubeloc_core::files::read_json(p).with_context(|| format!("decoder config {}", p.display()))?;
-                    cfg.validate().map_err(|e| anyhow::anyhow!("decoder config {}: {e}", p.display()))?;
-                    cfg
-                }
-                None => Default::default(),
-            };
+            let cfg = decode_config(args.decode_config.as_deref())?;
             let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
             let scales = match (&pds, band) {
                 (Some((cam, ground)), Some(band)) => vec![tubeloc_detect::scale::working_scale(cam, Some((ground.normal, ground.offset)), band)],

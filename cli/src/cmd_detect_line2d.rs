@@ -6,6 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, GroundPlane};
+use tubeloc_detect::fused::{FusedDetector, FusionParams};
 use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
 
 /// Line2D options of `tubeloc detect`.
@@ -109,6 +110,16 @@ impl Line2dOpts {
     }
 }
 
+/// The learned half of a fused detection (`tubeloc detect --method fused`).
+pub struct Fusion {
+    /// The learned model.
+    pub model: tubeloc_detect::learned::LearnedModel,
+    /// Its decoder settings.
+    pub decode: tubeloc_detect::learned::DecodeConfig,
+    /// Its working scale's range band (`None`: the image as it is).
+    pub range: Option<tubeloc_detect::scale::RangeBand>,
+}
+
 /// Default `--far-scale` (colour:grey): [`MatchParams::far_scale`] and
 /// [`MatchParams::far_scale_grey`] of [`MatchParams::default`].
 pub const DEFAULT_FAR_SCALE: &str = "1:1.4";
@@ -118,7 +129,7 @@ pub const DEFAULT_GROUND_RANGE: &str = "0.55:1.25";
 
 /// The Line2D detector and the fallback camera (`--camera`) that `opts` describe.
 pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<CameraModel>)> {
-    let lib_path = opts.templates.as_deref().context("--method line2d needs --templates LIB.tlt (tubeloc templates build)")?;
+    let lib_path = opts.templates.as_deref().context("--method line2d and --method fused need --templates LIB.tlt (tubeloc templates build)")?;
     let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
     let mut params = MatchParams {
@@ -170,8 +181,20 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
 /// the library's scale and its detections mapped back. The image's ground from `grounds` (a
 /// dataset's `images[].ground`), else `ground` (`--ground`), drives the ground-consistency
 /// check.
-pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>, grounds: &BTreeMap<u64, GroundPlane>, ground: Option<&GroundPlane>) -> Result<Vec<serde_json::Value>> {
+///
+/// With `fusion`, every Line2D candidate the verifier scores is fused with the learned
+/// instances of its image ([`tubeloc_detect::fused`]).
+pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>, grounds: &BTreeMap<u64, GroundPlane>, ground: Option<&GroundPlane>, fusion: Option<Fusion>) -> Result<Vec<serde_json::Value>> {
     let (det, camera) = detector_from_opts(opts)?;
+    let (plain, fused) = match fusion {
+        Some(f) => (None, Some(FusedDetector::new(det, f.model, f.decode, f.range, FusionParams::default()).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
+        None => (Some(det), None),
+    };
+    let det: &Line2dDetector = match (&plain, &fused) {
+        (Some(d), _) => d,
+        (None, Some(f)) => f.line2d(),
+        (None, None) => unreachable!("one of the two is built"),
+    };
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let mut out = Vec::new();
@@ -189,7 +212,11 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
             let (sx, sy) = det.scale_for(cam);
             bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
         }
-        let dets = det.detect_on_ground(img.as_raw(), w, h, cam, grounds.get(id).or(ground)).with_context(|| format!("detecting in {}", path.display()))?;
+        let g = grounds.get(id).or(ground);
+        let dets = match &fused {
+            Some(f) => f.detect(img.as_raw(), w, h, cam, g).map_err(|e| anyhow::anyhow!("detecting in {}: {e}", path.display()))?,
+            None => det.detect_on_ground(img.as_raw(), w, h, cam, g).with_context(|| format!("detecting in {}", path.display()))?,
+        };
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }

@@ -36,6 +36,9 @@ pub struct Line2dDetection {
     pub probability: Option<f32>,
     /// The verifier's features of this detection, when it ran.
     pub features: Option<Features>,
+    /// The learned segmenter's agreement with this detection, when it was fused
+    /// ([`crate::fused`]); the `score` is then the fused score.
+    pub agreement: Option<f32>,
     /// Factor by which the image was resampled to the library's pixel scale before matching
     /// (geometric mean over the two axes; 1 = matched as given).
     pub scale: f64,
@@ -109,6 +112,7 @@ impl Line2dDetection {
             contrast: None,
             probability: None,
             features: None,
+            agreement: None,
             scale: (sx * sy).sqrt(),
             x: corner[0].round() as i32,
             y: corner[1].round() as i32,
@@ -138,6 +142,9 @@ impl Line2dDetection {
             }
             if let Some(p) = self.probability {
                 o.insert("probability".into(), json!(p));
+            }
+            if let Some(a) = self.agreement {
+                o.insert("agreement".into(), json!(a));
             }
             if let Some(f) = &self.features {
                 o.insert("verifier_features".into(), json!(f.to_vec()));
