@@ -12,7 +12,9 @@
 //!     1.9 m high, 30 degrees down; colour: the mast view).
 //! (c) Line2D on the same composites and negatives: the default template library built once
 //!     into `<out>/real/line2d/templates.tlt`, every frame resampled to its pixel scale, the
-//!     shipped clutter verifier at its threshold; AP50 / AR, false detections per frame, time.
+//!     shipped clutter verifier at its threshold; AP50 / AR, false detections per frame, time;
+//!     and the fused detector (every Line2D candidate scored by the learned segmenter's
+//!     agreement, [`tubeloc_detect::fused`]) on the same frames.
 //! Results go to `<out>/real/report.md` and `<out>/real/summary.json`.
 
 use anyhow::{bail, Context, Result};
@@ -22,6 +24,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tubeloc_core::{files, CocoDataset, ScoreCalibration};
 use tubeloc_detect::learned::DecodeConfig;
+use crate::cmd_detect_line2d::Line2dRunner;
 use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
 use tubeloc_synth::real_set::AssumedView;
 
@@ -247,21 +250,19 @@ fn line2d_opts(lib: &Path, stage: &RealStage) -> crate::cmd_detect_line2d::Line2
     opts
 }
 
-/// Line2D on a composite set (each image's own camera, resampled to the library's scale):
+/// Line2D (alone or fused) on a composite set (each image's own camera, resampled to the library's scale):
 /// COCO segm AP50 / AR, false detections per image, time per image.
-fn line2d_eval(set: &Path, opts: &crate::cmd_detect_line2d::Line2dOpts, out: &Path) -> Result<Value> {
+fn line2d_eval(set: &Path, det: &Line2dRunner, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
     let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
-    // Load the library outside the timing.
-    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(opts)?;
     let mut dets = Vec::new();
     let mut ms = 0.0;
     for (id, path) in &images {
         let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let t = Instant::now();
-        let found = det.detect_on_ground(img.as_raw(), w, h, cameras.get(id), grounds.get(id))?;
+        let found = det.detect(img.as_raw(), w, h, cameras.get(id), grounds.get(id))?;
         ms += t.elapsed().as_secs_f64() * 1e3;
         dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
     }
@@ -273,11 +274,10 @@ fn line2d_eval(set: &Path, opts: &crate::cmd_detect_line2d::Line2dOpts, out: &Pa
     Ok(json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64}))
 }
 
-/// Line2D detections (default threshold) on each real negative frame, under the same assumed
+/// Line2D detections (alone at the default threshold, or fused) on each real negative frame, under the same assumed
 /// cameras as the learned detector's negatives.
-fn line2d_negatives(data: &Path, opts: &crate::cmd_detect_line2d::Line2dOpts, frames: Option<usize>) -> Result<Value> {
+fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
-    let (det, _) = crate::cmd_detect_line2d::detector_from_opts(opts)?;
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     let mut per_frame = Vec::new();
     let mut ms = 0.0;
@@ -289,10 +289,10 @@ fn line2d_negatives(data: &Path, opts: &crate::cmd_detect_line2d::Line2dOpts, fr
         let t = Instant::now();
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
-        let found = det.detect_on_ground(&input.rgb, input.width, input.height, Some(&view.camera), Some(&ground))?;
+        let found = det.detect(&input.rgb, input.width, input.height, Some(&view.camera), Some(&ground))?;
         let dt = t.elapsed().as_secs_f64() * 1e3;
         ms += dt;
-        let (sx, sy) = det.scale_for(Some(&view.camera));
+        let (sx, sy) = det.line2d().scale_for(Some(&view.camera));
         per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d.score).collect::<Vec<_>>()}));
     }
     let n = per_frame.len().max(1) as f64;
@@ -323,13 +323,24 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
-    let l2_grey = line2d_eval(&grey_set, &l2_opts, &dir.join("line2d_grey"))?;
-    let l2_colour = line2d_eval(&colour_set, &l2_opts, &dir.join("line2d_colour"))?;
-    let l2_neg = line2d_negatives(&stage.data, &l2_opts, stage.frames)?;
+    // Libraries and models are loaded outside the timings.
+    let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None)?;
+    let l2_grey = line2d_eval(&grey_set, &l2, &dir.join("line2d_grey"))?;
+    let l2_colour = line2d_eval(&colour_set, &l2, &dir.join("line2d_colour"))?;
+    let l2_neg = line2d_negatives(&stage.data, &l2, stage.frames)?;
+    drop(l2);
+    // Fused: every Line2D candidate scored by the learned segmenter's agreement (record 0063).
+    let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()) };
+    let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion))?;
+    let fused_grey = line2d_eval(&grey_set, &fused, &dir.join("fused_grey"))?;
+    let fused_colour = line2d_eval(&colour_set, &fused, &dir.join("fused_colour"))?;
+    let fused_neg = line2d_negatives(&stage.data, &fused, stage.frames)?;
+    let fusion_params = tubeloc_detect::fused::FusionParams::default();
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp,
-        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg}});
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
+        "fused": {"params": fusion_params, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -350,11 +361,12 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ar": s["ar"], "ms_per_image": num(v, "ms_per_image") + num(s, "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, "- | -".into())).ok();
     }
-    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
+    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour), ("fused grey (PDS geometry)", &fused_grey), ("fused colour (assumed view)", &fused_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
     let far_grey = stage.line2d_far_scale.1;
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones searched once, {threshold_far:.3} on grey ones searched twice); their precision column gives the false detections per image instead.").ok();
+    writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0063): every Line2D candidate the verifier scores, each scored S = P L with P its verifier probability and L the best score of a learned instance overlapping it at mask IoU >= {}, kept at S >= {}; masks and poses are Line2D's; time: both detectors.", fusion_params.min_iou, fusion_params.threshold).ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
@@ -369,6 +381,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)
     )
     .ok();
+    writeln!(md, "Fused on the same frames: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", fused_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), fused_neg["max_per_frame"], fused_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,

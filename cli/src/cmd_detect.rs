@@ -12,8 +12,8 @@ pub enum Method {
     /// The learned segmenter (`--model`, default: the shipped model, embedded in the program).
     Learned,
     /// Line2D candidates (`--templates`) scored by the learned segmenter's agreement
-    /// (`--model`): score = P (ε + L) / (1 + ε), P the clutter verifier's probability, L the
-    /// best score of a learned instance overlapping the candidate (record 0063).
+    /// (`--model`): score = P L, P the clutter verifier's probability, L the best score of a
+    /// learned instance overlapping the candidate (record 0063).
     Fused,
     /// Detections made elsewhere (`--results coco_results.json`), passed through with an axis
     /// seed from each mask's principal axis.

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, GroundPlane};
 use tubeloc_detect::fused::{FusedDetector, FusionParams};
-use tubeloc_detect::line2d::{Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
+use tubeloc_detect::line2d::{Line2dDetection, Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
 
 /// Line2D options of `tubeloc detect`.
 #[derive(clap::Args, Clone, Debug)]
@@ -120,6 +120,40 @@ pub struct Fusion {
     pub range: Option<tubeloc_detect::scale::RangeBand>,
 }
 
+/// Line2D alone, or fused with the learned segmenter ([`tubeloc_detect::fused`]).
+pub enum Line2dRunner {
+    /// Line2D at its verifier's cut.
+    Plain(Line2dDetector),
+    /// Every Line2D candidate, scored by the learned segmenter's agreement.
+    Fused(Box<FusedDetector>),
+}
+
+impl Line2dRunner {
+    /// `det` alone, or fused with `fusion`'s learned model at the default fusion settings.
+    pub fn new(det: Line2dDetector, fusion: Option<Fusion>) -> Result<Self> {
+        Ok(match fusion {
+            Some(f) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, FusionParams::default()).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
+            None => Line2dRunner::Plain(det),
+        })
+    }
+
+    /// The Line2D detector (library and matching parameters).
+    pub fn line2d(&self) -> &Line2dDetector {
+        match self {
+            Line2dRunner::Plain(d) => d,
+            Line2dRunner::Fused(f) => f.line2d(),
+        }
+    }
+
+    /// Detections in an interleaved RGB8 image of `camera` with its ground, when known.
+    pub fn detect(&self, rgb: &[u8], w: usize, h: usize, camera: Option<&CameraModel>, ground: Option<&GroundPlane>) -> Result<Vec<Line2dDetection>> {
+        match self {
+            Line2dRunner::Plain(d) => Ok(d.detect_on_ground(rgb, w, h, camera, ground)?),
+            Line2dRunner::Fused(f) => f.detect(rgb, w, h, camera, ground).map_err(anyhow::Error::msg),
+        }
+    }
+}
+
 /// Default `--far-scale` (colour:grey): [`MatchParams::far_scale`] and
 /// [`MatchParams::far_scale_grey`] of [`MatchParams::default`].
 pub const DEFAULT_FAR_SCALE: &str = "1:1.4";
@@ -186,15 +220,8 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
 /// instances of its image ([`tubeloc_detect::fused`]).
 pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>, grounds: &BTreeMap<u64, GroundPlane>, ground: Option<&GroundPlane>, fusion: Option<Fusion>) -> Result<Vec<serde_json::Value>> {
     let (det, camera) = detector_from_opts(opts)?;
-    let (plain, fused) = match fusion {
-        Some(f) => (None, Some(FusedDetector::new(det, f.model, f.decode, f.range, FusionParams::default()).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
-        None => (Some(det), None),
-    };
-    let det: &Line2dDetector = match (&plain, &fused) {
-        (Some(d), _) => d,
-        (None, Some(f)) => f.line2d(),
-        (None, None) => unreachable!("one of the two is built"),
-    };
+    let runner = Line2dRunner::new(det, fusion)?;
+    let det = runner.line2d();
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let mut out = Vec::new();
@@ -213,10 +240,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
             bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
         }
         let g = grounds.get(id).or(ground);
-        let dets = match &fused {
-            Some(f) => f.detect(img.as_raw(), w, h, cam, g).map_err(|e| anyhow::anyhow!("detecting in {}: {e}", path.display()))?,
-            None => det.detect_on_ground(img.as_raw(), w, h, cam, g).with_context(|| format!("detecting in {}", path.display()))?,
-        };
+        let dets = runner.detect(img.as_raw(), w, h, cam, g).with_context(|| format!("detecting in {}", path.display()))?;
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }

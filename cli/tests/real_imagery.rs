@@ -117,7 +117,17 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert_eq!(summary["line2d"]["max_upsample"], 2.0);
     assert_eq!(summary["line2d"]["negatives"]["frames"], 2);
     assert!(summary["line2d"]["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
+    // The fused detector (Line2D candidates scored by the learned agreement) beside both, at its
+    // default settings.
+    for set in ["grey", "colour"] {
+        let v = &summary["fused"][set];
+        assert_eq!(v["images"], summary["line2d"][set]["images"], "fused {set}: {v}");
+        assert!((0.0..=1.0).contains(&v["ap50"].as_f64().unwrap()), "fused {set}: {v}");
+    }
+    assert_eq!(summary["fused"]["params"], serde_json::json!({"min_iou": 0.3, "threshold": 0.02f32}));
+    assert_eq!(summary["fused"]["negatives"]["frames"], 2);
     let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
+    assert!(real_md.contains("| fused grey") && real_md.contains("Fused on the same frames"), "{real_md}");
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
     assert!(real_md.contains("searched again 1.2x further enlarged"), "{real_md}");
     assert!(real_md.contains("| colour, snapped to poses |"), "{real_md}");
