@@ -17,6 +17,7 @@
 //!     agreement, [`tubeloc_detect::fused`]) on the same frames.
 //! Results go to `<out>/real/report.md` and `<out>/real/summary.json`.
 
+use crate::cmd_detect_line2d::Line2dRunner;
 use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
@@ -24,7 +25,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tubeloc_core::{files, CocoDataset, ScoreCalibration};
 use tubeloc_detect::learned::DecodeConfig;
-use crate::cmd_detect_line2d::Line2dRunner;
 use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
 use tubeloc_synth::real_set::AssumedView;
 
@@ -381,7 +381,14 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)
     )
     .ok();
-    writeln!(md, "Fused on the same frames: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", fused_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), fused_neg["max_per_frame"], fused_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(
+        md,
+        "Fused on the same frames: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
+        fused_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
+        fused_neg["max_per_frame"],
+        fused_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)
+    )
+    .ok();
     writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,

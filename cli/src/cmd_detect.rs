@@ -122,7 +122,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
                 return Err(crate::args::usage("--ground needs --camera (the rays along which the ground's distance is measured)"));
             }
             let fusion = match args.method {
-                Method::Fused => Some(crate::cmd_detect_line2d::Fusion { model: crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref()).load()?, decode: decode_config(args.decode_config.as_deref())?, range: crate::cmd_detect_learned::parse_range_band(&args.range_m)? }),
+                Method::Fused => Some(crate::cmd_detect_line2d::Fusion {
+                    model: crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref()).load()?,
+                    decode: decode_config(args.decode_config.as_deref())?,
+                    range: crate::cmd_detect_learned::parse_range_band(&args.range_m)?,
+                }),
                 _ => None,
             };
             let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras, &grounds, args.ground.as_ref(), fusion)?;

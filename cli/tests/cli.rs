@@ -478,3 +478,32 @@ fn calibrate_bounds_false_detections_on_frames_without_tubes() {
     assert!(stderr(&o).contains("has no image without a tube"), "{}", stderr(&o));
     assert!(!dir.path().join("c2.json").exists());
 }
+
+/// `locate --detector fused` seeds the refinement with the detections of `detect --method
+/// fused` on the same frame: Line2D's candidates scored by the learned agreement (`P L`).
+#[test]
+fn fused_locate_refines_the_fused_detections() {
+    let s = Scene::new("1", "512");
+    let (lib, cam) = (s.path("lib.tlt"), s.path("camera.json"));
+    let dets = s.path("fused.json");
+    ok(&["detect", "--method", "fused", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&s.image(0)), "--out", p(&dets)]);
+    let dets: Value = serde_json::from_str(&std::fs::read_to_string(&dets).unwrap()).unwrap();
+    let dets = dets.as_array().unwrap();
+    assert!(!dets.is_empty(), "the rendered tubes are found");
+    for d in dets {
+        let (pr, ag, sc) = (d["probability"].as_f64().unwrap(), d["agreement"].as_f64().unwrap(), d["score"].as_f64().unwrap());
+        assert!(ag > 0.0 && (sc - pr * ag).abs() < 1e-5, "{d}");
+    }
+    let out = s.path("out/poses.json");
+    let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "fused", "--templates", p(&lib), "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(doc["detector"], "fused");
+    let scores = |list: &[Value]| -> Vec<f64> { list.iter().map(|d| d["score"].as_f64().unwrap()).collect() };
+    assert_eq!(scores(doc["detections"].as_array().unwrap()), scores(dets), "locate's detections are detect's");
+    assert!(doc["tubes"].as_array().unwrap().iter().any(|t| t["converged"] == true), "a tube is located");
+    // Like Line2D, the fused detector needs its template library.
+    let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "fused", "--out", p(&s.path("x.json"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--detector fused needs --templates"), "{}", stderr(&o));
+}

@@ -68,12 +68,7 @@ pub fn fused_score(probability: f32, agreement: f32) -> f32 {
 /// COCO `[x, y, w, h]`, pixels): the highest score among the instances whose mask overlaps it
 /// at IoU ≥ `min_iou`, 0 when none does. Masks are compared only where boxes overlap.
 pub fn agreement(mask: &Rle, bbox: &[f64; 4], learned: &[LearnedInstance], min_iou: f64) -> f32 {
-    learned
-        .iter()
-        .filter(|i| boxes_overlap(bbox, &i.bbox))
-        .filter(|i| Rle::iou(std::slice::from_ref(&i.mask), std::slice::from_ref(mask), &[false])[0] >= min_iou)
-        .map(|i| i.score as f32)
-        .fold(0.0, f32::max)
+    learned.iter().filter(|i| boxes_overlap(bbox, &i.bbox)).filter(|i| Rle::iou(std::slice::from_ref(&i.mask), std::slice::from_ref(mask), &[false])[0] >= min_iou).map(|i| i.score as f32).fold(0.0, f32::max)
 }
 
 /// Whether two COCO boxes overlap with a positive area.

@@ -1,5 +1,5 @@
 //! Detectors a [`crate::Locator`] is built with: the learned segmenter, Line2D template
-//! matching, or detections made elsewhere. Each turns one in-memory image into
+//! matching, the two fused, or detections made elsewhere. Each turns one in-memory image into
 //! [`TubeDetection`]s (seeds for the refiner) in the image's pixel frame.
 
 use crate::error::{PipelineError, Result};
@@ -106,6 +106,33 @@ impl TubeDetector for Line2dTubeDetector {
         let rgb = tubeloc_detect::input::rgb8_pixels(image);
         let (w, h) = (image.width() as usize, image.height() as usize);
         let dets = self.detector.detect_on_ground(&rgb, w, h, Some(camera), ground).map_err(|e| PipelineError::Detect(e.to_string()))?;
+        Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
+    }
+}
+
+/// Fused detection ([`tubeloc_detect::fused`]): Line2D candidates scored by the learned
+/// segmenter's agreement; masks and coarse template poses are Line2D's, the score is the fused
+/// score `P L`.
+pub struct FusedTubeDetector {
+    detector: tubeloc_detect::fused::FusedDetector,
+}
+
+impl FusedTubeDetector {
+    /// A detector around a fused detector (Line2D library, learned model, fusion settings).
+    pub fn new(detector: tubeloc_detect::fused::FusedDetector) -> Self {
+        FusedTubeDetector { detector }
+    }
+}
+
+impl TubeDetector for FusedTubeDetector {
+    fn name(&self) -> &str {
+        "fused"
+    }
+
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
+        let rgb = tubeloc_detect::input::rgb8_pixels(image);
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        let dets = self.detector.detect(&rgb, w, h, Some(camera), ground).map_err(PipelineError::Detect)?;
         Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
     }
 }

@@ -12,7 +12,7 @@
 //! the same [`crate::Locator`] from the same options; error messages are the CLI's (they name
 //! the option, e.g. `--range-m`, and the file at fault).
 
-use crate::detector::LearnedDetector;
+use crate::detector::{FusedTubeDetector, LearnedDetector, Line2dTubeDetector};
 use crate::error::{PipelineError, Result};
 use std::path::Path;
 use tubeloc_core::ScoreCalibration;
@@ -103,6 +103,34 @@ pub fn learned_detector(model: Option<&Path>, range_m: &str) -> Result<LearnedDe
     };
     d.range = parse_range_band(range_m)?;
     Ok(d)
+}
+
+/// The Line2D template library at `templates` (`--templates LIB.tlt`), for `detector`
+/// (`line2d` or `fused`, named in the error when it is missing).
+fn template_library(templates: Option<&Path>, detector: &str) -> Result<tubeloc_detect::line2d::TemplateLibrary> {
+    let lib = templates.ok_or_else(|| PipelineError::Input(format!("--detector {detector} needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")))?;
+    tubeloc_detect::line2d::TemplateLibrary::load(lib).map_err(|e| PipelineError::Input(format!("reading {}: {}", lib.display(), error_chain(&e))))
+}
+
+/// The Line2D detector of `tubeloc locate --detector line2d --templates LIB.tlt`: the library
+/// with the default matching parameters and the shipped clutter verifier.
+pub fn line2d_detector(templates: Option<&Path>) -> Result<Line2dTubeDetector> {
+    let det = tubeloc_detect::line2d::Line2dDetector::new(template_library(templates, "line2d")?, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))?;
+    Ok(Line2dTubeDetector::new(det))
+}
+
+/// The fused detector of `tubeloc locate --detector fused --templates LIB.tlt [--model M]
+/// [--range-m R]`: Line2D as [`line2d_detector`], the learned model as [`learned_detector`],
+/// the default fusion settings ([`tubeloc_detect::fused`]).
+pub fn fused_detector(templates: Option<&Path>, model: Option<&Path>, range_m: &str) -> Result<FusedTubeDetector> {
+    let line2d = tubeloc_detect::line2d::Line2dDetector::new(template_library(templates, "fused")?, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))?;
+    let weights = match model {
+        None => shipped_model().map_err(|e| PipelineError::Detect(format!("loading the embedded model: {e}")))?,
+        Some(m) if !m.exists() => return Err(PipelineError::Input(format!("learned model {} not found: pass an existing --model FILE, or leave --model out to use the shipped model", m.display()))),
+        Some(m) => tubeloc_detect::learned::LearnedModel::load(m).map_err(|e| PipelineError::Detect(format!("loading model {}: {e}", m.display())))?,
+    };
+    let fused = tubeloc_detect::fused::FusedDetector::new(line2d, weights, DecodeConfig::default(), parse_range_band(range_m)?, Default::default()).map_err(PipelineError::Detect)?;
+    Ok(FusedTubeDetector::new(fused))
 }
 
 #[cfg(test)]

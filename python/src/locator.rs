@@ -27,13 +27,10 @@ struct Options<'a> {
 fn detector_of(o: &Options) -> PyResult<Box<dyn TubeDetector>> {
     Ok(match o.detector {
         "learned" => Box::new(shipped::learned_detector(o.model.as_deref(), o.range_m).map_err(|e| chain_to_py(&e))?),
-        "line2d" => {
-            let lib = o.templates.as_ref().ok_or_else(|| to_py("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)"))?;
-            let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).map_err(|e| context_to_py(format!("reading {}", lib.display()), &e))?;
-            Box::new(tubeloc_pipeline::Line2dTubeDetector::new(tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default()).map_err(|e| chain_to_py(&e))?))
-        }
+        "line2d" => Box::new(shipped::line2d_detector(o.templates.as_deref()).map_err(|e| chain_to_py(&e))?),
+        "fused" => Box::new(shipped::fused_detector(o.templates.as_deref(), o.model.as_deref(), o.range_m).map_err(|e| chain_to_py(&e))?),
         "external" => return Err(to_py("detector \"external\": detections made elsewhere are refined with tubeloc.refine(image, detections, rig)")),
-        other => return Err(to_py(format!("detector {other:?}: expected \"learned\" or \"line2d\""))),
+        other => return Err(to_py(format!("detector {other:?}: expected \"learned\", \"line2d\" or \"fused\""))),
     })
 }
 
@@ -123,7 +120,8 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 ///         calibration=None, min_probability=None, range_m="1:4", min_highlight_level=None)
 ///
 /// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
-/// default the shipped model) or "line2d" (templates: a .tlt library for the camera). camera:
+/// default the shipped model), "line2d" (templates: a .tlt library for the camera) or "fused"
+/// (Line2D candidates scored by the learned segmenter's agreement; templates and model). camera:
 /// the rig camera of the (left) images; pair: (left, right) camera names. calibration: score
 /// calibration JSON (default: the learned model's); min_probability: acceptance threshold
 /// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".
@@ -221,7 +219,7 @@ impl PyLocator {
         self.read().camera().name.clone()
     }
 
-    /// The detector's name (`learned`, `line2d`).
+    /// The detector's name (`learned`, `line2d`, `fused`).
     #[getter]
     fn detector(&self) -> String {
         self.read().detector().name().to_string()

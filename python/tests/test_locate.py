@@ -97,3 +97,20 @@ def test_an_underexposed_frame_hands_over_no_tube(demo_scene):
     assert not [t for t in unguarded if t.status == "underexposed"]
     with pytest.raises(tubeloc.TubelocError, match="grey level in \\[0, 255\\]"):
         tubeloc.Locator(str(rig), min_highlight_level=300)
+
+
+def test_fused_detect_equals_the_cli(cli, demo_scene, tmp_path):
+    # Line2D candidates scored by the learned agreement (P L): the same boxes and scores as
+    # `tubeloc detect --method fused`, each agreeing with the network.
+    rig, image, ground = demo_scene
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps(json.loads(rig.read_text())["cameras"][0]["model"]))
+    lib, dets_path = tmp_path / "lib.tlt", tmp_path / "dets.json"
+    cli("templates", "build", "--camera", camera, "--distances", "1.0:3.5:0.25", "--step-deg", "12", "--out", lib)
+    cli("detect", "--method", "fused", "--templates", lib, "--image", image, "--camera", camera, "--ground", ground, "--out", dets_path)
+    cli_dets = json.loads(dets_path.read_text())
+    dets = tubeloc.detect(tubeloc.read_image(image), str(rig), detector="fused", templates=str(lib), ground=ground)
+    assert dets, "the demo scene's tubes are found"
+    assert [(d["bbox"], d["score"]) for d in dets] == [(c["bbox"], c["score"]) for c in cli_dets]
+    for c in cli_dets:
+        assert c["agreement"] > 0 and abs(c["score"] - c["probability"] * c["agreement"]) < 1e-5

@@ -33,6 +33,9 @@ pub enum Detector {
     Learned,
     /// Line2D template matching (`--templates LIB.tlt`, built for the rig camera).
     Line2d,
+    /// Line2D candidates (`--templates`) scored by the learned segmenter's agreement
+    /// (`--model`; `tubeloc detect --method fused`, record 0063).
+    Fused,
     /// Detections made elsewhere (`--results coco_results.json`, e.g. Detectron2).
     External,
 }
@@ -436,11 +439,8 @@ impl Setup {
         let shared: Option<Box<dyn TubeDetector>> = match a.detector {
             // The same detector the Python package builds from the same options.
             Detector::Learned => Some(Box::new(tubeloc_pipeline::shipped::learned_detector(a.model.as_deref(), &a.range_m)?)),
-            Detector::Line2d => {
-                let lib = a.templates.as_ref().context("--detector line2d needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")?;
-                let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).with_context(|| format!("reading {}", lib.display()))?;
-                Some(Box::new(tubeloc_pipeline::Line2dTubeDetector::new(tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default())?)))
-            }
+            Detector::Line2d => Some(Box::new(tubeloc_pipeline::shipped::line2d_detector(a.templates.as_deref())?)),
+            Detector::Fused => Some(Box::new(tubeloc_pipeline::shipped::fused_detector(a.templates.as_deref(), a.model.as_deref(), &a.range_m)?)),
             Detector::External => None,
         };
         // External results: a locator without detections resolves the camera here; each frame
