@@ -108,6 +108,9 @@ fn decode_config(path: Option<&Path>) -> Result<tubeloc_detect::learned::DecodeC
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
+    if matches!(args.method, Method::Fused) && args.line2d.min_probability.is_some() {
+        return Err(crate::args::usage("--min-probability is the Line2D verifier's cut; --method fused scores every candidate the verifier scores and keeps those whose fused score P L reaches its own cut (record 0063)"));
+    }
     let mut args = args;
     let pds = pds_camera(&mut args)?;
     let dets = match args.method {

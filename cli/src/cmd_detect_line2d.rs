@@ -227,7 +227,11 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
     let mut out = Vec::new();
     let mut warned_no_camera = false;
     for (id, path) in images {
-        let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
+        let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?;
+        if let Some(warn) = crate::cmd_detect_learned::underexposure_warning(path, &img) {
+            bar.suspend(|| eprintln!("{warn}"));
+        }
+        let img = img.into_rgb8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let cam = cameras.get(id).or(camera.as_ref());
         if cam.is_none() && !warned_no_camera {

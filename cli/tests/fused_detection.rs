@@ -68,6 +68,10 @@ fn fused_detections_are_line2d_candidates_scored_by_learned_agreement() {
         }
     }
 
+    // The verifier's cut does not apply: every candidate it scores is fused.
+    let o = tubeloc(&["detect", "--method", "fused", "--templates", p(&lib), "--min-probability", "0.5", "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--min-probability is the Line2D verifier's cut"), "{}", stderr(&o));
     // Line2D without its templates is a usage error naming the option.
     let o = tubeloc(&["detect", "--method", "fused", "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
     assert_ne!(o.status.code(), Some(0));

@@ -204,4 +204,21 @@ fn no_tube_is_handed_over_from_an_underexposed_frame() {
     assert_eq!(doc["tubes"][0]["status"], "located");
     let o = run(&[&a[..a.len() - 1], &["300".to_string()]].concat());
     assert!(o.status.code() == Some(2) && stderr(&o).contains("grey level in [0, 255]"), "{}", stderr(&o));
+    // `detect` says so too, for either detector; the well-exposed scene gives no warning.
+    let bright = Painted::new();
+    let cam = s.path("camera.json");
+    std::fs::write(&cam, serde_json::to_string(&CameraModel::from_hfov(320, 240, 60.0)).unwrap()).unwrap();
+    let lib = s.path("coarse.tlt");
+    ok(&["templates", "build", "--camera", p(&cam), "--step-deg", "30", "--distances", "0.6:0.8:0.2", "--inplane-range-deg", "0", "--out", p(&lib)]);
+    for (scene, dark) in [(&s, true), (&bright, false)] {
+        let (img, out) = (scene.path("img.png"), scene.path("d.json"));
+        for method in [vec!["--method", "learned"], vec!["--method", "line2d", "--templates", p(&lib)]] {
+            let mut args = vec!["detect", "--camera", p(&cam), "--image", p(&img), "--out", p(&out)];
+            args.extend(&method);
+            let o = tubeloc(&args);
+            assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+            let warned = stderr(&o).contains("img.png: underexposed (its highlights lie at grey level 15 < 48)");
+            assert_eq!(warned, dark, "{method:?}: {}", stderr(&o));
+        }
+    }
 }

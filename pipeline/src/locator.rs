@@ -453,6 +453,12 @@ impl Locator {
     }
 }
 
+/// [`highlight_level`] of an image as [`Locator::locate`] reads it: its grey levels at its real
+/// bit depth.
+pub fn frame_highlight_level(image: &image::DynamicImage) -> f64 {
+    highlight_level(&crate::frame::grey_levels(image))
+}
+
 /// The grey level of a frame's highlights: the 99th percentile of its 8-bit grey levels. A
 /// well-exposed rover frame's lie far up the range (every well-exposed real frame of the shared
 /// data at 81 or more, as tubeloc reads it); an underexposed frame's, low, with sensor noise a
