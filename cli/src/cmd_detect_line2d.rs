@@ -123,7 +123,7 @@ pub struct Fusion {
 /// Line2D alone, or fused with the learned segmenter ([`tubeloc_detect::fused`]).
 pub enum Line2dRunner {
     /// Line2D at its verifier's cut.
-    Plain(Line2dDetector),
+    Plain(Box<Line2dDetector>),
     /// Every Line2D candidate, scored by the learned segmenter's agreement.
     Fused(Box<FusedDetector>),
 }
@@ -133,7 +133,7 @@ impl Line2dRunner {
     pub fn new(det: Line2dDetector, fusion: Option<Fusion>) -> Result<Self> {
         Ok(match fusion {
             Some(f) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, FusionParams::default()).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
-            None => Line2dRunner::Plain(det),
+            None => Line2dRunner::Plain(Box::new(det)),
         })
     }
 
