@@ -373,22 +373,12 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         writeln!(md, "\nMono refinement of the learned detections on the {kind} test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
     }
     writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
-    writeln!(
-        md,
-        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice): **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
-        l2_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
-        l2_neg["max_per_frame"],
-        l2_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)
-    )
-    .ok();
-    writeln!(
-        md,
-        "Fused on the same frames: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n",
-        fused_neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
-        fused_neg["max_per_frame"],
-        fused_neg["ms_per_image"].as_f64().unwrap_or(f64::NAN)
-    )
-    .ok();
+    let l2_what = format!(
+        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice)"
+    );
+    for (what, v) in [(l2_what.as_str(), &l2_neg), ("Fused on the same frames", &fused_neg)] {
+        writeln!(md, "{what}: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", v["kept_per_frame"].as_f64().unwrap_or(f64::NAN), v["max_per_frame"], v["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
+    }
     writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,

@@ -68,12 +68,7 @@ pub fn fused_score(probability: f32, agreement: f32) -> f32 {
 /// COCO `[x, y, w, h]`, pixels): the highest score among the instances whose mask overlaps it
 /// at IoU ≥ `min_iou`, 0 when none does. Masks are compared only where boxes overlap.
 pub fn agreement(mask: &Rle, bbox: &[f64; 4], learned: &[LearnedInstance], min_iou: f64) -> f32 {
-    learned.iter().filter(|i| boxes_overlap(bbox, &i.bbox)).filter(|i| Rle::iou(std::slice::from_ref(&i.mask), std::slice::from_ref(mask), &[false])[0] >= min_iou).map(|i| i.score as f32).fold(0.0, f32::max)
-}
-
-/// Whether two COCO boxes overlap with a positive area.
-fn boxes_overlap(a: &[f64; 4], b: &[f64; 4]) -> bool {
-    a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3]
+    learned.iter().filter(|i| crate::learned::boxes_overlap(bbox, &i.bbox)).filter(|i| Rle::iou(std::slice::from_ref(&i.mask), std::slice::from_ref(mask), &[false])[0] >= min_iou).map(|i| i.score as f32).fold(0.0, f32::max)
 }
 
 /// Scores every Line2D candidate by its agreement with `learned` (instances of the same
@@ -145,13 +140,7 @@ impl FusedDetector {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tubeloc_core::{AxisSeed, BinaryMask};
-
-    fn learned(score: f64, x0: usize, x1: usize) -> LearnedInstance {
-        let mask = BinaryMask::from_fn(40, 10, |x, y| (x0..x1).contains(&x) && (3..6).contains(&y));
-        let axis = AxisSeed { centre_px: [(x0 + x1) as f64 / 2.0, 4.0], direction_px: [1.0, 0.0], length_px: (x1 - x0) as f64, width_px: 3.0 };
-        LearnedInstance { score, bbox: mask.bbox(), mask: Rle::from_mask(&mask), axis }
-    }
+    use crate::learned::tests::instance as learned;
 
     /// `S = P L`: full agreement keeps `P`, none drops the candidate under any threshold.
     #[test]

@@ -92,7 +92,7 @@ fn merge_scales(mut all: Vec<LearnedInstance>) -> Vec<LearnedInstance> {
 }
 
 /// Whether two COCO boxes `[x, y, w, h]` overlap with a positive area.
-fn boxes_overlap(a: &[f64; 4], b: &[f64; 4]) -> bool {
+pub(crate) fn boxes_overlap(a: &[f64; 4], b: &[f64; 4]) -> bool {
     a[0] < b[0] + b[2] && b[0] < a[0] + a[2] && a[1] < b[1] + b[3] && b[1] < a[1] + a[3]
 }
 
@@ -140,11 +140,12 @@ fn detect_scaled(model: &LearnedModel, scaled: &[f32], (nw, nh): (usize, usize),
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use tubeloc_core::{AxisSeed, BinaryMask, Rle};
 
-    fn instance(score: f64, x0: usize, x1: usize) -> LearnedInstance {
+    /// An instance whose mask is the rows 3-5 of columns `x0..x1` of a 40x10 image.
+    pub(crate) fn instance(score: f64, x0: usize, x1: usize) -> LearnedInstance {
         let mask = BinaryMask::from_fn(40, 10, |x, y| (x0..x1).contains(&x) && (3..6).contains(&y));
         let axis = AxisSeed { centre_px: [(x0 + x1) as f64 / 2.0, 4.0], direction_px: [1.0, 0.0], length_px: (x1 - x0) as f64, width_px: 3.0 };
         LearnedInstance { score, bbox: mask.bbox(), mask: Rle::from_mask(&mask), axis }
