@@ -101,17 +101,27 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
     let (gt, dt) = saved_results(set, out, &dets)?;
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
+    let n_gt = gt.annotations.len();
+    let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms});
+    merge(&mut v, at_threshold(&ev, cal, n_gt));
+    Ok(v)
+}
+
+/// The reliability of `cal`'s probability (ECE, bins of 0.1) and the precision / recall at its
+/// threshold on the matches at IoU 0.5 of `ev` (`n_gt` tubes).
+fn at_threshold(ev: &CocoEvaluator, cal: &ScoreCalibration, n_gt: usize) -> Value {
     let probs: Vec<(f64, bool)> = ev.outcomes_at_iou50().iter().map(|&(_, s, y)| (cal.probability(s), y)).collect();
     let (bins, ece) = tubeloc_eval::calibration::reliability(&probs, 10);
     let kept: Vec<_> = probs.iter().filter(|p| p.0 >= cal.threshold).collect();
     let tp = kept.iter().filter(|p| p.1).count();
-    let n_gt = gt.annotations.len();
-    Ok(json!({
-        "images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8],
-        "ms_per_image": ms, "ece": ece, "reliability": bins,
-        "kept": kept.len(), "precision_at_threshold": if kept.is_empty() { f64::NAN } else { tp as f64 / kept.len() as f64 },
-        "recall_at_threshold": tp as f64 / n_gt.max(1) as f64,
-    }))
+    json!({"ece": ece, "reliability": bins, "kept": kept.len(), "precision_at_threshold": if kept.is_empty() { f64::NAN } else { tp as f64 / kept.len() as f64 }, "recall_at_threshold": tp as f64 / n_gt.max(1) as f64})
+}
+
+/// Adds the fields of the object `extra` to the object `v`.
+fn merge(v: &mut Value, extra: Value) {
+    if let (Some(o), Value::Object(e)) = (v.as_object_mut(), extra) {
+        o.extend(e);
+    }
 }
 
 /// Mono refinement of a set's learned detections on each image's own ground (`--ground
@@ -147,7 +157,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
-fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+fn negatives(data: &Path, detector: &dyn Fn() -> Result<Box<dyn tubeloc_pipeline::TubeDetector>>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
     let mut settings = tubeloc_pipeline::LocatorSettings::default();
     settings.calibration = cal.clone();
@@ -161,8 +171,7 @@ fn negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &
         // `locate` at its defaults on the frame, with the assumed camera and ground; its
         // detector runs at the same working scale `s`.
         let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
-        let detector = model.detector()?;
-        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector), settings.clone())?;
+        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, detector()?, settings.clone())?;
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
         let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None })?;
@@ -252,7 +261,7 @@ fn line2d_opts(lib: &Path, stage: &RealStage) -> crate::cmd_detect_line2d::Line2
 
 /// Line2D (alone or fused) on a composite set (each image's own camera, resampled to the library's scale):
 /// COCO segm AP50 / AR, false detections per image, time per image.
-fn line2d_eval(set: &Path, det: &Line2dRunner, out: &Path) -> Result<Value> {
+fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
     let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
     let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
@@ -271,7 +280,11 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, out: &Path) -> Result<Value> {
     let r = ev.evaluate();
     let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
     let n = gt.images.len().max(1) as f64;
-    Ok(json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64}))
+    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64});
+    if let Some(cal) = cal {
+        merge(&mut v, at_threshold(&ev, cal, gt.annotations.len()));
+    }
+    Ok(v)
 }
 
 /// Line2D detections (alone at the default threshold, or fused) on each real negative frame, under the same assumed
@@ -316,7 +329,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
-    let neg = negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
+    let learned_detector = || -> Result<Box<dyn tubeloc_pipeline::TubeDetector>> { Ok(Box::new(stage.model.detector()?)) };
+    let neg = negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)?;
     let neg_pds = pds_negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
     // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
@@ -325,22 +339,27 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_opts = line2d_opts(&lib, stage);
     // Libraries and models are loaded outside the timings.
     let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None)?;
-    let l2_grey = line2d_eval(&grey_set, &l2, &dir.join("line2d_grey"))?;
-    let l2_colour = line2d_eval(&colour_set, &l2, &dir.join("line2d_colour"))?;
+    let l2_grey = line2d_eval(&grey_set, &l2, None, &dir.join("line2d_grey"))?;
+    let l2_colour = line2d_eval(&colour_set, &l2, None, &dir.join("line2d_colour"))?;
     let l2_neg = line2d_negatives(&stage.data, &l2, stage.frames)?;
     drop(l2);
     // Fused: every Line2D candidate scored by the learned segmenter's agreement (record 0063).
     let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()) };
     let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion))?;
-    let fused_grey = line2d_eval(&grey_set, &fused, &dir.join("fused_grey"))?;
-    let fused_colour = line2d_eval(&colour_set, &fused, &dir.join("fused_colour"))?;
+    let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
+    let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;
+    let fused_colour = line2d_eval(&colour_set, &fused, Some(&fused_cal), &dir.join("fused_colour"))?;
     let fused_neg = line2d_negatives(&stage.data, &fused, stage.frames)?;
+    drop(fused);
+    // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
+    let fused_detector = || -> Result<Box<dyn tubeloc_pipeline::TubeDetector>> { Ok(Box::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?)) };
+    let fused_located = negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)?;
     let fusion_params = tubeloc_detect::fused::FusionParams::default();
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp,
         "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
-        "fused": {"params": fusion_params, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg}});
+        "fused": {"params": fusion_params, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
@@ -361,12 +380,19 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ar": s["ar"], "ms_per_image": num(v, "ms_per_image") + num(s, "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, "- | -".into())).ok();
     }
-    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour), ("fused grey (PDS geometry)", &fused_grey), ("fused colour (assumed view)", &fused_colour)] {
+    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
+    }
+    for (name, v) in [("fused grey (PDS geometry)", &fused_grey), ("fused colour (assumed view)", &fused_colour)] {
+        let at = match v["kept"].as_u64() {
+            Some(0) => "none kept".to_string(),
+            _ => format!("{:.3} / {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold")),
+        };
+        writeln!(md, "{}", row(name, v, format!("{:.2} false / image; at P >= {:.3}: {at} | {:.3}", num(v, "false_per_image"), fused_cal.threshold, num(v, "ece")))).ok();
     }
     let far_grey = stage.line2d_far_scale.1;
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones searched once, {threshold_far:.3} on grey ones searched twice); their precision column gives the false detections per image instead.").ok();
-    writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0063): every Line2D candidate the verifier scores, each scored S = P L with P its verifier probability and L the best score of a learned instance overlapping it at mask IoU >= {}, kept at S >= {}; masks and poses are Line2D's; time: both detectors.", fusion_params.min_iou, fusion_params.threshold).ok();
+    writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0063): every Line2D candidate the verifier scores, each scored S = P L with P its verifier probability and L the best score of a learned instance overlapping it at mask IoU >= {}, kept at S >= {}; masks and poses are Line2D's; time: both detectors. Their precision column gives the false detections per image, then the precision / recall at the fused calibration's threshold (what `locate --detector fused` hands over), and its ECE.", fusion_params.min_iou, fusion_params.threshold).ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
@@ -379,6 +405,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (what, v) in [(l2_what.as_str(), &l2_neg), ("Fused on the same frames", &fused_neg)] {
         writeln!(md, "{what}: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", v["kept_per_frame"].as_f64().unwrap_or(f64::NAN), v["max_per_frame"], v["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
     }
+    writeln!(md, "`locate --detector fused` at its defaults (assumed camera and ground, P >= {:.3}) hands the planner **{:.3} tubes per frame**.\n", fused_cal.threshold, fused_located["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,

@@ -499,6 +499,9 @@ fn fused_locate_refines_the_fused_detections() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(doc["detector"], "fused");
+    // Tubes are handed over at the fused calibration's threshold (embedded from its file).
+    let cal: Value = serde_json::from_str(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models/fused.calibration.json")).unwrap()).unwrap();
+    assert_eq!(doc["min_probability"], cal["threshold"]);
     let scores = |list: &[Value]| -> Vec<f64> { list.iter().map(|d| d["score"].as_f64().unwrap()).collect() };
     assert_eq!(scores(doc["detections"].as_array().unwrap()), scores(dets), "locate's detections are detect's");
     assert!(doc["tubes"].as_array().unwrap().iter().any(|t| t["converged"] == true), "a tube is located");

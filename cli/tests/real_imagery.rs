@@ -126,8 +126,16 @@ fn bench_real_stage_runs_at_a_small_size() {
     }
     assert_eq!(summary["fused"]["params"], serde_json::json!({"min_iou": 0.3, "threshold": 0.02f32}));
     assert_eq!(summary["fused"]["negatives"]["frames"], 2);
+    // `locate --detector fused` at its embedded calibration's threshold on the same frames.
+    assert_eq!(summary["fused"]["locate_negatives"]["frames"], 2);
+    assert_eq!(summary["fused"]["calibration"]["target_precision"], 0.95);
+    for set in ["grey", "colour"] {
+        let r = summary["fused"][set]["recall_at_threshold"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&r), "fused {set}: {}", summary["fused"][set]);
+    }
     let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
     assert!(real_md.contains("| fused grey") && real_md.contains("Fused on the same frames"), "{real_md}");
+    assert!(real_md.contains("`locate --detector fused` at its defaults"), "{real_md}");
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
     assert!(real_md.contains("searched again 1.2x further enlarged"), "{real_md}");
     assert!(real_md.contains("| colour, snapped to poses |"), "{real_md}");

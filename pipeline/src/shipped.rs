@@ -28,8 +28,33 @@ pub const SHIPPED_CALIBRATION_JSON: &str = include_str!("../../data/models/tuben
 
 /// The shipped model's score calibration, parsed and validated.
 pub fn shipped_calibration() -> Result<ScoreCalibration> {
-    let bad = |m: String| PipelineError::Input(format!("embedded score calibration {SHIPPED_CALIBRATION_NAME}: {m}"));
-    let c: ScoreCalibration = serde_json::from_str(SHIPPED_CALIBRATION_JSON).map_err(|e| bad(e.to_string()))?;
+    embedded_calibration(SHIPPED_CALIBRATION_NAME, SHIPPED_CALIBRATION_JSON)
+}
+
+/// The file the fused detector's embedded calibration comes from, relative to the workspace
+/// root.
+pub const FUSED_CALIBRATION_NAME: &str = "data/models/fused.calibration.json";
+
+/// The fused detector's score calibration (JSON text of [`ScoreCalibration`]): fitted on the
+/// fused scores (`tubeloc_detect::fused`) of the shipped model and the default template
+/// library on real validation composites, as the shipped model's own (record 0063).
+pub const FUSED_CALIBRATION_JSON: &str = include_str!("../../data/models/fused.calibration.json");
+
+/// The fused detector's score calibration: with the shipped model (`model` = `None`) the
+/// embedded one; with another model the identity (probability = fused score, threshold 0.5)
+/// with a warning on stderr, since the embedded one was fitted on the shipped model's scores.
+pub fn fused_calibration(model: Option<&Path>) -> Result<ScoreCalibration> {
+    if let Some(m) = model {
+        eprintln!("warning: the fused detector's calibration was fitted with the shipped model, not {}: probabilities are the raw fused scores (pass --calibration to set one)", m.display());
+        return Ok(ScoreCalibration::identity());
+    }
+    embedded_calibration(FUSED_CALIBRATION_NAME, FUSED_CALIBRATION_JSON)
+}
+
+/// An embedded calibration `json` (from the file `name`), parsed and validated.
+fn embedded_calibration(name: &str, json: &str) -> Result<ScoreCalibration> {
+    let bad = |m: String| PipelineError::Input(format!("embedded score calibration {name}: {m}"));
+    let c: ScoreCalibration = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
     c.validate().map_err(|e| bad(e.to_string()))?;
     Ok(c)
 }
@@ -146,6 +171,17 @@ mod tests {
         // The shipped threshold was chosen for precision >= 0.95.
         assert_eq!(c.target_precision, 0.95);
         assert!(c.threshold > 0.0 && c.threshold < 1.0, "{c:?}");
+    }
+
+    #[test]
+    fn the_embedded_fused_calibration_is_its_file() {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(FUSED_CALIBRATION_NAME);
+        let from_file: ScoreCalibration = serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap();
+        let c = fused_calibration(None).unwrap();
+        assert_eq!(c, from_file);
+        assert_eq!(c.target_precision, 0.95);
+        assert!(c.threshold > 0.0 && c.threshold < 1.0, "{c:?}");
+        assert_eq!(fused_calibration(Some(Path::new("other.safetensors"))).unwrap(), ScoreCalibration::identity());
     }
 
     #[test]

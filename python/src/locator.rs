@@ -41,6 +41,7 @@ fn settings_of(o: &Options) -> PyResult<LocatorSettings> {
     settings.calibration = match (&o.calibration, o.detector) {
         (Some(p), _) => shipped::load_calibration(Some(p), None).map_err(|e| chain_to_py(&e))?,
         (None, "learned") => shipped::load_calibration(None, o.model.as_deref()).map_err(|e| chain_to_py(&e))?,
+        (None, "fused") => shipped::fused_calibration(o.model.as_deref()).map_err(|e| chain_to_py(&e))?,
         (None, _) => settings.calibration,
     };
     if let Some(p) = o.min_probability {

@@ -1,6 +1,7 @@
 """`tubeloc.Locator.locate` returns the poses `tubeloc locate` writes for the same inputs."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -114,3 +115,6 @@ def test_fused_detect_equals_the_cli(cli, demo_scene, tmp_path):
     assert [(d["bbox"], d["score"]) for d in dets] == [(c["bbox"], c["score"]) for c in cli_dets]
     for c in cli_dets:
         assert c["agreement"] > 0 and abs(c["score"] - c["probability"] * c["agreement"]) < 1e-5
+    # The Locator hands fused tubes over at the fused calibration's threshold, as `locate` does.
+    cal = json.loads((Path(__file__).resolve().parents[2] / "data/models/fused.calibration.json").read_text())
+    assert tubeloc.Locator(str(rig), detector="fused", templates=str(lib)).min_probability == cal["threshold"]

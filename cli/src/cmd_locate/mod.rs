@@ -136,7 +136,8 @@ pub struct LocateArgs {
     pub up: Option<Vector3<f64>>,
     /// Score calibration JSON (probability of a tube and acceptance threshold; `tubeloc eval
     /// --calibrate` writes one). Default for the learned detector: the shipped model's
-    /// (embedded) or the one beside --model (`<model>.calibration.json`); other detectors: none
+    /// (embedded) or the one beside --model (`<model>.calibration.json`); fused: its embedded
+    /// one (fitted with the shipped model and the default template library); Line2D: none
     /// (probability = score).
     #[arg(long)]
     pub calibration: Option<PathBuf>,
@@ -430,6 +431,7 @@ impl Setup {
         settings.calibration = match (&a.calibration, a.detector) {
             (Some(p), _) => tubeloc_pipeline::shipped::load_calibration(Some(p), None)?,
             (None, Detector::Learned) => model.calibration(None)?,
+            (None, Detector::Fused) => tubeloc_pipeline::shipped::fused_calibration(a.model.as_deref())?,
             (None, _) => settings.calibration,
         };
         settings.min_highlight_level = a.min_highlight_level;
