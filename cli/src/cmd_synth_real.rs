@@ -104,6 +104,7 @@ pub fn run(a: RealArgs) -> Result<()> {
     let jobs: Vec<(usize, usize)> = (0..views.len()).flat_map(|v| (0..cfg.per_view).map(move |k| (v, k))).collect();
     let pb = ProgressBar::new(jobs.len() as u64);
     pb.set_style(ProgressStyle::with_template("composite {bar:30} {pos}/{len} {elapsed}<{eta}").expect("template"));
+    let mut spread = None;
     let summary = write_folder_atomically(&a.out, a.force, |tmp| {
         std::fs::create_dir_all(tmp.join("images")).map_err(|e| tubeloc_core::CoreError::io(tmp, e))?;
         let samples: Vec<_> = jobs
@@ -121,9 +122,14 @@ pub fn run(a: RealArgs) -> Result<()> {
         let samples: Vec<_> = samples.into_iter().flatten().collect();
         let ds = assemble(samples, json!({"description": "tubeloc composites on real rover frames", "split": format!("{:?}", a.split).to_lowercase(), "seed": a.seed, "range_m": [range.0, range.1]}));
         files::write_json(&tmp.join("annotations.json"), &ds)?;
+        spread = tubeloc_synth::real_set::tube_spread(&ds);
         Ok((ds.images.len(), ds.annotations.len()))
     })?;
     pb.finish_and_clear();
     eprintln!("{} composites, {} tubes ({} frames, {} skipped where the range band is not in view) -> {}", summary.images, summary.annotations, views.len(), jobs.len() - summary.images, summary.out.display());
+    if let Some(t) = spread {
+        let [r, w] = [t.range_m, t.width_px];
+        eprintln!("tubes at {:.1} / {:.1} / {:.1} m from the camera, {:.1} / {:.1} / {:.1} px wide (p10 / median / p90)", r[0], r[1], r[2], w[0], w[1], w[2]);
+    }
     Ok(())
 }

@@ -19,7 +19,7 @@ const TEST_SOLS: [i64; 10] = [53, 344, 372, 688, 729, 3192, 3423, 5086, 5104, 51
 fn test_composites_use_the_frames_geometry_and_only_test_sols() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("grey");
-    ok(&["synth", "real", "--data", p(&real_data()), "--split", "test", "--kind", "grey", "--per-view", "1", "--limit", "2", "--tubes", "2:2", "--out", p(&out)]);
+    let o = ok(&["synth", "real", "--data", p(&real_data()), "--split", "test", "--kind", "grey", "--per-view", "1", "--limit", "2", "--tubes", "2:2", "--out", p(&out)]);
     let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("annotations.json")).unwrap()).unwrap();
     let images = gt["images"].as_array().unwrap();
     assert!(!images.is_empty());
@@ -37,12 +37,22 @@ fn test_composites_use_the_frames_geometry_and_only_test_sols() {
     }
     let anns = gt["annotations"].as_array().unwrap();
     assert_eq!(anns.len(), 2 * images.len());
+    let mut ranges = Vec::new();
     for a in anns {
         // Tubes lie 1.5-5 m from the camera.
         let t = &a["T_cam_tube"]["translation"];
         let r = (0..3).map(|k| t[k].as_f64().unwrap().powi(2)).sum::<f64>().sqrt();
         assert!((1.4..5.2).contains(&r), "tube at {r} m");
+        ranges.push(r);
     }
+    // The run says where its tubes lie: the median distance among them, to 0.1 m.
+    ranges.sort_by(f64::total_cmp);
+    let median = ranges[((ranges.len() - 1) as f64 * 0.5).round() as usize];
+    let said = stderr(&o);
+    let line = said.lines().find(|l| l.starts_with("tubes at ")).unwrap_or_else(|| panic!("{said}"));
+    let told: f64 = line.split(" / ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!((told - median).abs() <= 0.051, "{line}: median {median}");
+    assert!(line.ends_with("px wide (p10 / median / p90)"), "{line}");
 }
 
 #[test]

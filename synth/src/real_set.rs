@@ -249,9 +249,67 @@ pub fn assemble(samples: Vec<(CocoImage, Vec<tubeloc_core::CocoAnnotation>)>, in
     CocoDataset { info: Some(info), licenses: None, images, annotations, categories: vec![tube_category()], extra: Map::new() }
 }
 
+/// Where the tubes of a composite set lie: the 10th, 50th and 90th percentiles (nearest rank,
+/// `round((n - 1) q)` of the sorted values) of their centres' distance from the camera
+/// (metres) and of their body's image width `w = f D / r` (pixels; `f` the image's focal
+/// length, `D` = 17.1 mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TubeSpread {
+    /// Distance percentiles (p10, p50, p90), metres.
+    pub range_m: [f64; 3],
+    /// Image width percentiles (p10, p50, p90), pixels.
+    pub width_px: [f64; 3],
+}
+
+/// The [`TubeSpread`] of a composite set (annotations with `T_cam_tube`, images with
+/// `camera`), or `None` when it holds no such tube.
+pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
+    let fx: std::collections::HashMap<u64, f64> = ds.images.iter().filter_map(|im| Some((im.id, im.extra.get("camera")?.get("fx")?.as_f64()?))).collect();
+    let (mut ranges, mut widths) = (Vec::new(), Vec::new());
+    for a in &ds.annotations {
+        let Some(t) = a.extra.get("T_cam_tube").and_then(|p| p.get("translation")).and_then(|t| t.as_array()) else { continue };
+        let r = t.iter().filter_map(|v| v.as_f64()).map(|v| v * v).sum::<f64>().sqrt();
+        if let (Some(f), true) = (fx.get(&a.image_id), r > 0.0) {
+            ranges.push(r);
+            widths.push(f * 0.0171 / r);
+        }
+    }
+    let pct = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        [0.1, 0.5, 0.9].map(|q| v[((v.len() - 1) as f64 * q).round() as usize])
+    };
+    (!ranges.is_empty()).then(|| TubeSpread { range_m: pct(&mut ranges), width_px: pct(&mut widths) })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Ten tubes at 1..10 m under f = 1000 px: p10 / p50 / p90 at ranks 1 / 5 / 8 of 0..9
+    /// (rounded), i.e. 2 / 6 / 9 m, and widths f D / r at 9 / 5 / 2 m; a tube without a pose is
+    /// not counted, a set without one is None.
+    #[test]
+    fn tube_spread_takes_percentiles_of_range_and_width() {
+        let image = |id: u64| CocoImage { id, width: 10, height: 10, file_name: format!("{id}.png"), extra: serde_json::from_value(serde_json::json!({"camera": {"fx": 1000.0}})).unwrap() };
+        let ann = |id: u64, r: Option<f64>| {
+            let mut a: tubeloc_core::CocoAnnotation = serde_json::from_value(serde_json::json!({"id": id, "image_id": 1, "category_id": 1, "area": 1.0, "bbox": [0, 0, 1, 1], "iscrowd": 0})).unwrap();
+            if let Some(r) = r {
+                a.extra.insert("T_cam_tube".into(), serde_json::json!({"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0.0, 0.6 * r, 0.8 * r]}));
+            }
+            a
+        };
+        let mut anns: Vec<_> = (1..=10).map(|k| ann(k, Some(k as f64))).collect();
+        anns.push(ann(11, None));
+        let ds = assemble(vec![(image(1), anns)], serde_json::json!({}));
+        let s = tube_spread(&ds).unwrap();
+        for (got, want) in s.range_m.iter().zip([2.0, 6.0, 9.0]) {
+            assert!((got - want).abs() < 1e-9, "{s:?}");
+        }
+        for (got, want) in s.width_px.iter().zip([17.1 / 9.0, 17.1 / 5.0, 17.1 / 2.0]) {
+            assert!((got - want).abs() < 1e-9, "{s:?}");
+        }
+        assert_eq!(tube_spread(&assemble(vec![(image(1), vec![ann(1, None)])], serde_json::json!({}))), None);
+    }
 
     #[test]
     fn assumed_view_up_is_unit_and_pitched() {
