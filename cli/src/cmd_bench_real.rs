@@ -344,7 +344,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_neg = line2d_negatives(&stage.data, &l2, stage.frames)?;
     drop(l2);
     // Fused: every Line2D candidate scored by the learned segmenter's agreement (record 0063).
-    let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()) };
+    let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), params: Default::default() };
     let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion))?;
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
     let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;

@@ -42,6 +42,10 @@ pub struct DetectArgs {
     /// mirror averaging); missing fields keep their defaults.
     #[arg(long)]
     pub decode_config: Option<PathBuf>,
+    /// Fused detection settings (`--method fused`): JSON of `FusionParams` fields (`min_iou`,
+    /// `threshold`); missing fields keep their defaults.
+    #[arg(long)]
+    pub fusion_config: Option<PathBuf>,
     /// External COCO results to pass through (`--method external`).
     #[arg(long)]
     pub results: Option<PathBuf>,
@@ -66,7 +70,20 @@ impl DetectArgs {
     /// `tubeloc detect --method METHOD --dataset DATASET --out OUT` with the command line's
     /// defaults for everything else.
     pub(crate) fn dataset(method: Method, dataset: &Path, out: &Path) -> Self {
-        DetectArgs { method, image: None, image_id: 0, dataset: Some(dataset.to_path_buf()), model: None, decode_config: None, results: None, ground: None, range_m: DEFAULT_RANGE_M.into(), out: out.to_path_buf(), line2d: line2d_defaults() }
+        DetectArgs {
+            method,
+            image: None,
+            image_id: 0,
+            dataset: Some(dataset.to_path_buf()),
+            model: None,
+            decode_config: None,
+            fusion_config: None,
+            results: None,
+            ground: None,
+            range_m: DEFAULT_RANGE_M.into(),
+            out: out.to_path_buf(),
+            line2d: line2d_defaults(),
+        }
     }
 }
 
@@ -105,9 +122,20 @@ fn decode_config(path: Option<&Path>) -> Result<tubeloc_detect::learned::DecodeC
     Ok(cfg)
 }
 
+/// The fused detection settings of `--fusion-config` (defaults without it).
+fn fusion_config(path: Option<&Path>) -> Result<tubeloc_detect::fused::FusionParams> {
+    let Some(p) = path else { return Ok(Default::default()) };
+    let params: tubeloc_detect::fused::FusionParams = tubeloc_core::files::read_json(p).with_context(|| format!("fusion config {}", p.display()))?;
+    params.validate().map_err(|e| anyhow::anyhow!("fusion config {}: {e}", p.display()))?;
+    Ok(params)
+}
+
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
+    if !matches!(args.method, Method::Fused) && args.fusion_config.is_some() {
+        return Err(crate::args::usage("--fusion-config sets --method fused"));
+    }
     if matches!(args.method, Method::Fused) && args.line2d.min_probability.is_some() {
         return Err(crate::args::usage("--min-probability is the Line2D verifier's cut; --method fused scores every candidate the verifier scores and keeps those whose fused score P L reaches its own cut (record 0063)"));
     }
@@ -129,6 +157,7 @@ pub fn run(args: DetectArgs) -> Result<()> {
                     model: crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref()).load()?,
                     decode: decode_config(args.decode_config.as_deref())?,
                     range: crate::cmd_detect_learned::parse_range_band(&args.range_m)?,
+                    params: fusion_config(args.fusion_config.as_deref())?,
                 }),
                 _ => None,
             };

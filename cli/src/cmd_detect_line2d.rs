@@ -118,6 +118,8 @@ pub struct Fusion {
     pub decode: tubeloc_detect::learned::DecodeConfig,
     /// Its working scale's range band (`None`: the image as it is).
     pub range: Option<tubeloc_detect::scale::RangeBand>,
+    /// The fusion's settings.
+    pub params: FusionParams,
 }
 
 /// Line2D alone, or fused with the learned segmenter ([`tubeloc_detect::fused`]).
@@ -129,10 +131,10 @@ pub enum Line2dRunner {
 }
 
 impl Line2dRunner {
-    /// `det` alone, or fused with `fusion`'s learned model at the default fusion settings.
+    /// `det` alone, or fused with `fusion`'s learned model and settings.
     pub fn new(det: Line2dDetector, fusion: Option<Fusion>) -> Result<Self> {
         Ok(match fusion {
-            Some(f) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, FusionParams::default()).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
+            Some(f) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, f.params).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
             None => Line2dRunner::Plain(Box::new(det)),
         })
     }

@@ -68,6 +68,22 @@ fn fused_detections_are_line2d_candidates_scored_by_learned_agreement() {
         }
     }
 
+    // `--fusion-config` sets the fusion: a higher cut keeps the fused detections at or above it.
+    let cfg = dir.path().join("fusion.json");
+    std::fs::write(&cfg, r#"{"threshold": 0.2}"#).unwrap();
+    let strict = run(&["--method", "fused", "--templates", p(&lib), "--fusion-config", p(&cfg)], "strict.json");
+    let above: Vec<&Value> = fused.iter().filter(|f| f["score"].as_f64().unwrap() >= 0.2 - 1e-6).collect();
+    assert_eq!(strict.len(), above.len(), "--fusion-config threshold 0.2");
+    // A misspelt or out-of-range field is refused, naming the file; the option belongs to fused.
+    for (text, expect) in [(r#"{"min_iouu": 0.3}"#, "unknown field `min_iouu`"), (r#"{"threshold": 0}"#, "threshold 0 must be in (0, 1]")] {
+        std::fs::write(&cfg, text).unwrap();
+        let o = tubeloc(&["detect", "--method", "fused", "--templates", p(&lib), "--fusion-config", p(&cfg), "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(stderr(&o).contains("fusion.json") && stderr(&o).contains(expect), "{}", stderr(&o));
+    }
+    let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--fusion-config", p(&cfg), "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(!dir.path().join("x.json").exists(), "no output on error");
     // The verifier's cut does not apply: every candidate it scores is fused.
     let o = tubeloc(&["detect", "--method", "fused", "--templates", p(&lib), "--min-probability", "0.5", "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -26,8 +26,9 @@ use crate::line2d::{Line2dDetection, Line2dDetector};
 use crate::scale::{working_scale, RangeBand};
 use tubeloc_core::{CameraModel, GroundPlane, Rle};
 
-/// Settings of the fusion (see the module doc).
+/// Settings of the fusion (see the module doc; JSON: missing fields keep their defaults).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct FusionParams {
     /// Least mask IoU between a candidate's silhouette and a learned instance for the instance
     /// to count as agreeing, in `(0, 1]`.
