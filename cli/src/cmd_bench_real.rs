@@ -22,6 +22,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 use tubeloc_core::{files, CocoDataset, ScoreCalibration};
 use tubeloc_detect::learned::DecodeConfig;
@@ -157,7 +158,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
-fn negatives(data: &Path, detector: &dyn Fn() -> Result<Box<dyn tubeloc_pipeline::TubeDetector>>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
     let mut settings = tubeloc_pipeline::LocatorSettings::default();
     settings.calibration = cal.clone();
@@ -171,7 +172,7 @@ fn negatives(data: &Path, detector: &dyn Fn() -> Result<Box<dyn tubeloc_pipeline
         // `locate` at its defaults on the frame, with the assumed camera and ground; its
         // detector runs at the same working scale `s`.
         let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
-        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, detector()?, settings.clone())?;
+        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
         let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None })?;
@@ -329,7 +330,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
-    let learned_detector = || -> Result<Box<dyn tubeloc_pipeline::TubeDetector>> { Ok(Box::new(stage.model.detector()?)) };
+    let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
     let neg = negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)?;
     let neg_pds = pds_negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
     // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
@@ -352,7 +353,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let fused_neg = line2d_negatives(&stage.data, &fused, stage.frames)?;
     drop(fused);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
-    let fused_detector = || -> Result<Box<dyn tubeloc_pipeline::TubeDetector>> { Ok(Box::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?)) };
+    let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
     let fused_located = negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)?;
     let fusion_params = tubeloc_detect::fused::FusionParams::default();
     let verifier = tubeloc_detect::line2d::Verifier::shipped();

@@ -27,6 +27,22 @@ pub trait TubeDetector: Send + Sync {
     }
 }
 
+/// A shared detector (one model or template library for several locators, e.g. one per
+/// frame's camera) is a detector.
+impl<T: TubeDetector + ?Sized> TubeDetector for std::sync::Arc<T> {
+    fn name(&self) -> &str {
+        (**self).name()
+    }
+
+    fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
+        (**self).detect(image, camera, ground, image_id)
+    }
+
+    fn origin(&self) -> String {
+        (**self).origin()
+    }
+}
+
 /// The learned instance segmenter (masks and image axis seeds), run at its working scale
 /// ([`tubeloc_detect::scale`]): the image is resampled so that tubes in the range band (or on
 /// the ground plane) are about 16 px wide, and results are mapped back.

@@ -51,6 +51,19 @@ pub fn fused_calibration(model: Option<&Path>) -> Result<ScoreCalibration> {
     embedded_calibration(FUSED_CALIBRATION_NAME, FUSED_CALIBRATION_JSON)
 }
 
+/// The score calibration `tubeloc locate --detector DETECTOR` hands tubes over with:
+/// `calibration` (`--calibration`) when given; else the learned model's ([`load_calibration`]),
+/// the fused detector's ([`fused_calibration`]), or for other detectors none (probability =
+/// score, threshold 0: every converged tube).
+pub fn locator_calibration(detector: &str, calibration: Option<&Path>, model: Option<&Path>) -> Result<ScoreCalibration> {
+    match (calibration, detector) {
+        (Some(p), _) => load_calibration(Some(p), None),
+        (None, "learned") => load_calibration(None, model),
+        (None, "fused") => fused_calibration(model),
+        (None, _) => Ok(crate::LocatorSettings::default().calibration),
+    }
+}
+
 /// An embedded calibration `json` (from the file `name`), parsed and validated.
 fn embedded_calibration(name: &str, json: &str) -> Result<ScoreCalibration> {
     let bad = |m: String| PipelineError::Input(format!("embedded score calibration {name}: {m}"));
@@ -63,8 +76,8 @@ impl LearnedDetector {
     /// The learned detector with the shipped model (embedded), named
     /// `data/models/tubenet.safetensors (embedded)` in error messages.
     pub fn shipped(decode: DecodeConfig) -> Result<Self> {
-        let model = shipped_model().map_err(|e| PipelineError::Detect(format!("loading the embedded model: {e}")))?;
-        Ok(Self::new(model, decode, format!("{SHIPPED_MODEL_NAME} (embedded)")))
+        let (model, origin) = learned_model(None)?;
+        Ok(Self::new(model, decode, origin))
     }
 }
 
@@ -121,39 +134,43 @@ pub fn parse_range_band(s: &str) -> Result<Option<RangeBand>> {
 /// embedded model) with the default decoder, run at the working scale of the band `range_m`
 /// ("NEAR:FAR" metres, or "off"; see [`parse_range_band`]).
 pub fn learned_detector(model: Option<&Path>, range_m: &str) -> Result<LearnedDetector> {
-    let mut d = match model {
-        None => LearnedDetector::shipped(Default::default())?,
-        Some(m) if !m.exists() => return Err(PipelineError::Input(format!("learned model {} not found: pass an existing --model FILE, or leave --model out to use the shipped model", m.display()))),
-        Some(m) => LearnedDetector::load(m, Default::default())?,
-    };
+    let (weights, origin) = learned_model(model)?;
+    let mut d = LearnedDetector::new(weights, Default::default(), origin);
     d.range = parse_range_band(range_m)?;
     Ok(d)
 }
 
-/// The Line2D template library at `templates` (`--templates LIB.tlt`), for `detector`
-/// (`line2d` or `fused`, named in the error when it is missing).
-fn template_library(templates: Option<&Path>, detector: &str) -> Result<tubeloc_detect::line2d::TemplateLibrary> {
+/// The weights at `model` (`--model`; the shipped, embedded model when `None`) and their name
+/// in error messages.
+fn learned_model(model: Option<&Path>) -> Result<(tubeloc_detect::learned::LearnedModel, String)> {
+    match model {
+        None => Ok((shipped_model().map_err(|e| PipelineError::Detect(format!("loading the embedded model: {e}")))?, format!("{SHIPPED_MODEL_NAME} (embedded)"))),
+        Some(m) if !m.exists() => Err(PipelineError::Input(format!("learned model {} not found: pass an existing --model FILE, or leave --model out to use the shipped model", m.display()))),
+        Some(m) => Ok((tubeloc_detect::learned::LearnedModel::load(m).map_err(|e| PipelineError::Detect(format!("loading model {}: {e}", m.display())))?, m.display().to_string())),
+    }
+}
+
+/// Line2D with the template library at `templates` (`--templates LIB.tlt`), the default
+/// matching parameters and the shipped clutter verifier, for `detector` (`line2d` or `fused`,
+/// named in the error when the library is missing).
+fn line2d_matcher(templates: Option<&Path>, detector: &str) -> Result<tubeloc_detect::line2d::Line2dDetector> {
     let lib = templates.ok_or_else(|| PipelineError::Input(format!("--detector {detector} needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")))?;
-    tubeloc_detect::line2d::TemplateLibrary::load(lib).map_err(|e| PipelineError::Input(format!("reading {}: {}", lib.display(), error_chain(&e))))
+    let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).map_err(|e| PipelineError::Input(format!("reading {}: {}", lib.display(), error_chain(&e))))?;
+    tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))
 }
 
 /// The Line2D detector of `tubeloc locate --detector line2d --templates LIB.tlt`: the library
 /// with the default matching parameters and the shipped clutter verifier.
 pub fn line2d_detector(templates: Option<&Path>) -> Result<Line2dTubeDetector> {
-    let det = tubeloc_detect::line2d::Line2dDetector::new(template_library(templates, "line2d")?, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))?;
-    Ok(Line2dTubeDetector::new(det))
+    Ok(Line2dTubeDetector::new(line2d_matcher(templates, "line2d")?))
 }
 
 /// The fused detector of `tubeloc locate --detector fused --templates LIB.tlt [--model M]
 /// [--range-m R]`: Line2D as [`line2d_detector`], the learned model as [`learned_detector`],
 /// the default fusion settings ([`tubeloc_detect::fused`]).
 pub fn fused_detector(templates: Option<&Path>, model: Option<&Path>, range_m: &str) -> Result<FusedTubeDetector> {
-    let line2d = tubeloc_detect::line2d::Line2dDetector::new(template_library(templates, "fused")?, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))?;
-    let weights = match model {
-        None => shipped_model().map_err(|e| PipelineError::Detect(format!("loading the embedded model: {e}")))?,
-        Some(m) if !m.exists() => return Err(PipelineError::Input(format!("learned model {} not found: pass an existing --model FILE, or leave --model out to use the shipped model", m.display()))),
-        Some(m) => tubeloc_detect::learned::LearnedModel::load(m).map_err(|e| PipelineError::Detect(format!("loading model {}: {e}", m.display())))?,
-    };
+    let line2d = line2d_matcher(templates, "fused")?;
+    let (weights, _) = learned_model(model)?;
     let fused = tubeloc_detect::fused::FusedDetector::new(line2d, weights, DecodeConfig::default(), parse_range_band(range_m)?, Default::default()).map_err(PipelineError::Detect)?;
     Ok(FusedTubeDetector::new(fused))
 }

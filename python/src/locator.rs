@@ -38,12 +38,7 @@ fn detector_of(o: &Options) -> PyResult<Box<dyn TubeDetector>> {
 /// (given, or the learned model's), the acceptance threshold.
 fn settings_of(o: &Options) -> PyResult<LocatorSettings> {
     let mut settings = LocatorSettings::default();
-    settings.calibration = match (&o.calibration, o.detector) {
-        (Some(p), _) => shipped::load_calibration(Some(p), None).map_err(|e| chain_to_py(&e))?,
-        (None, "learned") => shipped::load_calibration(None, o.model.as_deref()).map_err(|e| chain_to_py(&e))?,
-        (None, "fused") => shipped::fused_calibration(o.model.as_deref()).map_err(|e| chain_to_py(&e))?,
-        (None, _) => settings.calibration,
-    };
+    settings.calibration = shipped::locator_calibration(o.detector, o.calibration.as_deref(), o.model.as_deref()).map_err(|e| chain_to_py(&e))?;
     if let Some(p) = o.min_probability {
         if !(0.0..=1.0).contains(&p) {
             return Err(to_py(format!("min_probability {p}: expected a probability in [0, 1]")));

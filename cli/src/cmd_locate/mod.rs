@@ -40,6 +40,18 @@ pub enum Detector {
     External,
 }
 
+impl Detector {
+    /// The detector's name, as `--detector` takes it and the outputs report it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Detector::Learned => "learned",
+            Detector::Line2d => "line2d",
+            Detector::Fused => "fused",
+            Detector::External => "external",
+        }
+    }
+}
+
 /// Nested `tubeloc locate` subcommands.
 #[derive(Subcommand, Debug)]
 pub enum LocateCommand {
@@ -428,12 +440,7 @@ impl Setup {
         let selection = CameraSelection { camera: camera_name, pair };
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let mut settings = LocatorSettings::default();
-        settings.calibration = match (&a.calibration, a.detector) {
-            (Some(p), _) => tubeloc_pipeline::shipped::load_calibration(Some(p), None)?,
-            (None, Detector::Learned) => model.calibration(None)?,
-            (None, Detector::Fused) => tubeloc_pipeline::shipped::fused_calibration(a.model.as_deref())?,
-            (None, _) => settings.calibration,
-        };
+        settings.calibration = tubeloc_pipeline::shipped::locator_calibration(a.detector.name(), a.calibration.as_deref(), model.path())?;
         settings.min_highlight_level = a.min_highlight_level;
         if let Some(p) = a.min_probability {
             settings.calibration.threshold = p;
