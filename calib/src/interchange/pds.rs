@@ -134,8 +134,22 @@ pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) 
     }
     match cameras {
         [label] if label.image.is_none() => Ok(label),
+        _ if fisheye_entries(path).iter().any(|n| n == name) => Err(CalibError::parse(
+            path,
+            format!("the entry for the image file {name:?} is a CAHVORE (fisheye) model, which a pinhole camera list cannot carry: give the image's PDS3 label (`.LBL`, or the `.IMG` with its label) as the rig instead; `locate` resamples the fisheye image into the model's linear camera"),
+        )),
         _ => Err(CalibError::parse(path, format!("no camera for the image file {name:?} (a PDS camera list names each camera after its image)"))),
     }
+}
+
+/// The image file names of the CAHVORE (fisheye) entries of the PDS camera list at `path`,
+/// which [`pds_cameras`] leaves out; empty when the file is not such a list.
+fn fisheye_entries(path: &Path) -> Vec<String> {
+    let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
+    list.iter()
+        .filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE"))
+        .filter_map(|e| Path::new(e.get("image")?.as_str()?).file_name()?.to_str().map(str::to_string))
+        .collect()
 }
 
 /// The rig of a PDS camera list: its cameras, no stereo pair.
@@ -211,6 +225,23 @@ mod tests {
         // The camera is 2 m above its ground.
         assert!((c.ground.height_of(&Vector3::zeros()) - 2.0).abs() < 1e-9);
         assert!(looks_like_pds_cameras(&text));
+    }
+
+    /// An image whose list entry is a fisheye is refused, saying so and pointing at its label;
+    /// an image the list does not name is refused as before.
+    #[test]
+    fn an_image_of_a_fisheye_entry_is_refused_naming_the_model_and_the_label() {
+        let dir = std::env::temp_dir().join(format!("tubeloc_pds_fisheye_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("cameras.json");
+        std::fs::write(&path, json!([navcam_entry(), {"image": "images/fisheye.png", "model_type": "CAHVORE"}]).to_string()).unwrap();
+        let cams = read_pds_cameras(&path).unwrap().unwrap();
+        let err = camera_of_image(&cams, &path, Path::new("x/fisheye.png")).unwrap_err().to_string();
+        assert!(err.contains("cameras.json") && err.contains("fisheye.png") && err.contains("CAHVORE") && err.contains("PDS3 label"), "{err}");
+        let err = camera_of_image(&cams, &path, Path::new("other.png")).unwrap_err().to_string();
+        assert!(err.contains("no camera for the image file \"other.png\""), "{err}");
+        assert_eq!(camera_of_image(&cams, &path, Path::new("NLB_1.jpg")).unwrap().camera.name, "NLB_1.jpg");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -23,6 +23,10 @@ pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
             }
         }
     } else {
+        let is_image = arg.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)));
+        if is_image && arg.is_file() {
+            bail!("{flag} {}: an image file; {flag} takes a folder of images or a list file of image paths (for one image, give {})", arg.display(), if flag.starts_with("--right") { "--right" } else { "--image" });
+        }
         let text = std::fs::read_to_string(arg).with_context(|| format!("{flag} {}: not a folder, and not readable as a list file", arg.display()))?;
         let base = arg.parent().unwrap_or(Path::new(""));
         for line in text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')) {
@@ -119,5 +123,13 @@ mod tests {
         std::fs::write(&list, "# nothing\n").unwrap();
         let e = frame_list(&list, None).unwrap_err().to_string();
         assert!(e.contains("no images"), "{e}");
+        // One image given where a folder or list is expected: says so, and names --image.
+        let png = dir.path().join("frame.PNG");
+        std::fs::write(&png, [0x89, b'P', b'N', b'G']).unwrap();
+        let e = frame_list(&png, None).unwrap_err().to_string();
+        assert!(e.contains("frame.PNG: an image file") && e.contains("give --image"), "{e}");
+        std::fs::write(&list, "a/f1.png\n").unwrap();
+        let e = frame_list(&list, Some(&png)).unwrap_err().to_string();
+        assert!(e.contains("--right-images") && e.contains("give --right"), "{e}");
     }
 }
