@@ -146,10 +146,7 @@ pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) 
 /// which [`pds_cameras`] leaves out; empty when the file is not such a list.
 fn fisheye_entries(path: &Path) -> Vec<String> {
     let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
-    list.iter()
-        .filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE"))
-        .filter_map(|e| Path::new(e.get("image")?.as_str()?).file_name()?.to_str().map(str::to_string))
-        .collect()
+    list.iter().filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")).filter_map(|e| Path::new(e.get("image")?.as_str()?).file_name()?.to_str().map(str::to_string)).collect()
 }
 
 /// The rig of a PDS camera list: its cameras, no stereo pair.
