@@ -5,14 +5,21 @@
 //! `T_world_cam`) and, for a stereo set, its right image. Counted over the located tubes: how
 //! many have a feasible grasp, how many grasps the check changed from the plain grasp from
 //! above, whether terrain was checked, and the tubes rejected for interpenetrating a stronger
-//! one.
+//! one. On a set with true poses (`T_cam_tube`), also how many located tubes are tubes of the
+//! set: their centre within [`MATCH_M`] of a true tube's, matched one to one (the pose
+//! evaluation's gate), strongest first.
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde_json::{json, Value};
 use std::path::Path;
 use tubeloc_core::{CocoDataset, Pose, Rig, RigCamera, ScoreCalibration};
+use tubeloc_eval::pose_match::{match_by_centre_distance, TubeEstimate, TubeTruth};
 use tubeloc_pipeline::{CameraSelection, ExternalDetections, LocateInput, Locator, LocatorSettings, Rejection};
+
+/// Greatest distance (metres) between a located tube's centre and a true tube's centre for the
+/// located tube to count as that tube: the 50 mm gate of `tubeloc eval --poses`.
+pub const MATCH_M: f64 = 0.05;
 
 /// Runs the grasp check over up to `max_images` images of the dataset in `set` seeded by the
 /// detections file `dets` (stereo with the right images when `stereo`), with `calibration`'s
@@ -56,8 +63,12 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
             let locator = Locator::new(&rig, &CameraSelection::default(), Box::new(ExternalDetections::new(mine, "bench")), settings.clone())?;
             let out = locator.locate(&LocateInput { image: &image, right: right.as_ref().map(|r| &r.0), ground, up: None })?;
             let t = &out.tubes;
+            let truths: Vec<TubeTruth> = ds.annotations.iter().filter(|a| a.image_id == im.id).filter_map(|a| Some(TubeTruth { image_id: 0, pose: serde_json::from_value(a.extra.get("T_cam_tube")?.clone()).ok()? })).collect();
+            let located: Vec<TubeEstimate> = t.iter().map(|t| TubeEstimate { image_id: 0, ..TubeEstimate::from_axis_pose(&t.pose) }).collect();
             Ok(json!({
                 "located": t.len(),
+                "truths": truths.len(),
+                "true_located": match_by_centre_distance(&truths, &located, MATCH_M).pairs.len(),
                 "feasible": t.iter().filter(|t| t.grasp.feasible).count(),
                 "changed": t.iter().filter(|t| t.grasp.changed).count(),
                 "changed_feasible": t.iter().filter(|t| t.grasp.changed && t.grasp.feasible).count(),
@@ -77,6 +88,8 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
     Ok(json!({
         "images": per_image.len(),
         "located": located,
+        "truths": sum("truths"),
+        "true_located": sum("true_located"),
         "feasible": sum("feasible"),
         "changed": sum("changed"),
         "changed_feasible": sum("changed_feasible"),
@@ -92,12 +105,15 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
 
 /// The markdown table of [`run`]'s results, one row per `(name, result)`.
 pub fn table(rows: &[(&str, &Value)]) -> String {
-    let mut t = String::from("| set | images | located tubes | feasible grasp | changed by the check (of which feasible) | terrain checked | rejected: overlapping a stronger tube | candidates rejected: ground / tube / terrain | grasp stage ms per tube |\n|---|---:|---:|---:|---:|---:|---:|---|---:|\n");
+    let mut t = String::from("| set | images | located tubes | of them true tubes (centre within 50 mm) | true tubes located | feasible grasp | changed by the check (of which feasible) | terrain checked | rejected: overlapping a stronger tube | candidates rejected: ground / tube / terrain | grasp stage ms per tube |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n");
     for (name, v) in rows {
         let n = v["located"].as_u64().unwrap_or(0);
         let share = |k: &str| if n > 0 { format!("{} ({:.0}%)", v[k], 100.0 * v[k].as_u64().unwrap_or(0) as f64 / n as f64) } else { "-".into() };
+        let (truths, right) = (v["truths"].as_u64().unwrap_or(0), v["true_located"].as_u64().unwrap_or(0));
+        let true_located = if truths > 0 { share("true_located") } else { "-".into() };
+        let recall = if truths > 0 { format!("{right} of {truths} ({:.0}%)", 100.0 * right as f64 / truths as f64) } else { "-".into() };
         t += &format!(
-            "| {name} | {} | {n} | {} | {} ({}) | {} | {} | {} / {} / {} of {} | {:.2} |\n",
+            "| {name} | {} | {n} | {true_located} | {recall} | {} | {} ({}) | {} | {} | {} / {} / {} of {} | {:.2} |\n",
             v["images"],
             share("feasible"),
             share("changed"),

@@ -41,7 +41,7 @@ pub struct RealStage {
     pub frames: Option<usize>,
     /// Composites per grey test frame.
     pub per_grey_frame: u32,
-    /// Grasp checks on at most this many grey composites (all when `None`).
+    /// `locate` and its grasp checks on at most this many composites of each set (all when `None`).
     pub grasp_images: Option<usize>,
     /// Line2D far-search factors (colour, grey) (`tubeloc detect --far-scale`).
     pub line2d_far_scale: (f64, f64),
@@ -333,8 +333,10 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
     let neg = negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)?;
     let neg_pds = pds_negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
-    // Grasp collision checks of `locate` (mono, each frame's own ground) on the grey composites.
+    // `locate` (mono, each frame's own ground) on the composites: its grasp checks, and how many
+    // of the tubes it hands over are composited tubes.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
+    let grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
@@ -358,7 +360,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let fusion_params = tubeloc_detect::fused::FusionParams::default();
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
-    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp,
+    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
         "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
         "fused": {"params": fusion_params, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
@@ -410,8 +412,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
-        "Grasp collision checks of `locate` on the grey test composites (mono: ground plane and other tubes; learned detections, each frame's own ground, tubes at or above the probability threshold):\n\n{}",
-        crate::bench_grasp::table(&[("grey composites", &grasp)])
+        "`locate` at its defaults on the test composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
+        crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour)])
     )
     .ok();
     writeln!(md, "Reliability of the calibrated probability on the grey test detections (bins of 0.1: mean predicted / observed / count):\n").ok();

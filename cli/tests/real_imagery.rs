@@ -143,7 +143,17 @@ fn bench_real_stage_runs_at_a_small_size() {
         let r = summary["fused"][set]["recall_at_threshold"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&r), "fused {set}: {}", summary["fused"][set]);
     }
+    // `locate` on the composites: every tube of the set is a truth, and no more located tubes
+    // are counted true than were located or composited.
+    for (key, set) in [("grasp_grey", "test_grey"), ("grasp_colour", "test_colour")] {
+        let v = &summary[key];
+        let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real").join(set).join("annotations.json")).unwrap()).unwrap();
+        assert_eq!(v["truths"].as_u64().unwrap() as usize, gt["annotations"].as_array().unwrap().len(), "{key}: {v}");
+        let (located, right) = (v["located"].as_u64().unwrap(), v["true_located"].as_u64().unwrap());
+        assert!(right <= located.min(v["truths"].as_u64().unwrap()), "{key}: {v}");
+    }
     let real_md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
+    assert!(real_md.contains("| colour composites |") && real_md.contains("of them true tubes"), "{real_md}");
     assert!(real_md.contains("| fused grey") && real_md.contains("Fused on the same frames"), "{real_md}");
     assert!(real_md.contains("`locate --detector fused` at its defaults"), "{real_md}");
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
