@@ -65,10 +65,24 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
             let t = &out.tubes;
             let truths: Vec<TubeTruth> = ds.annotations.iter().filter(|a| a.image_id == im.id).filter_map(|a| Some(TubeTruth { image_id: 0, pose: serde_json::from_value(a.extra.get("T_cam_tube")?.clone()).ok()? })).collect();
             let located: Vec<TubeEstimate> = t.iter().map(|t| TubeEstimate { image_id: 0, ..TubeEstimate::from_axis_pose(&t.pose) }).collect();
+            let matching = match_by_centre_distance(&truths, &located, MATCH_M);
+            // Each located tube that is no tube of the set: its probability and how far its
+            // centre lies from the nearest true tube's (metres; none when the image has none).
+            let false_tubes: Vec<Value> = matching
+                .unmatched_estimates
+                .iter()
+                .map(|&e| {
+                    let c = located[e].pose.translation();
+                    let nearest = truths.iter().map(|tr| (tr.pose.translation() - c).norm()).min_by(f64::total_cmp);
+                    json!({"probability": t[e].probability, "nearest_truth_m": nearest})
+                })
+                .collect();
             Ok(json!({
+                "image": im.file_name,
                 "located": t.len(),
                 "truths": truths.len(),
-                "true_located": match_by_centre_distance(&truths, &located, MATCH_M).pairs.len(),
+                "true_located": matching.pairs.len(),
+                "false_tubes": false_tubes,
                 "feasible": t.iter().filter(|t| t.grasp.feasible).count(),
                 "changed": t.iter().filter(|t| t.grasp.changed).count(),
                 "changed_feasible": t.iter().filter(|t| t.grasp.changed && t.grasp.feasible).count(),
@@ -100,6 +114,8 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
         "rejected_terrain": sum("rejected_terrain"),
         "candidates": sum("candidates"),
         "grasp_ms_per_tube": if located > 0 { grasp_ms / located as f64 } else { 0.0 },
+        // The images where `locate` handed over a tube that is none of the set's.
+        "false_located": per_image.iter().filter(|v| v["false_tubes"].as_array().is_some_and(|f| !f.is_empty())).map(|v| json!({"image": v["image"], "false_tubes": v["false_tubes"]})).collect::<Vec<_>>(),
     }))
 }
 

@@ -89,6 +89,11 @@ pub struct BenchArgs {
     /// for the real stage.
     #[arg(long, default_value = "../shared/data/real_mars")]
     pub real_data: PathBuf,
+    /// Real stage: the part of the real data, split by sol: `test` (the figures to report) or
+    /// `val` (the same measures on the validation part, to choose settings on; the tube-free
+    /// `negatives_val` frames are then not run).
+    #[arg(long, default_value = "test")]
+    pub real_split: tubeloc_synth::real_set::RealSplit,
     /// Real stage: use at most this many frames per set (default: all).
     #[arg(long)]
     pub real_frames: Option<usize>,
@@ -200,6 +205,9 @@ fn detect_and_eval(mut detect: DetectArgs, split_dir: &Path, out: &Path, n_image
 
 /// Runs `tubeloc bench`.
 pub fn run(a: BenchArgs) -> Result<()> {
+    if a.real_split == tubeloc_synth::real_set::RealSplit::Train {
+        bail!("--real-split train: the real stage measures on the val or test part (the training part's frames are the model's backgrounds)");
+    }
     let out = a.out.clone();
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let mut st = Stages::load(&out, a.fresh)?;
@@ -420,7 +428,17 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if !a.skip.contains(&Part::Real) {
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let calibration = model.calibration(a.calibration.as_deref())?;
-        let stage = crate::cmd_bench_real::RealStage { data: a.real_data.clone(), model, calibration, frames: a.real_frames, per_grey_frame: 4, grasp_images: None, line2d_far_scale: a.line2d_far_scale, line2d_max_upsample: a.line2d_max_upsample };
+        let stage = crate::cmd_bench_real::RealStage {
+            data: a.real_data.clone(),
+            split: a.real_split,
+            model,
+            calibration,
+            frames: a.real_frames,
+            per_grey_frame: 4,
+            grasp_images: None,
+            line2d_far_scale: a.line2d_far_scale,
+            line2d_max_upsample: a.line2d_max_upsample,
+        };
         st.run("real", &[out.join("real").join("report.md")], || {
             crate::cmd_bench_real::run(&stage, &out)?;
             Ok(json!({}))

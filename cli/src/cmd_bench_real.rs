@@ -37,6 +37,10 @@ pub struct RealStage {
     pub model: crate::cmd_detect_learned::ModelChoice,
     /// Score calibration (probability and threshold).
     pub calibration: ScoreCalibration,
+    /// The part of the real data the composites and the PDS frames come from: `Test` (the
+    /// figures to report) or `Val` (the figures to choose settings on; `negatives_val`, kept for
+    /// measuring false positives, is then not run).
+    pub split: tubeloc_synth::real_set::RealSplit,
     /// Keep at most this many frames per set (small runs, e.g. in CI).
     pub frames: Option<usize>,
     /// Composites per grey test frame.
@@ -185,15 +189,15 @@ fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, ca
     Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "per_frame": per_frame}))
 }
 
-/// `locate` at its defaults on the real frames of the test sols that come with PDS camera
+/// `locate` at its defaults on the real frames of the `split`'s sols that come with PDS camera
 /// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
 /// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
 /// None shows a tube, so every located tube is false.
-fn pds_negatives(data: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
-    use tubeloc_synth::real_set::{split_of_sol, RealSplit};
+fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+    use tubeloc_synth::real_set::split_of_sol;
     let list = data.join("with_cameras").join("cameras.json");
     let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
-    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == RealSplit::Test).collect();
+    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == split).collect();
     chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));
     chosen.truncate(frames.unwrap_or(usize::MAX));
     let mut per_frame = Vec::new();
@@ -315,6 +319,15 @@ fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> R
     Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
 }
 
+/// The name of a part of the real data (`val`, `test`, `train`), as `tubeloc synth real --split` takes it.
+fn split_name(split: tubeloc_synth::real_set::RealSplit) -> &'static str {
+    match split {
+        tubeloc_synth::real_set::RealSplit::Train => "train",
+        tubeloc_synth::real_set::RealSplit::Val => "val",
+        tubeloc_synth::real_set::RealSplit::Test => "test",
+    }
+}
+
 /// Runs the real stage into `<out>/real`; returns the report's markdown section.
 pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     if !stage.data.join("MANIFEST.tsv").exists() {
@@ -322,17 +335,20 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     }
     let dir = out.join("real");
     std::fs::create_dir_all(&dir)?;
-    let grey_set = dir.join("test_grey");
-    let colour_set = dir.join("test_colour");
-    composite_set(&stage.data, "test", crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, 500, stage.frames, 22, &grey_set)?;
-    composite_set(&stage.data, "test", crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &colour_set)?;
+    let part = split_name(stage.split);
+    // negatives_val measures false positives only: never run where settings are chosen.
+    let with_negatives = stage.split == tubeloc_synth::real_set::RealSplit::Test;
+    let grey_set = dir.join(format!("{part}_grey"));
+    let colour_set = dir.join(format!("{part}_colour"));
+    composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, 500, stage.frames, 22, &grey_set)?;
+    composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &colour_set)?;
     let grey = detect_eval(&grey_set, &stage.model, &stage.calibration, &dir.join("learned_grey"))?;
     let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
-    let neg = negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)?;
-    let neg_pds = pds_negatives(&stage.data, &stage.model, &stage.calibration, stage.frames)?;
+    let neg = if with_negatives { negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)? } else { Value::Null };
+    let neg_pds = pds_negatives(&stage.data, stage.split, &stage.model, &stage.calibration, stage.frames)?;
     // `locate` (mono, each frame's own ground) on the composites: its grasp checks, and how many
     // of the tubes it hands over are composited tubes.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
@@ -344,7 +360,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None)?;
     let l2_grey = line2d_eval(&grey_set, &l2, None, &dir.join("line2d_grey"))?;
     let l2_colour = line2d_eval(&colour_set, &l2, None, &dir.join("line2d_colour"))?;
-    let l2_neg = line2d_negatives(&stage.data, &l2, stage.frames)?;
+    let l2_neg = if with_negatives { line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
     drop(l2);
     // Fused: every Line2D candidate scored by the learned segmenter's agreement (record 0063).
     let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), params: Default::default() };
@@ -352,21 +368,22 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
     let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;
     let fused_colour = line2d_eval(&colour_set, &fused, Some(&fused_cal), &dir.join("fused_colour"))?;
-    let fused_neg = line2d_negatives(&stage.data, &fused, stage.frames)?;
+    let fused_neg = if with_negatives { line2d_negatives(&stage.data, &fused, stage.frames)? } else { Value::Null };
     drop(fused);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
     let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
-    let fused_located = negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)?;
+    let fused_located = if with_negatives { negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)? } else { Value::Null };
     let fusion_params = tubeloc_detect::fused::FusionParams::default();
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
-    let summary = json!({"model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
+    let summary = json!({"split": part, "model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
         "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
         "fused": {"params": fusion_params, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
-    writeln!(md, "## Real imagery (test part, split by sol)\n").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the test sols (`tubeloc synth real --split test`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
+    let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
+    writeln!(md, "{title}").ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
     writeln!(md, "| set | images | tubes | AP50 | AR | ms / image | precision / recall at P >= {:.3} | ECE |", stage.calibration.threshold).ok();
     writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|").ok();
     // One row: the columns every detector has, then the learned one's precision / recall and
@@ -399,24 +416,28 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
-        writeln!(md, "\nMono refinement of the learned detections on the {kind} test composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
+        writeln!(md, "\nMono refinement of the learned detections on the {kind} {part} composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
     }
-    writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
-    let l2_what = format!(
-        "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice)"
-    );
-    for (what, v) in [(l2_what.as_str(), &l2_neg), ("Fused on the same frames", &fused_neg)] {
-        writeln!(md, "{what}: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", v["kept_per_frame"].as_f64().unwrap_or(f64::NAN), v["max_per_frame"], v["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
+    if with_negatives {
+        writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+        let l2_what = format!(
+            "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice)"
+        );
+        for (what, v) in [(l2_what.as_str(), &l2_neg), ("Fused on the same frames", &fused_neg)] {
+            writeln!(md, "{what}: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", v["kept_per_frame"].as_f64().unwrap_or(f64::NAN), v["max_per_frame"], v["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
+        }
+        writeln!(md, "`locate --detector fused` at its defaults (assumed camera and ground, P >= {:.3}) hands the planner **{:.3} tubes per frame**.\n", fused_cal.threshold, fused_located["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    } else {
+        writeln!(md, "\nReal frames without tubes (`negatives_val`): not run on the {part} part; they measure false positives only.\n").ok();
     }
-    writeln!(md, "`locate --detector fused` at its defaults (assumed camera and ground, P >= {:.3}) hands the planner **{:.3} tubes per frame**.\n", fused_cal.threshold, fused_located["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
-    writeln!(md, "Real frames of the test sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
-        "`locate` at its defaults on the test composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
+        "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
         crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour)])
     )
     .ok();
-    writeln!(md, "Reliability of the calibrated probability on the grey test detections (bins of 0.1: mean predicted / observed / count):\n").ok();
+    writeln!(md, "Reliability of the calibrated probability on the grey {part} detections (bins of 0.1: mean predicted / observed / count):\n").ok();
     if let Some(bins) = grey["reliability"].as_array() {
         for b in bins.iter().filter(|b| b["count"].as_u64().unwrap_or(0) > 0) {
             writeln!(md, "- [{:.1}, {:.1}): {:.3} / {:.3} / {}", b["lo"].as_f64().unwrap_or(0.0), b["hi"].as_f64().unwrap_or(0.0), b["mean_probability"].as_f64().unwrap_or(f64::NAN), b["frequency"].as_f64().unwrap_or(f64::NAN), b["count"]).ok();
