@@ -437,6 +437,12 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour)])
     )
     .ok();
+    for (kind, g) in [("grey", &grasp), ("colour", &grasp_colour)] {
+        let listed: Vec<String> = g["false_located"].as_array().into_iter().flatten().flat_map(|im| im["false_tubes"].as_array().into_iter().flatten().map(move |t| format!("`{}` (P {:.3}, {:.2} m from the nearest true tube)", im["image"].as_str().unwrap_or("?"), t["probability"].as_f64().unwrap_or(f64::NAN), t["nearest_truth_m"].as_f64().unwrap_or(f64::NAN)))).collect();
+        if !listed.is_empty() {
+            writeln!(md, "Located {kind} tubes that are no composited tube: {}.\n", listed.join("; ")).ok();
+        }
+    }
     writeln!(md, "Reliability of the calibrated probability on the grey {part} detections (bins of 0.1: mean predicted / observed / count):\n").ok();
     if let Some(bins) = grey["reliability"].as_array() {
         for b in bins.iter().filter(|b| b["count"].as_u64().unwrap_or(0) > 0) {
