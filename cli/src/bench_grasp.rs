@@ -61,7 +61,7 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
                 })
                 .collect();
             let locator = Locator::new(&rig, &CameraSelection::default(), Box::new(ExternalDetections::new(mine, "bench")), settings.clone())?;
-            let out = locator.locate(&LocateInput { image: &image, right: right.as_ref().map(|r| &r.0), ground, up: None })?;
+            let out = locator.locate(&LocateInput { image: &image, right: right.as_ref().map(|r| &r.0), ground, up: None, ignore: None })?;
             let t = &out.tubes;
             let truths: Vec<TubeTruth> = ds.annotations.iter().filter(|a| a.image_id == im.id).filter_map(|a| Some(TubeTruth { image_id: 0, pose: serde_json::from_value(a.extra.get("T_cam_tube")?.clone()).ok()? })).collect();
             let located: Vec<TubeEstimate> = t.iter().map(|t| TubeEstimate { image_id: 0, ..TubeEstimate::from_axis_pose(&t.pose) }).collect();

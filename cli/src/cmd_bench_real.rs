@@ -179,7 +179,7 @@ fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, ca
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
-        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None })?;
+        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None })?;
         let (found, located) = (&out.detections, out.tubes.len());
         let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
         per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
@@ -210,7 +210,7 @@ fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: 
             let path = data.join("with_cameras/images").join(&c.camera.name);
             let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
             locator.select_camera(&c.camera.name)?;
-            let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None }).with_context(|| path.display().to_string())?;
+            let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None, ignore: None }).with_context(|| path.display().to_string())?;
             per_frame.push(json!({"image": c.camera.name, "sol": c.sol, "detections": out.detections.len(), "located": out.tubes.len()}));
         }
     }
@@ -438,7 +438,18 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     )
     .ok();
     for (kind, g) in [("grey", &grasp), ("colour", &grasp_colour)] {
-        let listed: Vec<String> = g["false_located"].as_array().into_iter().flatten().flat_map(|im| im["false_tubes"].as_array().into_iter().flatten().map(move |t| format!("`{}` (P {:.3}, {:.2} m from the nearest true tube)", im["image"].as_str().unwrap_or("?"), t["probability"].as_f64().unwrap_or(f64::NAN), t["nearest_truth_m"].as_f64().unwrap_or(f64::NAN)))).collect();
+        let listed: Vec<String> = g["false_located"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .flat_map(|im| {
+                im["false_tubes"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .map(move |t| format!("`{}` (P {:.3}, {:.2} m from the nearest true tube)", im["image"].as_str().unwrap_or("?"), t["probability"].as_f64().unwrap_or(f64::NAN), t["nearest_truth_m"].as_f64().unwrap_or(f64::NAN)))
+            })
+            .collect();
         if !listed.is_empty() {
             writeln!(md, "Located {kind} tubes that are no composited tube: {}.\n", listed.join("; ")).ok();
         }

@@ -291,7 +291,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
         Some(r) => Some(tubeloc_detect::input::open_eight_bit(r).with_context(|| format!("cannot read image {}", r.display()))?),
         None => None,
     };
-    let input = LocateInput { image: &image, right: right.as_ref(), ground, up: None };
+    let input = LocateInput { image: &image, right: right.as_ref(), ground, up: None, ignore: None };
     let refined = locator.refine_frame(&input, &dets).with_context(|| format!("refining {}", image_path.display()))?;
     let poses = refined.poses;
     let camera = &locator.camera().model;

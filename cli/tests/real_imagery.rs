@@ -229,6 +229,47 @@ fn locate_hands_the_planner_no_tube_on_a_real_frame_without_tubes() {
     }
 }
 
+/// The arm in view of a real Navcam frame (MSL sol 3423, no tube) is what `locate` hands over
+/// at its defaults; with an ignore mask over the arm and its turret, that tube is listed as
+/// `in_ignored_region` at a pixel inside the mask, with the same centre, and nothing is handed
+/// over. A mask of another size is refused, naming both files.
+#[test]
+fn an_ignore_mask_over_the_arm_keeps_its_turret_from_the_planner() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams = real_data().join("with_cameras/cameras.json");
+    let image = real_data().join("with_cameras/images/NRB_701384494RAD_F0933408NCAM00200M1.png");
+    let doc_of = |out: &Path| -> Value { serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap() };
+    let plain = dir.path().join("plain.json");
+    ok(&["locate", "--rig", p(&cams), "--image", p(&image), "--out", p(&plain)]);
+    let plain = doc_of(&plain);
+    let located: Vec<&Value> = plain["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").collect();
+    assert_eq!(located.len(), 1, "{}", plain["tubes"]);
+    // The arm (from the left edge to the turret) and the turret, as boxes of the 1024² frame.
+    let in_mask = |x: f64, y: f64| (0.0..=490.0).contains(&x) && (330.0..=770.0).contains(&y) || (400.0..=680.0).contains(&x) && (340.0..=700.0).contains(&y);
+    let mask = image::GrayImage::from_fn(1024, 1024, |x, y| image::Luma([if in_mask(x as f64, y as f64) { 255 } else { 0 }]));
+    let mask_path = dir.path().join("arm.png");
+    mask.save(&mask_path).unwrap();
+    let masked = dir.path().join("masked.json");
+    let o = tubeloc(&["locate", "--rig", p(&cams), "--image", p(&image), "--ignore-mask", p(&mask_path), "--out", p(&masked)]);
+    assert_eq!(o.status.code(), Some(3), "exit 3: no tube located; {}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("lies in the --ignore-mask region"), "{said}");
+    let masked = doc_of(&masked);
+    let tubes = masked["tubes"].as_array().unwrap();
+    assert!(tubes.iter().all(|t| t["status"] != "located"), "{}", masked["tubes"]);
+    let ignored: Vec<&Value> = tubes.iter().filter(|t| t["status"] == "in_ignored_region").collect();
+    assert_eq!(ignored.len(), 1, "{}", masked["tubes"]);
+    assert_eq!(ignored[0]["centre"], located[0]["centre"]);
+    let (c, m) = (&located[0]["centre"], &plain["camera_model"]);
+    let f = |v: &Value| v.as_f64().unwrap();
+    let (u, v) = (f(&m["fx"]) * f(&c[0]) / f(&c[2]) + f(&m["cx"]), f(&m["fy"]) * f(&c[1]) / f(&c[2]) + f(&m["cy"]));
+    assert!(in_mask(u.round(), v.round()), "the turret's tube at ({u:.0}, {v:.0}) is outside the mask");
+    image::GrayImage::new(512, 512).save(dir.path().join("small.png")).unwrap();
+    let o = tubeloc(&["locate", "--rig", p(&cams), "--image", p(&image), "--ignore-mask", p(&dir.path().join("small.png")), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("small.png is 512x512") && stderr(&o).contains("NRB_701384494RAD_F0933408NCAM00200M1.png is 1024x1024"), "{}", stderr(&o));
+}
+
 #[test]
 fn locate_takes_the_camera_and_ground_of_a_pds_camera_list() {
     // `cahv_to_pinhole.py`'s list as the rig: the camera is the one named after the image's

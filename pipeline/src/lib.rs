@@ -69,7 +69,7 @@ pub mod stereo;
 pub use detector::{ExternalDetections, FusedTubeDetector, LearnedDetector, Line2dTubeDetector, TubeDetector};
 pub use error::PipelineError;
 pub use frame::{refine_frame, Frame, FrameOptions, FrameRefinement, SeedItem, StereoView};
-pub use locator::{frame_highlight_level, highlight_level, CameraSelection, LocateInput, LocateOutput, LocatedTube, Locator, RejectedTube, Rejection, Timings, MAX_IMAGE_PIXELS};
+pub use locator::{frame_highlight_level, highlight_level, ignore_mask_of, CameraSelection, LocateInput, LocateOutput, LocatedTube, Locator, RejectedTube, Rejection, Timings, MAX_IMAGE_PIXELS};
 pub use settings::{load_settings_file, LocatorSettings, StageSettings};
 pub use shipped::shipped_calibration;
 pub use tubeloc_core::GroundPlane;

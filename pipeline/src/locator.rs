@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
-use tubeloc_core::{FailureReason, Pose, Rig, RigCamera, TubeAxisPose, TubeDetection};
+use tubeloc_core::{FailureReason, Plane, Pose, Rig, RigCamera, TubeAxisPose, TubeDetection};
 use tubeloc_grasp::{overlapping_tubes, GraspCheck, GraspPlanner, Scene};
 use tubeloc_refine::{GroundPlane, Refiner};
 
@@ -37,12 +37,17 @@ pub struct LocateInput<'a> {
     /// Up direction (camera frame, any length) for the grasp approach when there is no ground
     /// plane; default `-y` (a roughly level camera).
     pub up: Option<Vector3<f64>>,
+    /// Where no tube is handed over: a mask of the image's size whose non-zero pixels cover
+    /// rover hardware in view (the arm, the deck, wheels) or any region to leave out. A
+    /// converged tube whose centre projects into it is listed as
+    /// [`Rejection::InIgnoredRegion`].
+    pub ignore: Option<&'a Plane<u8>>,
 }
 
 impl<'a> LocateInput<'a> {
     /// A mono input with nothing else known.
     pub fn mono(image: &'a DynamicImage) -> Self {
-        LocateInput { image, right: None, ground: None, up: None }
+        LocateInput { image, right: None, ground: None, up: None, ignore: None }
     }
 }
 
@@ -99,17 +104,24 @@ pub enum Rejection {
         /// The least highlight level a frame's tubes are handed over from.
         min: f64,
     },
+    /// The tube's centre projects into the ignored region of the frame
+    /// ([`LocateInput::ignore`]).
+    InIgnoredRegion {
+        /// Image position (column, row) of the tube's centre, pixels.
+        pixel: (f64, f64),
+    },
 }
 
 impl Rejection {
     /// A short machine-readable name (`fit_failed`, `low_probability`, `intersects_tube`,
-    /// `underexposed`).
+    /// `underexposed`, `in_ignored_region`).
     pub fn name(&self) -> &'static str {
         match self {
             Rejection::FitFailed(_) => "fit_failed",
             Rejection::LowProbability { .. } => "low_probability",
             Rejection::IntersectsTube { .. } => "intersects_tube",
             Rejection::Underexposed { .. } => "underexposed",
+            Rejection::InIgnoredRegion { .. } => "in_ignored_region",
         }
     }
 }
@@ -339,6 +351,12 @@ impl Locator {
     pub fn locate(&self, input: &LocateInput) -> Result<LocateOutput> {
         let t0 = Instant::now();
         let up = Self::up_direction(input)?;
+        if let Some(m) = input.ignore {
+            let (w, h) = (input.image.width() as usize, input.image.height() as usize);
+            if (m.width, m.height) != (w, h) || m.data.len() != w * h {
+                return Err(PipelineError::Input(format!("the ignore mask is {}x{} but the image is {w}x{h}", m.width, m.height)));
+            }
+        }
         let detections = self.detect(input.image, input.ground.as_ref())?;
         let px = FramePixels::of(input.image, self.settings.colour_ends);
         let detect_s = t0.elapsed().as_secs_f64();
@@ -363,6 +381,7 @@ impl Locator {
         let mut tube_items = Vec::new();
         let cal = &self.settings.calibration;
         let (highlight, min_highlight) = (highlight_level(&px.gray), self.settings.min_highlight_level);
+        let ignored = |pose: &TubeAxisPose| ignored_pixel(input.ignore, &self.camera.model, pose);
         for (pose, item) in poses.into_iter().zip(seed_item) {
             let t_cam_grasp = pose.grasp_frame(&up);
             let failure = pose.failure.as_ref().map(|f| f.reason);
@@ -370,6 +389,10 @@ impl Locator {
             let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability };
             match (tube.pose.converged, failure) {
                 (true, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
+                (true, _) if probability >= cal.threshold && ignored(&tube.pose).is_some() => {
+                    let pixel = ignored(&tube.pose).expect("checked in the guard");
+                    rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } })
+                }
                 (true, _) if probability >= cal.threshold => {
                     tubes.push(tube);
                     tube_items.push(item);
@@ -457,6 +480,23 @@ impl Locator {
 /// bit depth.
 pub fn frame_highlight_level(image: &image::DynamicImage) -> f64 {
     highlight_level(&crate::frame::grey_levels(image))
+}
+
+/// The ignore mask ([`LocateInput::ignore`]) drawn in `image`: a pixel is ignored where any
+/// of its colour channels is not zero (alpha is not read), whatever the sample depth.
+pub fn ignore_mask_of(image: &DynamicImage) -> Plane<u8> {
+    let rgb = image.to_rgb16();
+    Plane { width: rgb.width() as usize, height: rgb.height() as usize, data: rgb.pixels().map(|p| u8::from(p.0.iter().any(|&c| c != 0))).collect() }
+}
+
+/// The image position (column, row) of `pose`'s centre under `camera` when it falls on a
+/// non-zero pixel of `ignore` (nearest pixel), else `None`.
+fn ignored_pixel(ignore: Option<&Plane<u8>>, camera: &tubeloc_core::CameraModel, pose: &TubeAxisPose) -> Option<(f64, f64)> {
+    let mask = ignore?;
+    let p = camera.project(&nalgebra::Point3::from(pose.centre))?;
+    let (x, y) = (p.x.round(), p.y.round());
+    let inside = x >= 0.0 && y >= 0.0 && (x as usize) < mask.width && (y as usize) < mask.height;
+    (inside && mask.data[y as usize * mask.width + x as usize] != 0).then_some((p.x, p.y))
 }
 
 /// The grey level of a frame's highlights: the 99th percentile of its 8-bit grey levels. A

@@ -43,7 +43,7 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     assert_eq!(locator.camera().name, "L");
 
     // Mono with the ground plane.
-    let mono = locator.locate(&LocateInput { image: &li, right: None, ground: Some(ground), up: None }).unwrap();
+    let mono = locator.locate(&LocateInput { image: &li, right: None, ground: Some(ground), up: None, ignore: None }).unwrap();
     assert_eq!((mono.tubes.len(), mono.rejected.len()), (1, 0));
     let t = &mono.tubes[0];
     let (dc, da) = ((t.pose.centre - truth.centre).norm(), angle_deg(&t.pose.axis, &truth.axis));
@@ -64,7 +64,7 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     assert_eq!(json["grasp"]["feasible"], serde_json::json!(true), "{json}");
 
     // Stereo: the pair's points and the stereo stages.
-    let st = locator.locate(&LocateInput { image: &li, right: Some(&ri), ground: Some(ground), up: None }).unwrap();
+    let st = locator.locate(&LocateInput { image: &li, right: Some(&ri), ground: Some(ground), up: None, ignore: None }).unwrap();
     assert_eq!(st.tubes.len(), 1);
     let t = &st.tubes[0];
     let (dc, da) = ((t.pose.centre - truth.centre).norm(), angle_deg(&t.pose.axis, &truth.axis));
@@ -76,7 +76,7 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     assert_eq!(g.t_cam_grasp, t.t_cam_grasp);
 
     // `refine` with the same detections gives the poses `locate` refined, before merging.
-    let (poses, fit_ms) = locator.refine(&LocateInput { image: &li, right: None, ground: Some(ground), up: None }, &mono.detections).unwrap();
+    let (poses, fit_ms) = locator.refine(&LocateInput { image: &li, right: None, ground: Some(ground), up: None, ignore: None }, &mono.detections).unwrap();
     assert_eq!(fit_ms.len(), 1);
     assert_eq!(poses[0], mono.tubes[0].pose);
     // The overlay tells a located tube (green, with its gripper) from a converged fit that was
@@ -91,6 +91,51 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     low.rejected.push(tubeloc_pipeline::RejectedTube { tube, reason: tubeloc_pipeline::Rejection::LowProbability { probability: 0.1, threshold: 0.8 } });
     let shown = locator.overlay_located(&li, &low);
     assert!(count(&shown, LOCATED) == 0 && count(&shown, REJECTED_CONVERGED) > 50);
+}
+
+/// A tube whose centre falls in the ignore mask is listed as `in_ignored_region` at its
+/// centre's pixel, with the pose it would have had; a mask elsewhere changes nothing; a mask
+/// of another size is refused.
+#[test]
+fn a_tube_centred_in_the_ignore_mask_is_not_handed_over() {
+    let model = common::default_model();
+    let cam = common::camera(false);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let (truth, up, gd) = common::random_truth(&mut rng, &model, &cam, (1.2, 1.6));
+    let left = common::render(&model, &cam, truth, up, gd, None, 11, 0.01);
+    let det: TubeDetection = common::mask_detection(&common::tube_mask(&model, &left));
+    let image = to_image(&left.image);
+    let ground = GroundPlane::new(up, gd).unwrap();
+    let locator = Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det], "test")), LocatorSettings::default()).unwrap();
+    let input = |ignore| LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore };
+    let plain = locator.locate(&input(None)).unwrap();
+    assert_eq!(plain.tubes.len(), 1);
+    let centre = cam.project(&nalgebra::Point3::from(plain.tubes[0].pose.centre)).unwrap();
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let square = |cx: f64, cy: f64, r: f64| Plane { width: w, height: h, data: (0..w * h).map(|i| u8::from(((i % w) as f64 - cx).abs() <= r && ((i / w) as f64 - cy).abs() <= r)).collect() };
+    // A small square on the tube's centre.
+    let on_centre = square(centre.x, centre.y, 3.0);
+    let over = locator.locate(&input(Some(&on_centre))).unwrap();
+    assert_eq!((over.tubes.len(), over.rejected.len()), (0, 1));
+    let r = &over.rejected[0];
+    assert_eq!(r.reason.name(), "in_ignored_region");
+    let tubeloc_pipeline::Rejection::InIgnoredRegion { pixel } = r.reason else { panic!("{:?}", r.reason) };
+    assert!((pixel.0 - centre.x).abs() < 1e-9 && (pixel.1 - centre.y).abs() < 1e-9, "{pixel:?} vs {centre}");
+    assert_eq!(r.tube.pose, plain.tubes[0].pose);
+    // The same square 40 px away: the tube is handed over as before.
+    let beside = square(centre.x + 40.0, centre.y, 3.0);
+    let away = locator.locate(&input(Some(&beside))).unwrap();
+    assert_eq!(away.tubes.len(), 1);
+    assert_eq!(away.tubes[0].pose, plain.tubes[0].pose);
+    // A mask drawn in an image (any channel non-zero ignores the pixel).
+    let mut drawn = image::RgbImage::new(cam.width, cam.height);
+    drawn.put_pixel(centre.x.round() as u32, centre.y.round() as u32, image::Rgb([0, 0, 1]));
+    let m = tubeloc_pipeline::ignore_mask_of(&DynamicImage::ImageRgb8(drawn));
+    assert_eq!(m.data.iter().filter(|&&v| v != 0).count(), 1);
+    assert_eq!(locator.locate(&input(Some(&m))).unwrap().tubes.len(), 0);
+    let small = Plane { width: 10, height: 10, data: vec![0u8; 100] };
+    let msg = locator.locate(&input(Some(&small))).unwrap_err().to_string();
+    assert!(msg.contains("ignore mask is 10x10") && msg.contains(&format!("{}x{}", cam.width, cam.height)), "{msg}");
 }
 
 #[test]

@@ -163,18 +163,22 @@ impl PyLocator {
         Ok(PyLocator { locator: RwLock::new(locator), min_probability, last_timings: Mutex::new(None) })
     }
 
-    /// locate(left, right=None, ground=None, up=None) -> list[Tube]
+    /// locate(left, right=None, ground=None, up=None, ignore_mask=None) -> list[Tube]
     ///
     /// The tubes in `left` (a numpy image of the locator's camera; with `right`, the right
     /// image of the pair adds stereo): located tubes best score first, then the rejected
     /// detections (`status` says why), as in `tubeloc locate`'s poses file. ground: the ground
     /// plane "nx,ny,nz,d" or four numbers (camera frame, n·X = d, n up, metres); up: the up
     /// direction (three numbers, camera frame) for the grasp when there is no ground.
-    #[pyo3(signature = (left, right = None, ground = None, up = None))]
-    fn locate<'py>(&self, py: Python<'py>, left: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>, up: Option<Vec<f64>>) -> PyResult<Vec<PyTube>> {
+    /// ignore_mask: where no tube is handed over (rover hardware in view): a uint8 or uint16
+    /// array of the image's size, non-zero where ignored (`read_image` reads a mask file); a
+    /// tube whose centre falls there gets status `in_ignored_region`.
+    #[pyo3(signature = (left, right = None, ground = None, up = None, ignore_mask = None))]
+    fn locate<'py>(&self, py: Python<'py>, left: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>, up: Option<Vec<f64>>, ignore_mask: Option<&Bound<'py, PyAny>>) -> PyResult<Vec<PyTube>> {
         let image = image_of(left, "left")?;
         let right = right.filter(|r| !r.is_none()).map(|r| image_of(r, "right")).transpose()?;
-        let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: up_of(up)? };
+        let ignore = ignore_mask.filter(|m| !m.is_none()).map(|m| image_of(m, "ignore_mask").map(|i| tubeloc_pipeline::ignore_mask_of(&i))).transpose()?;
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: up_of(up)?, ignore: ignore.as_ref() };
         let found = py.detach(|| self.read().locate(&input)).map_err(|e| chain_to_py(&e))?;
         *self.last_timings.lock().unwrap_or_else(|e| e.into_inner()) = Some(found.timings.clone());
         Ok(found.tubes.iter().map(|t| PyTube::from_located(py, t, "located")).chain(found.rejected.iter().map(|r| PyTube::from_located(py, &r.tube, r.reason.name()))).collect())
@@ -251,7 +255,7 @@ fn refine_with<'py>(py: Python<'py>, locator: &Locator, image: &Bound<'py, PyAny
     let image = image_of(image, "image")?;
     let right = right.filter(|r| !r.is_none()).map(|r| image_of(r, "right")).transpose()?;
     let dets = detections_from_py(py, detections)?;
-    let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: None };
+    let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: None, ignore: None };
     let (poses, _) = py.detach(|| locator.refine(&input, &dets)).map_err(|e| chain_to_py(&e))?;
     Ok(poses.iter().map(|p| PyTube::from_pose(py, p)).collect())
 }

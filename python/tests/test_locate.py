@@ -17,6 +17,21 @@ def cli_locate(cli, tmp_path, rig, image, *extra):
     return json.loads(out.read_text())
 
 
+def write_grey_png(path, grey):
+    """Writes an 8-bit grey HxW array as a PNG (zlib, no filter)."""
+    import struct  # noqa: PLC0415
+    import zlib  # noqa: PLC0415
+
+    h, w = grey.shape
+    raw = b"".join(b"\x00" + grey[y].astype(np.uint8).tobytes() for y in range(h))
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
+    Path(path).write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
 def assert_same_tube(py_tube, cli_tube):
     assert py_tube.status == cli_tube["status"]
     assert py_tube.converged == cli_tube["converged"]
@@ -98,6 +113,34 @@ def test_an_underexposed_frame_hands_over_no_tube(demo_scene):
     assert not [t for t in unguarded if t.status == "underexposed"]
     with pytest.raises(tubeloc.TubelocError, match="grey level in \\[0, 255\\]"):
         tubeloc.Locator(str(rig), min_highlight_level=300)
+
+
+def test_ignore_mask_equals_the_cli(cli, demo_scene, tmp_path):
+    # A mask over the whole frame: every tube located without it is listed as
+    # `in_ignored_region`, as `tubeloc locate --ignore-mask` lists it; an empty mask changes
+    # nothing; a mask of another size raises the CLI's message.
+    rig, image, ground = demo_scene
+    img = tubeloc.read_image(image)
+    locator = tubeloc.Locator(str(rig))
+    plain = locator.locate(img, ground=ground)
+    located = [t for t in plain if t.status == "located"]
+    assert located, "the demo scene locates tubes"
+    full = np.full(img.shape[:2], 255, dtype=np.uint8)
+    mask_path = tmp_path / "mask.png"
+    write_grey_png(mask_path, full)
+    out = tmp_path / "poses.json"
+    run = cli("locate", "--rig", rig, "--image", image, "--out", out, "--ground", ground, "--ignore-mask", mask_path, check=False)
+    assert run.returncode == 3, run.stderr  # no tube located
+    doc = json.loads(out.read_text())
+    masked = locator.locate(img, ground=ground, ignore_mask=full)
+    assert [t.status for t in masked] == [t["status"] for t in doc["tubes"]]
+    assert sum(t.status == "in_ignored_region" for t in masked) == len(located)
+    for py_tube, cli_tube in zip(masked, doc["tubes"]):
+        assert_same_tube(py_tube, cli_tube)
+    empty = locator.locate(img, ground=ground, ignore_mask=np.zeros(img.shape[:2], dtype=np.uint8))
+    assert [t.to_dict() for t in empty] == [t.to_dict() for t in plain]
+    with pytest.raises(tubeloc.TubelocError, match="ignore mask is 10x10"):
+        locator.locate(img, ground=ground, ignore_mask=np.zeros((10, 10), dtype=np.uint8))
 
 
 def test_fused_detect_equals_the_cli(cli, demo_scene, tmp_path):

@@ -162,6 +162,12 @@ pub struct LocateArgs {
     /// listed as `underexposed` (0: off).
     #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL, value_parser = crate::args::grey_level)]
     pub min_highlight_level: f64,
+    /// Mask image of the frames' size whose non-zero pixels cover what no tube is handed over
+    /// from: rover hardware in view (the arm, the deck, wheels) or any other region. A tube
+    /// whose centre falls there is listed as `in_ignored_region`. A fisheye frame's mask is
+    /// drawn on the raw frame and resampled with it.
+    #[arg(long)]
+    pub ignore_mask: Option<PathBuf>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
     /// the working scale of this band (or of --ground), or "off" (the image as it is).
     #[arg(long, default_value = "1:4", value_parser = crate::args::range_band)]
@@ -201,6 +207,7 @@ impl LocateArgs {
             calibration: None,
             min_probability: None,
             min_highlight_level: tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL,
+            ignore_mask: None,
             range_m: "1:4".into(),
             out: Some(out),
             overlay: None,
@@ -371,6 +378,8 @@ pub struct Setup {
     /// The fisheye (CAHVORE) models of the cameras whose labels give one, by camera name: their
     /// images are resampled into the camera, the model's linear part, before locating.
     fisheyes: BTreeMap<String, tubeloc_calib::interchange::cahvore::Cahvore>,
+    /// `--ignore-mask`: its path and image, as read.
+    ignore_mask: Option<(PathBuf, image::DynamicImage)>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
@@ -465,7 +474,11 @@ impl Setup {
             Some(ext) => FrameLocators::External(ext),
             None => FrameLocators::Shared(Box::new(std::sync::Mutex::new(locator))),
         };
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, detector_name })
+        let ignore_mask = match &a.ignore_mask {
+            Some(p) => Some((p.clone(), open_image(p).context("--ignore-mask")?)),
+            None => None,
+        };
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, ignore_mask, detector_name })
     }
 
     /// The rig camera that took `image`: the run's, or with a camera per image the one named
@@ -487,6 +500,16 @@ impl Setup {
             bail!("{} is {w}x{h} but rig camera {:?} in {} is {}x{}", image.display(), cam.name, self.rig_path.display(), cam.model.width, cam.model.height);
         }
         Ok(())
+    }
+
+    /// The `--ignore-mask` of the frame `image` (of `size` pixels, as stored) as the camera
+    /// `camera` sees it (resampled with a fisheye frame); the mask must be the frame's size.
+    fn ignore_mask_for(&self, camera: &tubeloc_core::RigCamera, image: &Path, size: (u32, u32)) -> Result<Option<tubeloc_core::Plane<u8>>> {
+        let Some((path, mask)) = &self.ignore_mask else { return Ok(None) };
+        if (mask.width(), mask.height()) != size {
+            bail!("--ignore-mask {} is {}x{} but the image {} is {}x{}: the mask is drawn on the frame as stored", path.display(), mask.width(), mask.height(), image.display(), size.0, size.1);
+        }
+        Ok(Some(tubeloc_pipeline::ignore_mask_of(&self.as_seen_by(camera, mask.clone()).0)))
     }
 
     /// `image` as the camera `camera` sees it: resampled into it when the camera is a fisheye
@@ -590,7 +613,8 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             (Some(p), None) => Some(open_image(p)?),
             (None, _) => None,
         };
-        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up };
+        let ignore = setup.ignore_mask_for(&cam, &frame.image, size)?;
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up, ignore: ignore.as_ref() };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let warning = (found.highlight_level < setup.settings.min_highlight_level).then(|| {
             format!(

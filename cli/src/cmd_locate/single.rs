@@ -69,6 +69,10 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
                 lines.push(format!("  tube {i}: rejected (the frame is underexposed: highlights at grey level {highlight:.0} < {min:.0}), score {:.2}", p.score));
                 continue;
             }
+            Some(tubeloc_pipeline::Rejection::InIgnoredRegion { pixel }) => {
+                lines.push(format!("  tube {i}: rejected (its centre, pixel ({:.0}, {:.0}), lies in the --ignore-mask region), score {:.2}", pixel.0, pixel.1, p.score));
+                continue;
+            }
             _ => {}
         }
         let c = p.centre * 1e3;
