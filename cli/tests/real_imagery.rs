@@ -264,6 +264,20 @@ fn an_ignore_mask_over_the_arm_keeps_its_turret_from_the_planner() {
     let f = |v: &Value| v.as_f64().unwrap();
     let (u, v) = (f(&m["fx"]) * f(&c[0]) / f(&c[2]) + f(&m["cx"]), f(&m["fy"]) * f(&c[1]) / f(&c[2]) + f(&m["cy"]));
     assert!(in_mask(u.round(), v.round()), "the turret's tube at ({u:.0}, {v:.0}) is outside the mask");
+    // A folder of masks by image stem (the arm moves between frames): the frame's own mask is
+    // used; a frame without one is not masked; the image's own folder is refused.
+    let masks = dir.path().join("masks");
+    std::fs::create_dir_all(&masks).unwrap();
+    let per_frame = dir.path().join("per_frame.json");
+    let o = tubeloc(&["locate", "--rig", p(&cams), "--image", p(&image), "--ignore-mask", p(&masks), "--out", p(&per_frame)]);
+    assert_eq!(o.status.code(), Some(0), "no mask for the frame: its tube is located; {}", stderr(&o));
+    std::fs::copy(&mask_path, masks.join("NRB_701384494RAD_F0933408NCAM00200M1.png")).unwrap();
+    let o = tubeloc(&["locate", "--rig", p(&cams), "--image", p(&image), "--ignore-mask", p(&masks), "--out", p(&per_frame)]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert_eq!(doc_of(&per_frame)["tubes"], masked["tubes"]);
+    let o = tubeloc(&["locate", "--rig", p(&cams), "--image", p(&image), "--ignore-mask", p(image.parent().unwrap()), "--out", p(&per_frame)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("is the image itself"), "{}", stderr(&o));
     image::GrayImage::new(512, 512).save(dir.path().join("small.png")).unwrap();
     let o = tubeloc(&["locate", "--rig", p(&cams), "--image", p(&image), "--ignore-mask", p(&dir.path().join("small.png")), "--out", p(&dir.path().join("x.json"))]);
     assert_eq!(o.status.code(), Some(1));

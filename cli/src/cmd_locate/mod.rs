@@ -163,9 +163,11 @@ pub struct LocateArgs {
     #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL, value_parser = crate::args::grey_level)]
     pub min_highlight_level: f64,
     /// Mask image of the frames' size whose non-zero pixels cover what no tube is handed over
-    /// from: rover hardware in view (the arm, the deck, wheels) or any other region. A tube
-    /// whose centre falls there is listed as `in_ignored_region`. A fisheye frame's mask is
-    /// drawn on the raw frame and resampled with it.
+    /// from: rover hardware in view (the arm, the deck, wheels) or any other region; or a
+    /// folder of masks, one per frame named after the image (`<image stem>.png`; a frame
+    /// without one is not masked), as the arm moves between frames. A tube whose centre falls
+    /// there is listed as `in_ignored_region`. A fisheye frame's mask is drawn on the raw
+    /// frame and resampled with it.
     #[arg(long)]
     pub ignore_mask: Option<PathBuf>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres: the learned detector runs at
@@ -378,8 +380,8 @@ pub struct Setup {
     /// The fisheye (CAHVORE) models of the cameras whose labels give one, by camera name: their
     /// images are resampled into the camera, the model's linear part, before locating.
     fisheyes: BTreeMap<String, tubeloc_calib::interchange::cahvore::Cahvore>,
-    /// `--ignore-mask`: its path and image, as read.
-    ignore_mask: Option<(PathBuf, image::DynamicImage)>,
+    /// `--ignore-mask`: one mask for every frame, or a folder of masks by image stem.
+    ignore_mask: Option<IgnoreMasks>,
     /// Name of the detector (`learned`, `line2d`, `external`).
     pub detector_name: String,
 }
@@ -475,7 +477,8 @@ impl Setup {
             None => FrameLocators::Shared(Box::new(std::sync::Mutex::new(locator))),
         };
         let ignore_mask = match &a.ignore_mask {
-            Some(p) => Some((p.clone(), open_image(p).context("--ignore-mask")?)),
+            Some(p) if p.is_dir() => Some(IgnoreMasks::PerFrame(p.clone())),
+            Some(p) => Some(IgnoreMasks::Every(p.clone(), open_image(p).context("--ignore-mask")?)),
             None => None,
         };
         Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, ignore_mask, detector_name })
@@ -505,7 +508,25 @@ impl Setup {
     /// The `--ignore-mask` of the frame `image` (of `size` pixels, as stored) as the camera
     /// `camera` sees it (resampled with a fisheye frame); the mask must be the frame's size.
     fn ignore_mask_for(&self, camera: &tubeloc_core::RigCamera, image: &Path, size: (u32, u32)) -> Result<Option<tubeloc_core::Plane<u8>>> {
-        let Some((path, mask)) = &self.ignore_mask else { return Ok(None) };
+        let (path, read);
+        let mask = match &self.ignore_mask {
+            None => return Ok(None),
+            Some(IgnoreMasks::Every(p, m)) => {
+                path = p.clone();
+                m
+            }
+            Some(IgnoreMasks::PerFrame(dir)) => {
+                path = dir.join(format!("{}.png", image.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default()));
+                if !path.exists() {
+                    return Ok(None);
+                }
+                if std::fs::canonicalize(&path).ok() == std::fs::canonicalize(image).ok() {
+                    bail!("--ignore-mask {}: the mask of {} is the image itself; keep the masks in a folder of their own", dir.display(), image.display());
+                }
+                read = open_image(&path).context("--ignore-mask")?;
+                &read
+            }
+        };
         if (mask.width(), mask.height()) != size {
             bail!("--ignore-mask {} is {}x{} but the image {} is {}x{}: the mask is drawn on the frame as stored", path.display(), mask.width(), mask.height(), image.display(), size.0, size.1);
         }
@@ -542,6 +563,13 @@ impl Setup {
             }
         }
     }
+}
+
+/// `--ignore-mask`: one mask (its path and image) for every frame, or a folder holding a mask
+/// per frame, `<image stem>.png`.
+enum IgnoreMasks {
+    Every(PathBuf, image::DynamicImage),
+    PerFrame(PathBuf),
 }
 
 /// A camera of a PDS3 label, with the fisheye model its image is resampled from, if any.
