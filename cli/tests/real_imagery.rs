@@ -257,6 +257,23 @@ fn an_ignore_mask_over_the_arm_keeps_its_turret_from_the_planner() {
     let masked = doc_of(&masked);
     let tubes = masked["tubes"].as_array().unwrap();
     assert!(tubes.iter().all(|t| t["status"] != "located"), "{}", masked["tubes"]);
+    // The overlay shows the ignored region tinted (blue over grey), and only it.
+    let shown = image::open(dir.path().join("masked.overlay.png")).unwrap().to_rgb8();
+    let tinted = |x: u32, y: u32| {
+        let [r, _, b] = shown.get_pixel(x, y).0;
+        b as i32 > r as i32 + 40
+    };
+    let (mut inside, mut outside) = (0, 0);
+    for (x, y, _) in shown.enumerate_pixels() {
+        if tinted(x, y) {
+            if in_mask(x as f64, y as f64) {
+                inside += 1
+            } else {
+                outside += 1
+            }
+        }
+    }
+    assert!(inside > 100_000 && outside == 0, "tinted pixels: {inside} inside the mask, {outside} outside");
     let ignored: Vec<&Value> = tubes.iter().filter(|t| t["status"] == "in_ignored_region").collect();
     assert_eq!(ignored.len(), 1, "{}", masked["tubes"]);
     assert_eq!(ignored[0]["centre"], located[0]["centre"]);

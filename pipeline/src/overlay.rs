@@ -17,6 +17,22 @@ pub const GRASP_FEASIBLE: [u8; 3] = [0, 210, 255];
 /// Gripper outline colour where no grasp candidate is feasible.
 pub const GRASP_INFEASIBLE: [u8; 3] = [255, 150, 0];
 
+/// Tint of the ignored region ([`crate::LocateInput::ignore`]) on an overlay.
+pub const IGNORED: [u8; 3] = [120, 80, 255];
+
+/// Tints the grey pixels of `overlay` (those not drawn on: equal channels) that `ignore` covers
+/// (non-zero), `p' = 0.65 p + 0.35 IGNORED`, so the region no tube was handed over from shows
+/// under the contours. `ignore` must be the overlay's size.
+pub fn tint_ignored(overlay: &mut image::RgbImage, ignore: &Plane<u8>) {
+    debug_assert_eq!((overlay.width() as usize, overlay.height() as usize), (ignore.width, ignore.height));
+    for (px, &m) in overlay.pixels_mut().zip(&ignore.data) {
+        let [r, g, b] = px.0;
+        if m != 0 && r == g && g == b {
+            px.0 = std::array::from_fn(|k| (0.65 * px.0[k] as f32 + 0.35 * IGNORED[k] as f32).round() as u8);
+        }
+    }
+}
+
 /// An RGB copy of `gray` with each pose's fitted contour (every 0.5 px) and a 7 px cross at its
 /// centre drawn, [`LOCATED`] green for converged poses and [`NOT_CONVERGED`] red for the
 /// others, in order.
@@ -103,4 +119,22 @@ pub fn draw_located(gray: &Plane<u8>, refiner: &Refiner, planner: &tubeloc_grasp
         }
     }
     img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Grey pixels under the mask take the tint; drawn (coloured) pixels and pixels outside
+    /// keep their colour.
+    #[test]
+    fn the_ignored_region_is_tinted_under_the_drawing() {
+        let mut img = image::RgbImage::from_pixel(3, 1, image::Rgb([100, 100, 100]));
+        img.put_pixel(1, 0, image::Rgb(LOCATED));
+        let mask = Plane { width: 3, height: 1, data: vec![1, 1, 0] };
+        tint_ignored(&mut img, &mask);
+        assert_eq!(img.get_pixel(0, 0).0, [107, 93, 154]);
+        assert_eq!(img.get_pixel(1, 0).0, LOCATED);
+        assert_eq!(img.get_pixel(2, 0).0, [100, 100, 100]);
+    }
 }

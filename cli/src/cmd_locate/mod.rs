@@ -654,7 +654,13 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         });
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
-            true => Some(tubeloc_pipeline::overlay::png_bytes(&locator.overlay_located(&image, &found)).context("encoding the overlay PNG")?),
+            true => {
+                let mut shown = locator.overlay_located(&image, &found);
+                if let Some(m) = &ignore {
+                    tubeloc_pipeline::overlay::tint_ignored(&mut shown, m);
+                }
+                Some(tubeloc_pipeline::overlay::png_bytes(&shown).context("encoding the overlay PNG")?)
+            }
             false => None,
         };
         let doc = LocateDoc {
