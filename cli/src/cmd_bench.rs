@@ -439,14 +439,16 @@ pub fn run(a: BenchArgs) -> Result<()> {
             line2d_far_scale: a.line2d_far_scale,
             line2d_max_upsample: a.line2d_max_upsample,
         };
-        st.run("real", &[out.join("real").join("report.md")], || {
+        let real_dir = crate::cmd_bench_real::stage_dir(&out, a.real_split);
+        let name = real_dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        st.run(&name, &[real_dir.join("report.md")], || {
             crate::cmd_bench_real::run(&stage, &out)?;
             Ok(json!({}))
         })?;
     }
 
     // 9. Report.
-    let report = write_report(&out, &st, &n_img)?;
+    let report = write_report(&out, &st, &n_img, a.real_split)?;
     eprintln!("\nbench finished in {:.0} s (this run); report: {}", t0.elapsed().as_secs_f64(), report.display());
     Ok(())
 }
@@ -482,7 +484,7 @@ fn f3(x: f64) -> String {
 }
 
 /// Writes `<out>/report.md` from the stage results; returns its path.
-fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Result<PathBuf> {
+fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, real_split: tubeloc_synth::real_set::RealSplit) -> Result<PathBuf> {
     let mut r = String::new();
     let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
     let _ = writeln!(
@@ -566,7 +568,7 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>) -> Resul
         let _ = writeln!(r, "\n## Tag-pair ground truth vs the renderer's exact poses (with-tags split)\n\n`tubeloc calib groundtruth` (PnP on all eight corners + LM) on the rendered images; sRGB images are linearized before tag detection.\n");
         r += &crate::figures::tag_table(t);
     }
-    if let Ok(real) = std::fs::read_to_string(out.join("real").join("report.md")) {
+    if let Ok(real) = std::fs::read_to_string(crate::cmd_bench_real::stage_dir(out, real_split).join("report.md")) {
         let _ = writeln!(r, "\n{real}");
     }
     let _ = writeln!(r, "\n## Timings and memory\n\n| stage | wall s | peak RSS of the bench process so far, MiB |\n|---|---|---|");

@@ -15,7 +15,8 @@
 //!     shipped clutter verifier at its threshold; AP50 / AR, false detections per frame, time;
 //!     and the fused detector (every Line2D candidate scored by the learned segmenter's
 //!     agreement, [`tubeloc_detect::fused`]) on the same frames.
-//! Results go to `<out>/real/report.md` and `<out>/real/summary.json`.
+//! Results go to `report.md` and `summary.json` in `<out>/real` (`<out>/real_val` for the
+//! validation part).
 
 use crate::cmd_detect_line2d::Line2dRunner;
 use anyhow::{bail, Context, Result};
@@ -328,12 +329,22 @@ fn split_name(split: tubeloc_synth::real_set::RealSplit) -> &'static str {
     }
 }
 
-/// Runs the real stage into `<out>/real`; returns the report's markdown section.
+/// The folder of the real stage of `split` under the bench's output folder `out`:
+/// `<out>/real` for the test part, `<out>/real_val` for the validation part, so that a run of
+/// one part never stands in for the other.
+pub fn stage_dir(out: &Path, split: tubeloc_synth::real_set::RealSplit) -> PathBuf {
+    match split {
+        tubeloc_synth::real_set::RealSplit::Test => out.join("real"),
+        other => out.join(format!("real_{}", split_name(other))),
+    }
+}
+
+/// Runs the real stage into [`stage_dir`]; returns the report's markdown section.
 pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     if !stage.data.join("MANIFEST.tsv").exists() {
         bail!("{}: no MANIFEST.tsv (the real data folder, ../shared/data/real_mars)", stage.data.display());
     }
-    let dir = out.join("real");
+    let dir = stage_dir(out, stage.split);
     std::fs::create_dir_all(&dir)?;
     let part = split_name(stage.split);
     // negatives_val measures false positives only: never run where settings are chosen.

@@ -173,11 +173,13 @@ fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let out = dir.path().join("bench");
     let skip = "line2d,learned,poses,stereo,fullres,tags";
     ok(&["bench", "--dataset", p(&ds), "--skip", skip, "--real-data", p(&real_data()), "--real-frames", "2", "--real-split", "val", "--out", p(&out)]);
-    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/summary.json")).unwrap()).unwrap();
+    // Its own folder: a validation run never stands in for the test part's.
+    assert!(!out.join("real").exists());
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real_val/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["split"], "val");
     assert!(summary["negatives"].is_null() && summary["line2d"]["negatives"].is_null() && summary["fused"]["negatives"].is_null(), "{}", summary["negatives"]);
     for set in ["val_grey", "val_colour"] {
-        let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real").join(set).join("annotations.json")).unwrap()).unwrap();
+        let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real_val").join(set).join("annotations.json")).unwrap()).unwrap();
         let images = gt["images"].as_array().unwrap();
         assert!(!images.is_empty(), "{set}");
         for im in images.iter().filter(|im| im["sol"].is_i64()) {
@@ -185,14 +187,15 @@ fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
             assert!(!TEST_SOLS.iter().any(|t| (t - sol).abs() <= 1), "{set}: sol {sol} is a test sol");
         }
     }
-    assert!(!out.join("real/test_grey").exists());
     let frames = summary["negatives_pds"]["per_frame"].as_array().unwrap();
     assert!(!frames.is_empty());
     for f in frames {
         let sol = f["sol"].as_i64().unwrap();
         assert!([38, 100].iter().any(|v: &i64| (v - sol).abs() <= 1), "PDS frame of sol {sol} is not a validation sol");
     }
-    let md = std::fs::read_to_string(out.join("real/report.md")).unwrap();
+    let top = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(top.contains("## Real imagery (val part"), "{top}");
+    let md = std::fs::read_to_string(out.join("real_val/report.md")).unwrap();
     assert!(md.starts_with("## Real imagery (val part") && md.contains("`negatives_val`): not run on the val part"), "{md}");
     let o = tubeloc(&["bench", "--dataset", p(&ds), "--real-split", "train", "--out", p(&dir.path().join("b2"))]);
     let e = stderr(&o);
