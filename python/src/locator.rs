@@ -171,8 +171,9 @@ impl PyLocator {
     /// plane "nx,ny,nz,d" or four numbers (camera frame, n·X = d, n up, metres); up: the up
     /// direction (three numbers, camera frame) for the grasp when there is no ground.
     /// ignore_mask: where no tube is handed over (rover hardware in view): a uint8 or uint16
-    /// array of the image's size, non-zero where ignored (`read_image` reads a mask file); a
-    /// tube whose centre falls there gets status `in_ignored_region`.
+    /// array of `left`'s size, in its pixels, non-zero where ignored (`read_image` reads a
+    /// mask file; for a fisheye product, draw it on the image `read_product` returns); a tube
+    /// whose centre falls there gets status `in_ignored_region`.
     #[pyo3(signature = (left, right = None, ground = None, up = None, ignore_mask = None))]
     fn locate<'py>(&self, py: Python<'py>, left: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>, up: Option<Vec<f64>>, ignore_mask: Option<&Bound<'py, PyAny>>) -> PyResult<Vec<PyTube>> {
         let image = image_of(left, "left")?;
