@@ -130,6 +130,13 @@ fn fusion_config(path: Option<&Path>) -> Result<tubeloc_detect::fused::FusionPar
     Ok(params)
 }
 
+/// The warning `tubeloc detect` prints for an underexposed frame (highlights below `locate`'s
+/// default `--min-highlight-level`, record 0062), whatever the method, or `None`.
+pub fn underexposure_warning(path: &Path, image: &image::DynamicImage) -> Option<String> {
+    let (level, min) = (tubeloc_pipeline::frame_highlight_level(image), tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL);
+    (level < min).then(|| format!("warning: {}: underexposed (its highlights lie at grey level {level:.0} < {min:.0}): its detections are unreliable, and tubeloc locate hands over no tube from it", path.display()))
+}
+
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;

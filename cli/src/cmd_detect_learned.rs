@@ -149,13 +149,6 @@ pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera:
     Ok(vec![tubeloc_detect::scale::working_scale(&cam, ground, band); images.len()])
 }
 
-/// The warning `tubeloc detect` prints for an underexposed frame (highlights below `locate`'s
-/// default `--min-highlight-level`, record 0062), or `None`.
-pub fn underexposure_warning(path: &Path, image: &image::DynamicImage) -> Option<String> {
-    let (level, min) = (tubeloc_pipeline::frame_highlight_level(image), tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL);
-    (level < min).then(|| format!("warning: {}: underexposed (its highlights lie at grey level {level:.0} < {min:.0}): its detections are unreliable, and tubeloc locate hands over no tube from it", path.display()))
-}
-
 /// Runs the learned model over images, each at its working scale (`scales[i]`, 1 = as it
 /// is); returns the output entries.
 pub fn run_learned(model: &ModelChoice, images: &[(u64, PathBuf)], scales: &[f64], cfg: &DecodeConfig) -> Result<Vec<DetectionOut>> {
@@ -167,7 +160,7 @@ pub fn run_learned(model: &ModelChoice, images: &[(u64, PathBuf)], scales: &[f64
         .zip(scales)
         .map(|((id, p), &s)| {
             let image = tubeloc_detect::input::open_image(p).map_err(|e| anyhow::anyhow!("reading image {}: {e}", p.display()))?;
-            if let Some(warn) = underexposure_warning(p, &image) {
+            if let Some(warn) = crate::cmd_detect::underexposure_warning(p, &image) {
                 pb.suspend(|| eprintln!("{warn}"));
             }
             let input = tubeloc_detect::input::rgb8_of(&image);

@@ -230,7 +230,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
     let mut warned_no_camera = false;
     for (id, path) in images {
         let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?;
-        if let Some(warn) = crate::cmd_detect_learned::underexposure_warning(path, &img) {
+        if let Some(warn) = crate::cmd_detect::underexposure_warning(path, &img) {
             bar.suspend(|| eprintln!("{warn}"));
         }
         let img = img.into_rgb8();

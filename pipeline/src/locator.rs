@@ -381,24 +381,21 @@ impl Locator {
         let mut tube_items = Vec::new();
         let cal = &self.settings.calibration;
         let (highlight, min_highlight) = (highlight_level(&px.gray), self.settings.min_highlight_level);
-        let ignored = |pose: &TubeAxisPose| ignored_pixel(input.ignore, &self.camera.model, pose);
         for (pose, item) in poses.into_iter().zip(seed_item) {
             let t_cam_grasp = pose.grasp_frame(&up);
             let failure = pose.failure.as_ref().map(|f| f.reason);
             let probability = cal.probability(pose.score);
+            let ignored = ignored_pixel(input.ignore, &self.camera.model, &pose);
             let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability };
-            match (tube.pose.converged, failure) {
-                (true, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
-                (true, _) if probability >= cal.threshold && ignored(&tube.pose).is_some() => {
-                    let pixel = ignored(&tube.pose).expect("checked in the guard");
-                    rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } })
-                }
-                (true, _) if probability >= cal.threshold => {
+            match (tube.pose.converged, failure, ignored) {
+                (true, _, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
+                (true, _, Some(pixel)) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } }),
+                (true, _, None) if probability >= cal.threshold => {
                     tubes.push(tube);
                     tube_items.push(item);
                 }
-                (true, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
-                (false, reason) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
+                (true, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
+                (false, reason, _) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
             }
         }
         let t2 = Instant::now();

@@ -478,7 +478,11 @@ impl Setup {
         };
         let ignore_mask = match &a.ignore_mask {
             Some(p) if p.is_dir() => Some(IgnoreMasks::PerFrame(p.clone())),
-            Some(p) => Some(IgnoreMasks::Every(p.clone(), open_image(p).context("--ignore-mask")?)),
+            Some(p) => {
+                let mask = open_image(p).context("--ignore-mask")?;
+                let plane = tubeloc_pipeline::ignore_mask_of(&mask);
+                Some(IgnoreMasks::Every(p.clone(), mask, plane))
+            }
             None => None,
         };
         Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, ignore_mask, detector_name })
@@ -507,11 +511,15 @@ impl Setup {
 
     /// The `--ignore-mask` of the frame `image` (of `size` pixels, as stored) as the camera
     /// `camera` sees it (resampled with a fisheye frame); the mask must be the frame's size.
-    fn ignore_mask_for(&self, camera: &tubeloc_core::RigCamera, image: &Path, size: (u32, u32)) -> Result<Option<tubeloc_core::Plane<u8>>> {
+    fn ignore_mask_for(&self, camera: &tubeloc_core::RigCamera, image: &Path, size: (u32, u32)) -> Result<Option<std::borrow::Cow<'_, tubeloc_core::Plane<u8>>>> {
         let (path, read);
         let mask = match &self.ignore_mask {
             None => return Ok(None),
-            Some(IgnoreMasks::Every(p, m)) => {
+            Some(IgnoreMasks::Every(p, m, plane)) => {
+                // The same mask for every frame: made once for pinhole frames.
+                if (m.width(), m.height()) == size && !self.fisheyes.contains_key(&camera.name) {
+                    return Ok(Some(std::borrow::Cow::Borrowed(plane)));
+                }
                 path = p.clone();
                 m
             }
@@ -530,7 +538,7 @@ impl Setup {
         if (mask.width(), mask.height()) != size {
             bail!("--ignore-mask {} is {}x{} but the image {} is {}x{}: the mask is drawn on the frame as stored", path.display(), mask.width(), mask.height(), image.display(), size.0, size.1);
         }
-        Ok(Some(tubeloc_pipeline::ignore_mask_of(&self.as_seen_by(camera, mask.clone()).0)))
+        Ok(Some(std::borrow::Cow::Owned(tubeloc_pipeline::ignore_mask_of(&self.as_seen_by(camera, mask.clone()).0))))
     }
 
     /// `image` as the camera `camera` sees it: resampled into it when the camera is a fisheye
@@ -565,10 +573,10 @@ impl Setup {
     }
 }
 
-/// `--ignore-mask`: one mask (its path and image) for every frame, or a folder holding a mask
-/// per frame, `<image stem>.png`.
+/// `--ignore-mask`: one mask for every frame (its path, image, and the mask as a pinhole frame
+/// takes it, made once), or a folder holding a mask per frame, `<image stem>.png`.
 enum IgnoreMasks {
-    Every(PathBuf, image::DynamicImage),
+    Every(PathBuf, image::DynamicImage, tubeloc_core::Plane<u8>),
     PerFrame(PathBuf),
 }
 
@@ -642,7 +650,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             (None, _) => None,
         };
         let ignore = setup.ignore_mask_for(&cam, &frame.image, size)?;
-        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up, ignore: ignore.as_ref() };
+        let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up, ignore: ignore.as_deref() };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
         let warning = (found.highlight_level < setup.settings.min_highlight_level).then(|| {
             format!(
