@@ -171,8 +171,13 @@ fn is_grey(rgb: &[u8]) -> bool {
     rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
 }
 
-/// Narrowest tube body placed in a composite, pixels (the body is 17.1 mm across).
+/// Narrowest tube body placed in a composite, pixels (the body is [`TUBE_BODY_DIAMETER_M`]
+/// across).
 pub const MIN_TUBE_WIDTH_PX: f64 = 3.5;
+
+/// Diameter of the tube's body, metres (the default tube model's, `2 body_radius`), for
+/// widths in pixels `f D / r`.
+pub const TUBE_BODY_DIAMETER_M: f64 = 0.0171;
 
 /// Renders composite `k` (0-based) of `view`; returns `Ok(None)` when the tubes do not fit in
 /// the range band of this view (e.g. a frame looking over the horizon).
@@ -191,7 +196,7 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     let seed: u64 = rng.random();
     let (n, d) = view.ground();
     // No tube narrower than MIN_TUBE_WIDTH_PX: the band ends where the body gets that thin.
-    let far = cfg.range_m.1.min((view.camera.fx * view.camera.fy).sqrt() * 0.0171 / MIN_TUBE_WIDTH_PX);
+    let far = cfg.range_m.1.min((view.camera.fx * view.camera.fy).sqrt() * TUBE_BODY_DIAMETER_M / MIN_TUBE_WIDTH_PX);
     if far <= cfg.range_m.0 {
         return Ok(None);
     }
@@ -252,7 +257,7 @@ pub fn assemble(samples: Vec<(CocoImage, Vec<tubeloc_core::CocoAnnotation>)>, in
 /// Where the tubes of a composite set lie: the 10th, 50th and 90th percentiles (nearest rank,
 /// `round((n - 1) q)` of the sorted values) of their centres' distance from the camera
 /// (metres) and of their body's image width `w = f D / r` (pixels; `f` the image's focal
-/// length, `D` = 17.1 mm).
+/// length, `D` = [`TUBE_BODY_DIAMETER_M`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TubeSpread {
     /// Distance percentiles (p10, p50, p90), metres.
@@ -271,7 +276,7 @@ pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
         let r = t.iter().filter_map(|v| v.as_f64()).map(|v| v * v).sum::<f64>().sqrt();
         if let (Some(f), true) = (fx.get(&a.image_id), r > 0.0) {
             ranges.push(r);
-            widths.push(f * 0.0171 / r);
+            widths.push(f * TUBE_BODY_DIAMETER_M / r);
         }
     }
     let pct = |v: &mut Vec<f64>| {
@@ -284,6 +289,11 @@ pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_body_diameter_is_the_default_tube_models() {
+        assert!((TUBE_BODY_DIAMETER_M - 2.0 * tubeloc_core::TubeModel::default().body_radius()).abs() < 1e-12);
+    }
 
     /// Ten tubes at 1..10 m under f = 1000 px: p10 / p50 / p90 at ranks 1 / 5 / 8 of 0..9
     /// (rounded), i.e. 2 / 6 / 9 m, and widths f D / r at 9 / 5 / 2 m; a tube without a pose is
