@@ -76,7 +76,18 @@ pub struct EvalArgs {
     /// expected calibration error, precision and recall at its threshold.
     #[arg(long, value_name = "CAL.json", conflicts_with = "calibrate")]
     pub(crate) calibration: Option<PathBuf>,
-    /// Free text stored in the `--calibrate` file's `fitted_on`.
+    /// Fit the probability that a refined pose is a tube from its detector score and its
+    /// fit's evidence (`tubeloc_core::PoseEvidence`: logistic regression on the score, the share
+    /// of contour samples on an edge, their number, the seal-end confidence and the axis's σ;
+    /// labels: each --dt mask at IoU >= 0.5 with a true tube) and write it to this JSON file
+    /// (for `tubeloc refine --pose-evidence`). Needs --evidence-poses.
+    #[arg(long, value_name = "OUT.json", requires = "evidence_poses", conflicts_with_all = ["calibrate", "calibration"])]
+    pub(crate) fit_pose_evidence: Option<PathBuf>,
+    /// With --fit-pose-evidence: the refined poses of the --dt detections, one per detection in
+    /// their order (`tubeloc refine --out`, written beside `--snapped-out`).
+    #[arg(long, value_name = "POSES.json", requires = "fit_pose_evidence")]
+    pub(crate) evidence_poses: Option<PathBuf>,
+    /// Free text stored in the `--calibrate` (or `--fit-pose-evidence`) file's `fitted_on`.
     #[arg(long, default_value = "")]
     pub(crate) fitted_on: String,
     /// Break the metrics down by an image attribute (terrain, time, split...) or an annotation
@@ -115,6 +126,8 @@ impl EvalArgs {
             calibration: None,
             max_false_per_image: None,
             max_false_per_negative_image: None,
+            fit_pose_evidence: None,
+            evidence_poses: None,
             fitted_on: String::new(),
             by: Vec::new(),
         }
@@ -200,6 +213,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         eprintln!("calibration a {:.4} b {:.4} threshold {:.4}: ECE {ece:.4}; kept {} of {} detections, precision {precision:.4}, recall {recall:.4}, false positives per image {fp_per_image:.4}{}", c.a, c.b, c.threshold, kept.len(), probs.len(), fp_per_negative.map_or(String::new(), |f| format!(", per image without a tube {f:.4} ({negatives} images)")));
         serde_json::json!({"calibration": c, "ece": ece, "bins": bins, "kept": kept.len(), "detections": probs.len(), "precision_at_threshold": precision, "recall_at_threshold": recall, "false_positives_per_image": fp_per_image, "false_positives_per_negative_image": fp_per_negative})
     });
+    if let (Some(out), Some(poses)) = (&args.fit_pose_evidence, &args.evidence_poses) {
+        fit_pose_evidence(&args, &gt, &dt, poses, out, result.stats[1])?;
+    }
     if let (Some(c), Some(p)) = (&calibration, &args.calibrate) {
         write_json(p, c).with_context(|| format!("writing {}", p.display()))?;
         eprintln!("calibration -> {}", p.display());
@@ -230,6 +246,30 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         let md = tubeloc_eval::report::write_eval_report(out, &report).with_context(|| format!("writing the report in {}", out.display()))?;
         eprintln!("report: {}", md.display());
     }
+    Ok(())
+}
+
+/// `--fit-pose-evidence`: fits the pose-evidence model to the detections `dt` (labelled against
+/// `gt`) and their refined poses (the file `poses`, in the same order), writes it to `out` and
+/// prints its weights and the AP50 of the detections ranked by it (`ap50`: by their scores).
+fn fit_pose_evidence(args: &EvalArgs, gt: &CocoDataset, dt: &[tubeloc_core::CocoResult], poses: &Path, out: &Path, ap50: f64) -> anyhow::Result<()> {
+    let dt_files = args.dt.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
+    let poses_list: Vec<tubeloc_core::TubeAxisPose> = tubeloc_core::files::read_json(poses).with_context(|| format!("reading poses {}", poses.display()))?;
+    if poses_list.len() != dt.len() {
+        anyhow::bail!("--evidence-poses {} holds {} poses but the detections ({dt_files}) are {}: the poses must be those of the detections, in their order (`tubeloc refine --out` with `--snapped-out`)", poses.display(), poses_list.len(), dt.len());
+    }
+    if let Some(k) = (0..dt.len()).find(|&k| dt[k].image_id != poses_list[k].image_id) {
+        anyhow::bail!("--evidence-poses {}: pose {k} is on image {} but detection {k} ({dt_files}) on image {}: the poses must be those of the detections, in their order", poses.display(), poses_list[k].image_id, dt[k].image_id);
+    }
+    let labels = tubeloc_eval::pose_evidence_fit::tube_labels(gt, dt).map_err(|e| anyhow::anyhow!("labelling the detections {dt_files}: {e}"))?;
+    let samples: Vec<_> = poses_list.iter().zip(&labels).map(|(p, &y)| (tubeloc_core::PoseEvidence::features(p), y)).collect();
+    let model = tubeloc_eval::pose_evidence_fit::fit_pose_evidence(&samples, &args.fitted_on).map_err(|e| anyhow::anyhow!("fitting the pose evidence on {dt_files}: {e}"))?;
+    let rescored: Vec<tubeloc_core::CocoResult> = dt.iter().zip(&poses_list).map(|(d, p)| tubeloc_core::CocoResult { score: model.probability(p), ..d.clone() }).collect();
+    let ap50_evidence = CocoEvaluator::new(gt, &rescored, args.iou_type).context("evaluating the re-ranked detections")?.evaluate().stats[1];
+    let weights: Vec<String> = model.features.iter().zip(model.weights).map(|(n, w)| format!("{n} {w:+.3}")).collect();
+    eprintln!("pose evidence fitted on {} detections ({} tubes): {}, bias {:+.3}; AP50 on them {ap50:.3} ranked by score, {ap50_evidence:.3} by the pose evidence", dt.len(), labels.iter().filter(|&&y| y).count(), weights.join(", "), model.bias);
+    write_json(out, &model).with_context(|| format!("writing {}", out.display()))?;
+    eprintln!("pose evidence -> {}", out.display());
     Ok(())
 }
 

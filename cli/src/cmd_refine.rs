@@ -121,6 +121,16 @@ pub struct RefineArgs {
     /// default).
     #[arg(long)]
     pub(crate) snapped_out: Option<PathBuf>,
+    /// With --snapped-out: each snapped detection's score becomes the probability that its
+    /// pose is a tube, from the detector's score and the evidence of the fit (the share of
+    /// contour samples on an edge, their number, the seal-end confidence, the axis's σ;
+    /// `tubeloc_core::PoseEvidence`), so that the detections rank by both. `shipped`: the one
+    /// fitted on the shipped learned model's detections of real validation composites
+    /// (data/models/tubenet.pose_evidence.json, embedded); or a file from `tubeloc eval
+    /// --fit-pose-evidence` (fit your own for another model or detector). The poses (--out)
+    /// keep the detector's score. Default: the detector's scores are kept.
+    #[arg(long, value_name = "shipped|FILE", requires = "snapped_out")]
+    pub(crate) pose_evidence: Option<String>,
     /// Decide which end is the seal end from the image's edges only. By default the tube's
     /// colours decide where the fitted pose shows enough of the gold seal section and the white
     /// body (`tubeloc_refine::seal_end`; grey images: the seal is the darker section).
@@ -199,14 +209,21 @@ pub struct RefineArgs {
     pub(crate) tube: Option<PathBuf>,
 }
 
-/// Writes the snapped detections of `--snapped-out` (if given) and reports how many masks were
-/// snapped.
-pub(crate) fn write_snapped(path: Option<&std::path::Path>, snapped: &[(TubeDetection, bool)]) -> Result<()> {
+/// Writes the snapped detections of `--snapped-out` (if given), each scored by `evidence` from
+/// its pose (`poses`, in the same order) when given, and reports how many masks were snapped.
+pub(crate) fn write_snapped(path: Option<&std::path::Path>, snapped: &[(TubeDetection, bool)], poses: &[tubeloc_core::TubeAxisPose], evidence: Option<&tubeloc_core::PoseEvidence>) -> Result<()> {
     let Some(path) = path else { return Ok(()) };
-    let dets: Vec<&TubeDetection> = snapped.iter().map(|(d, _)| d).collect();
+    anyhow::ensure!(snapped.len() == poses.len(), "internal: {} snapped detections for {} poses", snapped.len(), poses.len());
+    let dets: Vec<TubeDetection> = snapped.iter().zip(poses).map(|((d, _), p)| TubeDetection { score: evidence.map_or(d.score, |e| e.probability(p)), ..d.clone() }).collect();
     files::write_json(path, &dets).with_context(|| format!("writing {}", path.display()))?;
-    eprintln!("{} of {} masks snapped to their poses -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
+    let scored = if evidence.is_some() { ", scored by their poses' evidence" } else { "" };
+    eprintln!("{} of {} masks snapped to their poses{scored} -> {}", snapped.iter().filter(|(_, s)| *s).count(), snapped.len(), path.display());
     Ok(())
+}
+
+/// The pose evidence of `--pose-evidence`, loaded and checked.
+pub(crate) fn pose_evidence_of(spec: Option<&str>) -> Result<Option<tubeloc_core::PoseEvidence>> {
+    spec.map(|s| tubeloc_pipeline::shipped::pose_evidence(s).map_err(|e| anyhow::anyhow!("--pose-evidence: {e}"))).transpose()
 }
 
 /// The refiner's configuration and tube model of the arguments (config and tube model files).
@@ -335,7 +352,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
                 (d, s)
             })
             .collect();
-        write_snapped(args.snapped_out.as_deref(), &snapped)?;
+        write_snapped(args.snapped_out.as_deref(), &snapped, &poses, pose_evidence_of(args.pose_evidence.as_deref())?.as_ref())?;
     }
     if let Some(o) = &args.overlay {
         let png = tubeloc_pipeline::overlay::png_bytes(&locator.overlay(&image, &poses)).context("cannot encode PNG")?;

@@ -95,6 +95,10 @@ fn bench_real_stage_runs_at_a_small_size() {
     for set in ["poses_grey", "poses_colour"] {
         let ap = summary[set]["snapped"]["ap50"].as_f64().unwrap_or(-1.0);
         assert!((0.0..=1.0).contains(&ap), "{set}: snapped AP50 {}", summary[set]);
+        // Ranked by the pose evidence: the same masks, so the same recall.
+        let ranked = &summary[set]["snapped_pose_evidence"];
+        assert!((0.0..=1.0).contains(&ranked["ap50"].as_f64().unwrap_or(-1.0)), "{set}: {ranked}");
+        assert_eq!(ranked["ar"], summary[set]["snapped"]["ar"], "{set}");
         // The centre's offset along the axis beside the one across it, within the 50 mm
         // matching radius.
         if summary[set]["matched"].as_u64().unwrap_or(0) > 0 {
@@ -158,7 +162,7 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert!(real_md.contains("`locate --detector fused` at its defaults"), "{real_md}");
     assert!(real_md.contains("| Line2D grey") && real_md.contains("Line2D on the same frames"), "{real_md}");
     assert!(real_md.contains("searched again 1.2x further enlarged"), "{real_md}");
-    assert!(real_md.contains("| colour, snapped to poses |"), "{real_md}");
+    assert!(real_md.contains("| colour, snapped to poses |") && real_md.contains("| grey, snapped, ranked by pose evidence |"), "{real_md}");
     assert_eq!(real_md.matches("centre along the axis").count(), 2, "{real_md}");
 }
 

@@ -33,6 +33,7 @@ pub mod plot_hist;
 pub mod plot_pr;
 pub mod pose;
 pub mod pose_bop;
+pub mod pose_evidence_fit;
 pub mod pose_match;
 pub mod pose_summary;
 pub mod report;

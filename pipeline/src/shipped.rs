@@ -15,7 +15,7 @@
 use crate::detector::{FusedTubeDetector, LearnedDetector, Line2dTubeDetector};
 use crate::error::{PipelineError, Result};
 use std::path::Path;
-use tubeloc_core::ScoreCalibration;
+use tubeloc_core::{PoseEvidence, ScoreCalibration};
 use tubeloc_detect::learned::shipped::{shipped_model, SHIPPED_MODEL_NAME};
 use tubeloc_detect::learned::DecodeConfig;
 use tubeloc_detect::scale::RangeBand;
@@ -29,6 +29,29 @@ pub const SHIPPED_CALIBRATION_JSON: &str = include_str!("../../data/models/tuben
 /// The shipped model's score calibration, parsed and validated.
 pub fn shipped_calibration() -> Result<ScoreCalibration> {
     embedded_calibration(SHIPPED_CALIBRATION_NAME, SHIPPED_CALIBRATION_JSON)
+}
+
+/// The file the embedded pose evidence comes from, relative to the workspace root.
+pub const SHIPPED_POSE_EVIDENCE_NAME: &str = "data/models/tubenet.pose_evidence.json";
+
+/// The shipped model's pose evidence (JSON text of [`PoseEvidence`]): the probability that a
+/// refined pose is a tube from the shipped model's score and the fit's evidence, fitted by
+/// `tubeloc eval --fit-pose-evidence` on the snapped detections of real validation composites
+/// (record 0066).
+pub const SHIPPED_POSE_EVIDENCE_JSON: &str = include_str!("../../data/models/tubenet.pose_evidence.json");
+
+/// The pose evidence `spec` names: `shipped` (the embedded one, [`SHIPPED_POSE_EVIDENCE_JSON`])
+/// or the path of a file written by `tubeloc eval --fit-pose-evidence`; parsed and validated.
+pub fn pose_evidence(spec: &str) -> Result<PoseEvidence> {
+    let (name, text) = if spec == "shipped" {
+        (SHIPPED_POSE_EVIDENCE_NAME.to_string(), SHIPPED_POSE_EVIDENCE_JSON.to_string())
+    } else {
+        (spec.to_string(), std::fs::read_to_string(spec).map_err(|e| PipelineError::Input(format!("reading pose evidence {spec}: {e}")))?)
+    };
+    let bad = |m: String| PipelineError::Input(format!("pose evidence {name}: {m}"));
+    let m: PoseEvidence = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    m.validate().map_err(bad)?;
+    Ok(m)
 }
 
 /// The file the fused detector's embedded calibration comes from, relative to the workspace
@@ -199,6 +222,21 @@ mod tests {
         assert_eq!(c.target_precision, 0.95);
         assert!(c.threshold > 0.0 && c.threshold < 1.0, "{c:?}");
         assert_eq!(fused_calibration(Some(Path::new("other.safetensors"))).unwrap(), ScoreCalibration::identity());
+    }
+
+    #[test]
+    fn the_embedded_pose_evidence_is_its_file_and_bad_files_are_named() {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(SHIPPED_POSE_EVIDENCE_NAME);
+        let from_file: PoseEvidence = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        let m = pose_evidence("shipped").unwrap();
+        assert_eq!(m, from_file);
+        assert_eq!(pose_evidence(file.to_str().unwrap()).unwrap(), m);
+        assert!(m.fitted_on.contains("--split val"), "{}", m.fitted_on);
+        // The fit's evidence counts the right way on real frames: more contour on edges, a
+        // higher score, a sharper axis make a tube more likely.
+        assert!(m.weights[0] > 0.0 && m.weights[1] > 0.0 && m.weights[2] > 0.0 && m.weights[4] < 0.0, "{m:?}");
+        let e = pose_evidence("absent_evidence.json").unwrap_err().to_string();
+        assert!(e.contains("reading pose evidence absent_evidence.json"), "{e}");
     }
 
     #[test]

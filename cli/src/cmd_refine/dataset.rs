@@ -111,13 +111,15 @@ pub(crate) struct DatasetJob {
     pub seeds_out: Option<PathBuf>,
     /// Output detections with snapped masks.
     pub snapped_out: Option<PathBuf>,
+    /// Scores of the snapped detections from their poses' evidence (`--pose-evidence`).
+    pub pose_evidence: Option<tubeloc_core::PoseEvidence>,
 }
 
 impl DatasetJob {
     /// The job with the shipped settings: refine every image of `dataset` from `seeds`, poses
     /// to `out`.
     pub fn new(dataset: PathBuf, seeds: DatasetSeeds, out: PathBuf) -> Self {
-        DatasetJob { dataset, split: None, max_images: None, seeds, detections_camera: None, ground: None, stereo: false, mask_term: false, settings: Default::default(), out, seeds_out: None, snapped_out: None }
+        DatasetJob { dataset, split: None, max_images: None, seeds, detections_camera: None, ground: None, stereo: false, mask_term: false, settings: Default::default(), out, seeds_out: None, snapped_out: None, pose_evidence: None }
     }
 }
 
@@ -144,6 +146,7 @@ pub fn run(args: &RefineArgs) -> Result<()> {
         out: args.out.clone(),
         seeds_out: args.seeds_out.clone(),
         snapped_out: args.snapped_out.clone(),
+        pose_evidence: super::pose_evidence_of(args.pose_evidence.as_deref())?,
     };
     refine_dataset(&job)
 }
@@ -297,7 +300,7 @@ pub(crate) fn refine_dataset(args: &DatasetJob) -> Result<()> {
     if let Some(s) = &args.seeds_out {
         files::write_json(s, &seeds).with_context(|| format!("writing {}", s.display()))?;
     }
-    super::write_snapped(args.snapped_out.as_deref(), &snapped)?;
+    super::write_snapped(args.snapped_out.as_deref(), &snapped, &poses, args.pose_evidence.as_ref())?;
     let out: PathBuf = args.out.clone();
     eprintln!("{} images, {} poses ({} converged; failures {:?}) -> {}", images.len(), poses.len(), poses.iter().filter(|p| p.converged).count(), reasons, out.display());
     fit_ms.sort_by(f64::total_cmp);
