@@ -37,5 +37,6 @@ fn tubeloc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(locator::detect, m)?)?;
     m.add_function(wrap_pyfunction!(locator::refine, m)?)?;
     m.add_function(wrap_pyfunction!(coco::coco_eval, m)?)?;
+    m.add_function(wrap_pyfunction!(poses::pose_evidence, m)?)?;
     Ok(())
 }

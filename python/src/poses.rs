@@ -131,3 +131,19 @@ impl PyTube {
         )
     }
 }
+
+/// pose_evidence(tube, evidence="shipped") -> float
+///
+/// The probability that a refined tube (a `Tube` from `refine` or `Locator.locate`) is a tube,
+/// from its detector score and its fit's evidence (the share of contour samples on an edge,
+/// their number, the seal-end confidence, the axis's sigma): the score `tubeloc refine
+/// --snapped-out --pose-evidence` gives its snapped detection. `evidence`: `shipped` (fitted
+/// on the shipped model's detections of real validation composites) or a file written by
+/// `tubeloc eval --fit-pose-evidence`.
+#[pyfunction]
+#[pyo3(signature = (tube, evidence = "shipped"))]
+pub fn pose_evidence(tube: PyRef<'_, PyTube>, evidence: &str) -> PyResult<f64> {
+    let model = tubeloc_pipeline::shipped::pose_evidence(evidence).map_err(|e| crate::error::chain_to_py(&e))?;
+    let pose: TubeAxisPose = serde_json::from_str(&tube.json).map_err(crate::error::to_py)?;
+    Ok(model.probability(&pose))
+}

@@ -95,6 +95,16 @@ def test_detect_then_refine_equals_the_cli(cli, demo_scene, tmp_path):
     for p, c in zip(poses, cli_poses):
         np.testing.assert_allclose(p.centre, c["centre"], rtol=0, atol=TOL)
         assert p.status is None and p.t_cam_grasp is None and p.probability is None
+    # The pose evidence of each tube is the score `--pose-evidence` gives its snapped detection.
+    snapped_path = tmp_path / "snapped.json"
+    cli("refine", "--image", image, "--camera", camera, "--detections", dets_path, "--ground", ground, "--out", poses_path, "--snapped-out", snapped_path, "--pose-evidence", "shipped")
+    snapped = json.loads(snapped_path.read_text())
+    assert len(snapped) == len(poses)
+    for p, s in zip(poses, snapped):
+        assert tubeloc.pose_evidence(p) == pytest.approx(s["score"], abs=1e-12)
+        assert 0.0 <= tubeloc.pose_evidence(p, "shipped") <= 1.0
+    with pytest.raises(tubeloc.TubelocError, match="absent.json"):
+        tubeloc.pose_evidence(poses[0], "absent.json")
 
 
 def test_an_underexposed_frame_hands_over_no_tube(demo_scene):
