@@ -155,6 +155,11 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     anyhow::ensure!(pose_list.len() == dt.len(), "{} poses for {} snapped detections", pose_list.len(), dt.len());
     let ranked: Vec<tubeloc_core::coco::CocoResult> = dt.iter().zip(&pose_list).map(|(d, p)| tubeloc_core::coco::CocoResult { score: evidence.probability(p), ..d.clone() }).collect();
     let ranked_eval = CocoEvaluator::new(&gt, &ranked, IouType::Segm)?.evaluate();
+    // Its calibration on these held-out composites: the label it was fitted with (the snapped
+    // mask at IoU >= 0.5 with a true tube).
+    let labels = tubeloc_eval::pose_evidence_fit::tube_labels(&gt, &ranked).map_err(anyhow::Error::msg)?;
+    let probs: Vec<(f64, bool)> = ranked.iter().zip(labels).map(|(d, y)| (d.score, y)).collect();
+    let (_, evidence_ece) = tubeloc_eval::calibration::reliability(&probs, 10);
     let filter = crate::cmd_eval::poses::TruthFilter { field: "T_cam_tube", min_visible: 0.5, in_both_views: false };
     let labels = [("coarse".to_string(), seeds.clone()), ("mono".to_string(), poses.clone())];
     crate::cmd_eval::poses::run(&set.join("annotations.json"), &labels, &filter, 50.0, Some(&dir.join("pose_eval")))?;
@@ -166,7 +171,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
         "across_mm_median": mono["summaries"]["perpendicular_mm"]["median"], "across_mm_p90": mono["summaries"]["perpendicular_mm"]["p90"],
         "along_mm_median": mono["summaries"]["along_axis_abs_mm"]["median"], "along_mm_p90": mono["summaries"]["along_axis_abs_mm"]["p90"],
         "snapped": {"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64},
-        "snapped_pose_evidence": {"ap50": ranked_eval.stats[1], "ap": ranked_eval.stats[0], "ar": ranked_eval.stats[8]},
+        "snapped_pose_evidence": {"ap50": ranked_eval.stats[1], "ap": ranked_eval.stats[0], "ar": ranked_eval.stats[8], "ece": evidence_ece},
     }))
 }
 
@@ -423,7 +428,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (name, v, p) in [("grey, snapped, ranked by pose evidence", &grey, &grey_poses), ("colour, snapped, ranked by pose evidence", &colour, &colour_poses)] {
         let s = &p["snapped_pose_evidence"];
         let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ar": s["ar"], "ms_per_image": num(v, "ms_per_image") + num(&p["snapped"], "refine_ms_per_image")});
-        writeln!(md, "{}", row(name, &merged, "- | -".into())).ok();
+        writeln!(md, "{}", row(name, &merged, format!("- | {:.3}", num(s, "ece")))).ok();
     }
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
@@ -439,7 +444,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones searched once, {threshold_far:.3} on grey ones searched twice); their precision column gives the false detections per image instead.").ok();
     writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0063): every Line2D candidate the verifier scores, each scored S = P L with P its verifier probability and L the best score of a learned instance overlapping it at mask IoU >= {}, kept at S >= {}; masks and poses are Line2D's; time: both detectors. Their precision column gives the false detections per image, then the precision / recall at the fused calibration's threshold (what `locate --detector fused` hands over), and its ECE.", fusion_params.min_iou, fusion_params.threshold).ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
-    writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066).").ok();
+    writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
         writeln!(md, "\nMono refinement of the learned detections on the {kind} {part} composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
     }

@@ -99,6 +99,7 @@ fn bench_real_stage_runs_at_a_small_size() {
         let ranked = &summary[set]["snapped_pose_evidence"];
         assert!((0.0..=1.0).contains(&ranked["ap50"].as_f64().unwrap_or(-1.0)), "{set}: {ranked}");
         assert_eq!(ranked["ar"], summary[set]["snapped"]["ar"], "{set}");
+        assert!((0.0..=1.0).contains(&ranked["ece"].as_f64().unwrap_or(-1.0)), "{set}: {ranked}");
         // The centre's offset along the axis beside the one across it, within the 50 mm
         // matching radius.
         if summary[set]["matched"].as_u64().unwrap_or(0) > 0 {
