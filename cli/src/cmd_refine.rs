@@ -268,6 +268,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
         return dataset::run(&args);
     }
     let settings = args.settings()?;
+    let evidence = pose_evidence_of(args.pose_evidence.as_deref())?;
     let ground = match args.ground {
         Some(GroundArg::Auto) => bail!("--ground auto needs --dataset (each image's nominal ground); give nx,ny,nz,d"),
         Some(GroundArg::Plane(g)) => Some(g),
@@ -352,7 +353,7 @@ pub fn run(args: RefineArgs) -> Result<()> {
                 (d, s)
             })
             .collect();
-        write_snapped(args.snapped_out.as_deref(), &snapped, &poses, pose_evidence_of(args.pose_evidence.as_deref())?.as_ref())?;
+        write_snapped(args.snapped_out.as_deref(), &snapped, &poses, evidence.as_ref())?;
     }
     if let Some(o) = &args.overlay {
         let png = tubeloc_pipeline::overlay::png_bytes(&locator.overlay(&image, &poses)).context("cannot encode PNG")?;

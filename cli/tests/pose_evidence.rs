@@ -91,6 +91,15 @@ fn pose_evidence_fitted_on_some_scenes_ranks_tubes_first_on_others() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("bad.json") && stderr(&o).contains("features"), "{}", stderr(&o));
     assert!(!d.join("p.json").exists() && !d.join("s.json").exists());
+    // One image: the same refusal, before the poses are written.
+    let gt_doc = CocoDataset::load(&gt).unwrap();
+    let (camera, image) = (d.join("camera.json"), ds.join("images").join(&gt_doc.images[0].file_name));
+    std::fs::write(&camera, serde_json::to_string(&gt_doc.images[0].extra["camera"]).unwrap()).unwrap();
+    let o =
+        tubeloc(&["refine", "--image", p(&image), "--camera", p(&camera), "--detections", p(&dets), "--image-id", &gt_doc.images[0].id.to_string(), "--out", p(&d.join("p.json")), "--snapped-out", p(&d.join("s.json")), "--pose-evidence", p(&bad)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("bad.json"), "{}", stderr(&o));
+    assert!(!d.join("p.json").exists() && !d.join("s.json").exists());
     let o = tubeloc(&["refine", "--dataset", p(&ds), "--detections", p(&dets), "--out", p(&poses), "--pose-evidence", "shipped"]);
     assert_eq!(o.status.code(), Some(2), "--pose-evidence without --snapped-out");
     let (short, out) = (d.join("short.json"), d.join("never.json"));
