@@ -153,7 +153,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     let evidence = tubeloc_pipeline::shipped::pose_evidence("shipped")?;
     let pose_list: Vec<tubeloc_core::TubeAxisPose> = files::read_json(&poses)?;
     anyhow::ensure!(pose_list.len() == dt.len(), "{} poses for {} snapped detections", pose_list.len(), dt.len());
-    let ranked: Vec<tubeloc_core::coco::CocoResult> = dt.iter().zip(&pose_list).map(|(d, p)| tubeloc_core::coco::CocoResult { score: evidence.probability(p), ..d.clone() }).collect();
+    let ranked = tubeloc_eval::pose_evidence_fit::scored_by_evidence(&dt, &pose_list, &evidence);
     let ranked_eval = CocoEvaluator::new(&gt, &ranked, IouType::Segm)?.evaluate();
     // Its calibration on these held-out composites: the label it was fitted with (the snapped
     // mask at IoU >= 0.5 with a true tube).

@@ -264,7 +264,7 @@ fn fit_pose_evidence(args: &EvalArgs, gt: &CocoDataset, dt: &[tubeloc_core::Coco
     let labels = tubeloc_eval::pose_evidence_fit::tube_labels(gt, dt).map_err(|e| anyhow::anyhow!("labelling the detections {dt_files}: {e}"))?;
     let samples: Vec<_> = poses_list.iter().zip(&labels).map(|(p, &y)| (tubeloc_core::PoseEvidence::features(p), y)).collect();
     let model = tubeloc_eval::pose_evidence_fit::fit_pose_evidence(&samples, &args.fitted_on).map_err(|e| anyhow::anyhow!("fitting the pose evidence on {dt_files}: {e}"))?;
-    let rescored: Vec<tubeloc_core::CocoResult> = dt.iter().zip(&poses_list).map(|(d, p)| tubeloc_core::CocoResult { score: model.probability(p), ..d.clone() }).collect();
+    let rescored = tubeloc_eval::pose_evidence_fit::scored_by_evidence(dt, &poses_list, &model);
     let ap50_evidence = CocoEvaluator::new(gt, &rescored, args.iou_type).context("evaluating the re-ranked detections")?.evaluate().stats[1];
     let weights: Vec<String> = model.features.iter().zip(model.weights).map(|(n, w)| format!("{n} {w:+.3}")).collect();
     eprintln!("pose evidence fitted on {} detections ({} tubes): {}, bias {:+.3}; AP50 on them {ap50:.3} ranked by score, {ap50_evidence:.3} by the pose evidence", dt.len(), labels.iter().filter(|&&y| y).count(), weights.join(", "), model.bias);

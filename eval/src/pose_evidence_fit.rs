@@ -8,7 +8,7 @@
 
 use nalgebra::{SMatrix, SVector};
 use tubeloc_core::pose_evidence::{EVIDENCE_FEATURES, EVIDENCE_FEATURE_NAMES};
-use tubeloc_core::{CocoDataset, CocoResult, PoseEvidence, Rle};
+use tubeloc_core::{CocoDataset, CocoResult, PoseEvidence, Rle, TubeAxisPose};
 
 const N: usize = EVIDENCE_FEATURES + 1;
 
@@ -88,6 +88,12 @@ pub fn tube_labels(gt: &CocoDataset, dt: &[CocoResult]) -> Result<Vec<bool>, Str
             Ok(Rle::iou(std::slice::from_ref(&rle), t, &vec![false; t.len()]).iter().any(|&v| v >= 0.5))
         })
         .collect()
+}
+
+/// `results` each scored by `model`'s probability of its refined pose (`poses`, one per result
+/// in order): what `tubeloc refine --pose-evidence` writes, for ranking by the evidence.
+pub fn scored_by_evidence(results: &[CocoResult], poses: &[TubeAxisPose], model: &PoseEvidence) -> Vec<CocoResult> {
+    results.iter().zip(poses).map(|(d, p)| CocoResult { score: model.probability(p), ..d.clone() }).collect()
 }
 
 #[cfg(test)]
