@@ -287,10 +287,9 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
     let mut dets = Vec::new();
     let mut ms = 0.0;
     for (id, path) in &images {
-        let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8();
-        let (w, h) = (img.width() as usize, img.height() as usize);
+        let img = image::DynamicImage::ImageRgb8(tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8());
         let t = Instant::now();
-        let found = det.detect(img.as_raw(), w, h, cameras.get(id), grounds.get(id))?;
+        let (found, _) = det.detect(&img, cameras.get(id), grounds.get(id), *id)?;
         ms += t.elapsed().as_secs_f64() * 1e3;
         dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
     }
@@ -321,7 +320,7 @@ fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> R
         let t = Instant::now();
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;
-        let found = det.detect(&input.rgb, input.width, input.height, Some(&view.camera), Some(&ground))?;
+        let found = det.detect(&image, Some(&view.camera), Some(&ground), 0)?.0;
         let dt = t.elapsed().as_secs_f64() * 1e3;
         ms += dt;
         let (sx, sy) = det.line2d().scale_for(Some(&view.camera));
@@ -381,14 +380,14 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
     // Libraries and models are loaded outside the timings.
-    let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None)?;
+    let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None, l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
     let l2_grey = line2d_eval(&grey_set, &l2, None, &dir.join("line2d_grey"))?;
     let l2_colour = line2d_eval(&colour_set, &l2, None, &dir.join("line2d_colour"))?;
     let l2_neg = if with_negatives { line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
     drop(l2);
     // Fused: every Line2D candidate scored by the learned segmenter's agreement (record 0063).
     let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), params: Default::default() };
-    let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion))?;
+    let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion), None, 0.0)?;
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
     let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;
     let fused_colour = line2d_eval(&colour_set, &fused, Some(&fused_cal), &dir.join("fused_colour"))?;
@@ -400,8 +399,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let fusion_params = tubeloc_detect::fused::FusionParams::default();
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
+    let pose_verifier = tubeloc_pipeline::shipped::line2d_pose_verifier("shipped")?;
     let summary = json!({"split": part, "model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
-        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "pose_verifier": {"threshold": pose_verifier.threshold, "threshold_grey": pose_verifier.threshold_grey, "nms_iou": pose_verifier.nms_iou}, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
         "fused": {"params": fusion_params, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
@@ -441,7 +441,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image; at P >= {:.3}: {at} | {:.3}", num(v, "false_per_image"), fused_cal.threshold, num(v, "ece")))).ok();
     }
     let far_grey = stage.line2d_far_scale.1;
-    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), detections kept at the shipped clutter verifier's cut (P >= {threshold:.2} on colour frames, {threshold_grey:.2} on grey ones searched once, {threshold_far:.3} on grey ones searched twice); their precision column gives the false detections per image instead.").ok();
+    writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), every candidate the shipped clutter verifier scores refined in mono on the frame's ground, its mask snapped to the pose, and kept where the probability that its pose is a tube reaches the shipped pose verifier's cut ({:.3} on colour frames, {:.3} on grey ones; `tubeloc detect --method line2d`, record 0068); time: matching and verification. Their precision column gives the false detections per image instead.", pose_verifier.threshold, pose_verifier.threshold_grey).ok();
     writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0063): every Line2D candidate the verifier scores, each scored S = P L with P its verifier probability and L the best score of a learned instance overlapping it at mask IoU >= {}, kept at S >= {}; masks and poses are Line2D's; time: both detectors. Their precision column gives the false detections per image, then the precision / recall at the fused calibration's threshold (what `locate --detector fused` hands over), and its ECE.", fusion_params.min_iou, fusion_params.threshold).ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
@@ -451,7 +451,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     if with_negatives {
         writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
         let l2_what = format!(
-            "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verifier cut {threshold:.2} colour / {threshold_grey:.2} grey / {threshold_far:.3} grey searched twice)"
+            "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verified by pose at {:.3} colour / {:.3} grey)",
+            pose_verifier.threshold, pose_verifier.threshold_grey
         );
         for (what, v) in [(l2_what.as_str(), &l2_neg), ("Fused on the same frames", &fused_neg)] {
             writeln!(md, "{what}: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", v["kept_per_frame"].as_f64().unwrap_or(f64::NAN), v["max_per_frame"], v["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();

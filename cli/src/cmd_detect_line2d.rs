@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, GroundPlane};
 use tubeloc_detect::fused::{FusedDetector, FusionParams};
 use tubeloc_detect::line2d::{Line2dDetection, Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
+use tubeloc_pipeline::pose_verifier::{PoseVerification, PoseVerifier, CLUTTER_FLOOR};
 
 /// Line2D options of `tubeloc detect`.
 #[derive(clap::Args, Clone, Debug)]
@@ -98,15 +99,34 @@ pub struct Line2dOpts {
     #[arg(long, value_parser = crate::args::unit_interval_f32)]
     pub min_probability: Option<f32>,
     /// Line2D: no clutter verifier (the score is the radiometric verified score, nothing is
-    /// dropped by probability).
+    /// dropped by probability). Needs `--pose-verifier off`.
     #[arg(long)]
     pub no_verifier: bool,
+    /// Line2D pose verification (`--method line2d`, where the image's ground is known): every
+    /// candidate the clutter verifier scores is refined on the ground, its mask snapped to the
+    /// pose, scored by the probability that its pose is a tube, and kept at the cut of the
+    /// image's kind (record 0068). `shipped` (embedded), a file from `tubeloc eval
+    /// --fit-pose-verifier`, or `off` (the clutter verifier's cut alone). With it,
+    /// `--min-probability` is the clutter probability a candidate needs to reach it (default 0)
+    #[arg(long, default_value = "shipped")]
+    pub pose_verifier: String,
 }
 
 impl Line2dOpts {
     /// Checks the options that depend on each other (a command-line error, exit 2).
     pub fn check(&self) -> Result<()> {
+        if self.no_verifier && self.pose_verifier != "off" {
+            return Err(crate::args::usage("--no-verifier needs --pose-verifier off: the pose verifier scores the clutter verifier's probability"));
+        }
         crate::args::require_at_most(("--ring-inner", self.ring_inner), ("--ring-outer", self.ring_outer))
+    }
+
+    /// The pose verifier of `--pose-verifier` (`None` for `off`), loaded and checked.
+    pub fn pose_verifier(&self) -> Result<Option<PoseVerifier>> {
+        match self.pose_verifier.as_str() {
+            "off" => Ok(None),
+            spec => Ok(Some(tubeloc_pipeline::shipped::line2d_pose_verifier(spec).map_err(|e| anyhow::anyhow!("--pose-verifier: {e}"))?)),
+        }
     }
 }
 
@@ -122,36 +142,52 @@ pub struct Fusion {
     pub params: FusionParams,
 }
 
-/// Line2D alone, or fused with the learned segmenter ([`tubeloc_detect::fused`]).
+/// Line2D alone, verified by pose, or fused with the learned segmenter ([`tubeloc_detect::fused`]).
 pub enum Line2dRunner {
     /// Line2D at its verifier's cut.
     Plain(Box<Line2dDetector>),
+    /// Line2D candidates verified by their poses where the ground is known
+    /// ([`tubeloc_pipeline::pose_verifier`]).
+    Verified(Box<Line2dDetector>, Box<PoseVerification>),
     /// Every Line2D candidate, scored by the learned segmenter's agreement.
     Fused(Box<FusedDetector>),
 }
 
 impl Line2dRunner {
-    /// `det` alone, or fused with `fusion`'s learned model and settings.
-    pub fn new(det: Line2dDetector, fusion: Option<Fusion>) -> Result<Self> {
-        Ok(match fusion {
-            Some(f) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, f.params).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
-            None => Line2dRunner::Plain(Box::new(det)),
+    /// `det` alone; verified by `pose` (its clutter verifier then runs at `floor`, its own cuts
+    /// kept for images without a ground); or fused with `fusion`'s learned model and settings.
+    pub fn new(mut det: Line2dDetector, fusion: Option<Fusion>, pose: Option<PoseVerifier>, floor: f32) -> Result<Self> {
+        Ok(match (fusion, pose) {
+            (Some(f), _) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, f.params).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
+            (None, Some(p)) => {
+                let clutter = det.params.verifier.clone().context("pose verification needs the clutter verifier (--pose-verifier off with --no-verifier)")?;
+                det.params.verifier = Some(PoseVerification::floor_of(&clutter, floor));
+                Line2dRunner::Verified(Box::new(det), Box::new(PoseVerification::new(p, clutter)?))
+            }
+            (None, None) => Line2dRunner::Plain(Box::new(det)),
         })
     }
 
     /// The Line2D detector (library and matching parameters).
     pub fn line2d(&self) -> &Line2dDetector {
         match self {
-            Line2dRunner::Plain(d) => d,
+            Line2dRunner::Plain(d) | Line2dRunner::Verified(d, _) => d,
             Line2dRunner::Fused(f) => f.line2d(),
         }
     }
 
-    /// Detections in an interleaved RGB8 image of `camera` with its ground, when known.
-    pub fn detect(&self, rgb: &[u8], w: usize, h: usize, camera: Option<&CameraModel>, ground: Option<&GroundPlane>) -> Result<Vec<Line2dDetection>> {
+    /// Detections in `image` of `camera` with its ground, when known (COCO image id
+    /// `image_id`), and whether poses verified them (only a verified runner's, on an image
+    /// with a camera of its size and a ground).
+    pub fn detect(&self, image: &image::DynamicImage, camera: Option<&CameraModel>, ground: Option<&GroundPlane>, image_id: u64) -> Result<(Vec<Line2dDetection>, bool)> {
+        if let Line2dRunner::Verified(d, v) = self {
+            return Ok(v.detect(d, image, camera, ground, image_id)?);
+        }
+        let rgb = tubeloc_detect::input::rgb8_pixels(image);
+        let (w, h) = (image.width() as usize, image.height() as usize);
         match self {
-            Line2dRunner::Plain(d) => Ok(d.detect_on_ground(rgb, w, h, camera, ground)?),
-            Line2dRunner::Fused(f) => f.detect(rgb, w, h, camera, ground).map_err(anyhow::Error::msg),
+            Line2dRunner::Fused(f) => Ok((f.detect(&rgb, w, h, camera, ground).map_err(anyhow::Error::msg)?, false)),
+            _ => Ok((self.line2d().detect_on_ground(&rgb, w, h, camera, ground)?, false)),
         }
     }
 }
@@ -222,19 +258,19 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
 /// instances of its image ([`tubeloc_detect::fused`]).
 pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>, grounds: &BTreeMap<u64, GroundPlane>, ground: Option<&GroundPlane>, fusion: Option<Fusion>) -> Result<Vec<serde_json::Value>> {
     let (det, camera) = detector_from_opts(opts)?;
-    let runner = Line2dRunner::new(det, fusion)?;
+    let pose = if fusion.is_none() { opts.pose_verifier()? } else { None };
+    let runner = Line2dRunner::new(det, fusion, pose, opts.min_probability.unwrap_or(CLUTTER_FLOOR))?;
     let det = runner.line2d();
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     let mut out = Vec::new();
     let mut warned_no_camera = false;
+    let mut warned_unverified = false;
     for (id, path) in images {
         let img = tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?;
         if let Some(warn) = crate::cmd_detect::underexposure_warning(path, &img) {
             bar.suspend(|| eprintln!("{warn}"));
         }
-        let img = img.into_rgb8();
-        let (w, h) = (img.width() as usize, img.height() as usize);
         let cam = cameras.get(id).or(camera.as_ref());
         if cam.is_none() && !warned_no_camera {
             warned_no_camera = true;
@@ -246,7 +282,11 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
             bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
         }
         let g = grounds.get(id).or(ground);
-        let dets = runner.detect(img.as_raw(), w, h, cam, g).with_context(|| format!("detecting in {}", path.display()))?;
+        let (dets, verified) = runner.detect(&img, cam, g, *id).with_context(|| format!("detecting in {}", path.display()))?;
+        if matches!(runner, Line2dRunner::Verified(..)) && !verified && !warned_unverified {
+            warned_unverified = true;
+            bar.suspend(|| eprintln!("note: {}: no ground plane (--ground, or a dataset's images[].ground) or no camera of its size: Line2D detections kept at the clutter verifier's cut, not verified by their poses", path.display()));
+        }
         out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
         bar.inc(1);
     }

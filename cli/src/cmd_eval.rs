@@ -69,8 +69,10 @@ pub struct EvalArgs {
     pub(crate) max_false_per_image: Option<f64>,
     /// With --calibrate: the threshold also keeps at most this many false detections per
     /// image of the ground truth without any tube, counting the detections on those images
-    /// only (the analogue of real frames without tubes; needs such images).
-    #[arg(long, requires = "calibrate", value_parser = crate::args::non_negative_f64)]
+    /// only (the analogue of real frames without tubes; needs such images). With
+    /// --fit-pose-verifier: the bound its cuts are chosen for (default 0.5, half the Line2D
+    /// target of one per frame).
+    #[arg(long, value_parser = crate::args::non_negative_f64)]
     pub(crate) max_false_per_negative_image: Option<f64>,
     /// Check a fitted calibration on these (held-out) detections: reliability diagram,
     /// expected calibration error, precision and recall at its threshold.
@@ -87,7 +89,20 @@ pub struct EvalArgs {
     /// their order (`tubeloc refine --out`, written beside `--snapped-out`).
     #[arg(long, value_name = "POSES.json", requires = "fit_pose_evidence")]
     pub(crate) evidence_poses: Option<PathBuf>,
-    /// Free text stored in the `--calibrate` (or `--fit-pose-evidence`) file's `fitted_on`.
+    /// Choose the cuts of a pose verifier (`tubeloc detect --method line2d --pose-verifier`)
+    /// and write it, with the evidence of --verifier-evidence, to this JSON file: per image
+    /// kind, the lowest probability at which the --gt images without a tube (kind from their
+    /// `grey` field) keep at most --max-false-per-negative-image --dt detections per image,
+    /// after suppression at mask IoU 0.5. --dt: the snapped candidates scored by that evidence
+    /// (`tubeloc refine --snapped-out S --pose-evidence E`).
+    #[arg(long, value_name = "OUT.json", requires = "verifier_evidence", conflicts_with_all = ["calibrate", "calibration", "fit_pose_evidence"])]
+    pub(crate) fit_pose_verifier: Option<PathBuf>,
+    /// With --fit-pose-verifier: the pose evidence the --dt scores come from (`tubeloc eval
+    /// --fit-pose-evidence`).
+    #[arg(long, value_name = "EVIDENCE.json", requires = "fit_pose_verifier")]
+    pub(crate) verifier_evidence: Option<PathBuf>,
+    /// Free text stored in the `--calibrate` (or `--fit-pose-evidence`, `--fit-pose-verifier`)
+    /// file's `fitted_on`.
     #[arg(long, default_value = "")]
     pub(crate) fitted_on: String,
     /// Break the metrics down by an image attribute (terrain, time, split...) or an annotation
@@ -128,6 +143,8 @@ impl EvalArgs {
             max_false_per_negative_image: None,
             fit_pose_evidence: None,
             evidence_poses: None,
+            fit_pose_verifier: None,
+            verifier_evidence: None,
             fitted_on: String::new(),
             by: Vec::new(),
         }
@@ -156,6 +173,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         breakdowns.push(breakdown::breakdown(&evaluator, &gt, attr).with_context(|| format!("breakdown by {attr}"))?);
     }
     spinner.finish_and_clear();
+    if args.max_false_per_negative_image.is_some() && args.calibrate.is_none() && args.fit_pose_verifier.is_none() {
+        return Err(crate::args::usage("--max-false-per-negative-image needs --calibrate or --fit-pose-verifier"));
+    }
     if !(args.target_precision > 0.0 && args.target_precision <= 1.0) {
         anyhow::bail!("--target-precision {} must be in (0, 1]", args.target_precision);
     }
@@ -215,6 +235,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     });
     if let (Some(out), Some(poses)) = (&args.fit_pose_evidence, &args.evidence_poses) {
         fit_pose_evidence(&args, &gt, &dt, poses, out, result.stats[1])?;
+    }
+    if let (Some(out), Some(evidence)) = (&args.fit_pose_verifier, &args.verifier_evidence) {
+        fit_pose_verifier(&args, &gt, &dt, evidence, out)?;
     }
     if let (Some(c), Some(p)) = (&calibration, &args.calibrate) {
         write_json(p, c).with_context(|| format!("writing {}", p.display()))?;
@@ -292,4 +315,32 @@ fn report_of(args: &EvalArgs, result: &tubeloc_eval::coco_eval::EvalResult, brea
             .collect(),
         poses: Vec::new(),
     }
+}
+
+/// `--fit-pose-verifier`: the cuts per image kind on the tube-free images of `gt` for the
+/// candidates `dt` scored by the evidence file `evidence`
+/// ([`tubeloc_eval::negative_cuts::kind_cuts`]); writes the pose verifier to `out`.
+fn fit_pose_verifier(args: &EvalArgs, gt: &CocoDataset, dt: &[tubeloc_core::CocoResult], evidence: &Path, out: &Path) -> anyhow::Result<()> {
+    use tubeloc_pipeline::pose_verifier::PoseVerifier;
+    let model = tubeloc_pipeline::shipped::pose_evidence(&evidence.display().to_string()).map_err(|e| anyhow::anyhow!("--verifier-evidence: {e}"))?;
+    let bound = args.max_false_per_negative_image.unwrap_or(0.5);
+    const NMS_IOU: f64 = 0.5;
+    let cuts = tubeloc_eval::negative_cuts::kind_cuts(gt, dt, NMS_IOU, bound).map_err(|e| anyhow::anyhow!("{}: {e}", args.gt.display()))?;
+    if cuts.images.0 == 0 || cuts.images.1 == 0 {
+        eprintln!("warning: {} has {} colour and {} grey images without a tube: a kind without any gets the cut 0", args.gt.display(), cuts.images.0, cuts.images.1);
+    }
+    let verifier = PoseVerifier { evidence: model, threshold: cuts.colour, threshold_grey: cuts.grey, nms_iou: NMS_IOU, fitted_on: args.fitted_on.clone() };
+    verifier.validate().map_err(|e| anyhow::anyhow!("the pose verifier: {e}"))?;
+    write_json(out, &verifier).with_context(|| format!("writing {}", out.display()))?;
+    eprintln!(
+        "pose verifier cuts for at most {bound} false detections per tube-free image: colour {:.4} ({} images, {} detections after suppression), grey {:.4} ({} images, {} detections) -> {}",
+        cuts.colour,
+        cuts.images.0,
+        cuts.detections.0,
+        cuts.grey,
+        cuts.images.1,
+        cuts.detections.1,
+        out.display()
+    );
+    Ok(())
 }

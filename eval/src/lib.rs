@@ -27,6 +27,7 @@
 pub mod breakdown;
 pub mod calibration;
 pub mod coco_eval;
+pub mod negative_cuts;
 pub mod plot;
 pub mod plot_bar;
 pub mod plot_hist;

@@ -3,6 +3,7 @@
 //! [`TubeDetection`]s (seeds for the refiner) in the image's pixel frame.
 
 use crate::error::{PipelineError, Result};
+use crate::pose_verifier::{PoseVerification, PoseVerifier};
 use image::DynamicImage;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -100,15 +101,28 @@ impl TubeDetector for LearnedDetector {
 
 /// Line2D template matching with a library built for the camera (coarse template poses);
 /// with the ground known, matches inconsistent with a tube lying on it are dropped
-/// ([`tubeloc_detect::line2d::ground`]).
+/// ([`tubeloc_detect::line2d::ground`]). With a [`PoseVerification`] (the default of
+/// [`crate::shipped::line2d_detector`]), the candidates are verified by their refined poses
+/// ([`crate::pose_verifier`]) where the ground is known.
 pub struct Line2dTubeDetector {
     detector: Line2dDetector,
+    verification: Option<PoseVerification>,
 }
 
 impl Line2dTubeDetector {
-    /// A detector around a Line2D detector (library and matching parameters).
+    /// A detector around a Line2D detector (library and matching parameters), its candidates
+    /// kept at its clutter verifier's cut.
     pub fn new(detector: Line2dDetector) -> Self {
-        Line2dTubeDetector { detector }
+        Line2dTubeDetector { detector, verification: None }
+    }
+
+    /// A detector whose candidates are verified by their poses: `detector`'s clutter verifier
+    /// is run at the floor [`crate::pose_verifier::CLUTTER_FLOOR`], and its own cuts apply
+    /// where no pose can be refined (no ground plane).
+    pub fn verified(mut detector: Line2dDetector, verifier: PoseVerifier) -> Result<Self> {
+        let clutter = detector.params.verifier.clone().ok_or_else(|| PipelineError::Input("pose verification needs the Line2D clutter verifier (its probability is the evidence's score)".into()))?;
+        detector.params.verifier = Some(PoseVerification::floor_of(&clutter, crate::pose_verifier::CLUTTER_FLOOR));
+        Ok(Line2dTubeDetector { detector, verification: Some(PoseVerification::new(verifier, clutter)?) })
     }
 }
 
@@ -118,10 +132,15 @@ impl TubeDetector for Line2dTubeDetector {
     }
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
-        // An RGB8 image is read in place; other formats go through the shared conversion.
-        let rgb = tubeloc_detect::input::rgb8_pixels(image);
-        let (w, h) = (image.width() as usize, image.height() as usize);
-        let dets = self.detector.detect_on_ground(&rgb, w, h, Some(camera), ground).map_err(|e| PipelineError::Detect(e.to_string()))?;
+        let dets = match &self.verification {
+            Some(v) => v.detect(&self.detector, image, Some(camera), ground, image_id)?.0,
+            None => {
+                // An RGB8 image is read in place; other formats go through the shared conversion.
+                let rgb = tubeloc_detect::input::rgb8_pixels(image);
+                let (w, h) = (image.width() as usize, image.height() as usize);
+                self.detector.detect_on_ground(&rgb, w, h, Some(camera), ground).map_err(|e| PipelineError::Detect(e.to_string()))?
+            }
+        };
         Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
     }
 }

@@ -61,6 +61,7 @@ pub mod error;
 pub mod frame;
 pub mod locator;
 pub mod overlay;
+pub mod pose_verifier;
 pub mod settings;
 pub mod shipped;
 pub mod stages;

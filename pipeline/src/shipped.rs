@@ -14,6 +14,7 @@
 
 use crate::detector::{FusedTubeDetector, LearnedDetector, Line2dTubeDetector};
 use crate::error::{PipelineError, Result};
+use crate::pose_verifier::PoseVerifier;
 use std::path::Path;
 use tubeloc_core::{PoseEvidence, ScoreCalibration};
 use tubeloc_detect::learned::shipped::{shipped_model, SHIPPED_MODEL_NAME};
@@ -183,9 +184,35 @@ fn line2d_matcher(templates: Option<&Path>, detector: &str) -> Result<tubeloc_de
 }
 
 /// The Line2D detector of `tubeloc locate --detector line2d --templates LIB.tlt`: the library
-/// with the default matching parameters and the shipped clutter verifier.
-pub fn line2d_detector(templates: Option<&Path>) -> Result<Line2dTubeDetector> {
-    Ok(Line2dTubeDetector::new(line2d_matcher(templates, "line2d")?))
+/// with the default matching parameters and the shipped clutter verifier, its candidates
+/// verified by their poses with the pose verifier `pose_verifier` names
+/// ([`line2d_pose_verifier`]; `None`: none, the clutter verifier's cut alone).
+pub fn line2d_detector(templates: Option<&Path>, pose_verifier: Option<&str>) -> Result<Line2dTubeDetector> {
+    let matcher = line2d_matcher(templates, "line2d")?;
+    match pose_verifier {
+        Some(spec) => Line2dTubeDetector::verified(matcher, line2d_pose_verifier(spec)?),
+        None => Ok(Line2dTubeDetector::new(matcher)),
+    }
+}
+
+/// The file the embedded Line2D pose verifier comes from, relative to the workspace root.
+pub const SHIPPED_LINE2D_POSE_VERIFIER_NAME: &str = "data/models/line2d.pose_verifier.json";
+
+/// The shipped Line2D pose verifier (JSON text of [`PoseVerifier`]): the pose evidence of the
+/// default library's candidates, fitted by `tubeloc eval --fit-pose-evidence` on real
+/// validation composites, and its cuts per image kind, chosen by `tubeloc eval
+/// --fit-pose-verifier` on the tube-free validation frames (record 0068).
+pub const SHIPPED_LINE2D_POSE_VERIFIER_JSON: &str = include_str!("../../data/models/line2d.pose_verifier.json");
+
+/// The Line2D pose verifier `spec` names: `shipped` (the embedded one,
+/// [`SHIPPED_LINE2D_POSE_VERIFIER_JSON`]) or the path of a file written by `tubeloc eval
+/// --fit-pose-verifier`; parsed and validated.
+pub fn line2d_pose_verifier(spec: &str) -> Result<PoseVerifier> {
+    if spec == "shipped" {
+        return PoseVerifier::from_json(SHIPPED_LINE2D_POSE_VERIFIER_JSON, SHIPPED_LINE2D_POSE_VERIFIER_NAME);
+    }
+    let text = std::fs::read_to_string(spec).map_err(|e| PipelineError::Input(format!("reading pose verifier {spec}: {e}")))?;
+    PoseVerifier::from_json(&text, spec)
 }
 
 /// The fused detector of `tubeloc locate --detector fused --templates LIB.tlt [--model M]

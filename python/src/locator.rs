@@ -27,7 +27,7 @@ struct Options<'a> {
 fn detector_of(o: &Options) -> PyResult<Box<dyn TubeDetector>> {
     Ok(match o.detector {
         "learned" => Box::new(shipped::learned_detector(o.model.as_deref(), o.range_m).map_err(|e| chain_to_py(&e))?),
-        "line2d" => Box::new(shipped::line2d_detector(o.templates.as_deref()).map_err(|e| chain_to_py(&e))?),
+        "line2d" => Box::new(shipped::line2d_detector(o.templates.as_deref(), Some("shipped")).map_err(|e| chain_to_py(&e))?),
         "fused" => Box::new(shipped::fused_detector(o.templates.as_deref(), o.model.as_deref(), o.range_m).map_err(|e| chain_to_py(&e))?),
         "external" => return Err(to_py("detector \"external\": detections made elsewhere are refined with tubeloc.refine(image, detections, rig)")),
         other => return Err(to_py(format!("detector {other:?}: expected \"learned\", \"line2d\" or \"fused\""))),

@@ -459,7 +459,7 @@ impl Setup {
         let shared: Option<Box<dyn TubeDetector>> = match a.detector {
             // The same detector the Python package builds from the same options.
             Detector::Learned => Some(Box::new(tubeloc_pipeline::shipped::learned_detector(a.model.as_deref(), &a.range_m)?)),
-            Detector::Line2d => Some(Box::new(tubeloc_pipeline::shipped::line2d_detector(a.templates.as_deref())?)),
+            Detector::Line2d => Some(Box::new(tubeloc_pipeline::shipped::line2d_detector(a.templates.as_deref(), Some("shipped"))?)),
             Detector::Fused => Some(Box::new(tubeloc_pipeline::shipped::fused_detector(a.templates.as_deref(), a.model.as_deref(), &a.range_m)?)),
             Detector::External => None,
         };

@@ -39,6 +39,11 @@ pub struct Line2dDetection {
     /// The learned segmenter's agreement with this detection, when it was fused
     /// ([`crate::fused`]); the `score` is then the fused score.
     pub agreement: Option<f32>,
+    /// Probability that the pose refined from this detection is a tube, when the detection was
+    /// verified by its pose (`tubeloc_pipeline::pose_verifier`); the `score` is then this
+    /// probability, and `mask` and `bbox` are the refined pose's silhouette where it agrees
+    /// with the template's (the mask snapped to the pose).
+    pub pose_probability: Option<f32>,
     /// Factor by which the image was resampled to the library's pixel scale before matching
     /// (geometric mean over the two axes; 1 = matched as given).
     pub scale: f64,
@@ -113,6 +118,7 @@ impl Line2dDetection {
             probability: None,
             features: None,
             agreement: None,
+            pose_probability: None,
             scale: (sx * sy).sqrt(),
             x: corner[0].round() as i32,
             y: corner[1].round() as i32,
@@ -145,6 +151,9 @@ impl Line2dDetection {
             }
             if let Some(a) = self.agreement {
                 o.insert("agreement".into(), json!(a));
+            }
+            if let Some(p) = self.pose_probability {
+                o.insert("pose_probability".into(), json!(p));
             }
             if let Some(f) = &self.features {
                 o.insert("verifier_features".into(), json!(f.to_vec()));

@@ -74,7 +74,7 @@ impl Line2dDetector {
         let (colour_k, grey_k) = (self.params.far_scale, self.params.far_scale_grey);
         let grey = (self.params.verifier.is_some() || colour_k != grey_k) && crate::input::is_grey_rgb8(rgb);
         let k = self.far_scale_for(grey, sx, sy);
-        let two = k > 1.0 && sx * k <= self.params.max_upsample && sy * k <= self.params.max_upsample;
+        let two = self.searched_twice(grey, camera);
         let cut = self.params.verifier.as_ref().map(|v| v.threshold_for_search(grey, two));
         let mut dets = self.detect_at(rgb, width, height, &cam, sx, sy, ground, 1.0, cut)?;
         if two {
@@ -88,6 +88,16 @@ impl Line2dDetector {
             dets.truncate(self.params.max_detections);
         }
         Ok(dets)
+    }
+
+    /// Whether an image of `camera` that is `grey` (three equal channels) or colour is also
+    /// searched by the far search: its factor ([`Line2dDetector::far_scale_for`]) exceeds 1 and
+    /// the image enlarged by it stays within [`MatchParams::max_upsample`]. Such an image's
+    /// detections have the verifier's far cut ([`crate::line2d::Verifier::threshold_for_search`]).
+    pub fn searched_twice(&self, grey: bool, camera: Option<&CameraModel>) -> bool {
+        let (sx, sy) = self.scale_for(camera);
+        let k = self.far_scale_for(grey, sx, sy);
+        k > 1.0 && sx * k <= self.params.max_upsample && sy * k <= self.params.max_upsample
     }
 
     /// The far search's factor for an image that is `grey` (three equal channels,
