@@ -91,9 +91,9 @@ pub struct EvalArgs {
     pub(crate) evidence_poses: Option<PathBuf>,
     /// Choose the cuts of a pose verifier (`tubeloc detect --method line2d --pose-verifier`)
     /// and write it, with the evidence of --verifier-evidence, to this JSON file: per image
-    /// kind, the lowest probability at which the --gt images without a tube (kind from their
-    /// `grey` field) keep at most --max-false-per-negative-image --dt detections per image,
-    /// after suppression at mask IoU 0.5. --dt: the snapped candidates scored by that evidence
+    /// kind, the cut at which the --gt images without a tube (kind from their `grey` field)
+    /// keep at most --max-false-per-negative-image --dt detections per image, after
+    /// suppression at mask IoU 0.5 (halfway between the last kept and the first dropped). --dt: the snapped candidates scored by that evidence
     /// (`tubeloc refine --snapped-out S --pose-evidence E`).
     #[arg(long, value_name = "OUT.json", requires = "verifier_evidence", conflicts_with_all = ["calibrate", "calibration", "fit_pose_evidence"])]
     pub(crate) fit_pose_verifier: Option<PathBuf>,

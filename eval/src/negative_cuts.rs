@@ -2,9 +2,9 @@
 //!
 //! The detections of each image are first suppressed as a verifier keeps them: taken by
 //! score, one whose mask overlaps a kept one's at IoU above `nms_iou` is dropped. On the `n`
-//! tube-free images of one kind every kept detection is false, so the cut for that kind is the
-//! lowest `c` at which at most `⌊b n⌋` of them have a score `≥ c` (`b` false detections per
-//! frame); `0` where no cut is needed.
+//! tube-free images of one kind every kept detection is false, so the cut for that kind keeps
+//! at most `⌊b n⌋` of them (`b` false detections per frame): halfway between the last score
+//! it keeps and the first it drops ([`lowest_cut`]); `0` where no cut is needed.
 
 use std::collections::BTreeMap;
 use tubeloc_core::{CocoDataset, CocoResult, Rle};
@@ -22,9 +22,10 @@ pub struct KindCuts {
     pub detections: (usize, usize),
 }
 
-/// The lowest cut at which at most `⌊bound · images⌋` of `scores` are at or above it: `0`
-/// when that many or fewer scores exist at all, else the smallest number above the
-/// `(⌊bound · images⌋ + 1)`-th highest score.
+/// A cut at which at most `⌊bound · images⌋` of `scores` (probabilities in `[0, 1]`) are at
+/// or above it: `0` when that many or fewer scores exist at all, else halfway between the
+/// `(⌊bound · images⌋ + 1)`-th highest score and the next higher one (or 1), so that a
+/// probability computed again a rounding error away falls on the same side.
 pub fn lowest_cut(scores: &[f64], images: usize, bound: f64) -> f64 {
     let allowed = (bound * images as f64).floor() as usize;
     if scores.len() <= allowed {
@@ -32,21 +33,8 @@ pub fn lowest_cut(scores: &[f64], images: usize, bound: f64) -> f64 {
     }
     let mut s = scores.to_vec();
     s.sort_by(|a, b| b.total_cmp(a));
-    next_above(s[allowed])
-}
-
-/// The smallest `f64` above `x` (`f64::next_up`, which needs a newer Rust than this workspace's
-/// minimum).
-fn next_above(x: f64) -> f64 {
-    if x.is_nan() || x == f64::INFINITY {
-        x
-    } else if x == 0.0 {
-        f64::from_bits(1)
-    } else if x > 0.0 {
-        f64::from_bits(x.to_bits() + 1)
-    } else {
-        f64::from_bits(x.to_bits() - 1)
-    }
+    let above = if allowed == 0 { 1.0 } else { s[allowed - 1] };
+    0.5 * (s[allowed] + above)
 }
 
 /// The results of each image after suppression by mask IoU above `nms_iou` (strongest
@@ -103,12 +91,14 @@ mod tests {
     fn the_cut_keeps_at_most_the_bound_per_frame() {
         // Four frames, at most 0.5 per frame: two detections may stay.
         let s = [0.9, 0.1, 0.5, 0.7, 0.3];
+        // Halfway between the third highest (0.5) and the second (0.7).
         let c = lowest_cut(&s, 4, 0.5);
-        assert!(c > 0.5 && c < 0.5 + 1e-12, "{c}");
+        assert!((c - 0.6).abs() < 1e-12, "{c}");
         assert_eq!(s.iter().filter(|&&x| x >= c).count(), 2);
         assert_eq!(lowest_cut(&s, 10, 0.5), 0.0);
         assert_eq!(lowest_cut(&[], 3, 0.0), 0.0);
-        assert!(lowest_cut(&s, 3, 0.0) > 0.9);
+        // None allowed: halfway between the highest and 1.
+        assert!((lowest_cut(&s, 3, 0.0) - 0.95).abs() < 1e-12);
     }
 
     fn box_rle(x0: usize, x1: usize) -> serde_json::Value {
@@ -144,9 +134,9 @@ mod tests {
         let c = kind_cuts(&gt, &dt, 0.5, 0.5).unwrap();
         assert_eq!((c.images, c.detections), ((2, 1), (3, 1)));
         // Colour: 0.8, 0.6, 0.4 after suppression; one may stay (2 frames x 0.5).
-        assert!(c.colour > 0.6 && c.colour < 0.6 + 1e-12, "{c:?}");
+        assert!((c.colour - 0.7).abs() < 1e-12, "{c:?}");
         // Grey: 1 frame x 0.5 = 0 allowed.
-        assert!(c.grey > 0.3 && c.grey < 0.3 + 1e-12, "{c:?}");
+        assert!((c.grey - 0.65).abs() < 1e-12, "{c:?}");
         let mut no_kind = gt.clone();
         no_kind.images[1].extra.remove("grey");
         assert_eq!(kind_cuts(&no_kind, &dt, 0.5, 0.5).unwrap_err(), "image 2 (c2.png) has no boolean \"grey\" field (its kind: three equal channels or colour)");
