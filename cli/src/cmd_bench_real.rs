@@ -57,7 +57,7 @@ pub struct RealStage {
 /// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
 fn negative_view(grey: bool) -> AssumedView {
     if grey {
-        AssumedView { hfov_deg: 45.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 }
+        AssumedView::NAVCAM
     } else {
         AssumedView::MAST
     }
@@ -85,6 +85,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
         per_view,
         tubes: (1, 4),
         range_m: (1.5, 5.0),
+        grey_view: crate::cmd_synth_real::GreyViewArg::Pds,
         min_size,
         randomize: Some(false),
         limit: frames,

@@ -92,8 +92,9 @@ pub struct EvalArgs {
     /// Choose the cuts of a pose verifier (`tubeloc detect --method line2d --pose-verifier`)
     /// and write it, with the evidence of --verifier-evidence, to this JSON file: per image
     /// kind, the cut at which the --gt images without a tube (kind from their `grey` field)
-    /// keep at most --max-false-per-negative-image --dt detections per image, after
-    /// suppression at mask IoU 0.5 (halfway between the last kept and the first dropped). --dt: the snapped candidates scored by that evidence
+    /// keep at most --max-false-per-negative-image --dt detections per image under each of
+    /// their geometries (`geometry` field: `pds`, `assumed`), after suppression at mask IoU
+    /// 0.5 (halfway between the last kept and the first dropped; the kind's highest). --dt: the snapped candidates scored by that evidence
     /// (`tubeloc refine --snapped-out S --pose-evidence E`).
     #[arg(long, value_name = "OUT.json", requires = "verifier_evidence", conflicts_with_all = ["calibrate", "calibration", "fit_pose_evidence"])]
     pub(crate) fit_pose_verifier: Option<PathBuf>,
@@ -326,21 +327,17 @@ fn fit_pose_verifier(args: &EvalArgs, gt: &CocoDataset, dt: &[tubeloc_core::Coco
     let bound = args.max_false_per_negative_image.unwrap_or(0.5);
     const NMS_IOU: f64 = 0.5;
     let cuts = tubeloc_eval::negative_cuts::kind_cuts(gt, dt, NMS_IOU, bound).map_err(|e| anyhow::anyhow!("{}: {e}", args.gt.display()))?;
-    if cuts.images.0 == 0 || cuts.images.1 == 0 {
-        eprintln!("warning: {} has {} colour and {} grey images without a tube: a kind without any gets the cut 0", args.gt.display(), cuts.images.0, cuts.images.1);
+    for kind in [false, true] {
+        if !cuts.groups.iter().any(|g| g.grey == kind) {
+            eprintln!("warning: {} has no {} image without a tube: that kind gets the cut 0", args.gt.display(), if kind { "grey" } else { "colour" });
+        }
     }
     let verifier = PoseVerifier { evidence: model, threshold: cuts.colour, threshold_grey: cuts.grey, nms_iou: NMS_IOU, fitted_on: args.fitted_on.clone() };
     verifier.validate().map_err(|e| anyhow::anyhow!("the pose verifier: {e}"))?;
     write_json(out, &verifier).with_context(|| format!("writing {}", out.display()))?;
-    eprintln!(
-        "pose verifier cuts for at most {bound} false detections per tube-free image: colour {:.4} ({} images, {} detections after suppression), grey {:.4} ({} images, {} detections) -> {}",
-        cuts.colour,
-        cuts.images.0,
-        cuts.detections.0,
-        cuts.grey,
-        cuts.images.1,
-        cuts.detections.1,
-        out.display()
-    );
+    for g in &cuts.groups {
+        eprintln!("{} images, {} geometry: {} without a tube, {} detections after suppression, cut {:.4}", if g.grey { "grey" } else { "colour" }, if g.geometry.is_empty() { "unnamed" } else { &g.geometry }, g.images, g.detections, g.cut);
+    }
+    eprintln!("pose verifier cuts for at most {bound} false detections per tube-free image in each geometry: colour {:.4}, grey {:.4} -> {}", cuts.colour, cuts.grey, out.display());
     Ok(())
 }

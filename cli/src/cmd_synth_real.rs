@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tubeloc_core::{files, TubeModel};
 use tubeloc_synth::dataset::write_folder_atomically;
-use tubeloc_synth::real_set::{assemble, render_sample, split_views, RealSetConfig, RealSplit};
+use tubeloc_synth::real_set::{assemble, render_sample, split_views, GreyView, RealSetConfig, RealSplit};
 use tubeloc_synth::TubeShape;
 
 /// Which frames go into the set.
@@ -26,6 +26,17 @@ pub enum RealKind {
     Colour,
     /// Both.
     All,
+}
+
+/// `--grey-view`: [`GreyView`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum GreyViewArg {
+    /// Each frame's PDS camera and ground.
+    Pds,
+    /// The assumed Navcam view.
+    Assumed,
+    /// Both.
+    Both,
 }
 
 /// Arguments of `tubeloc synth real`.
@@ -49,6 +60,12 @@ pub struct RealArgs {
     /// Distance band of the tubes from the camera, metres, "NEAR:FAR".
     #[arg(long, default_value = "1.5:5", value_parser = crate::args::range_m)]
     pub range_m: (f64, f64),
+    /// Geometry of the grey frames of `val` and `test`: `pds` (the frames with PDS camera
+    /// models, each under its own camera and ground), `assumed` (the part's grey backgrounds
+    /// under the assumed Navcam view: 45 degree field of view, 1.9 m high, 30 degrees down,
+    /// as the bench judges real frames without a camera model), or `both`.
+    #[arg(long, value_enum, default_value = "pds")]
+    pub grey_view: GreyViewArg,
     /// Smallest frame side used (the 256 px frames binned on board show tubes 1-3 px wide).
     #[arg(long, default_value_t = 500)]
     pub min_size: u32,
@@ -83,7 +100,12 @@ fn tube_counts(s: &str) -> std::result::Result<(usize, usize), String> {
 /// Runs `tubeloc synth real`.
 pub fn run(a: RealArgs) -> Result<()> {
     let (tubes, range) = (a.tubes, a.range_m);
-    let mut views = split_views(&a.data, a.split, a.kind != RealKind::Colour, a.kind != RealKind::Grey, a.min_size, a.seed)?;
+    let grey_view = match a.grey_view {
+        GreyViewArg::Pds => GreyView::Pds,
+        GreyViewArg::Assumed => GreyView::Assumed,
+        GreyViewArg::Both => GreyView::Both,
+    };
+    let mut views = split_views(&a.data, a.split, (a.kind != RealKind::Colour).then_some(grey_view), a.kind != RealKind::Grey, a.min_size, a.seed)?;
     if let Some(n) = a.limit {
         views.truncate(n);
     }

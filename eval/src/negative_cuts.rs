@@ -9,17 +9,31 @@
 use std::collections::BTreeMap;
 use tubeloc_core::{CocoDataset, CocoResult, Rle};
 
-/// The cuts chosen for colour and grey tube-free images, with what decided them.
+/// The cut of one group of tube-free images (one kind under one geometry).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GroupCut {
+    /// Grey (three equal channels) or colour.
+    pub grey: bool,
+    /// The images' `geometry` field (`pds`, `assumed`; empty where absent).
+    pub geometry: String,
+    /// Tube-free images in the group.
+    pub images: usize,
+    /// Detections left on them after suppression.
+    pub detections: usize,
+    /// The group's cut ([`lowest_cut`]).
+    pub cut: f64,
+}
+
+/// The cuts chosen for colour and grey tube-free images: per kind, the highest of its
+/// groups' cuts, so that every geometry meets the bound.
 #[derive(Clone, Debug, PartialEq)]
 pub struct KindCuts {
-    /// Cut for colour images.
+    /// Cut for colour images (0 without colour images).
     pub colour: f64,
-    /// Cut for grey images.
+    /// Cut for grey images (0 without grey images).
     pub grey: f64,
-    /// Tube-free colour and grey images counted.
-    pub images: (usize, usize),
-    /// Detections left on them after suppression, colour and grey.
-    pub detections: (usize, usize),
+    /// Each group's cut.
+    pub groups: Vec<GroupCut>,
 }
 
 /// A cut at which at most `⌊bound · images⌋` of `scores` (probabilities in `[0, 1]`) are at
@@ -62,25 +76,36 @@ pub fn suppressed(gt: &CocoDataset, dt: &[CocoResult], nms_iou: f64) -> Result<V
 }
 
 /// The cut per kind on the tube-free images of `gt` (images without a non-crowd annotation;
-/// their kind from the boolean image field `grey`, as `tubeloc synth real` writes it) for at
-/// most `bound` false detections per image of `dt` after suppression at `nms_iou`. Errors
-/// when a tube-free image has no `grey` field or when there is no tube-free image.
+/// their kind from the boolean image field `grey`, as `tubeloc synth real` writes it, their
+/// geometry from `geometry`) for at most `bound` false detections per image of `dt` after
+/// suppression at `nms_iou`, in each geometry of the kind. Errors when a tube-free image has no
+/// `grey` field or when there is no tube-free image.
 pub fn kind_cuts(gt: &CocoDataset, dt: &[CocoResult], nms_iou: f64, bound: f64) -> Result<KindCuts, String> {
     let with_tubes: std::collections::HashSet<u64> = gt.annotations.iter().filter(|a| a.iscrowd == 0).map(|a| a.image_id).collect();
-    let mut grey_of = BTreeMap::new();
+    let mut group_of: BTreeMap<u64, (bool, String)> = BTreeMap::new();
     for im in gt.images.iter().filter(|i| !with_tubes.contains(&i.id)) {
         let g = im.extra.get("grey").and_then(|v| v.as_bool()).ok_or_else(|| format!("image {} ({}) has no boolean \"grey\" field (its kind: three equal channels or colour)", im.id, im.file_name))?;
-        grey_of.insert(im.id, g);
+        let geometry = im.extra.get("geometry").and_then(|v| v.as_str()).unwrap_or("").to_string();
+        group_of.insert(im.id, (g, geometry));
     }
-    if grey_of.is_empty() {
+    if group_of.is_empty() {
         return Err("the ground truth has no image without a tube".into());
     }
     let kept = suppressed(gt, dt, nms_iou)?;
-    let scores = |grey: bool| -> Vec<f64> { kept.iter().filter(|d| grey_of.get(&d.image_id) == Some(&grey)).map(|d| d.score).collect() };
-    let (sc, sg) = (scores(false), scores(true));
-    let count = |grey: bool| grey_of.values().filter(|&&g| g == grey).count();
-    let images = (count(false), count(true));
-    Ok(KindCuts { colour: lowest_cut(&sc, images.0, bound), grey: lowest_cut(&sg, images.1, bound), images, detections: (sc.len(), sg.len()) })
+    let mut images: BTreeMap<(bool, String), usize> = BTreeMap::new();
+    for key in group_of.values() {
+        *images.entry(key.clone()).or_default() += 1;
+    }
+    let mut scores: BTreeMap<(bool, String), Vec<f64>> = images.keys().map(|k| (k.clone(), Vec::new())).collect();
+    for d in &kept {
+        if let Some(key) = group_of.get(&d.image_id) {
+            scores.get_mut(key).expect("every group has a list").push(d.score);
+        }
+    }
+    let groups: Vec<GroupCut> =
+        images.iter().map(|((grey, geometry), &n)| GroupCut { grey: *grey, geometry: geometry.clone(), images: n, detections: scores[&(*grey, geometry.clone())].len(), cut: lowest_cut(&scores[&(*grey, geometry.clone())], n, bound) }).collect();
+    let cut_of = |grey: bool| groups.iter().filter(|g| g.grey == grey).map(|g| g.cut).fold(0.0, f64::max);
+    Ok(KindCuts { colour: cut_of(false), grey: cut_of(true), groups })
 }
 
 #[cfg(test)]
@@ -132,11 +157,22 @@ mod tests {
             r(4, 0.99, 14, 18),
         ];
         let c = kind_cuts(&gt, &dt, 0.5, 0.5).unwrap();
-        assert_eq!((c.images, c.detections), ((2, 1), (3, 1)));
+        let counts: Vec<(bool, usize, usize)> = c.groups.iter().map(|g| (g.grey, g.images, g.detections)).collect();
+        assert_eq!(counts, vec![(false, 2, 3), (true, 1, 1)]);
         // Colour: 0.8, 0.6, 0.4 after suppression; one may stay (2 frames x 0.5).
         assert!((c.colour - 0.7).abs() < 1e-12, "{c:?}");
         // Grey: 1 frame x 0.5 = 0 allowed.
         assert!((c.grey - 0.65).abs() < 1e-12, "{c:?}");
+        // A second geometry of colour frames: each geometry meets the bound, the kind's cut is
+        // the higher one.
+        let mut two = gt.clone();
+        for id in [1, 2] {
+            two.images[id - 1].extra.insert("geometry".into(), serde_json::json!(if id == 1 { "assumed" } else { "pds" }));
+        }
+        let c2 = kind_cuts(&two, &dt, 0.5, 0.5).unwrap();
+        // Frame 1 alone (0.8, 0.6; none allowed): halfway between 0.8 and 1; frame 2 (0.4): 0.7.
+        assert!((c2.colour - 0.9).abs() < 1e-12, "{c2:?}");
+        assert_eq!(c2.groups.iter().map(|g| g.geometry.as_str()).collect::<Vec<_>>(), vec!["assumed", "pds", ""]);
         let mut no_kind = gt.clone();
         no_kind.images[1].extra.remove("grey");
         assert_eq!(kind_cuts(&no_kind, &dt, 0.5, 0.5).unwrap_err(), "image 2 (c2.png) has no boolean \"grey\" field (its kind: three equal channels or colour)");

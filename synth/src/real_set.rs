@@ -111,6 +111,11 @@ impl AssumedView {
     /// is 3.8 m away).
     pub const MAST: AssumedView = AssumedView { hfov_deg: 20.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
 
+    /// The assumed view of a grey Navcam-like frame without a camera model: 1.9 m above the
+    /// ground, looking 30 degrees down, with a 45 degree field of view (the bench's real
+    /// tube-free grey frames are judged under it).
+    pub const NAVCAM: AssumedView = AssumedView { hfov_deg: 45.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
+
     /// A random view for training: field of view 15-50 degrees, height 0.8-2.2 m, pitch
     /// 15-60 degrees, roll ±4 degrees.
     pub fn random(rng: &mut ChaCha8Rng) -> AssumedView {
@@ -415,17 +420,32 @@ pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, SynthError> {
     Ok(out)
 }
 
+/// The geometry of the grey frames of a validation or test part.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GreyView {
+    /// The frames with PDS camera models, each under its own camera and ground.
+    #[default]
+    Pds,
+    /// The grey backgrounds of the part (Navcam frames, without their camera models) under
+    /// [`AssumedView::NAVCAM`], as a frame with no camera model is judged.
+    Assumed,
+    /// Both.
+    Both,
+}
+
 /// The frames of `split` in the real data folder `data` (holding `MANIFEST.tsv`,
 /// `backgrounds/` and `with_cameras/`), with their views. Validation and test: the grey frames
-/// with PDS camera models and the colour Mastcam backgrounds under [`AssumedView::MAST`], frames
-/// whose smaller side is below `min_size` left out. Training: every background of the split
-/// under a random assumed view drawn with `seed` (the Navcam backgrounds that are also
+/// (`grey`: with PDS camera models, and / or the grey backgrounds under
+/// [`AssumedView::NAVCAM`]) and the colour Mastcam backgrounds under [`AssumedView::MAST`],
+/// frames whose smaller side is below `min_size` left out. Training: every background of the
+/// split under a random assumed view drawn with `seed` (the Navcam backgrounds that are also
 /// camera-model frames fall in validation or test by their sol).
-pub fn split_views(data: &Path, split: RealSplit, grey: bool, colour: bool, min_size: u32, seed: u64) -> Result<Vec<RealView>, SynthError> {
+pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour: bool, min_size: u32, seed: u64) -> Result<Vec<RealView>, SynthError> {
     let manifest = read_manifest(&data.join("MANIFEST.tsv"))?;
     let mut out = Vec::new();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
-    if split != RealSplit::Train && grey {
+    let assumed_grey = matches!(grey, Some(GreyView::Assumed | GreyView::Both));
+    if split != RealSplit::Train && matches!(grey, Some(GreyView::Pds | GreyView::Both)) {
         for v in views_from_cameras_json(&data.join("with_cameras").join("cameras.json"))? {
             if split_of_sol(v.sol) == split && v.camera.width.min(v.camera.height) >= min_size {
                 out.push(v);
@@ -437,8 +457,9 @@ pub fn split_views(data: &Path, split: RealSplit, grey: bool, colour: bool, min_
             continue;
         }
         let is_colour = e.group.contains("mastcam");
-        // Colour backgrounds when asked for; grey ones only for training and when asked for.
-        let wanted = if is_colour { colour } else { grey && split == RealSplit::Train };
+        // Colour backgrounds when asked for; grey ones for training, or under the assumed
+        // Navcam view, when asked for.
+        let wanted = if is_colour { colour } else { grey.is_some() && (split == RealSplit::Train || assumed_grey) };
         if !wanted {
             continue;
         }
@@ -447,7 +468,11 @@ pub fn split_views(data: &Path, split: RealSplit, grey: bool, colour: bool, min_
         if w.min(h) < min_size && split != RealSplit::Train {
             continue;
         }
-        let view = if split == RealSplit::Train { AssumedView::random(&mut rng) } else { AssumedView::MAST };
+        let view = match (split, is_colour) {
+            (RealSplit::Train, _) => AssumedView::random(&mut rng),
+            (_, true) => AssumedView::MAST,
+            (_, false) => AssumedView::NAVCAM,
+        };
         out.push(view.view(path, w, h, e.sol, &mut rng));
     }
     Ok(out)
