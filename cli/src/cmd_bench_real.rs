@@ -12,9 +12,9 @@
 //!     1.9 m high, 30 degrees down; colour: the mast view).
 //! (c) Line2D on the same composites and negatives: the default template library built once
 //!     into `<out>/real/line2d/templates.tlt`, every frame resampled to its pixel scale, the
-//!     shipped clutter verifier at its threshold; AP50 / AR, false detections per frame, time;
-//!     and the fused detector (every Line2D candidate scored by the learned segmenter's
-//!     agreement, [`tubeloc_detect::fused`]) on the same frames.
+//!     candidates verified by their poses on each frame's ground; AP50 / AR, false detections
+//!     per frame, time; and the fused detector (the learned and the verified Line2D detections
+//!     by their pose evidence, [`tubeloc_pipeline::FusedTubeDetector`]) on the same frames.
 //! Results go to `report.md` and `summary.json` in `<out>/real` (`<out>/real_val` for the
 //! validation part).
 
@@ -292,7 +292,7 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
         let t = Instant::now();
         let (found, _) = det.detect(&img, cameras.get(id), grounds.get(id), *id)?;
         ms += t.elapsed().as_secs_f64() * 1e3;
-        dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
+        dets.extend(found);
     }
     let (gt, dt) = saved_results(set, out, &dets)?;
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
@@ -325,7 +325,7 @@ fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> R
         let dt = t.elapsed().as_secs_f64() * 1e3;
         ms += dt;
         let (sx, sy) = det.line2d().scale_for(Some(&view.camera));
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d.score).collect::<Vec<_>>()}));
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
     }
     let n = per_frame.len().max(1) as f64;
     let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
@@ -386,9 +386,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2_colour = line2d_eval(&colour_set, &l2, None, &dir.join("line2d_colour"))?;
     let l2_neg = if with_negatives { line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
     drop(l2);
-    // Fused: every Line2D candidate scored by the learned segmenter's agreement (record 0063).
-    let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), params: Default::default() };
-    let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion), None, 0.0)?;
+    // Fused: the learned detections and the verified Line2D ones by their pose evidence (record 0069).
+    let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), origin: stage.model.name() };
+    let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion), l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
     let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;
     let fused_colour = line2d_eval(&colour_set, &fused, Some(&fused_cal), &dir.join("fused_colour"))?;
@@ -397,13 +397,15 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
     let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
     let fused_located = if with_negatives { negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)? } else { Value::Null };
-    let fusion_params = tubeloc_detect::fused::FusionParams::default();
+    // `locate --detector fused` on the composites, as the learned detector's rows above.
+    let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_cal))?;
+    let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_cal))?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let pose_verifier = tubeloc_pipeline::shipped::line2d_pose_verifier("shipped")?;
     let summary = json!({"split": part, "model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
         "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "pose_verifier": {"threshold": pose_verifier.threshold, "threshold_grey": pose_verifier.threshold_grey, "nms_iou": pose_verifier.nms_iou}, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
-        "fused": {"params": fusion_params, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
+        "fused": {"grasp_grey": fused_grasp, "grasp_colour": fused_grasp_colour, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
     let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
@@ -443,7 +445,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     }
     let far_grey = stage.line2d_far_scale.1;
     writeln!(md, "\nLine2D rows: the default template library (paper camera at half resolution, 1-4 m), each frame resampled to its pixel scale (`f_library / f_image`), grey frames enlarged to it searched again {far_grey}x further enlarged (record 0055), matches whose scale disagrees with the frame's ground dropped (record 0054), every candidate the shipped clutter verifier scores refined in mono on the frame's ground, its mask snapped to the pose, and kept where the probability that its pose is a tube reaches the shipped pose verifier's cut ({:.3} on colour frames, {:.3} on grey ones; `tubeloc detect --method line2d`, record 0068); time: matching and verification. Their precision column gives the false detections per image instead.", pose_verifier.threshold, pose_verifier.threshold_grey).ok();
-    writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0063): every Line2D candidate the verifier scores, each scored S = P L with P its verifier probability and L the best score of a learned instance overlapping it at mask IoU >= {}, kept at S >= {}; masks and poses are Line2D's; time: both detectors. Their precision column gives the false detections per image, then the precision / recall at the fused calibration's threshold (what `locate --detector fused` hands over), and its ECE.", fusion_params.min_iou, fusion_params.threshold).ok();
+    writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0069): the learned detections, each refined on the frame's ground, snapped and scored by the shipped model's pose evidence, and the Line2D detections verified by pose as in the Line2D rows, in one list, the less probable of two overlapping at mask IoU > 0.5 dropped; time: both detectors and the refinements. Their precision column gives the false detections per image, then the precision / recall at the fused calibration's threshold (what `locate --detector fused` hands over), and its ECE.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
@@ -465,11 +467,11 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
     writeln!(
         md,
-        "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
-        crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour)])
+        "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold; `--detector fused` rows: the fused detections at the fused calibration's threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
+        crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour), ("grey composites, `--detector fused`", &fused_grasp), ("colour composites, `--detector fused`", &fused_grasp_colour)])
     )
     .ok();
-    for (kind, g) in [("grey", &grasp), ("colour", &grasp_colour)] {
+    for (kind, g) in [("grey", &grasp), ("colour", &grasp_colour), ("grey (`--detector fused`)", &fused_grasp), ("colour (`--detector fused`)", &fused_grasp_colour)] {
         let listed: Vec<String> = g["false_located"]
             .as_array()
             .into_iter()

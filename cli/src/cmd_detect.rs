@@ -11,9 +11,9 @@ pub enum Method {
     Line2d,
     /// The learned segmenter (`--model`, default: the shipped model, embedded in the program).
     Learned,
-    /// Line2D candidates (`--templates`) scored by the learned segmenter's agreement
-    /// (`--model`): score = P L, P the clutter verifier's probability, L the best score of a
-    /// learned instance overlapping the candidate (record 0063).
+    /// The learned segmenter's detections (`--model`) and Line2D's pose-verified ones
+    /// (`--templates`), each scored by the probability that its refined pose is a tube, the
+    /// less probable of two overlapping ones dropped (record 0069).
     Fused,
     /// Detections made elsewhere (`--results coco_results.json`), passed through with an axis
     /// seed from each mask's principal axis.
@@ -42,10 +42,6 @@ pub struct DetectArgs {
     /// mirror averaging); missing fields keep their defaults.
     #[arg(long)]
     pub decode_config: Option<PathBuf>,
-    /// Fused detection settings (`--method fused`): JSON of `FusionParams` fields (`min_iou`,
-    /// `threshold`); missing fields keep their defaults.
-    #[arg(long)]
-    pub fusion_config: Option<PathBuf>,
     /// External COCO results to pass through (`--method external`).
     #[arg(long)]
     pub results: Option<PathBuf>,
@@ -70,20 +66,7 @@ impl DetectArgs {
     /// `tubeloc detect --method METHOD --dataset DATASET --out OUT` with the command line's
     /// defaults for everything else.
     pub(crate) fn dataset(method: Method, dataset: &Path, out: &Path) -> Self {
-        DetectArgs {
-            method,
-            image: None,
-            image_id: 0,
-            dataset: Some(dataset.to_path_buf()),
-            model: None,
-            decode_config: None,
-            fusion_config: None,
-            results: None,
-            ground: None,
-            range_m: DEFAULT_RANGE_M.into(),
-            out: out.to_path_buf(),
-            line2d: line2d_defaults(),
-        }
+        DetectArgs { method, image: None, image_id: 0, dataset: Some(dataset.to_path_buf()), model: None, decode_config: None, results: None, ground: None, range_m: DEFAULT_RANGE_M.into(), out: out.to_path_buf(), line2d: line2d_defaults() }
     }
 }
 
@@ -122,14 +105,6 @@ fn decode_config(path: Option<&Path>) -> Result<tubeloc_detect::learned::DecodeC
     Ok(cfg)
 }
 
-/// The fused detection settings of `--fusion-config` (defaults without it).
-fn fusion_config(path: Option<&Path>) -> Result<tubeloc_detect::fused::FusionParams> {
-    let Some(p) = path else { return Ok(Default::default()) };
-    let params: tubeloc_detect::fused::FusionParams = tubeloc_core::files::read_json(p).with_context(|| format!("fusion config {}", p.display()))?;
-    params.validate().map_err(|e| anyhow::anyhow!("fusion config {}: {e}", p.display()))?;
-    Ok(params)
-}
-
 /// The warning `tubeloc detect` prints for an underexposed frame (highlights below `locate`'s
 /// default `--min-highlight-level`, record 0062), whatever the method, or `None`.
 pub fn underexposure_warning(path: &Path, image: &image::DynamicImage) -> Option<String> {
@@ -140,12 +115,6 @@ pub fn underexposure_warning(path: &Path, image: &image::DynamicImage) -> Option
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
-    if !matches!(args.method, Method::Fused) && args.fusion_config.is_some() {
-        return Err(crate::args::usage("--fusion-config sets --method fused"));
-    }
-    if matches!(args.method, Method::Fused) && args.line2d.min_probability.is_some() {
-        return Err(crate::args::usage("--min-probability is the Line2D verifier's cut; --method fused scores every candidate the verifier scores and keeps those whose fused score P L reaches its own cut (record 0063)"));
-    }
     let mut args = args;
     let pds = pds_camera(&mut args)?;
     let dets = match args.method {
@@ -160,12 +129,13 @@ pub fn run(args: DetectArgs) -> Result<()> {
                 return Err(crate::args::usage("--ground needs --camera (the rays along which the ground's distance is measured)"));
             }
             let fusion = match args.method {
-                Method::Fused => Some(crate::cmd_detect_line2d::Fusion {
-                    model: crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref()).load()?,
-                    decode: decode_config(args.decode_config.as_deref())?,
-                    range: crate::cmd_detect_learned::parse_range_band(&args.range_m)?,
-                    params: fusion_config(args.fusion_config.as_deref())?,
-                }),
+                Method::Fused => {
+                    let choice = crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref());
+                    if let Some(m) = &args.model {
+                        eprintln!("warning: --method fused scores learned detections by the shipped model's pose evidence, not one fitted for {}", m.display());
+                    }
+                    Some(crate::cmd_detect_line2d::Fusion { model: choice.load()?, decode: decode_config(args.decode_config.as_deref())?, range: crate::cmd_detect_learned::parse_range_band(&args.range_m)?, origin: choice.name() })
+                }
                 _ => None,
             };
             let dets = crate::cmd_detect_line2d::run_line2d(&args.line2d, &images, &cameras, &grounds, args.ground.as_ref(), fusion)?;

@@ -1,12 +1,11 @@
 //! The `line2d` method of `tubeloc detect`: Line2D template matching with a library built by
 //! `tubeloc templates build`, writing COCO results with the coarse pose and template id.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, GroundPlane};
-use tubeloc_detect::fused::{FusedDetector, FusionParams};
 use tubeloc_detect::line2d::{Line2dDetection, Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
 use tubeloc_pipeline::pose_verifier::{PoseVerification, PoseVerifier, CLUTTER_FLOOR};
 
@@ -138,27 +137,35 @@ pub struct Fusion {
     pub decode: tubeloc_detect::learned::DecodeConfig,
     /// Its working scale's range band (`None`: the image as it is).
     pub range: Option<tubeloc_detect::scale::RangeBand>,
-    /// The fusion's settings.
-    pub params: FusionParams,
+    /// The model's name in messages.
+    pub origin: String,
 }
 
-/// Line2D alone, verified by pose, or fused with the learned segmenter ([`tubeloc_detect::fused`]).
+/// Line2D alone, verified by pose, or fused with the learned segmenter
+/// ([`tubeloc_pipeline::FusedTubeDetector`]).
 pub enum Line2dRunner {
     /// Line2D at its verifier's cut.
     Plain(Box<Line2dDetector>),
     /// Line2D candidates verified by their poses where the ground is known
     /// ([`tubeloc_pipeline::pose_verifier`]).
     Verified(Box<Line2dDetector>, Box<PoseVerification>),
-    /// Every Line2D candidate, scored by the learned segmenter's agreement.
-    Fused(Box<FusedDetector>),
+    /// The learned detections and the verified Line2D ones, scored by their pose evidence.
+    Fused(Box<tubeloc_pipeline::FusedTubeDetector>),
 }
 
 impl Line2dRunner {
     /// `det` alone; verified by `pose` (its clutter verifier then runs at `floor`, its own cuts
-    /// kept for images without a ground); or fused with `fusion`'s learned model and settings.
+    /// kept for images without a ground); or fused with `fusion`'s learned model (which needs
+    /// `pose`).
     pub fn new(mut det: Line2dDetector, fusion: Option<Fusion>, pose: Option<PoseVerifier>, floor: f32) -> Result<Self> {
         Ok(match (fusion, pose) {
-            (Some(f), _) => Line2dRunner::Fused(Box::new(FusedDetector::new(det, f.model, f.decode, f.range, f.params).map_err(|e| anyhow::anyhow!("fused detector: {e}"))?)),
+            (Some(_), None) => bail!("--method fused verifies Line2D's candidates by their poses: leave out --pose-verifier off"),
+            (Some(f), Some(p)) => {
+                let mut learned = tubeloc_pipeline::LearnedDetector::new(f.model, f.decode, f.origin);
+                learned.range = f.range;
+                let evidence = tubeloc_pipeline::shipped::pose_evidence("shipped")?;
+                Line2dRunner::Fused(Box::new(tubeloc_pipeline::FusedTubeDetector::new(learned, evidence, det, p)?))
+            }
             (None, Some(p)) => {
                 let clutter = det.params.verifier.clone().context("pose verification needs the clutter verifier (--pose-verifier off with --no-verifier)")?;
                 det.params.verifier = Some(PoseVerification::floor_of(&clutter, floor));
@@ -176,18 +183,35 @@ impl Line2dRunner {
         }
     }
 
-    /// Detections in `image` of `camera` with its ground, when known (COCO image id
-    /// `image_id`), and whether poses verified them (only a verified runner's, on an image
-    /// with a camera of its size and a ground).
-    pub fn detect(&self, image: &image::DynamicImage, camera: Option<&CameraModel>, ground: Option<&GroundPlane>, image_id: u64) -> Result<(Vec<Line2dDetection>, bool)> {
-        if let Line2dRunner::Verified(d, v) = self {
-            return Ok(v.detect(d, image, camera, ground, image_id)?);
-        }
-        let rgb = tubeloc_detect::input::rgb8_pixels(image);
-        let (w, h) = (image.width() as usize, image.height() as usize);
+    /// Detections in `image` of `camera` with its ground, when known, as COCO results entries
+    /// with image id `image_id`, and whether poses verified Line2D's candidates (a verified or
+    /// fused runner's, on an image with a camera of its size and a ground).
+    pub fn detect(&self, image: &image::DynamicImage, camera: Option<&CameraModel>, ground: Option<&GroundPlane>, image_id: u64) -> Result<(Vec<serde_json::Value>, bool)> {
+        let json = |dets: Vec<Line2dDetection>| dets.iter().map(|d| d.to_coco_json(image_id)).collect::<Vec<_>>();
         match self {
-            Line2dRunner::Fused(f) => Ok((f.detect(&rgb, w, h, camera, ground).map_err(anyhow::Error::msg)?, false)),
-            _ => Ok((self.line2d().detect_on_ground(&rgb, w, h, camera, ground)?, false)),
+            Line2dRunner::Verified(d, v) => {
+                let (dets, verified) = v.detect(d, image, camera, ground, image_id)?;
+                Ok((json(dets), verified))
+            }
+            Line2dRunner::Fused(f) => {
+                let (w, h) = (image.width(), image.height());
+                let own = camera.filter(|c| (c.width, c.height) == (w, h)).cloned();
+                let camera = own.clone().unwrap_or_else(|| {
+                    let k = &f.line2d().library.params.camera;
+                    CameraModel { width: w, height: h, fx: k.fx, fy: k.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0, distortion: Default::default() }
+                });
+                let found = f.detect_fused(image, &camera, ground, image_id)?;
+                let out = found.into_iter().map(|d| match d.line2d {
+                    Some(l) => l.to_coco_json(image_id),
+                    None => serde_json::to_value(&d.detection).unwrap_or_default(),
+                });
+                Ok((out.collect(), own.is_some() && ground.is_some()))
+            }
+            Line2dRunner::Plain(d) => {
+                let rgb = tubeloc_detect::input::rgb8_pixels(image);
+                let (w, h) = (image.width() as usize, image.height() as usize);
+                Ok((json(d.detect_on_ground(&rgb, w, h, camera, ground)?), false))
+            }
         }
     }
 }
@@ -254,12 +278,11 @@ pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<C
 /// dataset's `images[].ground`), else `ground` (`--ground`), drives the ground-consistency
 /// check.
 ///
-/// With `fusion`, every Line2D candidate the verifier scores is fused with the learned
-/// instances of its image ([`tubeloc_detect::fused`]).
+/// With `fusion`, the learned detections of each image join Line2D's verified ones, all scored
+/// by their pose evidence ([`tubeloc_pipeline::FusedTubeDetector`]).
 pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeMap<u64, CameraModel>, grounds: &BTreeMap<u64, GroundPlane>, ground: Option<&GroundPlane>, fusion: Option<Fusion>) -> Result<Vec<serde_json::Value>> {
     let (det, camera) = detector_from_opts(opts)?;
-    let pose = if fusion.is_none() { opts.pose_verifier()? } else { None };
-    let runner = Line2dRunner::new(det, fusion, pose, opts.min_probability.unwrap_or(CLUTTER_FLOOR))?;
+    let runner = Line2dRunner::new(det, fusion, opts.pose_verifier()?, opts.min_probability.unwrap_or(CLUTTER_FLOOR))?;
     let det = runner.line2d();
     let bar = ProgressBar::new(images.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} images {elapsed}").unwrap_or_else(|_| ProgressStyle::default_bar()));
@@ -283,11 +306,11 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
         }
         let g = grounds.get(id).or(ground);
         let (dets, verified) = runner.detect(&img, cam, g, *id).with_context(|| format!("detecting in {}", path.display()))?;
-        if matches!(runner, Line2dRunner::Verified(..)) && !verified && !warned_unverified {
+        if !matches!(runner, Line2dRunner::Plain(..)) && !verified && !warned_unverified {
             warned_unverified = true;
             bar.suspend(|| eprintln!("note: {}: no ground plane (--ground, or a dataset's images[].ground) or no camera of its size: Line2D detections kept at the clutter verifier's cut, not verified by their poses", path.display()));
         }
-        out.extend(dets.iter().map(|d| d.to_coco_json(*id)));
+        out.extend(dets);
         bar.inc(1);
     }
     bar.finish_and_clear();

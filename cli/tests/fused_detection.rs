@@ -1,5 +1,6 @@
-//! `tubeloc detect --method fused`: Line2D candidates scored by the learned segmenter's
-//! agreement, checked against the two detectors run on their own. Needs
+//! `tubeloc detect --method fused`: the learned detections and Line2D's pose-verified ones in
+//! one list by their pose evidence (record 0069), checked against the two detectors run on
+//! their own and the learned detections refined and scored by `tubeloc refine`. Needs
 //! `../shared/data/real_mars` beside the repository (composites on real grey frames).
 
 mod common;
@@ -24,72 +25,75 @@ fn iou(a: &Rle, b: &Rle) -> f64 {
     Rle::iou(std::slice::from_ref(a), std::slice::from_ref(b), &[false])[0]
 }
 
+fn score(v: &Value) -> f64 {
+    v["score"].as_f64().unwrap()
+}
+
 /// On composites on real Navcam frames (validation sols, each frame's own camera and ground):
-/// every fused detection is a Line2D candidate (same template, box and verifier probability
-/// as Line2D with every candidate kept), its agreement is the best score of a learned
-/// detection overlapping it at mask IoU >= 0.3 (never 0: a candidate the network does not see
-/// is dropped), its score is P L, at least 0.02, and each image's list runs strongest first.
+/// every fused detection is a learned detection snapped and scored by the shipped pose
+/// evidence (as `tubeloc refine --snapped-out --pose-evidence shipped` gives it) or a verified
+/// Line2D detection (as `tubeloc detect --method line2d` gives it); every detection of either
+/// that is not fused overlaps a more probable fused one at mask IoU > 0.5; fused detections do
+/// not overlap one another and run most probable first in each image.
 #[test]
-fn fused_detections_are_line2d_candidates_scored_by_learned_agreement() {
+fn fused_detections_are_the_learned_and_verified_line2d_ones_by_pose_evidence() {
     let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
     let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
     assert!(real.join("MANIFEST.tsv").exists(), "{} is missing: this test needs ../shared/data beside the repository", real.display());
-    let set = dir.path().join("set");
+    let set = d.join("set");
     ok(&["synth", "real", "--data", p(&real), "--split", "val", "--kind", "grey", "--per-view", "1", "--limit", "3", "--seed", "3", "--out", p(&set)]);
-    let lib = dir.path().join("default.tlt");
+    let lib = d.join("default.tlt");
     ok(&["templates", "build", "--out", p(&lib)]);
     let run = |args: &[&str], name: &str| -> Vec<Value> {
-        let out = dir.path().join(name);
+        let out = d.join(name);
         let mut all = vec!["detect", "--dataset", p(&set), "--out", p(&out)];
         all.extend_from_slice(args);
         ok(&all);
         detections(&out)
     };
     let fused = run(&["--method", "fused", "--templates", p(&lib)], "fused.json");
-    let candidates = run(&["--method", "line2d", "--templates", p(&lib), "--min-probability", "0"], "candidates.json");
-    let learned = run(&["--method", "learned"], "learned.json");
-    assert!(!fused.is_empty(), "the composites' tubes give fused detections");
-    assert!(fused.len() < candidates.len(), "the fusion drops candidates: {} of {}", fused.len(), candidates.len());
-    for (k, f) in fused.iter().enumerate() {
-        let same = candidates.iter().find(|c| c["image_id"] == f["image_id"] && c["template_id"] == f["template_id"] && c["bbox"] == f["bbox"]);
-        let c = same.unwrap_or_else(|| panic!("fused detection {k} is no Line2D candidate: {f}"));
-        let prob = f["probability"].as_f64().unwrap();
-        assert_eq!(prob, c["probability"].as_f64().unwrap(), "{f}");
-        let m = mask(f);
-        let best = learned.iter().filter(|l| l["image_id"] == f["image_id"] && iou(&mask(l), &m) >= 0.3).map(|l| l["score"].as_f64().unwrap()).fold(0.0, f64::max);
-        let agreement = f["agreement"].as_f64().unwrap();
-        assert!((agreement - best).abs() < 1e-6, "agreement {agreement}, best overlapping learned score {best}: {f}");
-        assert!(agreement > 0.0, "{f}");
-        let score = f["score"].as_f64().unwrap();
-        assert!((score - prob * agreement).abs() < 1e-5, "{f}");
-        assert!(score >= 0.02 - 1e-6, "{f}");
-        if k > 0 && fused[k - 1]["image_id"] == f["image_id"] {
-            assert!(fused[k - 1]["score"].as_f64().unwrap() >= score, "strongest first in each image");
+    let verified = run(&["--method", "line2d", "--templates", p(&lib)], "line2d.json");
+    run(&["--method", "learned"], "learned.json");
+    let scored = d.join("scored.json");
+    ok(&["refine", "--dataset", p(&set), "--detections", p(&d.join("learned.json")), "--ground", "auto", "--out", p(&d.join("poses.json")), "--snapped-out", p(&scored), "--pose-evidence", "shipped"]);
+    let learned = detections(&scored);
+    assert!(!fused.is_empty() && !learned.is_empty() && !verified.is_empty());
+
+    let same = |a: &Value, b: &Value| a["image_id"] == b["image_id"] && (score(a) - score(b)).abs() < 1e-5 && iou(&mask(a), &mask(b)) > 0.999;
+    let (mut from_learned, mut from_line2d) = (0, 0);
+    for f in &fused {
+        if f.get("template_id").is_some() {
+            assert!(verified.iter().any(|v| v["template_id"] == f["template_id"] && v["probability"] == f["probability"] && same(v, f)), "a Line2D fused detection is a verified one: {f}");
+            from_line2d += 1;
+        } else {
+            assert!(learned.iter().any(|l| same(l, f)), "a learned fused detection is a snapped, scored one");
+            from_learned += 1;
         }
     }
-
-    // `--fusion-config` sets the fusion: a higher cut keeps the fused detections at or above it.
-    let cfg = dir.path().join("fusion.json");
-    std::fs::write(&cfg, r#"{"threshold": 0.2}"#).unwrap();
-    let strict = run(&["--method", "fused", "--templates", p(&lib), "--fusion-config", p(&cfg)], "strict.json");
-    let above: Vec<&Value> = fused.iter().filter(|f| f["score"].as_f64().unwrap() >= 0.2 - 1e-6).collect();
-    assert_eq!(strict.len(), above.len(), "--fusion-config threshold 0.2");
-    // A misspelt or out-of-range field is refused, naming the file; the option belongs to fused.
-    for (text, expect) in [(r#"{"min_iouu": 0.3}"#, "unknown field `min_iouu`"), (r#"{"threshold": 0}"#, "threshold 0 must be in (0, 1]")] {
-        std::fs::write(&cfg, text).unwrap();
-        let o = tubeloc(&["detect", "--method", "fused", "--templates", p(&lib), "--fusion-config", p(&cfg), "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
-        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
-        assert!(stderr(&o).contains("fusion.json") && stderr(&o).contains(expect), "{}", stderr(&o));
+    assert!(from_learned > 0 && from_line2d > 0, "both detectors contribute: {from_learned} learned, {from_line2d} Line2D");
+    for (k, f) in fused.iter().enumerate() {
+        for g in &fused[k + 1..] {
+            if f["image_id"] == g["image_id"] {
+                assert!(iou(&mask(f), &mask(g)) <= 0.5, "two fused detections overlap");
+                assert!(score(f) >= score(g), "most probable first in each image");
+            }
+        }
     }
-    let o = tubeloc(&["detect", "--method", "line2d", "--templates", p(&lib), "--fusion-config", p(&cfg), "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(!dir.path().join("x.json").exists(), "no output on error");
-    // The verifier's cut does not apply: every candidate it scores is fused.
-    let o = tubeloc(&["detect", "--method", "fused", "--templates", p(&lib), "--min-probability", "0.5", "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("--min-probability is the Line2D verifier's cut"), "{}", stderr(&o));
-    // Line2D without its templates is a usage error naming the option.
-    let o = tubeloc(&["detect", "--method", "fused", "--dataset", p(&set), "--out", p(&dir.path().join("x.json"))]);
+    for c in learned.iter().chain(&verified) {
+        if fused.iter().any(|f| same(f, c)) {
+            continue;
+        }
+        assert!(fused.iter().any(|f| f["image_id"] == c["image_id"] && score(f) >= score(c) - 1e-6 && iou(&mask(f), &mask(c)) > 0.5), "a detection left out overlaps a more probable fused one");
+    }
+
+    // The fusion needs the pose verifier and Line2D's templates; errors name the way out.
+    let x = d.join("x.json");
+    let o = tubeloc(&["detect", "--method", "fused", "--templates", p(&lib), "--pose-verifier", "off", "--dataset", p(&set), "--out", p(&x)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("leave out --pose-verifier off"), "{}", stderr(&o));
+    let o = tubeloc(&["detect", "--method", "fused", "--dataset", p(&set), "--out", p(&x)]);
     assert_ne!(o.status.code(), Some(0));
     assert!(stderr(&o).contains("--templates"), "{}", stderr(&o));
+    assert!(!x.exists(), "no output on error");
 }

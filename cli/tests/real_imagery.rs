@@ -132,14 +132,15 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert_eq!(summary["line2d"]["max_upsample"], 2.0);
     assert_eq!(summary["line2d"]["negatives"]["frames"], 2);
     assert!(summary["line2d"]["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
-    // The fused detector (Line2D candidates scored by the learned agreement) beside both, at its
-    // default settings.
+    // The fused detector (the learned and the verified Line2D detections by their pose
+    // evidence) beside both; Line2D's pose verifier is reported with its cuts.
     for set in ["grey", "colour"] {
         let v = &summary["fused"][set];
         assert_eq!(v["images"], summary["line2d"][set]["images"], "fused {set}: {v}");
         assert!((0.0..=1.0).contains(&v["ap50"].as_f64().unwrap()), "fused {set}: {v}");
     }
-    assert_eq!(summary["fused"]["params"], serde_json::json!({"min_iou": 0.3, "threshold": 0.02f32}));
+    let pv = &summary["line2d"]["pose_verifier"];
+    assert!(pv["threshold"].as_f64().unwrap() > 0.0 && pv["threshold_grey"].as_f64().unwrap() > 0.0, "{pv}");
     assert_eq!(summary["fused"]["negatives"]["frames"], 2);
     // `locate --detector fused` at its embedded calibration's threshold on the same frames.
     assert_eq!(summary["fused"]["locate_negatives"]["frames"], 2);
@@ -384,7 +385,7 @@ fn detect_with_a_pds_camera_list_equals_detect_with_that_camera_and_ground_by_ha
                 ok(&["templates", "build", "--distances", "2:4:1", "--step-deg", "20", "--out", p(&lib)]);
             }
             // Without the verifier, so that there are detections to compare.
-            extra = vec!["--templates", p(&lib), "--no-verifier"];
+            extra = vec!["--templates", p(&lib), "--no-verifier", "--pose-verifier", "off"];
         }
         let (a, b) = (dir.path().join(format!("{method}_pds.json")), dir.path().join(format!("{method}_hand.json")));
         let mut args = vec!["detect", "--method", method, "--image", p(&image), "--camera", p(&cams_path), "--out", p(&a)];
@@ -638,7 +639,8 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
     // assumed Navcam view (45 degree field of view, 1.9 m above level ground, 30 degrees down).
     // Without its ground the verifier keeps many patches; with it, matches whose template
     // distance disagrees with the ground's along their ray are dropped, so fewer remain and
-    // every one lies within the band (0.55-1.25) of the ground's distance.
+    // every one lies within the band (0.55-1.25) of the ground's distance. (The matcher and its
+    // clutter verifier alone: `--pose-verifier off`.)
     let image = neg.join("msl_navcam_1024/NLB_485117349EDR_F0480412NCAM00385M_.jpg");
     let cam = dir.path().join("navcam1024.json");
     camera_json(&cam, 1024, 1024, 45.0);
@@ -647,7 +649,7 @@ fn line2d_keeps_no_detection_on_real_frames_without_tubes_and_skips_binned_frame
     let ground = format!("--ground={},{},{},{d}", n.x, n.y, n.z);
     let run = |extra: &[&str], name: &str| -> Vec<Value> {
         let out = dir.path().join(name);
-        let mut args = vec!["detect", "--method", "line2d", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&image), "--out", p(&out)];
+        let mut args = vec!["detect", "--method", "line2d", "--templates", p(&lib), "--camera", p(&cam), "--image", p(&image), "--out", p(&out), "--pose-verifier", "off"];
         args.extend_from_slice(extra);
         ok(&args);
         serde_json::from_str::<Value>(&std::fs::read_to_string(&out).unwrap()).unwrap().as_array().unwrap().clone()

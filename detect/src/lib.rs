@@ -1,7 +1,6 @@
 //! tubeloc-detect (see the README for what this crate owns).
 #![warn(missing_docs)]
 
-pub mod fused;
 pub mod input;
 pub mod learned;
 pub mod line2d;

@@ -8,7 +8,7 @@ use image::DynamicImage;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use tubeloc_core::GroundPlane;
-use tubeloc_core::{AxisSeed, CameraModel, CocoResult, DetectionSource, Pose, Rle, Segmentation, TubeDetection};
+use tubeloc_core::{AxisSeed, CameraModel, CocoResult, DetectionSource, Pose, PoseEvidence, Rle, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
 use tubeloc_detect::line2d::Line2dDetector;
 use tubeloc_detect::scale::RangeBand;
@@ -145,17 +145,70 @@ impl TubeDetector for Line2dTubeDetector {
     }
 }
 
-/// Fused detection ([`tubeloc_detect::fused`]): Line2D candidates scored by the learned
-/// segmenter's agreement; masks and coarse template poses are Line2D's, the score is the fused
-/// score `P L`.
+/// Fused detection (record 0069): the learned segmenter's detections and Line2D's
+/// pose-verified ones in one list, each scored by the probability that its refined pose is a
+/// tube. Each learned detection is refined on the frame's ground, its mask snapped to the pose
+/// and scored by the learned model's [`PoseEvidence`]; Line2D's candidates are verified as
+/// [`Line2dTubeDetector::verified`] keeps them. Most probable first, a detection whose mask
+/// overlaps a kept one at IoU above [`FusedTubeDetector::NMS_IOU`] is dropped.
 pub struct FusedTubeDetector {
-    detector: tubeloc_detect::fused::FusedDetector,
+    learned: LearnedDetector,
+    line2d: Line2dDetector,
+    verification: PoseVerification,
+    learned_evidence: PoseVerifier,
+}
+
+/// One fused detection: the detection, and its Line2D record when Line2D found it.
+#[derive(Clone, Debug)]
+pub struct FusedDetection {
+    /// The detection (snapped mask, the pose evidence as its score).
+    pub detection: TubeDetection,
+    /// Line2D's record (template, clutter probability, `pose_probability`), when it is Line2D's.
+    pub line2d: Option<tubeloc_detect::line2d::Line2dDetection>,
 }
 
 impl FusedTubeDetector {
-    /// A detector around a fused detector (Line2D library, learned model, fusion settings).
-    pub fn new(detector: tubeloc_detect::fused::FusedDetector) -> Self {
-        FusedTubeDetector { detector }
+    /// Mask IoU above which the less probable of two detections is dropped.
+    pub const NMS_IOU: f64 = 0.5;
+
+    /// The learned detector with its model's pose evidence `learned_evidence`, and the Line2D
+    /// matcher `line2d` (with its clutter verifier) verified by `line2d_verifier`.
+    pub fn new(learned: LearnedDetector, learned_evidence: PoseEvidence, mut line2d: Line2dDetector, line2d_verifier: PoseVerifier) -> Result<Self> {
+        let clutter = line2d.params.verifier.clone().ok_or_else(|| PipelineError::Input("fused detection needs the Line2D clutter verifier (its probability is the pose evidence's score)".into()))?;
+        line2d.params.verifier = Some(PoseVerification::floor_of(&clutter, crate::pose_verifier::CLUTTER_FLOOR));
+        let learned_evidence = PoseVerifier { evidence: learned_evidence, threshold: 0.0, threshold_grey: 0.0, nms_iou: 1.0, fitted_on: String::new() };
+        Ok(FusedTubeDetector { learned, line2d, verification: PoseVerification::new(line2d_verifier, clutter)?, learned_evidence })
+    }
+
+    /// The Line2D matcher (library and matching parameters).
+    pub fn line2d(&self) -> &Line2dDetector {
+        &self.line2d
+    }
+
+    /// The fused detections of `image` (of `camera`, on `ground` when known), most probable
+    /// first. Without a ground, the learned detections are refined without one and Line2D's
+    /// candidates are kept at the clutter verifier's cut with its probability as their score.
+    pub fn detect_fused(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<FusedDetection>> {
+        let learned = self.learned.detect(image, camera, ground, image_id)?;
+        let grey = tubeloc_detect::input::is_grey_rgb8(&tubeloc_detect::input::rgb8_pixels(image));
+        let mut all: Vec<FusedDetection> = Vec::new();
+        if !learned.is_empty() {
+            let frame = crate::frame::Frame { image, camera, image_id, ground: ground.copied(), stereo: None };
+            let (refiner, settings) = self.verification.refinement();
+            let verdicts = self.learned_evidence.verify(refiner, settings, &frame, &learned, grey)?;
+            all.extend(verdicts.into_iter().map(|v| FusedDetection { detection: v.detection, line2d: None }));
+        }
+        let (line2d, _) = self.verification.detect(&self.line2d, image, Some(camera), ground, image_id)?;
+        all.extend(line2d.into_iter().map(|d| FusedDetection { detection: d.to_tube_detection(image_id), line2d: Some(d) }));
+        all.sort_by(|a, b| b.detection.score.total_cmp(&a.detection.score));
+        let mut kept: Vec<FusedDetection> = Vec::new();
+        for d in all {
+            let overlaps = d.detection.mask.as_ref().is_some_and(|m| kept.iter().filter_map(|k| k.detection.mask.as_ref()).any(|k| Rle::iou(std::slice::from_ref(m), std::slice::from_ref(k), &[false])[0] > Self::NMS_IOU));
+            if !overlaps {
+                kept.push(d);
+            }
+        }
+        Ok(kept)
     }
 }
 
@@ -165,10 +218,7 @@ impl TubeDetector for FusedTubeDetector {
     }
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
-        let rgb = tubeloc_detect::input::rgb8_pixels(image);
-        let (w, h) = (image.width() as usize, image.height() as usize);
-        let dets = self.detector.detect(&rgb, w, h, Some(camera), ground).map_err(PipelineError::Detect)?;
-        Ok(dets.iter().map(|d| d.to_tube_detection(image_id)).collect())
+        Ok(self.detect_fused(image, camera, ground, image_id)?.into_iter().map(|d| d.detection).collect())
     }
 }
 

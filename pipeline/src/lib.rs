@@ -67,7 +67,7 @@ pub mod shipped;
 pub mod stages;
 pub mod stereo;
 
-pub use detector::{ExternalDetections, FusedTubeDetector, LearnedDetector, Line2dTubeDetector, TubeDetector};
+pub use detector::{ExternalDetections, FusedDetection, FusedTubeDetector, LearnedDetector, Line2dTubeDetector, TubeDetector};
 pub use error::PipelineError;
 pub use frame::{refine_frame, Frame, FrameOptions, FrameRefinement, SeedItem, StereoView};
 pub use locator::{frame_highlight_level, highlight_level, ignore_mask_of, CameraSelection, LocateInput, LocateOutput, LocatedTube, Locator, RejectedTube, Rejection, Timings, MAX_IMAGE_PIXELS};

@@ -166,6 +166,11 @@ impl PoseVerification {
         Ok(PoseVerification { verifier, clutter, refiner, settings })
     }
 
+    /// The refiner and settings the verification refines with.
+    pub(crate) fn refinement(&self) -> (&Refiner, &LocatorSettings) {
+        (&self.refiner, &self.settings)
+    }
+
     /// `clutter` with its cut lowered to `floor` for every image (the matcher of a verified
     /// Line2D detector).
     pub fn floor_of(clutter: &Verifier, floor: f32) -> Verifier {

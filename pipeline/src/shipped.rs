@@ -216,13 +216,17 @@ pub fn line2d_pose_verifier(spec: &str) -> Result<PoseVerifier> {
 }
 
 /// The fused detector of `tubeloc locate --detector fused --templates LIB.tlt [--model M]
-/// [--range-m R]`: Line2D as [`line2d_detector`], the learned model as [`learned_detector`],
-/// the default fusion settings ([`tubeloc_detect::fused`]).
+/// [--range-m R]`: the learned detector as [`learned_detector`] with the shipped model's pose
+/// evidence, and Line2D as [`line2d_detector`] verified by the shipped pose verifier (record
+/// 0069). With another model than the shipped one its detections are scored by the shipped
+/// model's pose evidence, with a warning on stderr.
 pub fn fused_detector(templates: Option<&Path>, model: Option<&Path>, range_m: &str) -> Result<FusedTubeDetector> {
     let line2d = line2d_matcher(templates, "fused")?;
-    let (weights, _) = learned_model(model)?;
-    let fused = tubeloc_detect::fused::FusedDetector::new(line2d, weights, DecodeConfig::default(), parse_range_band(range_m)?, Default::default()).map_err(PipelineError::Detect)?;
-    Ok(FusedTubeDetector::new(fused))
+    let learned = learned_detector(model, range_m)?;
+    if let Some(m) = model {
+        eprintln!("warning: the fused detector scores learned detections by the shipped model's pose evidence, not one fitted for {}", m.display());
+    }
+    FusedTubeDetector::new(learned, pose_evidence("shipped")?, line2d, line2d_pose_verifier("shipped")?)
 }
 
 #[cfg(test)]
@@ -264,6 +268,23 @@ mod tests {
         assert!(m.weights[0] > 0.0 && m.weights[1] > 0.0 && m.weights[2] > 0.0 && m.weights[4] < 0.0, "{m:?}");
         let e = pose_evidence("absent_evidence.json").unwrap_err().to_string();
         assert!(e.contains("reading pose evidence absent_evidence.json"), "{e}");
+    }
+
+    #[test]
+    fn the_embedded_line2d_pose_verifier_is_its_file() {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(SHIPPED_LINE2D_POSE_VERIFIER_NAME);
+        let from_file: PoseVerifier = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        let v = line2d_pose_verifier("shipped").unwrap();
+        assert_eq!(v, from_file);
+        assert_eq!(line2d_pose_verifier(file.to_str().unwrap()).unwrap(), v);
+        // Fitted and cut on the validation part; a candidate with more contour on edges and a
+        // higher clutter probability is more likely a tube.
+        assert!(v.evidence.fitted_on.contains("real_val_all") && v.fitted_on.contains("--split val"), "{v:?}");
+        assert!(v.evidence.weights[0] > 0.0 && v.evidence.weights[2] > 0.0, "{v:?}");
+        // Grey clutter under an assumed camera passes more often: its cut is the higher one.
+        assert!(v.threshold_grey > v.threshold && v.threshold > 0.0 && v.threshold_grey < 1.0, "{v:?}");
+        let e = line2d_pose_verifier("absent_verifier.json").unwrap_err().to_string();
+        assert!(e.contains("reading pose verifier absent_verifier.json"), "{e}");
     }
 
     #[test]

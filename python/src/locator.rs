@@ -117,7 +117,7 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 ///
 /// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
 /// default the shipped model), "line2d" (templates: a .tlt library for the camera) or "fused"
-/// (Line2D candidates scored by the learned segmenter's agreement; templates and model). camera:
+/// (the learned detections and Line2D's pose-verified ones, by pose evidence; templates and model). camera:
 /// the rig camera of the (left) images; pair: (left, right) camera names. calibration: score
 /// calibration JSON (default: the learned model's); min_probability: acceptance threshold
 /// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".

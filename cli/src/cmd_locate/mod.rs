@@ -33,8 +33,8 @@ pub enum Detector {
     Learned,
     /// Line2D template matching (`--templates LIB.tlt`, built for the rig camera).
     Line2d,
-    /// Line2D candidates (`--templates`) scored by the learned segmenter's agreement
-    /// (`--model`; `tubeloc detect --method fused`, record 0063).
+    /// The learned detections (`--model`) and Line2D's pose-verified ones (`--templates`),
+    /// scored by their pose evidence (`tubeloc detect --method fused`, record 0069).
     Fused,
     /// Detections made elsewhere (`--results coco_results.json`, e.g. Detectron2).
     External,

@@ -36,9 +36,6 @@ pub struct Line2dDetection {
     pub probability: Option<f32>,
     /// The verifier's features of this detection, when it ran.
     pub features: Option<Features>,
-    /// The learned segmenter's agreement with this detection, when it was fused
-    /// ([`crate::fused`]); the `score` is then the fused score.
-    pub agreement: Option<f32>,
     /// Probability that the pose refined from this detection is a tube, when the detection was
     /// verified by its pose (`tubeloc_pipeline::pose_verifier`); the `score` is then this
     /// probability, and `mask` and `bbox` are the refined pose's silhouette where it agrees
@@ -117,7 +114,6 @@ impl Line2dDetection {
             contrast: None,
             probability: None,
             features: None,
-            agreement: None,
             pose_probability: None,
             scale: (sx * sy).sqrt(),
             x: corner[0].round() as i32,
@@ -148,9 +144,6 @@ impl Line2dDetection {
             }
             if let Some(p) = self.probability {
                 o.insert("probability".into(), json!(p));
-            }
-            if let Some(a) = self.agreement {
-                o.insert("agreement".into(), json!(a));
             }
             if let Some(p) = self.pose_probability {
                 o.insert("pose_probability".into(), json!(p));
