@@ -60,8 +60,9 @@ pub fn pose_evidence(spec: &str) -> Result<PoseEvidence> {
 pub const FUSED_CALIBRATION_NAME: &str = "data/models/fused.calibration.json";
 
 /// The fused detector's score calibration (JSON text of [`ScoreCalibration`]): fitted on the
-/// fused scores (`tubeloc_detect::fused`) of the shipped model and the default template
-/// library on real validation composites, as the shipped model's own (record 0063).
+/// fused detections ([`crate::FusedTubeDetector`]: the shipped model's and the default template
+/// library's, by their pose evidence) on real validation composites, as the shipped model's
+/// own (record 0069).
 pub const FUSED_CALIBRATION_JSON: &str = include_str!("../../data/models/fused.calibration.json");
 
 /// The fused detector's score calibration: with the shipped model (`model` = `None`) the
