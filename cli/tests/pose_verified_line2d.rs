@@ -8,26 +8,6 @@ mod common;
 use common::*;
 use serde_json::Value;
 use std::path::Path;
-use tubeloc_core::{Rle, Segmentation};
-
-fn detections(path: &Path) -> Vec<Value> {
-    serde_json::from_str::<Value>(&std::fs::read_to_string(path).unwrap()).unwrap().as_array().unwrap().clone()
-}
-
-fn mask(v: &Value) -> Rle {
-    let size = &v["segmentation"]["size"];
-    let (h, w) = (size[0].as_u64().unwrap() as u32, size[1].as_u64().unwrap() as u32);
-    let seg: Segmentation = serde_json::from_value(v["segmentation"].clone()).unwrap();
-    seg.to_rle(h, w).unwrap()
-}
-
-fn iou(a: &Rle, b: &Rle) -> f64 {
-    Rle::iou(std::slice::from_ref(a), std::slice::from_ref(b), &[false])[0]
-}
-
-fn score(v: &Value) -> f64 {
-    v["score"].as_f64().unwrap()
-}
 
 /// The snapped candidates each image keeps: most probable first, none overlapping a kept one
 /// at mask IoU above 0.5, at or above `cut`.

@@ -56,3 +56,26 @@ END_GROUP = GEOMETRIC_CAMERA_MODEL_PARMS\nOBJECT = IMAGE\n  LINES = {}\n  LINE_S
     bytes.extend_from_slice(rgb.as_raw());
     std::fs::write(path, bytes).unwrap();
 }
+
+/// The COCO results list of a detections file.
+pub fn detections(path: &Path) -> Vec<serde_json::Value> {
+    serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(path).unwrap()).unwrap().as_array().unwrap().clone()
+}
+
+/// A detection's mask (its `segmentation`).
+pub fn mask(v: &serde_json::Value) -> tubeloc_core::Rle {
+    let size = &v["segmentation"]["size"];
+    let (h, w) = (size[0].as_u64().unwrap() as u32, size[1].as_u64().unwrap() as u32);
+    let seg: tubeloc_core::Segmentation = serde_json::from_value(v["segmentation"].clone()).unwrap();
+    seg.to_rle(h, w).unwrap()
+}
+
+/// The IoU of two masks.
+pub fn iou(a: &tubeloc_core::Rle, b: &tubeloc_core::Rle) -> f64 {
+    tubeloc_core::Rle::iou(std::slice::from_ref(a), std::slice::from_ref(b), &[false])[0]
+}
+
+/// A detection's score.
+pub fn score(v: &serde_json::Value) -> f64 {
+    v["score"].as_f64().unwrap()
+}
