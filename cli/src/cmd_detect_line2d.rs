@@ -94,7 +94,8 @@ pub struct Line2dOpts {
     #[arg(long)]
     pub verifier: Option<PathBuf>,
     /// Line2D clutter verifier: keep detections whose probability of being a tube is at least
-    /// this (default: the verifier's own threshold, chosen on real validation composites).
+    /// this (default: the verifier's own threshold, chosen on real validation composites). With
+    /// the pose verifier: the least clutter probability of a candidate it refines (default 0).
     #[arg(long, value_parser = crate::args::unit_interval_f32)]
     pub min_probability: Option<f32>,
     /// Line2D: no clutter verifier (the score is the radiometric verified score, nothing is

@@ -154,8 +154,8 @@ def test_ignore_mask_equals_the_cli(cli, demo_scene, tmp_path):
 
 
 def test_fused_detect_equals_the_cli(cli, demo_scene, tmp_path):
-    # Line2D candidates scored by the learned agreement (P L): the same boxes and scores as
-    # `tubeloc detect --method fused`, each agreeing with the network.
+    # The learned detections and Line2D's pose-verified ones by their pose evidence: the same
+    # boxes and scores as `tubeloc detect --method fused`.
     rig, image, ground = demo_scene
     camera = tmp_path / "camera.json"
     camera.write_text(json.dumps(json.loads(rig.read_text())["cameras"][0]["model"]))
@@ -167,7 +167,10 @@ def test_fused_detect_equals_the_cli(cli, demo_scene, tmp_path):
     assert dets, "the demo scene's tubes are found"
     assert [(d["bbox"], d["score"]) for d in dets] == [(c["bbox"], c["score"]) for c in cli_dets]
     for c in cli_dets:
-        assert c["agreement"] > 0 and abs(c["score"] - c["probability"] * c["agreement"]) < 1e-5
+        assert 0.0 <= c["score"] <= 1.0
+        assert c["source"] in ("learned", "line2d"), c
+        if c["source"] == "line2d":
+            assert c["pose_probability"] == c["score"], c  # verified on the given ground
     # The Locator hands fused tubes over at the fused calibration's threshold, as `locate` does.
     cal = json.loads((Path(__file__).resolve().parents[2] / "data/models/fused.calibration.json").read_text())
     assert tubeloc.Locator(str(rig), detector="fused", templates=str(lib)).min_probability == cal["threshold"]
