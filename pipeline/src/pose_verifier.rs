@@ -190,13 +190,14 @@ impl PoseVerification {
         let (w, h) = (image.width() as usize, image.height() as usize);
         let candidates = matcher.detect_on_ground(&rgb, w, h, camera, ground).map_err(|e| PipelineError::Detect(e.to_string()))?;
         let grey = tubeloc_detect::input::is_grey_rgb8(&rgb);
-        let camera = camera.filter(|c| (c.width as usize, c.height as usize) == (w, h));
-        let (Some(camera), Some(ground)) = (camera, ground) else {
+        let own = camera.filter(|c| (c.width as usize, c.height as usize) == (w, h));
+        let (Some(own), Some(ground)) = (own, ground) else {
+            // The cut the matcher would have applied: the search it ran used `camera`.
             let cut = self.clutter.threshold_for_search(grey, matcher.searched_twice(grey, camera));
             return Ok((candidates.into_iter().filter(|d| d.probability.is_none_or(|p| p >= cut)).collect(), false));
         };
         let dets: Vec<TubeDetection> = candidates.iter().map(|d| d.to_tube_detection(image_id)).collect();
-        let frame = Frame { image, camera, image_id, ground: Some(*ground), stereo: None };
+        let frame = Frame { image, camera: own, image_id, ground: Some(*ground), stereo: None };
         let verdicts = self.verifier.verify(&self.refiner, &self.settings, &frame, &dets, grey)?;
         let kept = verdicts
             .into_iter()
