@@ -168,9 +168,8 @@ impl Line2dRunner {
                 Line2dRunner::Fused(Box::new(tubeloc_pipeline::FusedTubeDetector::new(learned, evidence, det, p)?))
             }
             (None, Some(p)) => {
-                let clutter = det.params.verifier.clone().context("pose verification needs the clutter verifier (--pose-verifier off with --no-verifier)")?;
-                det.params.verifier = Some(PoseVerification::floor_of(&clutter, floor));
-                Line2dRunner::Verified(Box::new(det), Box::new(PoseVerification::new(p, clutter)?))
+                let verification = PoseVerification::for_matcher(&mut det, p, floor)?;
+                Line2dRunner::Verified(Box::new(det), Box::new(verification))
             }
             (None, None) => Line2dRunner::Plain(Box::new(det)),
         })

@@ -7,7 +7,6 @@ mod common;
 
 use common::*;
 use serde_json::Value;
-use std::path::Path;
 
 /// On composites on real Navcam frames (validation sols, each frame's own camera and ground):
 /// every fused detection is a learned detection snapped and scored by the shipped pose
@@ -19,12 +18,7 @@ use std::path::Path;
 fn fused_detections_are_the_learned_and_verified_line2d_ones_by_pose_evidence() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
-    assert!(real.join("MANIFEST.tsv").exists(), "{} is missing: this test needs ../shared/data beside the repository", real.display());
-    let set = d.join("set");
-    ok(&["synth", "real", "--data", p(&real), "--split", "val", "--kind", "grey", "--per-view", "1", "--limit", "3", "--seed", "3", "--out", p(&set)]);
-    let lib = d.join("default.tlt");
-    ok(&["templates", "build", "--out", p(&lib)]);
+    let (set, lib) = real_grey_val_set_and_library(d);
     let run = |args: &[&str], name: &str| -> Vec<Value> {
         let out = d.join(name);
         let mut all = vec!["detect", "--dataset", p(&set), "--out", p(&out)];

@@ -33,12 +33,7 @@ fn kept_by_rule(snapped: &[Value], cut: f64) -> Vec<Value> {
 fn verified_line2d_detections_are_the_candidates_their_pose_evidence_keeps() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
-    assert!(real.join("MANIFEST.tsv").exists(), "{} is missing: this test needs ../shared/data beside the repository", real.display());
-    let set = d.join("set");
-    ok(&["synth", "real", "--data", p(&real), "--split", "val", "--kind", "grey", "--per-view", "1", "--limit", "3", "--seed", "3", "--out", p(&set)]);
-    let lib = d.join("default.tlt");
-    ok(&["templates", "build", "--out", p(&lib)]);
+    let (set, lib) = real_grey_val_set_and_library(d);
     let run = |args: &[&str], name: &str| -> (Vec<Value>, String) {
         let out = d.join(name);
         let mut all = vec!["detect", "--method", "line2d", "--templates", p(&lib), "--out", p(&out)];

@@ -34,7 +34,7 @@ pub use confidence::ScoreCalibration;
 pub use detection::{AxisSeed, DetectionSource, TubeDetection};
 pub use error::CoreError;
 pub use ground::GroundPlane;
-pub use mask::{BinaryMask, BoundedMask, MaskWindow, Rle};
+pub use mask::{keep_by_iou, BinaryMask, BoundedMask, MaskWindow, Rle};
 pub use plane::Plane;
 pub use pose::Pose;
 pub use pose_evidence::PoseEvidence;

@@ -722,3 +722,37 @@ pub fn bbox_iou(dt: &[[f64; 4]], gt: &[[f64; 4]], iscrowd: &[bool]) -> Vec<f64> 
     }
     out
 }
+
+/// Greedy suppression by mask IoU. `masks` come in decreasing order of score; each is kept
+/// unless its IoU ([`Rle::iou`]) with an earlier kept mask exceeds `max_iou`. An entry without
+/// a mask (`None`) is kept and suppresses nothing. Returns whether each entry is kept.
+pub fn keep_by_iou(masks: &[Option<&Rle>], max_iou: f64) -> Vec<bool> {
+    let mut kept: Vec<Rle> = Vec::new();
+    masks
+        .iter()
+        .map(|m| {
+            let Some(m) = m else { return true };
+            let overlaps = !kept.is_empty() && Rle::iou(std::slice::from_ref(*m), &kept, &vec![false; kept.len()]).iter().any(|&iou| iou > max_iou);
+            if !overlaps {
+                kept.push((*m).clone());
+            }
+            !overlaps
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod keep_by_iou_tests {
+    use super::*;
+
+    #[test]
+    fn a_mask_overlapping_a_kept_one_is_dropped_and_a_dropped_one_suppresses_nothing() {
+        let band = |x0: usize, x1: usize| Rle::from_mask(&BinaryMask::from_fn(20, 10, |x, y| (x0..x1).contains(&x) && (2..6).contains(&y)));
+        // b overlaps a at IoU 32/40 = 0.8; c overlaps b at 24/40 but a only at 16/40: b is
+        // dropped, so c stays; the fourth has no mask.
+        let (a, b, c) = (band(0, 8), band(0, 10), band(4, 10));
+        assert_eq!(keep_by_iou(&[Some(&a), Some(&b), Some(&c), None], 0.5), vec![true, false, true, true]);
+        assert_eq!(keep_by_iou(&[Some(&a), Some(&b), Some(&c)], 1.0), vec![true, true, true]);
+        assert!(keep_by_iou(&[], 0.5).is_empty());
+    }
+}

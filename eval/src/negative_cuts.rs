@@ -64,13 +64,8 @@ pub fn suppressed(gt: &CocoDataset, dt: &[CocoResult], nms_iou: f64) -> Result<V
     let mut out = Vec::new();
     for (_, mut list) in by_image {
         list.sort_by(|a, b| dt[b.0].score.total_cmp(&dt[a.0].score).then(a.0.cmp(&b.0)));
-        let mut kept: Vec<Rle> = Vec::new();
-        for (k, m) in list {
-            if kept.is_empty() || Rle::iou(std::slice::from_ref(&m), &kept, &vec![false; kept.len()]).iter().all(|&v| v <= nms_iou) {
-                kept.push(m);
-                out.push(dt[k].clone());
-            }
-        }
+        let keep = tubeloc_core::keep_by_iou(&list.iter().map(|(_, m)| Some(m)).collect::<Vec<_>>(), nms_iou);
+        out.extend(list.iter().zip(keep).filter(|(_, k)| *k).map(|((k, _), _)| dt[*k].clone()));
     }
     Ok(out)
 }

@@ -120,9 +120,8 @@ impl Line2dTubeDetector {
     /// is run at the floor [`crate::pose_verifier::CLUTTER_FLOOR`], and its own cuts apply
     /// where no pose can be refined (no ground plane).
     pub fn verified(mut detector: Line2dDetector, verifier: PoseVerifier) -> Result<Self> {
-        let clutter = detector.params.verifier.clone().ok_or_else(|| PipelineError::Input("pose verification needs the Line2D clutter verifier (its probability is the evidence's score)".into()))?;
-        detector.params.verifier = Some(PoseVerification::floor_of(&clutter, crate::pose_verifier::CLUTTER_FLOOR));
-        Ok(Line2dTubeDetector { detector, verification: Some(PoseVerification::new(verifier, clutter)?) })
+        let verification = PoseVerification::for_matcher(&mut detector, verifier, crate::pose_verifier::CLUTTER_FLOOR)?;
+        Ok(Line2dTubeDetector { detector, verification: Some(verification) })
     }
 }
 
@@ -174,10 +173,9 @@ impl FusedTubeDetector {
     /// The learned detector with its model's pose evidence `learned_evidence`, and the Line2D
     /// matcher `line2d` (with its clutter verifier) verified by `line2d_verifier`.
     pub fn new(learned: LearnedDetector, learned_evidence: PoseEvidence, mut line2d: Line2dDetector, line2d_verifier: PoseVerifier) -> Result<Self> {
-        let clutter = line2d.params.verifier.clone().ok_or_else(|| PipelineError::Input("fused detection needs the Line2D clutter verifier (its probability is the pose evidence's score)".into()))?;
-        line2d.params.verifier = Some(PoseVerification::floor_of(&clutter, crate::pose_verifier::CLUTTER_FLOOR));
+        let verification = PoseVerification::for_matcher(&mut line2d, line2d_verifier, crate::pose_verifier::CLUTTER_FLOOR)?;
         let learned_evidence = PoseVerifier { evidence: learned_evidence, threshold: 0.0, threshold_grey: 0.0, nms_iou: 1.0, fitted_on: String::new() };
-        Ok(FusedTubeDetector { learned, line2d, verification: PoseVerification::new(line2d_verifier, clutter)?, learned_evidence })
+        Ok(FusedTubeDetector { learned, line2d, verification, learned_evidence })
     }
 
     /// The Line2D matcher (library and matching parameters).
@@ -201,14 +199,8 @@ impl FusedTubeDetector {
         let (line2d, _) = self.verification.detect(&self.line2d, image, Some(camera), ground, image_id)?;
         all.extend(line2d.into_iter().map(|d| FusedDetection { detection: d.to_tube_detection(image_id), line2d: Some(d) }));
         all.sort_by(|a, b| b.detection.score.total_cmp(&a.detection.score));
-        let mut kept: Vec<FusedDetection> = Vec::new();
-        for d in all {
-            let overlaps = d.detection.mask.as_ref().is_some_and(|m| kept.iter().filter_map(|k| k.detection.mask.as_ref()).any(|k| Rle::iou(std::slice::from_ref(m), std::slice::from_ref(k), &[false])[0] > Self::NMS_IOU));
-            if !overlaps {
-                kept.push(d);
-            }
-        }
-        Ok(kept)
+        let keep = tubeloc_core::keep_by_iou(&all.iter().map(|d| d.detection.mask.as_ref()).collect::<Vec<_>>(), Self::NMS_IOU);
+        Ok(all.into_iter().zip(keep).filter_map(|(d, k)| k.then_some(d)).collect())
     }
 }
 

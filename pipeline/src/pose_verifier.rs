@@ -19,7 +19,7 @@ use crate::settings::LocatorSettings;
 use crate::stages::snapped_detection;
 use image::DynamicImage;
 use serde::{Deserialize, Serialize};
-use tubeloc_core::{CameraModel, GroundPlane, PoseEvidence, Rle, TubeAxisPose, TubeDetection};
+use tubeloc_core::{keep_by_iou, CameraModel, GroundPlane, PoseEvidence, TubeAxisPose, TubeDetection};
 use tubeloc_detect::line2d::{Line2dDetection, Line2dDetector, Verifier};
 use tubeloc_refine::Refiner;
 
@@ -129,14 +129,12 @@ impl PoseVerifier {
             })
             .collect();
         verdicts.sort_by(|a, b| b.probability.total_cmp(&a.probability).then(a.index.cmp(&b.index)));
-        let cut = self.threshold_for(grey);
-        let mut kept: Vec<Rle> = Vec::new();
-        for v in verdicts.iter_mut().filter(|v| v.probability >= cut) {
-            let overlaps = v.detection.mask.as_ref().is_some_and(|m| !kept.is_empty() && Rle::iou(std::slice::from_ref(m), &kept, &vec![false; kept.len()]).iter().any(|&iou| iou > self.nms_iou));
-            v.verdict = if overlaps { Verdict::Overlapping } else { Verdict::Kept };
-            if let (Verdict::Kept, Some(m)) = (v.verdict, &v.detection.mask) {
-                kept.push(m.clone());
-            }
+        // Most probable first: those at or above the cut are the leading ones.
+        let above = verdicts.partition_point(|v| v.probability >= self.threshold_for(grey));
+        let masks: Vec<Option<&tubeloc_core::Rle>> = verdicts[..above].iter().map(|v| v.detection.mask.as_ref()).collect();
+        let keep = keep_by_iou(&masks, self.nms_iou);
+        for (v, k) in verdicts.iter_mut().zip(keep) {
+            v.verdict = if k { Verdict::Kept } else { Verdict::Overlapping };
         }
         Ok(verdicts)
     }
@@ -171,12 +169,16 @@ impl PoseVerification {
         (&self.refiner, &self.settings)
     }
 
-    /// `clutter` with its cut lowered to `floor` for every image (the matcher of a verified
-    /// Line2D detector).
-    pub fn floor_of(clutter: &Verifier, floor: f32) -> Verifier {
-        let mut v = clutter.clone();
-        v.set_threshold(floor);
-        v
+    /// The verification of `matcher`'s candidates by `verifier`: `matcher`'s clutter verifier
+    /// is kept with its own cuts (for images without a ground) and the matcher's is lowered to
+    /// `floor` for every image, so that the candidates above it reach the pose verifier. Errors
+    /// when the matcher has no clutter verifier (its probability is the evidence's score).
+    pub fn for_matcher(matcher: &mut Line2dDetector, verifier: PoseVerifier, floor: f32) -> Result<Self> {
+        let clutter = matcher.params.verifier.clone().ok_or_else(|| PipelineError::Input("pose verification needs the Line2D clutter verifier: its probability is the pose evidence's score".into()))?;
+        let mut lowered = clutter.clone();
+        lowered.set_threshold(floor);
+        matcher.params.verifier = Some(lowered);
+        Self::new(verifier, clutter)
     }
 
     /// Line2D on `image` (of `camera`, on `ground`) verified by pose: the matcher's candidates
