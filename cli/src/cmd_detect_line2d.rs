@@ -12,7 +12,9 @@ use tubeloc_pipeline::pose_verifier::{PoseVerification, PoseVerifier, CLUTTER_FL
 /// Line2D options of `tubeloc detect`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct Line2dOpts {
-    /// Template library (`--method line2d`), from `tubeloc templates build`.
+    /// Template library (`--method line2d|fused`), from `tubeloc templates build`. Default: the
+    /// default library (what `tubeloc templates build` writes at its defaults), built in memory
+    /// in about 1 s; images of any camera are resampled to its pixel scale.
     #[arg(long)]
     pub templates: Option<PathBuf>,
     /// Camera JSON of the images (coarse poses; an image whose focal length differs from the
@@ -225,8 +227,10 @@ pub const DEFAULT_GROUND_RANGE: &str = "0.55:1.25";
 
 /// The Line2D detector and the fallback camera (`--camera`) that `opts` describe.
 pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<CameraModel>)> {
-    let lib_path = opts.templates.as_deref().context("--method line2d and --method fused need --templates LIB.tlt (tubeloc templates build)")?;
-    let lib = TemplateLibrary::load(lib_path).with_context(|| format!("reading {}", lib_path.display()))?;
+    let lib = match opts.templates.as_deref() {
+        Some(p) => TemplateLibrary::load(p).with_context(|| format!("reading {}", p.display()))?,
+        None => TemplateLibrary::default_library().context("building the default template library")?,
+    };
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
     let mut params = MatchParams {
         threshold: opts.threshold,

@@ -65,11 +65,12 @@ fn locate_errors_name_the_file_and_the_problem() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("img.png is 64x48 but rig camera \"C\""), "{}", stderr(&o));
 
-    // Line2D without a library; stereo without a pair.
+    // Line2D with a library that is not there; stereo without a pair.
     image::RgbImage::new(640, 480).save(&img).unwrap();
-    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--detector", "line2d", "--out", p(&out)]);
+    let missing = dir.path().join("missing.tlt");
+    let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--detector", "line2d", "--templates", p(&missing), "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("needs --templates"), "{}", stderr(&o));
+    assert!(stderr(&o).contains(&format!("reading {}", missing.display())), "{}", stderr(&o));
     let o = tubeloc(&["locate", "--rig", p(&rig), "--image", p(&img), "--right", p(&img), "--out", p(&out)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("no stereo pair"), "{}", stderr(&o));
@@ -512,8 +513,27 @@ fn fused_locate_refines_the_fused_detections() {
     let scores = |list: &[Value]| -> Vec<f64> { list.iter().map(|d| d["score"].as_f64().unwrap()).collect() };
     assert_eq!(scores(doc["detections"].as_array().unwrap()), scores(dets), "locate's detections are detect's");
     assert!(doc["tubes"].as_array().unwrap().iter().any(|t| t["converged"] == true), "a tube is located");
-    // Like Line2D, the fused detector needs its template library.
-    let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "fused", "--out", p(&s.path("x.json"))]);
-    assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("--detector fused needs --templates"), "{}", stderr(&o));
+}
+
+/// Without `--templates`, Line2D and the fused detector search with the default library: the
+/// same detections as with the library `tubeloc templates build` writes at its defaults.
+#[test]
+fn without_templates_the_default_library_is_used() {
+    let s = Scene::new("1", "512");
+    let (lib, cam) = (s.path("default.tlt"), s.path("camera.json"));
+    ok(&["templates", "build", "--out", p(&lib)]);
+    for method in ["line2d", "fused"] {
+        let (with, without) = (s.path(&format!("{method}_with.json")), s.path(&format!("{method}_without.json")));
+        ok(&["detect", "--method", method, "--templates", p(&lib), "--camera", p(&cam), "--image", p(&s.image(0)), "--out", p(&with)]);
+        ok(&["detect", "--method", method, "--camera", p(&cam), "--image", p(&s.image(0)), "--out", p(&without)]);
+        let read = |f: &Path| -> Value { serde_json::from_str(&std::fs::read_to_string(f).unwrap()).unwrap() };
+        let with = read(&with);
+        assert!(!with.as_array().unwrap().is_empty(), "{method}: the rendered tubes are found");
+        assert_eq!(with, read(&without), "{method}");
+    }
+    let out = s.path("out/poses.json");
+    let o = tubeloc(&["locate", "--rig", p(&s.path("rig.json")), "--image", p(&s.image(0)), "--detector", "fused", "--out", p(&out)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(doc["tubes"].as_array().unwrap().iter().any(|t| t["converged"] == true), "a tube is located");
 }

@@ -19,6 +19,7 @@ use std::path::Path;
 use tubeloc_core::{PoseEvidence, ScoreCalibration};
 use tubeloc_detect::learned::shipped::{shipped_model, SHIPPED_MODEL_NAME};
 use tubeloc_detect::learned::DecodeConfig;
+use tubeloc_detect::line2d::TemplateLibrary;
 use tubeloc_detect::scale::RangeBand;
 
 /// The file the embedded calibration comes from, relative to the workspace root.
@@ -175,21 +176,28 @@ fn learned_model(model: Option<&Path>) -> Result<(tubeloc_detect::learned::Learn
     }
 }
 
-/// Line2D with the template library at `templates` (`--templates LIB.tlt`), the default
-/// matching parameters and the shipped clutter verifier, for `detector` (`line2d` or `fused`,
-/// named in the error when the library is missing).
-fn line2d_matcher(templates: Option<&Path>, detector: &str) -> Result<tubeloc_detect::line2d::Line2dDetector> {
-    let lib = templates.ok_or_else(|| PipelineError::Input(format!("--detector {detector} needs --templates LIB.tlt (build one for this camera: tubeloc templates build --camera CAM.json --out LIB.tlt)")))?;
-    let lib = tubeloc_detect::line2d::TemplateLibrary::load(lib).map_err(|e| PipelineError::Input(format!("reading {}: {}", lib.display(), error_chain(&e))))?;
-    tubeloc_detect::line2d::Line2dDetector::new(lib, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))
+/// The template library at `templates` (`--templates LIB.tlt`), or without one the default
+/// library ([`TemplateLibrary::default_library`], built in memory in about 1 s: the library
+/// the real stage of `tubeloc bench` measures).
+pub fn template_library(templates: Option<&Path>) -> Result<TemplateLibrary> {
+    match templates {
+        Some(lib) => TemplateLibrary::load(lib).map_err(|e| PipelineError::Input(format!("reading {}: {}", lib.display(), error_chain(&e)))),
+        None => TemplateLibrary::default_library().map_err(|e| PipelineError::Detect(format!("building the default template library: {e}"))),
+    }
 }
 
-/// The Line2D detector of `tubeloc locate --detector line2d --templates LIB.tlt`: the library
-/// with the default matching parameters and the shipped clutter verifier, its candidates
+/// Line2D with the template library `templates` names ([`template_library`]), the default
+/// matching parameters and the shipped clutter verifier.
+fn line2d_matcher(templates: Option<&Path>) -> Result<tubeloc_detect::line2d::Line2dDetector> {
+    tubeloc_detect::line2d::Line2dDetector::new(template_library(templates)?, Default::default()).map_err(|e| PipelineError::Detect(e.to_string()))
+}
+
+/// The Line2D detector of `tubeloc locate --detector line2d [--templates LIB.tlt]`: the library
+/// ([`template_library`]: the default one without a file) with the default matching parameters and the shipped clutter verifier, its candidates
 /// verified by their poses with the pose verifier `pose_verifier` names
 /// ([`line2d_pose_verifier`]; `None`: none, the clutter verifier's cut alone).
 pub fn line2d_detector(templates: Option<&Path>, pose_verifier: Option<&str>) -> Result<Line2dTubeDetector> {
-    let matcher = line2d_matcher(templates, "line2d")?;
+    let matcher = line2d_matcher(templates)?;
     match pose_verifier {
         Some(spec) => Line2dTubeDetector::verified(matcher, line2d_pose_verifier(spec)?),
         None => Ok(Line2dTubeDetector::new(matcher)),
@@ -216,13 +224,13 @@ pub fn line2d_pose_verifier(spec: &str) -> Result<PoseVerifier> {
     PoseVerifier::from_json(&text, spec)
 }
 
-/// The fused detector of `tubeloc locate --detector fused --templates LIB.tlt [--model M]
+/// The fused detector of `tubeloc locate --detector fused [--templates LIB.tlt] [--model M]
 /// [--range-m R]`: the learned detector as [`learned_detector`] with the shipped model's pose
 /// evidence, and Line2D as [`line2d_detector`] verified by the shipped pose verifier (record
 /// 0069). With another model than the shipped one its detections are scored by the shipped
 /// model's pose evidence, with a warning on stderr.
 pub fn fused_detector(templates: Option<&Path>, model: Option<&Path>, range_m: &str) -> Result<FusedTubeDetector> {
-    let line2d = line2d_matcher(templates, "fused")?;
+    let line2d = line2d_matcher(templates)?;
     let learned = learned_detector(model, range_m)?;
     if let Some(m) = model {
         eprintln!("warning: the fused detector scores learned detections by the shipped model's pose evidence, not one fitted for {}", m.display());
@@ -234,10 +242,16 @@ pub fn fused_detector(templates: Option<&Path>, model: Option<&Path>, range_m: &
 mod tests {
     use super::*;
 
+    /// The shipped file `name` (relative to the workspace root): its path and its parsed JSON.
+    fn shipped_file<T: serde::de::DeserializeOwned>(name: &str) -> (std::path::PathBuf, T) {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(name);
+        let parsed = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        (file, parsed)
+    }
+
     #[test]
     fn the_embedded_calibration_is_the_shipped_file() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(SHIPPED_CALIBRATION_NAME);
-        let from_file: ScoreCalibration = serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap();
+        let (_, from_file): (_, ScoreCalibration) = shipped_file(SHIPPED_CALIBRATION_NAME);
         let c = shipped_calibration().unwrap();
         assert_eq!(c, from_file);
         // The shipped threshold was chosen for precision >= 0.95.
@@ -247,8 +261,7 @@ mod tests {
 
     #[test]
     fn the_embedded_fused_calibration_is_its_file() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(FUSED_CALIBRATION_NAME);
-        let from_file: ScoreCalibration = serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap();
+        let (_, from_file): (_, ScoreCalibration) = shipped_file(FUSED_CALIBRATION_NAME);
         let c = fused_calibration(None).unwrap();
         assert_eq!(c, from_file);
         assert_eq!(c.target_precision, 0.95);
@@ -258,8 +271,7 @@ mod tests {
 
     #[test]
     fn the_embedded_pose_evidence_is_its_file_and_bad_files_are_named() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(SHIPPED_POSE_EVIDENCE_NAME);
-        let from_file: PoseEvidence = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        let (file, from_file): (_, PoseEvidence) = shipped_file(SHIPPED_POSE_EVIDENCE_NAME);
         let m = pose_evidence("shipped").unwrap();
         assert_eq!(m, from_file);
         assert_eq!(pose_evidence(file.to_str().unwrap()).unwrap(), m);
@@ -273,8 +285,7 @@ mod tests {
 
     #[test]
     fn the_embedded_line2d_pose_verifier_is_its_file() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(SHIPPED_LINE2D_POSE_VERIFIER_NAME);
-        let from_file: PoseVerifier = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        let (file, from_file): (_, PoseVerifier) = shipped_file(SHIPPED_LINE2D_POSE_VERIFIER_NAME);
         let v = line2d_pose_verifier("shipped").unwrap();
         assert_eq!(v, from_file);
         assert_eq!(line2d_pose_verifier(file.to_str().unwrap()).unwrap(), v);

@@ -116,8 +116,9 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 ///         calibration=None, min_probability=None, range_m="1:4", min_highlight_level=None)
 ///
 /// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
-/// default the shipped model), "line2d" (templates: a .tlt library for the camera) or "fused"
-/// (the learned detections and Line2D's pose-verified ones, by pose evidence; templates and model). camera:
+/// default the shipped model), "line2d" (templates: a .tlt library, default the default library
+/// built in memory) or "fused" (the learned detections and Line2D's pose-verified ones, by pose
+/// evidence; templates and model). camera:
 /// the rig camera of the (left) images; pair: (left, right) camera names. calibration: score
 /// calibration JSON (default: the learned model's); min_probability: acceptance threshold
 /// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".

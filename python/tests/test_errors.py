@@ -29,13 +29,11 @@ def test_tubeloc_error_is_a_value_error():
     [
         (["--model", "/nonexistent/tubenet.safetensors"], {"model": "/nonexistent/tubenet.safetensors"}),
         (["--camera-name", "nope"], {"camera": "nope"}),
-        (["--detector", "line2d"], {"detector": "line2d"}),
         (["--detector", "line2d", "--templates", "/nonexistent/lib.tlt"], {"detector": "line2d", "templates": "/nonexistent/lib.tlt"}),
-        (["--detector", "fused"], {"detector": "fused"}),
         (["--detector", "fused", "--templates", "/nonexistent/lib.tlt"], {"detector": "fused", "templates": "/nonexistent/lib.tlt"}),
         (["--calibration", "/nonexistent/cal.json"], {"calibration": "/nonexistent/cal.json"}),
     ],
-    ids=["missing-model", "camera-name", "line2d-no-templates", "line2d-missing-templates", "fused-no-templates", "fused-missing-templates", "missing-calibration"],
+    ids=["missing-model", "camera-name", "line2d-missing-templates", "fused-missing-templates", "missing-calibration"],
 )
 def test_locator_errors_carry_the_cli_message(cli, demo_scene, tmp_path, cli_args, py_kwargs):
     rig, image, _ = demo_scene

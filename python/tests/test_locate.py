@@ -174,3 +174,16 @@ def test_fused_detect_equals_the_cli(cli, demo_scene, tmp_path):
     # The Locator hands fused tubes over at the fused calibration's threshold, as `locate` does.
     cal = json.loads((Path(__file__).resolve().parents[2] / "data/models/fused.calibration.json").read_text())
     assert tubeloc.Locator(str(rig), detector="fused", templates=str(lib)).min_probability == cal["threshold"]
+
+
+def test_line2d_without_templates_uses_the_default_library(cli, demo_scene, tmp_path):
+    # Without a library, Python and the CLI both search with the default one.
+    rig, image, ground = demo_scene
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps(json.loads(rig.read_text())["cameras"][0]["model"]))
+    dets_path = tmp_path / "dets.json"
+    cli("detect", "--method", "line2d", "--image", image, "--camera", camera, "--ground", ground, "--out", dets_path)
+    cli_dets = json.loads(dets_path.read_text())
+    dets = tubeloc.detect(tubeloc.read_image(image), str(rig), detector="line2d", ground=ground)
+    assert dets, "the demo scene's tubes are found"
+    assert [(d["bbox"], d["score"]) for d in dets] == [(c["bbox"], c["score"]) for c in cli_dets]

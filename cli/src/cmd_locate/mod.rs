@@ -31,7 +31,8 @@ pub const EXIT_NO_TUBE: u8 = 3;
 pub enum Detector {
     /// The learned segmenter (`--model`, default: the shipped model, embedded in the program).
     Learned,
-    /// Line2D template matching (`--templates LIB.tlt`, built for the rig camera).
+    /// Line2D template matching (`--templates LIB.tlt`; default: the default library, built in
+    /// memory, each image resampled to its pixel scale).
     Line2d,
     /// The learned detections (`--model`) and Line2D's pose-verified ones (`--templates`),
     /// scored by their pose evidence (`tubeloc detect --method fused`, record 0069).
@@ -126,7 +127,9 @@ pub struct LocateArgs {
     /// Learned model weights (default: the shipped model, embedded in the program).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Line2D template library (`--detector line2d`).
+    /// Line2D template library (`--detector line2d|fused`; `tubeloc templates build`). Default:
+    /// the default library (what `tubeloc templates build` writes at its defaults), built in
+    /// memory in about 1 s; images of any camera are resampled to its pixel scale.
     #[arg(long)]
     pub templates: Option<PathBuf>,
     /// External COCO results (`--detector external`). Entries are selected by the image's file

@@ -281,6 +281,17 @@ impl Template {
 }
 
 impl TemplateLibrary {
+    /// The default library: the default tube model seen through [`LibraryParams::default`] (the
+    /// paper's camera at half resolution, 1-4 m, 10-degree views; 8308 templates), what `tubeloc
+    /// templates build` writes at its defaults. Line2D searches any camera's image with it by
+    /// resampling the image to its pixel scale; building it takes about 1 s on 2 cores. It is
+    /// taken through the `.tlt` format, so that it is the library a saved copy loads (template
+    /// poses to the bit).
+    pub fn default_library() -> Result<TemplateLibrary, Line2dError> {
+        let built = Self::build(&TubeModel::default(), &LibraryParams::default(), &|_| {})?;
+        TemplateLibrary::from_bytes(&built.to_bytes()).map_err(|e| Line2dError::invalid("default library", e))
+    }
+
     /// Renders and extracts all templates of `params` for `tube` (rayon across views).
     /// `progress` is called with the number of templates done so far (from any thread).
     pub fn build(tube: &TubeModel, params: &LibraryParams, progress: &(dyn Fn(usize) + Sync)) -> Result<TemplateLibrary, Line2dError> {
