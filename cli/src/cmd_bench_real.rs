@@ -111,6 +111,7 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
     let n_gt = gt.annotations.len();
     let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms});
     merge(&mut v, at_threshold(&ev, cal, n_gt));
+    merge(&mut v, crate::bench_intervals::ap_ar_by_sol(&gt, &ev));
     Ok(v)
 }
 
@@ -148,14 +149,16 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     let refine_ms = t.elapsed().as_secs_f64() * 1e3;
     let snapped_dets: Value = files::read_json(&snapped)?;
     let (gt, dt) = saved_results(set, &dir.join("snapped_eval"), &snapped_dets)?;
-    let snapped_eval = CocoEvaluator::new(&gt, &dt, IouType::Segm)?.evaluate();
+    let snapped_ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
+    let snapped_eval = snapped_ev.evaluate();
     // The same snapped detections ranked by the shipped pose evidence (what `tubeloc refine
     // --snapped-out --pose-evidence shipped` writes).
     let evidence = tubeloc_pipeline::shipped::pose_evidence("shipped")?;
     let pose_list: Vec<tubeloc_core::TubeAxisPose> = files::read_json(&poses)?;
     anyhow::ensure!(pose_list.len() == dt.len(), "{} poses for {} snapped detections", pose_list.len(), dt.len());
     let ranked = tubeloc_eval::pose_evidence_fit::scored_by_evidence(&dt, &pose_list, &evidence);
-    let ranked_eval = CocoEvaluator::new(&gt, &ranked, IouType::Segm)?.evaluate();
+    let ranked_ev = CocoEvaluator::new(&gt, &ranked, IouType::Segm)?;
+    let ranked_eval = ranked_ev.evaluate();
     // Its calibration on these held-out composites: the label it was fitted with (the snapped
     // mask at IoU >= 0.5 with a true tube).
     let labels = tubeloc_eval::pose_evidence_fit::tube_labels(&gt, &ranked).map_err(anyhow::Error::msg)?;
@@ -166,19 +169,24 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     crate::cmd_eval::poses::run(&set.join("annotations.json"), &labels, &filter, 50.0, Some(&dir.join("pose_eval")))?;
     let m: Value = files::read_json(&dir.join("pose_eval").join("pose_metrics.json"))?;
     let mono = m["poses"].as_array().and_then(|v| v.iter().find(|p| p["label"] == "mono")).cloned().unwrap_or(Value::Null);
+    let mut snapped_fig = json!({"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64});
+    merge(&mut snapped_fig, crate::bench_intervals::ap_ar_by_sol(&gt, &snapped_ev));
+    let mut ranked_fig = json!({"ap50": ranked_eval.stats[1], "ap": ranked_eval.stats[0], "ar": ranked_eval.stats[8], "ece": evidence_ece});
+    merge(&mut ranked_fig, crate::bench_intervals::ap_ar_by_sol(&gt, &ranked_ev));
     Ok(json!({
         "truths": mono["n_truths"], "matched": mono["n_matched"],
         "axis_deg_median": mono["summaries"]["axis_angle_deg"]["median"], "axis_deg_p90": mono["summaries"]["axis_angle_deg"]["p90"],
         "across_mm_median": mono["summaries"]["perpendicular_mm"]["median"], "across_mm_p90": mono["summaries"]["perpendicular_mm"]["p90"],
         "along_mm_median": mono["summaries"]["along_axis_abs_mm"]["median"], "along_mm_p90": mono["summaries"]["along_axis_abs_mm"]["p90"],
-        "snapped": {"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64},
-        "snapped_pose_evidence": {"ap50": ranked_eval.stats[1], "ap": ranked_eval.stats[0], "ar": ranked_eval.stats[8], "ece": evidence_ece},
+        "snapped": snapped_fig,
+        "snapped_pose_evidence": ranked_fig,
     }))
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
 fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
+    let sols = negative_sols(data, &paths)?;
     let mut settings = tubeloc_pipeline::LocatorSettings::default();
     settings.calibration = cal.clone();
     let mut per_frame = Vec::new();
@@ -201,7 +209,8 @@ fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, ca
     }
     let n = per_frame.len().max(1) as f64;
     let sum = |k: &str| per_frame.iter().filter_map(|f| f[k].as_u64()).sum::<u64>() as f64 / n;
-    Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "per_frame": per_frame}))
+    let ci = |k: &str| crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, k);
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "kept_per_frame_ci": ci("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "located_per_frame_ci": ci("located"), "per_frame": per_frame}))
 }
 
 /// `locate` at its defaults on the real frames of the `split`'s sols that come with PDS camera
@@ -230,7 +239,16 @@ fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: 
         }
     }
     let located = per_frame.iter().filter_map(|f| f["located"].as_u64()).sum::<u64>();
-    Ok(json!({"frames": per_frame.len(), "located_per_frame": located as f64 / per_frame.len().max(1) as f64, "per_frame": per_frame}))
+    let sols: Vec<Option<i64>> = per_frame.iter().map(|f| f["sol"].as_i64()).collect();
+    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "located");
+    Ok(json!({"frames": per_frame.len(), "located_per_frame": located as f64 / per_frame.len().max(1) as f64, "located_per_frame_ci": ci, "per_frame": per_frame}))
+}
+
+/// The sol of each of `paths` (frames in `data`) from the data's `MANIFEST.tsv`; `None` where
+/// it gives none.
+fn negative_sols(data: &Path, paths: &[PathBuf]) -> Result<Vec<Option<i64>>> {
+    let sols = crate::bench_intervals::manifest_sols(data)?;
+    Ok(paths.iter().map(|p| p.strip_prefix(data).ok().and_then(|r| sols.get(r).copied())).collect())
 }
 
 /// The `negatives_val` frames (all, or `frames` spread over the folders), sorted.
@@ -300,6 +318,7 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
     let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
     let n = gt.images.len().max(1) as f64;
     let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64});
+    merge(&mut v, crate::bench_intervals::ap_ar_by_sol(&gt, &ev));
     if let Some(cal) = cal {
         merge(&mut v, at_threshold(&ev, cal, gt.annotations.len()));
     }
@@ -310,6 +329,7 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
 /// cameras as the learned detector's negatives.
 fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
+    let sols = negative_sols(data, &paths)?;
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     let mut per_frame = Vec::new();
     let mut ms = 0.0;
@@ -330,7 +350,8 @@ fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> R
     let n = per_frame.len().max(1) as f64;
     let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
     let max = per_frame.iter().filter_map(|f| f["kept"].as_u64()).max().unwrap_or(0);
-    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
+    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "kept");
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "kept_per_frame_ci": ci, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
 }
 
 /// The name of a part of the real data (`val`, `test`, `train`), as `tubeloc synth real --split` takes it.
@@ -411,12 +432,20 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
     writeln!(md, "{title}").ok();
     writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
+    writeln!(
+        md,
+        "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"
+    )
+    .ok();
     writeln!(md, "| set | images | tubes | AP50 | AR | ms / image | precision / recall at P >= {:.3} | ECE |", stage.calibration.threshold).ok();
     writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|").ok();
     // One row: the columns every detector has, then the learned one's precision / recall and
     // ECE, or Line2D's false detections per image.
     let num = |v: &Value, key: &str| v[key].as_f64().unwrap_or(f64::NAN);
-    let row = |name: &str, v: &Value, rest: String| format!("| {name} | {} | {} | {:.3} | {:.3} | {:.0} | {rest} |", v["images"], v["tubes"], num(v, "ap50"), num(v, "ar"), num(v, "ms_per_image"));
+    let row = |name: &str, v: &Value, rest: String| {
+        use crate::bench_intervals::bracket;
+        format!("| {name} | {} | {} | {:.3}{} | {:.3}{} | {:.0} | {rest} |", v["images"], v["tubes"], num(v, "ap50"), bracket(&v["ap50_ci"]), num(v, "ar"), bracket(&v["ar_ci"]), num(v, "ms_per_image"))
+    };
     for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
         writeln!(md, "{}", row(name, v, format!("{:.3} / {:.3} | {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold"), num(v, "ece")))).ok();
     }
@@ -424,13 +453,13 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     // learned detection followed by `tubeloc refine --snapped-out`.
     for (name, v, p) in [("grey, snapped to poses", &grey, &grey_poses), ("colour, snapped to poses", &colour, &colour_poses)] {
         let s = &p["snapped"];
-        let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ar": s["ar"], "ms_per_image": num(v, "ms_per_image") + num(s, "refine_ms_per_image")});
+        let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ap50_ci": s["ap50_ci"], "ar": s["ar"], "ar_ci": s["ar_ci"], "ms_per_image": num(v, "ms_per_image") + num(s, "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, "- | -".into())).ok();
     }
     // The snapped detections ranked by the pose evidence (`refine --pose-evidence shipped`).
     for (name, v, p) in [("grey, snapped, ranked by pose evidence", &grey, &grey_poses), ("colour, snapped, ranked by pose evidence", &colour, &colour_poses)] {
         let s = &p["snapped_pose_evidence"];
-        let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ar": s["ar"], "ms_per_image": num(v, "ms_per_image") + num(&p["snapped"], "refine_ms_per_image")});
+        let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ap50_ci": s["ap50_ci"], "ar": s["ar"], "ar_ci": s["ar_ci"], "ms_per_image": num(v, "ms_per_image") + num(&p["snapped"], "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, format!("- | {:.3}", num(s, "ece")))).ok();
     }
     for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
@@ -452,19 +481,35 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         writeln!(md, "\nMono refinement of the learned detections on the {kind} {part} composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
     }
     if with_negatives {
-        writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections **{:.3} per frame** kept at the threshold ({:.2} per frame before it); `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+        use crate::bench_intervals::by_sol_note;
+        writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections kept at the threshold **{:.3} per frame**{}, {:.2} per frame before it; `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**{}.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), by_sol_note(&neg["kept_per_frame_ci"]), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN), by_sol_note(&neg["located_per_frame_ci"])).ok();
         let l2_what = format!(
             "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verified by pose at {:.3} colour / {:.3} grey)",
             pose_verifier.threshold, pose_verifier.threshold_grey
         );
         for (what, v) in [(l2_what.as_str(), &l2_neg), ("Fused on the same frames", &fused_neg)] {
-            writeln!(md, "{what}: **{:.3} false detections per frame** (at most {} on one frame), {:.0} ms per frame.\n", v["kept_per_frame"].as_f64().unwrap_or(f64::NAN), v["max_per_frame"], v["ms_per_image"].as_f64().unwrap_or(f64::NAN)).ok();
+            writeln!(
+                md,
+                "{what}: **{:.3} false detections per frame**{}, at most {} on one frame, {:.0} ms per frame.\n",
+                v["kept_per_frame"].as_f64().unwrap_or(f64::NAN),
+                by_sol_note(&v["kept_per_frame_ci"]),
+                v["max_per_frame"],
+                v["ms_per_image"].as_f64().unwrap_or(f64::NAN)
+            )
+            .ok();
         }
-        writeln!(md, "`locate --detector fused` at its defaults (assumed camera and ground, P >= {:.3}) hands the planner **{:.3} tubes per frame**.\n", fused_cal.threshold, fused_located["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+        writeln!(
+            md,
+            "`locate --detector fused` at its defaults (assumed camera and ground, P >= {:.3}) hands the planner **{:.3} tubes per frame**{}.\n",
+            fused_cal.threshold,
+            fused_located["located_per_frame"].as_f64().unwrap_or(f64::NAN),
+            by_sol_note(&fused_located["located_per_frame_ci"])
+        )
+        .ok();
     } else {
         writeln!(md, "\nReal frames without tubes (`negatives_val`): not run on the {part} part; they measure false positives only.\n").ok();
     }
-    writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN)).ok();
+    writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**{}.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN), crate::bench_intervals::by_sol_note(&neg_pds["located_per_frame_ci"])).ok();
     writeln!(
         md,
         "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold; `--detector fused` rows: the fused detections at the fused calibration's threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",

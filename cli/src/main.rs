@@ -7,6 +7,7 @@ use std::process::ExitCode;
 // One module per subcommand: `cmd_<name>.rs` holds its clap arguments and `run`.
 pub(crate) mod args;
 mod bench_grasp;
+mod bench_intervals;
 mod cmd_bench;
 mod cmd_bench_real;
 mod cmd_calib;

@@ -109,6 +109,26 @@ fn bench_real_stage_runs_at_a_small_size() {
             }
         }
     }
+    // Every AP50 / AR carries a 95 % interval by sol around it; so does every figure per
+    // tube-free frame.
+    let within = |v: &Value, key: &str, ci: &Value, at: &str| {
+        let (x, lo, hi) = (v[key].as_f64().unwrap(), ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+        assert!(lo <= x + 1e-12 && x <= hi + 1e-12 && (0.0..=1.0).contains(&lo) && hi <= 1.0, "{at} {key}: {x} not in [{lo}, {hi}]");
+    };
+    for set in ["grey", "colour"] {
+        for v in [&summary["learned"][set], &summary["line2d"][set], &summary["fused"][set], &summary[format!("poses_{set}").as_str()]["snapped_pose_evidence"]] {
+            within(v, "ap50", &v["ap50_ci"], set);
+            within(v, "ar", &v["ar_ci"], set);
+            let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real").join(format!("test_{set}")).join("annotations.json")).unwrap()).unwrap();
+            let sols: std::collections::BTreeSet<i64> = gt["images"].as_array().unwrap().iter().map(|im| im["sol"].as_i64().unwrap()).collect();
+            assert_eq!(v["sols"].as_u64().unwrap() as usize, sols.len(), "{set}: resampled by the composites' sols");
+        }
+    }
+    for (v, key) in [(&summary["negatives"], "kept_per_frame"), (&summary["negatives"], "located_per_frame"), (&summary["line2d"]["negatives"], "kept_per_frame"), (&summary["negatives_pds"], "located_per_frame")] {
+        let ci = &v[format!("{key}_ci").as_str()];
+        let x = v[key].as_f64().unwrap();
+        assert!(ci["lo"].as_f64().unwrap() <= x && x <= ci["hi"].as_f64().unwrap() && ci["sols"].as_u64().unwrap() >= 1, "{key}: {x} {ci}");
+    }
     assert_eq!(summary["negatives"]["frames"], 2);
     // The test-sol frames with PDS cameras, each under its own camera and ground.
     assert_eq!(summary["negatives_pds"]["frames"], 2);

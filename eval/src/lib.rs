@@ -24,6 +24,7 @@
 //! # Ok::<(), tubeloc_eval::coco_eval::EvalError>(())
 //! ```
 #![warn(missing_docs)]
+pub mod bootstrap;
 pub mod breakdown;
 pub mod calibration;
 pub mod coco_eval;

@@ -15,6 +15,7 @@
 //! are refused. Results with a category absent from the ground truth are ignored, as there.
 
 mod accumulate;
+pub mod bootstrap;
 mod matching;
 pub mod params;
 mod prepare;
