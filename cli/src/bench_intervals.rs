@@ -26,10 +26,12 @@ fn key(sol: Option<i64>, frame: usize) -> (Option<i64>, usize) {
 
 /// AP50 and AR intervals of `ev` (on the composite set `gt`) by the composites' sols:
 /// `{"ap50_ci": [lo, hi], "ar_ci": [lo, hi], "sols": n}`.
+/// `Null` when no composite carries a sol.
 pub fn ap_ar_by_sol(gt: &CocoDataset, ev: &CocoEvaluator) -> Value {
-    let sols: HashMap<u64, Option<i64>> = gt.images.iter().map(|im| (im.id, im.extra.get("sol").and_then(Value::as_i64))).collect();
-    let i = ev.intervals_by_group(&|id| key(sols.get(&id).copied().flatten(), id as usize), &spec());
-    json!({"ap50_ci": [i.ap50.lo, i.ap50.hi], "ar_ci": [i.ar.lo, i.ar.hi], "sols": i.ap50.groups})
+    match tubeloc_eval::breakdown::intervals_by_image_attribute(ev, gt, "sol", &spec()) {
+        Ok(i) => json!({"ap50_ci": [i.ap50.lo, i.ap50.hi], "ar_ci": [i.ar.lo, i.ar.hi], "sols": i.ap50.groups}),
+        Err(_) => Value::Null,
+    }
 }
 
 /// The sol of each frame in `data`'s `MANIFEST.tsv`, by its path relative to `data`.

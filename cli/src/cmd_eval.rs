@@ -110,6 +110,11 @@ pub struct EvalArgs {
     /// attribute (occlusion, dust...); repeatable.
     #[arg(long = "by", num_args = 1..)]
     pub(crate) by: Vec<String>,
+    /// Give AP50 and AR with 95 % intervals from a bootstrap that resamples the values of this
+    /// image attribute (e.g. `sol`: frames of one sol are not independent; 2000 resamples, seed
+    /// 0); written to intervals.json with --out.
+    #[arg(long, value_name = "ATTRIBUTE")]
+    pub(crate) interval_by: Option<String>,
 }
 
 impl EvalArgs {
@@ -148,6 +153,7 @@ impl EvalArgs {
             verifier_evidence: None,
             fitted_on: String::new(),
             by: Vec::new(),
+            interval_by: None,
         }
     }
 }
@@ -173,6 +179,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         spinner.set_message(format!("breakdown by {attr}"));
         breakdowns.push(breakdown::breakdown(&evaluator, &gt, attr).with_context(|| format!("breakdown by {attr}"))?);
     }
+    let intervals = match &args.interval_by {
+        Some(attr) => {
+            spinner.set_message(format!("intervals by {attr}"));
+            let spec = tubeloc_eval::bootstrap::BootstrapSpec::default();
+            Some(breakdown::intervals_by_image_attribute(&evaluator, &gt, attr, &spec).with_context(|| format!("--interval-by {attr}: {}", args.gt.display()))?)
+        }
+        None => None,
+    };
     spinner.finish_and_clear();
     if args.max_false_per_negative_image.is_some() && args.calibrate.is_none() && args.fit_pose_verifier.is_none() {
         return Err(crate::args::usage("--max-false-per-negative-image needs --calibrate or --fit-pose-verifier"));
@@ -246,6 +260,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     }
 
     crate::out::out!("{}", result.summary_text());
+    if let (Some(i), Some(attr)) = (&intervals, &args.interval_by) {
+        crate::out::outln!("AP50 {:.3} [{:.3}, {:.3}], AR {:.3} [{:.3}, {:.3}]: 95 % intervals from a bootstrap over the {} values of {attr} (2000 resamples, seed 0)", i.ap50.estimate, i.ap50.lo, i.ap50.hi, i.ar.estimate, i.ar.lo, i.ar.hi, i.ap50.groups);
+    }
     let table = breakdown::markdown_table(&breakdowns);
     if !breakdowns.is_empty() {
         crate::out::outln!("\n{table}");
@@ -261,6 +278,10 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             write_json(&p, &breakdown::to_json(&breakdowns)).with_context(|| format!("writing {}", p.display()))?;
             let p = out.join("breakdown.md");
             write_atomic(&p, table.as_bytes()).with_context(|| format!("writing {}", p.display()))?;
+        }
+        if let (Some(i), Some(attr)) = (&intervals, &args.interval_by) {
+            let p = out.join("intervals.json");
+            write_json(&p, &serde_json::json!({"by": attr, "bootstrap": tubeloc_eval::bootstrap::BootstrapSpec::default(), "ap50": i.ap50, "ar": i.ar})).with_context(|| format!("writing {}", p.display()))?;
         }
         if let Some(cr) = &calibration_report {
             let p = out.join("calibration.json");

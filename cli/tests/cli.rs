@@ -424,6 +424,46 @@ fn train_average_writes_the_weight_average_and_refuses_mismatched_models() {
 const FALSE_SCORES: [f64; 4] = [0.5, 0.6, 0.7, 0.9];
 
 #[test]
+fn eval_gives_intervals_that_resample_an_image_attribute() {
+    // Four sols of two images with one tube each: sol 1 found whole, sol 2 half, sols 3 and 4
+    // with a false detection above their true one.
+    let dir = tempfile::tempdir().unwrap();
+    let (mut images, mut anns, mut dets) = (Vec::new(), Vec::new(), Vec::new());
+    for id in 1..=8u64 {
+        let sol = id.div_ceil(2);
+        images.push(serde_json::json!({"id": id, "file_name": format!("{id}.png"), "width": 100, "height": 100, "sol": sol}));
+        anns.push(serde_json::json!({"id": id, "image_id": id, "category_id": 1, "bbox": [10, 10, 30, 10], "area": 300, "iscrowd": 0}));
+        if sol != 2 || id == 3 {
+            dets.push(serde_json::json!({"image_id": id, "category_id": 1, "bbox": [10, 10, 30, 10], "score": 0.5 + 0.05 * id as f64}));
+        }
+        if sol >= 3 {
+            dets.push(serde_json::json!({"image_id": id, "category_id": 1, "bbox": [60, 60, 30, 10], "score": 0.99}));
+        }
+    }
+    let gt = dir.path().join("gt.json");
+    std::fs::write(&gt, serde_json::json!({"images": images, "annotations": anns, "categories": [{"id": 1, "name": "tube"}]}).to_string()).unwrap();
+    let dt = dir.path().join("dt.json");
+    std::fs::write(&dt, serde_json::json!(dets).to_string()).unwrap();
+    let out = dir.path().join("ev");
+    let o = ok(&["eval", "--gt", p(&gt), "--dt", p(&dt), "--iou-type", "bbox", "--interval-by", "sol", "--out", p(&out)]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("95 % intervals from a bootstrap over the 4 values of sol"), "{}", String::from_utf8_lossy(&o.stdout));
+    let read = |f: &str| -> Value { serde_json::from_str(&std::fs::read_to_string(out.join(f)).unwrap()).unwrap() };
+    let (iv, metrics) = (read("intervals.json"), read("metrics.json"));
+    for (key, stat) in [("ap50", 1), ("ar", 8)] {
+        let (x, lo, hi) = (iv[key]["estimate"].as_f64().unwrap(), iv[key]["lo"].as_f64().unwrap(), iv[key]["hi"].as_f64().unwrap());
+        assert_eq!(x, metrics["stats"][stat]["value"].as_f64().unwrap(), "{key}: the estimate is the evaluation's");
+        assert!(lo < x && x < hi && lo >= 0.0 && hi <= 1.0, "{key}: {x} [{lo}, {hi}]");
+        assert_eq!(iv[key]["groups"], 4);
+    }
+    // An attribute no image carries is named, with the file, and nothing is written.
+    let out2 = dir.path().join("ev2");
+    let o = tubeloc(&["eval", "--gt", p(&gt), "--dt", p(&dt), "--iou-type", "bbox", "--interval-by", "terrain", "--out", p(&out2)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--interval-by terrain") && stderr(&o).contains("found on no image"), "{}", stderr(&o));
+    assert!(!out2.join("metrics.json").exists());
+}
+
+#[test]
 fn calibrate_bounds_false_detections_on_frames_without_tubes() {
     // Four images with a tube each, four without. Four true detections at 0.95 and four at
     // 0.85, one false one on each tube-free frame (0.5, 0.6, 0.7, 0.9): precision alone (0.3)

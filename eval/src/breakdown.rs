@@ -58,6 +58,21 @@ fn attr_of(extra: &Map<String, Value>, attr: &str) -> String {
     text(extra.get(attr))
 }
 
+/// AP50 and AR of `evaluator` (prepared on `gt`) with intervals from a bootstrap that resamples
+/// the values of the image attribute `attr` (e.g. `sol`: the frames of one sol are drawn
+/// together; [`CocoEvaluator::intervals_by_group`]). An image without the attribute is a group
+/// of its own; an attribute on no image is an error.
+pub fn intervals_by_image_attribute(evaluator: &CocoEvaluator, gt: &CocoDataset, attr: &str, spec: &crate::bootstrap::BootstrapSpec) -> Result<crate::coco_eval::bootstrap::ApArIntervals, EvalError> {
+    if !gt.images.iter().any(|im| im.extra.get(attr).is_some_and(|v| !v.is_null())) {
+        return Err(EvalError::Entry { entry: format!("attribute {attr:?}"), message: "found on no image of the ground truth".into() });
+    }
+    let group: std::collections::HashMap<u64, Option<String>> = gt.images.iter().map(|im| (im.id, im.extra.get(attr).filter(|v| !v.is_null()).map(|v| text(Some(v))))).collect();
+    Ok(evaluator.intervals_by_group(&|id| match group.get(&id).cloned().flatten() {
+        Some(v) => (Some(v), 0),
+        None => (None, id),
+    }, spec))
+}
+
 /// Evaluates `evaluator` (prepared on `gt`) once per value of `attr`. The attribute is looked up
 /// on images first, then on annotations; an attribute found on neither is an error.
 pub fn breakdown(evaluator: &CocoEvaluator, gt: &CocoDataset, attr: &str) -> Result<Breakdown, EvalError> {

@@ -6,6 +6,7 @@
 use super::accumulate::accumulate_slice;
 use super::matching::{evaluate_cell, ImgEval};
 use super::params::{iou_thresholds, recall_thresholds, AREA_RNGS, NUM_REC_THRS};
+use super::summary::pairwise_sum;
 use super::CocoEvaluator;
 use crate::bootstrap::{groups_by_key, BootstrapSpec, Interval};
 use rayon::prelude::*;
@@ -30,7 +31,8 @@ fn ap50_ar(cells: &[ImageCells], chosen: &[usize], categories: usize, rec_thrs: 
         .filter_map(|k| {
             let evals: Vec<&ImgEval> = chosen.iter().filter_map(|&i| cells[i][k].as_ref()).collect();
             let (precision, recall) = accumulate_slice(&evals, 100, rec_thrs)?;
-            Some((precision[0].iter().sum::<f64>() / NUM_REC_THRS as f64, recall.iter().sum::<f64>() / recall.len() as f64))
+            // Summed as the summary sums (numpy's pairwise sum), so one category gives its stats to the bit.
+            Some((pairwise_sum(&precision[0]) / NUM_REC_THRS as f64, pairwise_sum(&recall) / recall.len() as f64))
         })
         .collect();
     if per_category.is_empty() {
