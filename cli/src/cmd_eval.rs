@@ -261,7 +261,16 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
     crate::out::out!("{}", result.summary_text());
     if let (Some(i), Some(attr)) = (&intervals, &args.interval_by) {
-        crate::out::outln!("AP50 {:.3} [{:.3}, {:.3}], AR {:.3} [{:.3}, {:.3}]: 95 % intervals from a bootstrap over the {} values of {attr} (2000 resamples, seed 0)", i.ap50.estimate, i.ap50.lo, i.ap50.hi, i.ar.estimate, i.ar.lo, i.ar.hi, i.ap50.groups);
+        crate::out::outln!(
+            "AP50 {:.3} [{:.3}, {:.3}], AR {:.3} [{:.3}, {:.3}]: 95 % intervals from a bootstrap over the {} values of {attr} (2000 resamples, seed 0)",
+            i.ap50.estimate,
+            i.ap50.lo,
+            i.ap50.hi,
+            i.ar.estimate,
+            i.ar.lo,
+            i.ar.hi,
+            i.ap50.groups
+        );
     }
     let table = breakdown::markdown_table(&breakdowns);
     if !breakdowns.is_empty() {

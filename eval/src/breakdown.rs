@@ -67,10 +67,13 @@ pub fn intervals_by_image_attribute(evaluator: &CocoEvaluator, gt: &CocoDataset,
         return Err(EvalError::Entry { entry: format!("attribute {attr:?}"), message: "found on no image of the ground truth".into() });
     }
     let group: std::collections::HashMap<u64, Option<String>> = gt.images.iter().map(|im| (im.id, im.extra.get(attr).filter(|v| !v.is_null()).map(|v| text(Some(v))))).collect();
-    Ok(evaluator.intervals_by_group(&|id| match group.get(&id).cloned().flatten() {
-        Some(v) => (Some(v), 0),
-        None => (None, id),
-    }, spec))
+    Ok(evaluator.intervals_by_group(
+        &|id| match group.get(&id).cloned().flatten() {
+            Some(v) => (Some(v), 0),
+            None => (None, id),
+        },
+        spec,
+    ))
 }
 
 /// Evaluates `evaluator` (prepared on `gt`) once per value of `attr`. The attribute is looked up
