@@ -28,7 +28,6 @@ use std::time::Instant;
 use tubeloc_core::{files, CocoDataset, ScoreCalibration};
 use tubeloc_detect::learned::DecodeConfig;
 use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
-use tubeloc_synth::real_set::AssumedView;
 
 /// Options of the real stage.
 pub struct RealStage {
@@ -52,15 +51,6 @@ pub struct RealStage {
     pub line2d_far_scale: (f64, f64),
     /// Line2D largest enlargement to the library's scale (`tubeloc detect --max-upsample`).
     pub line2d_max_upsample: f64,
-}
-
-/// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
-fn negative_view(grey: bool) -> AssumedView {
-    if grey {
-        AssumedView::NAVCAM
-    } else {
-        AssumedView::MAST
-    }
 }
 
 /// Writes a detector's results on the composite set `set` to `<out>/detections.json` and reads
@@ -183,98 +173,6 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     }))
 }
 
-/// Learned detections kept at the threshold on each real negative frame.
-fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
-    let paths = negative_paths(data, frames)?;
-    let sols = negative_sols(data, &paths)?;
-    let mut settings = tubeloc_pipeline::LocatorSettings::default();
-    settings.calibration = cal.clone();
-    let mut per_frame = Vec::new();
-    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
-    for p in &paths {
-        let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
-        let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
-        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
-        let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
-        // `locate` at its defaults on the frame, with the assumed camera and ground; its
-        // detector runs at the same working scale `s`.
-        let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
-        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
-        let (n, d) = view.ground();
-        let ground = tubeloc_core::GroundPlane::new(n, d)?;
-        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None })?;
-        let (found, located) = (&out.detections, out.tubes.len());
-        let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
-    }
-    let n = per_frame.len().max(1) as f64;
-    let sum = |k: &str| per_frame.iter().filter_map(|f| f[k].as_u64()).sum::<u64>() as f64 / n;
-    let ci = |k: &str| crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, k);
-    Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "kept_per_frame_ci": ci("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "located_per_frame_ci": ci("located"), "per_frame": per_frame}))
-}
-
-/// `locate` at its defaults on the real frames of the `split`'s sols that come with PDS camera
-/// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
-/// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
-/// None shows a tube, so every located tube is false.
-fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
-    use tubeloc_synth::real_set::split_of_sol;
-    let list = data.join("with_cameras").join("cameras.json");
-    let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
-    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == split).collect();
-    chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));
-    chosen.truncate(frames.unwrap_or(usize::MAX));
-    let mut per_frame = Vec::new();
-    if !chosen.is_empty() {
-        let mut settings = tubeloc_pipeline::LocatorSettings::default();
-        settings.calibration = cal.clone();
-        let rig = tubeloc_calib::interchange::pds::rig_of(&chosen);
-        let mut locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings)?;
-        for c in &chosen {
-            let path = data.join("with_cameras/images").join(&c.camera.name);
-            let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
-            locator.select_camera(&c.camera.name)?;
-            let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None, ignore: None }).with_context(|| path.display().to_string())?;
-            per_frame.push(json!({"image": c.camera.name, "sol": c.sol, "detections": out.detections.len(), "located": out.tubes.len()}));
-        }
-    }
-    let located = per_frame.iter().filter_map(|f| f["located"].as_u64()).sum::<u64>();
-    let sols: Vec<Option<i64>> = per_frame.iter().map(|f| f["sol"].as_i64()).collect();
-    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "located");
-    Ok(json!({"frames": per_frame.len(), "located_per_frame": located as f64 / per_frame.len().max(1) as f64, "located_per_frame_ci": ci, "per_frame": per_frame}))
-}
-
-/// The sol of each of `paths` (frames in `data`) from the data's `MANIFEST.tsv`; `None` where
-/// it gives none.
-fn negative_sols(data: &Path, paths: &[PathBuf]) -> Result<Vec<Option<i64>>> {
-    let sols = crate::bench_intervals::manifest_sols(data)?;
-    Ok(paths.iter().map(|p| p.strip_prefix(data).ok().and_then(|r| sols.get(r).copied())).collect())
-}
-
-/// The `negatives_val` frames (all, or `frames` spread over the folders), sorted.
-fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
-    let dir = data.join("negatives_val");
-    let mut paths: Vec<PathBuf> = Vec::new();
-    for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
-        let sub = sub?.path();
-        if sub.is_dir() {
-            for f in std::fs::read_dir(&sub)? {
-                let f = f?.path();
-                if f.extension().is_some_and(|e| e == "png" || e == "jpg" || e == "jpeg") {
-                    paths.push(f);
-                }
-            }
-        }
-    }
-    paths.sort();
-    if let Some(n) = frames {
-        // Spread the subset over the folders.
-        let step = (paths.len() as f64 / n.max(1) as f64).max(1.0);
-        paths = (0..n.min(paths.len())).map(|i| paths[(i as f64 * step) as usize].clone()).collect();
-    }
-    Ok(paths)
-}
-
 /// The Line2D library of the real stage: the default library (`tubeloc templates build` at its
 /// defaults: the paper's camera at half resolution, 1-4 m), built once into
 /// `<out>/real/line2d/templates.tlt`; every real frame is resampled to its pixel scale.
@@ -325,35 +223,6 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
     Ok(v)
 }
 
-/// Line2D detections (alone at the default threshold, or fused) on each real negative frame, under the same assumed
-/// cameras as the learned detector's negatives.
-fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> Result<Value> {
-    let paths = negative_paths(data, frames)?;
-    let sols = negative_sols(data, &paths)?;
-    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
-    let mut per_frame = Vec::new();
-    let mut ms = 0.0;
-    for p in &paths {
-        let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
-        let input = tubeloc_detect::input::rgb8_of(&image);
-        let grey = input.info.grey;
-        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
-        let t = Instant::now();
-        let (n, d) = view.ground();
-        let ground = tubeloc_core::GroundPlane::new(n, d)?;
-        let found = det.detect(&image, Some(&view.camera), Some(&ground), 0)?.0;
-        let dt = t.elapsed().as_secs_f64() * 1e3;
-        ms += dt;
-        let (sx, sy) = det.line2d().scale_for(Some(&view.camera));
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
-    }
-    let n = per_frame.len().max(1) as f64;
-    let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
-    let max = per_frame.iter().filter_map(|f| f["kept"].as_u64()).max().unwrap_or(0);
-    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "kept");
-    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "kept_per_frame_ci": ci, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
-}
-
 /// The name of a part of the real data (`val`, `test`, `train`), as `tubeloc synth real --split` takes it.
 fn split_name(split: tubeloc_synth::real_set::RealSplit) -> &'static str {
     match split {
@@ -392,8 +261,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
-    let neg = if with_negatives { negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)? } else { Value::Null };
-    let neg_pds = pds_negatives(&stage.data, stage.split, &stage.model, &stage.calibration, stage.frames)?;
+    let neg = if with_negatives { crate::bench_negatives::negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)? } else { Value::Null };
+    let neg_pds = crate::bench_negatives::pds_negatives(&stage.data, stage.split, &stage.model, &stage.calibration, stage.frames)?;
     // `locate` (mono, each frame's own ground) on the composites: its grasp checks, and how many
     // of the tubes it hands over are composited tubes.
     let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
@@ -405,7 +274,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None, l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
     let l2_grey = line2d_eval(&grey_set, &l2, None, &dir.join("line2d_grey"))?;
     let l2_colour = line2d_eval(&colour_set, &l2, None, &dir.join("line2d_colour"))?;
-    let l2_neg = if with_negatives { line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
+    let l2_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
     drop(l2);
     // Fused: the learned detections and the verified Line2D ones by their pose evidence (record 0069).
     let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), origin: stage.model.name() };
@@ -413,11 +282,11 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
     let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;
     let fused_colour = line2d_eval(&colour_set, &fused, Some(&fused_cal), &dir.join("fused_colour"))?;
-    let fused_neg = if with_negatives { line2d_negatives(&stage.data, &fused, stage.frames)? } else { Value::Null };
+    let fused_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &fused, stage.frames)? } else { Value::Null };
     drop(fused);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
     let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
-    let fused_located = if with_negatives { negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)? } else { Value::Null };
+    let fused_located = if with_negatives { crate::bench_negatives::negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)? } else { Value::Null };
     // `locate --detector fused` on the composites, as the learned detector's rows above.
     let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_cal))?;
     let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_cal))?;
@@ -506,6 +375,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
             by_sol_note(&fused_located["located_per_frame_ci"])
         )
         .ok();
+        let columns = [("learned kept", &neg, "kept"), ("`locate`", &neg, "located"), ("Line2D", &l2_neg, "kept"), ("fused", &fused_neg, "kept"), ("`locate --detector fused`", &fused_located, "located")];
+        writeln!(md, "By folder of `negatives_val` (camera and frame size; per frame):\n\n{}", crate::bench_negatives::folder_table(&columns)).ok();
     } else {
         writeln!(md, "\nReal frames without tubes (`negatives_val`): not run on the {part} part; they measure false positives only.\n").ok();
     }

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 pub(crate) mod args;
 mod bench_grasp;
 mod bench_intervals;
+mod bench_negatives;
 mod cmd_bench;
 mod cmd_bench_real;
 mod cmd_calib;

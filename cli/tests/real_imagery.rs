@@ -186,6 +186,10 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert!(real_md.contains("searched again 1.2x further enlarged"), "{real_md}");
     assert!(real_md.contains("| colour, snapped to poses |") && real_md.contains("| grey, snapped, ranked by pose evidence |"), "{real_md}");
     assert_eq!(real_md.matches("centre along the axis").count(), 2, "{real_md}");
+    // The tube-free frames' figures by folder: the two frames, each in its folder's row.
+    let rows: Vec<&str> = real_md.lines().skip_while(|l| !l.starts_with("| folder of `negatives_val` |")).skip(2).take_while(|l| l.starts_with("| `")).collect();
+    let frames: u64 = rows.iter().map(|r| r.split('|').nth(2).unwrap().trim().parse::<u64>().unwrap()).sum();
+    assert_eq!(frames, 2, "{real_md}");
 }
 
 /// The real stage on the validation part: composites and PDS frames of validation sols only,

@@ -1,0 +1,196 @@
+//! The tube-free frames of the real stage of `tubeloc bench`: `negatives_val` under an assumed
+//! camera per frame kind (grey Navcam: 45 degree field of view, 1.9 m high, 30 degrees down;
+//! colour: the mast view), and the frames of the part's sols with PDS camera models under their
+//! own. Every detection kept and every tube `locate` hands over there is false. Each figure per
+//! frame carries its interval by sol ([`crate::bench_intervals`]) and a breakdown by the data's
+//! folder (camera and frame size).
+
+use crate::cmd_detect_line2d::Line2dRunner;
+use anyhow::{Context, Result};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+use tubeloc_core::ScoreCalibration;
+use tubeloc_synth::real_set::AssumedView;
+
+/// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
+fn negative_view(grey: bool) -> AssumedView {
+    if grey {
+        AssumedView::NAVCAM
+    } else {
+        AssumedView::MAST
+    }
+}
+
+/// Learned detections kept at the threshold on each real negative frame.
+pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+    let paths = negative_paths(data, frames)?;
+    let sols = negative_sols(data, &paths)?;
+    let mut settings = tubeloc_pipeline::LocatorSettings::default();
+    settings.calibration = cal.clone();
+    let mut per_frame = Vec::new();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+    for p in &paths {
+        let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
+        let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
+        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
+        let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
+        // `locate` at its defaults on the frame, with the assumed camera and ground; its
+        // detector runs at the same working scale `s`.
+        let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
+        let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
+        let (n, d) = view.ground();
+        let ground = tubeloc_core::GroundPlane::new(n, d)?;
+        let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None })?;
+        let (found, located) = (&out.detections, out.tubes.len());
+        let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
+    }
+    let n = per_frame.len().max(1) as f64;
+    let sum = |k: &str| per_frame.iter().filter_map(|f| f[k].as_u64()).sum::<u64>() as f64 / n;
+    let ci = |k: &str| crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, k);
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": sum("kept"), "kept_per_frame_ci": ci("kept"), "detections_per_frame": sum("detections"), "located_per_frame": sum("located"), "located_per_frame_ci": ci("located"), "per_frame": per_frame}))
+}
+
+/// `locate` at its defaults on the real frames of the `split`'s sols that come with PDS camera
+/// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
+/// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
+/// None shows a tube, so every located tube is false.
+pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+    use tubeloc_synth::real_set::split_of_sol;
+    let list = data.join("with_cameras").join("cameras.json");
+    let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
+    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == split).collect();
+    chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));
+    chosen.truncate(frames.unwrap_or(usize::MAX));
+    let mut per_frame = Vec::new();
+    if !chosen.is_empty() {
+        let mut settings = tubeloc_pipeline::LocatorSettings::default();
+        settings.calibration = cal.clone();
+        let rig = tubeloc_calib::interchange::pds::rig_of(&chosen);
+        let mut locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings)?;
+        for c in &chosen {
+            let path = data.join("with_cameras/images").join(&c.camera.name);
+            let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;
+            locator.select_camera(&c.camera.name)?;
+            let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(c.ground), up: None, ignore: None }).with_context(|| path.display().to_string())?;
+            per_frame.push(json!({"image": c.camera.name, "sol": c.sol, "detections": out.detections.len(), "located": out.tubes.len()}));
+        }
+    }
+    let located = per_frame.iter().filter_map(|f| f["located"].as_u64()).sum::<u64>();
+    let sols: Vec<Option<i64>> = per_frame.iter().map(|f| f["sol"].as_i64()).collect();
+    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "located");
+    Ok(json!({"frames": per_frame.len(), "located_per_frame": located as f64 / per_frame.len().max(1) as f64, "located_per_frame_ci": ci, "per_frame": per_frame}))
+}
+
+/// The sol of each of `paths` (frames in `data`) from the data's `MANIFEST.tsv`; `None` where
+/// it gives none.
+fn negative_sols(data: &Path, paths: &[PathBuf]) -> Result<Vec<Option<i64>>> {
+    let sols = crate::bench_intervals::manifest_sols(data)?;
+    Ok(paths.iter().map(|p| p.strip_prefix(data).ok().and_then(|r| sols.get(r).copied())).collect())
+}
+
+/// The `negatives_val` frames (all, or `frames` spread over the folders), sorted.
+fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
+    let dir = data.join("negatives_val");
+    let mut paths: Vec<PathBuf> = Vec::new();
+    for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
+        let sub = sub?.path();
+        if sub.is_dir() {
+            for f in std::fs::read_dir(&sub)? {
+                let f = f?.path();
+                if f.extension().is_some_and(|e| e == "png" || e == "jpg" || e == "jpeg") {
+                    paths.push(f);
+                }
+            }
+        }
+    }
+    paths.sort();
+    if let Some(n) = frames {
+        // Spread the subset over the folders.
+        let step = (paths.len() as f64 / n.max(1) as f64).max(1.0);
+        paths = (0..n.min(paths.len())).map(|i| paths[(i as f64 * step) as usize].clone()).collect();
+    }
+    Ok(paths)
+}
+
+/// Line2D detections (alone at the default threshold, or fused) on each real negative frame, under the same assumed
+/// cameras as the learned detector's negatives.
+pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> Result<Value> {
+    let paths = negative_paths(data, frames)?;
+    let sols = negative_sols(data, &paths)?;
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+    let mut per_frame = Vec::new();
+    let mut ms = 0.0;
+    for p in &paths {
+        let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
+        let input = tubeloc_detect::input::rgb8_of(&image);
+        let grey = input.info.grey;
+        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
+        let t = Instant::now();
+        let (n, d) = view.ground();
+        let ground = tubeloc_core::GroundPlane::new(n, d)?;
+        let found = det.detect(&image, Some(&view.camera), Some(&ground), 0)?.0;
+        let dt = t.elapsed().as_secs_f64() * 1e3;
+        ms += dt;
+        let (sx, sy) = det.line2d().scale_for(Some(&view.camera));
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
+    }
+    let n = per_frame.len().max(1) as f64;
+    let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
+    let max = per_frame.iter().filter_map(|f| f["kept"].as_u64()).max().unwrap_or(0);
+    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "kept");
+    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "kept_per_frame_ci": ci, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
+}
+
+/// The folder of `negatives_val` a frame lies in (`negatives_val/<folder>/<file>`: the data's
+/// group, one camera and frame size), from its path relative to the data folder.
+fn folder_of(image: &str) -> String {
+    let mut parts = Path::new(image).components().skip(1);
+    parts.next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_else(|| "(none)".into())
+}
+
+/// Per folder of `negatives_val`: how many frames, and the mean of `field` over them, from a
+/// tube-free run's `per_frame` list (in folder order).
+pub fn by_folder(run: &Value, field: &str) -> Vec<(String, usize, f64)> {
+    let mut by: std::collections::BTreeMap<String, (usize, f64)> = std::collections::BTreeMap::new();
+    for f in run["per_frame"].as_array().into_iter().flatten() {
+        let e = by.entry(folder_of(f["image"].as_str().unwrap_or(""))).or_default();
+        e.0 += 1;
+        e.1 += f[field].as_f64().unwrap_or(0.0);
+    }
+    by.into_iter().map(|(k, (n, sum))| (k, n, sum / n.max(1) as f64)).collect()
+}
+
+/// The markdown table of the figures per tube-free frame by folder of `negatives_val`: for each
+/// `(column title, run, field)`, the mean of `field` over the folder's frames.
+pub fn folder_table(columns: &[(&str, &Value, &str)]) -> String {
+    let Some((_, first, field)) = columns.first() else { return String::new() };
+    let folders = by_folder(first, field);
+    let per_column: Vec<Vec<(String, usize, f64)>> = columns.iter().map(|(_, run, field)| by_folder(run, field)).collect();
+    let mut md = format!("| folder of `negatives_val` | frames | {} |\n|---|---:|{}\n", columns.iter().map(|c| c.0).collect::<Vec<_>>().join(" | "), "---:|".repeat(columns.len()));
+    for (i, (folder, n, _)) in folders.iter().enumerate() {
+        let cells: Vec<String> = per_column.iter().map(|c| c.get(i).filter(|r| &r.0 == folder).map_or("-".into(), |r| format!("{:.2}", r.2))).collect();
+        md.push_str(&format!("| `{folder}` | {n} | {} |\n", cells.join(" | ")));
+    }
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn figures_per_frame_are_broken_down_by_folder() {
+        let run = json!({"per_frame": [
+            {"image": "negatives_val/msl_navcam_1024/a.png", "kept": 3, "located": 1},
+            {"image": "negatives_val/msl_navcam_1024/b.png", "kept": 0, "located": 0},
+            {"image": "negatives_val/msl_mastcam_marsdata/c.jpg", "kept": 1, "located": 0},
+        ]});
+        assert_eq!(by_folder(&run, "kept"), vec![("msl_mastcam_marsdata".to_string(), 1, 1.0), ("msl_navcam_1024".to_string(), 2, 1.5)]);
+        let md = folder_table(&[("kept", &run, "kept"), ("located", &run, "located")]);
+        assert!(md.contains("| `msl_navcam_1024` | 2 | 1.50 | 0.50 |"), "{md}");
+        assert!(md.starts_with("| folder of `negatives_val` | frames | kept | located |\n|---|---:|---:|---:|\n"), "{md}");
+    }
+}
