@@ -34,6 +34,24 @@ pub fn ap_ar_by_sol(gt: &CocoDataset, ev: &CocoEvaluator) -> Value {
     }
 }
 
+/// The interval of the median of a pose error `field` (an entry of each pair's `axis`: e.g.
+/// `axis_angle_deg`, `perpendicular_mm`; `along_axis_abs_mm` is the absolute `along_axis_mm`)
+/// over the matched `pairs` of a pose evaluation (`pose_eval.json`), resampling the sols of
+/// their composites in `gt`: `[lo, hi]`, or `Null` without pairs.
+pub fn median_by_sol(gt: &CocoDataset, pairs: &Value, field: &str) -> Value {
+    let sols: HashMap<u64, Option<i64>> = gt.images.iter().map(|im| (im.id, im.extra.get("sol").and_then(Value::as_i64))).collect();
+    let Some(pairs) = pairs.as_array().filter(|p| !p.is_empty()) else { return Value::Null };
+    let value = |p: &Value| match field {
+        "along_axis_abs_mm" => p["axis"]["along_axis_mm"].as_f64().map(f64::abs),
+        f => p["axis"][f].as_f64(),
+    };
+    let ids: Vec<u64> = pairs.iter().map(|p| p["image_id"].as_u64().unwrap_or(0)).collect();
+    let groups = groups_by_key(ids.iter().map(|id| key(sols.get(id).copied().flatten(), *id as usize)));
+    let values: Vec<Vec<f64>> = groups.iter().map(|g| g.iter().filter_map(|&i| value(&pairs[i])).filter(|v| v.is_finite()).collect()).collect();
+    let i = spec().pooled_statistic(&values, &tubeloc_eval::bootstrap::median);
+    json!([i.lo, i.hi])
+}
+
 /// The sol of each frame in `data`'s `MANIFEST.tsv`, by its path relative to `data`.
 pub fn manifest_sols(data: &Path) -> Result<HashMap<PathBuf, i64>> {
     let rows = tubeloc_synth::real_set::read_manifest(&data.join("MANIFEST.tsv"))?;

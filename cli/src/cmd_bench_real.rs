@@ -159,6 +159,9 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     crate::cmd_eval::poses::run(&set.join("annotations.json"), &labels, &filter, 50.0, Some(&dir.join("pose_eval")))?;
     let m: Value = files::read_json(&dir.join("pose_eval").join("pose_metrics.json"))?;
     let mono = m["poses"].as_array().and_then(|v| v.iter().find(|p| p["label"] == "mono")).cloned().unwrap_or(Value::Null);
+    let pairs: Value = files::read_json(&dir.join("pose_eval").join("pose_eval.json"))?;
+    let mono_pairs = pairs.as_array().and_then(|v| v.iter().find(|p| p["label"] == "mono")).map(|p| p["evaluation"]["pairs"].clone()).unwrap_or(Value::Null);
+    let median_ci = |field: &str| crate::bench_intervals::median_by_sol(&gt, &mono_pairs, field);
     let mut snapped_fig = json!({"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64});
     merge(&mut snapped_fig, crate::bench_intervals::ap_ar_by_sol(&gt, &snapped_ev));
     let mut ranked_fig = json!({"ap50": ranked_eval.stats[1], "ap": ranked_eval.stats[0], "ar": ranked_eval.stats[8], "ece": evidence_ece});
@@ -168,6 +171,7 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
         "axis_deg_median": mono["summaries"]["axis_angle_deg"]["median"], "axis_deg_p90": mono["summaries"]["axis_angle_deg"]["p90"],
         "across_mm_median": mono["summaries"]["perpendicular_mm"]["median"], "across_mm_p90": mono["summaries"]["perpendicular_mm"]["p90"],
         "along_mm_median": mono["summaries"]["along_axis_abs_mm"]["median"], "along_mm_p90": mono["summaries"]["along_axis_abs_mm"]["p90"],
+        "axis_deg_median_ci": median_ci("axis_angle_deg"), "across_mm_median_ci": median_ci("perpendicular_mm"), "along_mm_median_ci": median_ci("along_axis_abs_mm"),
         "snapped": snapped_fig,
         "snapped_pose_evidence": ranked_fig,
     }))
@@ -347,7 +351,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
-        writeln!(md, "\nMono refinement of the learned detections on the {kind} {part} composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {} / {} deg, across the axis {} / {} mm, centre along the axis {} / {} mm (median / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), f(&p["along_mm_p90"])).ok();
+        use crate::bench_intervals::bracket;
+        writeln!(md, "\nMono refinement of the learned detections on the {kind} {part} composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {}{} / {} deg, across the axis {}{} / {} mm, centre along the axis {}{} / {} mm (median [95 % interval by sol] / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), bracket(&p["axis_deg_median_ci"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), bracket(&p["across_mm_median_ci"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), bracket(&p["along_mm_median_ci"]), f(&p["along_mm_p90"])).ok();
     }
     if with_negatives {
         use crate::bench_intervals::by_sol_note;

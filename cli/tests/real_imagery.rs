@@ -107,6 +107,11 @@ fn bench_real_stage_runs_at_a_small_size() {
                 let mm = summary[set][key].as_f64().unwrap_or(-1.0);
                 assert!((0.0..=50.0).contains(&mm), "{set}: {key} {}", summary[set]);
             }
+            // The medians the targets are on carry their interval by sol around them.
+            for key in ["axis_deg_median", "across_mm_median", "along_mm_median"] {
+                let (x, ci) = (summary[set][key].as_f64().unwrap(), &summary[set][format!("{key}_ci").as_str()]);
+                assert!(ci[0].as_f64().unwrap() <= x + 1e-12 && x <= ci[1].as_f64().unwrap() + 1e-12, "{set}: {key} {x} {ci}");
+            }
         }
     }
     // Every AP50 / AR carries a 95 % interval by sol around it; so does every figure per

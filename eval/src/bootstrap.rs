@@ -80,6 +80,32 @@ impl BootstrapSpec {
     }
 }
 
+impl BootstrapSpec {
+    /// The interval of a statistic of pooled values, e.g. the median pose error: `groups[g]`
+    /// holds group `g`'s values; each resample pools the values of the groups it drew (a group
+    /// drawn twice counts twice) and applies `stat` to them, sorted ascending. The estimate is
+    /// `stat` of all values; an empty pool gives NaN.
+    pub fn pooled_statistic(&self, groups: &[Vec<f64>], stat: &(dyn Fn(&[f64]) -> f64 + Sync)) -> Interval {
+        let pooled = |draw: &mut dyn Iterator<Item = usize>| {
+            let mut v: Vec<f64> = draw.flat_map(|g| groups[g].iter().copied()).collect();
+            if v.is_empty() {
+                return f64::NAN;
+            }
+            v.sort_by(f64::total_cmp);
+            stat(&v)
+        };
+        let estimate = pooled(&mut (0..groups.len()));
+        let values = self.draws(groups.len()).iter().map(|d| pooled(&mut d.iter().copied())).collect();
+        self.interval(estimate, values, groups.len())
+    }
+}
+
+/// The median of sorted `v` (the mean of the two middle values for an even count; NaN for an
+/// empty `v`).
+pub fn median(v: &[f64]) -> f64 {
+    quantile(v, 0.5)
+}
+
 /// The `q` quantile of sorted `v`, linearly interpolated (`numpy.quantile`'s default); NaN for
 /// an empty `v`.
 pub fn quantile(v: &[f64], q: f64) -> f64 {
@@ -136,6 +162,19 @@ mod tests {
         assert_eq!((flat.lo, flat.estimate, flat.hi), (0.5, 0.5, 0.5));
         // No group: NaN, not a panic.
         assert!(spec.ratio_of_sums(&[]).estimate.is_nan());
+    }
+
+    #[test]
+    fn pooled_medians_take_each_group_whole() {
+        // Three sols of small errors and one of large ones.
+        let groups = vec![vec![0.5, 0.7, 0.6], vec![0.8, 0.4], vec![0.6, 0.9], vec![5.0, 6.0, 7.0]];
+        let spec = BootstrapSpec::default();
+        let i = spec.pooled_statistic(&groups, &median);
+        assert_eq!(i.estimate, 0.75, "median of the ten values");
+        assert!(i.lo <= 0.6 && i.hi >= 5.0, "the heavy sol moves the median when drawn twice: {i:?}");
+        assert_eq!(spec.pooled_statistic(&groups, &median), i);
+        assert_eq!(median(&[1.0, 2.0, 3.0]), 2.0);
+        assert!(spec.pooled_statistic(&[], &median).estimate.is_nan());
     }
 
     #[test]
