@@ -6,7 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, GroundPlane};
-use tubeloc_detect::line2d::{Line2dDetection, Line2dDetector, MatchParams, TemplateLibrary, Verifier, VerifyParams};
+use tubeloc_detect::line2d::{Line2dDetection, Line2dDetector, MatchParams, Verifier, VerifyParams};
 use tubeloc_pipeline::pose_verifier::{PoseVerification, PoseVerifier, CLUTTER_FLOOR};
 
 /// Line2D options of `tubeloc detect`.
@@ -227,10 +227,7 @@ pub const DEFAULT_GROUND_RANGE: &str = "0.55:1.25";
 
 /// The Line2D detector and the fallback camera (`--camera`) that `opts` describe.
 pub fn detector_from_opts(opts: &Line2dOpts) -> Result<(Line2dDetector, Option<CameraModel>)> {
-    let lib = match opts.templates.as_deref() {
-        Some(p) => TemplateLibrary::load(p).with_context(|| format!("reading {}", p.display()))?,
-        None => TemplateLibrary::default_library().context("building the default template library")?,
-    };
+    let lib = tubeloc_pipeline::shipped::template_library(opts.templates.as_deref())?;
     let camera = opts.camera.as_deref().map(|p: &Path| CameraModel::load_json(p).with_context(|| format!("reading {}", p.display()))).transpose()?;
     let mut params = MatchParams {
         threshold: opts.threshold,
