@@ -7,7 +7,11 @@ tubes and dust 0-0.5 each. One `tubeloc synth composite` call per composite, the
 Deterministic: composite k draws its view from Python's `random.Random(k * 7919)` and passes
 `--seed k`.
 
-usage: navcam_composites.py TUBELOC REAL_DATA OUT [PER_FRAME=50]
+usage: navcam_composites.py TUBELOC REAL_DATA OUT [PER_FRAME=50] [PITCH_MIN=25] [PITCH_MAX=45] [FIRST=1]
+
+PITCH_MIN / PITCH_MAX: the range of the downward look, degrees (12 and 28 put the tubes at about
+4 m median, the range of the grey validation composites). FIRST: the index of the first
+composite (its seeds); sets meant to be trained on together need disjoint indices.
 """
 import json
 import math
@@ -22,7 +26,7 @@ CAMERA = {"width": 1024, "height": 1024, "fx": 1225.0, "fy": 1225.0, "cx": 511.5
           "distortion": {"k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "k3": 0.0}}
 
 
-def main(tubeloc, data, out, per_frame=50):
+def main(tubeloc, data, out, per_frame=50, pitch_min=25, pitch_max=45, first=1):
     if os.path.exists(out):
         sys.exit(f"{out}: exists; choose a new folder")
     work = tempfile.mkdtemp(prefix="navcam-")
@@ -32,14 +36,15 @@ def main(tubeloc, data, out, per_frame=50):
     os.makedirs(os.path.join(out, "images"))
     merged = {"images": [], "annotations": [], "categories": None,
               "info": {"description": "tubeloc composites on the full-resolution Navcam frames of the training sols",
-                       "script": "scripts/navcam_composites.py", "per_frame": per_frame}}
-    k = 0
+                       "script": "scripts/navcam_composites.py", "per_frame": per_frame,
+                      "pitch_deg": [pitch_min, pitch_max], "first": first}}
+    k = first - 1
     for frame in FRAMES:
         background = os.path.join(data, "backgrounds", "msl_navcam_1024", frame)
         for _ in range(per_frame):
             k += 1
             r = random.Random(k * 7919)
-            pitch, height = math.radians(r.uniform(25, 45)), r.uniform(1.6, 2.0)
+            pitch, height = math.radians(r.uniform(pitch_min, pitch_max)), r.uniform(1.6, 2.0)
             azimuth, elevation, tubes, dust = r.uniform(-180, 180), r.uniform(20, 75), r.randint(1, 4), r.uniform(0, 0.5)
             # n . X = d with n up in the camera frame (camera pitched down) and d = -height.
             ground = "%f,%f,%f,%f" % (0, -math.cos(pitch), -math.sin(pitch), -height)
@@ -66,6 +71,6 @@ def main(tubeloc, data, out, per_frame=50):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (4, 5):
+    if not 4 <= len(sys.argv) <= 8:
         sys.exit(__doc__)
     main(sys.argv[1], sys.argv[2], sys.argv[3], *(int(a) for a in sys.argv[4:]))

@@ -267,6 +267,52 @@ fn locate_hands_the_planner_no_tube_on_a_real_frame_without_tubes() {
     }
 }
 
+/// `locate --assumed-view navcam` on a frame without a camera model is the run with that view
+/// written by hand as a rig and a ground (the same tubes, probabilities and camera); in a batch
+/// each frame gets the view at its own size, and an unreadable frame is named while the others
+/// are located. The view cannot be combined with a rig.
+#[test]
+fn an_assumed_view_stands_in_for_a_missing_camera_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = real_data().join("negatives_val/msl_navcam_1024/NLB_485117349EDR_F0480412NCAM00385M_.jpg");
+    let f = 512.0 / 22.5f64.to_radians().tan();
+    let rig = serde_json::json!({"cameras": [{"name": "navcam", "model": {"width": 1024, "height": 1024, "fx": f, "fy": f, "cx": 511.5, "cy": 511.5}, "T_rig_cam": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]}}], "stereo_pairs": []});
+    let rig_path = dir.path().join("rig.json");
+    std::fs::write(&rig_path, rig.to_string()).unwrap();
+    let (by_hand, assumed) = (dir.path().join("hand.json"), dir.path().join("assumed.json"));
+    let ground = format!("--ground=0,{},{},-1.9", -(30f64.to_radians().cos()), -(30f64.to_radians().sin()));
+    tubeloc(&["locate", "--rig", p(&rig_path), "--image", p(&image), &ground, "--out", p(&by_hand)]);
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--image", p(&image), "--out", p(&assumed)]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{}", String::from_utf8_lossy(&o.stderr));
+    let (a, b): (Value, Value) = (serde_json::from_str(&std::fs::read_to_string(&by_hand).unwrap()).unwrap(), serde_json::from_str(&std::fs::read_to_string(&assumed).unwrap()).unwrap());
+    assert!(!a["tubes"].as_array().unwrap().is_empty(), "the frame has detections to compare");
+    json_close(&a["tubes"], &b["tubes"], 1e-9, &[], "tubes").unwrap();
+    json_close(&a["camera_model"], &b["camera_model"], 1e-9, &[], "camera_model").unwrap();
+    json_close(&a["up_cam"], &b["up_cam"], 1e-12, &[], "up_cam").unwrap();
+
+    // A batch: a full frame, a 256 px frame and a file that is no image.
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    std::fs::copy(&image, frames.join("full.jpg")).unwrap();
+    let small = std::fs::read_dir(real_data().join("negatives_val/msl_navcam_256")).unwrap().map(|e| e.unwrap().path()).min().unwrap();
+    std::fs::copy(&small, frames.join("small.jpg")).unwrap();
+    std::fs::write(frames.join("broken.png"), b"not a png").unwrap();
+    let out = dir.path().join("batch");
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--images", p(&frames), "--out", p(&out)]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("broken.png"), "the unreadable frame is named: {stderr}");
+    for (stem, w) in [("full", 1024.0), ("small", 256.0)] {
+        let doc: Value = serde_json::from_str(&std::fs::read_to_string(out.join(format!("frames/{stem}.json"))).unwrap()).unwrap();
+        let m = &doc["camera_model"];
+        assert_eq!(m["width"].as_f64(), Some(w));
+        let fx = m["fx"].as_f64().unwrap();
+        assert!((fx - w / 2.0 / 22.5f64.to_radians().tan()).abs() < 1e-9, "{stem}: fx {fx}");
+    }
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--rig", p(&rig_path), "--image", p(&image), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));
+}
+
 /// The arm in view of a real Navcam frame (MSL sol 3423, no tube) is what `locate` hands over
 /// at its defaults; with an ignore mask over the arm and its turret, that tube is listed as
 /// `in_ignored_region` at a pixel inside the mask, with the same centre, and nothing is handed

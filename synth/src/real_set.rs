@@ -122,14 +122,31 @@ impl AssumedView {
         AssumedView { hfov_deg: rng.random_range(15.0..50.0), height_m: rng.random_range(0.8..2.2), pitch_deg: rng.random_range(15.0..60.0), roll_deg: rng.random_range(-4.0..4.0) }
     }
 
+    /// The camera of an image of `width x height` pixels under this view: a pinhole with the
+    /// view's horizontal field of view, its principal point at the image centre.
+    pub fn camera(&self, width: u32, height: u32) -> CameraModel {
+        CameraModel::from_hfov(width, height, self.hfov_deg)
+    }
+
+    /// Unit up direction of the level ground in the camera frame (x right, y down, z ahead):
+    /// `(0, -cos p, -sin p)` for a camera pitched down by `p`, turned about z by the roll.
+    pub fn up_cam(&self) -> Vector3<f64> {
+        let (p, r) = (self.pitch_deg.to_radians(), self.roll_deg.to_radians());
+        let up = Vector3::new(0.0, -p.cos(), -p.sin());
+        Vector3::new(r.cos() * up.x - r.sin() * up.y, r.sin() * up.x + r.cos() * up.y, up.z)
+    }
+
+    /// The ground under the camera in its frame, as `(n, d)` with `n · X = d` and `n` up:
+    /// `(up, -height)`.
+    pub fn ground(&self) -> (Vector3<f64>, f64) {
+        (self.up_cam(), -self.height_m)
+    }
+
     /// The view for an image of `width x height` pixels at `image`; the sun is drawn from
     /// `rng` (elevation 20-75 degrees, any azimuth).
     pub fn view(&self, image: PathBuf, width: u32, height: u32, sol: Option<i64>, rng: &mut ChaCha8Rng) -> RealView {
-        let camera = CameraModel::from_hfov(width, height, self.hfov_deg);
-        let (p, r) = (self.pitch_deg.to_radians(), self.roll_deg.to_radians());
-        // Up in a camera pitched down by p: (0, -cos p, -sin p); roll turns it about z.
-        let up = Vector3::new(0.0, -p.cos(), -p.sin());
-        let up_cam = Vector3::new(r.cos() * up.x - r.sin() * up.y, r.sin() * up.x + r.cos() * up.y, up.z);
+        let camera = self.camera(width, height);
+        let up_cam = self.up_cam();
         // Sun: elevation e above the ground, azimuth a about the up axis.
         let (a, e) = (rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(20f64..75.0).to_radians());
         let fwd = (Vector3::z() - up_cam * up_cam.z).normalize();

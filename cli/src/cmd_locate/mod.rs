@@ -23,6 +23,33 @@ use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, CocoResult, Pose, Rig, TubeDetection};
 use tubeloc_pipeline::{detector, CameraSelection, ExternalDetections, GroundPlane, LocateInput, LocatedTube, Locator, LocatorSettings, TubeDetector};
 
+/// A view assumed for frames without a camera model (`--assumed-view`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AssumedViewArg {
+    /// A mast navigation camera: 45 degree field of view, 1.9 m high, 30 degrees down.
+    Navcam,
+    /// A mast science camera: 20 degree field of view, 1.9 m high, 30 degrees down.
+    Mast,
+}
+
+impl AssumedViewArg {
+    /// The view's geometry.
+    pub fn view(self) -> tubeloc_synth::real_set::AssumedView {
+        match self {
+            AssumedViewArg::Navcam => tubeloc_synth::real_set::AssumedView::NAVCAM,
+            AssumedViewArg::Mast => tubeloc_synth::real_set::AssumedView::MAST,
+        }
+    }
+
+    /// The name `--assumed-view` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            AssumedViewArg::Navcam => "navcam",
+            AssumedViewArg::Mast => "mast",
+        }
+    }
+}
+
 /// Exit code of a run that finished but located no tube.
 pub const EXIT_NO_TUBE: u8 = 3;
 
@@ -74,7 +101,7 @@ pub struct LocateArgs {
     /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground; a
     /// CAHVORE fisheye's image is resampled into the model's linear camera), recognised by
     /// content.
-    #[arg(long, required_unless_present = "label_cameras", conflicts_with = "label_cameras")]
+    #[arg(long, required_unless_present_any = ["label_cameras", "assumed_view"], conflicts_with_all = ["label_cameras", "assumed_view"])]
     pub rig: Option<PathBuf>,
     /// Instead of --rig: each image is a PDS3 product (`.IMG` with its label, or a `.LBL` beside
     /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground;
@@ -83,6 +110,13 @@ pub struct LocateArgs {
     /// With --right (a product of the same moment), the two labels make the stereo pair.
     #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
+    /// Instead of --rig, for frames that come without a camera model: each image's camera and
+    /// ground are assumed from its size. `navcam`: a 45 degree horizontal field of view, 1.9 m
+    /// above level ground, looking 30 degrees down (how `tubeloc bench` judges grey frames
+    /// without a model); `mast`: the same with a 20 degree field (its colour frames). Poses
+    /// are then only as good as the assumption; mono only.
+    #[arg(long, value_enum, conflicts_with_all = ["label_cameras", "camera_name", "pair", "right", "right_images"])]
+    pub assumed_view: Option<AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
     /// model's linear part: below 1 keeps more of the fisheye's field (its rim, the near
     /// ground of a hazard camera) at a coarser scale; the corners beyond the field are black.
@@ -193,6 +227,7 @@ impl LocateArgs {
             command: None,
             rig: Some(rig),
             label_cameras: false,
+            assumed_view: None,
             fisheye_scale: 1.0,
             image: Some(image),
             right: None,
@@ -396,7 +431,13 @@ impl Setup {
         // With --label-cameras and --right (one stereo pair), both labels, the right one last.
         let label_images: Vec<&Path> = images.iter().copied().chain(a.right.as_deref().filter(|_| a.label_cameras)).collect();
         let mut fisheyes = BTreeMap::new();
-        let (rig_path, pds, label_errors) = if a.label_cameras {
+        let (rig_path, pds, label_errors) = if let Some(view) = a.assumed_view {
+            let (cams, errors) = assumed_cameras(view, &label_images);
+            if cams.is_empty() {
+                bail!("{}", errors.into_values().next().unwrap_or_else(|| "--assumed-view: no image".into()));
+            }
+            (PathBuf::from(format!("the assumed {} view (--assumed-view)", view.name())), Some(cams), errors)
+        } else if a.label_cameras {
             let (cams, errors) = label_cameras(&label_images);
             if cams.is_empty() || (a.right.is_some() && !errors.is_empty()) {
                 bail!("{}", errors.into_values().next().unwrap_or_else(|| "--label-cameras: no image".into()));
@@ -603,6 +644,29 @@ fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String
             Ok(c) => cams.push(c),
             Err(e) => {
                 errors.insert(name, format!("{e:#}"));
+            }
+        }
+    }
+    (cams, errors)
+}
+
+/// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
+/// under `view`, from the image's size; and, by image file name, why an image gives none.
+fn assumed_cameras(view: AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
+    let geometry = view.view();
+    let (n, d) = geometry.ground();
+    let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
+    for image in images {
+        let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let camera = tubeloc_detect::input::image_size(image).map_err(|e| format!("--assumed-view: reading {}: {e}", image.display())).and_then(|(w, h)| {
+            let ground = GroundPlane::new(n, d).map_err(|e| format!("--assumed-view: {e}"))?;
+            let model = geometry.camera(w, h);
+            Ok(tubeloc_calib::interchange::pds::PdsCamera { camera: tubeloc_core::RigCamera { name: name.clone(), model, t_rig_cam: Pose::identity() }, ground, sol: None, image: Some(name.clone()) })
+        });
+        match camera {
+            Ok(c) => cams.push(c),
+            Err(e) => {
+                errors.insert(name, e);
             }
         }
     }
