@@ -273,3 +273,30 @@ mod tests {
         assert!(require_at_most(("--a", 7), ("--b", 6)).unwrap_err().to_string().contains("--a (7) must not exceed --b (6)"));
     }
 }
+
+/// A view assumed for frames without a camera model (`--assumed-view`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AssumedViewArg {
+    /// A mast navigation camera: 45 degree field of view, 1.9 m high, 30 degrees down.
+    Navcam,
+    /// A mast science camera: 20 degree field of view, 1.9 m high, 30 degrees down.
+    Mast,
+}
+
+impl AssumedViewArg {
+    /// The view's geometry.
+    pub fn view(self) -> tubeloc_synth::real_set::AssumedView {
+        match self {
+            AssumedViewArg::Navcam => tubeloc_synth::real_set::AssumedView::NAVCAM,
+            AssumedViewArg::Mast => tubeloc_synth::real_set::AssumedView::MAST,
+        }
+    }
+
+    /// The name `--assumed-view` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            AssumedViewArg::Navcam => "navcam",
+            AssumedViewArg::Mast => "mast",
+        }
+    }
+}

@@ -50,6 +50,11 @@ pub struct DetectArgs {
     /// images use their own `ground`.
     #[arg(long, allow_hyphen_values = true)]
     pub ground: Option<tubeloc_core::GroundPlane>,
+    /// Instead of --camera and --ground, for an --image without a camera model: its camera and
+    /// ground are assumed from its size, as `tubeloc locate --assumed-view` does (`navcam`: 45
+    /// degree field of view, 1.9 m above level ground, 30 degrees down; `mast`: 20 degrees).
+    #[arg(long, value_enum, requires = "image", conflicts_with_all = ["ground", "camera", "dataset"])]
+    pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
     /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
     #[arg(long, default_value = DEFAULT_RANGE_M, value_parser = crate::args::range_band)]
@@ -66,7 +71,20 @@ impl DetectArgs {
     /// `tubeloc detect --method METHOD --dataset DATASET --out OUT` with the command line's
     /// defaults for everything else.
     pub(crate) fn dataset(method: Method, dataset: &Path, out: &Path) -> Self {
-        DetectArgs { method, image: None, image_id: 0, dataset: Some(dataset.to_path_buf()), model: None, decode_config: None, results: None, ground: None, range_m: DEFAULT_RANGE_M.into(), out: out.to_path_buf(), line2d: line2d_defaults() }
+        DetectArgs {
+            method,
+            image: None,
+            image_id: 0,
+            dataset: Some(dataset.to_path_buf()),
+            model: None,
+            decode_config: None,
+            results: None,
+            ground: None,
+            assumed_view: None,
+            range_m: DEFAULT_RANGE_M.into(),
+            out: out.to_path_buf(),
+            line2d: line2d_defaults(),
+        }
     }
 }
 
@@ -85,8 +103,14 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 /// With a PDS camera list as `--camera` (`cahv_to_pinhole.py`'s JSON) or a PDS3 label: the
 /// camera of `--image` (the list's camera named after its file, the label's one camera) and its
 /// ground (`--ground` when given), and `--camera` cleared so
-/// that nothing reads the list as one camera. `None` for any other `--camera`.
+/// that nothing reads the list as one camera. With `--assumed-view`: that view's camera at the
+/// image's size and its ground. `None` for any other `--camera`.
 fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
+    if let (Some(view), Some(image)) = (args.assumed_view, &args.image) {
+        let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
+        let (n, d) = view.view().ground();
+        return Ok(Some((view.view().camera(w, h), tubeloc_core::GroundPlane::new(n, d)?)));
+    }
     let Some(path) = args.line2d.camera.clone() else { return Ok(None) };
     let Some(cams) = tubeloc_calib::interchange::pds::read_pds_cameras(&path)? else { return Ok(None) };
     let Some(image) = &args.image else {

@@ -108,3 +108,15 @@ fn main() -> ExitCode {
         },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every argument's relations (conflicts, requirements, groups) name arguments that exist,
+    /// whatever the build profile (clap checks them itself only in debug builds).
+    #[test]
+    fn the_command_line_definition_is_consistent() {
+        super::Cli::command().debug_assert();
+    }
+}

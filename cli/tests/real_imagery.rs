@@ -308,6 +308,13 @@ fn an_assumed_view_stands_in_for_a_missing_camera_model() {
         let fx = m["fx"].as_f64().unwrap();
         assert!((fx - w / 2.0 / 22.5f64.to_radians().tan()).abs() < 1e-9, "{stem}: fx {fx}");
     }
+    // `detect` takes the same view: the detections of the camera and ground written by hand.
+    let cam = dir.path().join("cam.json");
+    std::fs::write(&cam, rig["cameras"][0]["model"].to_string()).unwrap();
+    let (d_hand, d_assumed) = (dir.path().join("d_hand.json"), dir.path().join("d_assumed.json"));
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--camera", p(&cam), &ground, "--out", p(&d_hand)]);
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--assumed-view", "navcam", "--out", p(&d_assumed)]);
+    assert_eq!(std::fs::read(&d_hand).unwrap(), std::fs::read(&d_assumed).unwrap());
     let o = tubeloc(&["locate", "--assumed-view", "navcam", "--rig", p(&rig_path), "--image", p(&image), "--out", p(&dir.path().join("x.json"))]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));

@@ -23,33 +23,6 @@ use std::path::{Path, PathBuf};
 use tubeloc_core::{CameraModel, CocoResult, Pose, Rig, TubeDetection};
 use tubeloc_pipeline::{detector, CameraSelection, ExternalDetections, GroundPlane, LocateInput, LocatedTube, Locator, LocatorSettings, TubeDetector};
 
-/// A view assumed for frames without a camera model (`--assumed-view`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum AssumedViewArg {
-    /// A mast navigation camera: 45 degree field of view, 1.9 m high, 30 degrees down.
-    Navcam,
-    /// A mast science camera: 20 degree field of view, 1.9 m high, 30 degrees down.
-    Mast,
-}
-
-impl AssumedViewArg {
-    /// The view's geometry.
-    pub fn view(self) -> tubeloc_synth::real_set::AssumedView {
-        match self {
-            AssumedViewArg::Navcam => tubeloc_synth::real_set::AssumedView::NAVCAM,
-            AssumedViewArg::Mast => tubeloc_synth::real_set::AssumedView::MAST,
-        }
-    }
-
-    /// The name `--assumed-view` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            AssumedViewArg::Navcam => "navcam",
-            AssumedViewArg::Mast => "mast",
-        }
-    }
-}
-
 /// Exit code of a run that finished but located no tube.
 pub const EXIT_NO_TUBE: u8 = 3;
 
@@ -116,7 +89,7 @@ pub struct LocateArgs {
     /// without a model); `mast`: the same with a 20 degree field (its colour frames). Poses
     /// are then only as good as the assumption; mono only.
     #[arg(long, value_enum, conflicts_with_all = ["label_cameras", "camera_name", "pair", "right", "right_images"])]
-    pub assumed_view: Option<AssumedViewArg>,
+    pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
     /// model's linear part: below 1 keeps more of the fisheye's field (its rim, the near
     /// ground of a hazard camera) at a coarser scale; the corners beyond the field are black.
@@ -652,7 +625,7 @@ fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String
 
 /// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
 /// under `view`, from the image's size; and, by image file name, why an image gives none.
-fn assumed_cameras(view: AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
+fn assumed_cameras(view: crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
     let geometry = view.view();
     let (n, d) = geometry.ground();
     let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
