@@ -356,7 +356,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     }
     if with_negatives {
         use crate::bench_intervals::by_sol_note;
-        writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections kept at the threshold **{:.3} per frame**{}, {:.2} per frame before it; `locate` at its defaults (assumed camera and ground) hands the planner **{:.3} tubes per frame**{}.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), by_sol_note(&neg["kept_per_frame_ci"]), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN), by_sol_note(&neg["located_per_frame_ci"])).ok();
+        writeln!(md, "\nReal frames without tubes (`negatives_val`, {} frames): learned detections kept at the threshold **{:.3} per frame**{}, {:.2} per frame before it; `locate` at its defaults (assumed camera and ground: each frame's figure is what `tubeloc locate --assumed-view navcam|mast --image F` gives, navcam for grey frames) hands the planner **{:.3} tubes per frame**{}.\n", neg["frames"], neg["kept_per_frame"].as_f64().unwrap_or(f64::NAN), by_sol_note(&neg["kept_per_frame_ci"]), neg["detections_per_frame"].as_f64().unwrap_or(f64::NAN), neg["located_per_frame"].as_f64().unwrap_or(f64::NAN), by_sol_note(&neg["located_per_frame_ci"])).ok();
         let l2_what = format!(
             "Line2D on the same frames (assumed cameras and ground, resampled to the library's scale, grey frames enlarged to it searched twice, verified by pose at {:.3} colour / {:.3} grey)",
             pose_verifier.threshold, pose_verifier.threshold_grey

@@ -195,6 +195,20 @@ fn bench_real_stage_runs_at_a_small_size() {
     let rows: Vec<&str> = real_md.lines().skip_while(|l| !l.starts_with("| folder of `negatives_val` |")).skip(2).take_while(|l| l.starts_with("| `")).collect();
     let frames: u64 = rows.iter().map(|r| r.split('|').nth(2).unwrap().trim().parse::<u64>().unwrap()).sum();
     assert_eq!(frames, 2, "{real_md}");
+    // Each tube-free frame's figures are what `locate --assumed-view` gives on it (the view of
+    // its kind: navcam for grey frames, mast for colour ones).
+    assert!(real_md.contains("`tubeloc locate --assumed-view navcam|mast --image F`"), "{real_md}");
+    for f in summary["negatives"]["per_frame"].as_array().unwrap() {
+        let image = real_data().join(f["image"].as_str().unwrap());
+        let view = if f["grey"].as_bool().unwrap() { "navcam" } else { "mast" };
+        let poses = dir.path().join("frame.json");
+        let o = tubeloc(&["locate", "--assumed-view", view, "--image", p(&image), "--out", p(&poses)]);
+        assert!(matches!(o.status.code(), Some(0 | 3)), "{}", String::from_utf8_lossy(&o.stderr));
+        let doc: Value = serde_json::from_str(&std::fs::read_to_string(&poses).unwrap()).unwrap();
+        let located = doc["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").count();
+        assert_eq!(doc["detections"].as_array().unwrap().len() as u64, f["detections"].as_u64().unwrap(), "{f}");
+        assert_eq!(located as u64, f["located"].as_u64().unwrap(), "{f}");
+    }
 }
 
 /// The real stage on the validation part: composites and PDS frames of validation sols only,
