@@ -285,10 +285,10 @@ pub enum AssumedViewArg {
 
 impl AssumedViewArg {
     /// The view's geometry.
-    pub fn view(self) -> tubeloc_synth::real_set::AssumedView {
+    pub fn view(self) -> tubeloc_core::AssumedView {
         match self {
-            AssumedViewArg::Navcam => tubeloc_synth::real_set::AssumedView::NAVCAM,
-            AssumedViewArg::Mast => tubeloc_synth::real_set::AssumedView::MAST,
+            AssumedViewArg::Navcam => tubeloc_core::AssumedView::NAVCAM,
+            AssumedViewArg::Mast => tubeloc_core::AssumedView::MAST,
         }
     }
 

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 use tubeloc_core::ScoreCalibration;
-use tubeloc_synth::real_set::AssumedView;
+use tubeloc_synth::real_set::{assumed_real_view, AssumedView};
 
 /// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
 fn negative_view(grey: bool) -> AssumedView {
@@ -34,7 +34,7 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
-        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
+        let view = assumed_real_view(&negative_view(grey), p.clone(), image.width(), image.height(), None, &mut rng);
         let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
         // `locate` at its defaults on the frame, with the assumed camera and ground; its
         // detector runs at the same working scale `s`.
@@ -127,7 +127,7 @@ pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) 
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let input = tubeloc_detect::input::rgb8_of(&image);
         let grey = input.info.grey;
-        let view = negative_view(grey).view(p.clone(), image.width(), image.height(), None, &mut rng);
+        let view = assumed_real_view(&negative_view(grey), p.clone(), image.width(), image.height(), None, &mut rng);
         let t = Instant::now();
         let (n, d) = view.ground();
         let ground = tubeloc_core::GroundPlane::new(n, d)?;

@@ -108,8 +108,7 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (args.assumed_view, &args.image) {
         let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
-        let (n, d) = view.view().ground();
-        return Ok(Some((view.view().camera(w, h), tubeloc_core::GroundPlane::new(n, d)?)));
+        return Ok(Some((view.view().camera(w, h), view.view().ground_plane()?)));
     }
     let Some(path) = args.line2d.camera.clone() else { return Ok(None) };
     let Some(cams) = tubeloc_calib::interchange::pds::read_pds_cameras(&path)? else { return Ok(None) };

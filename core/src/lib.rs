@@ -6,6 +6,7 @@
 //! and +z along the axis toward the seal end.
 #![warn(missing_docs)]
 
+pub mod assumed_view;
 pub mod bit_depth;
 pub mod camera;
 pub mod coco;
@@ -28,6 +29,7 @@ pub mod rig;
 pub mod tube;
 pub mod tube_pose;
 
+pub use assumed_view::AssumedView;
 pub use camera::{CameraModel, Distortion};
 pub use coco::{CocoAnnotation, CocoCategory, CocoDataset, CocoImage, CocoResult, Segmentation};
 pub use confidence::ScoreCalibration;

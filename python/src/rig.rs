@@ -104,6 +104,19 @@ pub fn read_pds_grounds(path: PathBuf) -> PyResult<std::collections::BTreeMap<St
     Ok(cams.into_iter().map(|c| (c.camera.name, (c.ground.normal.x, c.ground.normal.y, c.ground.normal.z, c.ground.offset))).collect())
 }
 
+/// assumed_view(view, width, height) -> tuple[Rig, tuple[float, float, float, float]]
+///
+/// For an image without a camera model: the one-camera rig (camera "assumed") and the ground
+/// (nx, ny, nz, d) of an image of width x height pixels under the assumed view `view`, as
+/// `tubeloc locate --assumed-view` takes it: "navcam" (45 degree horizontal field of view,
+/// 1.9 m above level ground, looking 30 degrees down) or "mast" (a 20 degree field).
+#[pyfunction]
+pub fn assumed_view(view: &str, width: u32, height: u32) -> PyResult<(PyRig, (f64, f64, f64, f64))> {
+    let (rig, g) = tubeloc_core::AssumedView::by_name(view).and_then(|v| v.rig("assumed", width, height)).map_err(|e| chain_to_py(&e))?;
+    rig.validate().map_err(|e| chain_to_py(&e))?;
+    Ok((PyRig { rig }, (g.normal.x, g.normal.y, g.normal.z, g.offset)))
+}
+
 /// write_rig(rig, path)
 ///
 /// Writes a rig file, atomically: tubeloc JSON, or OpenCV YAML for a name ending in .yaml/.yml.

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import tubeloc
+from conftest import REPO
 
 
 def test_rig_file_round_trip(demo_scene, tmp_path):
@@ -148,3 +149,26 @@ def test_read_product_gives_image_rig_and_ground_a_fisheye_resampled(tmp_path):
     with pytest.raises(tubeloc.TubelocError, match="x.png: not a PDS3 product"):
         (tmp_path / "x.png").write_bytes(b"\x89PNG")
         tubeloc.read_product(tmp_path / "x.png")
+
+
+def test_assumed_view_locates_as_the_command_line_does(cli, tmp_path):
+    # A real Navcam frame without a camera model (held out for false positives): the rig and
+    # ground of the assumed Navcam view give the tubes of `tubeloc locate --assumed-view navcam`.
+    frame = REPO.parent / "shared/data/real_mars/negatives_val/msl_navcam_1024/NLB_485117349EDR_F0480412NCAM00385M_.jpg"
+    if not frame.exists():
+        pytest.skip(f"{frame} is missing (../shared/data beside the repository)")
+    rig, ground = tubeloc.assumed_view("navcam", 1024, 1024)
+    assert rig.image_size("assumed") == (1024, 1024)
+    assert ground[3] == pytest.approx(-1.9) and ground[:3] == pytest.approx((0.0, -np.cos(np.radians(30)), -np.sin(np.radians(30))))
+    tubes = tubeloc.Locator(rig).locate(tubeloc.read_image(frame), ground=list(ground))
+    out = tmp_path / "poses.json"
+    cli("locate", "--assumed-view", "navcam", "--image", frame, "--out", out, check=False)
+    doc = json.loads(out.read_text())
+    assert len(tubes) == len(doc["tubes"]) > 0
+    for t, d in zip(tubes, doc["tubes"]):
+        assert t.status == d["status"] and t.probability == pytest.approx(d["probability"], abs=1e-9)
+        assert np.allclose(t.centre, d["centre"], atol=1e-9)
+    with pytest.raises(tubeloc.TubelocError, match="navcam, mast"):
+        tubeloc.assumed_view("hazcam", 1024, 1024)
+    with pytest.raises(tubeloc.TubelocError):
+        tubeloc.assumed_view("mast", 0, 0)

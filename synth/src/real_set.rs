@@ -92,68 +92,25 @@ pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError>
     Ok(out)
 }
 
-/// An assumed camera for a background without a camera model.
-#[derive(Clone, Copy, Debug)]
-pub struct AssumedView {
-    /// Horizontal field of view, degrees.
-    pub hfov_deg: f64,
-    /// Camera height above the ground, metres.
-    pub height_m: f64,
-    /// Angle of the optical axis below the horizon, degrees.
-    pub pitch_deg: f64,
-    /// Roll about the optical axis, degrees.
-    pub roll_deg: f64,
+pub use tubeloc_core::AssumedView;
+
+/// A random assumed view for training: field of view 15-50 degrees, height 0.8-2.2 m, pitch
+/// 15-60 degrees, roll ±4 degrees.
+pub fn random_view(rng: &mut ChaCha8Rng) -> AssumedView {
+    AssumedView { hfov_deg: rng.random_range(15.0..50.0), height_m: rng.random_range(0.8..2.2), pitch_deg: rng.random_range(15.0..60.0), roll_deg: rng.random_range(-4.0..4.0) }
 }
 
-impl AssumedView {
-    /// The documented view of the colour test frames: a mast camera 1.9 m above the ground,
-    /// looking 30 degrees down, with a 20 degree field of view (the ground at the image centre
-    /// is 3.8 m away).
-    pub const MAST: AssumedView = AssumedView { hfov_deg: 20.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
-
-    /// The assumed view of a grey Navcam-like frame without a camera model: 1.9 m above the
-    /// ground, looking 30 degrees down, with a 45 degree field of view (the bench's real
-    /// tube-free grey frames are judged under it).
-    pub const NAVCAM: AssumedView = AssumedView { hfov_deg: 45.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
-
-    /// A random view for training: field of view 15-50 degrees, height 0.8-2.2 m, pitch
-    /// 15-60 degrees, roll ±4 degrees.
-    pub fn random(rng: &mut ChaCha8Rng) -> AssumedView {
-        AssumedView { hfov_deg: rng.random_range(15.0..50.0), height_m: rng.random_range(0.8..2.2), pitch_deg: rng.random_range(15.0..60.0), roll_deg: rng.random_range(-4.0..4.0) }
-    }
-
-    /// The camera of an image of `width x height` pixels under this view: a pinhole with the
-    /// view's horizontal field of view, its principal point at the image centre.
-    pub fn camera(&self, width: u32, height: u32) -> CameraModel {
-        CameraModel::from_hfov(width, height, self.hfov_deg)
-    }
-
-    /// Unit up direction of the level ground in the camera frame (x right, y down, z ahead):
-    /// `(0, -cos p, -sin p)` for a camera pitched down by `p`, turned about z by the roll.
-    pub fn up_cam(&self) -> Vector3<f64> {
-        let (p, r) = (self.pitch_deg.to_radians(), self.roll_deg.to_radians());
-        let up = Vector3::new(0.0, -p.cos(), -p.sin());
-        Vector3::new(r.cos() * up.x - r.sin() * up.y, r.sin() * up.x + r.cos() * up.y, up.z)
-    }
-
-    /// The ground under the camera in its frame, as `(n, d)` with `n · X = d` and `n` up:
-    /// `(up, -height)`.
-    pub fn ground(&self) -> (Vector3<f64>, f64) {
-        (self.up_cam(), -self.height_m)
-    }
-
-    /// The view for an image of `width x height` pixels at `image`; the sun is drawn from
-    /// `rng` (elevation 20-75 degrees, any azimuth).
-    pub fn view(&self, image: PathBuf, width: u32, height: u32, sol: Option<i64>, rng: &mut ChaCha8Rng) -> RealView {
-        let camera = self.camera(width, height);
-        let up_cam = self.up_cam();
-        // Sun: elevation e above the ground, azimuth a about the up axis.
-        let (a, e) = (rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(20f64..75.0).to_radians());
-        let fwd = (Vector3::z() - up_cam * up_cam.z).normalize();
-        let side = up_cam.cross(&fwd);
-        let sun_cam = Some(((fwd * a.cos() + side * a.sin()) * e.cos() + up_cam * e.sin()).normalize());
-        RealView { image, sol, camera, up_cam, height_m: self.height_m, sun_cam, geometry: "assumed" }
-    }
+/// `view` for an image of `width x height` pixels at `image`; the sun is drawn from
+/// `rng` (elevation 20-75 degrees, any azimuth).
+pub fn assumed_real_view(view: &AssumedView, image: PathBuf, width: u32, height: u32, sol: Option<i64>, rng: &mut ChaCha8Rng) -> RealView {
+    let camera = view.camera(width, height);
+    let up_cam = view.up_cam();
+    // Sun: elevation e above the ground, azimuth a about the up axis.
+    let (a, e) = (rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(20f64..75.0).to_radians());
+    let fwd = (Vector3::z() - up_cam * up_cam.z).normalize();
+    let side = up_cam.cross(&fwd);
+    let sun_cam = Some(((fwd * a.cos() + side * a.sin()) * e.cos() + up_cam * e.sin()).normalize());
+    RealView { image, sol, camera, up_cam, height_m: view.height_m, sun_cam, geometry: "assumed" }
 }
 
 /// Options of a composite set.
@@ -346,7 +303,7 @@ mod tests {
     #[test]
     fn assumed_view_up_is_unit_and_pitched() {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let v = AssumedView::MAST.view(PathBuf::from("x.png"), 500, 400, None, &mut rng);
+        let v = assumed_real_view(&AssumedView::MAST, PathBuf::from("x.png"), 500, 400, None, &mut rng);
         assert!((v.up_cam.norm() - 1.0).abs() < 1e-12);
         // Looking 30 degrees down: the optical axis makes 30 degrees with the ground.
         assert!((v.up_cam.z + 30f64.to_radians().sin()).abs() < 1e-12, "{:?}", v.up_cam);
@@ -486,11 +443,11 @@ pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour
             continue;
         }
         let view = match (split, is_colour) {
-            (RealSplit::Train, _) => AssumedView::random(&mut rng),
+            (RealSplit::Train, _) => random_view(&mut rng),
             (_, true) => AssumedView::MAST,
             (_, false) => AssumedView::NAVCAM,
         };
-        out.push(view.view(path, w, h, e.sol, &mut rng));
+        out.push(assumed_real_view(&view, path, w, h, e.sol, &mut rng));
     }
     Ok(out)
 }

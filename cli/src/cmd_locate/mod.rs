@@ -626,15 +626,12 @@ fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String
 /// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
 /// under `view`, from the image's size; and, by image file name, why an image gives none.
 fn assumed_cameras(view: crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
-    let geometry = view.view();
-    let (n, d) = geometry.ground();
     let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
     for image in images {
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let camera = tubeloc_detect::input::image_size(image).map_err(|e| format!("--assumed-view: reading {}: {e}", image.display())).and_then(|(w, h)| {
-            let ground = GroundPlane::new(n, d).map_err(|e| format!("--assumed-view: {e}"))?;
-            let model = geometry.camera(w, h);
-            Ok(tubeloc_calib::interchange::pds::PdsCamera { camera: tubeloc_core::RigCamera { name: name.clone(), model, t_rig_cam: Pose::identity() }, ground, sol: None, image: Some(name.clone()) })
+            let (rig, ground) = view.view().rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
+            Ok(tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) })
         });
         match camera {
             Ok(c) => cams.push(c),

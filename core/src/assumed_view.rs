@@ -1,0 +1,101 @@
+//! Views assumed for frames that come without a camera model: a level-ground pinhole geometry
+//! (field of view, height, downward look, roll) from which each frame's camera and ground follow
+//! at the frame's own size.
+//!
+//! Camera frame as everywhere: x right, y down, z ahead. A camera pitched down by `p` and
+//! rolled by `r` about z sees the ground's up direction as `R_z(r) (0, -cos p, -sin p)`, and
+//! the ground plane `n · X = d` with `n` that direction and `d = -height`.
+
+use crate::{CameraModel, CoreError, GroundPlane, Pose, Rig, RigCamera};
+use nalgebra::Vector3;
+
+/// An assumed camera for a frame without a camera model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AssumedView {
+    /// Horizontal field of view, degrees.
+    pub hfov_deg: f64,
+    /// Camera height above the ground, metres.
+    pub height_m: f64,
+    /// Angle of the optical axis below the horizon, degrees.
+    pub pitch_deg: f64,
+    /// Roll about the optical axis, degrees.
+    pub roll_deg: f64,
+}
+
+impl AssumedView {
+    /// A mast science camera (the colour test frames' documented view): 1.9 m above the
+    /// ground, looking 30 degrees down, with a 20 degree field of view (the ground at the image
+    /// centre is 3.8 m away).
+    pub const MAST: AssumedView = AssumedView { hfov_deg: 20.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// A mast navigation camera (how grey Navcam-like frames without a model are judged): 1.9
+    /// m above the ground, looking 30 degrees down, with a 45 degree field of view.
+    pub const NAVCAM: AssumedView = AssumedView { hfov_deg: 45.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// The named views, as the command line and Python name them.
+    pub const NAMED: [(&'static str, AssumedView); 2] = [("navcam", AssumedView::NAVCAM), ("mast", AssumedView::MAST)];
+
+    /// The view called `name` (`navcam` or `mast`); the error lists the names.
+    pub fn by_name(name: &str) -> Result<AssumedView, CoreError> {
+        Self::NAMED.iter().find(|(n, _)| *n == name).map(|(_, v)| *v).ok_or_else(|| CoreError::invalid("assumed view", format!("unknown view {name:?}: expected one of navcam, mast")))
+    }
+
+    /// The camera of an image of `width x height` pixels under this view: a pinhole with the
+    /// view's horizontal field of view, its principal point at the image centre.
+    pub fn camera(&self, width: u32, height: u32) -> CameraModel {
+        CameraModel::from_hfov(width, height, self.hfov_deg)
+    }
+
+    /// Unit up direction of the level ground in the camera frame: `(0, -cos p, -sin p)` for a
+    /// camera pitched down by `p`, turned about z by the roll.
+    pub fn up_cam(&self) -> Vector3<f64> {
+        let (p, r) = (self.pitch_deg.to_radians(), self.roll_deg.to_radians());
+        let up = Vector3::new(0.0, -p.cos(), -p.sin());
+        Vector3::new(r.cos() * up.x - r.sin() * up.y, r.sin() * up.x + r.cos() * up.y, up.z)
+    }
+
+    /// The ground under the camera in its frame, as `(n, d)` with `n · X = d` and `n` up:
+    /// `(up, -height)`.
+    pub fn ground(&self) -> (Vector3<f64>, f64) {
+        (self.up_cam(), -self.height_m)
+    }
+
+    /// [`AssumedView::ground`] as a [`GroundPlane`].
+    pub fn ground_plane(&self) -> Result<GroundPlane, CoreError> {
+        let (n, d) = self.ground();
+        GroundPlane::new(n, d)
+    }
+
+    /// A one-camera rig for an image of `width x height` pixels under this view (the camera
+    /// named `name`, at the rig's origin) and the ground in its frame.
+    pub fn rig(&self, name: &str, width: u32, height: u32) -> Result<(Rig, GroundPlane), CoreError> {
+        let camera = RigCamera { name: name.to_string(), model: self.camera(width, height), t_rig_cam: Pose::identity() };
+        Ok((Rig { cameras: vec![camera], stereo_pairs: Vec::new() }, self.ground_plane()?))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ground_lies_below_the_camera_along_the_view() {
+        let v = AssumedView::NAVCAM;
+        let (rig, ground) = v.rig("f.jpg", 1024, 768).unwrap();
+        let m = &rig.cameras[0].model;
+        assert_eq!((m.width, m.height), (1024, 768));
+        assert!((m.fx - 512.0 / 22.5f64.to_radians().tan()).abs() < 1e-9);
+        // The optical axis meets the ground at height / sin(pitch) ahead.
+        let z = ground.offset / ground.normal.z;
+        assert!((z - 1.9 / 30f64.to_radians().sin()).abs() < 1e-9, "{z}");
+        // The camera centre is 1.9 m above the ground.
+        assert!((ground.normal.dot(&Vector3::zeros()) - ground.offset - 1.9).abs() < 1e-12);
+        assert_eq!(AssumedView::by_name("mast").unwrap(), AssumedView::MAST);
+        let e = AssumedView::by_name("hazcam").unwrap_err().to_string();
+        assert!(e.contains("hazcam") && e.contains("navcam, mast"), "{e}");
+        // A roll turns the up direction about the optical axis and keeps it a unit vector.
+        let rolled = AssumedView { roll_deg: 90.0, ..v };
+        let up = rolled.up_cam();
+        assert!((up.norm() - 1.0).abs() < 1e-12 && (up.x - 30f64.to_radians().cos()).abs() < 1e-12, "{up}");
+    }
+}
