@@ -11,8 +11,8 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
+use tubeloc_core::AssumedView;
 use tubeloc_core::ScoreCalibration;
-use tubeloc_synth::real_set::{assumed_real_view, AssumedView};
 
 /// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
 fn negative_view(grey: bool) -> AssumedView {
@@ -30,18 +30,14 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
     let mut settings = tubeloc_pipeline::LocatorSettings::default();
     settings.calibration = cal.clone();
     let mut per_frame = Vec::new();
-    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
-        let view = assumed_real_view(&negative_view(grey), p.clone(), image.width(), image.height(), None, &mut rng);
-        let s = tubeloc_detect::scale::working_scale(&view.camera, Some(view.ground()), Default::default());
-        // `locate` at its defaults on the frame, with the assumed camera and ground; its
-        // detector runs at the same working scale `s`.
-        let rig = tubeloc_core::Rig { cameras: vec![tubeloc_core::RigCamera { name: "assumed".into(), model: view.camera.clone(), t_rig_cam: tubeloc_core::Pose::identity() }], stereo_pairs: Vec::new() };
+        // `locate` at its defaults on the frame, with the assumed camera and ground (what
+        // `tubeloc locate --assumed-view` builds); its detector runs at the working scale `s`.
+        let (rig, ground) = negative_view(grey).rig("assumed", image.width(), image.height())?;
+        let s = tubeloc_detect::scale::working_scale(&rig.cameras[0].model, Some(negative_view(grey).ground()), Default::default());
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
-        let (n, d) = view.ground();
-        let ground = tubeloc_core::GroundPlane::new(n, d)?;
         let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None })?;
         let (found, located) = (&out.detections, out.tubes.len());
         let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
@@ -120,21 +116,19 @@ fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
 pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
     let sols = negative_sols(data, &paths)?;
-    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     let mut per_frame = Vec::new();
     let mut ms = 0.0;
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let input = tubeloc_detect::input::rgb8_of(&image);
         let grey = input.info.grey;
-        let view = assumed_real_view(&negative_view(grey), p.clone(), image.width(), image.height(), None, &mut rng);
+        // The assumed camera and ground, as `tubeloc detect --assumed-view` takes them.
+        let (camera, ground) = (negative_view(grey).camera(image.width(), image.height()), negative_view(grey).ground_plane()?);
         let t = Instant::now();
-        let (n, d) = view.ground();
-        let ground = tubeloc_core::GroundPlane::new(n, d)?;
-        let found = det.detect(&image, Some(&view.camera), Some(&ground), 0)?.0;
+        let found = det.detect(&image, Some(&camera), Some(&ground), 0)?.0;
         let dt = t.elapsed().as_secs_f64() * 1e3;
         ms += dt;
-        let (sx, sy) = det.line2d().scale_for(Some(&view.camera));
+        let (sx, sy) = det.line2d().scale_for(Some(&camera));
         per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
     }
     let n = per_frame.len().max(1) as f64;

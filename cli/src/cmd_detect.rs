@@ -50,10 +50,11 @@ pub struct DetectArgs {
     /// images use their own `ground`.
     #[arg(long, allow_hyphen_values = true)]
     pub ground: Option<tubeloc_core::GroundPlane>,
-    /// Instead of --camera and --ground, for an --image without a camera model: its camera and
-    /// ground are assumed from its size, as `tubeloc locate --assumed-view` does (`navcam`: 45
-    /// degree field of view, 1.9 m above level ground, 30 degrees down; `mast`: 20 degrees).
-    #[arg(long, value_enum, requires = "image", conflicts_with_all = ["ground", "camera", "dataset"])]
+    /// Instead of --camera, for an --image without a camera model: its camera and ground
+    /// (unless --ground) are assumed from its size, as `tubeloc locate --assumed-view` does
+    /// (`navcam`: 45 degree field of view, 1.9 m above level ground, 30 degrees down; `mast`: 20
+    /// degrees).
+    #[arg(long, value_enum, requires = "image", conflicts_with_all = ["camera", "dataset"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
     /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
@@ -108,7 +109,11 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (args.assumed_view, &args.image) {
         let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
-        return Ok(Some((view.view().camera(w, h), view.view().ground_plane()?)));
+        let ground = match args.ground {
+            Some(g) => g,
+            None => view.view().ground_plane()?,
+        };
+        return Ok(Some((view.view().camera(w, h), ground)));
     }
     let Some(path) = args.line2d.camera.clone() else { return Ok(None) };
     let Some(cams) = tubeloc_calib::interchange::pds::read_pds_cameras(&path)? else { return Ok(None) };

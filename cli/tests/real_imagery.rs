@@ -329,6 +329,11 @@ fn an_assumed_view_stands_in_for_a_missing_camera_model() {
     ok(&["detect", "--method", "learned", "--image", p(&image), "--camera", p(&cam), &ground, "--out", p(&d_hand)]);
     ok(&["detect", "--method", "learned", "--image", p(&image), "--assumed-view", "navcam", "--out", p(&d_assumed)]);
     assert_eq!(std::fs::read(&d_hand).unwrap(), std::fs::read(&d_assumed).unwrap());
+    // A --ground given beside the view replaces the assumed one, as with a PDS camera.
+    let other_ground = "--ground=0,-0.7071068,-0.7071068,-1.2";
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--camera", p(&cam), other_ground, "--out", p(&d_hand)]);
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--assumed-view", "navcam", other_ground, "--out", p(&d_assumed)]);
+    assert_eq!(std::fs::read(&d_hand).unwrap(), std::fs::read(&d_assumed).unwrap());
     let o = tubeloc(&["locate", "--assumed-view", "navcam", "--rig", p(&rig_path), "--image", p(&image), "--out", p(&dir.path().join("x.json"))]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));

@@ -84,7 +84,7 @@ pub struct LocateArgs {
     #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
     /// Instead of --rig, for frames that come without a camera model: each image's camera and
-    /// ground are assumed from its size. `navcam`: a 45 degree horizontal field of view, 1.9 m
+    /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal field of view, 1.9 m
     /// above level ground, looking 30 degrees down (how `tubeloc bench` judges grey frames
     /// without a model); `mast`: the same with a 20 degree field (its colour frames). Poses
     /// are then only as good as the assumption; mono only.
