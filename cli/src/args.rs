@@ -229,6 +229,30 @@ pub fn far_scale(s: &str) -> Result<(f64, f64), String> {
     }
 }
 
+/// A view assumed for frames without a camera model (`--assumed-view`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AssumedViewArg {
+    /// A mast navigation camera: 45 degree field of view, 1.9 m high, 30 degrees down.
+    Navcam,
+    /// A mast science camera: 20 degree field of view, 1.9 m high, 30 degrees down.
+    Mast,
+}
+
+impl AssumedViewArg {
+    /// The view's geometry ([`tubeloc_core::AssumedView::NAMED`]).
+    pub fn view(self) -> tubeloc_core::AssumedView {
+        tubeloc_core::AssumedView::by_name(self.name()).expect("every --assumed-view value is a named view")
+    }
+
+    /// The name `--assumed-view` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            AssumedViewArg::Navcam => "navcam",
+            AssumedViewArg::Mast => "mast",
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -272,31 +296,13 @@ mod tests {
         assert!(require_at_most(("--a", 2), ("--b", 6)).is_ok() && require_at_most(("--a", 6), ("--b", 6)).is_ok());
         assert!(require_at_most(("--a", 7), ("--b", 6)).unwrap_err().to_string().contains("--a (7) must not exceed --b (6)"));
     }
-}
 
-/// A view assumed for frames without a camera model (`--assumed-view`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum AssumedViewArg {
-    /// A mast navigation camera: 45 degree field of view, 1.9 m high, 30 degrees down.
-    Navcam,
-    /// A mast science camera: 20 degree field of view, 1.9 m high, 30 degrees down.
-    Mast,
-}
-
-impl AssumedViewArg {
-    /// The view's geometry.
-    pub fn view(self) -> tubeloc_core::AssumedView {
-        match self {
-            AssumedViewArg::Navcam => tubeloc_core::AssumedView::NAVCAM,
-            AssumedViewArg::Mast => tubeloc_core::AssumedView::MAST,
-        }
-    }
-
-    /// The name `--assumed-view` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            AssumedViewArg::Navcam => "navcam",
-            AssumedViewArg::Mast => "mast",
+    #[test]
+    fn every_assumed_view_value_is_a_named_view_under_its_own_name() {
+        use clap::ValueEnum;
+        for v in AssumedViewArg::value_variants() {
+            assert_eq!(v.to_possible_value().unwrap().get_name(), v.name());
+            assert_eq!(v.view(), tubeloc_core::AssumedView::by_name(v.name()).unwrap());
         }
     }
 }

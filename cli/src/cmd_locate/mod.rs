@@ -84,10 +84,10 @@ pub struct LocateArgs {
     #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
     /// Instead of --rig, for frames that come without a camera model: each image's camera and
-    /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal field of view, 1.9 m
-    /// above level ground, looking 30 degrees down (how `tubeloc bench` judges grey frames
-    /// without a model); `mast`: the same with a 20 degree field (its colour frames). Poses
-    /// are then only as good as the assumption; mono only.
+    /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal
+    /// field of view, 1.9 m above level ground, looking 30 degrees down (how `tubeloc bench`
+    /// judges grey frames without a model); `mast`: the same with a 20 degree field (its
+    /// colour frames). Poses are then only as good as the assumption; mono only.
     #[arg(long, value_enum, conflicts_with_all = ["label_cameras", "camera_name", "pair", "right", "right_images"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
