@@ -337,6 +337,11 @@ fn an_assumed_view_stands_in_for_a_missing_camera_model() {
     let o = tubeloc(&["locate", "--assumed-view", "navcam", "--rig", p(&rig_path), "--image", p(&image), "--out", p(&dir.path().join("x.json"))]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));
+    // Without any source of cameras, the error names the three.
+    let o = tubeloc(&["locate", "--image", p(&image), "--out", p(&dir.path().join("x.json"))]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(e.contains("--rig") && e.contains("--label-cameras") && e.contains("--assumed-view"), "{e}");
 }
 
 /// The arm in view of a real Navcam frame (MSL sol 3423, no tube) is what `locate` hands over

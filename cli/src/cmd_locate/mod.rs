@@ -64,6 +64,7 @@ pub enum LocateCommand {
 /// Arguments of `tubeloc locate`.
 #[derive(Args, Debug)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+#[command(group = clap::ArgGroup::new("cameras").args(["rig", "label_cameras", "assumed_view"]).required(true).multiple(false))]
 pub struct LocateArgs {
     /// `merge`: combine the folders of a sharded batch run.
     #[command(subcommand)]
@@ -74,7 +75,7 @@ pub struct LocateArgs {
     /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground; a
     /// CAHVORE fisheye's image is resampled into the model's linear camera), recognised by
     /// content.
-    #[arg(long, required_unless_present_any = ["label_cameras", "assumed_view"], conflicts_with_all = ["label_cameras", "assumed_view"])]
+    #[arg(long)]
     pub rig: Option<PathBuf>,
     /// Instead of --rig: each image is a PDS3 product (`.IMG` with its label, or a `.LBL` beside
     /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground;
@@ -88,7 +89,7 @@ pub struct LocateArgs {
     /// field of view, 1.9 m above level ground, looking 30 degrees down (how `tubeloc bench`
     /// judges grey frames without a model); `mast`: the same with a 20 degree field (its
     /// colour frames). Poses are then only as good as the assumption; mono only.
-    #[arg(long, value_enum, conflicts_with_all = ["label_cameras", "camera_name", "pair", "right", "right_images"])]
+    #[arg(long, value_enum, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
     /// model's linear part: below 1 keeps more of the fisheye's field (its rim, the near
