@@ -303,6 +303,8 @@ fn an_assumed_view_stands_in_for_a_missing_camera_model() {
     json_close(&a["tubes"], &b["tubes"], 1e-9, &[], "tubes").unwrap();
     json_close(&a["camera_model"], &b["camera_model"], 1e-9, &[], "camera_model").unwrap();
     json_close(&a["up_cam"], &b["up_cam"], 1e-12, &[], "up_cam").unwrap();
+    // The document says that its geometry was assumed, and which view.
+    assert_eq!((a.get("assumed_view"), &b["assumed_view"]), (None, &serde_json::json!("navcam")));
 
     // A batch: a full frame, a 256 px frame and a file that is no image.
     let frames = dir.path().join("frames");

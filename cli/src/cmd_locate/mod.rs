@@ -312,6 +312,11 @@ pub struct LocateDoc<'a> {
     /// those of the resampled image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub resampled_from: Option<&'static str>,
+    /// The view `camera_model` and the ground were assumed from (`--assumed-view`: `navcam`
+    /// or `mast`) when the frame came without a camera model: the poses rest on that
+    /// assumption.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub assumed_view: Option<&'static str>,
     /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
     pub detections: &'a [TubeDetection],
 }
@@ -725,6 +730,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             }),
             camera_model: &cam.model,
             resampled_from,
+            assumed_view: a.assumed_view.map(|v| v.name()),
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
