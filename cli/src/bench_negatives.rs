@@ -35,8 +35,9 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
         // `locate` at its defaults on the frame, with the assumed camera and ground (what
         // `tubeloc locate --assumed-view` builds); its detector runs at the working scale `s`.
-        let (rig, ground) = negative_view(grey).rig("assumed", image.width(), image.height())?;
-        let s = tubeloc_detect::scale::working_scale(&rig.cameras[0].model, Some(negative_view(grey).ground()), Default::default());
+        let view = negative_view(grey);
+        let (rig, ground) = view.rig("assumed", image.width(), image.height())?;
+        let s = tubeloc_detect::scale::working_scale(&rig.cameras[0].model, Some(view.ground()), Default::default());
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
         let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None })?;
         let (found, located) = (&out.detections, out.tubes.len());
@@ -123,7 +124,8 @@ pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) 
         let input = tubeloc_detect::input::rgb8_of(&image);
         let grey = input.info.grey;
         // The assumed camera and ground, as `tubeloc detect --assumed-view` takes them.
-        let (camera, ground) = (negative_view(grey).camera(image.width(), image.height()), negative_view(grey).ground_plane()?);
+        let view = negative_view(grey);
+        let (camera, ground) = (view.camera(image.width(), image.height()), view.ground_plane()?);
         let t = Instant::now();
         let found = det.detect(&image, Some(&camera), Some(&ground), 0)?.0;
         let dt = t.elapsed().as_secs_f64() * 1e3;

@@ -101,12 +101,12 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
     crate::cmd_detect_line2d::Line2dOpts::from_arg_matches(&matches).expect("every Line2D option has a default")
 }
 
-/// With a PDS camera list as `--camera` (`cahv_to_pinhole.py`'s JSON) or a PDS3 label: the
-/// camera of `--image` (the list's camera named after its file, the label's one camera) and its
+/// The camera and ground of one `--image` given without a plain camera file. With a PDS camera
+/// list as `--camera` (`cahv_to_pinhole.py`'s JSON) or a PDS3 label: the camera of `--image` (the list's camera named after its file, the label's one camera) and its
 /// ground (`--ground` when given), and `--camera` cleared so
 /// that nothing reads the list as one camera. With `--assumed-view`: that view's camera at the
 /// image's size and its ground. `None` for any other `--camera`.
-fn pds_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
+fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (args.assumed_view, &args.image) {
         let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
         let ground = match args.ground {
@@ -144,7 +144,7 @@ pub fn underexposure_warning(path: &Path, image: &image::DynamicImage) -> Option
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
     let mut args = args;
-    let pds = pds_camera(&mut args)?;
+    let pds = image_camera(&mut args)?;
     let dets = match args.method {
         Method::Line2d | Method::Fused => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;

@@ -67,10 +67,13 @@ impl AssumedView {
     }
 
     /// A one-camera rig for an image of `width x height` pixels under this view (the camera
-    /// named `name`, at the rig's origin) and the ground in its frame.
+    /// named `name`, at the rig's origin) and the ground in its frame; refused as an invalid
+    /// rig for an empty image.
     pub fn rig(&self, name: &str, width: u32, height: u32) -> Result<(Rig, GroundPlane), CoreError> {
         let camera = RigCamera { name: name.to_string(), model: self.camera(width, height), t_rig_cam: Pose::identity() };
-        Ok((Rig { cameras: vec![camera], stereo_pairs: Vec::new() }, self.ground_plane()?))
+        let rig = Rig { cameras: vec![camera], stereo_pairs: Vec::new() };
+        rig.validate()?;
+        Ok((rig, self.ground_plane()?))
     }
 }
 
@@ -90,6 +93,7 @@ mod tests {
         assert!((z - 1.9 / 30f64.to_radians().sin()).abs() < 1e-9, "{z}");
         // The camera centre is 1.9 m above the ground.
         assert!((ground.normal.dot(&Vector3::zeros()) - ground.offset - 1.9).abs() < 1e-12);
+        assert!(v.rig("empty", 0, 0).is_err(), "an empty image has no camera");
         assert_eq!(AssumedView::by_name("mast").unwrap(), AssumedView::MAST);
         let e = AssumedView::by_name("hazcam").unwrap_err().to_string();
         assert!(e.contains("hazcam") && e.contains("navcam, mast"), "{e}");
