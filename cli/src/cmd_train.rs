@@ -59,6 +59,11 @@ pub struct TrainArgs {
     /// (`LearnedModel::init_from_gray`).
     #[arg(long, requires = "init")]
     pub init_rgb: bool,
+    /// With --init: start from the --init model widened to this base width, computing what it
+    /// computes (`LearnedModel::widened`, Net2WiderNet), so fine-tuning adds capacity without
+    /// losing the trained model's accuracy.
+    #[arg(long, requires = "init", value_parser = crate::args::positive_usize)]
+    pub widen: Option<usize>,
     /// Add the full-resolution mask branch (mask outlines at pixel precision instead of
     /// bilinear stride-4 logits); kept when the --init model has it.
     #[arg(long)]
@@ -210,7 +215,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
         bail!("nothing to train on: give --train DATASET and/or --generate N");
     }
     let init = match &args.init {
-        Some(p) => Some(LearnedModel::load(p).with_context(|| format!("reading the --init model {}", p.display()))?),
+        Some(p) => {
+            let m = LearnedModel::load(p).with_context(|| format!("reading the --init model {}", p.display()))?;
+            match args.widen {
+                Some(w) => Some(m.widened(w, args.seed).with_context(|| format!("--widen {w}: widening the --init model {}", p.display()))?),
+                None => Some(m),
+            }
+        }
         None => None,
     };
     let pre = match (&args.resume, &init) {

@@ -392,7 +392,7 @@ fn refine_stage_settings_bad_fields_are_refused_before_any_work() {
 }
 
 #[test]
-fn train_average_writes_the_weight_average_and_refuses_mismatched_models() {
+fn train_average_and_widen_keep_what_the_model_detects_and_refuse_mismatches() {
     let dir = tempfile::tempdir().unwrap();
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models");
     let (rgb, gray) = (models.join("synthetic_rgb/tubenet.safetensors"), models.join("gray/tubenet.safetensors"));
@@ -418,6 +418,24 @@ fn train_average_writes_the_weight_average_and_refuses_mismatched_models() {
     assert!(!bad.exists(), "no output on error");
     // One model is not an average.
     assert_eq!(tubeloc(&["train", "--average", p(&rgb), "--out", p(&bad)]).status.code(), Some(2));
+    // A widened model (one step at a negligible learning rate) detects what the narrow one does.
+    let wide = dir.path().join("wide.safetensors");
+    let train = ["train", "--train", p(&ds), "--init", p(&rgb), "--steps", "1", "--lr", "1e-12", "--batch", "1", "--crop", "128"];
+    ok(&[&train[..], &["--widen", "12", "--out", p(&wide)]].concat());
+    let w = det(&wide, "w.json");
+    assert_eq!(a.len(), w.len(), "same detections from the widened model");
+    for (x, y) in a.iter().zip(&w) {
+        assert!((x["score"].as_f64().unwrap() - y["score"].as_f64().unwrap()).abs() < 1e-3, "{x} vs {y}");
+        for k in 0..4 {
+            assert!((x["bbox"][k].as_f64().unwrap() - y["bbox"][k].as_f64().unwrap()).abs() <= 1.0, "{x} vs {y}");
+        }
+    }
+    // Narrowing is refused, naming the model; nothing written.
+    let o = tubeloc(&[&train[..], &["--widen", "4", "--out", p(&bad)]].concat());
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("--widen 4") && e.contains("synthetic_rgb/tubenet.safetensors") && e.contains("below the model's 8"), "{e}");
+    assert!(!bad.exists(), "no output on error");
 }
 
 /// Scores of the false detections on the tube-free frames of the calibration test.

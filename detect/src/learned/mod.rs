@@ -22,6 +22,7 @@ pub mod shipped;
 pub mod soup;
 pub mod targets;
 pub mod train;
+pub mod widen;
 
 pub use augment::{AugmentConfig, TrainImage};
 pub use decode::{decode, predict_for, DecodeConfig, LearnedInstance};
