@@ -317,7 +317,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
     pb.finish();
     let ap = validate(&trainer)?;
     let warm = match (&init, &args.init) {
-        (Some(m), Some(p)) => format!(" warm start from {} ({} steps)", p.display(), m.meta.steps),
+        (Some(m), Some(p)) => {
+            let widened = args.widen.map_or(String::new(), |w| format!(", widened to width {w}"));
+            format!(" warm start from {} ({} steps{widened})", p.display(), m.meta.steps)
+        }
         _ => String::new(),
     };
     let crops = if args.upright { " upright crops" } else { "" };
