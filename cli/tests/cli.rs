@@ -422,6 +422,8 @@ fn train_average_and_widen_keep_what_the_model_detects_and_refuse_mismatches() {
     let wide = dir.path().join("wide.safetensors");
     let train = ["train", "--train", p(&ds), "--init", p(&rgb), "--steps", "1", "--lr", "1e-12", "--batch", "1", "--crop", "128"];
     ok(&[&train[..], &["--widen", "12", "--out", p(&wide)]].concat());
+    let size = |m: &Path| std::fs::metadata(m).unwrap().len() as f64;
+    assert!(size(&wide) > 2.0 * size(&rgb), "width 12 holds about (12/8)² the weights of width 8");
     let w = det(&wide, "w.json");
     assert_eq!(a.len(), w.len(), "same detections from the widened model");
     for (x, y) in a.iter().zip(&w) {

@@ -61,14 +61,9 @@ const LAYERS: [(&str, Option<&str>, Option<&str>); 13] = [
     ("fine_proj", Some("d2"), None),
 ];
 
-/// Width multiple of each space (`w`, `2w` or `4w`).
-fn multiple(space: &str) -> usize {
-    match space {
-        "a1" | "b1" => 2,
-        "a2" | "a3" | "b2" => 4,
-        _ => 1,
-    }
-}
+/// Every widened space and its width as a multiple of the base width (`w`, `2w` or `4w`), in
+/// the order their channel maps are drawn.
+const SPACES: [(&str, usize); 8] = [("a0", 1), ("b0", 1), ("a1", 2), ("b1", 2), ("a2", 4), ("b2", 4), ("a3", 4), ("d2", 1)];
 
 impl LearnedModel {
     /// This model widened to base width `width` (at least its own), computing the same
@@ -80,8 +75,7 @@ impl LearnedModel {
             return Err(LearnedError::Invalid(format!("widening: the new width {width} is below the model's {w}")));
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let spaces = ["a0", "b0", "a1", "b1", "a2", "b2", "a3", "d2"];
-        let maps: HashMap<&str, ChannelMap> = spaces.iter().map(|&s| (s, ChannelMap::new(multiple(s) * w, multiple(s) * width, &mut rng))).collect();
+        let maps: HashMap<&str, ChannelMap> = SPACES.iter().map(|&(s, k)| (s, ChannelMap::new(k * w, k * width, &mut rng))).collect();
         let mut out = LearnedModel::with_fine_mask(self.meta.preprocess, width, self.meta.net.fine_mask, seed)?;
         let theirs: HashMap<String, candle_core::Var> = sorted_vars(&self.varmap).into_iter().collect();
         for (name, var) in sorted_vars(&out.varmap) {
@@ -105,7 +99,7 @@ impl LearnedModel {
                             None => vals,
                         }
                     } else {
-                        let (co, ci, kh, kw) = old.as_tensor().dims4()?;
+                        let (_, ci, kh, kw) = old.as_tensor().dims4()?;
                         let k2 = kh * kw;
                         let in_map = input.map(|s| &maps[s]);
                         let (nco, nci) = (new_dims[0], new_dims[1]);
@@ -114,7 +108,6 @@ impl LearnedModel {
                             let so = out_map.map_or(o, |m| m.source[o]);
                             for i in 0..nci {
                                 let (si, f) = in_map.map_or((i, 1.0), |m| (m.source[i], m.share[i]));
-                                debug_assert!(so < co && si < ci);
                                 for t in 0..k2 {
                                     v[(o * nci + i) * k2 + t] = f * vals[(so * ci + si) * k2 + t];
                                 }
