@@ -13,7 +13,7 @@ use tubeloc_synth::TubeShape;
 /// Arguments of `tubeloc synth composite`.
 #[derive(Args)]
 pub struct CompositeArgs {
-    /// Background photograph (PNG, JPEG or TIFF).
+    /// Background photograph (PNG, JPEG, TIFF, PGM / PPM, BMP or WebP).
     #[arg(long)]
     pub background: PathBuf,
     /// Camera model JSON (CameraModel) of the photograph, or its PDS3 label; its size must match

@@ -1,5 +1,5 @@
-//! Rover camera images of any format (PNG, JPEG, TIFF, PDS3 products) as the detectors' input:
-//! 8-bit sRGB, interleaved RGB.
+//! Rover camera images of any format (PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP, PDS3
+//! products) as the detectors' input: 8-bit sRGB, interleaved RGB.
 //!
 //! Every detector and the training loader go through [`rgb8_of`], so training and inference
 //! see the same conversion:
@@ -116,8 +116,20 @@ pub fn to_eight_bit(img: &image::DynamicImage) -> Option<image::DynamicImage> {
     })
 }
 
-/// Decodes an image file (PNG, JPEG, TIFF, or a PDS3 product: [`crate::pds3_image`]), its
-/// format told by its bytes; a JPEG cut short is an error
+/// File name extensions (any case) of the image files a folder is read for: PNG, JPEG, TIFF,
+/// PGM / PPM / PNM (16-bit samples of any `maxval`), BMP, WebP, and PDS3 products (`.img`
+/// with an attached label; a detached `.lbl` stands for its `.img`, see
+/// [`has_image_extension`]).
+pub const IMAGE_EXTENSIONS: [&str; 11] = ["png", "jpg", "jpeg", "tif", "tiff", "pgm", "ppm", "pnm", "bmp", "webp", "img"];
+
+/// Whether `path` has one of [`IMAGE_EXTENSIONS`] (any case). A PDS3 label (`.lbl`) is not
+/// one by itself: a folder listing takes it in place of the `.img` of the same stem beside it.
+pub fn has_image_extension(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)))
+}
+
+/// Decodes an image file (PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP, or a PDS3 product:
+/// [`crate::pds3_image`]), its format told by its bytes; a JPEG cut short is an error
 /// ([`tubeloc_core::image_file::read_whole`]), not an image with blank rows.
 pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
     let path = path.as_ref();
@@ -128,7 +140,16 @@ pub fn open_image(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::
     if bytes.starts_with(b"LBLSIZE=") {
         return Err(invalid_data(vicar_without_label(path)));
     }
-    image::load_from_memory(&bytes)
+    image::load_from_memory(&bytes).map_err(|e| match e {
+        image::ImageError::Unsupported(u) => {
+            let hint = match u.kind() {
+                image::error::UnsupportedErrorKind::Color(_) => "tubeloc reads 8- and 16-bit integer samples, grey, grey + alpha, RGB or RGBA; convert other sample types, e.g. 32-bit floating point, first",
+                _ => "tubeloc reads PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP and PDS3 products",
+            };
+            invalid_data(format!("{u} ({hint})"))
+        }
+        e => e,
+    })
 }
 
 /// The error for a VICAR file without a PDS3 label at its head.
@@ -158,13 +179,13 @@ pub fn image_size(path: impl AsRef<Path>) -> Result<(u32, u32), image::ImageErro
     image::image_dimensions(path)
 }
 
-/// Opens an image file (PNG, JPEG, TIFF) by [`open_image`] as [`eight_bit`].
+/// Opens an image file (any format of [`IMAGE_EXTENSIONS`]) by [`open_image`] as [`eight_bit`].
 pub fn open_eight_bit(path: impl AsRef<Path>) -> Result<image::DynamicImage, image::ImageError> {
     open_image(path).map(eight_bit)
 }
 
-/// Reads an image file (PNG, JPEG, TIFF) by [`open_image`] and converts it (see the module doc). The
-/// error names the file.
+/// Reads an image file (any format of [`IMAGE_EXTENSIONS`]) by [`open_image`] and converts it
+/// (see the module doc). The error names the file.
 pub fn load(path: &Path) -> Result<DetectorInput, String> {
     let img = open_image(path).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(rgb8_of(&img))
@@ -183,6 +204,33 @@ mod tests {
         for err in [open_image(&vic).unwrap_err().to_string(), image_size(&vic).unwrap_err().to_string()] {
             assert!(err.contains("n.IMG") && err.contains("VICAR") && err.contains(".LBL"), "{err}");
         }
+    }
+
+    #[test]
+    fn an_unreadable_file_says_which_formats_and_samples_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = dir.path().join("notes.png");
+        std::fs::write(&text, "not an image").unwrap();
+        let e = open_image(&text).unwrap_err().to_string();
+        assert!(e.contains("could not be determined") && e.contains("PGM / PPM / PNM, BMP, WebP and PDS3"), "{e}");
+        // A TIFF of 32-bit floating-point grey samples (one strip, little-endian).
+        let tif = dir.path().join("float.tif");
+        let (w, h) = (2u32, 2u32);
+        let mut b: Vec<u8> = b"II*\0".to_vec();
+        b.extend(8u32.to_le_bytes());
+        let entries: [(u16, u16, u32, u32); 9] = [(256, 4, 1, w), (257, 4, 1, h), (258, 3, 1, 32), (259, 3, 1, 1), (262, 3, 1, 1), (273, 4, 1, 8 + 2 + 9 * 12 + 4), (277, 3, 1, 1), (279, 4, 1, w * h * 4), (339, 3, 1, 3)];
+        b.extend((entries.len() as u16).to_le_bytes());
+        for (tag, ty, n, v) in entries {
+            b.extend(tag.to_le_bytes());
+            b.extend(ty.to_le_bytes());
+            b.extend(n.to_le_bytes());
+            b.extend(if ty == 3 { (v as u16 as u32).to_le_bytes() } else { v.to_le_bytes() });
+        }
+        b.extend(0u32.to_le_bytes());
+        b.extend([0.25f32, 0.5, 0.75, 1.0].iter().flat_map(|v| v.to_le_bytes()));
+        std::fs::write(&tif, &b).unwrap();
+        let e = open_image(&tif).unwrap_err().to_string();
+        assert!(e.contains("8- and 16-bit integer samples") && e.contains("floating point"), "{e}");
     }
 
     #[test]

@@ -77,7 +77,7 @@ pub fn array_of<'py>(py: Python<'py>, img: &DynamicImage) -> Bound<'py, PyAny> {
 
 /// read_image(path) -> numpy.ndarray
 ///
-/// Decodes an image file (PNG, JPEG, TIFF, or a PDS3 product: `.IMG`, or a `.LBL` beside its data)
+/// Decodes an image file (PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP, or a PDS3 product: `.IMG`, or a `.LBL` beside its data)
 /// with the decoder `tubeloc` uses: uint8 or uint16, shape
 /// HxW (grey), HxWx2, HxWx3 (RGB) or HxWx4 (RGBA), as stored in the file.
 #[pyfunction]

@@ -1,5 +1,6 @@
 //! One scene in several file formats gives the same learned detections: 8-bit colour, 8-bit
-//! grey, 16-bit grey holding 12-bit data, 16-bit RGBA and JPEG. The scene is a composite of
+//! grey, 16-bit grey holding 12-bit data (in memory, PGM and TIFF files), 16-bit RGBA, JPEG,
+//! BMP and WebP. The scene is a composite of
 //! rendered tubes on a real Navcam frame with its PDS camera model (`../shared/data`), detected
 //! at its working scale with the shipped model.
 
@@ -28,7 +29,7 @@ fn iou(a: &[u8], b: &[u8]) -> f64 {
 }
 
 #[test]
-fn grey_sixteen_bit_rgba_and_jpeg_give_the_detections_of_the_eight_bit_colour_image() {
+fn grey_sixteen_bit_rgba_jpeg_pgm_tiff_bmp_and_webp_give_the_detections_of_the_eight_bit_colour_image() {
     let views = views_from_cameras_json(&data().join("with_cameras/cameras.json")).unwrap();
     let view = views.iter().find(|v| v.camera.width == 1024 && v.sol == Some(38)).expect("a sol-38 Navcam frame");
     let cfg = RealSetConfig {
@@ -63,11 +64,33 @@ fn grey_sixteen_bit_rgba_and_jpeg_give_the_detections_of_the_eight_bit_colour_im
     let rgba16 = image::DynamicImage::ImageLuma8(grey8.clone()).to_rgba16();
     let mut jpeg = Vec::new();
     image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 95).encode_image(&grey8).unwrap();
+    // Files as a rover pipeline may write them, read by `open_image` as the CLI reads them:
+    // 12-bit data in a 16-bit PGM (big-endian, `maxval` 4095 or 65535), 16-bit TIFF, BMP and
+    // (lossless) WebP.
+    let dir = tempfile::tempdir().unwrap();
+    let pgm = |maxval: u32| {
+        let mut b = format!("P5\n{w} {h}\n{maxval}\n").into_bytes();
+        b.extend(twelve.pixels().flat_map(|p| p.0[0].to_be_bytes()));
+        b
+    };
+    let files: [(&str, Vec<u8>); 2] = [("twelve_4095.pgm", pgm(4095)), ("twelve_65535.pgm", pgm(65535))];
+    for (name, bytes) in &files {
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+    }
+    image::DynamicImage::ImageLuma16(twelve.clone()).save(dir.path().join("twelve.tif")).unwrap();
+    image::DynamicImage::ImageLuma8(grey8.clone()).save(dir.path().join("grey.bmp")).unwrap();
+    image::DynamicImage::ImageRgb8(image::DynamicImage::ImageLuma8(grey8.clone()).to_rgb8()).save(dir.path().join("colour.webp")).unwrap();
+    let read = |name: &str| tubeloc_detect::input::open_image(dir.path().join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
     let variants: Vec<(&str, image::DynamicImage)> = vec![
         ("8-bit grey", image::DynamicImage::ImageLuma8(grey8.clone())),
         ("12-bit data in 16-bit grey", image::DynamicImage::ImageLuma16(twelve)),
         ("16-bit RGBA", image::DynamicImage::ImageRgba16(rgba16)),
         ("JPEG q95", image::load_from_memory(&jpeg).unwrap()),
+        ("PGM, 12-bit maxval 4095", read("twelve_4095.pgm")),
+        ("PGM, 12-bit data under maxval 65535", read("twelve_65535.pgm")),
+        ("16-bit TIFF, 12-bit data", read("twelve.tif")),
+        ("BMP", read("grey.bmp")),
+        ("WebP", read("colour.webp")),
     ];
     for (name, img) in variants {
         let found = run(img);

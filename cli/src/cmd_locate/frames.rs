@@ -5,26 +5,39 @@ use super::Frame;
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-
-/// Image file extensions a folder given to `--images` is read for (any case).
-pub const IMAGE_EXTENSIONS: [&str; 4] = ["png", "jpg", "jpeg", "img"];
+use tubeloc_detect::input::{has_image_extension, IMAGE_EXTENSIONS};
 
 /// The image paths of `--images`/`--right-images` (`flag` names it in errors), sorted: a
-/// folder's files with an [`IMAGE_EXTENSIONS`] extension (not its subfolders), or a list file's
-/// lines (paths relative to the list's folder; blank lines and lines starting with `#` skipped).
+/// folder's image files ([`tubeloc_detect::input::IMAGE_EXTENSIONS`], not its subfolders; a
+/// PDS3 product's detached `.lbl` label in place of its `.img` of the same stem), or a list
+/// file's lines (paths relative to the list's folder; blank lines and lines starting with `#`
+/// skipped).
 pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
     let mut paths = Vec::new();
     if arg.is_dir() {
+        let mut labels = Vec::new();
         for entry in std::fs::read_dir(arg).with_context(|| format!("{flag} {}: reading the folder", arg.display()))? {
             let p = entry.with_context(|| format!("{flag} {}: reading the folder", arg.display()))?.path();
-            let is_image = p.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)));
-            if is_image && p.is_file() {
+            if !p.is_file() {
+                continue;
+            }
+            if has_image_extension(&p) {
                 paths.push(p);
+            } else if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("lbl")) {
+                labels.push(p);
+            }
+        }
+        // A detached label reads its product (the `.img` beside it holds no label of its own).
+        for label in labels {
+            let stem = label.file_stem().map(|s| s.to_ascii_lowercase());
+            let product = paths.iter().position(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("img")) && p.file_stem().map(|s| s.to_ascii_lowercase()) == stem);
+            if let Some(k) = product {
+                paths[k] = label;
             }
         }
     } else {
-        let is_image = arg.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)));
-        if is_image && arg.is_file() {
+        let label = arg.extension().is_some_and(|e| e.eq_ignore_ascii_case("lbl"));
+        if (has_image_extension(arg) || label) && arg.is_file() {
             bail!("{flag} {}: an image file; {flag} takes a folder of images or a list file of image paths (for one image, give {})", arg.display(), if flag.starts_with("--right") { "--right" } else { "--image" });
         }
         let text = std::fs::read_to_string(arg).with_context(|| format!("{flag} {}: not a folder, and not readable as a list file", arg.display()))?;
@@ -34,7 +47,7 @@ pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
         }
     }
     if paths.is_empty() {
-        bail!("{flag} {}: no images (a folder's .png/.jpg/.jpeg/.img files, or a list file of image paths)", arg.display());
+        bail!("{flag} {}: no images (a folder's image files: {}; or a list file of image paths)", arg.display(), IMAGE_EXTENSIONS.map(|e| format!(".{e}")).join(" "));
     }
     paths.sort();
     Ok(paths)
@@ -131,5 +144,23 @@ mod tests {
         std::fs::write(&list, "a/f1.png\n").unwrap();
         let e = frame_list(&list, Some(&png)).unwrap_err().to_string();
         assert!(e.contains("--right-images") && e.contains("give --right"), "{e}");
+    }
+
+    #[test]
+    fn a_folder_lists_every_image_format_and_a_detached_label_in_place_of_its_product() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["a.tif", "b.PGM", "c.IMG", "c.LBL", "d.img", "e.lbl", "f.webp", "g.bmp", "notes.txt", "h.ppm"] {
+            std::fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        std::fs::create_dir(dir.path().join("sub.png")).unwrap();
+        let names: Vec<String> = image_paths(dir.path(), "--images").unwrap().iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
+        assert_eq!(names, ["a.tif", "b.PGM", "c.LBL", "d.img", "f.webp", "g.bmp", "h.ppm"]);
+        // A label given where a folder or list is expected is an image, not a list file.
+        let e = image_paths(&dir.path().join("c.LBL"), "--images").unwrap_err().to_string();
+        assert!(e.contains("c.LBL: an image file") && e.contains("give --image"), "{e}");
+        let empty = tempfile::tempdir().unwrap();
+        std::fs::write(empty.path().join("readme.md"), b"x").unwrap();
+        let e = image_paths(empty.path(), "--images").unwrap_err().to_string();
+        assert!(e.contains("no images") && e.contains(".tiff") && e.contains(".pgm"), "{e}");
     }
 }
