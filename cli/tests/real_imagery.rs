@@ -653,7 +653,9 @@ fn a_batch_of_pds3_products_takes_each_frames_camera_from_its_own_label() {
     // the PNG, which carries no camera, fails alone, named.
     let dir = tempfile::tempdir().unwrap();
     let entries = test_sol_navcam_products();
-    let labels: Vec<PathBuf> = entries.iter().take(2).map(|e| write_product(dir.path(), e).label).collect();
+    let products = dir.path().join("products");
+    std::fs::create_dir(&products).unwrap();
+    let labels: Vec<PathBuf> = entries.iter().take(2).map(|e| write_product(&products, e).label).collect();
     let png = real_data().join("with_cameras").join(entries[0]["image"].as_str().unwrap());
     let list = dir.path().join("frames.txt");
     std::fs::write(&list, format!("{}\n{}\n{}\n", labels[0].display(), labels[1].display(), png.display())).unwrap();
@@ -674,6 +676,16 @@ fn a_batch_of_pds3_products_takes_each_frames_camera_from_its_own_label() {
         assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
         let single: Value = serde_json::from_str(&std::fs::read_to_string(&single_out).unwrap()).unwrap();
         json_close(&batch, &single, 1e-9, &["camera", "run", "overlay"], "").unwrap();
+    }
+    // The products' folder as it comes from the archive (each detached label beside its data
+    // file): each label is read in place of its data file, which holds no label.
+    let by_folder = dir.path().join("by_folder");
+    let o = tubeloc(&["locate", "--label-cameras", "--images", p(&products), "--out", p(&by_folder)]);
+    assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+    for label in &labels {
+        let name = format!("{}.json", label.file_stem().unwrap().to_str().unwrap());
+        let read = |d: &Path| -> Value { serde_json::from_str(&std::fs::read_to_string(d.join("frames").join(&name)).unwrap()).unwrap() };
+        json_close(&read(&by_folder), &read(&out), 1e-9, &["run", "overlay"], "").unwrap();
     }
     // --label-cameras takes no rig.
     let o = tubeloc(&["locate", "--label-cameras", "--rig", p(&labels[0]), "--image", p(&labels[0]), "--out", p(&dir.path().join("x.json"))]);
