@@ -77,8 +77,8 @@ pub fn array_of<'py>(py: Python<'py>, img: &DynamicImage) -> Bound<'py, PyAny> {
 
 /// read_image(path) -> numpy.ndarray
 ///
-/// Decodes an image file (PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP, or a PDS3 product: `.IMG`, or a `.LBL` beside its data)
-/// with the decoder `tubeloc` uses: uint8 or uint16, shape
+/// Decodes an image file (PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP, or a PDS3 product:
+/// `.IMG`, or a `.LBL` beside its data) with the decoder `tubeloc` uses: uint8 or uint16, shape
 /// HxW (grey), HxWx2, HxWx3 (RGB) or HxWx4 (RGBA), as stored in the file.
 #[pyfunction]
 pub fn read_image<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyAny>> {
