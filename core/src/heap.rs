@@ -19,6 +19,17 @@ pub const HEAP_BLOCK_MAX_BYTES: usize = 8 << 20;
 /// 1 GiB no faster, peak 351 MiB.
 pub const HEAP_KEEP_FREE_BYTES: usize = 128 << 20;
 
+/// Free memory that `malloc` keeps at a heap's top when it trims it (`M_TOP_PAD`; glibc's
+/// default 128 KiB), and the extra it asks the kernel for each time the heap grows. Without it,
+/// [`HEAP_KEEP_FREE_BYTES`] only delays the trim: once a freed top passes that size it is cut
+/// back to 128 KiB, and the learned segmenter, whose layers on a 1024 x 1024 Navcam frame at
+/// its working scale (about 2560 x 2560) each allocate and free tens of MiB, faulted its
+/// activations in again at every layer. `tubeloc detect --method learned` on six such frames
+/// (2 cores, medians of three interleaved runs): 5.0 s wall with 4.4 s system time at the
+/// default, 1.9 s with 0.2 s at 256 MiB; 64 and 128 MiB were fast in some runs only; peak
+/// memory 272 MiB in all.
+pub const HEAP_TOP_PAD_BYTES: usize = 256 << 20;
+
 /// Most allocator arenas (`M_ARENA_MAX`). glibc gives each thread that meets a locked arena
 /// a new one, up to 8 per core, and each keeps its freed top ([`HEAP_KEEP_FREE_BYTES`]), so
 /// peak memory grew with the core count: `locate` on a 5472 x 3648 frame with 16 threads
@@ -29,7 +40,8 @@ pub const ALLOCATOR_ARENAS: usize = 2;
 
 /// Asks the C allocator to keep freed memory for reuse: blocks up to
 /// [`HEAP_BLOCK_MAX_BYTES`] come from the heap, freed heap tops of up to
-/// [`HEAP_KEEP_FREE_BYTES`] are not returned to the kernel, at most [`ALLOCATOR_ARENAS`]
+/// [`HEAP_KEEP_FREE_BYTES`] are not returned to the kernel and a trim keeps
+/// [`HEAP_TOP_PAD_BYTES`], at most [`ALLOCATOR_ARENAS`]
 /// arenas keep them, and no block is served by its own
 /// `mmap` (`M_MMAP_MAX` = 0): the segmenter's activations (tens to hundreds of MiB per layer
 /// on a large frame, above glibc's 32 MiB ceiling for `M_MMAP_THRESHOLD`) then reuse freed
@@ -43,6 +55,7 @@ pub fn keep_freed_memory() -> bool {
         unsafe {
             libc::mallopt(libc::M_MMAP_THRESHOLD, HEAP_BLOCK_MAX_BYTES as libc::c_int) == 1
                 && libc::mallopt(libc::M_TRIM_THRESHOLD, HEAP_KEEP_FREE_BYTES as libc::c_int) == 1
+                && libc::mallopt(libc::M_TOP_PAD, HEAP_TOP_PAD_BYTES as libc::c_int) == 1
                 && libc::mallopt(libc::M_MMAP_MAX, 0) == 1
                 && libc::mallopt(libc::M_ARENA_MAX, ALLOCATOR_ARENAS as libc::c_int) == 1
         }
