@@ -47,24 +47,36 @@ impl CustomOp1 for Im2Col {
         let x = contiguous(s, l, self.name())?;
         let (k, r) = (self.k, self.k as isize / 2);
         let row = w * k * k * c;
-        let mut out = vec![0f32; b * h * row];
-        out.par_chunks_mut(row).enumerate().for_each(|(by, dst)| {
+        let n = b * h * row;
+        // Every element is written once below (a tap's channels, or zeros outside the image), so
+        // the buffer is not cleared first: on a large frame clearing it cost as much as filling.
+        let mut out: Vec<f32> = Vec::with_capacity(n);
+        out.spare_capacity_mut()[..n].par_chunks_mut(row).enumerate().for_each(|(by, dst)| {
             let (bi, y) = (by / h, (by % h) as isize);
             for xx in 0..w as isize {
                 for dy in 0..k as isize {
                     let sy = y + dy - r;
                     for dx in 0..k as isize {
                         let sx = xx + dx - r;
-                        if sy < 0 || sx < 0 || sy >= h as isize || sx >= w as isize {
-                            continue;
-                        }
                         let o = (xx as usize * k * k + (dy as usize) * k + dx as usize) * c;
-                        let i = ((bi * h + sy as usize) * w + sx as usize) * c;
-                        dst[o..o + c].copy_from_slice(&x[i..i + c]);
+                        let d = &mut dst[o..o + c];
+                        if sy < 0 || sx < 0 || sy >= h as isize || sx >= w as isize {
+                            d.iter_mut().for_each(|v| {
+                                v.write(0.0);
+                            });
+                        } else {
+                            let i = ((bi * h + sy as usize) * w + sx as usize) * c;
+                            d.iter_mut().zip(&x[i..i + c]).for_each(|(v, &s)| {
+                                v.write(s);
+                            });
+                        }
                     }
                 }
             }
         });
+        // SAFETY: the loop above wrote all `n` elements: each row chunk covers `w` pixels x `k²`
+        // taps x `c` channels, every one of them written either from `x` or as zero.
+        unsafe { out.set_len(n) };
         Ok((CpuStorage::F32(out), Shape::from((b, h * w, k * k * c))))
     }
 
