@@ -53,22 +53,38 @@ impl CustomOp1 for Im2Col {
         let mut out: Vec<f32> = Vec::with_capacity(n);
         out.spare_capacity_mut()[..n].par_chunks_mut(row).enumerate().for_each(|(by, dst)| {
             let (bi, y) = (by / h, (by % h) as isize);
+            let put = |d: &mut [std::mem::MaybeUninit<f32>], src: Option<&[f32]>| match src {
+                Some(src) => d.iter_mut().zip(src).for_each(|(v, &s)| {
+                    v.write(s);
+                }),
+                None => d.iter_mut().for_each(|v| {
+                    v.write(0.0);
+                }),
+            };
             for xx in 0..w as isize {
                 for dy in 0..k as isize {
                     let sy = y + dy - r;
+                    // The k taps of one kernel row are k·C consecutive values of the input row.
+                    let o = (xx as usize * k * k + (dy as usize) * k) * c;
+                    let d = &mut dst[o..o + k * c];
+                    if sy < 0 || sy >= h as isize {
+                        put(d, None);
+                        continue;
+                    }
+                    let line = (bi * h + sy as usize) * w;
+                    if xx >= r && xx + r < w as isize {
+                        let i = (line + (xx - r) as usize) * c;
+                        put(d, Some(&x[i..i + k * c]));
+                        continue;
+                    }
                     for dx in 0..k as isize {
                         let sx = xx + dx - r;
-                        let o = (xx as usize * k * k + (dy as usize) * k + dx as usize) * c;
-                        let d = &mut dst[o..o + c];
-                        if sy < 0 || sx < 0 || sy >= h as isize || sx >= w as isize {
-                            d.iter_mut().for_each(|v| {
-                                v.write(0.0);
-                            });
+                        let d = &mut d[dx as usize * c..][..c];
+                        if sx < 0 || sx >= w as isize {
+                            put(d, None);
                         } else {
-                            let i = ((bi * h + sy as usize) * w + sx as usize) * c;
-                            d.iter_mut().zip(&x[i..i + c]).for_each(|(v, &s)| {
-                                v.write(s);
-                            });
+                            let i = (line + sx as usize) * c;
+                            put(d, Some(&x[i..i + c]));
                         }
                     }
                 }
