@@ -1,6 +1,10 @@
 //! Speed of the learned segmenter: one training step (batch of augmented crops, forward,
 //! backward, AdamW) of `TubeNet` (width 8) on an 8 x 1 x 384 x 384 batch, and inference on one
-//! 1024 x 1024 image (preprocessing + network + decoding). Run: `RAYON_NUM_THREADS=2 cargo bench -p tubeloc-detect --bench learned_probe`.
+//! 1024 x 1024 image (preprocessing + network + decoding); then inference on a 2560 x 2560
+//! image (a 1024 x 1024 Navcam frame at its working scale) under glibc's default heap policy
+//! and, in the same run, under the kept heap that `tubeloc` sets at start
+//! (`tubeloc_core::heap::keep_freed_memory`, record 0075; the policy cannot be undone, so it
+//! comes last). Run: `RAYON_NUM_THREADS=2 cargo bench -p tubeloc-detect --bench learned_probe`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use tubeloc_detect::learned::augment::{AugmentConfig, TrainImage};
@@ -39,6 +43,10 @@ fn bench(c: &mut Criterion) {
     // With the optional full-resolution mask branch (`tubeloc train --fine-mask`).
     let fine = LearnedModel::with_fine_mask(pre, 8, true, 1).unwrap();
     g.bench_function("detect_rgb_1024x1024_fine_mask", |b| b.iter(|| detect_rgb(&fine, &rgb, 1024, 1024, &DecodeConfig::default()).unwrap()));
+    let (big, _) = synthetic_image(2560);
+    g.bench_function("detect_rgb_2560x2560_default_heap", |b| b.iter(|| detect_rgb(model, &big, 2560, 2560, &DecodeConfig::default()).unwrap()));
+    let kept = tubeloc_core::heap::keep_freed_memory();
+    g.bench_function(if kept { "detect_rgb_2560x2560_kept_heap" } else { "detect_rgb_2560x2560_kept_heap_not_applied" }, |b| b.iter(|| detect_rgb(model, &big, 2560, 2560, &DecodeConfig::default()).unwrap()));
     g.finish();
 }
 
