@@ -3,7 +3,7 @@
 
 use super::Frame;
 use anyhow::{bail, Context, Result};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use tubeloc_detect::input::{has_image_extension, IMAGE_EXTENSIONS};
 
@@ -23,21 +23,20 @@ pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
             }
             if has_image_extension(&p) {
                 paths.push(p);
-            } else if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("lbl")) {
+            } else if has_extension(&p, "lbl") {
                 labels.push(p);
             }
         }
         // A detached label reads its product (the `.img` beside it holds no label of its own).
+        let stem = |p: &Path| p.file_stem().map(|s| s.to_ascii_lowercase());
+        let products: HashMap<_, usize> = paths.iter().enumerate().filter(|(_, p)| has_extension(p, "img")).map(|(k, p)| (stem(p), k)).collect();
         for label in labels {
-            let stem = label.file_stem().map(|s| s.to_ascii_lowercase());
-            let product = paths.iter().position(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("img")) && p.file_stem().map(|s| s.to_ascii_lowercase()) == stem);
-            if let Some(k) = product {
+            if let Some(&k) = products.get(&stem(&label)) {
                 paths[k] = label;
             }
         }
     } else {
-        let label = arg.extension().is_some_and(|e| e.eq_ignore_ascii_case("lbl"));
-        if (has_image_extension(arg) || label) && arg.is_file() {
+        if (has_image_extension(arg) || has_extension(arg, "lbl")) && arg.is_file() {
             bail!("{flag} {}: an image file; {flag} takes a folder of images or a list file of image paths (for one image, give {})", arg.display(), if flag.starts_with("--right") { "--right" } else { "--image" });
         }
         let text = std::fs::read_to_string(arg).with_context(|| format!("{flag} {}: not a folder, and not readable as a list file", arg.display()))?;
@@ -51,6 +50,11 @@ pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
     }
     paths.sort();
     Ok(paths)
+}
+
+/// Whether `path`'s extension is `ext` (any case).
+fn has_extension(path: &Path, ext: &str) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext))
 }
 
 /// The frames of a batch run in sorted order: the left images, each paired with the right image

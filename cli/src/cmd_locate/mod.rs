@@ -103,7 +103,8 @@ pub struct LocateArgs {
     #[arg(long, conflicts_with = "images")]
     pub right: Option<PathBuf>,
     /// Batch run: the (left) frames, a folder (its image files: PNG, JPEG, TIFF, PGM/PPM/PNM, BMP,
-    /// WebP, PDS3 .img, or the detached .lbl beside an .img) or a list file (one image path a line, relative to the list's folder; blank lines and `#` comments skipped).
+    /// WebP, PDS3 .img, or the detached .lbl beside an .img) or a list file (one image path a
+    /// line, relative to the list's folder; blank lines and `#` comments skipped).
     /// Frames are taken in sorted path order; each frame's result is `--out DIR/frames/<image
     /// file stem>.json` (image file stems must be unique), plus `DIR/summary.json`. A frame
     /// whose result file exists and is complete is skipped, so a killed run resumes by running
