@@ -139,3 +139,22 @@ fn a_hazcam_fisheye_resampled_into_its_linear_part_fills_the_frame() {
         }
     }
 }
+
+#[test]
+fn the_lists_fisheye_entries_are_read_from_their_labels() {
+    // `cahv_to_pinhole.py` carries a CAHVORE entry's linear part only; the model comes from the
+    // label the entry names, as with that label as the rig.
+    let path = with_cameras().join("cameras.json");
+    let fisheyes = tubeloc_calib::interchange::pds::fisheye_cameras(&path);
+    let expected: Vec<Value> = list().into_iter().filter(|e| e["model_type"] == "CAHVORE").collect();
+    assert_eq!(fisheyes.len(), expected.len());
+    assert!(!expected.is_empty(), "the real data holds the MER front and MSL rear Hazcam frames");
+    for ((name, got), e) in fisheyes.iter().zip(&expected) {
+        let image = Path::new(e["image"].as_str().unwrap()).file_name().unwrap().to_str().unwrap();
+        let (camera, model) = got.as_ref().unwrap_or_else(|err| panic!("{image}: {err}"));
+        assert_eq!((name.as_str(), camera.camera.name.as_str(), camera.image.as_deref(), camera.sol), (image, image, Some(image), e["sol"].as_i64()));
+        let (by_label, label_model) = read_resampled_label_camera(&with_cameras().join(e["label_file"].as_str().unwrap())).unwrap().unwrap();
+        assert_eq!((&camera.camera.model, camera.ground.offset), (&by_label.camera.model, by_label.ground.offset));
+        assert_eq!(format!("{model:?}"), format!("{:?}", label_model.unwrap()));
+    }
+}

@@ -59,6 +59,13 @@ fn lens_of(cam: &Value, r: &Matrix3<f64>, c: &Vector3<f64>, r1: f64) -> (Cahvore
     (lens, lines)
 }
 
+/// `v` (a JSON object) with `key` set to the string `value`.
+fn dict_with(v: &Value, key: &str, value: &str) -> Value {
+    let mut v = v.clone();
+    v[key] = Value::String(value.to_string());
+    v
+}
+
 /// Distance (m) from each true tube centre of `truth` to the nearest located tube of `doc`
 /// (centres in the camera frame), sorted.
 fn centre_errors(truth: &[Vector3<f64>], doc: &Value) -> Vec<f64> {
@@ -112,6 +119,23 @@ fn a_fisheye_product_locates_as_its_pinhole_render_once_resampled() {
     let resampled = run(&["locate", "--label-cameras", "--image", p(&fish_img)], "fish.json");
     let unresampled = run(&["locate", "--label-cameras", "--image", p(&as_pinhole)], "pin.json");
     assert_eq!((resampled["resampled_from"].as_str(), unresampled.get("resampled_from")), (Some("CAHVORE"), None));
+    // A PDS camera list (`cahv_to_pinhole.py`'s shape) whose CAHVORE entry names the product's
+    // label: `locate --rig LIST` reads the model from it and resamples as the label does.
+    let fish_png = tmp.join("fish.png");
+    fish.save(&fish_png).unwrap();
+    let list = tmp.join("cameras.json");
+    let entry = serde_json::json!({"image": "images/fish.png", "label_file": "FISH.IMG", "model_type": "CAHVORE", "sol": 7});
+    std::fs::write(&list, serde_json::json!([entry]).to_string()).unwrap();
+    let by_list = run(&["locate", "--rig", p(&list), "--image", p(&fish_png)], "list.json");
+    assert_eq!((by_list["resampled_from"].as_str(), by_list["camera"].as_str()), (Some("CAHVORE"), Some("fish.png")));
+    assert_eq!((&by_list["camera_model"], &by_list["up_cam"]), (&resampled["camera_model"], &resampled["up_cam"]));
+    let located = |d: &Value| d["tubes"].as_array().unwrap().iter().map(|t| (t["status"].clone(), t["centre"].clone())).collect::<Vec<_>>();
+    assert!(!located(&resampled).is_empty() && located(&by_list) == located(&resampled), "{by_list}");
+    // An entry whose label is missing fails its frame, naming the list, the image and the label.
+    std::fs::write(&list, serde_json::json!([dict_with(&entry, "label_file", "GONE.IMG")]).to_string()).unwrap();
+    let o = tubeloc(&["locate", "--rig", p(&list), "--image", p(&fish_png), "--out", p(&tmp.join("gone.json")), &ground]);
+    let err = stderr(&o);
+    assert!(o.status.code() == Some(1) && err.contains("cameras.json") && err.contains("fish.png") && err.contains("GONE.IMG"), "{err}");
     // Each tube of the scene against the nearest located tube of a run.
     let image_id = im["id"].clone();
     let truth: Vec<Vector3<f64>> = read(&set.join("annotations.json"))["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == image_id).map(|a| vec3(&a["T_cam_tube"]["translation"])).collect();

@@ -100,7 +100,9 @@ pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
 #[pyfunction]
 pub fn read_pds_grounds(path: PathBuf) -> PyResult<std::collections::BTreeMap<String, (f64, f64, f64, f64)>> {
     let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&path).map_err(|e| chain_to_py(&e))?;
-    let cams = cams.ok_or_else(|| to_py(format!("{}: neither a PDS camera list (a JSON list) nor a PDS3 label", path.display())))?;
+    let mut cams = cams.ok_or_else(|| to_py(format!("{}: neither a PDS camera list (a JSON list) nor a PDS3 label", path.display())))?;
+    // A list's fisheye (CAHVORE) entries, read from their labels: the ground is their linear camera's.
+    cams.extend(tubeloc_calib::interchange::pds::fisheye_cameras(&path).into_iter().filter_map(|(_, c)| c.ok().map(|(c, _)| c)));
     Ok(cams.into_iter().map(|c| (c.camera.name, (c.ground.normal.x, c.ground.normal.y, c.ground.normal.z, c.ground.offset))).collect())
 }
 

@@ -172,3 +172,20 @@ def test_assumed_view_locates_as_the_command_line_does(cli, tmp_path):
         tubeloc.assumed_view("hazcam", 1024, 1024)
     with pytest.raises(tubeloc.TubelocError):
         tubeloc.assumed_view("mast", 0, 0)
+
+
+def test_a_camera_lists_fisheye_entries_have_grounds_from_their_labels():
+    # The real data's list carries only the linear part of its two Hazcam (CAHVORE) entries;
+    # their cameras come from the labels the entries name, as `tubeloc locate --rig` reads them.
+    path = REPO.parent / "shared/data/real_mars/with_cameras/cameras.json"
+    if not path.exists():
+        pytest.skip(f"{path} is missing (../shared/data beside the repository)")
+    entries = json.loads(path.read_text())
+    fisheyes = [e for e in entries if e["model_type"] == "CAHVORE"]
+    grounds = tubeloc.read_pds_grounds(path)
+    assert len(grounds) == len(entries) and fisheyes
+    for e in fisheyes:
+        nx, ny, nz, d = grounds[e["image"].split("/")[-1]]
+        # Level ground `camera_height_m` below the camera: n = up = -(site z) in the camera frame.
+        up = [-row[2] for row in e["R_cam_from_site"]]
+        assert (nx, ny, nz) == pytest.approx(up, abs=1e-9) and d == pytest.approx(-e["camera_height_m"], abs=1e-9)

@@ -14,9 +14,12 @@
 //!
 //! [`read_pds_cameras`] also reads the PDS3 label of one image ([`super::pds_label`]).
 //!
-//! CAHVORE (fisheye) entries are left out: a pinhole does not describe them. The pinhole's skew
-//! (under 1 px for the MSL and MER cameras) is dropped; an entry with more is refused.
+//! CAHVORE (fisheye) entries are left out of the pinhole cameras: a pinhole does not describe
+//! their images. [`fisheye_cameras`] reads each one from the PDS3 label the entry names
+//! (`label_file`), with the model its image is resampled from. The pinhole's skew (under 1 px
+//! for the MSL and MER cameras) is dropped; an entry with more is refused.
 
+use super::cahvore::Cahvore;
 use crate::error::CalibError;
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
@@ -88,7 +91,8 @@ pub fn looks_like_pds_cameras(text: &str) -> bool {
     text.trim_start_matches('\u{feff}').trim_start().starts_with('[')
 }
 
-/// Reads every pinhole camera of a `cahv_to_pinhole.py` list (`path` names the file in errors).
+/// Reads every pinhole camera of a `cahv_to_pinhole.py` list (`path` names the file in errors);
+/// empty when every entry is a CAHVORE (fisheye) model ([`fisheye_cameras`] reads those).
 pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError> {
     let list: Vec<Value> = serde_json::from_str(text).map_err(|e| CalibError::parse(path, format!("not a JSON list of PDS cameras: {e}")))?;
     let mut out: Vec<PdsCamera> = Vec::with_capacity(list.len());
@@ -103,7 +107,10 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
         }
         out.push(cam);
     }
-    if out.is_empty() {
+    // A list of fisheyes only has no pinhole camera, yet `tubeloc locate` reads its entries'
+    // labels ([`fisheye_cameras`]).
+    let fisheye = |e: &Value| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE");
+    if out.is_empty() && !list.iter().any(fisheye) {
         return Err(CalibError::parse(path, "no CAHV or CAHVOR camera in the list"));
     }
     Ok(out)
@@ -136,7 +143,7 @@ pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) 
         [label] if label.image.is_none() => Ok(label),
         _ if fisheye_entries(path).iter().any(|n| n == name) => Err(CalibError::parse(
             path,
-            format!("the entry for the image file {name:?} is a CAHVORE (fisheye) model, which a pinhole camera list cannot carry: give the image's PDS3 label (`.LBL`, or the `.IMG` with its label) as the rig instead; `locate` resamples the fisheye image into the model's linear camera"),
+            format!("the entry for the image file {name:?} is a CAHVORE (fisheye) model, whose image a pinhole describes only once resampled: `tubeloc locate` resamples it (this list as --rig, when the entry's `label_file` can be read, or the image's PDS3 label as --rig); give other commands the resampled image and a camera JSON"),
         )),
         _ => Err(CalibError::parse(path, format!("no camera for the image file {name:?} (a PDS camera list names each camera after its image)"))),
     }
@@ -149,9 +156,43 @@ fn fisheye_entries(path: &Path) -> Vec<String> {
     list.iter().filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")).filter_map(|e| Path::new(e.get("image")?.as_str()?).file_name()?.to_str().map(str::to_string)).collect()
 }
 
+/// The CAHVORE (fisheye) entries of the PDS camera list at `path`, each read from the PDS3
+/// label its `label_file` names (relative to the list's folder, as `cahv_to_pinhole.py` writes
+/// it), since the list's pinhole describes such an image only once resampled: by the image's
+/// file name, the label's camera (the model's linear part, named after that file, with the
+/// list entry's sol) and the model the image is resampled from
+/// ([`super::linearize::LinearResampling`]), or why the entry gives none. Empty when the
+/// file is not such a list.
+pub fn fisheye_cameras(path: &Path) -> Vec<(String, Result<(PdsCamera, Cahvore), String>)> {
+    let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
+    let folder = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for e in list.iter().filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")) {
+        let Some(name) = e.get("image").and_then(Value::as_str).and_then(|i| Path::new(i).file_name()?.to_str()).map(str::to_string) else { continue };
+        let camera = match e.get("label_file").and_then(Value::as_str) {
+            None => Err(format!("{}: the CAHVORE (fisheye) entry for {name:?} names no `label_file`: give the image's PDS3 label as the rig", path.display())),
+            Some(label) => match super::pds_label::read_resampled_label_camera(&folder.join(label)) {
+                Ok(Some((mut c, Some(model)))) => {
+                    (c.camera.name, c.image, c.sol) = (name.clone(), Some(name.clone()), e.get("sol").and_then(Value::as_i64).or(c.sol));
+                    Ok((c, model))
+                }
+                Ok(Some((_, None))) => Err(format!("{}: the entry for {name:?} is a CAHVORE model but its label {} is not", path.display(), folder.join(label).display())),
+                Ok(None) => Err(format!("{}: the label of the CAHVORE entry for {name:?}, {}, is not a PDS3 label", path.display(), folder.join(label).display())),
+                Err(err) => Err(format!("{}: the CAHVORE entry for {name:?}: {err}", path.display())),
+            },
+        };
+        out.push((name, camera));
+    }
+    out
+}
+
 /// The rig of a PDS camera list: its cameras, no stereo pair.
 pub fn rig_from_pds(text: &str, path: &Path) -> Result<Rig, CalibError> {
-    Ok(rig_of(&pds_cameras(text, path)?))
+    let cameras = pds_cameras(text, path)?;
+    if cameras.is_empty() {
+        return Err(CalibError::parse(path, "every camera of the list is a CAHVORE (fisheye) model, whose images a pinhole describes only once resampled: `tubeloc locate` takes the list as --rig and resamples them"));
+    }
+    Ok(rig_of(&cameras))
 }
 
 /// The rig of PDS cameras: the cameras, no stereo pair.

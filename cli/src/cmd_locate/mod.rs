@@ -71,10 +71,10 @@ pub struct LocateArgs {
     pub command: Option<LocateCommand>,
     /// Rig file: tubeloc JSON (`tubeloc calib rig`, a synthetic dataset's `rig.json`), OpenCV YAML,
     /// a kalibr camchain, one ROS `camera_info`, a PDS camera list (`cahv_to_pinhole.py`'s JSON:
-    /// each image's camera, by file name, and ground) or the PDS3 label of the image (`.LBL`, or
-    /// an `.IMG` with its label: its CAHV/CAHVOR camera in the rover frame, and ground; a
-    /// CAHVORE fisheye's image is resampled into the model's linear camera), recognised by
-    /// content.
+    /// each image's camera, by file name, and ground; a CAHVORE entry's model read from the
+    /// label its `label_file` names) or the PDS3 label of the image (`.LBL`, or an `.IMG` with
+    /// its label: its CAHV/CAHVOR camera in the rover frame, and ground), recognised by content.
+    /// A CAHVORE fisheye's image is resampled into the model's linear camera.
     #[arg(long)]
     pub rig: Option<PathBuf>,
     /// Instead of --rig: each image is a PDS3 product (`.IMG` with its label, or a `.LBL` beside
@@ -392,8 +392,8 @@ pub struct Setup {
     /// The cameras of a PDS camera list with their grounds (used when `--ground` is not
     /// given); empty for other rig files.
     pds: Vec<tubeloc_calib::interchange::pds::PdsCamera>,
-    /// With `--label-cameras`: why an image's label gives no camera, by image file name (that
-    /// frame fails; the others run).
+    /// With `--label-cameras`, `--assumed-view` or a PDS camera list's fisheye entries: why an
+    /// image gets no camera, by image file name (that frame fails; the others run).
     label_errors: BTreeMap<String, String>,
     /// The fisheye (CAHVORE) models of the cameras whose labels give one, by camera name: their
     /// images are resampled into the camera, the model's linear part, before locating.
@@ -430,15 +430,31 @@ impl Setup {
             (PathBuf::from("the images' PDS3 labels (--label-cameras)"), Some(list), errors)
         } else {
             let rig_path = a.rig_path()?.to_path_buf();
-            // A PDS3 label is read here with its fisheye model, if any; other rigs as rigs.
+            // A PDS3 label is read here with its fisheye model, if any; a PDS camera list with
+            // the fisheye models of its CAHVORE entries, from their labels (a frame whose label
+            // cannot be read fails, the others run); other rigs as rigs.
+            let mut errors = BTreeMap::new();
             let pds = match tubeloc_calib::interchange::pds_label::read_resampled_label_camera(&rig_path).context("rig")? {
                 Some((c, fisheye)) => {
                     fisheyes.extend(fisheye.map(|m| (c.camera.name.clone(), m)));
                     Some(vec![c])
                 }
-                None => tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?,
+                None => tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?.map(|mut cams| {
+                    for (name, camera) in tubeloc_calib::interchange::pds::fisheye_cameras(&rig_path) {
+                        match camera {
+                            Ok((c, model)) => {
+                                fisheyes.insert(c.camera.name.clone(), model);
+                                cams.push(c);
+                            }
+                            Err(e) => {
+                                errors.insert(name, e);
+                            }
+                        }
+                    }
+                    cams
+                }),
             };
-            (rig_path, pds, BTreeMap::new())
+            (rig_path, pds, errors)
         };
         // A fisheye's pinhole at the asked scale (same principal point, same pose and ground).
         let mut pds = pds;
@@ -469,7 +485,12 @@ impl Setup {
         let per_image = pds.is_some() && a.camera_name.is_none() && pair.is_none();
         let pds = pds.unwrap_or_default();
         let camera_name = match (per_image, &a.image) {
-            (true, Some(image)) => Some(pds_camera_of(&pds, &rig_path, image)?.camera.name.clone()),
+            (true, Some(image)) => {
+                if let Some(e) = image.file_name().and_then(|n| label_errors.get(n.to_string_lossy().as_ref())) {
+                    bail!("{e}");
+                }
+                Some(pds_camera_of(&pds, &rig_path, image)?.camera.name.clone())
+            }
             _ => a.camera_name.clone(),
         };
         let selection = CameraSelection { camera: camera_name, pair };
