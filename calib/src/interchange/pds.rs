@@ -156,6 +156,10 @@ fn fisheye_entries(path: &Path) -> Vec<String> {
     list.iter().filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")).filter_map(|e| Path::new(e.get("image")?.as_str()?).file_name()?.to_str().map(str::to_string)).collect()
 }
 
+/// A fisheye's camera (its model's linear part, with its ground) and the CAHVORE model its
+/// image is resampled from.
+pub type FisheyeCamera = (PdsCamera, Cahvore);
+
 /// The CAHVORE (fisheye) entries of the PDS camera list at `path`, each read from the PDS3
 /// label its `label_file` names (relative to the list's folder, as `cahv_to_pinhole.py` writes
 /// it), since the list's pinhole describes such an image only once resampled: by the image's
@@ -163,7 +167,7 @@ fn fisheye_entries(path: &Path) -> Vec<String> {
 /// list entry's sol) and the model the image is resampled from
 /// ([`super::linearize::LinearResampling`]), or why the entry gives none. Empty when the
 /// file is not such a list.
-pub fn fisheye_cameras(path: &Path) -> Vec<(String, Result<(PdsCamera, Cahvore), String>)> {
+pub fn fisheye_cameras(path: &Path) -> Vec<(String, Result<FisheyeCamera, String>)> {
     let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
     let folder = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
