@@ -229,28 +229,34 @@ pub fn far_scale(s: &str) -> Result<(f64, f64), String> {
     }
 }
 
-/// A view assumed for frames without a camera model (`--assumed-view`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum AssumedViewArg {
-    /// A mast navigation camera: 45 degree field of view, 1.9 m high, 30 degrees down.
-    Navcam,
-    /// A mast science camera: 20 degree field of view, 1.9 m high, 30 degrees down.
-    Mast,
+/// A view assumed for frames without a camera model (`--assumed-view`): a named view
+/// (`navcam`, `mast`) or one given by its numbers, `HFOV_DEG,HEIGHT_M,PITCH_DEG`
+/// ([`tubeloc_core::AssumedView::parse`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AssumedViewArg {
+    /// The view as given (a name, or the numbers).
+    spec: String,
+    /// Its geometry.
+    view: tubeloc_core::AssumedView,
 }
 
 impl AssumedViewArg {
-    /// The view's geometry ([`tubeloc_core::AssumedView::NAMED`]).
-    pub fn view(self) -> tubeloc_core::AssumedView {
-        tubeloc_core::AssumedView::by_name(self.name()).expect("every --assumed-view value is a named view")
+    /// The view's geometry.
+    pub fn view(&self) -> tubeloc_core::AssumedView {
+        self.view
     }
 
-    /// The name `--assumed-view` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            AssumedViewArg::Navcam => "navcam",
-            AssumedViewArg::Mast => "mast",
-        }
+    /// The view as `--assumed-view` took it: `navcam`, `mast`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
+    pub fn name(&self) -> &str {
+        &self.spec
     }
+}
+
+/// Parses `--assumed-view`: `navcam`, `mast`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
+pub fn assumed_view(s: &str) -> Result<AssumedViewArg, String> {
+    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| e.to_string())?;
+    let spec = s.split(',').map(str::trim).collect::<Vec<_>>().join(",");
+    Ok(AssumedViewArg { spec, view })
 }
 
 #[cfg(test)]
@@ -298,11 +304,13 @@ mod tests {
     }
 
     #[test]
-    fn every_assumed_view_value_is_a_named_view_under_its_own_name() {
-        use clap::ValueEnum;
-        for v in AssumedViewArg::value_variants() {
-            assert_eq!(v.to_possible_value().unwrap().get_name(), v.name());
-            assert_eq!(v.view(), tubeloc_core::AssumedView::by_name(v.name()).unwrap());
+    fn assumed_views_are_named_or_given_by_their_numbers() {
+        for (name, view) in tubeloc_core::AssumedView::NAMED {
+            let v = assumed_view(name).unwrap();
+            assert_eq!((v.name(), v.view()), (name, view));
         }
+        let v = assumed_view("96, 2,20").unwrap();
+        assert_eq!((v.name(), v.view().hfov_deg, v.view().height_m, v.view().pitch_deg), ("96,2,20", 96.0, 2.0, 20.0));
+        assert!(assumed_view("hazcam").unwrap_err().contains("HFOV_DEG,HEIGHT_M,PITCH_DEG"));
     }
 }

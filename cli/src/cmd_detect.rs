@@ -53,8 +53,8 @@ pub struct DetectArgs {
     /// Instead of --camera, for an --image without a camera model: its camera and ground
     /// (unless --ground) are assumed from its size, as `tubeloc locate --assumed-view` does
     /// (`navcam`: 45 degree field of view, 1.9 m above level ground, 30 degrees down; `mast`: 20
-    /// degrees).
-    #[arg(long, value_enum, requires = "image", conflicts_with_all = ["camera", "dataset"])]
+    /// degrees; or `HFOV_DEG,HEIGHT_M,PITCH_DEG`, e.g. `90,2,25`).
+    #[arg(long, value_parser = crate::args::assumed_view, requires = "image", conflicts_with_all = ["camera", "dataset"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
     /// working scale (the image is resampled so tubes are about 16 px wide), or "off".
@@ -107,7 +107,7 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 /// that nothing reads the list as one camera. With `--assumed-view`: that view's camera at the
 /// image's size and its ground. `None` for any other `--camera`.
 fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
-    if let (Some(view), Some(image)) = (args.assumed_view, &args.image) {
+    if let (Some(view), Some(image)) = (&args.assumed_view, &args.image) {
         let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
         let ground = match args.ground {
             Some(g) => g,

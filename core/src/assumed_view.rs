@@ -40,6 +40,36 @@ impl AssumedView {
         Self::NAMED.iter().find(|(n, _)| *n == name).map(|(_, v)| *v).ok_or_else(|| CoreError::invalid("assumed view", format!("unknown view {name:?}: expected one of navcam, mast")))
     }
 
+    /// The view `spec` names: a named view (`navcam`, `mast`), or one given as
+    /// `HFOV_DEG,HEIGHT_M,PITCH_DEG` (horizontal field of view in degrees, in (1, 170); camera
+    /// height above level ground in metres, in (0, 100]; angle of the optical axis below the
+    /// horizon in degrees, in (0, 90]: the image centre sees the ground), e.g. `90,2,25` for a
+    /// wide mast camera. The error names the part at fault and the forms taken.
+    pub fn parse(spec: &str) -> Result<AssumedView, CoreError> {
+        let spec = spec.trim();
+        if !spec.contains(',') {
+            return Self::by_name(spec).map_err(|_| CoreError::invalid("assumed view", format!("unknown view {spec:?}: expected one of navcam, mast, or HFOV_DEG,HEIGHT_M,PITCH_DEG (e.g. 90,2,25)")));
+        }
+        let parts: Vec<&str> = spec.split(',').map(str::trim).collect();
+        let bad = |m: String| CoreError::invalid("assumed view", format!("{spec:?}: {m}"));
+        let [hfov, height, pitch] = parts[..] else {
+            return Err(bad(format!("{} numbers, expected three: HFOV_DEG,HEIGHT_M,PITCH_DEG", parts.len())));
+        };
+        let number = |t: &str, what: &str, ok: &dyn Fn(f64) -> bool, range: &str| -> Result<f64, CoreError> {
+            let v: f64 = t.parse().map_err(|_| bad(format!("{what} {t:?} is not a number")))?;
+            if !(v.is_finite() && ok(v)) {
+                return Err(bad(format!("{what} {v} is outside {range}")));
+            }
+            Ok(v)
+        };
+        Ok(AssumedView {
+            hfov_deg: number(hfov, "the field of view", &|v| v > 1.0 && v < 170.0, "(1, 170) degrees")?,
+            height_m: number(height, "the camera height", &|v| v > 0.0 && v <= 100.0, "(0, 100] metres")?,
+            pitch_deg: number(pitch, "the downward look", &|v| v > 0.0 && v <= 90.0, "(0, 90] degrees below the horizon (the image centre must see the ground)")?,
+            roll_deg: 0.0,
+        })
+    }
+
     /// The camera of an image of `width x height` pixels under this view: a pinhole with the
     /// view's horizontal field of view, its principal point at the image centre.
     pub fn camera(&self, width: u32, height: u32) -> CameraModel {
@@ -97,6 +127,16 @@ mod tests {
         assert_eq!(AssumedView::by_name("mast").unwrap(), AssumedView::MAST);
         let e = AssumedView::by_name("hazcam").unwrap_err().to_string();
         assert!(e.contains("hazcam") && e.contains("navcam, mast"), "{e}");
+        // A view given by its numbers.
+        let wide = AssumedView::parse(" 90, 2 ,25").unwrap();
+        assert_eq!(wide, AssumedView { hfov_deg: 90.0, height_m: 2.0, pitch_deg: 25.0, roll_deg: 0.0 });
+        assert_eq!(AssumedView::parse("navcam").unwrap(), v);
+        for (spec, says) in
+            [("hazcam", "HFOV_DEG,HEIGHT_M,PITCH_DEG"), ("90,2", "2 numbers"), ("90,x,25", "\"x\" is not a number"), ("180,2,25", "field of view 180"), ("90,0,25", "camera height 0"), ("90,2,-5", "below the horizon"), ("90,2,NaN", "NaN")]
+        {
+            let e = AssumedView::parse(spec).unwrap_err().to_string();
+            assert!(e.contains(says), "{spec}: {e}");
+        }
         // A roll turns the up direction about the optical axis and keeps it a unit vector.
         let rolled = AssumedView { roll_deg: 90.0, ..v };
         let up = rolled.up_cam();

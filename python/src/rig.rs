@@ -111,10 +111,11 @@ pub fn read_pds_grounds(path: PathBuf) -> PyResult<std::collections::BTreeMap<St
 /// For an image without a camera model: the one-camera rig (camera "assumed") and the ground
 /// (nx, ny, nz, d) of an image of width x height pixels under the assumed view `view`, as
 /// `tubeloc locate --assumed-view` takes it: "navcam" (45 degree horizontal field of view,
-/// 1.9 m above level ground, looking 30 degrees down) or "mast" (a 20 degree field).
+/// 1.9 m above level ground, looking 30 degrees down), "mast" (a 20 degree field), or
+/// "HFOV_DEG,HEIGHT_M,PITCH_DEG" (e.g. "90,2,25").
 #[pyfunction]
 pub fn assumed_view(view: &str, width: u32, height: u32) -> PyResult<(PyRig, (f64, f64, f64, f64))> {
-    let (rig, g) = tubeloc_core::AssumedView::by_name(view).and_then(|v| v.rig("assumed", width, height)).map_err(|e| chain_to_py(&e))?;
+    let (rig, g) = tubeloc_core::AssumedView::parse(view).and_then(|v| v.rig("assumed", width, height)).map_err(|e| chain_to_py(&e))?;
     Ok((PyRig { rig }, (g.normal.x, g.normal.y, g.normal.z, g.offset)))
 }
 

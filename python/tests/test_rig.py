@@ -170,6 +170,12 @@ def test_assumed_view_locates_as_the_command_line_does(cli, tmp_path):
         assert np.allclose(t.centre, d["centre"], atol=1e-9)
     with pytest.raises(tubeloc.TubelocError, match="navcam, mast"):
         tubeloc.assumed_view("hazcam", 1024, 1024)
+    # A view given by its numbers: field of view, height, downward look.
+    rig, ground = tubeloc.assumed_view("90,2,25", 1024, 768)
+    assert rig.image_size("assumed") == (1024, 768)
+    assert ground == pytest.approx((0.0, -np.cos(np.radians(25)), -np.sin(np.radians(25)), -2.0))
+    with pytest.raises(tubeloc.TubelocError, match="field of view 180"):
+        tubeloc.assumed_view("180,2,25", 1024, 768)
     with pytest.raises(tubeloc.TubelocError):
         tubeloc.assumed_view("mast", 0, 0)
 

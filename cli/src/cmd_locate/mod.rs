@@ -88,8 +88,10 @@ pub struct LocateArgs {
     /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal
     /// field of view, 1.9 m above level ground, looking 30 degrees down (how `tubeloc bench`
     /// judges grey frames without a model); `mast`: the same with a 20 degree field (its
-    /// colour frames). Poses are then only as good as the assumption; mono only.
-    #[arg(long, value_enum, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
+    /// colour frames); or the view's numbers, `HFOV_DEG,HEIGHT_M,PITCH_DEG` (e.g. `90,2,25`
+    /// for a wide mast camera: the field of view sets the pixel scale the detectors work at).
+    /// Poses are then only as good as the assumption; mono only.
+    #[arg(long, value_parser = crate::args::assumed_view, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
     /// model's linear part: below 1 keeps more of the fisheye's field (its rim, the near
@@ -313,11 +315,11 @@ pub struct LocateDoc<'a> {
     /// those of the resampled image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub resampled_from: Option<&'static str>,
-    /// The view `camera_model` and the ground were assumed from (`--assumed-view`: `navcam`
-    /// or `mast`) when the frame came without a camera model: the poses rest on that
-    /// assumption.
+    /// The view `camera_model` and the ground were assumed from (`--assumed-view`: `navcam`,
+    /// `mast` or `HFOV_DEG,HEIGHT_M,PITCH_DEG`) when the frame came without a camera model:
+    /// the poses rest on that assumption.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub assumed_view: Option<&'static str>,
+    pub assumed_view: Option<&'a str>,
     /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
     pub detections: &'a [TubeDetection],
 }
@@ -411,7 +413,7 @@ impl Setup {
         // With --label-cameras and --right (one stereo pair), both labels, the right one last.
         let label_images: Vec<&Path> = images.iter().copied().chain(a.right.as_deref().filter(|_| a.label_cameras)).collect();
         let mut fisheyes = BTreeMap::new();
-        let (rig_path, pds, label_errors) = if let Some(view) = a.assumed_view {
+        let (rig_path, pds, label_errors) = if let Some(view) = &a.assumed_view {
             let (cams, errors) = assumed_cameras(view, &label_images);
             if cams.is_empty() {
                 bail!("{}", errors.into_values().next().unwrap_or_else(|| "--assumed-view: no image".into()));
@@ -653,7 +655,7 @@ fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String
 
 /// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
 /// under `view`, from the image's size; and, by image file name, why an image gives none.
-fn assumed_cameras(view: crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
+fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
     let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
     for image in images {
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -752,7 +754,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             }),
             camera_model: &cam.model,
             resampled_from,
-            assumed_view: a.assumed_view.map(|v| v.name()),
+            assumed_view: a.assumed_view.as_ref().map(|v| v.name()),
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
