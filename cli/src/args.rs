@@ -230,33 +230,42 @@ pub fn far_scale(s: &str) -> Result<(f64, f64), String> {
 }
 
 /// A view assumed for frames without a camera model (`--assumed-view`): a named view
-/// (`navcam`, `mast`) or one given by its numbers, `HFOV_DEG,HEIGHT_M,PITCH_DEG`
-/// ([`tubeloc_core::AssumedView::parse`]).
+/// (`navcam`, `mast`), one given by its numbers, `HFOV_DEG,HEIGHT_M,PITCH_DEG`
+/// ([`tubeloc_core::AssumedView::parse`]), or `auto`: each frame's by its kind
+/// ([`tubeloc_core::AssumedView::of_kind`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct AssumedViewArg {
-    /// The view as given (a name, or the numbers).
-    spec: String,
-    /// Its geometry.
-    view: tubeloc_core::AssumedView,
+pub enum AssumedViewArg {
+    /// One view for every frame: as given (a name, or the numbers), and its geometry.
+    View(String, tubeloc_core::AssumedView),
+    /// `navcam` for a grey frame, `mast` for a colour one (as `tubeloc bench` judges real frames).
+    Auto,
 }
 
 impl AssumedViewArg {
-    /// The view's geometry.
-    pub fn view(&self) -> tubeloc_core::AssumedView {
-        self.view
+    /// Whether the view depends on the frame's pixels (`auto`).
+    pub fn by_kind(&self) -> bool {
+        matches!(self, AssumedViewArg::Auto)
     }
 
-    /// The view as `--assumed-view` took it: `navcam`, `mast`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
-    pub fn name(&self) -> &str {
-        &self.spec
+    /// The view of a frame, grey or not, and its name as a frame document gives it: the
+    /// name as given (`navcam`, `mast`, or the numbers), or with `auto` the named view of the
+    /// frame's kind.
+    pub fn for_frame(&self, grey: bool) -> (&str, tubeloc_core::AssumedView) {
+        match self {
+            AssumedViewArg::View(spec, view) => (spec, *view),
+            AssumedViewArg::Auto => tubeloc_core::AssumedView::of_kind(grey),
+        }
     }
 }
 
-/// Parses `--assumed-view`: `navcam`, `mast`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
+/// Parses `--assumed-view`: `navcam`, `mast`, `auto`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
 pub fn assumed_view(s: &str) -> Result<AssumedViewArg, String> {
-    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| e.to_string())?;
+    if s.trim() == "auto" {
+        return Ok(AssumedViewArg::Auto);
+    }
+    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| format!("{e}, or auto"))?;
     let spec = s.split(',').map(str::trim).collect::<Vec<_>>().join(",");
-    Ok(AssumedViewArg { spec, view })
+    Ok(AssumedViewArg::View(spec, view))
 }
 
 #[cfg(test)]
@@ -304,13 +313,19 @@ mod tests {
     }
 
     #[test]
-    fn assumed_views_are_named_or_given_by_their_numbers() {
+    fn assumed_views_are_named_given_by_their_numbers_or_by_kind() {
         for (name, view) in tubeloc_core::AssumedView::NAMED {
             let v = assumed_view(name).unwrap();
-            assert_eq!((v.name(), v.view()), (name, view));
+            assert!(!v.by_kind());
+            assert_eq!(v.for_frame(true), (name, view));
         }
         let v = assumed_view("96, 2,20").unwrap();
-        assert_eq!((v.name(), v.view().hfov_deg, v.view().height_m, v.view().pitch_deg), ("96,2,20", 96.0, 2.0, 20.0));
-        assert!(assumed_view("hazcam").unwrap_err().contains("HFOV_DEG,HEIGHT_M,PITCH_DEG"));
+        let (name, view) = v.for_frame(false);
+        assert_eq!((name, view.hfov_deg, view.height_m, view.pitch_deg), ("96,2,20", 96.0, 2.0, 20.0));
+        let auto = assumed_view("auto").unwrap();
+        assert!(auto.by_kind());
+        assert_eq!((auto.for_frame(true), auto.for_frame(false)), (("navcam", tubeloc_core::AssumedView::NAVCAM), ("mast", tubeloc_core::AssumedView::MAST)));
+        let e = assumed_view("hazcam").unwrap_err();
+        assert!(e.contains("HFOV_DEG,HEIGHT_M,PITCH_DEG") && e.contains("auto"), "{e}");
     }
 }

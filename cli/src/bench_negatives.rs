@@ -14,13 +14,10 @@ use std::time::Instant;
 use tubeloc_core::AssumedView;
 use tubeloc_core::ScoreCalibration;
 
-/// Assumed view of a negative frame: grey Navcam-like or the colour mast view.
+/// Assumed view of a negative frame: grey Navcam-like or the colour mast view
+/// ([`AssumedView::of_kind`], what `tubeloc locate --assumed-view auto` takes).
 fn negative_view(grey: bool) -> AssumedView {
-    if grey {
-        AssumedView::NAVCAM
-    } else {
-        AssumedView::MAST
-    }
+    AssumedView::of_kind(grey).1
 }
 
 /// Learned detections kept at the threshold on each real negative frame.

@@ -53,7 +53,8 @@ pub struct DetectArgs {
     /// Instead of --camera, for an --image without a camera model: its camera and ground
     /// (unless --ground) are assumed from its size, as `tubeloc locate --assumed-view` does
     /// (`navcam`: 45 degree field of view, 1.9 m above level ground, 30 degrees down; `mast`: 20
-    /// degrees; or `HFOV_DEG,HEIGHT_M,PITCH_DEG`, e.g. `90,2,25`).
+    /// degrees; `auto`: navcam for a grey image, mast for a colour one; or
+    /// `HFOV_DEG,HEIGHT_M,PITCH_DEG`, e.g. `90,2,25`).
     #[arg(long, value_parser = crate::args::assumed_view, requires = "image", conflicts_with_all = ["camera", "dataset"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Distances of the tubes from the camera, "NEAR:FAR" metres, for the learned detector's
@@ -108,12 +109,19 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 /// image's size and its ground. `None` for any other `--camera`.
 fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (&args.assumed_view, &args.image) {
-        let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
+        let ((w, h), grey) = match view.by_kind() {
+            true => {
+                let im = tubeloc_detect::input::open_eight_bit(image).with_context(|| format!("reading {}", image.display()))?;
+                ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)
+            }
+            false => (tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?, true),
+        };
+        let view = view.for_frame(grey).1;
         let ground = match args.ground {
             Some(g) => g,
-            None => view.view().ground_plane()?,
+            None => view.ground_plane()?,
         };
-        return Ok(Some((view.view().camera(w, h), ground)));
+        return Ok(Some((view.camera(w, h), ground)));
     }
     let Some(path) = args.line2d.camera.clone() else { return Ok(None) };
     let Some(cams) = tubeloc_calib::interchange::pds::read_pds_cameras(&path)? else { return Ok(None) };

@@ -945,3 +945,34 @@ fn an_assumed_view_given_by_its_numbers_locates_a_wide_camera_frame() {
 fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
+
+#[test]
+fn the_auto_view_judges_each_frame_of_a_batch_by_its_kind() {
+    // A folder of one grey Navcam frame and one colour Mastcam frame (training sols): `auto`
+    // gives the grey one the navcam view and the colour one the mast view, each frame exactly
+    // as its own named view locates it.
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path();
+    let frames = tmp.join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    let bg = real_data().join("backgrounds");
+    let (grey, colour) = ("NLB_524534514EDR_F0562034NCAM00280M_.jpg", "0076MR0005710070103772E01.jpg");
+    std::fs::copy(bg.join("msl_navcam_1024").join(grey), frames.join(grey)).unwrap();
+    std::fs::copy(bg.join("msl_mastcam_marsdata").join(colour), frames.join(colour)).unwrap();
+    let out = tmp.join("auto");
+    let o = tubeloc(&["locate", "--assumed-view", "auto", "--images", p(&frames), "--out", p(&out)]);
+    assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+    for (file, view, hfov) in [(grey, "navcam", 45f64), (colour, "mast", 20f64)] {
+        let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
+        let doc = read_json(&out.join("frames").join(format!("{stem}.json")));
+        assert_eq!(doc["assumed_view"], view, "{file}");
+        let w = doc["camera_model"]["width"].as_f64().unwrap();
+        assert!((doc["camera_model"]["fx"].as_f64().unwrap() - (w / 2.0) / (hfov / 2.0).to_radians().tan()).abs() < 1e-9, "{file}: {}", doc["camera_model"]);
+        let single = tmp.join(format!("{view}.json"));
+        let o = tubeloc(&["locate", "--assumed-view", view, "--image", p(&frames.join(file)), "--out", p(&single)]);
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+        let alone = read_json(&single);
+        assert!(!doc["detections"].as_array().unwrap().is_empty(), "{file}: no detection to compare");
+        assert_eq!((&doc["tubes"], &doc["detections"], &doc["up_cam"]), (&alone["tubes"], &alone["detections"], &alone["up_cam"]), "{file}");
+    }
+}

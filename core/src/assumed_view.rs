@@ -35,6 +35,17 @@ impl AssumedView {
     /// The named views, as the command line and Python name them.
     pub const NAMED: [(&'static str, AssumedView); 2] = [("navcam", AssumedView::NAVCAM), ("mast", AssumedView::MAST)];
 
+    /// The named view a frame without a camera model is judged under by its kind (how `tubeloc
+    /// bench` judges real frames, and `--assumed-view auto`): [`AssumedView::NAVCAM`] for a
+    /// grey frame, [`AssumedView::MAST`] for a colour one; with its name.
+    pub fn of_kind(grey: bool) -> (&'static str, AssumedView) {
+        if grey {
+            ("navcam", AssumedView::NAVCAM)
+        } else {
+            ("mast", AssumedView::MAST)
+        }
+    }
+
     /// The view called `name` (`navcam` or `mast`); the error lists the names.
     pub fn by_name(name: &str) -> Result<AssumedView, CoreError> {
         Self::NAMED.iter().find(|(n, _)| *n == name).map(|(_, v)| *v).ok_or_else(|| CoreError::invalid("assumed view", format!("unknown view {name:?}: expected one of navcam, mast")))

@@ -88,9 +88,11 @@ pub struct LocateArgs {
     /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal
     /// field of view, 1.9 m above level ground, looking 30 degrees down (how `tubeloc bench`
     /// judges grey frames without a model); `mast`: the same with a 20 degree field (its
-    /// colour frames); or the view's numbers, `HFOV_DEG,HEIGHT_M,PITCH_DEG` (e.g. `90,2,25`
-    /// for a wide mast camera: the field of view sets the pixel scale the detectors work at).
-    /// Poses are then only as good as the assumption; mono only.
+    /// colour frames); `auto`: `navcam` for a grey frame, `mast` for a colour one (a folder of
+    /// both, judged as the bench judges them); or the view's numbers,
+    /// `HFOV_DEG,HEIGHT_M,PITCH_DEG` (e.g. `90,2,25` for a wide mast camera: the field of view
+    /// sets the pixel scale the detectors work at). Poses are then only as good as the
+    /// assumption; mono only.
     #[arg(long, value_parser = crate::args::assumed_view, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
@@ -400,6 +402,9 @@ pub struct Setup {
     /// The fisheye (CAHVORE) models of the cameras whose labels give one, by camera name: their
     /// images are resampled into the camera, the model's linear part, before locating.
     fisheyes: BTreeMap<String, tubeloc_calib::interchange::cahvore::Cahvore>,
+    /// With `--assumed-view`: the view each image was given, by image file name (`navcam`,
+    /// `mast`, or the numbers as given).
+    assumed_views: BTreeMap<String, String>,
     /// `--ignore-mask`: one mask for every frame, or a folder of masks by image stem.
     ignore_mask: Option<IgnoreMasks>,
     /// Name of the detector (`learned`, `line2d`, `external`).
@@ -413,12 +418,18 @@ impl Setup {
         // With --label-cameras and --right (one stereo pair), both labels, the right one last.
         let label_images: Vec<&Path> = images.iter().copied().chain(a.right.as_deref().filter(|_| a.label_cameras)).collect();
         let mut fisheyes = BTreeMap::new();
+        let mut assumed_views = BTreeMap::new();
         let (rig_path, pds, label_errors) = if let Some(view) = &a.assumed_view {
-            let (cams, errors) = assumed_cameras(view, &label_images);
+            let (cams, views, errors) = assumed_cameras(view, &label_images);
+            assumed_views = views;
             if cams.is_empty() {
                 bail!("{}", errors.into_values().next().unwrap_or_else(|| "--assumed-view: no image".into()));
             }
-            (PathBuf::from(format!("the assumed {} view (--assumed-view)", view.name())), Some(cams), errors)
+            let described = match view {
+                crate::args::AssumedViewArg::View(spec, _) => format!("the assumed {spec} view (--assumed-view)"),
+                crate::args::AssumedViewArg::Auto => "the assumed view of each frame's kind (--assumed-view auto: navcam for grey, mast for colour)".to_string(),
+            };
+            (PathBuf::from(described), Some(cams), errors)
         } else if a.label_cameras {
             let (cams, errors) = label_cameras(&label_images);
             if cams.is_empty() || (a.right.is_some() && !errors.is_empty()) {
@@ -532,7 +543,7 @@ impl Setup {
             }
             None => None,
         };
-        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, ignore_mask, detector_name })
+        Ok(Setup { rig, rig_path, selection, settings, locators, camera, per_image, pds, label_errors, fisheyes, assumed_views, ignore_mask, detector_name })
     }
 
     /// The rig camera that took `image`: the run's, or with a camera per image the one named
@@ -654,23 +665,39 @@ fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String
 }
 
 /// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
-/// under `view`, from the image's size; and, by image file name, why an image gives none.
-fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>) {
-    let (mut cams, mut errors) = (Vec::new(), BTreeMap::new());
-    for image in images {
+/// under `view`, from the image's size (with `auto`, and its pixels: grey or colour); by image
+/// file name, the view's name; and, by image file name, why an image gives none.
+fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>, BTreeMap<String, String>) {
+    use rayon::prelude::*;
+    let one = |image: &&Path| {
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let camera = tubeloc_detect::input::image_size(image).map_err(|e| format!("--assumed-view: reading {}: {e}", image.display())).and_then(|(w, h)| {
-            let (rig, ground) = view.view().rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
-            Ok(tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) })
+        let reading = |e: String| format!("--assumed-view: reading {}: {e}", image.display());
+        // `auto` decodes the frame to tell grey from colour (as `tubeloc bench` does).
+        let kind = match view.by_kind() {
+            true => tubeloc_detect::input::open_eight_bit(image).map(|im| ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)).map_err(|e| reading(e.to_string())),
+            false => tubeloc_detect::input::image_size(image).map(|size| (size, true)).map_err(|e| reading(e.to_string())),
+        };
+        let camera = kind.and_then(|((w, h), grey)| {
+            let (view_name, v) = view.for_frame(grey);
+            let (rig, ground) = v.rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
+            Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, view_name.to_string()))
         });
+        (name, camera)
+    };
+    let read: Vec<_> = if view.by_kind() { images.par_iter().map(one).collect() } else { images.iter().map(one).collect() };
+    let (mut cams, mut names, mut errors) = (Vec::new(), BTreeMap::new(), BTreeMap::new());
+    for (name, camera) in read {
         match camera {
-            Ok(c) => cams.push(c),
+            Ok((c, view_name)) => {
+                cams.push(c);
+                names.insert(name, view_name);
+            }
             Err(e) => {
                 errors.insert(name, e);
             }
         }
     }
-    (cams, errors)
+    (cams, names, errors)
 }
 
 /// The camera of the PDS camera list `cameras` (read from `rig_path`) that took `image`: the
@@ -754,7 +781,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             }),
             camera_model: &cam.model,
             resampled_from,
-            assumed_view: a.assumed_view.as_ref().map(|v| v.name()),
+            assumed_view: frame.image.file_name().and_then(|n| setup.assumed_views.get(n.to_string_lossy().as_ref())).map(String::as_str),
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
