@@ -263,7 +263,10 @@ pub fn assumed_view(s: &str) -> Result<AssumedViewArg, String> {
     if s.trim() == "auto" {
         return Ok(AssumedViewArg::Auto);
     }
-    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| format!("{e}, or auto"))?;
+    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| match s.contains(',') {
+        true => e.to_string(),
+        false => format!("unknown view {:?}: expected navcam, mast, auto, or HFOV_DEG,HEIGHT_M,PITCH_DEG (e.g. 90,2,25)", s.trim()),
+    })?;
     let spec = s.split(',').map(str::trim).collect::<Vec<_>>().join(",");
     Ok(AssumedViewArg::View(spec, view))
 }
