@@ -133,6 +133,24 @@ fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraMod
     Ok(Some((c.camera.model.clone(), args.ground.unwrap_or(c.ground))))
 }
 
+/// The warning for a frame whose tubes, at their expected range (`range_m`, `--range-m`; none
+/// when "off"), are narrower than the detectors can enlarge to their working width
+/// ([`tubeloc_detect::scale::MAX_ENLARGEMENT`]): few of them are found.
+pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, ground: Option<tubeloc_core::GroundPlane>, range_m: &str) -> Option<String> {
+    use tubeloc_detect::scale::{expected_range_m, expected_tube_width_px, MAX_ENLARGEMENT, WORKING_TUBE_WIDTH_PX};
+    let band = tubeloc_pipeline::shipped::parse_range_band(range_m).ok().flatten()?;
+    let ground = ground.map(|g| (g.normal, g.offset));
+    let width = expected_tube_width_px(cam, ground, band);
+    let least = WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT;
+    (width < least).then(|| {
+        format!(
+            "{}: tubes at their expected range ({:.1} m) are about {width:.1} px wide in this image, under the {least:.0} px that the detectors can enlarge to their working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
+            image.display(),
+            expected_range_m(cam, ground, band)
+        )
+    })
+}
+
 /// The learned decoder settings of `--decode-config` (defaults without it).
 fn decode_config(path: Option<&Path>) -> Result<tubeloc_detect::learned::DecodeConfig> {
     let Some(p) = path else { return Ok(Default::default()) };
@@ -153,6 +171,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
     let mut args = args;
     let pds = image_camera(&mut args)?;
+    if let (Some((cam, ground)), Some(image)) = (&pds, &args.image) {
+        if let Some(w) = narrow_tubes_warning(image, cam, Some(*ground), &args.range_m) {
+            eprintln!("warning: {w}");
+        }
+    }
     let dets = match args.method {
         Method::Line2d | Method::Fused => {
             let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;

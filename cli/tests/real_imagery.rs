@@ -976,3 +976,26 @@ fn the_auto_view_judges_each_frame_of_a_batch_by_its_kind() {
         assert_eq!((&doc["tubes"], &doc["detections"], &doc["up_cam"]), (&alone["tubes"], &alone["detections"], &alone["up_cam"]), "{file}");
     }
 }
+
+#[test]
+fn a_frame_too_coarse_for_its_tubes_is_warned_about() {
+    // A Navcam frame binned 4x4 on board (256 px, training sol) under the navcam view: tubes at
+    // their expected range are about 2 px wide, under the 4 px the detectors can enlarge to
+    // their 16 px working width. `locate` and `detect` say so; the full frame is not warned about.
+    let dir = tempfile::tempdir().unwrap();
+    let bg = real_data().join("backgrounds");
+    let coarse = bg.join("msl_navcam_256/NLA_406373677EDR_D0050104TRAV00024M_.jpg");
+    let full = bg.join("msl_navcam_1024/NLB_524534514EDR_F0562034NCAM00280M_.jpg");
+    let run = |args: &[&str]| -> String {
+        let o = tubeloc(args);
+        assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
+        stderr(&o)
+    };
+    let out = |name: &str| dir.path().join(name);
+    let err = run(&["locate", "--assumed-view", "navcam", "--image", p(&coarse), "--out", p(&out("c.json"))]);
+    assert!(err.contains("warning:") && err.contains("1.8 px wide") && err.contains("at most 4x"), "{err}");
+    let err = run(&["detect", "--method", "learned", "--assumed-view", "navcam", "--image", p(&coarse), "--out", p(&out("d.json"))]);
+    assert!(err.contains("1.8 px wide"), "{err}");
+    let err = run(&["locate", "--assumed-view", "navcam", "--image", p(&full), "--out", p(&out("f.json"))]);
+    assert!(!err.contains("px wide"), "{err}");
+}

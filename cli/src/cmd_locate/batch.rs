@@ -141,7 +141,7 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
             skipped += 1;
         } else {
             let written = locate_frame(&setup, a, frame, None, a.overlays).and_then(|o| {
-                if let Some(w) = &o.warning {
+                for w in &o.warnings {
                     bar.suspend(|| eprintln!("warning: frame {k}: {w}"));
                 }
                 if let Some(png) = &o.overlay_png {

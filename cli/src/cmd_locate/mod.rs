@@ -723,9 +723,10 @@ pub struct FrameOutcome {
     pub overlay_png: Option<Vec<u8>>,
     /// What the pipeline found.
     pub found: tubeloc_pipeline::LocateOutput,
-    /// Why the frame's tubes could not be handed over as a whole (an underexposed frame), for
-    /// the caller to print.
-    pub warning: Option<String>,
+    /// What the caller should print about the frame: why its tubes could not be handed over
+    /// as a whole (an underexposed frame), or why few are found (tubes narrower in it than the
+    /// detectors can enlarge to their working width).
+    pub warnings: Vec<String>,
 }
 
 /// Locates the tubes of one frame and encodes its document (with run statistics since
@@ -746,14 +747,15 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         let ignore = setup.ignore_mask_for(&cam, &frame.image, size)?;
         let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up, ignore: ignore.as_deref() };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
-        let warning = (found.highlight_level < setup.settings.min_highlight_level).then(|| {
+        let mut warnings: Vec<String> = crate::cmd_detect::narrow_tubes_warning(&frame.image, &cam.model, input.ground, &a.range_m).into_iter().collect();
+        warnings.extend((found.highlight_level < setup.settings.min_highlight_level).then(|| {
             format!(
                 "{} is underexposed (its highlights lie at grey level {:.0} < {:.0}): no tube is handed over from it; retake the frame, or lower --min-highlight-level",
                 frame.image.display(),
                 found.highlight_level,
                 setup.settings.min_highlight_level
             )
-        });
+        }));
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
             true => {
@@ -785,7 +787,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
-        Ok(FrameOutcome { json, overlay_png, found, warning })
+        Ok(FrameOutcome { json, overlay_png, found, warnings })
     })
 }
 

@@ -33,7 +33,7 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
     files::write_atomic_group(&[(out, &done.json), (&overlay_path, png)]).with_context(|| format!("writing {} and {}", out.display(), overlay_path.display()))?;
 
     let converged = done.found.tubes.len();
-    if let Some(w) = &done.warning {
+    for w in &done.warnings {
         eprintln!("warning: {w}");
     }
     print_summary(&frame.image, &done.found, converged);
