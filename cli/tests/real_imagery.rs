@@ -994,8 +994,10 @@ fn a_frame_too_coarse_for_its_tubes_is_warned_about() {
     let out = |name: &str| dir.path().join(name);
     let err = run(&["locate", "--assumed-view", "navcam", "--image", p(&coarse), "--out", p(&out("c.json"))]);
     assert!(err.contains("warning:") && err.contains("1.8 px wide") && err.contains("at most 4x"), "{err}");
+    let warnings = read_json(&out("c.json"))["warnings"].clone();
+    assert!(warnings.as_array().is_some_and(|w| w.len() == 1 && err.contains(w[0].as_str().unwrap())), "the frame document: {warnings}");
     let err = run(&["detect", "--method", "learned", "--assumed-view", "navcam", "--image", p(&coarse), "--out", p(&out("d.json"))]);
     assert!(err.contains("1.8 px wide"), "{err}");
     let err = run(&["locate", "--assumed-view", "navcam", "--image", p(&full), "--out", p(&out("f.json"))]);
-    assert!(!err.contains("px wide"), "{err}");
+    assert!(!err.contains("px wide") && read_json(&out("f.json")).get("warnings").is_none(), "{err}");
 }

@@ -318,10 +318,14 @@ pub struct LocateDoc<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub resampled_from: Option<&'static str>,
     /// The view `camera_model` and the ground were assumed from (`--assumed-view`: `navcam`,
-    /// `mast` or `HFOV_DEG,HEIGHT_M,PITCH_DEG`) when the frame came without a camera model:
+    /// `mast` (given, or by `auto`) or `HFOV_DEG,HEIGHT_M,PITCH_DEG`) when the frame came without a camera model:
     /// the poses rest on that assumption.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub assumed_view: Option<&'a str>,
+    /// What was printed as warnings about the frame (underexposed; tubes narrower than the
+    /// detectors can enlarge to their working width); absent when none.
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    pub warnings: &'a [String],
     /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
     pub detections: &'a [TubeDetection],
 }
@@ -784,6 +788,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             camera_model: &cam.model,
             resampled_from,
             assumed_view: frame.image.file_name().and_then(|n| setup.assumed_views.get(n.to_string_lossy().as_ref())).map(String::as_str),
+            warnings: &warnings,
             detections: &found.detections,
         };
         let json = serde_json::to_vec_pretty(&doc).context("serializing the poses")?;
