@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
 /// Which detector to run.
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
     /// Line2D template matching.
     Line2d,
@@ -151,6 +151,26 @@ pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, groun
     })
 }
 
+/// The note `tubeloc detect --dataset D` prints when images of `D` carry no `camera`: they are
+/// detected as they are, not at the pixel scale the detectors work at (the learned detector's
+/// working scale, unless `--range-m off`; Line2D's library scale), so tubes much narrower or
+/// wider than about 16 px are mostly missed.
+fn cameraless_note(dataset: &Path, method: Method, range_m: &str) -> Result<Option<String>> {
+    if method == Method::External || (method == Method::Learned && crate::cmd_detect_learned::parse_range_band(range_m)?.is_none()) {
+        return Ok(None);
+    }
+    let ann = dataset.join("annotations.json");
+    let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+    let without = ds.images.iter().filter(|im| !im.extra.contains_key("camera")).count();
+    Ok((without > 0).then(|| {
+        format!(
+            "note: {without} of {} images of {} carry no `camera`: they are detected as they are, not resampled to the pixel scale the detectors work at (tubes about 16 px wide), and tubes much narrower are mostly missed; give each image its `camera` (and `ground`) in the annotations, or locate frames without a model with `tubeloc locate --assumed-view`",
+            ds.images.len(),
+            ann.display()
+        )
+    }))
+}
+
 /// The learned decoder settings of `--decode-config` (defaults without it).
 fn decode_config(path: Option<&Path>) -> Result<tubeloc_detect::learned::DecodeConfig> {
     let Some(p) = path else { return Ok(Default::default()) };
@@ -171,6 +191,11 @@ pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
     let mut args = args;
     let pds = image_camera(&mut args)?;
+    if let Some(d) = &args.dataset {
+        if let Some(note) = cameraless_note(d, args.method, &args.range_m)? {
+            eprintln!("{note}");
+        }
+    }
     if let (Some((cam, ground)), Some(image)) = (&pds, &args.image) {
         if let Some(w) = narrow_tubes_warning(image, cam, Some(*ground), &args.range_m) {
             eprintln!("warning: {w}");

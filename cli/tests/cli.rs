@@ -597,3 +597,22 @@ fn without_templates_the_default_library_is_used() {
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert!(doc["tubes"].as_array().unwrap().iter().any(|t| t["converged"] == true), "a tube is located");
 }
+
+#[test]
+fn detect_notes_dataset_images_that_carry_no_camera() {
+    // Images without a `camera` are detected as they are, not at the working scale: said once,
+    // with the count; a dataset whose images all carry one, or `--range-m off`, says nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    ok(&["synth", "--preset", "tiny", "--scenes", "1", "--scale", "0.25", "--resolution", "256", "--seed", "5", "--out", p(&ds)]);
+    let detect = |extra: &[&str]| stderr(&ok(&[&["detect", "--method", "learned", "--dataset", p(&ds), "--out", p(&dir.path().join("d.json"))], extra].concat()));
+    assert!(!detect(&[]).contains("carry no `camera`"));
+    let ann = ds.join("annotations.json");
+    let mut gt: Value = serde_json::from_str(&std::fs::read_to_string(&ann).unwrap()).unwrap();
+    let n = gt["images"].as_array().unwrap().len();
+    gt["images"][0].as_object_mut().unwrap().remove("camera");
+    std::fs::write(&ann, gt.to_string()).unwrap();
+    let err = detect(&[]);
+    assert!(err.contains(&format!("note: 1 of {n} images")) && err.contains("carry no `camera`") && err.contains("annotations.json"), "{err}");
+    assert!(!detect(&["--range-m", "off"]).contains("carry no `camera`"));
+}
