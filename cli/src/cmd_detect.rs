@@ -134,8 +134,9 @@ fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraMod
 }
 
 /// The warning for a frame whose tubes, at their expected range (`range_m`, `--range-m`; none
-/// when "off"), are narrower than the detectors can enlarge to their working width
-/// ([`tubeloc_detect::scale::MAX_ENLARGEMENT`]): few of them are found.
+/// when "off"), are narrower than the learned detector can enlarge to its working width
+/// ([`tubeloc_detect::scale::MAX_ENLARGEMENT`]): few of them are found. (Line2D, which
+/// enlarges at most `--max-upsample`, warns of its own limit.)
 pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, ground: Option<tubeloc_core::GroundPlane>, range_m: &str) -> Option<String> {
     use tubeloc_detect::scale::{expected_range_m, expected_tube_width_px, MAX_ENLARGEMENT, WORKING_TUBE_WIDTH_PX};
     let band = tubeloc_pipeline::shipped::parse_range_band(range_m).ok().flatten()?;
@@ -144,7 +145,7 @@ pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, groun
     let least = WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT;
     (width < least).then(|| {
         format!(
-            "{}: tubes at their expected range ({:.1} m) are about {width:.1} px wide in this image, under the {least:.0} px that the detectors can enlarge to their working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
+            "{}: tubes at their expected range ({:.1} m) are about {width:.1} px wide in this image, under the {least:.0} px that the learned detector can enlarge to its working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
             image.display(),
             expected_range_m(cam, ground, band)
         )
@@ -197,7 +198,8 @@ pub fn run(args: DetectArgs) -> Result<()> {
         }
     }
     if let (Some((cam, ground)), Some(image)) = (&pds, &args.image) {
-        if let Some(w) = narrow_tubes_warning(image, cam, Some(*ground), &args.range_m) {
+        let learned = matches!(args.method, Method::Learned | Method::Fused);
+        if let Some(w) = narrow_tubes_warning(image, cam, Some(*ground), &args.range_m).filter(|_| learned) {
             eprintln!("warning: {w}");
         }
     }

@@ -303,7 +303,7 @@ pub fn run_line2d(opts: &Line2dOpts, images: &[(u64, PathBuf)], cameras: &BTreeM
         }
         if !det.resolvable(cam) {
             let (sx, sy) = det.scale_for(cam);
-            bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
+            bar.suspend(|| eprintln!("warning: {}: its camera would need {:.1}x enlargement to the library's scale (at most {}, --max-upsample): too coarse for the library's tubes, not searched", path.display(), sx.max(sy), det.params.max_upsample));
         }
         let g = grounds.get(id).or(ground);
         let (dets, verified) = runner.detect(&img, cam, g, *id).with_context(|| format!("detecting in {}", path.display()))?;

@@ -998,6 +998,9 @@ fn a_frame_too_coarse_for_its_tubes_is_warned_about() {
     assert!(warnings.as_array().is_some_and(|w| w.len() == 1 && err.contains(w[0].as_str().unwrap())), "the frame document: {warnings}");
     let err = run(&["detect", "--method", "learned", "--assumed-view", "navcam", "--image", p(&coarse), "--out", p(&out("d.json"))]);
     assert!(err.contains("1.8 px wide"), "{err}");
+    // Line2D has its own limit (--max-upsample) and says so itself.
+    let err = run(&["detect", "--method", "line2d", "--assumed-view", "navcam", "--image", p(&coarse), "--out", p(&out("l.json"))]);
+    assert!(!err.contains("px wide") && err.contains("too coarse") && err.contains("--max-upsample"), "{err}");
     let err = run(&["locate", "--assumed-view", "navcam", "--image", p(&full), "--out", p(&out("f.json"))]);
     assert!(!err.contains("px wide") && read_json(&out("f.json")).get("warnings").is_none(), "{err}");
 }
