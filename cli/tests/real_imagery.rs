@@ -974,6 +974,11 @@ fn the_auto_view_judges_each_frame_of_a_batch_by_its_kind() {
         let alone = read_json(&single);
         assert!(!doc["detections"].as_array().unwrap().is_empty(), "{file}: no detection to compare");
         assert_eq!((&doc["tubes"], &doc["detections"], &doc["up_cam"]), (&alone["tubes"], &alone["detections"], &alone["up_cam"]), "{file}");
+        // `detect --assumed-view auto` picks the same view.
+        let (auto_dets, named_dets) = (tmp.join(format!("{view}_auto_dets.json")), tmp.join(format!("{view}_dets.json")));
+        ok(&["detect", "--method", "learned", "--assumed-view", "auto", "--image", p(&frames.join(file)), "--out", p(&auto_dets)]);
+        ok(&["detect", "--method", "learned", "--assumed-view", view, "--image", p(&frames.join(file)), "--out", p(&named_dets)]);
+        assert_eq!(read_json(&auto_dets), read_json(&named_dets), "{file}");
     }
 }
 
