@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The real stage of `tubeloc bench` (the test part) for a candidate learned model, with its
 # score calibration, pose evidence and fused calibration refitted on the real validation
-# composites by the shipped rules (data/models/README.md), as records 0073 measured theirs.
+# composites by the shipped rules (data/models/README.md), as record 0073 measured its candidates.
 #
 # Usage: scripts/test_candidate_model.sh MODEL.safetensors OUT_DIR [REAL_DATA]
 #
