@@ -1008,4 +1008,17 @@ fn a_frame_too_coarse_for_its_tubes_is_warned_about() {
     assert!(!err.contains("px wide") && err.contains("too coarse") && err.contains("--max-upsample"), "{err}");
     let err = run(&["locate", "--assumed-view", "navcam", "--image", p(&full), "--out", p(&out("f.json"))]);
     assert!(!err.contains("px wide") && read_json(&out("f.json")).get("warnings").is_none(), "{err}");
+    // A batch lists the frame's warnings in its summary, and keeps them when it resumes.
+    let frames = out("frames");
+    std::fs::create_dir(&frames).unwrap();
+    for f in [&coarse, &full] {
+        std::fs::copy(f, frames.join(f.file_name().unwrap())).unwrap();
+    }
+    for pass in 0..2 {
+        let err = run(&["locate", "--assumed-view", "navcam", "--images", p(&frames), "--out", p(&out("batch"))]);
+        assert!(err.contains("1 frame(s) with warnings"), "pass {pass}: {err}");
+        let summary = read_json(&out("batch/summary.json"));
+        let warned: Vec<&str> = summary["frames"].as_array().unwrap().iter().filter(|e| e.get("warnings").is_some()).map(|e| e["image"].as_str().unwrap()).collect();
+        assert!(warned.len() == 1 && warned[0].ends_with(coarse.file_name().unwrap().to_str().unwrap()), "pass {pass}: {summary}");
+    }
 }

@@ -70,6 +70,10 @@ pub struct FrameEntry {
     /// Why the frame failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// The warnings about the frame (its document's `warnings`: underexposed, tubes too narrow
+    /// for the detector); absent when none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 impl Summary {
@@ -105,7 +109,7 @@ pub fn overlay_path(image: &Path) -> String {
 
 /// Counts of a finished frame's document: located tubes and rejected detections, when `path`
 /// holds a complete document of `frame` (schema, image and tubes as this run would write).
-fn finished_counts(path: &Path, frame: &Frame) -> Option<(usize, usize)> {
+fn finished_counts(path: &Path, frame: &Frame) -> Option<(usize, usize, Vec<String>)> {
     let doc: Value = serde_json::from_slice(&std::fs::read(path).ok()?).ok()?;
     let image_matches = doc["image"].as_str() == frame.image.to_str() && doc["right_image"].as_str() == frame.right.as_deref().and_then(Path::to_str);
     if doc["schema"] != FRAME_SCHEMA || !image_matches {
@@ -113,7 +117,8 @@ fn finished_counts(path: &Path, frame: &Frame) -> Option<(usize, usize)> {
     }
     let tubes = doc["tubes"].as_array()?;
     let located = tubes.iter().filter(|t| t["status"] == "located").count();
-    Some((located, tubes.len() - located))
+    let warnings = doc["warnings"].as_array().map(|w| w.iter().filter_map(|v| v.as_str().map(str::to_string)).collect()).unwrap_or_default();
+    Some((located, tubes.len() - located, warnings))
 }
 
 /// Runs a batch (`--images`); returns the number of located tubes over the shard's frames.
@@ -134,10 +139,10 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
     for &k in &mine {
         let frame = &frames[k];
         let (rel, rel_overlay) = (result_path(&frame.image), overlay_path(&frame.image));
-        let mut entry = FrameEntry { frame: k, image: frame.image.clone(), right_image: frame.right.clone(), result: Some(rel.clone()), located: 0, rejected: 0, error: None };
+        let mut entry = FrameEntry { frame: k, image: frame.image.clone(), right_image: frame.right.clone(), result: Some(rel.clone()), located: 0, rejected: 0, error: None, warnings: Vec::new() };
         let done = finished_counts(&out.join(&rel), frame).filter(|_| !a.overlays || out.join(&rel_overlay).exists());
-        if let Some((located, rejected)) = done {
-            (entry.located, entry.rejected) = (located, rejected);
+        if let Some((located, rejected, warnings)) = done {
+            (entry.located, entry.rejected, entry.warnings) = (located, rejected, warnings);
             skipped += 1;
         } else {
             let written = locate_frame(&setup, a, frame, None, a.overlays).and_then(|o| {
@@ -148,10 +153,10 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
                     files::write_atomic(&out.join(&rel_overlay), png).with_context(|| format!("writing {}", out.join(&rel_overlay).display()))?;
                 }
                 files::write_atomic(&out.join(&rel), &o.json).with_context(|| format!("writing {}", out.join(&rel).display()))?;
-                Ok((o.found.tubes.len(), o.found.rejected.len()))
+                Ok((o.found.tubes.len(), o.found.rejected.len(), o.warnings))
             });
             match written {
-                Ok((located, rejected)) => (entry.located, entry.rejected) = (located, rejected),
+                Ok((located, rejected, warnings)) => (entry.located, entry.rejected, entry.warnings) = (located, rejected, warnings),
                 Err(e) => {
                     bar.suspend(|| eprintln!("warning: frame {k} ({}): {e:#}", frame.image.display()));
                     (entry.result, entry.error) = (None, Some(format!("{e:#}")));
@@ -165,6 +170,7 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
     bar.finish_and_clear();
 
     let failed = entries.iter().filter(|e| e.error.is_some()).count();
+    let warned = entries.iter().filter(|e| !e.warnings.is_empty()).count();
     let located = entries.iter().map(|e| e.located).sum();
     let summary = Summary { schema: SUMMARY_SCHEMA.into(), shard, frames_in_list: frames.len(), list_digest: list_digest(&frames), located, failed, frames: entries };
     summary.save(&out)?;
@@ -187,6 +193,9 @@ pub fn run(a: &LocateArgs) -> Result<usize> {
         out.join("summary.json").display()
     );
     eprintln!("{processed} frame(s) in {seconds:.1} s: {fps:.2} frames/s on {threads} thread(s), {:.3} frames/s per core", fps / threads as f64);
+    if warned > 0 {
+        eprintln!("{warned} frame(s) with warnings (listed in {})", out.join("summary.json").display());
+    }
     if failed > 0 {
         bail!("{failed} of {} frame(s) failed (listed with their errors in {}); run the same command again to retry them", mine.len(), out.join("summary.json").display());
     }
