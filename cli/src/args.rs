@@ -247,6 +247,19 @@ impl AssumedViewArg {
         matches!(self, AssumedViewArg::Auto)
     }
 
+    /// The size of the image at `image` and its view, with the view's name (as
+    /// [`AssumedViewArg::for_frame`]): `auto` decodes the image to tell grey from colour (as
+    /// `tubeloc bench` does); other views read its size only. The error names the file.
+    pub fn frame_view(&self, image: &std::path::Path) -> Result<((u32, u32), &str, tubeloc_core::AssumedView), String> {
+        let reading = |e: String| format!("reading {}: {e}", image.display());
+        let (size, grey) = match self.by_kind() {
+            true => tubeloc_detect::input::open_eight_bit(image).map(|im| ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)).map_err(|e| reading(e.to_string()))?,
+            false => (tubeloc_detect::input::image_size(image).map_err(|e| reading(e.to_string()))?, true),
+        };
+        let (name, view) = self.for_frame(grey);
+        Ok((size, name, view))
+    }
+
     /// The view of a frame, grey or not, and its name as a frame document gives it: the
     /// name as given (`navcam`, `mast`, or the numbers), or with `auto` the named view of the
     /// frame's kind.

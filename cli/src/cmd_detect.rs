@@ -109,14 +109,7 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 /// image's size and its ground. `None` for any other `--camera`.
 fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (&args.assumed_view, &args.image) {
-        let ((w, h), grey) = match view.by_kind() {
-            true => {
-                let im = tubeloc_detect::input::open_eight_bit(image).with_context(|| format!("reading {}", image.display()))?;
-                ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)
-            }
-            false => (tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?, true),
-        };
-        let view = view.for_frame(grey).1;
+        let ((w, h), _, view) = view.frame_view(image).map_err(anyhow::Error::msg)?;
         let ground = match args.ground {
             Some(g) => g,
             None => view.ground_plane()?,
@@ -138,16 +131,14 @@ fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraMod
 /// ([`tubeloc_detect::scale::MAX_ENLARGEMENT`]): few of them are found. (Line2D, which
 /// enlarges at most `--max-upsample`, warns of its own limit.)
 pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, ground: Option<tubeloc_core::GroundPlane>, range_m: &str) -> Option<String> {
-    use tubeloc_detect::scale::{expected_range_m, expected_tube_width_px, MAX_ENLARGEMENT, WORKING_TUBE_WIDTH_PX};
+    use tubeloc_detect::scale::{expected_range_m, tube_width_px, MAX_ENLARGEMENT, WORKING_TUBE_WIDTH_PX};
     let band = tubeloc_pipeline::shipped::parse_range_band(range_m).ok().flatten()?;
-    let ground = ground.map(|g| (g.normal, g.offset));
-    let width = expected_tube_width_px(cam, ground, band);
-    let least = WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT;
+    let range = expected_range_m(cam, ground.map(|g| (g.normal, g.offset)), band);
+    let (width, least) = (tube_width_px(cam, range), WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT);
     (width < least).then(|| {
         format!(
-            "{}: tubes at their expected range ({:.1} m) are about {width:.1} px wide in this image, under the {least:.0} px that the learned detector can enlarge to its working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
-            image.display(),
-            expected_range_m(cam, ground, band)
+            "{}: tubes at their expected range ({range:.1} m) are about {width:.1} px wide in this image, under the {least:.0} px that the learned detector can enlarge to its working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
+            image.display()
         )
     })
 }

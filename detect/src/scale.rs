@@ -87,16 +87,16 @@ pub fn expected_range_m(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, 
 /// `WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT` (4 px) stay narrower than the working width.
 pub const MAX_ENLARGEMENT: f64 = 4.0;
 
-/// Width of a tube's body at the expected range ([`expected_range_m`]) in the image, pixels:
+/// Width of a tube's body at range `range_m` (metres) in the image, pixels:
 /// `w = sqrt(fx fy) D / r`.
-pub fn expected_tube_width_px(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, band: RangeBand) -> f64 {
-    (cam.fx * cam.fy).sqrt() * TUBE_BODY_DIAMETER_M / expected_range_m(cam, ground, band)
+pub fn tube_width_px(cam: &CameraModel, range_m: f64) -> f64 {
+    (cam.fx * cam.fy).sqrt() * TUBE_BODY_DIAMETER_M / range_m
 }
 
 /// The factor by which to resample the image so that tubes are about
 /// [`WORKING_TUBE_WIDTH_PX`] wide (see the module doc).
 pub fn working_scale(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, band: RangeBand) -> f64 {
-    let s = WORKING_TUBE_WIDTH_PX / expected_tube_width_px(cam, ground, band);
+    let s = WORKING_TUBE_WIDTH_PX / tube_width_px(cam, expected_range_m(cam, ground, band));
     if !s.is_finite() {
         return 1.0;
     }
@@ -421,13 +421,14 @@ mod tests {
         assert!(r > 2.5 && r < 4.0, "{r}");
         let s = working_scale(&cam, Some((up, -1.97)), RangeBand::default());
         let w = 1226.0 * TUBE_BODY_DIAMETER_M / r;
-        assert!((expected_tube_width_px(&cam, Some((up, -1.97)), RangeBand::default()) - w).abs() < 1e-9);
+        assert!((tube_width_px(&cam, r) - w).abs() < 1e-9);
         assert!((s * w - WORKING_TUBE_WIDTH_PX).abs() < 1e-9, "s {s} w {w}");
         assert!(s > 2.0);
         // A 256 px frame of the same camera (4x4 binned): tubes about 2 px wide, enlarged by at
         // most 4.
         let binned = CameraModel { width: 256, height: 256, fx: cam.fx / 4.0, fy: cam.fy / 4.0, cx: 127.5, cy: 127.5, ..cam };
-        assert!((expected_tube_width_px(&binned, Some((up, -1.97)), RangeBand::default()) - w / 4.0).abs() < 0.05);
+        let r_binned = expected_range_m(&binned, Some((up, -1.97)), RangeBand::default());
+        assert!((tube_width_px(&binned, r_binned) - w / 4.0).abs() < 0.05);
         assert_eq!(working_scale(&binned, Some((up, -1.97)), RangeBand::default()), MAX_ENLARGEMENT);
     }
 

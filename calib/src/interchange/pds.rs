@@ -98,7 +98,7 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
     let mut out: Vec<PdsCamera> = Vec::with_capacity(list.len());
     for (k, e) in list.iter().enumerate() {
         let fail = |m: String| CalibError::parse(path, format!("entry {k}: {m}"));
-        if e.get("model_type").and_then(Value::as_str) == Some("CAHVORE") {
+        if is_fisheye(e) {
             continue;
         }
         let cam = entry(e).map_err(fail)?;
@@ -109,8 +109,7 @@ pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError
     }
     // A list of fisheyes only has no pinhole camera, yet `tubeloc locate` reads its entries'
     // labels ([`fisheye_cameras`]).
-    let fisheye = |e: &Value| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE");
-    if out.is_empty() && !list.iter().any(fisheye) {
+    if out.is_empty() && !list.iter().any(is_fisheye) {
         return Err(CalibError::parse(path, "no CAHV or CAHVOR camera in the list"));
     }
     Ok(out)
@@ -149,11 +148,21 @@ pub fn camera_of_image<'a>(cameras: &'a [PdsCamera], path: &Path, image: &Path) 
     }
 }
 
-/// The image file names of the CAHVORE (fisheye) entries of the PDS camera list at `path`,
-/// which [`pds_cameras`] leaves out; empty when the file is not such a list.
-fn fisheye_entries(path: &Path) -> Vec<String> {
+/// Whether a list entry is a CAHVORE (fisheye) model, which [`pds_cameras`] leaves out.
+fn is_fisheye(e: &Value) -> bool {
+    e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")
+}
+
+/// The CAHVORE (fisheye) entries of the PDS camera list at `path`, with their image file
+/// names; empty when the file is not such a list.
+fn fisheye_list_entries(path: &Path) -> Vec<(String, Value)> {
     let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
-    list.iter().filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")).filter_map(|e| Path::new(e.get("image")?.as_str()?).file_name()?.to_str().map(str::to_string)).collect()
+    list.into_iter().filter(is_fisheye).filter_map(|e| Some((Path::new(e.get("image")?.as_str()?).file_name()?.to_str()?.to_string(), e))).collect()
+}
+
+/// The image file names of the CAHVORE (fisheye) entries of the PDS camera list at `path`.
+fn fisheye_entries(path: &Path) -> Vec<String> {
+    fisheye_list_entries(path).into_iter().map(|(name, _)| name).collect()
 }
 
 /// A fisheye's camera (its model's linear part, with its ground) and the CAHVORE model its
@@ -168,11 +177,9 @@ pub type FisheyeCamera = (PdsCamera, Cahvore);
 /// ([`super::linearize::LinearResampling`]), or why the entry gives none. Empty when the
 /// file is not such a list.
 pub fn fisheye_cameras(path: &Path) -> Vec<(String, Result<FisheyeCamera, String>)> {
-    let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
     let folder = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
-    for e in list.iter().filter(|e| e.get("model_type").and_then(Value::as_str) == Some("CAHVORE")) {
-        let Some(name) = e.get("image").and_then(Value::as_str).and_then(|i| Path::new(i).file_name()?.to_str()).map(str::to_string) else { continue };
+    for (name, e) in fisheye_list_entries(path) {
         let camera = match e.get("label_file").and_then(Value::as_str) {
             None => Err(format!("{}: the CAHVORE (fisheye) entry for {name:?} names no `label_file`: give the image's PDS3 label as the rig", path.display())),
             Some(label) => match super::pds_label::read_resampled_label_camera(&folder.join(label)) {

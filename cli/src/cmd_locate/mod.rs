@@ -675,14 +675,7 @@ fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> (Vec
     use rayon::prelude::*;
     let one = |image: &&Path| {
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let reading = |e: String| format!("--assumed-view: reading {}: {e}", image.display());
-        // `auto` decodes the frame to tell grey from colour (as `tubeloc bench` does).
-        let kind = match view.by_kind() {
-            true => tubeloc_detect::input::open_eight_bit(image).map(|im| ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)).map_err(|e| reading(e.to_string())),
-            false => tubeloc_detect::input::image_size(image).map(|size| (size, true)).map_err(|e| reading(e.to_string())),
-        };
-        let camera = kind.and_then(|((w, h), grey)| {
-            let (view_name, v) = view.for_frame(grey);
+        let camera = view.frame_view(image).map_err(|e| format!("--assumed-view: {e}")).and_then(|((w, h), view_name, v)| {
             let (rig, ground) = v.rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
             Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, view_name.to_string()))
         });
