@@ -5,7 +5,7 @@
 set -u
 cd "$(dirname "$0")"
 secs=${1:-180}; shift || true
-targets=${*:-"rle_string obj_mesh tube_toml coco_dataset coco_results detections rig_json jpeg_markers"}
+targets=${*:-"rle_string obj_mesh tube_toml coco_dataset coco_results detections rig_json jpeg_markers assumed_view"}
 export RUSTC_BOOTSTRAP=1 CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-/work/targets/fuzz}
 mkdir -p logs
 for t in $targets; do
