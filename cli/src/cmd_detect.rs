@@ -128,19 +128,11 @@ fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraMod
 
 /// The warning for a frame whose tubes, at their expected range (`range_m`, `--range-m`; none
 /// when "off"), are narrower than the learned detector can enlarge to its working width
-/// ([`tubeloc_detect::scale::MAX_ENLARGEMENT`]): few of them are found. (Line2D, which
+/// ([`tubeloc_detect::scale::NarrowTubes`]): few of them are found. (Line2D, which
 /// enlarges at most `--max-upsample`, warns of its own limit.)
 pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, ground: Option<tubeloc_core::GroundPlane>, range_m: &str) -> Option<String> {
-    use tubeloc_detect::scale::{expected_range_m, tube_width_px, MAX_ENLARGEMENT, WORKING_TUBE_WIDTH_PX};
     let band = tubeloc_pipeline::shipped::parse_range_band(range_m).ok().flatten()?;
-    let range = expected_range_m(cam, ground.map(|g| (g.normal, g.offset)), band);
-    let (width, least) = (tube_width_px(cam, range), WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT);
-    (width < least).then(|| {
-        format!(
-            "{}: tubes at their expected range ({range:.1} m) are about {width:.1} px wide in this image, under the {least:.0} px that the learned detector can enlarge to its working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
-            image.display()
-        )
-    })
+    tubeloc_detect::scale::NarrowTubes::of(cam, ground.map(|g| (g.normal, g.offset)), band).map(|n| format!("{}: {n}", image.display()))
 }
 
 /// The note `tubeloc detect --dataset D` prints when images of `D` carry no `camera`: they are

@@ -93,6 +93,39 @@ pub fn tube_width_px(cam: &CameraModel, range_m: f64) -> f64 {
     (cam.fx * cam.fy).sqrt() * TUBE_BODY_DIAMETER_M / range_m
 }
 
+/// Tubes narrower at their expected range than the working scale can enlarge to the working
+/// width: `w < WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT` (4 px), with `w` the
+/// [`tube_width_px`] at the [`expected_range_m`]. Few such tubes are found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NarrowTubes {
+    /// The expected range of the tubes, metres.
+    pub range_m: f64,
+    /// Width of a tube's body at that range, pixels.
+    pub width_px: f64,
+}
+
+impl NarrowTubes {
+    /// `Some` when the tubes of an image of `cam` (on the plane `n · X = d`, camera frame, when
+    /// known) in `band` are too narrow for the working scale.
+    pub fn of(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, band: RangeBand) -> Option<Self> {
+        let range_m = expected_range_m(cam, ground, band);
+        let width_px = tube_width_px(cam, range_m);
+        (width_px < WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT).then_some(NarrowTubes { range_m, width_px })
+    }
+}
+
+impl std::fmt::Display for NarrowTubes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "tubes at their expected range ({:.1} m) are about {:.1} px wide in this image, under the {:.0} px that the learned detector can enlarge to its working width ({WORKING_TUBE_WIDTH_PX:.0} px, at most {MAX_ENLARGEMENT:.0}x): expect most tubes to be missed (a camera with finer pixels, or a closer view, finds them)",
+            self.range_m,
+            self.width_px,
+            WORKING_TUBE_WIDTH_PX / MAX_ENLARGEMENT
+        )
+    }
+}
+
 /// The factor by which to resample the image so that tubes are about
 /// [`WORKING_TUBE_WIDTH_PX`] wide (see the module doc).
 pub fn working_scale(cam: &CameraModel, ground: Option<(Vector3<f64>, f64)>, band: RangeBand) -> f64 {

@@ -26,6 +26,12 @@ pub trait TubeDetector: Send + Sync {
     fn origin(&self) -> String {
         self.name().to_string()
     }
+    /// Why this detector will miss most tubes in images of `camera` over `ground` (camera
+    /// frame), when it can tell from the geometry alone: e.g. the learned detector's
+    /// [`tubeloc_detect::scale::NarrowTubes`]. `None` by default.
+    fn scale_warning(&self, _camera: &CameraModel, _ground: Option<&GroundPlane>) -> Option<String> {
+        None
+    }
 }
 
 /// A shared detector (one model or template library for several locators, e.g. one per
@@ -41,6 +47,10 @@ impl<T: TubeDetector + ?Sized> TubeDetector for std::sync::Arc<T> {
 
     fn origin(&self) -> String {
         (**self).origin()
+    }
+
+    fn scale_warning(&self, camera: &CameraModel, ground: Option<&GroundPlane>) -> Option<String> {
+        (**self).scale_warning(camera, ground)
     }
 }
 
@@ -76,6 +86,10 @@ impl TubeDetector for LearnedDetector {
 
     fn origin(&self) -> String {
         self.origin.clone()
+    }
+
+    fn scale_warning(&self, camera: &CameraModel, ground: Option<&GroundPlane>) -> Option<String> {
+        tubeloc_detect::scale::NarrowTubes::of(camera, ground.map(|g| (g.normal, g.offset)), self.range?).map(|n| n.to_string())
     }
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {
@@ -207,6 +221,10 @@ impl FusedTubeDetector {
 impl TubeDetector for FusedTubeDetector {
     fn name(&self) -> &str {
         "fused"
+    }
+
+    fn scale_warning(&self, camera: &CameraModel, ground: Option<&GroundPlane>) -> Option<String> {
+        self.learned.scale_warning(camera, ground)
     }
 
     fn detect(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<TubeDetection>> {

@@ -173,6 +173,11 @@ pub struct LocateOutput {
     /// The frame's highlight level ([`highlight_level`]); under
     /// [`LocatorSettings::min_highlight_level`] no tube is located.
     pub highlight_level: f64,
+    /// What makes this frame's result unreliable, as the detector sees it from the camera
+    /// and ground ([`TubeDetector::scale_warning`]): e.g. tubes too narrow for the learned
+    /// detector's working scale. (An underexposed frame shows in `highlight_level` and in
+    /// its rejections.)
+    pub warnings: Vec<String>,
     /// Stage timings.
     pub timings: Timings,
 }
@@ -423,7 +428,8 @@ impl Locator {
         let grasp_ms = t2.elapsed().as_secs_f64() * 1e3;
         overlapping.extend(rejected);
         let rejected = overlapping;
-        Ok(LocateOutput { tubes, rejected, detections, merged, terrain_checked, up_cam: up, highlight_level: highlight, timings: Timings { detect_s, refine_s, fit_ms: refined.fit_ms, grasp_ms, total_s: t0.elapsed().as_secs_f64() } })
+        let warnings = self.detector.scale_warning(&self.camera().model, input.ground.as_ref()).into_iter().collect();
+        Ok(LocateOutput { tubes, rejected, detections, merged, terrain_checked, up_cam: up, highlight_level: highlight, warnings, timings: Timings { detect_s, refine_s, fit_ms: refined.fit_ms, grasp_ms, total_s: t0.elapsed().as_secs_f64() } })
     }
 
     /// The grasp check of each located tube (seed item `items[k]` of `refined`): the scene is

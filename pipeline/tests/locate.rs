@@ -213,3 +213,23 @@ fn a_kept_seed_is_snapped_to_the_silhouette_of_its_pose() {
     let failed = kept.clone().fail(tubeloc_core::FailureReason::Diverged, "test");
     assert!(unchanged(&failed, &wide_enough));
 }
+
+/// A frame whose tubes, at their expected range, are narrower than the learned detector can
+/// enlarge to its working width carries a warning saying so, with the width; a full Navcam
+/// frame under the same view does not, nor does a detector without a working scale.
+#[test]
+fn a_frame_too_coarse_for_the_learned_detector_is_warned_about() {
+    let locate = |size: u32, range_m: &str| {
+        let (rig, ground) = tubeloc_core::AssumedView::NAVCAM.rig("assumed", size, size).unwrap();
+        let detector = tubeloc_pipeline::shipped::learned_detector(None, range_m).unwrap();
+        let locator = Locator::new(&rig, &CameraSelection::default(), Box::new(detector), LocatorSettings::default()).unwrap();
+        let image = DynamicImage::ImageLuma8(GrayImage::from_fn(size, size, |x, y| Luma([(60 + (x * 7 + y * 13) % 90) as u8])));
+        locator.locate(&LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None }).unwrap().warnings
+    };
+    let coarse = locate(256, "1:4");
+    assert_eq!(coarse.len(), 1, "{coarse:?}");
+    // 256 px across 45 degrees: f = 309 px; the ground at the image centre is 3.8 m away.
+    assert!(coarse[0].contains("about 1.") && coarse[0].contains("under the 4 px"), "{}", coarse[0]);
+    assert!(locate(1024, "1:4").is_empty());
+    assert!(locate(256, "off").is_empty());
+}

@@ -174,7 +174,9 @@ impl PyLocator {
     /// ignore_mask: where no tube is handed over (rover hardware in view): a uint8 or uint16
     /// array of `left`'s size, in its pixels, non-zero where ignored (`read_image` reads a
     /// mask file; for a fisheye product, draw it on the image `read_product` returns); a tube
-    /// whose centre falls there gets status `in_ignored_region`.
+    /// whose centre falls there gets status `in_ignored_region`. A frame whose tubes are
+    /// too narrow for the detector at their expected range (a coarse or binned image, a
+    /// distant view) raises a `UserWarning` saying so, as `tubeloc locate` prints it.
     #[pyo3(signature = (left, right = None, ground = None, up = None, ignore_mask = None))]
     fn locate<'py>(&self, py: Python<'py>, left: &Bound<'py, PyAny>, right: Option<&Bound<'py, PyAny>>, ground: Option<&Bound<'py, PyAny>>, up: Option<Vec<f64>>, ignore_mask: Option<&Bound<'py, PyAny>>) -> PyResult<Vec<PyTube>> {
         let image = image_of(left, "left")?;
@@ -183,6 +185,10 @@ impl PyLocator {
         let input = LocateInput { image: &image, right: right.as_ref(), ground: ground_of(ground)?, up: up_of(up)?, ignore: ignore.as_ref() };
         let found = py.detach(|| self.read().locate(&input)).map_err(|e| chain_to_py(&e))?;
         *self.last_timings.lock().unwrap_or_else(|e| e.into_inner()) = Some(found.timings.clone());
+        for w in &found.warnings {
+            let msg = std::ffi::CString::new(w.as_str()).unwrap_or_default();
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &msg, 1)?;
+        }
         Ok(found.tubes.iter().map(|t| PyTube::from_located(py, t, "located")).chain(found.rejected.iter().map(|r| PyTube::from_located(py, &r.tube, r.reason.name()))).collect())
     }
 

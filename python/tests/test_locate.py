@@ -3,6 +3,7 @@
 import json
 import platform
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -202,3 +203,17 @@ def test_keeping_freed_memory_changes_no_result(demo_scene):
     assert applied == (sys.platform == "linux" and platform.libc_ver()[0] == "glibc")
     after = [t.to_dict() for t in locator.locate(img, ground=ground)]
     assert after == before and len(before) > 0
+
+
+def test_a_frame_too_coarse_for_the_detector_is_warned_about():
+    # A 256 px Navcam-like frame (binned on board) shows tubes about 1.4 px wide at their
+    # expected range: the locator says so, as `tubeloc locate` does; a full frame is not warned.
+    x, y = np.meshgrid(np.arange(256), np.arange(256))
+    frame = (60 + (7 * x + 13 * y) % 90).astype(np.uint8)
+    rig, ground = tubeloc.assumed_view("navcam", 256, 256)
+    with pytest.warns(UserWarning, match=r"about 1\.\d px wide in this image, under the 4 px"):
+        tubeloc.Locator(rig).locate(frame, ground=ground)
+    rig, ground = tubeloc.assumed_view("navcam", 1024, 1024)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tubeloc.Locator(rig).locate(np.tile(frame, (4, 4)), ground=ground)

@@ -195,3 +195,18 @@ def test_a_camera_lists_fisheye_entries_have_grounds_from_their_labels():
         # Level ground `camera_height_m` below the camera: n = up = -(site z) in the camera frame.
         up = [-row[2] for row in e["R_cam_from_site"]]
         assert (nx, ny, nz) == pytest.approx(up, abs=1e-9) and d == pytest.approx(-e["camera_height_m"], abs=1e-9)
+
+
+def test_a_fisheye_entry_whose_label_is_missing_is_left_out_with_a_warning(tmp_path):
+    s, c = 0.5, 0.8660254037844386
+    r = [[0.0, 1.0, 0.0], [-s, 0.0, c], [c, 0.0, s]]
+    entry = {"image": "images/NLB_1.jpg", "model_type": "CAHVOR", "image_width": 640, "image_height": 480,
+             "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 239.5, "skew": 0.0,
+             "R_cam_from_ref": r, "camera_center_ref_m": [0.8, 0.4, -2.0],
+             "R_cam_from_site": r, "camera_height_m": 2.0}
+    fisheye = dict(entry, image="images/RRB_2.jpg", model_type="CAHVORE", label_file="labels/RRB_2.LBL")
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([entry, fisheye]))
+    with pytest.warns(UserWarning, match=r"CAHVORE entry for \"RRB_2.jpg\".*RRB_2.LBL.*left out of the grounds"):
+        grounds = tubeloc.read_pds_grounds(path)
+    assert list(grounds) == ["NLB_1.jpg"]

@@ -744,9 +744,8 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
         let ignore = setup.ignore_mask_for(&cam, &frame.image, size)?;
         let input = LocateInput { image: &image, right: right.as_ref(), ground: a.ground.or_else(|| setup.pds.iter().find(|c| c.camera.name == cam.name).map(|c| c.ground)), up: a.up, ignore: ignore.as_deref() };
         let found = locator.locate(&input).with_context(|| format!("locating tubes in {}", frame.image.display()))?;
-        // The learned detector's working scale (Line2D warns of its own limit as it searches).
-        let learned = matches!(a.detector, Detector::Learned | Detector::Fused);
-        let mut warnings: Vec<String> = crate::cmd_detect::narrow_tubes_warning(&frame.image, &cam.model, input.ground, &a.range_m).filter(|_| learned).into_iter().collect();
+        // The detector's scale limits (Line2D warns of its own as it searches).
+        let mut warnings: Vec<String> = found.warnings.iter().map(|w| format!("{}: {w}", frame.image.display())).collect();
         warnings.extend((found.highlight_level < setup.settings.min_highlight_level).then(|| {
             format!(
                 "{} is underexposed (its highlights lie at grey level {:.0} < {:.0}): no tube is handed over from it; retake the frame, or lower --min-highlight-level",
