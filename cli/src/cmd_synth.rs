@@ -27,6 +27,9 @@ pub enum SynthCommand {
     Composite(crate::cmd_synth_composite::CompositeArgs),
     /// Composites of rendered tubes on the real rover frames of one split (by sol), as a COCO set.
     Real(crate::cmd_synth_real::RealArgs),
+    /// Hard negatives for training: crops of the real backgrounds of one split (no tube in
+    /// any) around a learned model's own confident detections, at each frame's working scale.
+    Negatives(crate::cmd_synth_negatives::NegativesArgs),
     /// Render a calibration set: a tag board seen by a rig's cameras, with exact corners.
     Calib(crate::cmd_synth_calib::SynthCalibArgs),
     /// Render stereo pairs (both cameras of a rig pair, same crop) with exact disparity maps.
@@ -70,6 +73,7 @@ pub fn run(a: SynthArgs) -> Result<()> {
     match a.command {
         Some(SynthCommand::Composite(c)) => crate::cmd_synth_composite::run(c),
         Some(SynthCommand::Real(c)) => crate::cmd_synth_real::run(c),
+        Some(SynthCommand::Negatives(c)) => crate::cmd_synth_negatives::run(c),
         Some(SynthCommand::Calib(c)) => crate::cmd_synth_calib::run(c),
         Some(SynthCommand::Stereo(c)) => crate::cmd_synth_stereo::run(c),
         None => run_dataset(a.dataset),

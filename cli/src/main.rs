@@ -24,6 +24,7 @@ mod cmd_stereo;
 mod cmd_synth;
 mod cmd_synth_calib;
 mod cmd_synth_composite;
+mod cmd_synth_negatives;
 mod cmd_synth_real;
 mod cmd_synth_stereo;
 mod cmd_templates;

@@ -1022,3 +1022,63 @@ fn a_frame_too_coarse_for_its_tubes_is_warned_about() {
         assert!(warned.len() == 1 && warned[0].ends_with(coarse.file_name().unwrap().to_str().unwrap()), "pass {pass}: {summary}");
     }
 }
+
+/// The split of a sol as `tubeloc_synth::real_set::split_of_sol` gives it (validation sols 38
+/// and 100 and the test sols, each with its neighbours; else by tens).
+fn split_of(sol: Option<i64>) -> &'static str {
+    let Some(s) = sol else { return "train" };
+    if [38i64, 100].iter().any(|v| (v - s).abs() <= 1) {
+        return "val";
+    }
+    if TEST_SOLS.iter().any(|v| (v - s).abs() <= 1) {
+        return "test";
+    }
+    ["test", "val", "train", "train", "train"][((s / 10) % 5) as usize]
+}
+
+#[test]
+fn hard_negatives_are_crops_of_training_backgrounds_only_and_repeat_exactly() {
+    let data = real_data();
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, floor: &str| {
+        let out = dir.path().join(name);
+        let o = ok(&["synth", "negatives", "--data", p(&data), "--limit", "60", "--min-probability", floor, "--out", p(&out)]);
+        let doc: Value = serde_json::from_str(&std::fs::read_to_string(out.join("annotations.json")).unwrap()).unwrap();
+        (out, doc, stderr(&o))
+    };
+    let (out, doc, said) = run("a", "0.2");
+    assert!(said.contains("of 60 frames of split train (probability >= 0.2)"), "{said}");
+    let images = doc["images"].as_array().unwrap();
+    assert!(!images.is_empty(), "the shipped model takes some clutter of 60 training frames for tubes: {said}");
+    assert_eq!(doc["annotations"].as_array().unwrap().len(), 0);
+    // Every crop comes from a background of a training sol, at that frame's working scale.
+    let manifest = std::fs::read_to_string(data.join("MANIFEST.tsv")).unwrap();
+    let sols: std::collections::HashMap<&str, Option<i64>> = manifest.lines().skip(1).map(|l| l.split('\t').collect::<Vec<_>>()).map(|c| (c[0], c[5].parse().ok())).collect();
+    for im in images {
+        let source = im["source"].as_str().unwrap();
+        assert!(source.starts_with("backgrounds/"), "{source}");
+        assert_eq!(split_of(sols[source]), "train", "{source}");
+        let (w, h) = (im["width"].as_u64().unwrap(), im["height"].as_u64().unwrap());
+        assert!(w <= 320 && h <= 320 && w.max(h) == 320, "{w}x{h}");
+        let crop = image::open(out.join("images").join(im["file_name"].as_str().unwrap())).unwrap();
+        assert_eq!((crop.width() as u64, crop.height() as u64), (w, h));
+        assert!(im["working_scale"].as_f64().unwrap() > 0.2);
+    }
+    // The same run gives the same crops, byte for byte; a higher floor cuts fewer.
+    let (again, doc2, _) = run("b", "0.2");
+    assert_eq!(doc, doc2);
+    for im in images {
+        let f = im["file_name"].as_str().unwrap();
+        assert_eq!(std::fs::read(out.join("images").join(f)).unwrap(), std::fs::read(again.join("images").join(f)).unwrap(), "{f}");
+    }
+    let (_, fewer, _) = run("c", "0.6");
+    assert!(fewer["images"].as_array().unwrap().len() < images.len());
+    // Bad requests are refused naming the problem, and nothing is written.
+    let o = tubeloc(&["synth", "negatives", "--data", p(&data), "--min-probability", "1.5", "--out", p(&dir.path().join("d"))]);
+    assert!(!o.status.success() && stderr(&o).contains("--min-probability 1.5 is not a probability"), "{}", stderr(&o));
+    let model = dir.path().join("m.safetensors");
+    std::fs::write(&model, b"x").unwrap();
+    let o = tubeloc(&["synth", "negatives", "--data", p(&data), "--model", p(&model), "--out", p(&dir.path().join("d"))]);
+    assert!(!o.status.success() && stderr(&o).contains("no score calibration for") && stderr(&o).contains("m.calibration.json"), "{}", stderr(&o));
+    assert!(!dir.path().join("d").exists());
+}

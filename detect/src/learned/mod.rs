@@ -13,6 +13,7 @@ pub mod augment;
 pub mod dataset;
 pub mod decode;
 pub mod error;
+pub mod hard_negatives;
 pub mod layers;
 pub mod model;
 pub mod net;
