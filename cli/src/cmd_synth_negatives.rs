@@ -60,6 +60,9 @@ pub fn run(a: NegativesArgs) -> Result<()> {
     if !(0.0..=1.0).contains(&a.min_probability) {
         bail!("--min-probability {} is not a probability in [0, 1]", a.min_probability);
     }
+    if a.split != RealSplit::Train {
+        eprintln!("warning: --split {}: these crops are of frames held out for choosing and reporting; never train on them", format!("{:?}", a.split).to_lowercase());
+    }
     let model_choice = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
     if let (Some(m), None) = (&a.model, &a.calibration) {
         let beside = m.with_extension("calibration.json");

@@ -1073,6 +1073,9 @@ fn hard_negatives_are_crops_of_training_backgrounds_only_and_repeat_exactly() {
     }
     let (_, fewer, _) = run("c", "0.6");
     assert!(fewer["images"].as_array().unwrap().len() < images.len());
+    // Crops of held-out frames are made on request, with a warning.
+    let o = ok(&["synth", "negatives", "--data", p(&data), "--split", "val", "--limit", "3", "--out", p(&dir.path().join("v"))]);
+    assert!(stderr(&o).contains("warning: --split val:") && stderr(&o).contains("never train on them"), "{}", stderr(&o));
     // Bad requests are refused naming the problem, and nothing is written.
     let o = tubeloc(&["synth", "negatives", "--data", p(&data), "--min-probability", "1.5", "--out", p(&dir.path().join("d"))]);
     assert!(!o.status.success() && stderr(&o).contains("--min-probability 1.5 is not a probability"), "{}", stderr(&o));
