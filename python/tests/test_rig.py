@@ -55,15 +55,22 @@ def test_opencv_yaml_round_trip(demo_scene, tmp_path):
         assert a["cameras"][0]["model"][k] == pytest.approx(b["cameras"][0]["model"][k], rel=1e-12)
 
 
-def test_pds_camera_list_gives_cameras_by_image_and_their_grounds(tmp_path):
-    # A level camera 2 m above the ground, looking along the rover's +x, 30 degrees down
-    # (rover frame: x forward, y right, z down; camera: x right, y down, z forward).
+def pds_entry(**changes):
+    """An entry of a PDS camera list (`cahv_to_pinhole.py`'s shape): a level camera 2 m above
+    the ground, looking along the rover's +x, 30 degrees down (rover frame: x forward, y right,
+    z down; camera: x right, y down, z forward), with `changes` applied."""
     s, c = 0.5, 0.8660254037844386
     r = [[0.0, 1.0, 0.0], [-s, 0.0, c], [c, 0.0, s]]
     entry = {"image": "images/NLB_1.jpg", "model_type": "CAHVOR", "image_width": 640, "image_height": 480,
              "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 239.5, "skew": 0.1,
              "R_cam_from_ref": r, "camera_center_ref_m": [0.8, 0.4, -2.0],
              "R_cam_from_site": r, "camera_height_m": 2.0}
+    return dict(entry, **changes)
+
+
+def test_pds_camera_list_gives_cameras_by_image_and_their_grounds(tmp_path):
+    s, c = 0.5, 0.8660254037844386  # sine and cosine of the 30 degree look down
+    entry = pds_entry()
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps([entry, dict(entry, image="images/NLB_2.jpg", camera_height_m=1.5)]))
     rig = tubeloc.read_rig(path)
@@ -198,13 +205,8 @@ def test_a_camera_lists_fisheye_entries_have_grounds_from_their_labels():
 
 
 def test_a_fisheye_entry_whose_label_is_missing_is_left_out_with_a_warning(tmp_path):
-    s, c = 0.5, 0.8660254037844386
-    r = [[0.0, 1.0, 0.0], [-s, 0.0, c], [c, 0.0, s]]
-    entry = {"image": "images/NLB_1.jpg", "model_type": "CAHVOR", "image_width": 640, "image_height": 480,
-             "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 239.5, "skew": 0.0,
-             "R_cam_from_ref": r, "camera_center_ref_m": [0.8, 0.4, -2.0],
-             "R_cam_from_site": r, "camera_height_m": 2.0}
-    fisheye = dict(entry, image="images/RRB_2.jpg", model_type="CAHVORE", label_file="labels/RRB_2.LBL")
+    entry = pds_entry()
+    fisheye = pds_entry(image="images/RRB_2.jpg", model_type="CAHVORE", label_file="labels/RRB_2.LBL")
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps([entry, fisheye]))
     with pytest.warns(UserWarning, match=r"CAHVORE entry for \"RRB_2.jpg\".*RRB_2.LBL.*left out of the grounds"):
