@@ -96,6 +96,14 @@ pub struct DecodeConfig {
     /// the colour ones and the calibration set do not, and the refitted threshold keeps fewer
     /// tubes.
     pub second_scale: f32,
+    /// Replace the mask of each instance narrower than this (its axis seed's width in the
+    /// image's own pixels, after the working scale) by the rectangle along the seed's direction
+    /// that the mask fills ([`super::rectangle`]); 0 = never. The score and the axis seed stay
+    /// the network mask's. Default: the working width, 16 px
+    /// (`docs/design/0077-rectangle-masks.md`: real validation composites, AR 0.257 → 0.315
+    /// grey, 0.449 → 0.477 colour; wider tubes, as on our renders, keep their sharper network
+    /// masks).
+    pub rectangle_below_px: f32,
 }
 
 impl Default for DecodeConfig {
@@ -118,6 +126,7 @@ impl Default for DecodeConfig {
             fill_weight: 1.0,
             mask_direction_weight: 2.0,
             second_scale: 0.0,
+            rectangle_below_px: crate::scale::WORKING_TUBE_WIDTH_PX as f32,
         }
     }
 }
@@ -141,6 +150,7 @@ impl DecodeConfig {
             ("fill_weight", self.fill_weight),
             ("mask_direction_weight", self.mask_direction_weight),
             ("second_scale", self.second_scale),
+            ("rectangle_below_px", self.rectangle_below_px),
         ];
         check_all(&non_negative, Closed(0.0), Open(f64::INFINITY))?;
         check_real("mask_logit", self.mask_logit, Closed(f64::NEG_INFINITY), Closed(f64::INFINITY))?;

@@ -19,6 +19,7 @@ pub mod model;
 pub mod net;
 pub mod optim;
 pub mod preprocess;
+pub mod rectangle;
 pub mod shipped;
 pub mod soup;
 pub mod targets;
@@ -42,7 +43,20 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
         return Err(LearnedError::Invalid(format!("RGB buffer has {} bytes, expected {}", rgb.len(), width * height * 3)));
     }
     let input = model.meta.preprocess.apply(rgb, width, height);
-    Ok(decode(&predict_for(model, &input, width, height, cfg)?, cfg))
+    Ok(shaped(decode(&predict_for(model, &input, width, height, cfg)?, cfg), cfg))
+}
+
+/// The instances, the masks of those narrower than [`DecodeConfig::rectangle_below_px`]
+/// (axis seed width, image pixels) replaced by [`rectangle::rectangle_mask`] (an instance whose
+/// rectangle is empty keeps its mask).
+fn shaped(mut instances: Vec<LearnedInstance>, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
+    let below = cfg.rectangle_below_px as f64;
+    instances.par_iter_mut().filter(|i| i.axis.width_px < below).for_each(|i| {
+        if let Some((mask, bbox)) = rectangle::rectangle_mask(&i.mask, i.axis.direction_px) {
+            (i.mask, i.bbox) = (mask, bbox);
+        }
+    });
+    instances
 }
 
 /// Detects tubes in an interleaved RGB8 image at working scale `s` ([`crate::scale`]): the
@@ -104,7 +118,7 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
         return Err(LearnedError::Invalid(format!("working scale {s} must be finite and > 0")));
     }
     if s == 1.0 {
-        return Ok(decode(&predict_for(model, &input, width, height, cfg)?, cfg));
+        return Ok(shaped(decode(&predict_for(model, &input, width, height, cfg)?, cfg), cfg));
     }
     let (nw, nh) = crate::scale::scaled_size(width, height, s);
     let c = model.meta.preprocess.channels();
@@ -118,7 +132,7 @@ pub fn detect_planes_at_scale(model: &LearnedModel, input: Vec<f32>, width: usiz
 fn detect_scaled(model: &LearnedModel, scaled: &[f32], (nw, nh): (usize, usize), (width, height): (usize, usize), cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
     let found = decode(&predict_for(model, scaled, nw, nh, cfg)?, cfg);
     let (sx, sy) = (nw as f64 / width as f64, nh as f64 / height as f64);
-    Ok(found
+    let back = found
         .into_par_iter()
         .filter_map(|i| {
             let small = i.mask.to_bounded_mask().ok()?;
@@ -138,7 +152,8 @@ fn detect_scaled(model: &LearnedModel, scaled: &[f32], (nw, nh): (usize, usize),
             axis.width_px /= sm;
             Some(LearnedInstance { score: i.score, mask, bbox, axis })
         })
-        .collect())
+        .collect();
+    Ok(shaped(back, cfg))
 }
 
 #[cfg(test)]
@@ -160,6 +175,23 @@ pub(crate) mod tests {
         let merged = merge_scales(vec![instance(0.4, 0, 10), instance(0.9, 1, 11), instance(0.5, 6, 16), instance(0.3, 25, 35)]);
         let kept: Vec<f64> = merged.iter().map(|i| i.score).collect();
         assert_eq!(kept, vec![0.9, 0.5, 0.3], "IoU(0-10, 1-11) = 9/11 merges; IoU(1-11, 6-16) = 5/15 does not");
+    }
+
+    /// Masks of tubes narrower than `rectangle_below_px` become rectangles; a wider tube and
+    /// the setting 0 keep the network's mask.
+    #[test]
+    fn only_narrow_tubes_masks_become_rectangles() {
+        // A ragged bar: rows 3-5 of columns 5-30, its end columns one row thin.
+        let ragged = BinaryMask::from_fn(40, 10, |x, y| (5..31).contains(&x) && (3..6).contains(&y) && !((x == 5 || x == 30) && y != 4));
+        let narrow = LearnedInstance { score: 0.9, bbox: ragged.bbox(), mask: Rle::from_mask(&ragged), axis: AxisSeed { centre_px: [17.5, 4.0], direction_px: [1.0, 0.0], length_px: 26.0, width_px: 3.0 } };
+        let wide = LearnedInstance { axis: AxisSeed { width_px: 20.0, ..narrow.axis }, ..narrow.clone() };
+        let bar = Rle::from_mask(&BinaryMask::from_fn(40, 10, |x, y| (5..31).contains(&x) && (3..6).contains(&y)));
+        let out = shaped(vec![narrow.clone(), wide.clone()], &DecodeConfig::default());
+        assert_eq!(out[0].mask, bar, "the narrow tube's mask is its rectangle");
+        assert_eq!((out[0].score, out[0].axis), (narrow.score, narrow.axis));
+        assert_eq!(out[1].mask, wide.mask, "a tube wider than the working width keeps its mask");
+        let off = shaped(vec![narrow.clone()], &DecodeConfig { rectangle_below_px: 0.0, ..DecodeConfig::default() });
+        assert_eq!(off[0].mask, narrow.mask);
     }
 
     /// The second scale runs only for enlarged images: a frame at scale 1 or shrunk gives the
