@@ -12,8 +12,10 @@
 //!   sides at the mask's full width, stray pixels ignored),
 //!
 //! a pixel belonging to it when its centre lies inside ([`tubeloc_core::Rle::from_polygon`]).
-//! Record 0077 chose it on the real validation composites (network masks' AR 0.257 → 0.309
-//! grey, 0.449 → 0.478 colour, AP50 +0.02).
+//! Record 0077 chose it on the real validation composites (AR 0.257 → 0.315 grey, 0.449 →
+//! 0.477 colour, AP50 +0.02). The decoder applies it to tubes narrower than the working width
+//! only ([`super::DecodeConfig::rectangle_below_px`]): wider tubes, as on our renders, keep
+//! their sharper network masks.
 
 use tubeloc_core::Rle;
 
