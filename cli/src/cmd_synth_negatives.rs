@@ -73,6 +73,8 @@ pub fn run(a: NegativesArgs) -> Result<()> {
     let calibration = model_choice.calibration(a.calibration.as_deref())?;
     let band = crate::cmd_detect_learned::parse_range_band(&a.range_m)?.context("--range-m off: the crops need a working scale")?;
     let model = model_choice.load()?;
+    // The crops need the detections' centres and scores only, not their masks' shape.
+    let centres_only = tubeloc_detect::learned::DecodeConfig { rectangle_below_px: 0.0, ..Default::default() };
     let manifest = a.data.join("MANIFEST.tsv");
     let frames: Vec<PathBuf> = read_manifest(&manifest)?.into_iter().filter(|e| e.split == "backgrounds" && split_of_sol(e.sol) == a.split).map(|e| e.file).take(a.limit.unwrap_or(usize::MAX)).collect();
     if frames.is_empty() {
@@ -91,7 +93,7 @@ pub fn run(a: NegativesArgs) -> Result<()> {
             let (_, view) = tubeloc_core::AssumedView::of_kind(input.info.grey);
             let (rig, ground) = view.rig("frame", w as u32, h as u32)?;
             let s = tubeloc_detect::scale::working_scale(&rig.cameras[0].model, Some((ground.normal, ground.offset)), band);
-            let found = tubeloc_detect::learned::detect_rgb_at_scale(&model, &input.rgb, w, h, s, &Default::default()).map_err(|e| tubeloc_synth::SynthError::Invalid(format!("{}: {e}", path.display())))?;
+            let found = tubeloc_detect::learned::detect_rgb_at_scale(&model, &input.rgb, w, h, s, &centres_only).map_err(|e| tubeloc_synth::SynthError::Invalid(format!("{}: {e}", path.display())))?;
             let centres = negative_centres(&found, |p| calibration.probability(p), a.min_probability, a.spacing_px);
             let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             searched += 1;

@@ -5,7 +5,7 @@
 //! looked up relative to the directory, then under `images/`.
 
 use super::augment::TrainImage;
-use super::decode::{DecodeConfig, LearnedInstance};
+use super::decode::{decode, predict_for, DecodeConfig, LearnedInstance};
 use super::error::LearnedError;
 use super::model::LearnedModel;
 use super::preprocess::Preprocess;
@@ -79,9 +79,12 @@ pub fn load_coco_dir_at_scale(dir: &Path, pre: Preprocess, limit: Option<usize>,
 }
 
 /// Runs the model on a preprocessed training image at its working scale, as inference does
-/// ([`super::detect_planes_at_scale`]).
+/// ([`super::detect_planes_at_scale`]; at scale 1 without copying the input).
 pub fn detect_image(model: &LearnedModel, img: &TrainImage, cfg: &DecodeConfig) -> Result<Vec<LearnedInstance>, LearnedError> {
-    super::detect_planes_at_scale(model, img.input.clone(), img.width, img.height, img.scale as f64, cfg)
+    if img.scale != 1.0 {
+        return super::detect_planes_at_scale(model, img.input.clone(), img.width, img.height, img.scale as f64, cfg);
+    }
+    Ok(super::shaped(decode(&predict_for(model, &img.input, img.width, img.height, cfg)?, cfg), cfg))
 }
 
 /// Mask quality of a model on labelled images (see [`mask_scores`]).

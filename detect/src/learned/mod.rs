@@ -49,7 +49,7 @@ pub fn detect_rgb(model: &LearnedModel, rgb: &[u8], width: usize, height: usize,
 /// The instances, the masks of those narrower than [`DecodeConfig::rectangle_below_px`]
 /// (axis seed width, image pixels) replaced by [`rectangle::rectangle_mask`] (an instance whose
 /// rectangle is empty keeps its mask).
-fn shaped(mut instances: Vec<LearnedInstance>, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
+pub(super) fn shaped(mut instances: Vec<LearnedInstance>, cfg: &DecodeConfig) -> Vec<LearnedInstance> {
     let below = cfg.rectangle_below_px as f64;
     instances.par_iter_mut().filter(|i| i.axis.width_px < below).for_each(|i| {
         if let Some((mask, bbox)) = rectangle::rectangle_mask(&i.mask, i.axis.direction_px) {
