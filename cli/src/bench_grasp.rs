@@ -24,7 +24,7 @@ pub const MATCH_M: f64 = 0.05;
 /// Runs the grasp check over up to `max_images` images of the dataset in `set` seeded by the
 /// detections file `dets` (stereo with the right images when `stereo`), with `calibration`'s
 /// probability threshold when given (else every converged tube is located). Returns the counts.
-pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, calibration: Option<&ScoreCalibration>) -> Result<Value> {
+pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, calibration: Option<&ScoreCalibration>, evidence: Option<&tubeloc_core::PoseEvidence>) -> Result<Value> {
     let ann = set.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
     let all = tubeloc_core::detection::read_coco_results(dets)?;
@@ -36,6 +36,7 @@ pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, cal
     if let Some(c) = calibration {
         settings.calibration = c.clone();
     }
+    settings.pose_evidence = evidence.cloned();
     let per_image: Vec<Value> = images
         .par_iter()
         .map(|im| -> Result<Value> {

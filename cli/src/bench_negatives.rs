@@ -21,11 +21,12 @@ fn negative_view(grey: bool) -> AssumedView {
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
-pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, evidence: Option<&tubeloc_core::PoseEvidence>, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
     let sols = negative_sols(data, &paths)?;
     let mut settings = tubeloc_pipeline::LocatorSettings::default();
     settings.calibration = cal.clone();
+    settings.pose_evidence = evidence.cloned();
     let mut per_frame = Vec::new();
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
@@ -51,7 +52,7 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
 /// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
 /// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
 /// None shows a tube, so every located tube is false.
-pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, frames: Option<usize>) -> Result<Value> {
+pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, evidence: Option<&tubeloc_core::PoseEvidence>, frames: Option<usize>) -> Result<Value> {
     use tubeloc_synth::real_set::split_of_sol;
     let list = data.join("with_cameras").join("cameras.json");
     let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
@@ -62,6 +63,7 @@ pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, mod
     if !chosen.is_empty() {
         let mut settings = tubeloc_pipeline::LocatorSettings::default();
         settings.calibration = cal.clone();
+        settings.pose_evidence = evidence.cloned();
         let rig = tubeloc_calib::interchange::pds::rig_of(&chosen);
         let mut locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings)?;
         for c in &chosen {

@@ -265,12 +265,14 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
-    let neg = if with_negatives { crate::bench_negatives::negatives(&stage.data, &learned_detector, &stage.calibration, stage.frames)? } else { Value::Null };
-    let neg_pds = crate::bench_negatives::pds_negatives(&stage.data, stage.split, &stage.model, &stage.calibration, stage.frames)?;
+    // `locate`'s acceptance: the calibrated score, then the model's pose evidence (as `tubeloc locate`).
+    let evidence = tubeloc_pipeline::shipped::locator_pose_evidence("learned", stage.model.path())?;
+    let neg = if with_negatives { crate::bench_negatives::negatives(&stage.data, &learned_detector, &stage.calibration, evidence.as_ref(), stage.frames)? } else { Value::Null };
+    let neg_pds = crate::bench_negatives::pds_negatives(&stage.data, stage.split, &stage.model, &stage.calibration, evidence.as_ref(), stage.frames)?;
     // `locate` (mono, each frame's own ground) on the composites: its grasp checks, and how many
     // of the tubes it hands over are composited tubes.
-    let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
-    let grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration))?;
+    let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration), evidence.as_ref())?;
+    let grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration), evidence.as_ref())?;
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
@@ -290,10 +292,10 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     drop(fused);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
     let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
-    let fused_located = if with_negatives { crate::bench_negatives::negatives(&stage.data, &fused_detector, &fused_cal, stage.frames)? } else { Value::Null };
+    let fused_located = if with_negatives { crate::bench_negatives::negatives(&stage.data, &fused_detector, &fused_cal, None, stage.frames)? } else { Value::Null };
     // `locate --detector fused` on the composites, as the learned detector's rows above.
-    let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_cal))?;
-    let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_cal))?;
+    let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_cal), None)?;
+    let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_cal), None)?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let pose_verifier = tubeloc_pipeline::shipped::line2d_pose_verifier("shipped")?;
@@ -388,7 +390,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**{}.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN), crate::bench_intervals::by_sol_note(&neg_pds["located_per_frame_ci"])).ok();
     writeln!(
         md,
-        "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold; `--detector fused` rows: the fused detections at the fused calibration's threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
+        "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold whose pose evidence reaches the floor, record 0078; `--detector fused` rows: the fused detections at the fused calibration's threshold): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
         crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour), ("grey composites, `--detector fused`", &fused_grasp), ("colour composites, `--detector fused`", &fused_grasp_colour)])
     )
     .ok();

@@ -279,6 +279,70 @@ fn locate_hands_the_planner_no_tube_on_a_real_frame_without_tubes() {
             assert!(pr < thr);
         }
     }
+    // The shipped model's pose evidence was checked too, at its default floor.
+    assert_eq!(doc["min_pose_evidence"], 0.3, "{}", doc["min_pose_evidence"]);
+}
+
+/// `locate` hands a learned detection's tube over only where its pose evidence reaches
+/// `--min-pose-evidence`: on a real tube-free frame with every converged tube past the score
+/// (`--min-probability 0`), each is located or `weak_pose_evidence` by its evidence alone, and
+/// a floor of 0 locates them all. A model file takes the evidence beside it, and without one
+/// the run says so and checks none.
+#[test]
+fn locate_checks_the_pose_evidence_of_learned_tubes() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = real_data().join("negatives_val/msl_navcam_1024/NLB_462567671EDR_F0402448NCAM00385M_.jpg");
+    let run = |extra: &[&str], name: &str| -> (Value, String) {
+        let out = dir.path().join(name);
+        let mut args = vec!["locate", "--assumed-view", "navcam", "--image", p(&image), "--min-probability", "0", "--out", p(&out)];
+        args.extend_from_slice(extra);
+        let o = tubeloc(&args);
+        assert!(matches!(o.status.code(), Some(0 | 3)), "{}", stderr(&o));
+        (serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap(), stderr(&o))
+    };
+    let statuses = |doc: &Value| -> Vec<String> { doc["tubes"].as_array().unwrap().iter().map(|t| t["status"].as_str().unwrap().to_string()).collect() };
+    let (doc, _) = run(&[], "a.json");
+    let min = doc["min_pose_evidence"].as_f64().unwrap();
+    let tubes = doc["tubes"].as_array().unwrap();
+    let converged: Vec<&Value> = tubes.iter().filter(|t| t["converged"] == true).collect();
+    assert!(converged.len() >= 3, "{} converged tubes", converged.len());
+    let (mut located, mut weak) = (0, 0);
+    for t in &converged {
+        let e = t["pose_evidence"].as_f64().unwrap_or_else(|| panic!("a converged tube carries its pose evidence: {t}"));
+        match t["status"].as_str().unwrap() {
+            "located" => {
+                assert!(e >= min, "{t}");
+                located += 1;
+            }
+            "weak_pose_evidence" => {
+                assert!(e < min, "{t}");
+                weak += 1;
+            }
+            "intersects_tube" => {}
+            other => panic!("status {other}: {t}"),
+        }
+    }
+    assert!(weak >= 1 && located >= 1, "{located} located, {weak} weak: the frame's clutter has both");
+    let (off, _) = run(&["--min-pose-evidence", "0"], "b.json");
+    assert!(statuses(&off).iter().all(|s| s != "weak_pose_evidence"), "{:?}", statuses(&off));
+    assert!(off["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").count() > located);
+
+    // A model file: its evidence beside it, else none (and a warning).
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models");
+    let model = dir.path().join("m.safetensors");
+    std::fs::copy(models.join("tubenet.safetensors"), &model).unwrap();
+    std::fs::copy(models.join("tubenet.calibration.json"), dir.path().join("m.calibration.json")).unwrap();
+    let (bare, e) = run(&["--model", p(&model)], "c.json");
+    assert!(e.contains("no pose evidence for") && e.contains("m.pose_evidence.json is missing"), "{e}");
+    assert!(bare.get("min_pose_evidence").is_none() && bare["tubes"].as_array().unwrap().iter().all(|t| t.get("pose_evidence").is_none()));
+    std::fs::copy(models.join("tubenet.pose_evidence.json"), dir.path().join("m.pose_evidence.json")).unwrap();
+    let (beside, e) = run(&["--model", p(&model)], "d.json");
+    assert!(!e.contains("no pose evidence"), "{e}");
+    assert_eq!(statuses(&beside), statuses(&doc), "the file beside the model is the shipped evidence");
+
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--image", p(&image), "--min-pose-evidence", "1.5", "--out", p(&dir.path().join("e.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--min-pose-evidence") && !dir.path().join("e.json").exists(), "{}", stderr(&o));
 }
 
 /// `locate --assumed-view navcam` on a frame without a camera model is the run with that view

@@ -70,6 +70,10 @@ pub struct LocatedTube {
     /// Probability that this is a tube: the detector's score through the score calibration
     /// ([`LocatorSettings::calibration`]), fitted on real validation composites.
     pub probability: f64,
+    /// Probability that this pose is a tube from the detector's score and the fit's evidence
+    /// ([`LocatorSettings::pose_evidence`]); absent without one and for unconverged fits.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_evidence: Option<f64>,
     /// The grasp's collision check against the ground, the other located tubes and (stereo)
     /// the terrain ([`tubeloc_grasp::GraspPlanner::check`]); for rejected tubes unchecked
     /// (`candidates_tried` 0).
@@ -88,6 +92,15 @@ pub enum Rejection {
         probability: f64,
         /// The threshold ([`tubeloc_core::ScoreCalibration::threshold`]).
         threshold: f64,
+    },
+    /// The fit converged and the probability passes the threshold, but the fit's evidence
+    /// ([`LocatorSettings::pose_evidence`]) says it is unlikely a tube: few contour samples on
+    /// edges, a blurred axis, no seal end showing.
+    WeakPoseEvidence {
+        /// The pose evidence ([`LocatedTube::pose_evidence`]).
+        evidence: f64,
+        /// The least accepted ([`LocatorSettings::min_pose_evidence`]).
+        min: f64,
     },
     /// The fitted tube's solid interpenetrates a stronger located tube's (two such tubes cannot
     /// both be right; [`tubeloc_grasp::overlapping_tubes`]).
@@ -113,12 +126,13 @@ pub enum Rejection {
 }
 
 impl Rejection {
-    /// A short machine-readable name (`fit_failed`, `low_probability`, `intersects_tube`,
-    /// `underexposed`, `in_ignored_region`).
+    /// A short machine-readable name (`fit_failed`, `low_probability`, `weak_pose_evidence`,
+    /// `intersects_tube`, `underexposed`, `in_ignored_region`).
     pub fn name(&self) -> &'static str {
         match self {
             Rejection::FitFailed(_) => "fit_failed",
             Rejection::LowProbability { .. } => "low_probability",
+            Rejection::WeakPoseEvidence { .. } => "weak_pose_evidence",
             Rejection::IntersectsTube { .. } => "intersects_tube",
             Rejection::Underexposed { .. } => "underexposed",
             Rejection::InIgnoredRegion { .. } => "in_ignored_region",
@@ -391,16 +405,19 @@ impl Locator {
             let failure = pose.failure.as_ref().map(|f| f.reason);
             let probability = cal.probability(pose.score);
             let ignored = ignored_pixel(input.ignore, &self.camera.model, &pose);
-            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability };
-            match (tube.pose.converged, failure, ignored) {
-                (true, _, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
-                (true, _, Some(pixel)) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } }),
-                (true, _, None) if probability >= cal.threshold => {
+            let evidence = self.settings.pose_evidence.as_ref().filter(|_| pose.converged).map(|m| m.probability(&pose));
+            let weak = evidence.filter(|&e| e < self.settings.min_pose_evidence);
+            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability, pose_evidence: evidence };
+            match (tube.pose.converged, failure, ignored, weak) {
+                (true, _, _, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
+                (true, _, Some(pixel), _) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } }),
+                (true, _, None, Some(evidence)) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::WeakPoseEvidence { evidence, min: self.settings.min_pose_evidence } }),
+                (true, _, None, None) if probability >= cal.threshold => {
                     tubes.push(tube);
                     tube_items.push(item);
                 }
-                (true, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
-                (false, reason, _) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
+                (true, _, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
+                (false, reason, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
             }
         }
         let t2 = Instant::now();

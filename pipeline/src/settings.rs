@@ -1,7 +1,7 @@
 //! Settings of a [`crate::Locator`] run: the refiner's, the stereo matcher's and those of the
 //! stages after the fit.
 
-use tubeloc_core::{ScoreCalibration, TubeModel};
+use tubeloc_core::{PoseEvidence, ScoreCalibration, TubeModel};
 use tubeloc_grasp::{GripperModel, PlannerSettings};
 use tubeloc_refine::silhouette::MaskSnap;
 use tubeloc_refine::two_view::TwoViewConfig;
@@ -42,7 +42,23 @@ pub struct LocatorSettings {
     /// (underexposed) frame, converged tubes are rejected as `underexposed`. Default 48; 0
     /// disables.
     pub min_highlight_level: f64,
+    /// The pose evidence of the detector's model ([`PoseEvidence`]: the probability that a
+    /// refined pose is a tube from the detector's score and the fit's evidence). With it, a
+    /// converged tube that passes the calibration's threshold is handed over only where its
+    /// pose evidence reaches [`LocatorSettings::min_pose_evidence`] (else `weak_pose_evidence`).
+    /// Default `None` (no such check); `tubeloc locate` loads the one fitted for the learned
+    /// model ([`crate::shipped::locator_pose_evidence`]).
+    pub pose_evidence: Option<PoseEvidence>,
+    /// The least pose evidence of a handed-over tube, with [`LocatorSettings::pose_evidence`].
+    /// Default [`DEFAULT_MIN_POSE_EVIDENCE`]; 0 disables.
+    pub min_pose_evidence: f64,
 }
+
+/// Default [`LocatorSettings::min_pose_evidence`]: the largest floor in steps of 0.1 that drops
+/// no true tube `locate` hands over on the real validation composites (lowest true tube 0.31;
+/// 5 of 12 false ones and 1 of the 3 false tubes on 101 tube-free validation frames lie below
+/// it; `docs/design/0078-pose-evidence-floor.md`).
+pub const DEFAULT_MIN_POSE_EVIDENCE: f64 = 0.3;
 
 /// Default [`LocatorSettings::min_highlight_level`]: near the geometric mean of the darkest
 /// well-exposed real frame of the shared data as tubeloc reads it (81) and the underexposed
@@ -61,6 +77,8 @@ impl Default for LocatorSettings {
             gripper: GripperModel::default(),
             grasp: PlannerSettings::default(),
             min_highlight_level: DEFAULT_MIN_HIGHLIGHT_LEVEL,
+            pose_evidence: None,
+            min_pose_evidence: DEFAULT_MIN_POSE_EVIDENCE,
         }
     }
 }

@@ -56,6 +56,43 @@ pub fn pose_evidence(spec: &str) -> Result<PoseEvidence> {
     Ok(m)
 }
 
+/// The settings `tubeloc locate --detector DETECTOR` runs with: the defaults, the score
+/// calibration ([`locator_calibration`]: `calibration` when given, else the detector's
+/// model's) and, with a floor `min_pose_evidence` > 0, the pose evidence
+/// ([`locator_pose_evidence`]) of the learned model (`model` `None`: the shipped one); with 0
+/// none is looked for. The floor must be a probability.
+pub fn locate_settings(detector: &str, calibration: Option<&Path>, model: Option<&Path>, min_pose_evidence: f64) -> Result<crate::LocatorSettings> {
+    if !(0.0..=1.0).contains(&min_pose_evidence) {
+        return Err(PipelineError::Input(format!("min_pose_evidence {min_pose_evidence}: expected a probability in [0, 1]")));
+    }
+    let pose_evidence = match min_pose_evidence > 0.0 {
+        true => locator_pose_evidence(detector, model)?,
+        false => None,
+    };
+    Ok(crate::LocatorSettings { calibration: locator_calibration(detector, calibration, model)?, pose_evidence, min_pose_evidence, ..Default::default() })
+}
+
+/// The pose evidence `tubeloc locate` checks the tubes of `detector` against
+/// ([`crate::LocatorSettings::pose_evidence`]): for the learned detector with the shipped model
+/// (`model` = `None`) the shipped one; with a model file, `<model>.pose_evidence.json` beside it
+/// when there is one (else none, with a warning on stderr, as the evidence's score feature is
+/// that model's); none for the other detectors (Line2D's and the fused detector's scores are
+/// already pose-based, an external detector's scores are its own).
+pub fn locator_pose_evidence(detector: &str, model: Option<&Path>) -> Result<Option<PoseEvidence>> {
+    match (detector, model) {
+        ("learned", None) => pose_evidence("shipped").map(Some),
+        ("learned", Some(m)) => {
+            let beside = m.with_extension("pose_evidence.json");
+            if beside.exists() {
+                return pose_evidence(&beside.to_string_lossy()).map(Some);
+            }
+            eprintln!("warning: no pose evidence for {} ({} is missing): tubes are handed over on the score calibration alone; fit one with `tubeloc eval --fit-pose-evidence`", m.display(), beside.display());
+            Ok(None)
+        }
+        _ => Ok(None),
+    }
+}
+
 /// The file the fused detector's embedded calibration comes from, relative to the workspace
 /// root.
 pub const FUSED_CALIBRATION_NAME: &str = "data/models/fused.calibration.json";

@@ -233,3 +233,52 @@ fn a_frame_too_coarse_for_the_learned_detector_is_warned_about() {
     assert!(locate(1024, "1:4").is_empty());
     assert!(locate(256, "off").is_empty());
 }
+
+/// With the model's pose evidence, a converged tube that passes the score calibration is handed
+/// over only where the evidence reaches the floor: the rendered tube at a confident score is,
+/// the same tube at a score the evidence calls unlikely is listed as `weak_pose_evidence` with
+/// the same pose, and a floor of 0 hands it over again.
+#[test]
+fn a_tube_with_weak_pose_evidence_is_not_handed_over() {
+    let model = common::default_model();
+    let cam = common::camera(false);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let (truth, up, gd) = common::random_truth(&mut rng, &model, &cam, (1.2, 1.6));
+    let left = common::render(&model, &cam, truth, up, gd, None, 11, 0.01);
+    let det: TubeDetection = common::mask_detection(&common::tube_mask(&model, &left));
+    let image = to_image(&left.image);
+    let ground = GroundPlane::new(up, gd).unwrap();
+    let evidence = tubeloc_pipeline::shipped::pose_evidence("shipped").unwrap();
+    let input = LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None };
+    let locate = |score: f64, min: f64| {
+        let mut settings = LocatorSettings::default();
+        settings.pose_evidence = Some(evidence.clone());
+        settings.min_pose_evidence = min;
+        let mut d = det.clone();
+        d.score = score;
+        Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![d], "test")), settings).unwrap().locate(&input).unwrap()
+    };
+    assert_eq!(LocatorSettings::default().min_pose_evidence, tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE);
+    // A clean rendered tube at the detector's confident score: every contour sample on an
+    // edge, a sharp axis; the evidence is high and recorded.
+    let sure = locate(0.9, tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE);
+    assert_eq!((sure.tubes.len(), sure.rejected.len()), (1, 0));
+    let e = sure.tubes[0].pose_evidence.expect("a converged tube carries its pose evidence");
+    assert!((e - evidence.probability(&sure.tubes[0].pose)).abs() < 1e-12 && e > 0.9, "{e}");
+    assert_eq!(serde_json::to_value(&sure.tubes[0]).unwrap()["pose_evidence"], serde_json::json!(e));
+    // The same fit at a score of 0.01 (the identity calibration, threshold 0, accepts it): the
+    // evidence is its score's as much as the fit's, and falls below the floor.
+    let weak = locate(0.01, tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE);
+    assert_eq!((weak.tubes.len(), weak.rejected.len()), (0, 1));
+    let r = &weak.rejected[0];
+    assert_eq!(r.reason.name(), "weak_pose_evidence");
+    let tubeloc_pipeline::Rejection::WeakPoseEvidence { evidence: ev, min } = r.reason else { panic!("{:?}", r.reason) };
+    assert!(ev < min && min == tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE && Some(ev) == r.tube.pose_evidence, "{ev} {min}");
+    assert!((r.tube.pose.centre - sure.tubes[0].pose.centre).norm() < 1e-9, "the score does not move the fit");
+    // A floor of 0 hands it over.
+    let off = locate(0.01, 0.0);
+    assert_eq!((off.tubes.len(), off.rejected.len()), (1, 0));
+    // Without pose evidence (the library default), no tube carries one.
+    let plain = Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det.clone()], "test")), LocatorSettings::default()).unwrap().locate(&input).unwrap();
+    assert!(plain.tubes.len() == 1 && plain.tubes[0].pose_evidence.is_none());
+}

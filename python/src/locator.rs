@@ -20,6 +20,7 @@ struct Options<'a> {
     calibration: Option<PathBuf>,
     min_probability: Option<f64>,
     min_highlight_level: Option<f64>,
+    min_pose_evidence: Option<f64>,
     range_m: &'a str,
 }
 
@@ -35,10 +36,10 @@ fn detector_of(o: &Options) -> PyResult<Box<dyn TubeDetector>> {
 }
 
 /// The settings of `tubeloc locate` with the options: the defaults, the score calibration
-/// (given, or the learned model's), the acceptance threshold.
+/// (given, or the learned model's), the acceptance threshold, the pose-evidence floor.
 fn settings_of(o: &Options) -> PyResult<LocatorSettings> {
-    let mut settings = LocatorSettings::default();
-    settings.calibration = shipped::locator_calibration(o.detector, o.calibration.as_deref(), o.model.as_deref()).map_err(|e| chain_to_py(&e))?;
+    let floor = o.min_pose_evidence.unwrap_or(tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE);
+    let mut settings = shipped::locate_settings(o.detector, o.calibration.as_deref(), o.model.as_deref(), floor).map_err(|e| chain_to_py(&e))?;
     if let Some(p) = o.min_probability {
         if !(0.0..=1.0).contains(&p) {
             return Err(to_py(format!("min_probability {p}: expected a probability in [0, 1]")));
@@ -113,7 +114,8 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 /// the stages after the fit, duplicate merging and grasp frames -- `tubeloc locate`'s pipeline.
 ///
 /// Locator(rig, detector="learned", model=None, templates=None, camera=None, pair=None,
-///         calibration=None, min_probability=None, range_m="1:4", min_highlight_level=None)
+///         calibration=None, min_probability=None, range_m="1:4", min_highlight_level=None,
+///         min_pose_evidence=None)
 ///
 /// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
 /// default the shipped model), "line2d" (templates: a .tlt library, default the default library
@@ -124,7 +126,10 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 /// (default: the calibration's). range_m: distances of the tubes "NEAR:FAR" metres, or "off".
 /// min_highlight_level: no tube is located in an underexposed frame, whose highlights (99th
 /// percentile of its 8-bit grey levels) lie below this (default 48, as `tubeloc locate
-/// --min-highlight-level`; 0: off).
+/// --min-highlight-level`; 0: off). min_pose_evidence: a learned detection's tube is handed
+/// over only where the probability that its pose is a tube (the model's pose evidence: score
+/// and the fit's evidence) reaches this (default 0.3, as `tubeloc locate --min-pose-evidence`;
+/// 0: off); below it the tube is rejected as "weak_pose_evidence".
 #[pyclass(name = "Locator", module = "tubeloc", frozen)]
 pub struct PyLocator {
     /// Read-locked by every call, write-locked by `select_camera`.
@@ -137,7 +142,7 @@ pub struct PyLocator {
 #[pymethods]
 impl PyLocator {
     #[new]
-    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4", min_highlight_level = None))]
+    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4", min_highlight_level = None, min_pose_evidence = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -151,10 +156,11 @@ impl PyLocator {
         min_probability: Option<f64>,
         range_m: &str,
         min_highlight_level: Option<f64>,
+        min_pose_evidence: Option<f64>,
     ) -> PyResult<Self> {
         let origin = rig_origin(rig);
         let rig = rig_of(rig)?;
-        let o = Options { detector, model, templates, calibration, min_probability, min_highlight_level, range_m };
+        let o = Options { detector, model, templates, calibration, min_probability, min_highlight_level, min_pose_evidence, range_m };
         let (locator, min_probability) = py.detach(|| -> PyResult<(Locator, f64)> {
             let det = detector_of(&o)?;
             let settings = settings_of(&o)?;
@@ -290,7 +296,7 @@ pub fn detect<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let origin = rig_origin(rig);
     let rig = rig_of(rig)?;
-    let o = Options { detector, model, templates, calibration: None, min_probability: None, min_highlight_level: None, range_m };
+    let o = Options { detector, model, templates, calibration: None, min_probability: None, min_highlight_level: None, min_pose_evidence: None, range_m };
     let det = py.detach(|| detector_of(&o))?;
     let locator = build(&rig, &origin, &selection_of(camera, None), det, LocatorSettings::default())?;
     let image = image_of(image, "image")?;

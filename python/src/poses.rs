@@ -11,7 +11,8 @@ use tubeloc_pipeline::LocatedTube;
 /// One tube pose in the camera frame (OpenCV: x right, y down, z forward; metres).
 ///
 /// From `Locator.locate` also its grasp frames, probability of being a tube and status
-/// (`located`, `fit_failed` or `low_probability`); from `refine` these are None.
+/// (`located`, or why not: `fit_failed`, `low_probability`, `weak_pose_evidence`, ...) and
+/// pose evidence; from `refine` these are None.
 #[pyclass(name = "Tube", module = "tubeloc", frozen)]
 pub struct PyTube {
     /// COCO image id of the detection it was refined from.
@@ -47,7 +48,13 @@ pub struct PyTube {
     /// Probability of a tube (the score through the model's calibration); None from `refine`.
     #[pyo3(get)]
     probability: Option<f64>,
-    /// `located`, `fit_failed` or `low_probability`; None from `refine`.
+    /// Probability that the pose is a tube from the detector's score and the fit's evidence
+    /// (the learned model's pose evidence); None without one, for unconverged fits and from
+    /// `refine`.
+    #[pyo3(get)]
+    pose_evidence: Option<f64>,
+    /// `located`, or why not (`fit_failed`, `low_probability`, `weak_pose_evidence`,
+    /// `intersects_tube`, `underexposed`, `in_ignored_region`); None from `refine`.
     #[pyo3(get)]
     status: Option<String>,
     /// Grasp frame in the camera frame, 4x4 homogeneous (origin at the centre, +x along the
@@ -102,6 +109,7 @@ impl PyTube {
             failure: reason,
             failure_message: p.failure.as_ref().map(|f| f.message.clone()),
             probability,
+            pose_evidence: located.and_then(|(t, _)| t.pose_evidence),
             status: located.map(|(_, s)| s.to_string()),
             t_cam_grasp: located.map(|(t, _)| matrix4(py, &t.t_cam_grasp)),
             t_rig_grasp: located.map(|(t, _)| matrix4(py, &t.t_rig_grasp)),

@@ -40,6 +40,10 @@ def assert_same_tube(py_tube, cli_tube):
     assert py_tube.converged == cli_tube["converged"]
     assert py_tube.score == pytest.approx(cli_tube["score"], abs=TOL)
     assert py_tube.probability == pytest.approx(cli_tube["probability"], abs=TOL)
+    if "pose_evidence" in cli_tube:
+        assert py_tube.pose_evidence == pytest.approx(cli_tube["pose_evidence"], abs=TOL)
+    else:
+        assert py_tube.pose_evidence is None
     assert py_tube.end_confidence == pytest.approx(cli_tube["end_confidence"], abs=TOL)
     for field in ("centre", "axis", "end_direction"):
         np.testing.assert_allclose(getattr(py_tube, field), cli_tube[field], rtol=0, atol=TOL, err_msg=field)
@@ -126,6 +130,23 @@ def test_an_underexposed_frame_hands_over_no_tube(demo_scene):
     assert not [t for t in unguarded if t.status == "underexposed"]
     with pytest.raises(tubeloc.TubelocError, match="grey level in \\[0, 255\\]"):
         tubeloc.Locator(str(rig), min_highlight_level=300)
+
+
+def test_the_pose_evidence_floor_is_the_clis(cli, demo_scene, tmp_path):
+    # The learned model's pose evidence is checked at the CLI's default floor; a floor of 1
+    # turns every tube the score accepts into `weak_pose_evidence`, as --min-pose-evidence 1.
+    rig, image, _ = demo_scene
+    found = tubeloc.Locator(str(rig)).locate(tubeloc.read_image(str(image)))
+    located = [t for t in found if t.status == "located"]
+    assert located and all(t.pose_evidence is not None and t.pose_evidence >= 0.3 for t in located)
+    strict = tubeloc.Locator(str(rig), min_pose_evidence=1.0).locate(tubeloc.read_image(str(image)))
+    assert not [t for t in strict if t.status == "located"]
+    passed = [t for t in found if t.status in ("located", "intersects_tube", "weak_pose_evidence")]
+    assert len([t for t in strict if t.status == "weak_pose_evidence"]) == len(passed)
+    doc = cli_locate(cli, tmp_path, rig, image, "--min-pose-evidence", "1")
+    assert [t["status"] for t in doc["tubes"]] == [t.status for t in strict]
+    with pytest.raises(tubeloc.TubelocError, match="min_pose_evidence"):
+        tubeloc.Locator(str(rig), min_pose_evidence=1.5)
 
 
 def test_ignore_mask_equals_the_cli(cli, demo_scene, tmp_path):

@@ -178,6 +178,13 @@ pub struct LocateArgs {
     /// listed as `underexposed` (0: off).
     #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL, value_parser = crate::args::grey_level)]
     pub min_highlight_level: f64,
+    /// Hand over a learned detection's tube only where the probability that its pose is a tube,
+    /// from the detector's score and the fit's evidence (contour on edges, a sharp axis, a seal
+    /// end that shows; the model's pose evidence, `tubeloc eval --fit-pose-evidence`), reaches
+    /// this; below it the tube is listed as `weak_pose_evidence` (0: off). The shipped model's
+    /// evidence is embedded; a --model file's is `<model>.pose_evidence.json` beside it.
+    #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE, value_parser = probability)]
+    pub min_pose_evidence: f64,
     /// Mask image of the frames' size whose non-zero pixels cover what no tube is handed over
     /// from: rover hardware in view (the arm, the deck, wheels) or any other region; or a
     /// folder of masks, one per frame named after the image (`<image stem>.png`; a frame
@@ -226,6 +233,7 @@ impl LocateArgs {
             calibration: None,
             min_probability: None,
             min_highlight_level: tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL,
+            min_pose_evidence: tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE,
             ignore_mask: None,
             range_m: "1:4".into(),
             out: Some(out),
@@ -305,6 +313,10 @@ pub struct LocateDoc<'a> {
     pub tubes: Vec<TubeOut<'a>>,
     /// The probability threshold tubes were accepted at.
     pub min_probability: f64,
+    /// The least pose evidence tubes were accepted at (`--min-pose-evidence`); absent when no
+    /// pose evidence was checked (off, or a detector without one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_pose_evidence: Option<f64>,
     /// Run statistics of a one-image run: wall time (s) and peak resident memory (MiB) of the
     /// whole run. Absent from the frames of a batch run (its `run.json` holds them), so that a
     /// frame's document depends on its inputs only.
@@ -339,7 +351,8 @@ pub struct TubeOut<'a> {
     /// The tube.
     #[serde(flatten)]
     pub tube: &'a LocatedTube,
-    /// `located` (handed to the planner), `fit_failed`, `low_probability` or `intersects_tube`.
+    /// `located` (handed to the planner), or why not: `fit_failed`, `low_probability`,
+    /// `weak_pose_evidence`, `intersects_tube`, `underexposed` or `in_ignored_region`.
     pub status: &'static str,
 }
 
@@ -512,8 +525,7 @@ impl Setup {
         };
         let selection = CameraSelection { camera: camera_name, pair };
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
-        let mut settings = LocatorSettings::default();
-        settings.calibration = tubeloc_pipeline::shipped::locator_calibration(a.detector.name(), a.calibration.as_deref(), model.path())?;
+        let mut settings = tubeloc_pipeline::shipped::locate_settings(a.detector.name(), a.calibration.as_deref(), model.path(), a.min_pose_evidence)?;
         settings.min_highlight_level = a.min_highlight_level;
         if let Some(p) = a.min_probability {
             settings.calibration.threshold = p;
@@ -775,6 +787,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             t_rig_cam: cam.t_rig_cam,
             tubes,
             min_probability: setup.settings.calibration.threshold,
+            min_pose_evidence: setup.settings.pose_evidence.as_ref().map(|_| setup.settings.min_pose_evidence),
             run: started.map(|t0| {
                 let t = &found.timings;
                 serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb(), "detect_s": t.detect_s, "refine_s": t.refine_s, "grasp_ms": t.grasp_ms, "locate_s": t.total_s})

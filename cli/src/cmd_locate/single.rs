@@ -65,6 +65,10 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
                 lines.push(format!("  tube {i}: rejected (its solid intersects tube {other}'s), score {:.2}", p.score));
                 continue;
             }
+            Some(tubeloc_pipeline::Rejection::WeakPoseEvidence { evidence, min }) => {
+                lines.push(format!("  tube {i}: rejected (its fit's evidence makes it a tube with probability {evidence:.3} < {min:.3}), score {:.2}", p.score));
+                continue;
+            }
             Some(tubeloc_pipeline::Rejection::Underexposed { highlight, min }) => {
                 lines.push(format!("  tube {i}: rejected (the frame is underexposed: highlights at grey level {highlight:.0} < {min:.0}), score {:.2}", p.score));
                 continue;
@@ -79,7 +83,7 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
         let g = t.t_rig_grasp.translation() * 1e3;
         lines.push(match &p.failure {
             None => format!(
-                "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}, P(tube) {:.3}",
+                "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}, P(tube) {:.3}{}",
                 c.x,
                 c.y,
                 c.z,
@@ -93,7 +97,8 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
                 p.axis_std_rad().to_degrees(),
                 p.end_confidence,
                 p.score,
-                t.probability
+                t.probability,
+                t.pose_evidence.map(|e| format!(", pose evidence {e:.3}")).unwrap_or_default()
             ),
             Some(f) => format!("  tube {i}: rejected ({:?}): {}", f.reason, f.message),
         });
