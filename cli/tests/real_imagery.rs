@@ -339,6 +339,11 @@ fn locate_checks_the_pose_evidence_of_learned_tubes() {
     let (beside, e) = run(&["--model", p(&model)], "d.json");
     assert!(!e.contains("no pose evidence"), "{e}");
     assert_eq!(statuses(&beside), statuses(&doc), "the file beside the model is the shipped evidence");
+    // A damaged evidence file is named, and nothing is written.
+    std::fs::write(dir.path().join("m.pose_evidence.json"), "{\"features\": [").unwrap();
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--image", p(&image), "--model", p(&model), "--out", p(&dir.path().join("f.json"))]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("m.pose_evidence.json") && !dir.path().join("f.json").exists(), "{}", stderr(&o));
 
     let o = tubeloc(&["locate", "--assumed-view", "navcam", "--image", p(&image), "--min-pose-evidence", "1.5", "--out", p(&dir.path().join("e.json"))]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -65,7 +65,8 @@ pub struct FrameEntry {
     pub result: Option<String>,
     /// Located tubes (`status` `located`).
     pub located: usize,
-    /// Rejected detections (`fit_failed`, `low_probability`).
+    /// Rejected detections (every `status` but `located`: `fit_failed`, `low_probability`,
+    /// `weak_pose_evidence`, ...).
     pub rejected: usize,
     /// Why the frame failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
