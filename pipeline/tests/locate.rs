@@ -93,11 +93,9 @@ fn locate_returns_the_rendered_tube_mono_and_stereo() {
     assert!(count(&shown, LOCATED) == 0 && count(&shown, REJECTED_CONVERGED) > 50);
 }
 
-/// A tube whose centre falls in the ignore mask is listed as `in_ignored_region` at its
-/// centre's pixel, with the pose it would have had; a mask elsewhere changes nothing; a mask
-/// of another size is refused.
-#[test]
-fn a_tube_centred_in_the_ignore_mask_is_not_handed_over() {
+/// The rendered scene of one tube at 1.2-1.6 m (seed 5) on its ground: the camera, the image,
+/// the ground plane and the tube's detection (its exact mask).
+fn one_tube_scene() -> (tubeloc_core::CameraModel, DynamicImage, GroundPlane, TubeDetection) {
     let model = common::default_model();
     let cam = common::camera(false);
     let mut rng = ChaCha8Rng::seed_from_u64(5);
@@ -106,6 +104,15 @@ fn a_tube_centred_in_the_ignore_mask_is_not_handed_over() {
     let det: TubeDetection = common::mask_detection(&common::tube_mask(&model, &left));
     let image = to_image(&left.image);
     let ground = GroundPlane::new(up, gd).unwrap();
+    (cam, image, ground, det)
+}
+
+/// A tube whose centre falls in the ignore mask is listed as `in_ignored_region` at its
+/// centre's pixel, with the pose it would have had; a mask elsewhere changes nothing; a mask
+/// of another size is refused.
+#[test]
+fn a_tube_centred_in_the_ignore_mask_is_not_handed_over() {
+    let (cam, image, ground, det) = one_tube_scene();
     let locator = Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det], "test")), LocatorSettings::default()).unwrap();
     let input = |ignore| LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore };
     let plain = locator.locate(&input(None)).unwrap();
@@ -240,14 +247,7 @@ fn a_frame_too_coarse_for_the_learned_detector_is_warned_about() {
 /// the same pose, and a floor of 0 hands it over again.
 #[test]
 fn a_tube_with_weak_pose_evidence_is_not_handed_over() {
-    let model = common::default_model();
-    let cam = common::camera(false);
-    let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let (truth, up, gd) = common::random_truth(&mut rng, &model, &cam, (1.2, 1.6));
-    let left = common::render(&model, &cam, truth, up, gd, None, 11, 0.01);
-    let det: TubeDetection = common::mask_detection(&common::tube_mask(&model, &left));
-    let image = to_image(&left.image);
-    let ground = GroundPlane::new(up, gd).unwrap();
+    let (cam, image, ground, det) = one_tube_scene();
     let evidence = tubeloc_pipeline::shipped::pose_evidence("shipped").unwrap();
     let input = LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None };
     let locate = |score: f64, min: f64| {
