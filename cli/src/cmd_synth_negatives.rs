@@ -47,7 +47,10 @@ pub struct NegativesArgs {
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
-    /// Output folder: the crops and an `annotations.json` without annotations.
+    /// Output folder: the crops and an `annotations.json` without annotations; each image names
+    /// its frame (`source`), the frame's working scale and the frame's gray-norm map (`gray_norm`:
+    /// median and gain), with which `tubeloc train --preprocess gray-norm` normalizes the crop as
+    /// inference normalizes the whole frame.
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -98,12 +101,14 @@ pub fn run(a: NegativesArgs) -> Result<()> {
             let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             searched += 1;
             with_crops += usize::from(!centres.is_empty());
+            // Inference normalizes the whole frame (gray-norm); each crop carries that map.
+            let (p50, inv) = tubeloc_detect::learned::preprocess::GrayNormMap::fit(&input.rgb, w * h).parts();
             for (k, crop) in working_scale_crops(&input.rgb, w, h, s, &centres, a.crop as usize).into_iter().enumerate() {
                 let name = format!("{:05}_{stem}_{k}.png", images.len() + 1);
                 let mut png = Vec::new();
                 crop.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).map_err(|e| tubeloc_synth::SynthError::Invalid(format!("encoding {name}: {e}")))?;
                 files::write_atomic(&tmp.join("images").join(&name), &png)?;
-                images.push(json!({"id": images.len() + 1, "file_name": name, "width": crop.width(), "height": crop.height(), "source": f, "working_scale": s}));
+                images.push(json!({"id": images.len() + 1, "file_name": name, "width": crop.width(), "height": crop.height(), "source": f, "working_scale": s, "gray_norm": {"p50": p50, "inv": inv}}));
             }
             pb.inc(1);
         }

@@ -43,6 +43,14 @@ pub fn image_ground(im: &tubeloc_core::CocoImage) -> Option<tubeloc_core::Ground
     ground_field(im).and_then(|(n, d)| tubeloc_core::GroundPlane::new(n, d).ok())
 }
 
+/// The `gray_norm` field of a dataset image (`{"p50": median, "inv": gain}`, as `tubeloc synth
+/// negatives` writes for a crop: the [`GrayNormMap`](super::preprocess::GrayNormMap) of the
+/// whole frame it was cut from); `None` without one or when out of range.
+pub fn frame_gray_norm(im: &tubeloc_core::CocoImage) -> Option<super::preprocess::GrayNormMap> {
+    let g = im.extra.get("gray_norm")?;
+    super::preprocess::GrayNormMap::from_parts(g.get("p50")?.as_f64()? as f32, g.get("inv")?.as_f64()? as f32)
+}
+
 /// [`load_coco_dir`] with each image's working scale set from its camera and ground
 /// ([`image_working_scale`]) when `band` is given, so that training crops see tubes at the
 /// scale inference resamples them to.
@@ -69,7 +77,13 @@ pub fn load_coco_dir_at_scale(dir: &Path, pre: Preprocess, limit: Option<usize>,
                 let m = seg.to_rle(im.height, im.width).and_then(|r| r.to_mask()).map_err(|e| LearnedError::Dataset { path: ann.clone(), msg: format!("annotation {}: {e}", a.id) })?;
                 masks.push(m.data);
             }
-            let mut t = TrainImage::new(w, h, pre.apply(&rgb.rgb, w, h), &masks);
+            // A crop cut from a larger frame carries the frame's map, so that it is normalized
+            // as inference normalizes the whole frame (`tubeloc synth negatives`).
+            let input = match (pre, frame_gray_norm(im)) {
+                (Preprocess::GrayNorm, Some(map)) => map.apply_all(&rgb.rgb, w * h),
+                (_, _) => pre.apply(&rgb.rgb, w, h),
+            };
+            let mut t = TrainImage::new(w, h, input, &masks);
             if let Some(band) = band {
                 t.scale = image_working_scale(im, band) as f32;
             }
@@ -230,5 +244,39 @@ mod tests {
         let mut d = vec![(0.9, true), (0.1, false)];
         assert!((average_precision(&mut d, 2) - 51.0 / 101.0).abs() < 1e-12);
         assert_eq!(average_precision(&mut [], 0), 0.0);
+    }
+
+    /// A crop that carries its frame's gray-norm map is normalized by it (as inference
+    /// normalizes the whole frame), one without by its own pixels; other preprocessings ignore
+    /// the field, and a map out of range is not used.
+    #[test]
+    fn a_crop_is_normalized_by_its_frames_map() {
+        use super::super::preprocess::GrayNormMap;
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("images")).unwrap();
+        // A dark crop of a brighter frame: its own percentiles stretch it, the frame's do not.
+        let crop = image::RgbImage::from_fn(64, 32, |x, y| image::Rgb([(20 + (x + y) % 40) as u8; 3]));
+        crop.save(dir.path().join("images/c.png")).unwrap();
+        let frame_map = GrayNormMap::from_parts(0.5, 4.0).unwrap();
+        let write = |gray_norm: serde_json::Value| {
+            let mut im = serde_json::json!({"id": 1, "file_name": "c.png", "width": 64, "height": 32});
+            if !gray_norm.is_null() {
+                im["gray_norm"] = gray_norm;
+            }
+            let doc = serde_json::json!({"images": [im], "annotations": [], "categories": [{"id": 1, "name": "tube"}]});
+            std::fs::write(dir.path().join("annotations.json"), doc.to_string()).unwrap();
+            load_coco_dir(dir.path(), Preprocess::GrayNorm, None).unwrap().remove(0).input
+        };
+        let rgb = crop.as_raw();
+        let framed = write(serde_json::json!({"p50": 0.5, "inv": 4.0}));
+        assert_eq!(framed, frame_map.apply_all(rgb, 64 * 32));
+        assert!(framed.iter().all(|&v| v < -1.0), "a dark crop stays dark under the frame's map");
+        let own = write(serde_json::Value::Null);
+        assert_eq!(own, super::super::preprocess::gray_norm(rgb, 64 * 32));
+        assert!(own.iter().any(|&v| v > 0.5), "its own map stretches it");
+        assert_eq!(write(serde_json::json!({"p50": 0.5, "inv": -1.0})), own, "a bad map is not used");
+        assert!(GrayNormMap::from_parts(1.5, 1.0).is_none() && GrayNormMap::from_parts(0.5, f32::NAN).is_none());
+        let (p50, inv) = frame_map.parts();
+        assert_eq!(GrayNormMap::from_parts(p50, inv), Some(frame_map));
     }
 }

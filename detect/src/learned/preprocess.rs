@@ -155,6 +155,24 @@ impl GrayNormMap {
         GrayNormMap { p50, inv: 1.0 / (0.5 * (p98 - p2).max(0.02)) }
     }
 
+    /// The map with median `p50` (luminance in `[0, 1]`) and gain `inv` (> 0, finite), e.g.
+    /// one fitted on a whole frame and stored beside a crop of it ([`GrayNormMap::parts`]);
+    /// `None` when out of range.
+    pub fn from_parts(p50: f32, inv: f32) -> Option<Self> {
+        ((0.0..=1.0).contains(&p50) && inv.is_finite() && inv > 0.0).then_some(GrayNormMap { p50, inv })
+    }
+
+    /// `(p50, inv)`: the median luminance and the gain of the map.
+    pub fn parts(&self) -> (f32, f32) {
+        (self.p50, self.inv)
+    }
+
+    /// The input planes (one) of the first `n` pixels of interleaved RGB8 `rgb` under this map.
+    pub fn apply_all(&self, rgb: &[u8], n: usize) -> Vec<f32> {
+        use rayon::prelude::*;
+        rgb[..3 * n.min(rgb.len() / 3)].par_chunks_exact(3).map(|p| self.apply(p)).collect()
+    }
+
     /// The network input of an RGB8 pixel `p`.
     #[inline]
     pub fn apply(&self, p: &[u8]) -> f32 {
@@ -164,9 +182,7 @@ impl GrayNormMap {
 
 /// [`Preprocess::GrayNorm`] of interleaved RGB8 (its first `n` pixels) ([`GrayNormMap`]).
 pub fn gray_norm(rgb: &[u8], n: usize) -> Vec<f32> {
-    use rayon::prelude::*;
-    let map = GrayNormMap::fit(rgb, n);
-    rgb[..3 * n.min(rgb.len() / 3)].par_chunks_exact(3).map(|p| map.apply(p)).collect()
+    GrayNormMap::fit(rgb, n).apply_all(rgb, n)
 }
 
 /// Mean over a `(2r+1)^2` window with clamped (replicated) borders; separable running sums.
