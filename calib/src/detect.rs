@@ -120,7 +120,11 @@ pub struct DetectorConfig {
     pub decimation: f32,
     /// Gaussian blur sigma applied before quad detection, pixels (0 = none).
     pub sigma: f32,
-    /// Worker threads of the C detector.
+    /// Threads asked for (at least 1). The C detector always runs on one: its worker pool races
+    /// (a worker can read a task list that is being reallocated, AprilTag pull request 339,
+    /// and the union-find of its quad clustering is shared unguarded, issue 387), which crashed
+    /// `tubeloc calib detect` in 3 of 1600 runs here with 2 threads. Detect several images at
+    /// once instead, one detector each (`tubeloc calib detect --threads`).
     pub threads: u8,
     /// Snap quad edges to strong gradients (improves corners when decimating). Off by default,
     /// unlike `apriltag_detector_create`: the reference corners were made without it, and with
@@ -214,7 +218,8 @@ impl TagDetector {
         let mut inner = b.build().map_err(|e| CalibError::Detector(e.to_string()))?;
         inner.set_decimation(config.decimation);
         inner.set_sigma(config.sigma);
-        inner.set_thread_number(config.threads);
+        // One thread: the C worker pool is not thread-safe (see `DetectorConfig::threads`).
+        inner.set_thread_number(1);
         inner.set_refine_edges(config.refine_edges);
         inner.set_shapening(config.sharpening);
         let families = config.families.clone();

@@ -27,7 +27,8 @@ pub struct DetectorArgs {
     /// Quad decimation factor (1 = full resolution).
     #[arg(long, default_value_t = 1.0, value_parser = crate::args::decimation)]
     pub decimate: f32,
-    /// Detector threads.
+    /// Images detected at once by `calib detect`, each on one thread (the AprilTag C
+    /// detector's own worker pool is not used: it races and can crash).
     #[arg(long, default_value_t = 2, value_parser = crate::args::positive_u8)]
     pub threads: u8,
     /// Snap quad edges to strong gradients (off by default, as in the reference detector's
@@ -130,12 +131,27 @@ pub fn run(cmd: CalibCommand) -> Result<()> {
 }
 
 fn run_detect(a: DetectArgs) -> Result<()> {
-    let mut det = a.detector.detector()?;
+    use rayon::prelude::*;
+    a.detector.detector()?; // refuses bad settings before any image is read
+                            // `--threads` images at once, one single-threaded detector each; results in the given order.
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.detector.threads as usize).build().context("starting the detection threads")?;
+    let found: Vec<Result<serde_json::Value>> = pool.install(|| {
+        a.images
+            .par_iter()
+            .map_init(
+                || a.detector.detector(),
+                |det, p| {
+                    let det = det.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+                    let img = tubeloc_calib::grey::open_grey(p)?;
+                    let d = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()))?;
+                    Ok(serde_json::to_value(d)?)
+                },
+            )
+            .collect()
+    });
     let mut all = serde_json::Map::new();
-    for p in &a.images {
-        let img = tubeloc_calib::grey::open_grey(p)?;
-        let d = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()))?;
-        all.insert(p.display().to_string(), serde_json::to_value(d)?);
+    for (p, d) in a.images.iter().zip(found) {
+        all.insert(p.display().to_string(), d?);
     }
     let v = serde_json::Value::Object(all);
     match a.out {

@@ -943,7 +943,8 @@ fn fit_verifier_chooses_a_cut_per_image_kind_that_detect_uses() {
 }
 
 /// `tubeloc calib detect` on the real AprilTag photos (../shared/data/apriltag) finds every tag
-/// the reference C detector lists, at its corners (reference + the -0.5 px pixel-centre shift).
+/// the reference C detector lists, at its corners (reference + the -0.5 px pixel-centre shift),
+/// the same with its images detected one at a time or several at once.
 #[test]
 fn calib_detect_finds_every_reference_tag_in_real_photos() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/apriltag/apriltag_test_data");
@@ -975,6 +976,14 @@ fn calib_detect_finds_every_reference_tag_in_real_photos() {
     // Measured: 47 of 47, 98 % of corners within 0.1 px.
     assert_eq!(matched, reference, "{matched} of {reference} reference tags found");
     assert!(within as f64 >= 0.95 * 4.0 * reference as f64, "{within} of {} corners within 0.1 px", 4 * reference);
+    // Images are detected several at once (`--threads`, one single-threaded C detector each):
+    // one at a time gives the same file, byte for byte, in the same order.
+    let one = tmp.path().join("one.json");
+    let mut args = vec!["calib", "detect", "--threads", "1"];
+    args.extend(photos.iter().map(|p| p.to_str().unwrap()));
+    args.extend(["--out", p(&one)]);
+    ok(&args);
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&out).unwrap());
 }
 
 #[test]
