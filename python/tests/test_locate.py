@@ -143,7 +143,11 @@ def test_the_pose_evidence_floor_is_the_clis(cli, demo_scene, tmp_path):
     assert not [t for t in strict if t.status == "located"]
     passed = [t for t in found if t.status in ("located", "intersects_tube", "weak_pose_evidence")]
     assert len([t for t in strict if t.status == "weak_pose_evidence"]) == len(passed)
-    doc = cli_locate(cli, tmp_path, rig, image, "--min-pose-evidence", "1")
+    out = tmp_path / "strict.json"
+    p = cli("locate", "--rig", rig, "--image", image, "--min-pose-evidence", "1", "--out", out, check=False)
+    assert p.returncode == 3, p.stderr  # no tube located
+    doc = json.loads(out.read_text())
+    assert doc["min_pose_evidence"] == 1.0
     assert [t["status"] for t in doc["tubes"]] == [t.status for t in strict]
     with pytest.raises(tubeloc.TubelocError, match="min_pose_evidence"):
         tubeloc.Locator(str(rig), min_pose_evidence=1.5)
