@@ -27,8 +27,8 @@ pub struct DetectorArgs {
     /// Quad decimation factor (1 = full resolution).
     #[arg(long, default_value_t = 1.0, value_parser = crate::args::decimation)]
     pub decimate: f32,
-    /// Images detected at once by `calib detect`, each on one thread (the AprilTag C
-    /// detector's own worker pool is not used: it races and can crash).
+    /// Images detected at once by `calib detect` and `calib groundtruth`, each on one thread
+    /// (the AprilTag C detector's own worker pool is not used: it races and can crash).
     #[arg(long, default_value_t = 2, value_parser = crate::args::positive_u8)]
     pub threads: u8,
     /// Snap quad edges to strong gradients (off by default, as in the reference detector's
@@ -130,28 +130,34 @@ pub fn run(cmd: CalibCommand) -> Result<()> {
     }
 }
 
-fn run_detect(a: DetectArgs) -> Result<()> {
+/// The tags of each image of `paths`, in order: `--threads` images at once, each with its own
+/// single-threaded detector (record 0079); `bar` advances by one per image.
+fn detect_images(d: &DetectorArgs, paths: &[PathBuf], bar: &indicatif::ProgressBar) -> Result<Vec<Result<Vec<tubeloc_calib::TagDetection>>>> {
     use rayon::prelude::*;
-    a.detector.detector()?; // refuses bad settings before any image is read
-                            // `--threads` images at once, one single-threaded detector each; results in the given order.
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.detector.threads as usize).build().context("starting the detection threads")?;
-    let found: Vec<Result<serde_json::Value>> = pool.install(|| {
-        a.images
+    d.detector()?; // refuses bad settings before any image is read
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(d.threads as usize).build().context("starting the detection threads")?;
+    Ok(pool.install(|| {
+        paths
             .par_iter()
             .map_init(
-                || a.detector.detector(),
+                || d.detector(),
                 |det, p| {
                     let det = det.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     let img = tubeloc_calib::grey::open_grey(p)?;
-                    let d = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()))?;
-                    Ok(serde_json::to_value(d)?)
+                    let found = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()));
+                    bar.inc(1);
+                    found
                 },
             )
             .collect()
-    });
+    }))
+}
+
+fn run_detect(a: DetectArgs) -> Result<()> {
+    let found = detect_images(&a.detector, &a.images, &indicatif::ProgressBar::hidden())?;
     let mut all = serde_json::Map::new();
     for (p, d) in a.images.iter().zip(found) {
-        all.insert(p.display().to_string(), d?);
+        all.insert(p.display().to_string(), serde_json::to_value(d?)?);
     }
     let v = serde_json::Value::Object(all);
     match a.out {
@@ -286,11 +292,10 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
     let ann_path = a.dataset.join("annotations.json");
     let mut coco: serde_json::Value = files::read_json(&ann_path)?;
     let images = coco.get("images").and_then(|v| v.as_array()).cloned().with_context(|| format!("{}: no `images` array", ann_path.display()))?;
-    let mut det = a.detector.detector()?;
-    let bar = indicatif::ProgressBar::new(images.len() as u64);
-    let (mut posed, mut single, mut none) = (0, 0, 0);
+    // Each image's entry is checked first (in order), then the tags of all are detected at
+    // once (`--threads`), then each pose is estimated and matched in order.
+    let mut entries = Vec::with_capacity(images.len());
     for (i, im) in images.iter().enumerate() {
-        bar.inc(1);
         let id = im.get("id").cloned().with_context(|| format!("{}: images[{i}] has no id", ann_path.display()))?;
         let file = im.get("file_name").and_then(|f| f.as_str()).with_context(|| format!("{}: images[{i}] has no file_name", ann_path.display()))?;
         let camera: CameraModel = match im.get("camera") {
@@ -303,8 +308,14 @@ fn run_groundtruth(a: GroundtruthArgs) -> Result<()> {
         };
         let direct = a.dataset.join(file);
         let path = if direct.is_file() { direct } else { a.dataset.join("images").join(file) };
-        let img = tubeloc_calib::grey::open_grey(&path)?;
-        let dets = det.detect_image(&img)?;
+        entries.push((id, camera, mount, path));
+    }
+    let bar = indicatif::ProgressBar::new(images.len() as u64);
+    let paths: Vec<PathBuf> = entries.iter().map(|e| e.3.clone()).collect();
+    let found = detect_images(&a.detector, &paths, &bar)?;
+    let (mut posed, mut single, mut none) = (0, 0, 0);
+    for ((id, camera, mount, path), dets) in entries.into_iter().zip(found) {
+        let dets = dets?;
         let est = match estimate_tube_pose(&camera, &mount, &dets) {
             Ok(e) => e,
             Err(CalibError::NoTags(_)) => {
