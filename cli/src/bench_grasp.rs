@@ -13,7 +13,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde_json::{json, Value};
 use std::path::Path;
-use tubeloc_core::{CocoDataset, Pose, Rig, RigCamera, ScoreCalibration};
+use tubeloc_core::{CocoDataset, Pose, Rig, RigCamera};
 use tubeloc_eval::pose_match::{match_by_centre_distance, TubeEstimate, TubeTruth};
 use tubeloc_pipeline::{CameraSelection, ExternalDetections, LocateInput, Locator, LocatorSettings, Rejection};
 
@@ -22,21 +22,18 @@ use tubeloc_pipeline::{CameraSelection, ExternalDetections, LocateInput, Locator
 pub const MATCH_M: f64 = 0.05;
 
 /// Runs the grasp check over up to `max_images` images of the dataset in `set` seeded by the
-/// detections file `dets` (stereo with the right images when `stereo`), with `calibration`'s
-/// probability threshold when given (else every converged tube is located). Returns the counts.
-pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, calibration: Option<&ScoreCalibration>, evidence: Option<&tubeloc_core::PoseEvidence>) -> Result<Value> {
+/// detections file `dets` (stereo with the right images when `stereo`), accepting tubes as
+/// `acceptance`'s calibration and pose evidence do when given (else every converged tube is
+/// located). Returns the counts.
+pub fn run(set: &Path, dets: &Path, stereo: bool, max_images: Option<usize>, acceptance: Option<&LocatorSettings>) -> Result<Value> {
     let ann = set.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
     let all = tubeloc_core::detection::read_coco_results(dets)?;
     let mut images: Vec<_> = ds.images.iter().collect();
     images.truncate(max_images.unwrap_or(usize::MAX));
-    let mut settings = LocatorSettings::default();
+    let mut settings = acceptance.cloned().unwrap_or_default();
     // As `refine --ground auto`: the nominal ground's height is the terrain's level, not a constraint.
     settings.refine.priors.ground_height_known = false;
-    if let Some(c) = calibration {
-        settings.calibration = c.clone();
-    }
-    settings.pose_evidence = evidence.cloned();
     let per_image: Vec<Value> = images
         .par_iter()
         .map(|im| -> Result<Value> {

@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 use tubeloc_core::AssumedView;
-use tubeloc_core::ScoreCalibration;
 
 /// Assumed view of a negative frame: grey Navcam-like or the colour mast view
 /// ([`AssumedView::of_kind`], what `tubeloc locate --assumed-view auto` takes).
@@ -21,12 +20,10 @@ fn negative_view(grey: bool) -> AssumedView {
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
-pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, cal: &ScoreCalibration, evidence: Option<&tubeloc_core::PoseEvidence>, frames: Option<usize>) -> Result<Value> {
+pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>, settings: &tubeloc_pipeline::LocatorSettings, frames: Option<usize>) -> Result<Value> {
     let paths = negative_paths(data, frames)?;
     let sols = negative_sols(data, &paths)?;
-    let mut settings = tubeloc_pipeline::LocatorSettings::default();
-    settings.calibration = cal.clone();
-    settings.pose_evidence = evidence.cloned();
+    let cal = &settings.calibration;
     let mut per_frame = Vec::new();
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
@@ -52,7 +49,7 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
 /// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
 /// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
 /// None shows a tube, so every located tube is false.
-pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, evidence: Option<&tubeloc_core::PoseEvidence>, frames: Option<usize>) -> Result<Value> {
+pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, settings: &tubeloc_pipeline::LocatorSettings, frames: Option<usize>) -> Result<Value> {
     use tubeloc_synth::real_set::split_of_sol;
     let list = data.join("with_cameras").join("cameras.json");
     let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
@@ -61,11 +58,8 @@ pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, mod
     chosen.truncate(frames.unwrap_or(usize::MAX));
     let mut per_frame = Vec::new();
     if !chosen.is_empty() {
-        let mut settings = tubeloc_pipeline::LocatorSettings::default();
-        settings.calibration = cal.clone();
-        settings.pose_evidence = evidence.cloned();
         let rig = tubeloc_calib::interchange::pds::rig_of(&chosen);
-        let mut locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings)?;
+        let mut locator = tubeloc_pipeline::Locator::new(&rig, &Default::default(), Box::new(model.detector()?), settings.clone())?;
         for c in &chosen {
             let path = data.join("with_cameras/images").join(&c.camera.name);
             let image = tubeloc_detect::input::open_eight_bit(&path).with_context(|| format!("reading {}", path.display()))?;

@@ -384,7 +384,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         let sdir = out.join("stereo");
         st.run("stereo/grasp", &[sdir.join("grasp.json")], || {
             let (set, dets) = (sdir.join("set"), sdir.join("learned_detections.json"));
-            let r = json!({"stereo": crate::bench_grasp::run(&set, &dets, true, None, None, None)?, "mono": crate::bench_grasp::run(&set, &dets, false, None, None, None)?});
+            let r = json!({"stereo": crate::bench_grasp::run(&set, &dets, true, None, None)?, "mono": crate::bench_grasp::run(&set, &dets, false, None, None)?});
             files::write_json(&sdir.join("grasp.json"), &r)?;
             Ok(r)
         })?;

@@ -265,14 +265,17 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
     let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
-    // `locate`'s acceptance: the calibrated score, then the model's pose evidence (as `tubeloc locate`).
-    let evidence = tubeloc_pipeline::shipped::locator_pose_evidence("learned", stage.model.path())?;
-    let neg = if with_negatives { crate::bench_negatives::negatives(&stage.data, &learned_detector, &stage.calibration, evidence.as_ref(), stage.frames)? } else { Value::Null };
-    let neg_pds = crate::bench_negatives::pds_negatives(&stage.data, stage.split, &stage.model, &stage.calibration, evidence.as_ref(), stage.frames)?;
+    // `locate`'s settings at its defaults: the stage's score calibration, the model's pose
+    // evidence (`tubeloc_pipeline::shipped::locate_settings`, without loading the calibration again).
+    let mut learned_settings = tubeloc_pipeline::LocatorSettings::default();
+    learned_settings.calibration = stage.calibration.clone();
+    learned_settings.pose_evidence = tubeloc_pipeline::shipped::locator_pose_evidence("learned", stage.model.path())?;
+    let neg = if with_negatives { crate::bench_negatives::negatives(&stage.data, &learned_detector, &learned_settings, stage.frames)? } else { Value::Null };
+    let neg_pds = crate::bench_negatives::pds_negatives(&stage.data, stage.split, &stage.model, &learned_settings, stage.frames)?;
     // `locate` (mono, each frame's own ground) on the composites: its grasp checks, and how many
     // of the tubes it hands over are composited tubes.
-    let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration), evidence.as_ref())?;
-    let grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&stage.calibration), evidence.as_ref())?;
+    let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&learned_settings))?;
+    let grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&learned_settings))?;
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
@@ -292,10 +295,12 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     drop(fused);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
     let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
-    let fused_located = if with_negatives { crate::bench_negatives::negatives(&stage.data, &fused_detector, &fused_cal, None, stage.frames)? } else { Value::Null };
+    let mut fused_settings = tubeloc_pipeline::LocatorSettings::default();
+    fused_settings.calibration = fused_cal.clone();
+    let fused_located = if with_negatives { crate::bench_negatives::negatives(&stage.data, &fused_detector, &fused_settings, stage.frames)? } else { Value::Null };
     // `locate --detector fused` on the composites, as the learned detector's rows above.
-    let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_cal), None)?;
-    let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_cal), None)?;
+    let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_settings))?;
+    let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_settings))?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let pose_verifier = tubeloc_pipeline::shipped::line2d_pose_verifier("shipped")?;

@@ -101,8 +101,12 @@ pub fn run(a: NegativesArgs) -> Result<()> {
             let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             searched += 1;
             with_crops += usize::from(!centres.is_empty());
-            // Inference normalizes the whole frame (gray-norm); each crop carries that map.
-            let (p50, inv) = tubeloc_detect::learned::preprocess::GrayNormMap::fit(&input.rgb, w * h).parts();
+            // Inference normalizes the whole frame (gray-norm); each crop carries that map
+            // (fitted only for frames that give crops).
+            let (p50, inv) = match centres.is_empty() {
+                true => (0.0, 0.0),
+                false => tubeloc_detect::learned::preprocess::GrayNormMap::fit(&input.rgb, w * h).parts(),
+            };
             for (k, crop) in working_scale_crops(&input.rgb, w, h, s, &centres, a.crop as usize).into_iter().enumerate() {
                 let name = format!("{:05}_{stem}_{k}.png", images.len() + 1);
                 let mut png = Vec::new();
