@@ -120,11 +120,12 @@ pub struct DetectorConfig {
     pub decimation: f32,
     /// Gaussian blur sigma applied before quad detection, pixels (0 = none).
     pub sigma: f32,
-    /// Threads asked for (at least 1). The C detector always runs on one: its worker pool races
+    /// Images detected at once by [`crate::batch::detect_files`] (at least 1). A
+    /// [`TagDetector`] always runs the C detector on one thread: its worker pool races
     /// (a worker can read a task list that is being reallocated, AprilTag pull request 339,
     /// and the union-find of its quad clustering is shared unguarded, issue 387), which crashed
     /// `tubeloc calib detect` in 3 of 1600 runs here with 2 threads. Detect several images at
-    /// once instead, one detector each (`tubeloc calib detect --threads`).
+    /// once instead, one detector each (`detect_files`, `tubeloc calib detect --threads`).
     pub threads: u8,
     /// Snap quad edges to strong gradients (improves corners when decimating). Off by default,
     /// unlike `apriltag_detector_create`: the reference corners were made without it, and with

@@ -3,7 +3,7 @@
 //! camchain).
 //!
 //! - [`detect`]: wrapper of the AprilTag 3 detector (`apriltag` crate); corners in the tubeloc /
-//!   OpenCV pixel convention (pixel centres at integers).
+//!   OpenCV pixel convention (pixel centres at integers); [`batch`]: many files at once.
 //! - [`mount`] + [`tagpose`]: the tag mount of `data/tag_mount.toml` and `T_cam_tube` from the
 //!   tag pair (PnP + Levenberg-Marquardt, covariance, single-tag fallback flagged).
 //! - [`calibrate`]: Zhang initialization, bundle adjustment of intrinsics, distortion and
@@ -13,6 +13,7 @@
 //! - [`lm`], [`geometry`]: the least-squares solver and projective helpers.
 #![warn(missing_docs)]
 
+pub mod batch;
 pub mod calibrate;
 pub mod detect;
 pub mod error;
@@ -25,6 +26,7 @@ pub mod tagpose;
 pub mod views;
 pub mod yaml;
 
+pub use batch::detect_files;
 pub use calibrate::{calibrate, CalibrationInput, CalibrationOptions, CameraCalibration, CameraSpec, Observation, RigCalibration};
 pub use detect::{DetectorConfig, TagDetection, TagDetector, TagFamily};
 pub use error::CalibError;

@@ -3,7 +3,7 @@
 //! rendered images.
 
 use crate::calibrate::{CalibrationInput, CameraSpec, Observation};
-use crate::detect::{TagDetector, TagFamily};
+use crate::detect::{DetectorConfig, TagFamily};
 use crate::error::CalibError;
 use nalgebra::{Point2, Point3};
 use serde::Deserialize;
@@ -88,39 +88,46 @@ pub struct LoadedSet {
     pub truth: Rig,
 }
 
-/// Reads `dir/calib_set.json`; with [`CornerSource::Detect`] runs `detector` on each image.
-pub fn load_calib_set(dir: &Path, source: CornerSource, detector: Option<&mut TagDetector>) -> Result<LoadedSet, CalibError> {
+/// Reads `dir/calib_set.json`; with [`CornerSource::Detect`] detects the tags of its images
+/// with `detector` ([`crate::batch::detect_files`]: `detector.threads` images at once).
+pub fn load_calib_set(dir: &Path, source: CornerSource, detector: Option<&DetectorConfig>) -> Result<LoadedSet, CalibError> {
     let path = dir.join("calib_set.json");
     let set: SetJson = tubeloc_core::files::read_json(&path)?;
-    let mut detector = detector;
     let cameras: Vec<CameraSpec> = set.rig.cameras.iter().map(|c| CameraSpec { name: c.name.clone(), width: c.model.width, height: c.model.height }).collect();
     let index: BTreeMap<&str, usize> = cameras.iter().enumerate().map(|(i, c)| (c.name.as_str(), i)).collect();
-    let mut observations = Vec::new();
+    // Every observation's camera (and, to detect, its image) is checked before any is read.
+    let mut seen = Vec::new();
     for v in &set.views {
         for o in &v.observations {
             let cam = *index.get(o.camera.as_str()).ok_or_else(|| CalibError::parse(&path, format!("views[{}]: unknown camera {:?}", v.index, o.camera)))?;
-            let tags: Vec<(u32, [[f64; 2]; 4])> = match source {
-                CornerSource::Exact => o.exact.iter().map(|t| (t.id, t.corners)).collect(),
-                CornerSource::Noisy => o.noisy.iter().map(|t| (t.id, t.corners)).collect(),
-                CornerSource::Detect => {
-                    let name = o.image.as_ref().ok_or_else(|| CalibError::parse(&path, format!("views[{}] camera {}: no image to detect in (set made without rendering)", v.index, o.camera)))?;
-                    let ip = dir.join(name);
-                    let img = crate::grey::open_grey(&ip)?;
-                    let det = detector.as_deref_mut().ok_or_else(|| CalibError::invalid("detector", "corner source Detect needs a detector"))?;
-                    det.detect_image(&img)?.into_iter().map(|d| (d.id, d.corners)).collect()
-                }
-            };
-            let mut ob = Observation { camera: cam, view: v.index, object: Vec::new(), image: Vec::new() };
-            for (id, corners) in tags {
-                let Some(obj) = set.board.corners(id) else { continue };
-                for (p, c) in obj.iter().zip(&corners) {
-                    ob.object.push(*p);
-                    ob.image.push(Point2::new(c[0], c[1]));
-                }
+            seen.push((v.index, cam, o));
+        }
+    }
+    let tags: Vec<Vec<(u32, [[f64; 2]; 4])>> = match source {
+        CornerSource::Exact => seen.iter().map(|(_, _, o)| o.exact.iter().map(|t| (t.id, t.corners)).collect()).collect(),
+        CornerSource::Noisy => seen.iter().map(|(_, _, o)| o.noisy.iter().map(|t| (t.id, t.corners)).collect()).collect(),
+        CornerSource::Detect => {
+            let config = detector.ok_or_else(|| CalibError::invalid("detector", "corner source Detect needs a detector"))?;
+            let images = seen
+                .iter()
+                .map(|(view, _, o)| o.image.as_ref().map(|name| dir.join(name)).ok_or_else(|| CalibError::parse(&path, format!("views[{view}] camera {}: no image to detect in (set made without rendering)", o.camera))))
+                .collect::<Result<Vec<_>, _>>()?;
+            let found = crate::batch::detect_files(config, &images, &|| {})?;
+            found.into_iter().map(|f| f.map(|d| d.into_iter().map(|d| (d.id, d.corners)).collect())).collect::<Result<_, _>>()?
+        }
+    };
+    let mut observations = Vec::new();
+    for ((view, cam, _), tags) in seen.into_iter().zip(tags) {
+        let mut ob = Observation { camera: cam, view, object: Vec::new(), image: Vec::new() };
+        for (id, corners) in tags {
+            let Some(obj) = set.board.corners(id) else { continue };
+            for (p, c) in obj.iter().zip(&corners) {
+                ob.object.push(*p);
+                ob.image.push(Point2::new(c[0], c[1]));
             }
-            if !ob.object.is_empty() {
-                observations.push(ob);
-            }
+        }
+        if !ob.object.is_empty() {
+            observations.push(ob);
         }
     }
     let input = CalibrationInput { cameras, observations, stereo_pairs: set.rig.stereo_pairs.clone() };

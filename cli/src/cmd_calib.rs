@@ -27,7 +27,7 @@ pub struct DetectorArgs {
     /// Quad decimation factor (1 = full resolution).
     #[arg(long, default_value_t = 1.0, value_parser = crate::args::decimation)]
     pub decimate: f32,
-    /// Images detected at once by `calib detect` and `calib groundtruth`, each on one thread
+    /// Images detected at once by `calib detect`, `calib groundtruth` and `calib rig`, each on one thread
     /// (the AprilTag C detector's own worker pool is not used: it races and can crash).
     #[arg(long, default_value_t = 2, value_parser = crate::args::positive_u8)]
     pub threads: u8,
@@ -53,9 +53,12 @@ impl DetectorArgs {
         DetectorArgs { family: vec!["tag36h11".into()], decimate: 1.0, threads: 2, refine_edges: true, no_refine_edges: false, encoding: "srgb".into() }
     }
 
-    fn detector(&self) -> Result<TagDetector> {
+    /// The detector's settings, checked (a detector of them is built).
+    fn config(&self) -> Result<DetectorConfig> {
         let families = self.family.iter().map(|f| TagFamily::from_name(f.trim())).collect::<Result<Vec<_>, _>>()?;
-        Ok(TagDetector::new(DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: self.refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() })?)
+        let config = DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: self.refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() };
+        TagDetector::new(config.clone())?;
+        Ok(config)
     }
 }
 
@@ -130,27 +133,10 @@ pub fn run(cmd: CalibCommand) -> Result<()> {
     }
 }
 
-/// The tags of each image of `paths`, in order: `--threads` images at once, each with its own
-/// single-threaded detector (record 0079); `bar` advances by one per image.
-fn detect_images(d: &DetectorArgs, paths: &[PathBuf], bar: &indicatif::ProgressBar) -> Result<Vec<Result<Vec<tubeloc_calib::TagDetection>>>> {
-    use rayon::prelude::*;
-    d.detector()?; // refuses bad settings before any image is read
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(d.threads as usize).build().context("starting the detection threads")?;
-    Ok(pool.install(|| {
-        paths
-            .par_iter()
-            .map_init(
-                || d.detector(),
-                |det, p| {
-                    let det = det.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
-                    let img = tubeloc_calib::grey::open_grey(p)?;
-                    let found = det.detect_image(&img).with_context(|| format!("detecting in {}", p.display()));
-                    bar.inc(1);
-                    found
-                },
-            )
-            .collect()
-    }))
+/// The tags of each image of `paths`, in order (`tubeloc_calib::detect_files`: `--threads`
+/// images at once, record 0079); `bar` advances by one per image.
+fn detect_images(d: &DetectorArgs, paths: &[PathBuf], bar: &indicatif::ProgressBar) -> Result<Vec<Result<Vec<tubeloc_calib::TagDetection>, tubeloc_calib::CalibError>>> {
+    Ok(tubeloc_calib::detect_files(&d.config()?, paths, &|| bar.inc(1))?)
 }
 
 fn run_detect(a: DetectArgs) -> Result<()> {
@@ -173,8 +159,8 @@ fn run_rig(a: RigArgs) -> Result<()> {
         "noisy" => CornerSource::Noisy,
         _ => CornerSource::Detect,
     };
-    let mut det = a.detector.detector()?;
-    let set = load_calib_set(&a.views, source, Some(&mut det)).with_context(|| format!("reading calibration set {}", a.views.display()))?;
+    let config = a.detector.config()?;
+    let set = load_calib_set(&a.views, source, Some(&config)).with_context(|| format!("reading calibration set {}", a.views.display()))?;
     let opts = CalibrationOptions { fix_k3: a.fix_k3, ..Default::default() };
     let cal = calibrate(&set.input, &opts).with_context(|| format!("calibrating from {}", a.views.display()))?;
     // Every export is built before anything is written, so that a refused one writes nothing.
@@ -376,9 +362,9 @@ mod tests {
     /// thread count differs, which does not change the detections.
     #[test]
     fn detector_defaults_are_the_library_defaults() {
-        let det = Cmd::parse_from(["calib"]).detector.detector().unwrap();
-        assert_eq!(*det.config(), DetectorConfig { threads: 2, ..Default::default() });
-        let det = Cmd::parse_from(["calib", "--encoding", "srgb", "--refine-edges"]).detector.detector().unwrap();
-        assert!(det.config().linearize_srgb && det.config().refine_edges);
+        let config = Cmd::parse_from(["calib"]).detector.config().unwrap();
+        assert_eq!(config, DetectorConfig { threads: 2, ..Default::default() });
+        let config = Cmd::parse_from(["calib", "--encoding", "srgb", "--refine-edges"]).detector.config().unwrap();
+        assert!(config.linearize_srgb && config.refine_edges);
     }
 }
