@@ -175,6 +175,20 @@ fn brute(q: &tubeloc_core::Plane<u8>, feats: &[tubeloc_detect::line2d::Feature],
         .sum()
 }
 
+/// An image narrower or shorter than two level-1 tiles holds no template: no detection, not an
+/// error (a folder of frames is not stopped by one thumbnail); a wrong buffer is still refused.
+#[test]
+fn an_image_too_small_for_any_template_gives_no_detection() {
+    let (_, lib) = centred_library(64, 48, 1.8, 2.2);
+    let det = Line2dDetector::new(lib, MatchParams::default()).unwrap();
+    let t1 = MatchParams::default().t1;
+    for (w, h) in [(1, 1), (40, 2 * t1 - 1), (2 * t1 - 1, 40)] {
+        let img: Vec<u8> = (0..w * h * 3).map(|i| (i * 37 % 251) as u8).collect();
+        assert_eq!(det.detect(&img, w, h, None).unwrap().len(), 0, "{w}x{h}");
+    }
+    assert!(det.detect(&[0u8; 5], 40, 7, None).is_err());
+}
+
 #[test]
 fn response_maps_and_linear_memories_equal_brute_force() {
     let (w, h) = (160usize, 128usize);

@@ -48,7 +48,8 @@ impl Line2dDetector {
     /// this image (masks and boxes at its size, centres by [`crate::scale::point_back`], coarse
     /// poses in `camera`; see [`Line2dDetection::from_match_scaled`]). An image that would have
     /// to be enlarged by more than [`MatchParams::max_upsample`] is not searched (no detection;
-    /// see [`Line2dDetector::resolvable`]).
+    /// see [`Line2dDetector::resolvable`]), nor is one (as matched) narrower or shorter than two
+    /// level-1 tiles (`2 t1` px): no template fits in it.
     pub fn detect(&self, rgb: &[u8], width: usize, height: usize, camera: Option<&CameraModel>) -> Result<Vec<Line2dDetection>, Line2dError> {
         self.detect_on_ground(rgb, width, height, camera, None)
     }
@@ -165,6 +166,10 @@ impl Line2dDetector {
     /// [`Line2dDetector::detect_at`].
     #[allow(clippy::too_many_arguments)]
     fn detect_native(&self, rgb: &[u8], width: usize, height: usize, cam: &CameraModel, sx: f64, sy: f64, ow: usize, oh: usize, ground: Option<&GroundPlane>, far: f64, cut: Option<f32>) -> Result<Vec<Line2dDetection>, Line2dError> {
+        let t1 = self.params.t1;
+        if t1 > 0 && (width < 2 * t1 || height < 2 * t1) {
+            return Ok(Vec::new()); // narrower than two level-1 tiles: no template fits in it
+        }
         let img = prepare_image(rgb, width, height, &self.params)?;
         let mut raw = match_all_within(&img, &self.library, &self.params, (width * height) as f64 / (far * far));
         if let (Some(range), Some(g)) = (&self.params.ground_range, ground) {
