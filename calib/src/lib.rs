@@ -33,5 +33,5 @@ pub use error::CalibError;
 pub use interchange::{read_camera, read_rig, RigFormat};
 pub use mount::{MountedTag, TagMount};
 pub use tagpose::{estimate_tube_pose, TagPoseEstimate};
-pub use views::{load_calib_set, Board, CornerSource, LoadedSet};
+pub use views::{load_calib_set, load_calib_set_reporting, Board, CornerSource, LoadedSet};
 pub use yaml::{load_rig_yaml, rig_from_yaml, rig_to_yaml, save_rig_yaml};

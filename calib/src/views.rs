@@ -91,6 +91,12 @@ pub struct LoadedSet {
 /// Reads `dir/calib_set.json`; with [`CornerSource::Detect`] detects the tags of its images
 /// with `detector` ([`crate::batch::detect_files`]: `detector.threads` images at once).
 pub fn load_calib_set(dir: &Path, source: CornerSource, detector: Option<&DetectorConfig>) -> Result<LoadedSet, CalibError> {
+    load_calib_set_reporting(dir, source, detector, &|_| {})
+}
+
+/// [`load_calib_set`], calling `on_image(n)` as each of the `n` images to detect in is done
+/// (for a progress bar; not called for corners read from the file).
+pub fn load_calib_set_reporting(dir: &Path, source: CornerSource, detector: Option<&DetectorConfig>, on_image: &(dyn Fn(usize) + Sync)) -> Result<LoadedSet, CalibError> {
     let path = dir.join("calib_set.json");
     let set: SetJson = tubeloc_core::files::read_json(&path)?;
     let cameras: Vec<CameraSpec> = set.rig.cameras.iter().map(|c| CameraSpec { name: c.name.clone(), width: c.model.width, height: c.model.height }).collect();
@@ -112,7 +118,7 @@ pub fn load_calib_set(dir: &Path, source: CornerSource, detector: Option<&Detect
                 .iter()
                 .map(|(view, _, o)| o.image.as_ref().map(|name| dir.join(name)).ok_or_else(|| CalibError::parse(&path, format!("views[{view}] camera {}: no image to detect in (set made without rendering)", o.camera))))
                 .collect::<Result<Vec<_>, _>>()?;
-            let found = crate::batch::detect_files(config, &images, &|| {})?;
+            let found = crate::batch::detect_files(config, &images, &|| on_image(images.len()))?;
             found.into_iter().map(|f| f.map(|d| d.into_iter().map(|d| (d.id, d.corners)).collect())).collect::<Result<_, _>>()?
         }
     };

@@ -109,3 +109,37 @@ fn degenerate_inputs_give_clear_errors() {
     let e = calibrate(&input, &CalibrationOptions::default()).unwrap_err().to_string();
     assert!(e.contains("shares no simultaneous view"), "{e}");
 }
+
+/// Corners detected in a rendered set (two images at once, each on its own detector) equal
+/// those detected one image at a time, lie within a pixel of the exact ones, and the progress
+/// callback is called once per image with their number.
+#[test]
+fn detected_corners_match_the_exact_ones_whatever_the_threads() {
+    let cfg = CalibSetConfig { views: 3, seed: 5, render: true, scale: 0.25, ..Default::default() };
+    let set = generate(&default_rig(), &BoardLayout::default_board(), &cfg).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    write_calib_set(dir.path(), &set, || {}).unwrap();
+    let exact = load_calib_set(dir.path(), CornerSource::Exact, None).unwrap();
+    let calls = std::sync::Mutex::new(Vec::new());
+    let two = tubeloc_calib::DetectorConfig { threads: 2, ..Default::default() };
+    let detected = tubeloc_calib::load_calib_set_reporting(dir.path(), CornerSource::Detect, Some(&two), &|n| calls.lock().unwrap().push(n)).unwrap();
+    let one = load_calib_set(dir.path(), CornerSource::Detect, Some(&tubeloc_calib::DetectorConfig::default())).unwrap();
+    let images = set.views.iter().flat_map(|v| &v.observations).filter(|o| o.image.is_some()).count();
+    assert_eq!(calls.into_inner().unwrap(), vec![images; images]);
+    assert_eq!(format!("{:?}", detected.input.observations), format!("{:?}", one.input.observations));
+    let (mut compared, mut detected_corners) = (0, 0);
+    for d in &detected.input.observations {
+        let e = exact.input.observations.iter().find(|e| e.camera == d.camera && e.view == d.view).unwrap();
+        for (p, q) in d.object.iter().zip(&d.image) {
+            detected_corners += 1;
+            // The set writes exact corners only for tags facing the camera, 2 px inside the
+            // image; one nearer the border or more oblique can still be detected.
+            let Some(i) = e.object.iter().position(|o| o == p) else { continue };
+            assert!((q - e.image[i]).norm() < 1.0, "view {} camera {}: {q} vs {}", d.view, d.camera, e.image[i]);
+            compared += 1;
+        }
+    }
+    assert!(compared >= 16 && compared * 10 >= detected_corners * 9, "{compared} of {detected_corners} detected corners have exact ones");
+    let missing = tubeloc_calib::load_calib_set(dir.path(), CornerSource::Detect, None).unwrap_err().to_string();
+    assert!(missing.contains("needs a detector"), "{missing}");
+}

@@ -4,7 +4,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
 use tubeloc_calib::interchange::{kalibr, ros};
-use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount};
+use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set_reporting, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount};
 use tubeloc_core::{files, CameraModel, Rig};
 
 /// Calibration subcommands.
@@ -160,7 +160,13 @@ fn run_rig(a: RigArgs) -> Result<()> {
         _ => CornerSource::Detect,
     };
     let config = a.detector.config()?;
-    let set = load_calib_set(&a.views, source, Some(&config)).with_context(|| format!("reading calibration set {}", a.views.display()))?;
+    let bar = indicatif::ProgressBar::new(0);
+    let set = load_calib_set_reporting(&a.views, source, Some(&config), &|n| {
+        bar.set_length(n as u64);
+        bar.inc(1);
+    })
+    .with_context(|| format!("reading calibration set {}", a.views.display()))?;
+    bar.finish_and_clear();
     let opts = CalibrationOptions { fix_k3: a.fix_k3, ..Default::default() };
     let cal = calibrate(&set.input, &opts).with_context(|| format!("calibrating from {}", a.views.display()))?;
     // Every export is built before anything is written, so that a refused one writes nothing.
