@@ -286,8 +286,9 @@ fn locate_hands_the_planner_no_tube_on_a_real_frame_without_tubes() {
 /// `locate` hands a learned detection's tube over only where its pose evidence reaches
 /// `--min-pose-evidence`: on a real tube-free frame with every converged tube past the score
 /// (`--min-probability 0`), each is located or `weak_pose_evidence` by its evidence alone, and
-/// a floor of 0 locates them all. A model file takes the evidence beside it, and without one
-/// the run says so and checks none.
+/// a floor of 0 locates them all; of those with enough evidence, the ones whose limbs go on
+/// past their ends beyond `--max-limb-continuation` are `limbs_continue` (`off` locates them).
+/// A model file takes the evidence beside it, and without one the run says so and checks none.
 #[test]
 fn locate_checks_the_pose_evidence_of_learned_tubes() {
     let dir = tempfile::tempdir().unwrap();
@@ -303,26 +304,39 @@ fn locate_checks_the_pose_evidence_of_learned_tubes() {
     let statuses = |doc: &Value| -> Vec<String> { doc["tubes"].as_array().unwrap().iter().map(|t| t["status"].as_str().unwrap().to_string()).collect() };
     let (doc, _) = run(&[], "a.json");
     let min = doc["min_pose_evidence"].as_f64().unwrap();
+    let cut = doc["max_limb_continuation"].as_f64().unwrap();
+    assert_eq!(cut, tubeloc_pipeline::settings::DEFAULT_MAX_LIMB_CONTINUATION);
     let tubes = doc["tubes"].as_array().unwrap();
     let converged: Vec<&Value> = tubes.iter().filter(|t| t["converged"] == true).collect();
     assert!(converged.len() >= 3, "{} converged tubes", converged.len());
-    let (mut located, mut weak) = (0, 0);
+    let (mut located, mut weak, mut going_on) = (0, 0, 0);
     for t in &converged {
         let e = t["pose_evidence"].as_f64().unwrap_or_else(|| panic!("a converged tube carries its pose evidence: {t}"));
+        let c = t["limb_continuation"].as_f64().unwrap_or_else(|| panic!("a converged tube inside the frame carries its limb continuation: {t}"));
         match t["status"].as_str().unwrap() {
             "located" => {
-                assert!(e >= min, "{t}");
+                assert!(e >= min && c <= cut, "{t}");
                 located += 1;
             }
             "weak_pose_evidence" => {
                 assert!(e < min, "{t}");
                 weak += 1;
             }
+            "limbs_continue" => {
+                assert!(e >= min && c > cut, "{t}");
+                going_on += 1;
+            }
             "intersects_tube" => {}
             other => panic!("status {other}: {t}"),
         }
     }
-    assert!(weak >= 1 && located >= 1, "{located} located, {weak} weak: the frame's clutter has both");
+    assert!(weak >= 1 && located >= 1 && going_on >= 1, "{located} located, {weak} weak, {going_on} going on: the frame's clutter has each");
+    let (no_cut, _) = run(&["--max-limb-continuation", "off"], "g.json");
+    assert!(no_cut.get("max_limb_continuation").is_none() && statuses(&no_cut).iter().all(|s| s != "limbs_continue"), "{:?}", statuses(&no_cut));
+    assert_eq!(statuses(&no_cut).iter().filter(|s| *s == "located").count(), located + going_on);
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--image", p(&image), "--max-limb-continuation", "0", "--out", p(&dir.path().join("h.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--max-limb-continuation") && stderr(&o).contains("or off"), "{}", stderr(&o));
     let (off, _) = run(&["--min-pose-evidence", "0"], "b.json");
     assert!(statuses(&off).iter().all(|s| s != "weak_pose_evidence"), "{:?}", statuses(&off));
     assert!(off["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").count() > located);

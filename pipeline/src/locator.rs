@@ -74,6 +74,11 @@ pub struct LocatedTube {
     /// ([`LocatorSettings::pose_evidence`]); absent without one and for unconverged fits.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_evidence: Option<f64>,
+    /// How strongly the edges along the tube's limbs go on past its ends, against along its
+    /// body ([`tubeloc_refine::limb_continuation`]; about 0.15 for a tube, 0.5-2 for a rim);
+    /// absent for unconverged fits and where it cannot be measured (an end out of the image).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limb_continuation: Option<f64>,
     /// The grasp's collision check against the ground, the other located tubes and (stereo)
     /// the terrain ([`tubeloc_grasp::GraspPlanner::check`]); for rejected tubes unchecked
     /// (`candidates_tried` 0).
@@ -102,6 +107,15 @@ pub enum Rejection {
         /// The least accepted ([`LocatorSettings::min_pose_evidence`]).
         min: f64,
     },
+    /// The fit converged and passes the probability and the pose evidence, but the edges along
+    /// its limbs go on past its ends ([`LocatedTube::limb_continuation`]): a slab rim, a crack
+    /// or a layer of bedrock, not a tube, which ends.
+    LimbsContinue {
+        /// The limb continuation.
+        continuation: f64,
+        /// The largest accepted ([`LocatorSettings::max_limb_continuation`]).
+        max: f64,
+    },
     /// The fitted tube's solid interpenetrates a stronger located tube's (two such tubes cannot
     /// both be right; [`tubeloc_grasp::overlapping_tubes`]).
     IntersectsTube {
@@ -127,12 +141,13 @@ pub enum Rejection {
 
 impl Rejection {
     /// A short machine-readable name (`fit_failed`, `low_probability`, `weak_pose_evidence`,
-    /// `intersects_tube`, `underexposed`, `in_ignored_region`).
+    /// `limbs_continue`, `intersects_tube`, `underexposed`, `in_ignored_region`).
     pub fn name(&self) -> &'static str {
         match self {
             Rejection::FitFailed(_) => "fit_failed",
             Rejection::LowProbability { .. } => "low_probability",
             Rejection::WeakPoseEvidence { .. } => "weak_pose_evidence",
+            Rejection::LimbsContinue { .. } => "limbs_continue",
             Rejection::IntersectsTube { .. } => "intersects_tube",
             Rejection::Underexposed { .. } => "underexposed",
             Rejection::InIgnoredRegion { .. } => "in_ignored_region",
@@ -407,17 +422,20 @@ impl Locator {
             let ignored = ignored_pixel(input.ignore, &self.camera.model, &pose);
             let evidence = self.settings.pose_evidence.as_ref().filter(|_| pose.converged).map(|m| m.probability(&pose));
             let weak = evidence.filter(|&e| e < self.settings.min_pose_evidence);
-            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability, pose_evidence: evidence };
-            match (tube.pose.converged, failure, ignored, weak) {
-                (true, _, _, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
-                (true, _, Some(pixel), _) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } }),
-                (true, _, None, Some(evidence)) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::WeakPoseEvidence { evidence, min: self.settings.min_pose_evidence } }),
-                (true, _, None, None) if probability >= cal.threshold => {
+            let limbs = if pose.converged { tubeloc_refine::limb_continuation::limb_continuation(&px.gray, &self.camera.model, &self.settings.tube, &pose) } else { None };
+            let going_on = limbs.zip(self.settings.max_limb_continuation).filter(|&(c, max)| c > max);
+            let tube = LocatedTube { t_rig_grasp: self.camera.t_rig_cam * t_cam_grasp, t_cam_grasp, grasp: GraspCheck::unchecked(t_cam_grasp), pose, probability, pose_evidence: evidence, limb_continuation: limbs };
+            match (tube.pose.converged, failure, ignored, weak, going_on) {
+                (true, _, _, _, _) if probability >= cal.threshold && highlight < min_highlight => rejected.push(RejectedTube { tube, reason: Rejection::Underexposed { highlight, min: min_highlight } }),
+                (true, _, Some(pixel), _, _) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::InIgnoredRegion { pixel } }),
+                (true, _, None, Some(evidence), _) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::WeakPoseEvidence { evidence, min: self.settings.min_pose_evidence } }),
+                (true, _, None, None, Some((continuation, max))) if probability >= cal.threshold => rejected.push(RejectedTube { tube, reason: Rejection::LimbsContinue { continuation, max } }),
+                (true, _, None, None, None) if probability >= cal.threshold => {
                     tubes.push(tube);
                     tube_items.push(item);
                 }
-                (true, _, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
-                (false, reason, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
+                (true, _, _, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::LowProbability { probability, threshold: cal.threshold } }),
+                (false, reason, _, _, _) => rejected.push(RejectedTube { tube, reason: Rejection::FitFailed(reason.unwrap_or(FailureReason::Diverged)) }),
             }
         }
         let t2 = Instant::now();

@@ -52,6 +52,13 @@ pub struct LocatorSettings {
     /// The least pose evidence of a handed-over tube, with [`LocatorSettings::pose_evidence`].
     /// Default [`DEFAULT_MIN_POSE_EVIDENCE`]; 0 disables.
     pub min_pose_evidence: f64,
+    /// The largest limb continuation of a handed-over tube
+    /// ([`tubeloc_refine::limb_continuation`]: how strongly the edges along a converged tube's
+    /// limbs go on past its ends, against along its body; a slab rim or a layer of bedrock goes
+    /// on, a tube ends). A converged tube that passes the calibration's threshold and the pose
+    /// evidence but continues more is listed as `limbs_continue`. Default
+    /// [`DEFAULT_MAX_LIMB_CONTINUATION`]; `None` disables.
+    pub max_limb_continuation: Option<f64>,
 }
 
 /// Default [`LocatorSettings::min_pose_evidence`]: the largest floor in steps of 0.1 that drops
@@ -59,6 +66,12 @@ pub struct LocatorSettings {
 /// 5 of 12 false ones and 1 of the 3 false tubes on 101 tube-free validation frames lie below
 /// it; `docs/design/0078-pose-evidence-floor.md`).
 pub const DEFAULT_MIN_POSE_EVIDENCE: f64 = 0.3;
+
+/// Default [`LocatorSettings::max_limb_continuation`]: the smallest cut in steps of 0.1 that
+/// drops at most 1 % of the true tubes `locate` hands over on the real validation composites
+/// (4 of 462; 4 of the 7 false ones and 1 of the 2 false tubes on 101 tube-free validation
+/// frames lie above it; `docs/design/0080-limb-continuation.md`).
+pub const DEFAULT_MAX_LIMB_CONTINUATION: f64 = 0.6;
 
 /// Default [`LocatorSettings::min_highlight_level`]: near the geometric mean of the darkest
 /// well-exposed real frame of the shared data as tubeloc reads it (81) and the underexposed
@@ -79,6 +92,7 @@ impl Default for LocatorSettings {
             min_highlight_level: DEFAULT_MIN_HIGHLIGHT_LEVEL,
             pose_evidence: None,
             min_pose_evidence: DEFAULT_MIN_POSE_EVIDENCE,
+            max_limb_continuation: Some(DEFAULT_MAX_LIMB_CONTINUATION),
         }
     }
 }

@@ -282,3 +282,50 @@ fn a_tube_with_weak_pose_evidence_is_not_handed_over() {
     let plain = Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det.clone()], "test")), LocatorSettings::default()).unwrap().locate(&input).unwrap();
     assert!(plain.tubes.len() == 1 && plain.tubes[0].pose_evidence.is_none());
 }
+
+/// A tube ends where the tube ends: the rendered tube is handed over with a small limb
+/// continuation; the same image with a bright band of the tube's width going on past both its
+/// ends (a slab rim, as a cylinder fit sees one) is listed as `limbs_continue`, and handed
+/// over with the check off.
+#[test]
+fn a_tube_whose_limbs_go_on_past_its_ends_is_not_handed_over() {
+    let (cam, image, ground, det) = one_tube_scene();
+    let locate = |image: &DynamicImage, max: Option<f64>| {
+        let mut settings = LocatorSettings::default();
+        settings.max_limb_continuation = max;
+        let input = LocateInput { image, right: None, ground: Some(ground), up: None, ignore: None };
+        Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det.clone()], "test")), settings).unwrap().locate(&input).unwrap()
+    };
+    let max = tubeloc_pipeline::settings::DEFAULT_MAX_LIMB_CONTINUATION;
+    assert_eq!(LocatorSettings::default().max_limb_continuation, Some(max));
+    let tube = locate(&image, Some(max));
+    assert_eq!((tube.tubes.len(), tube.rejected.len()), (1, 0));
+    let c = tube.tubes[0].limb_continuation.expect("a converged tube inside the image carries its limb continuation");
+    assert!(c < 0.3, "a rendered tube on ground: {c}");
+    assert_eq!(serde_json::to_value(&tube.tubes[0]).unwrap()["limb_continuation"], serde_json::json!(c));
+    // The band: the tube's body width along its image axis, from 1.6 lengths before its foot
+    // to 1.6 lengths past its seal end, at the tube body's brightness.
+    let pose = &tube.tubes[0].pose;
+    let model = tubeloc_core::TubeModel::default();
+    let e0 = cam.project(&nalgebra::Point3::from(pose.centre - pose.axis * model.length / 2.0)).unwrap();
+    let e1 = cam.project(&nalgebra::Point3::from(pose.centre + pose.axis * model.length / 2.0)).unwrap();
+    let (ell, u) = ((e1 - e0).norm(), (e1 - e0).normalize());
+    let half_width = cam.fx * model.body_radius() / pose.centre.z;
+    let mut grey = image.to_luma8();
+    let body = grey.get_pixel(((e0.x + e1.x) / 2.0) as u32, ((e0.y + e1.y) / 2.0) as u32).0[0];
+    for (x, y, p) in grey.enumerate_pixels_mut() {
+        let d = nalgebra::Vector2::new(x as f64, y as f64) - e0.coords;
+        let (t, a) = (d.dot(&u), d.x * -u.y + d.y * u.x);
+        if a.abs() <= half_width && t > -0.6 * ell && t < 1.6 * ell && !(0.0..=ell).contains(&t) {
+            p.0[0] = body;
+        }
+    }
+    let rim = DynamicImage::ImageLuma8(grey);
+    let r = locate(&rim, Some(max));
+    assert_eq!((r.tubes.len(), r.rejected.len()), (0, 1), "{:?}", r.rejected.first().map(|t| &t.reason));
+    let tubeloc_pipeline::Rejection::LimbsContinue { continuation, max: m } = r.rejected[0].reason else { panic!("{:?}", r.rejected[0].reason) };
+    assert!(continuation > max && m == max && Some(continuation) == r.rejected[0].tube.limb_continuation, "{continuation}");
+    assert_eq!(r.rejected[0].reason.name(), "limbs_continue");
+    let off = locate(&rim, None);
+    assert_eq!((off.tubes.len(), off.rejected.len()), (1, 0));
+}

@@ -21,6 +21,7 @@ struct Options<'a> {
     min_probability: Option<f64>,
     min_highlight_level: Option<f64>,
     min_pose_evidence: Option<f64>,
+    max_limb_continuation: Option<f64>,
     range_m: &'a str,
 }
 
@@ -51,6 +52,12 @@ fn settings_of(o: &Options) -> PyResult<LocatorSettings> {
             return Err(to_py(format!("min_highlight_level {v}: expected a grey level in [0, 255]")));
         }
         settings.min_highlight_level = v;
+    }
+    match o.max_limb_continuation {
+        None => {}
+        Some(0.0) => settings.max_limb_continuation = None,
+        Some(c) if c.is_finite() && c > 0.0 => settings.max_limb_continuation = Some(c),
+        Some(c) => return Err(to_py(format!("max_limb_continuation {c}: expected a positive number, or 0 for no such check"))),
     }
     Ok(settings)
 }
@@ -115,7 +122,7 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 ///
 /// Locator(rig, detector="learned", model=None, templates=None, camera=None, pair=None,
 ///         calibration=None, min_probability=None, range_m="1:4", min_highlight_level=None,
-///         min_pose_evidence=None)
+///         min_pose_evidence=None, max_limb_continuation=None)
 ///
 /// rig: a tubeloc.Rig or the path of a rig file. detector: "learned" (model: weights file,
 /// default the shipped model), "line2d" (templates: a .tlt library, default the default library
@@ -129,7 +136,11 @@ fn detections_from_py(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<Vec<Tu
 /// --min-highlight-level`; 0: off). min_pose_evidence: a learned detection's tube is handed
 /// over only where the probability that its pose is a tube (the model's pose evidence: score
 /// and the fit's evidence) reaches this (default 0.3, as `tubeloc locate --min-pose-evidence`;
-/// 0: off); below it the tube is rejected as "weak_pose_evidence".
+/// 0: off); below it the tube is rejected as "weak_pose_evidence". max_limb_continuation: a
+/// tube is handed over only where the edges along its limbs go on past its ends by at most
+/// this much, against along its body (a rim or a layer of rock goes on, a tube ends; default
+/// 0.6, as `tubeloc locate --max-limb-continuation`; 0: off); beyond it the tube is rejected as
+/// "limbs_continue".
 #[pyclass(name = "Locator", module = "tubeloc", frozen)]
 pub struct PyLocator {
     /// Read-locked by every call, write-locked by `select_camera`.
@@ -142,7 +153,7 @@ pub struct PyLocator {
 #[pymethods]
 impl PyLocator {
     #[new]
-    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4", min_highlight_level = None, min_pose_evidence = None))]
+    #[pyo3(signature = (rig, detector = "learned", model = None, templates = None, camera = None, pair = None, calibration = None, min_probability = None, range_m = "1:4", min_highlight_level = None, min_pose_evidence = None, max_limb_continuation = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -157,10 +168,11 @@ impl PyLocator {
         range_m: &str,
         min_highlight_level: Option<f64>,
         min_pose_evidence: Option<f64>,
+        max_limb_continuation: Option<f64>,
     ) -> PyResult<Self> {
         let origin = rig_origin(rig);
         let rig = rig_of(rig)?;
-        let o = Options { detector, model, templates, calibration, min_probability, min_highlight_level, min_pose_evidence, range_m };
+        let o = Options { detector, model, templates, calibration, min_probability, min_highlight_level, min_pose_evidence, max_limb_continuation, range_m };
         let (locator, min_probability) = py.detach(|| -> PyResult<(Locator, f64)> {
             let det = detector_of(&o)?;
             let settings = settings_of(&o)?;
@@ -296,7 +308,7 @@ pub fn detect<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let origin = rig_origin(rig);
     let rig = rig_of(rig)?;
-    let o = Options { detector, model, templates, calibration: None, min_probability: None, min_highlight_level: None, min_pose_evidence: None, range_m };
+    let o = Options { detector, model, templates, calibration: None, min_probability: None, min_highlight_level: None, min_pose_evidence: None, max_limb_continuation: None, range_m };
     let det = py.detach(|| detector_of(&o))?;
     let locator = build(&rig, &origin, &selection_of(camera, None), det, LocatorSettings::default())?;
     let image = image_of(image, "image")?;

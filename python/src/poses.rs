@@ -53,8 +53,14 @@ pub struct PyTube {
     /// `refine`.
     #[pyo3(get)]
     pose_evidence: Option<f64>,
+    /// How strongly the edges along the tube's limbs go on past its ends, against along its
+    /// body (about 0.15 for a tube, 0.5-2 for a rim); None for unconverged fits, where an end
+    /// lies out of the image, and from `refine`.
+    #[pyo3(get)]
+    limb_continuation: Option<f64>,
     /// `located`, or why not (`fit_failed`, `low_probability`, `weak_pose_evidence`,
-    /// `intersects_tube`, `underexposed`, `in_ignored_region`); None from `refine`.
+    /// `limbs_continue`, `intersects_tube`, `underexposed`, `in_ignored_region`); None from
+    /// `refine`.
     #[pyo3(get)]
     status: Option<String>,
     /// Grasp frame in the camera frame, 4x4 homogeneous (origin at the centre, +x along the
@@ -110,6 +116,7 @@ impl PyTube {
             failure_message: p.failure.as_ref().map(|f| f.message.clone()),
             probability,
             pose_evidence: located.and_then(|(t, _)| t.pose_evidence),
+            limb_continuation: located.and_then(|(t, _)| t.limb_continuation),
             status: located.map(|(_, s)| s.to_string()),
             t_cam_grasp: located.map(|(t, _)| matrix4(py, &t.t_cam_grasp)),
             t_rig_grasp: located.map(|(t, _)| matrix4(py, &t.t_rig_grasp)),

@@ -141,7 +141,7 @@ def test_the_pose_evidence_floor_is_the_clis(cli, demo_scene, tmp_path):
     assert located and all(t.pose_evidence is not None and t.pose_evidence >= 0.3 for t in located)
     strict = tubeloc.Locator(str(rig), min_pose_evidence=1.0).locate(tubeloc.read_image(str(image)))
     assert not [t for t in strict if t.status == "located"]
-    passed = [t for t in found if t.status in ("located", "intersects_tube", "weak_pose_evidence")]
+    passed = [t for t in found if t.status in ("located", "intersects_tube", "weak_pose_evidence", "limbs_continue")]
     assert len([t for t in strict if t.status == "weak_pose_evidence"]) == len(passed)
     out = tmp_path / "strict.json"
     p = cli("locate", "--rig", rig, "--image", image, "--min-pose-evidence", "1", "--out", out, check=False)
@@ -151,6 +151,34 @@ def test_the_pose_evidence_floor_is_the_clis(cli, demo_scene, tmp_path):
     assert [t["status"] for t in doc["tubes"]] == [t.status for t in strict]
     with pytest.raises(tubeloc.TubelocError, match="min_pose_evidence"):
         tubeloc.Locator(str(rig), min_pose_evidence=1.5)
+
+
+def test_the_limb_continuation_cut_is_the_clis(cli, demo_scene, tmp_path):
+    # Every converged tube whose ends lie in the frame carries its limb continuation; located
+    # tubes lie at or under the CLI's default cut. A tiny cut turns every such tube into
+    # `limbs_continue`, as --max-limb-continuation does (one whose end lies out of the frame
+    # is not measured, and stays located); 0 turns the check off.
+    rig, image, _ = demo_scene
+    img = tubeloc.read_image(str(image))
+    found = tubeloc.Locator(str(rig)).locate(img)
+    located = [t for t in found if t.status == "located"]
+    measured = [t for t in located if t.limb_continuation is not None]
+    assert measured and all(t.limb_continuation <= 0.6 for t in measured)
+    strict = tubeloc.Locator(str(rig), max_limb_continuation=1e-6).locate(img)
+    going_on = [t for t in strict if t.status == "limbs_continue"]
+    assert len(going_on) == len(measured) and all(t.limb_continuation > 1e-6 for t in going_on)
+    assert all(t.limb_continuation is None for t in strict if t.status == "located")
+    out = tmp_path / "strict.json"
+    p = cli("locate", "--rig", rig, "--image", image, "--max-limb-continuation", "1e-6", "--out", out, check=False)
+    assert p.returncode in (0, 3), p.stderr
+    doc = json.loads(out.read_text())
+    assert doc["max_limb_continuation"] == 1e-6
+    assert [t["status"] for t in doc["tubes"]] == [t.status for t in strict]
+    off = tubeloc.Locator(str(rig), max_limb_continuation=0).locate(img)
+    assert not [t for t in off if t.status == "limbs_continue"]
+    assert len([t for t in off if t.status == "located"]) >= len(located)
+    with pytest.raises(tubeloc.TubelocError, match="max_limb_continuation"):
+        tubeloc.Locator(str(rig), max_limb_continuation=-1.0)
 
 
 def test_ignore_mask_equals_the_cli(cli, demo_scene, tmp_path):

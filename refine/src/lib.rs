@@ -25,6 +25,7 @@ mod error;
 mod fit;
 pub mod hidden_end;
 mod jacobian;
+pub mod limb_continuation;
 pub mod local_ground;
 mod mask_check;
 mod model;

@@ -185,6 +185,12 @@ pub struct LocateArgs {
     /// evidence is embedded; a --model file's is `<model>.pose_evidence.json` beside it.
     #[arg(long, default_value_t = tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE, value_parser = probability)]
     pub min_pose_evidence: f64,
+    /// Hand over a tube only where the edges along its limbs go on past its ends by at most
+    /// this much, against along its body (a slab rim, a crack or a layer of bedrock goes on; a
+    /// tube ends: about 0.15 for a tube, 0.5-2 for a rim); beyond it the tube is listed as
+    /// `limbs_continue` (`off`: no such check).
+    #[arg(long, default_value = "0.6", value_parser = limb_continuation_cut)]
+    pub max_limb_continuation: LimbCut,
     /// Mask image of the frames' size whose non-zero pixels cover what no tube is handed over
     /// from: rover hardware in view (the arm, the deck, wheels) or any other region; or a
     /// folder of masks, one per frame named after the image (`<image stem>.png`; a frame
@@ -234,6 +240,7 @@ impl LocateArgs {
             min_probability: None,
             min_highlight_level: tubeloc_pipeline::settings::DEFAULT_MIN_HIGHLIGHT_LEVEL,
             min_pose_evidence: tubeloc_pipeline::settings::DEFAULT_MIN_POSE_EVIDENCE,
+            max_limb_continuation: LimbCut(Some(tubeloc_pipeline::settings::DEFAULT_MAX_LIMB_CONTINUATION)),
             ignore_mask: None,
             range_m: "1:4".into(),
             out: Some(out),
@@ -278,6 +285,21 @@ fn probability(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
+/// `--max-limb-continuation`: a cut, or none (`off`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LimbCut(pub Option<f64>);
+
+/// Parses `--max-limb-continuation`: a positive number, or `off`.
+fn limb_continuation_cut(s: &str) -> std::result::Result<LimbCut, String> {
+    match s.trim() {
+        "off" => Ok(LimbCut(None)),
+        t => match t.parse::<f64>() {
+            Ok(c) if c.is_finite() && c > 0.0 => Ok(LimbCut(Some(c))),
+            _ => Err(format!("{s:?}: expected a positive number, or off")),
+        },
+    }
+}
+
 /// `--up ux,uy,uz`: three finite numbers, not all zero (normalized).
 fn parse_up(s: &str) -> std::result::Result<Vector3<f64>, String> {
     let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("{s:?}: expected three numbers ux,uy,uz"))?;
@@ -317,6 +339,10 @@ pub struct LocateDoc<'a> {
     /// pose evidence was checked (off, or a detector without one).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min_pose_evidence: Option<f64>,
+    /// The largest limb continuation tubes were accepted at (`--max-limb-continuation`); absent
+    /// when off.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_limb_continuation: Option<f64>,
     /// Run statistics of a one-image run: wall time (s) and peak resident memory (MiB) of the
     /// whole run. Absent from the frames of a batch run (its `run.json` holds them), so that a
     /// frame's document depends on its inputs only.
@@ -352,7 +378,8 @@ pub struct TubeOut<'a> {
     #[serde(flatten)]
     pub tube: &'a LocatedTube,
     /// `located` (handed to the planner), or why not: `fit_failed`, `low_probability`,
-    /// `weak_pose_evidence`, `intersects_tube`, `underexposed` or `in_ignored_region`.
+    /// `weak_pose_evidence`, `limbs_continue`, `intersects_tube`, `underexposed` or
+    /// `in_ignored_region`.
     pub status: &'static str,
 }
 
@@ -527,6 +554,7 @@ impl Setup {
         let model = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
         let mut settings = tubeloc_pipeline::shipped::locate_settings(a.detector.name(), a.calibration.as_deref(), model.path(), a.min_pose_evidence)?;
         settings.min_highlight_level = a.min_highlight_level;
+        settings.max_limb_continuation = a.max_limb_continuation.0;
         if let Some(p) = a.min_probability {
             settings.calibration.threshold = p;
         }
@@ -788,6 +816,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             tubes,
             min_probability: setup.settings.calibration.threshold,
             min_pose_evidence: setup.settings.pose_evidence.as_ref().map(|_| setup.settings.min_pose_evidence),
+            max_limb_continuation: setup.settings.max_limb_continuation,
             run: started.map(|t0| {
                 let t = &found.timings;
                 serde_json::json!({"seconds": t0.elapsed().as_secs_f64(), "peak_rss_mb": crate::memory::peak_rss_mb(), "detect_s": t.detect_s, "refine_s": t.refine_s, "grasp_ms": t.grasp_ms, "locate_s": t.total_s})

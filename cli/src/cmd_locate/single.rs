@@ -69,6 +69,10 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
                 lines.push(format!("  tube {i}: rejected (its fit's evidence makes it a tube with probability {evidence:.3} < {min:.3}), score {:.2}", p.score));
                 continue;
             }
+            Some(tubeloc_pipeline::Rejection::LimbsContinue { continuation, max }) => {
+                lines.push(format!("  tube {i}: rejected (the edges along its limbs go on past its ends: continuation {continuation:.2} > {max:.2}; a rim or a layer of rock, not a tube), score {:.2}", p.score));
+                continue;
+            }
             Some(tubeloc_pipeline::Rejection::Underexposed { highlight, min }) => {
                 lines.push(format!("  tube {i}: rejected (the frame is underexposed: highlights at grey level {highlight:.0} < {min:.0}), score {:.2}", p.score));
                 continue;
