@@ -87,7 +87,7 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
         let g = t.t_rig_grasp.translation() * 1e3;
         lines.push(match &p.failure {
             None => format!(
-                "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}, P(tube) {:.3}{}",
+                "  tube {i}: centre [{:.1}, {:.1}, {:.1}] mm (cam), grasp at [{:.1}, {:.1}, {:.1}] mm (rig), axis [{:.3}, {:.3}, {:.3}], ±{:.1} mm / ±{:.2}°, seal end conf {:.2}, score {:.2}, P(tube) {:.3}{}{}",
                 c.x,
                 c.y,
                 c.z,
@@ -102,7 +102,8 @@ fn print_summary(image: &Path, found: &tubeloc_pipeline::LocateOutput, converged
                 p.end_confidence,
                 p.score,
                 t.probability,
-                t.pose_evidence.map(|e| format!(", pose evidence {e:.3}")).unwrap_or_default()
+                t.pose_evidence.map(|e| format!(", pose evidence {e:.3}")).unwrap_or_default(),
+                t.limb_continuation.map(|c| format!(", limb continuation {c:.2}")).unwrap_or_default()
             ),
             Some(f) => format!("  tube {i}: rejected ({:?}): {}", f.reason, f.message),
         });
