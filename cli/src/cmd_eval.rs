@@ -362,7 +362,7 @@ fn fit_pose_verifier(args: &EvalArgs, gt: &CocoDataset, dt: &[tubeloc_core::Coco
             eprintln!("warning: {} has no {} image without a tube: that kind gets the cut 0", args.gt.display(), if kind { "grey" } else { "colour" });
         }
     }
-    let verifier = PoseVerifier { evidence: model, threshold: cuts.colour, threshold_grey: cuts.grey, nms_iou: NMS_IOU, fitted_on: args.fitted_on.clone() };
+    let verifier = PoseVerifier { evidence: model, threshold: cuts.colour, threshold_grey: cuts.grey, nms_iou: NMS_IOU, max_limb_continuation: None, fitted_on: args.fitted_on.clone() };
     verifier.validate().map_err(|e| anyhow::anyhow!("the pose verifier: {e}"))?;
     write_json(out, &verifier).with_context(|| format!("writing {}", out.display()))?;
     for g in &cuts.groups {

@@ -27,7 +27,7 @@ fn kept_by_rule(snapped: &[Value], cut: f64) -> Vec<Value> {
 /// every verified detection is a Line2D candidate (same template and clutter probability),
 /// its mask and score are the candidate's snapped mask and pose evidence as `tubeloc refine`
 /// gives them, and the detections are exactly the candidates the rule keeps at the shipped grey
-/// cut. A verifier file sets the cut; bad files and options are refused; without a ground the
+/// cut; a verifier file with a limb check keeps a subset of them. A verifier file sets the cut; bad files and options are refused; without a ground the
 /// clutter verifier's cut applies, with a note.
 #[test]
 fn verified_line2d_detections_are_the_candidates_their_pose_evidence_keeps() {
@@ -42,10 +42,20 @@ fn verified_line2d_detections_are_the_candidates_their_pose_evidence_keeps() {
         (detections(&out), stderr(&o))
     };
     let (candidates, _) = run(&["--dataset", p(&set), "--min-probability", "0", "--pose-verifier", "off"], "candidates.json");
+    let shipped: Value = serde_json::from_str(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models/line2d.pose_verifier.json")).unwrap()).unwrap();
     let (verified, _) = run(&["--dataset", p(&set)], "verified.json");
+    // A verifier file with a limb check (record 0080) keeps a subset of them.
+    let mut with_limbs = shipped.clone();
+    with_limbs["max_limb_continuation"] = serde_json::json!(0.6);
+    let with_limbs_file = d.join("with_limbs.json");
+    std::fs::write(&with_limbs_file, with_limbs.to_string()).unwrap();
+    let (checked, _) = run(&["--dataset", p(&set), "--pose-verifier", p(&with_limbs_file)], "checked.json");
+    assert!(!checked.is_empty() && checked.len() <= verified.len(), "{} with the limb check, {} without", checked.len(), verified.len());
+    for c in &checked {
+        assert!(verified.iter().any(|v| v["image_id"] == c["image_id"] && v["template_id"] == c["template_id"] && iou(&mask(v), &mask(c)) > 0.999), "{c} is no verified detection");
+    }
 
     // The shipped verifier's evidence, and the candidates refined and scored by it.
-    let shipped: Value = serde_json::from_str(&std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/models/line2d.pose_verifier.json")).unwrap()).unwrap();
     let evidence = d.join("evidence.json");
     std::fs::write(&evidence, shipped["evidence"].to_string()).unwrap();
     let snapped_path = d.join("snapped.json");

@@ -188,7 +188,7 @@ impl FusedTubeDetector {
     /// matcher `line2d` (with its clutter verifier) verified by `line2d_verifier`.
     pub fn new(learned: LearnedDetector, learned_evidence: PoseEvidence, mut line2d: Line2dDetector, line2d_verifier: PoseVerifier) -> Result<Self> {
         let verification = PoseVerification::for_matcher(&mut line2d, line2d_verifier, crate::pose_verifier::CLUTTER_FLOOR)?;
-        let learned_evidence = PoseVerifier { evidence: learned_evidence, threshold: 0.0, threshold_grey: 0.0, nms_iou: 1.0, fitted_on: String::new() };
+        let learned_evidence = PoseVerifier { evidence: learned_evidence, threshold: 0.0, threshold_grey: 0.0, nms_iou: 1.0, max_limb_continuation: None, fitted_on: String::new() };
         Ok(FusedTubeDetector { learned, line2d, verification, learned_evidence })
     }
 

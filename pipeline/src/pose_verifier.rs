@@ -35,6 +35,11 @@ pub struct PoseVerifier {
     pub threshold_grey: f64,
     /// Snapped-mask IoU above which the less probable of two candidates is dropped.
     pub nms_iou: f64,
+    /// The largest limb continuation of a kept candidate ([`tubeloc_refine::limb_continuation`]:
+    /// how strongly the edges along its pose's limbs go on past its ends, against along its
+    /// body); `None` (absent from the file): no such check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_limb_continuation: Option<f64>,
     /// How the cuts were chosen (command, data, bound).
     #[serde(default)]
     pub fitted_on: String,
@@ -50,6 +55,9 @@ pub enum Verdict {
     Overlapping,
     /// Its probability is below the cut of the image's kind.
     BelowCut,
+    /// The edges along its limbs go on past its ends beyond
+    /// [`PoseVerifier::max_limb_continuation`]: a rim or a layer of rock, not a tube.
+    LimbsContinue,
 }
 
 /// One verified candidate.
@@ -88,6 +96,9 @@ impl PoseVerifier {
         if !(self.nms_iou > 0.0 && self.nms_iou <= 1.0) {
             return Err(format!("nms_iou {} is not in (0, 1]", self.nms_iou));
         }
+        if let Some(c) = self.max_limb_continuation.filter(|c| !(c.is_finite() && *c > 0.0)) {
+            return Err(format!("max_limb_continuation {c} is not a positive number"));
+        }
         Ok(())
     }
 
@@ -116,6 +127,7 @@ impl PoseVerifier {
         let items: Vec<SeedItem> = candidates.iter().cloned().map(SeedItem::Detection).collect();
         let refined = refine_frame(refiner, settings, frame, &items, &FrameOptions::default())?;
         let snap = settings.stages.snap;
+        let gray = self.max_limb_continuation.map(|_| crate::frame::grey_levels(frame.image));
         let mut verdicts: Vec<PoseVerdict> = candidates
             .iter()
             .zip(refined.poses)
@@ -129,12 +141,24 @@ impl PoseVerifier {
             })
             .collect();
         verdicts.sort_by(|a, b| b.probability.total_cmp(&a.probability).then(a.index.cmp(&b.index)));
-        // Most probable first: those at or above the cut are the leading ones.
+        // Most probable first: those at or above the cut are the leading ones; of them, those
+        // whose limbs go on past their ends are set aside before the suppression.
         let above = verdicts.partition_point(|v| v.probability >= self.threshold_for(grey));
-        let masks: Vec<Option<&tubeloc_core::Rle>> = verdicts[..above].iter().map(|v| v.detection.mask.as_ref()).collect();
+        let going_on: Vec<bool> = verdicts[..above]
+            .iter()
+            .map(|v| match (&gray, self.max_limb_continuation) {
+                (Some(g), Some(max)) if v.pose.converged => tubeloc_refine::limb_continuation::limb_continuation(g, frame.camera, &settings.tube, &v.pose).is_some_and(|c| c > max),
+                _ => false,
+            })
+            .collect();
+        let masks: Vec<Option<&tubeloc_core::Rle>> = verdicts[..above].iter().zip(&going_on).map(|(v, &g)| if g { None } else { v.detection.mask.as_ref() }).collect();
         let keep = keep_by_iou(&masks, self.nms_iou);
-        for (v, k) in verdicts.iter_mut().zip(keep) {
-            v.verdict = if k { Verdict::Kept } else { Verdict::Overlapping };
+        for ((v, k), g) in verdicts.iter_mut().zip(keep).zip(going_on) {
+            v.verdict = match (g, k) {
+                (true, _) => Verdict::LimbsContinue,
+                (false, true) => Verdict::Kept,
+                (false, false) => Verdict::Overlapping,
+            };
         }
         Ok(verdicts)
     }
@@ -225,7 +249,7 @@ mod tests {
 
     fn verifier() -> PoseVerifier {
         let evidence = PoseEvidence { features: tubeloc_core::pose_evidence::EVIDENCE_FEATURE_NAMES.map(String::from).to_vec(), mean: [0.0; 5], scale: [1.0; 5], weights: [1.0, 0.0, 0.0, 0.0, 0.0], bias: 0.0, fitted_on: String::new() };
-        PoseVerifier { evidence, threshold: 0.1, threshold_grey: 0.05, nms_iou: 0.5, fitted_on: String::new() }
+        PoseVerifier { evidence, threshold: 0.1, threshold_grey: 0.05, nms_iou: 0.5, max_limb_continuation: None, fitted_on: String::new() }
     }
 
     #[test]
@@ -240,5 +264,11 @@ mod tests {
         assert!(PoseVerifier::from_json(&bad, "v.json").unwrap_err().to_string().contains("nms_iou 0 is not in (0, 1]"));
         let e = PoseVerifier::from_json("{}", "v.json").unwrap_err().to_string();
         assert!(e.starts_with("pose verifier v.json: missing field"), "{e}");
+        // The limb check: absent, none; present, a positive number.
+        assert!(!text.contains("max_limb_continuation"));
+        let with = PoseVerifier { max_limb_continuation: Some(0.6), ..verifier() };
+        assert_eq!(PoseVerifier::from_json(&serde_json::to_string(&with).unwrap(), "v.json").unwrap(), with);
+        let bad = serde_json::to_string(&PoseVerifier { max_limb_continuation: Some(-1.0), ..verifier() }).unwrap();
+        assert!(PoseVerifier::from_json(&bad, "v.json").unwrap_err().to_string().contains("max_limb_continuation -1 is not a positive number"));
     }
 }

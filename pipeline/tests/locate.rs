@@ -283,6 +283,27 @@ fn a_tube_with_weak_pose_evidence_is_not_handed_over() {
     assert!(plain.tubes.len() == 1 && plain.tubes[0].pose_evidence.is_none());
 }
 
+/// `image` with a band of the tube body's width and brightness along the image axis of `pose`,
+/// from 0.6 lengths before its foot to 0.6 lengths past its seal end, the tube itself left as
+/// it is: a slab rim, as a cylinder fit sees one.
+fn with_rim_band(image: &DynamicImage, cam: &tubeloc_core::CameraModel, pose: &tubeloc_core::TubeAxisPose) -> DynamicImage {
+    let model = tubeloc_core::TubeModel::default();
+    let e0 = cam.project(&nalgebra::Point3::from(pose.centre - pose.axis * model.length / 2.0)).unwrap();
+    let e1 = cam.project(&nalgebra::Point3::from(pose.centre + pose.axis * model.length / 2.0)).unwrap();
+    let (ell, u) = ((e1 - e0).norm(), (e1 - e0).normalize());
+    let half_width = cam.fx * model.body_radius() / pose.centre.z;
+    let mut grey = image.to_luma8();
+    let body = grey.get_pixel(((e0.x + e1.x) / 2.0) as u32, ((e0.y + e1.y) / 2.0) as u32).0[0];
+    for (x, y, p) in grey.enumerate_pixels_mut() {
+        let d = nalgebra::Vector2::new(x as f64, y as f64) - e0.coords;
+        let (t, a) = (d.dot(&u), d.x * -u.y + d.y * u.x);
+        if a.abs() <= half_width && t > -0.6 * ell && t < 1.6 * ell && !(0.0..=ell).contains(&t) {
+            p.0[0] = body;
+        }
+    }
+    DynamicImage::ImageLuma8(grey)
+}
+
 /// A tube ends where the tube ends: the rendered tube is handed over with a small limb
 /// continuation; the same image with a bright band of the tube's width going on past both its
 /// ends (a slab rim, as a cylinder fit sees one) is listed as `limbs_continue`, and handed
@@ -303,24 +324,7 @@ fn a_tube_whose_limbs_go_on_past_its_ends_is_not_handed_over() {
     let c = tube.tubes[0].limb_continuation.expect("a converged tube inside the image carries its limb continuation");
     assert!(c < 0.3, "a rendered tube on ground: {c}");
     assert_eq!(serde_json::to_value(&tube.tubes[0]).unwrap()["limb_continuation"], serde_json::json!(c));
-    // The band: the tube's body width along its image axis, from 1.6 lengths before its foot
-    // to 1.6 lengths past its seal end, at the tube body's brightness.
-    let pose = &tube.tubes[0].pose;
-    let model = tubeloc_core::TubeModel::default();
-    let e0 = cam.project(&nalgebra::Point3::from(pose.centre - pose.axis * model.length / 2.0)).unwrap();
-    let e1 = cam.project(&nalgebra::Point3::from(pose.centre + pose.axis * model.length / 2.0)).unwrap();
-    let (ell, u) = ((e1 - e0).norm(), (e1 - e0).normalize());
-    let half_width = cam.fx * model.body_radius() / pose.centre.z;
-    let mut grey = image.to_luma8();
-    let body = grey.get_pixel(((e0.x + e1.x) / 2.0) as u32, ((e0.y + e1.y) / 2.0) as u32).0[0];
-    for (x, y, p) in grey.enumerate_pixels_mut() {
-        let d = nalgebra::Vector2::new(x as f64, y as f64) - e0.coords;
-        let (t, a) = (d.dot(&u), d.x * -u.y + d.y * u.x);
-        if a.abs() <= half_width && t > -0.6 * ell && t < 1.6 * ell && !(0.0..=ell).contains(&t) {
-            p.0[0] = body;
-        }
-    }
-    let rim = DynamicImage::ImageLuma8(grey);
+    let rim = with_rim_band(&image, &cam, &tube.tubes[0].pose);
     let r = locate(&rim, Some(max));
     assert_eq!((r.tubes.len(), r.rejected.len()), (0, 1), "{:?}", r.rejected.first().map(|t| &t.reason));
     let tubeloc_pipeline::Rejection::LimbsContinue { continuation, max: m } = r.rejected[0].reason else { panic!("{:?}", r.rejected[0].reason) };
@@ -328,4 +332,27 @@ fn a_tube_whose_limbs_go_on_past_its_ends_is_not_handed_over() {
     assert_eq!(r.rejected[0].reason.name(), "limbs_continue");
     let off = locate(&rim, None);
     assert_eq!((off.tubes.len(), off.rejected.len()), (1, 0));
+}
+
+/// Line2D's pose verification with a limb cut sets a candidate whose limbs go on past its ends
+/// aside (`LimbsContinue`) and keeps it where they end; without the cut it is kept either way.
+#[test]
+fn pose_verification_sets_aside_a_candidate_whose_limbs_go_on() {
+    use tubeloc_pipeline::pose_verifier::{PoseVerifier, Verdict};
+    let (cam, image, ground, det) = one_tube_scene();
+    let settings = PoseVerifier::refinement_settings();
+    let refiner = tubeloc_refine::Refiner::new(&settings.tube, settings.refine.clone()).unwrap();
+    let evidence = tubeloc_pipeline::shipped::pose_evidence("shipped").unwrap();
+    let verdict = |image: &DynamicImage, max: Option<f64>| {
+        let v = PoseVerifier { evidence: evidence.clone(), threshold: 0.0, threshold_grey: 0.0, nms_iou: 0.5, max_limb_continuation: max, fitted_on: String::new() };
+        let frame = tubeloc_pipeline::Frame { image, camera: &cam, image_id: 1, ground: Some(ground), stereo: None };
+        let out = v.verify(&refiner, &settings, &frame, std::slice::from_ref(&det), true).unwrap();
+        assert_eq!(out.len(), 1);
+        (out[0].verdict, out[0].pose.clone())
+    };
+    let (kept, pose) = verdict(&image, Some(0.6));
+    assert_eq!(kept, Verdict::Kept);
+    let rim = with_rim_band(&image, &cam, &pose);
+    assert_eq!(verdict(&rim, Some(0.6)).0, Verdict::LimbsContinue);
+    assert_eq!(verdict(&rim, None).0, Verdict::Kept);
 }
