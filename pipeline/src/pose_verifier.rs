@@ -7,7 +7,9 @@
 //! `P = σ(b + Σ w_i (f_i − μ_i) / s_i)` that the pose is a tube, from the detector's score and
 //! the fit's evidence. Candidates are taken most probable first; one whose snapped mask overlaps
 //! a kept one at IoU above [`PoseVerifier::nms_iou`] is dropped, and those at or above the cut
-//! of the image's kind (grey: three equal channels; colour) are kept.
+//! of the image's kind (grey: three equal channels; colour) are kept. A verifier with
+//! [`PoseVerifier::max_limb_continuation`] first sets aside the candidates whose limbs go on
+//! past their ends (record 0080; the shipped Line2D verifier has none).
 //!
 //! [`PoseVerification`] runs it on the Line2D matcher's candidates: the matcher runs with its
 //! clutter verifier's cut lowered to a floor, and without a ground plane (or a camera of the
