@@ -14,7 +14,7 @@ use std::path::PathBuf;
 /// The outer error is a refused `config` (nothing read); each inner one is that file's (it
 /// names the file).
 pub fn detect_files(config: &DetectorConfig, paths: &[PathBuf], on_done: &(dyn Fn() + Sync)) -> Result<Vec<Result<Vec<TagDetection>, CalibError>>, CalibError> {
-    TagDetector::new(config.clone())?; // refuses bad settings before any file is read
+    config.validate()?; // refuses bad settings before any file is read
     let pool = rayon::ThreadPoolBuilder::new().num_threads(config.threads as usize).build().map_err(|e| CalibError::Detector(format!("starting {} detection threads: {e}", config.threads)))?;
     Ok(pool.install(|| {
         paths

@@ -149,6 +149,25 @@ pub struct DetectorConfig {
     pub linearize_srgb: bool,
 }
 
+impl DetectorConfig {
+    /// Checks the settings as [`TagDetector::new`] does, without building the C detector: a
+    /// family, a valid decimation, sigma in `[0, MAX_SIGMA]`, threads >= 1, max_hamming <= 3,
+    /// a finite sharpening and a number for the least decision margin.
+    pub fn validate(&self) -> Result<(), CalibError> {
+        if self.families.is_empty() {
+            return Err(CalibError::invalid("detector", "no tag family given"));
+        }
+        check_decimation(self.decimation).map_err(|m| CalibError::invalid("decimation", m))?;
+        if !(self.sigma >= 0.0 && self.sigma <= MAX_SIGMA) || self.threads == 0 || self.max_hamming > 3 {
+            return Err(CalibError::invalid("detector", format!("sigma must be in [0, {MAX_SIGMA}], threads >= 1, max_hamming <= 3")));
+        }
+        if !self.sharpening.is_finite() || self.min_decision_margin.is_nan() {
+            return Err(CalibError::invalid("detector", "sharpening must be finite and min_decision_margin a number"));
+        }
+        Ok(())
+    }
+}
+
 impl Default for DetectorConfig {
     fn default() -> Self {
         DetectorConfig { families: vec![TagFamily::Tag36h11], max_hamming: 2, decimation: 1.0, sigma: 0.0, threads: 1, refine_edges: false, sharpening: 0.25, min_decision_margin: 0.0, linearize_srgb: false }
@@ -202,16 +221,7 @@ impl std::fmt::Debug for TagDetector {
 impl TagDetector {
     /// Builds a detector; fails for an empty family list or invalid numbers.
     pub fn new(config: DetectorConfig) -> Result<Self, CalibError> {
-        if config.families.is_empty() {
-            return Err(CalibError::invalid("detector", "no tag family given"));
-        }
-        check_decimation(config.decimation).map_err(|m| CalibError::invalid("decimation", m))?;
-        if !(config.sigma >= 0.0 && config.sigma <= MAX_SIGMA) || config.threads == 0 || config.max_hamming > 3 {
-            return Err(CalibError::invalid("detector", format!("sigma must be in [0, {MAX_SIGMA}], threads >= 1, max_hamming <= 3")));
-        }
-        if !config.sharpening.is_finite() || config.min_decision_margin.is_nan() {
-            return Err(CalibError::invalid("detector", "sharpening must be finite and min_decision_margin a number"));
-        }
+        config.validate()?;
         let mut b = DetectorBuilder::new();
         for f in &config.families {
             b = b.add_family_bits(f.to_family(), config.max_hamming);

@@ -4,7 +4,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
 use tubeloc_calib::interchange::{kalibr, ros};
-use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set_reporting, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagDetector, TagFamily, TagMount};
+use tubeloc_calib::{calibrate, estimate_tube_pose, load_calib_set_reporting, save_rig_yaml, CalibError, CalibrationOptions, CornerSource, DetectorConfig, TagFamily, TagMount};
 use tubeloc_core::{files, CameraModel, Rig};
 
 /// Calibration subcommands.
@@ -53,11 +53,11 @@ impl DetectorArgs {
         DetectorArgs { family: vec!["tag36h11".into()], decimate: 1.0, threads: 2, refine_edges: true, no_refine_edges: false, encoding: "srgb".into() }
     }
 
-    /// The detector's settings, checked (a detector of them is built).
+    /// The detector's settings, checked ([`DetectorConfig::validate`]).
     fn config(&self) -> Result<DetectorConfig> {
         let families = self.family.iter().map(|f| TagFamily::from_name(f.trim())).collect::<Result<Vec<_>, _>>()?;
         let config = DetectorConfig { families, decimation: self.decimate, threads: self.threads, refine_edges: self.refine_edges, linearize_srgb: self.encoding == "srgb", ..Default::default() };
-        TagDetector::new(config.clone())?;
+        config.validate()?;
         Ok(config)
     }
 }
