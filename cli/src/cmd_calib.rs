@@ -161,6 +161,7 @@ fn run_rig(a: RigArgs) -> Result<()> {
     };
     let config = a.detector.config()?;
     let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(indicatif::ProgressStyle::with_template("detect tags {bar:30} {pos}/{len} images {elapsed}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
     let set = load_calib_set_reporting(&a.views, source, Some(&config), &|n| {
         bar.set_length(n as u64);
         bar.inc(1);
