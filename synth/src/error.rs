@@ -9,6 +9,14 @@ pub enum SynthError {
     /// A core operation (file, camera, pose) failed.
     #[error(transparent)]
     Core(#[from] tubeloc_core::CoreError),
+    /// A data file (a real data folder's manifest or camera list) is missing or malformed.
+    #[error("{path}: {message}")]
+    Data {
+        /// File concerned.
+        path: std::path::PathBuf,
+        /// What went wrong.
+        message: String,
+    },
     /// An image could not be encoded or decoded.
     #[error("{path}: {message}")]
     Image {

@@ -58,7 +58,7 @@ impl RealView {
 /// does not describe them. Each entry needs `image`, `image_width`, `image_height`, `fx`, `fy`,
 /// `cx`, `cy`, `R_cam_from_site` and `camera_height_m`; `sun_direction_camera` is optional.
 pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError> {
-    let err = |m: String| SynthError::Invalid(format!("{}: {m}", path.display()));
+    let err = |message: String| SynthError::Data { path: path.to_path_buf(), message };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
     let list: Vec<Value> = serde_json::from_str(&text).map_err(|e| err(format!("not a JSON list of cameras: {e}")))?;
     let root = path.parent().unwrap_or(Path::new("."));
@@ -269,6 +269,20 @@ pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
 mod tests {
     use super::*;
 
+    /// A background the manifest lists but the folder lacks is named, with the manifest, in the
+    /// error; one of another split is not opened at all.
+    #[test]
+    fn a_listed_background_that_is_missing_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let manifest = "file\tsplit\tgroup\tsol\nbackgrounds/msl_mastcam_marsdata/gone.jpg\tbackgrounds\tmsl_mastcam_marsdata\t500\nbackgrounds/msl_mastcam_marsdata/other.jpg\tbackgrounds\tmsl_mastcam_marsdata\t520\n";
+        std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
+        assert_eq!((split_of_sol(Some(500)), split_of_sol(Some(520))), (RealSplit::Test, RealSplit::Train));
+        let e = split_views(dir.path(), RealSplit::Test, None, true, 0, 0).unwrap_err().to_string();
+        assert!(e.contains("gone.jpg: listed in") && e.contains("MANIFEST.tsv but not readable as an image"), "{e}");
+        assert!(!e.contains("invalid synth parameter"), "{e}");
+        assert!(split_views(dir.path(), RealSplit::Val, None, true, 0, 0).unwrap().is_empty());
+    }
+
     #[test]
     fn the_body_diameter_is_the_default_tube_models() {
         assert!((TUBE_BODY_DIAMETER_M - 2.0 * tubeloc_core::TubeModel::default().body_radius()).abs() < 1e-12);
@@ -377,7 +391,7 @@ pub struct ManifestEntry {
 
 /// Reads `MANIFEST.tsv` (tab-separated with a header naming `file`, `split`, `group`, `sol`).
 pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, SynthError> {
-    let err = |m: String| SynthError::Invalid(format!("{}: {m}", path.display()));
+    let err = |message: String| SynthError::Data { path: path.to_path_buf(), message };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().ok_or_else(|| err("empty file".into()))?.split('\t').collect();
@@ -438,7 +452,7 @@ pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour
             continue;
         }
         let path = data.join(&e.file);
-        let (w, h) = image::image_dimensions(&path).map_err(|er| SynthError::Invalid(format!("{}: {er}", path.display())))?;
+        let (w, h) = image::image_dimensions(&path).map_err(|er| SynthError::Image { path: path.clone(), message: format!("listed in {} but not readable as an image: {er}", data.join("MANIFEST.tsv").display()) })?;
         if w.min(h) < min_size && split != RealSplit::Train {
             continue;
         }
