@@ -48,10 +48,14 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
 /// `locate` at its defaults on the real frames of the `split`'s sols that come with PDS camera
 /// models (`with_cameras`, pinhole, at least 512 px; all, or the first `frames`): each frame
 /// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
-/// None shows a tube, so every located tube is false.
+/// None shows a tube, so every located tube is false. A data folder without the camera list
+/// gives no frames.
 pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, settings: &tubeloc_pipeline::LocatorSettings, frames: Option<usize>) -> Result<Value> {
     use tubeloc_synth::real_set::split_of_sol;
     let list = data.join("with_cameras").join("cameras.json");
+    if !list.exists() {
+        return Ok(json!({"frames": 0, "located_per_frame": Value::Null, "per_frame": []}));
+    }
     let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
     let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == split).collect();
     chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));

@@ -86,7 +86,8 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 4, value_parser = crate::args::positive_usize)]
     pub stereo_scenes: usize,
     /// The real rover data (`MANIFEST.tsv`, `backgrounds/`, `negatives_val/`, `with_cameras/`)
-    /// for the real stage.
+    /// for the real stage. Grey composites need `with_cameras/`, colour ones Mastcam
+    /// backgrounds, the tube-free rows `negatives_val/`: what the folder lacks is left out.
     #[arg(long, default_value = "../shared/data/real_mars")]
     pub real_data: PathBuf,
     /// Real stage: the part of the real data, split by sol: `test` (the figures to report) or

@@ -16,7 +16,9 @@
 //!     per frame, time; and the fused detector (the learned and the verified Line2D detections
 //!     by their pose evidence, [`tubeloc_pipeline::FusedTubeDetector`]) on the same frames.
 //! Results go to `report.md` and `summary.json` in `<out>/real` (`<out>/real_val` for the
-//! validation part).
+//! validation part). A kind of frame (grey with PDS cameras, colour Mastcam) or `negatives_val`
+//! that the data folder lacks is left out: its entries in `summary.json` are `null`, and the
+//! report says what is missing.
 
 use crate::cmd_detect_line2d::Line2dRunner;
 use anyhow::{bail, Context, Result};
@@ -63,14 +65,26 @@ fn saved_results(set: &Path, out: &Path, dets: &impl serde::Serialize) -> Result
     Ok((gt, dt))
 }
 
+/// The composite set of one kind of frame (`tubeloc synth real --kind KIND`) in `out`, or
+/// `None` where the data holds no frame of that kind in the part (a folder of grey frames only,
+/// or one without `with_cameras/cameras.json`): that kind's rows are then left out.
 #[allow(clippy::too_many_arguments)]
-fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<()> {
+fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<Option<PathBuf>> {
+    use crate::cmd_synth_real::RealKind;
     if out.join("annotations.json").exists() {
-        return Ok(());
+        return Ok(Some(out.to_path_buf()));
+    }
+    let split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+    let grey = (kind != RealKind::Colour).then_some(tubeloc_synth::real_set::GreyView::Pds);
+    if grey.is_some() && kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
+        return Ok(None);
+    }
+    if tubeloc_synth::real_set::split_views(data, split, grey, kind != RealKind::Grey, min_size, seed)?.is_empty() {
+        return Ok(None);
     }
     crate::cmd_synth_real::run(crate::cmd_synth_real::RealArgs {
         data: data.to_path_buf(),
-        split: split.parse().map_err(|e: String| anyhow::anyhow!(e))?,
+        split,
         kind,
         per_view,
         tubes: (1, 4),
@@ -82,7 +96,13 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
         seed,
         force: true,
         out: out.to_path_buf(),
-    })
+    })?;
+    Ok(Some(out.to_path_buf()))
+}
+
+/// `f` on a kind's composite set, or `null` where the data has no such set.
+fn each(set: &Option<PathBuf>, f: impl FnOnce(&Path) -> Result<Value>) -> Result<Value> {
+    set.as_deref().map_or(Ok(Value::Null), f)
 }
 
 /// Detects with the learned model at each image's working scale and evaluates: returns the
@@ -255,15 +275,17 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     std::fs::create_dir_all(&dir)?;
     let part = split_name(stage.split);
     // negatives_val measures false positives only: never run where settings are chosen.
-    let with_negatives = stage.split == tubeloc_synth::real_set::RealSplit::Test;
-    let grey_set = dir.join(format!("{part}_grey"));
-    let colour_set = dir.join(format!("{part}_colour"));
-    composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, 500, stage.frames, 22, &grey_set)?;
-    composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &colour_set)?;
-    let grey = detect_eval(&grey_set, &stage.model, &stage.calibration, &dir.join("learned_grey"))?;
-    let colour = detect_eval(&colour_set, &stage.model, &stage.calibration, &dir.join("learned_colour"))?;
-    let grey_poses = poses(&grey_set, &dir.join("learned_grey"))?;
-    let colour_poses = poses(&colour_set, &dir.join("learned_colour"))?;
+    let negatives_dir = stage.data.join("negatives_val");
+    let with_negatives = stage.split == tubeloc_synth::real_set::RealSplit::Test && negatives_dir.is_dir();
+    let grey_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
+    let colour_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
+    if grey_set.is_none() && colour_set.is_none() {
+        bail!("{}: no frames of the {part} part to composite on: no grey frame with a PDS camera model (with_cameras/cameras.json) and no colour Mastcam background of its sols", stage.data.display());
+    }
+    let grey = each(&grey_set, |s| detect_eval(s, &stage.model, &stage.calibration, &dir.join("learned_grey")))?;
+    let colour = each(&colour_set, |s| detect_eval(s, &stage.model, &stage.calibration, &dir.join("learned_colour")))?;
+    let grey_poses = each(&grey_set, |s| poses(s, &dir.join("learned_grey")))?;
+    let colour_poses = each(&colour_set, |s| poses(s, &dir.join("learned_colour")))?;
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
     // `locate`'s settings at its defaults: the stage's score calibration, the model's pose
     // evidence (`tubeloc_pipeline::shipped::locate_settings`, without loading the calibration again).
@@ -274,23 +296,23 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let neg_pds = crate::bench_negatives::pds_negatives(&stage.data, stage.split, &stage.model, &learned_settings, stage.frames)?;
     // `locate` (mono, each frame's own ground) on the composites: its grasp checks, and how many
     // of the tubes it hands over are composited tubes.
-    let grasp = crate::bench_grasp::run(&grey_set, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&learned_settings))?;
-    let grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&learned_settings))?;
+    let grasp = each(&grey_set, |s| crate::bench_grasp::run(s, &dir.join("learned_grey").join("detections.json"), false, stage.grasp_images, Some(&learned_settings)))?;
+    let grasp_colour = each(&colour_set, |s| crate::bench_grasp::run(s, &dir.join("learned_colour").join("detections.json"), false, stage.grasp_images, Some(&learned_settings)))?;
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
     // Libraries and models are loaded outside the timings.
     let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None, l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
-    let l2_grey = line2d_eval(&grey_set, &l2, None, &dir.join("line2d_grey"))?;
-    let l2_colour = line2d_eval(&colour_set, &l2, None, &dir.join("line2d_colour"))?;
+    let l2_grey = each(&grey_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_grey")))?;
+    let l2_colour = each(&colour_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_colour")))?;
     let l2_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
     drop(l2);
     // Fused: the learned detections and the verified Line2D ones by their pose evidence (record 0069).
     let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), origin: stage.model.name() };
     let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion), l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
-    let fused_grey = line2d_eval(&grey_set, &fused, Some(&fused_cal), &dir.join("fused_grey"))?;
-    let fused_colour = line2d_eval(&colour_set, &fused, Some(&fused_cal), &dir.join("fused_colour"))?;
+    let fused_grey = each(&grey_set, |s| line2d_eval(s, &fused, Some(&fused_cal), &dir.join("fused_grey")))?;
+    let fused_colour = each(&colour_set, |s| line2d_eval(s, &fused, Some(&fused_cal), &dir.join("fused_colour")))?;
     let fused_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &fused, stage.frames)? } else { Value::Null };
     drop(fused);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
@@ -299,8 +321,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     fused_settings.calibration = fused_cal.clone();
     let fused_located = if with_negatives { crate::bench_negatives::negatives(&stage.data, &fused_detector, &fused_settings, stage.frames)? } else { Value::Null };
     // `locate --detector fused` on the composites, as the learned detector's rows above.
-    let fused_grasp = crate::bench_grasp::run(&grey_set, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_settings))?;
-    let fused_grasp_colour = crate::bench_grasp::run(&colour_set, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_settings))?;
+    let fused_grasp = each(&grey_set, |s| crate::bench_grasp::run(s, &dir.join("fused_grey").join("detections.json"), false, stage.grasp_images, Some(&fused_settings)))?;
+    let fused_grasp_colour = each(&colour_set, |s| crate::bench_grasp::run(s, &dir.join("fused_colour").join("detections.json"), false, stage.grasp_images, Some(&fused_settings)))?;
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let pose_verifier = tubeloc_pipeline::shipped::line2d_pose_verifier("shipped")?;
@@ -326,26 +348,27 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         use crate::bench_intervals::bracket;
         format!("| {name} | {} | {} | {:.3}{} | {:.3}{} | {:.0} | {rest} |", v["images"], v["tubes"], num(v, "ap50"), bracket(&v["ap50_ci"]), num(v, "ar"), bracket(&v["ar_ci"]), num(v, "ms_per_image"))
     };
-    for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)] {
+    let present = |v: &&Value| !v.is_null();
+    for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)].into_iter().filter(|r| present(&r.1)) {
         writeln!(md, "{}", row(name, v, format!("{:.3} / {:.3} | {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold"), num(v, "ece")))).ok();
     }
     // The same detections with their masks snapped to their mono-refined poses: the masks of a
     // learned detection followed by `tubeloc refine --snapped-out`.
-    for (name, v, p) in [("grey, snapped to poses", &grey, &grey_poses), ("colour, snapped to poses", &colour, &colour_poses)] {
+    for (name, v, p) in [("grey, snapped to poses", &grey, &grey_poses), ("colour, snapped to poses", &colour, &colour_poses)].into_iter().filter(|r| present(&r.1)) {
         let s = &p["snapped"];
         let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ap50_ci": s["ap50_ci"], "ar": s["ar"], "ar_ci": s["ar_ci"], "ms_per_image": num(v, "ms_per_image") + num(s, "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, "- | -".into())).ok();
     }
     // The snapped detections ranked by the pose evidence (`refine --pose-evidence shipped`).
-    for (name, v, p) in [("grey, snapped, ranked by pose evidence", &grey, &grey_poses), ("colour, snapped, ranked by pose evidence", &colour, &colour_poses)] {
+    for (name, v, p) in [("grey, snapped, ranked by pose evidence", &grey, &grey_poses), ("colour, snapped, ranked by pose evidence", &colour, &colour_poses)].into_iter().filter(|r| present(&r.1)) {
         let s = &p["snapped_pose_evidence"];
         let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ap50_ci": s["ap50_ci"], "ar": s["ar"], "ar_ci": s["ar_ci"], "ms_per_image": num(v, "ms_per_image") + num(&p["snapped"], "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, format!("- | {:.3}", num(s, "ece")))).ok();
     }
-    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)] {
+    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)].into_iter().filter(|r| present(&r.1)) {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
-    for (name, v) in [("fused grey (PDS geometry)", &fused_grey), ("fused colour (assumed view)", &fused_colour)] {
+    for (name, v) in [("fused grey (PDS geometry)", &fused_grey), ("fused colour (assumed view)", &fused_colour)].into_iter().filter(|r| present(&r.1)) {
         let at = match v["kept"].as_u64() {
             Some(0) => "none kept".to_string(),
             _ => format!("{:.3} / {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold")),
@@ -357,7 +380,10 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "\nFused rows (`tubeloc detect --method fused`, record 0069): the learned detections, each refined on the frame's ground, snapped and scored by the shipped model's pose evidence, and the Line2D detections verified by pose as in the Line2D rows, in one list, the less probable of two overlapping at mask IoU > 0.5 dropped; time: both detectors and the refinements. Their precision column gives the false detections per image, then the precision / recall at the fused calibration's threshold (what `locate --detector fused` hands over), and its ECE.").ok();
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
-    for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)] {
+    for (kind, _) in [("grey", &grey_set), ("colour", &colour_set)].into_iter().filter(|r| r.1.is_none()) {
+        writeln!(md, "\nNo {kind} frames of the {part} sols in `{}`: the {kind} rows are left out.", stage.data.display()).ok();
+    }
+    for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)].into_iter().filter(|r| present(&r.1)) {
         use crate::bench_intervals::bracket;
         writeln!(md, "\nMono refinement of the learned detections on the {kind} {part} composites (each frame's own ground, `--ground auto`; tubes at least half visible, matched within 50 mm): {} of {} tubes, axis {}{} / {} deg, across the axis {}{} / {} mm, centre along the axis {}{} / {} mm (median [95 % interval by sol] / p90).", p["matched"], p["truths"], f(&p["axis_deg_median"]), bracket(&p["axis_deg_median_ci"]), f(&p["axis_deg_p90"]), f(&p["across_mm_median"]), bracket(&p["across_mm_median_ci"]), f(&p["across_mm_p90"]), f(&p["along_mm_median"]), bracket(&p["along_mm_median_ci"]), f(&p["along_mm_p90"])).ok();
     }
@@ -389,14 +415,20 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         .ok();
         let columns = [("learned kept", &neg, "kept"), ("`locate`", &neg, "located"), ("Line2D", &l2_neg, "kept"), ("fused", &fused_neg, "kept"), ("`locate --detector fused`", &fused_located, "located")];
         writeln!(md, "By folder of `negatives_val` (camera and frame size; per frame):\n\n{}", crate::bench_negatives::folder_table(&columns)).ok();
+    } else if stage.split == tubeloc_synth::real_set::RealSplit::Test {
+        writeln!(md, "\nReal frames without tubes: no `negatives_val` folder in `{}`.\n", stage.data.display()).ok();
     } else {
         writeln!(md, "\nReal frames without tubes (`negatives_val`): not run on the {part} part; they measure false positives only.\n").ok();
     }
-    writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**{}.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN), crate::bench_intervals::by_sol_note(&neg_pds["located_per_frame_ci"])).ok();
+    if neg_pds["frames"].as_u64().unwrap_or(0) == 0 {
+        writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, pinhole, at least 512 px): none in `{}`.\n", stage.data.display()).ok();
+    } else {
+        writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**{}.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN), crate::bench_intervals::by_sol_note(&neg_pds["located_per_frame_ci"])).ok();
+    }
     writeln!(
         md,
         "`locate` at its defaults on the {part} composites (mono; learned detections, each frame's own ground, tubes at or above the probability threshold whose pose evidence reaches the floor, record 0078, and whose limbs end with them, record 0080; `--detector fused` rows: the fused detections at the fused calibration's threshold whose limbs end with them): the tubes it hands the planner, how many of them are composited tubes (centre within 50 mm of one, matched one to one), and its grasp collision checks (ground plane and other tubes):\n\n{}",
-        crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour), ("grey composites, `--detector fused`", &fused_grasp), ("colour composites, `--detector fused`", &fused_grasp_colour)])
+        crate::bench_grasp::table(&[("grey composites", &grasp), ("colour composites", &grasp_colour), ("grey composites, `--detector fused`", &fused_grasp), ("colour composites, `--detector fused`", &fused_grasp_colour)].into_iter().filter(|r| present(&r.1)).collect::<Vec<_>>())
     )
     .ok();
     for (kind, g) in [("grey", &grasp), ("colour", &grasp_colour), ("grey (`--detector fused`)", &fused_grasp), ("colour (`--detector fused`)", &fused_grasp_colour)] {
@@ -416,8 +448,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
             writeln!(md, "Located {kind} tubes that are no composited tube: {}.\n", listed.join("; ")).ok();
         }
     }
-    writeln!(md, "Reliability of the calibrated probability on the grey {part} detections (bins of 0.1: mean predicted / observed / count):\n").ok();
-    if let Some(bins) = grey["reliability"].as_array() {
+    let (kind, reliability) = if present(&&grey) { ("grey", &grey["reliability"]) } else { ("colour", &colour["reliability"]) };
+    writeln!(md, "Reliability of the calibrated probability on the {kind} {part} detections (bins of 0.1: mean predicted / observed / count):\n").ok();
+    if let Some(bins) = reliability.as_array() {
         for b in bins.iter().filter(|b| b["count"].as_u64().unwrap_or(0) > 0) {
             writeln!(md, "- [{:.1}, {:.1}): {:.3} / {:.3} / {}", b["lo"].as_f64().unwrap_or(0.0), b["hi"].as_f64().unwrap_or(0.0), b["mean_probability"].as_f64().unwrap_or(f64::NAN), b["frequency"].as_f64().unwrap_or(f64::NAN), b["count"]).ok();
         }

@@ -74,6 +74,42 @@ fn training_backgrounds_hold_no_frame_of_a_validation_or_test_sol() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown split"));
 }
 
+/// The real stage on a data folder that holds only colour backgrounds (no `with_cameras`, no
+/// `negatives_val`): the colour rows, and a line in the report for each part left out; a
+/// folder with no frame of the part at all is refused with what it lacks.
+#[test]
+fn bench_real_stage_leaves_out_what_the_data_lacks() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("colour_only");
+    std::fs::create_dir_all(&data).unwrap();
+    std::fs::copy(real_data().join("MANIFEST.tsv"), data.join("MANIFEST.tsv")).unwrap();
+    std::os::unix::fs::symlink(real_data().join("backgrounds"), data.join("backgrounds")).unwrap();
+    let ds = dir.path().join("dataset");
+    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
+    let out = dir.path().join("bench");
+    let skip = "line2d,learned,poses,stereo,fullres,tags";
+    ok(&["bench", "--dataset", p(&ds), "--skip", skip, "--real-data", p(&data), "--real-frames", "2", "--out", p(&out)]);
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/summary.json")).unwrap()).unwrap();
+    assert!(summary["learned"]["grey"].is_null() && summary["line2d"]["grey"].is_null() && summary["fused"]["grey"].is_null(), "{}", summary["learned"]);
+    assert_eq!(summary["learned"]["colour"]["images"], 2);
+    assert!((0.0..=1.0).contains(&summary["line2d"]["colour"]["ap50"].as_f64().unwrap()));
+    assert_eq!(summary["negatives_pds"]["frames"], 0);
+    assert!(summary["negatives"].is_null());
+    let report = std::fs::read_to_string(out.join("real/report.md")).unwrap();
+    assert!(report.contains("| colour (assumed view) | 2 |") && !report.contains("| grey (PDS geometry)"), "{report}");
+    assert!(report.contains("No grey frames of the test sols in") && report.contains("the grey rows are left out"), "{report}");
+    assert!(report.contains("Real frames without tubes: no `negatives_val` folder in"), "{report}");
+    assert!(report.contains("Reliability of the calibrated probability on the colour test detections"), "{report}");
+    // Nothing of the part: its manifest lists no background, and there is no camera list.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    std::fs::write(empty.join("MANIFEST.tsv"), "file\tsplit\tgroup\tsol\n").unwrap();
+    let r = tubeloc(&["bench", "--dataset", p(&ds), "--skip", skip, "--real-data", p(&empty), "--real-frames", "2", "--out", p(&dir.path().join("b2"))]);
+    assert!(!r.status.success());
+    let e = String::from_utf8_lossy(&r.stderr);
+    assert!(e.contains("no frames of the test part to composite on") && e.contains("with_cameras/cameras.json"), "{e}");
+}
+
 #[test]
 fn bench_real_stage_runs_at_a_small_size() {
     let dir = tempfile::tempdir().unwrap();
