@@ -26,6 +26,12 @@ pub const EVIDENCE_FEATURES: usize = 5;
 /// Names of the evidence features, in order (for reports and the JSON file's readers).
 pub const EVIDENCE_FEATURE_NAMES: [&str; EVIDENCE_FEATURES] = ["logit_score", "inlier_fraction", "ln_1_plus_contour_samples", "end_confidence", "ln_axis_sigma_rad"];
 
+/// Largest magnitude [`PoseEvidence::validate`] accepts for a mean, a weight or the bias.
+pub const MAX_EVIDENCE_PARAMETER: f64 = 1e9;
+
+/// Smallest feature scale [`PoseEvidence::validate`] accepts.
+pub const MIN_EVIDENCE_SCALE: f64 = 1e-9;
+
 /// A fitted logistic model of the probability that a refined pose is a tube.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -69,17 +75,20 @@ impl PoseEvidence {
         self.probability_of(&Self::features(pose))
     }
 
-    /// Checks the feature names, finite numbers and positive scales.
+    /// Checks the feature names, and numbers that keep every term of the sum finite: mean,
+    /// weights and bias within ±[`MAX_EVIDENCE_PARAMETER`], scales from
+    /// [`MIN_EVIDENCE_SCALE`] (a fitted model's are far inside; beyond them a term can
+    /// overflow to ±∞ and two such terms sum to NaN).
     pub fn validate(&self) -> Result<(), String> {
         if self.features != EVIDENCE_FEATURE_NAMES {
             return Err(format!("features {:?} must be {:?}", self.features, EVIDENCE_FEATURE_NAMES));
         }
-        let finite = self.mean.iter().chain(&self.weights).chain(std::iter::once(&self.bias)).all(|v| v.is_finite());
-        if !finite {
-            return Err("mean, weights and bias must be finite".into());
+        let bounded = self.mean.iter().chain(&self.weights).chain(std::iter::once(&self.bias)).all(|v| v.is_finite() && v.abs() <= MAX_EVIDENCE_PARAMETER);
+        if !bounded {
+            return Err(format!("mean, weights and bias must be finite and within ±{MAX_EVIDENCE_PARAMETER:e}"));
         }
-        if let Some(s) = self.scale.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
-            return Err(format!("scale {s} must be finite and positive"));
+        if let Some(s) = self.scale.iter().find(|s| !(s.is_finite() && **s >= MIN_EVIDENCE_SCALE)) {
+            return Err(format!("scale {s} must be finite and at least {MIN_EVIDENCE_SCALE:e}"));
         }
         Ok(())
     }
@@ -130,5 +139,17 @@ mod tests {
         assert!(PoseEvidence { scale: [0.0, 1.0, 1.0, 1.0, 1.0], ..model() }.validate().unwrap_err().contains("scale 0"));
         assert!(PoseEvidence { features: vec!["x".into()], ..model() }.validate().unwrap_err().contains("features"));
         assert!(PoseEvidence { bias: f64::NAN, ..model() }.validate().is_err());
+        // Numbers that would overflow a term to ±∞ (two such terms of opposite signs sum to
+        // NaN) are refused; at the bounds every probability is a number.
+        let overflowing = PoseEvidence { scale: [1e-300; 5], weights: [1e300, -1e300, 0.0, 0.0, 0.0], ..model() };
+        assert!(overflowing.probability_of(&[13.9, 1.0, 0.0, 0.0, 0.0]).is_nan(), "the file the check is for");
+        assert!(overflowing.validate().unwrap_err().contains("within"));
+        assert!(PoseEvidence { scale: [1e-12; 5], ..model() }.validate().unwrap_err().contains("at least"));
+        let extreme = PoseEvidence { scale: [MIN_EVIDENCE_SCALE; 5], weights: [MAX_EVIDENCE_PARAMETER, -MAX_EVIDENCE_PARAMETER, MAX_EVIDENCE_PARAMETER, -MAX_EVIDENCE_PARAMETER, MAX_EVIDENCE_PARAMETER], mean: [-MAX_EVIDENCE_PARAMETER; 5], ..model() };
+        assert!(extreme.validate().is_ok());
+        for f in [[13.9, 1.0, 30.0, 1.0, 5.0], [-13.9, 0.0, 0.0, 0.0, -13.9]] {
+            let p = extreme.probability_of(&f);
+            assert!((0.0..=1.0).contains(&p), "{p}");
+        }
     }
 }

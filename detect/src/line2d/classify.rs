@@ -112,7 +112,9 @@ impl Verifier {
         Ok(v)
     }
 
-    /// Checks the lengths, names and finiteness of the fields.
+    /// Checks the lengths, the names, and numbers that keep every term of the log-odds finite:
+    /// mean, weights and bias within ±1e6, standard deviations of at least 1e-6 (what a fit
+    /// gives; beyond them a term overflows to ±∞ and two such terms sum to NaN).
     pub fn check(&self) -> Result<(), String> {
         if self.features.len() != N_FEATURES || self.features.iter().zip(FEATURE_NAMES).any(|(a, b)| a != b) {
             return Err(format!("features {:?} differ from {:?}", self.features, FEATURE_NAMES));
@@ -121,8 +123,14 @@ impl Verifier {
             return Err(format!("mean, std and weights need {N_TERMS} values each"));
         }
         let all = self.mean.iter().chain(&self.std).chain(&self.weights).chain([&self.bias, &self.threshold]);
-        if all.clone().any(|x| !x.is_finite()) || self.std.iter().any(|&s| s <= 0.0) {
-            return Err("non-finite value or non-positive std".into());
+        if all.clone().any(|x| !x.is_finite()) {
+            return Err("non-finite value".into());
+        }
+        if self.mean.iter().chain(&self.weights).chain([&self.bias]).any(|x| x.abs() > 1e6) {
+            return Err("mean, weights and bias must be within ±1e6".into());
+        }
+        if let Some(s) = self.std.iter().find(|&&s| s < 1e-6) {
+            return Err(format!("std {s} is below 1e-6"));
         }
         for (name, t) in [("threshold", Some(self.threshold)), ("threshold_grey", self.threshold_grey), ("threshold_far", self.threshold_far)] {
             if let Some(t) = t.filter(|t| !(0.0..=1.0).contains(t)) {
@@ -341,6 +349,22 @@ mod tests {
         let v = Verifier::shipped();
         assert_eq!(v.features, FEATURE_NAMES.iter().map(|s| s.to_string()).collect::<Vec<_>>());
         assert!((0.0..=1.0).contains(&v.threshold));
+    }
+
+    /// A verifier file whose terms would overflow (a tiny std, huge weights of opposite signs:
+    /// ∞ - ∞ = NaN log-odds) is refused; the shipped one is within the bounds.
+    #[test]
+    fn a_verifier_whose_terms_overflow_is_refused() {
+        let shipped = Verifier::shipped();
+        assert!(shipped.check().is_ok());
+        let tiny_std = Verifier { std: vec![1e-30; N_TERMS], ..shipped.clone() };
+        assert!(tiny_std.check().unwrap_err().contains("below 1e-6"));
+        let mut huge = shipped.clone();
+        huge.weights[0] = 3e38;
+        huge.weights[1] = -3e38;
+        assert!(huge.check().unwrap_err().contains("within"));
+        let text = serde_json::to_string(&tiny_std).unwrap();
+        assert!(Verifier::from_json(&text).is_err());
     }
 
     #[test]
