@@ -78,6 +78,9 @@ pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError>
         let rows = e.get("R_cam_from_site").and_then(Value::as_array).filter(|r| r.len() == 3).ok_or_else(|| ctx("missing `R_cam_from_site` (3x3)"))?;
         let rows: Vec<Vector3<f64>> = rows.iter().map(vec3).collect::<Option<_>>().ok_or_else(|| ctx("`R_cam_from_site` is not 3x3 numbers"))?;
         let r = Matrix3::from_rows(&[rows[0].transpose(), rows[1].transpose(), rows[2].transpose()]);
+        if !((r * r.transpose() - Matrix3::identity()).abs().max() < 1e-3 && (r.determinant() - 1.0).abs() < 1e-3) {
+            return Err(ctx("`R_cam_from_site` is not a rotation (orthonormal, determinant 1)"));
+        }
         let up_cam = (r * Vector3::new(0.0, 0.0, -1.0)).normalize();
         let camera = CameraModel { width: num("image_width")? as u32, height: num("image_height")? as u32, fx: num("fx")?, fy: num("fy")?, cx: num("cx")?, cy: num("cy")?, distortion: Default::default() };
         camera.validate().map_err(|e| ctx(&e.to_string()))?;
@@ -85,7 +88,10 @@ pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError>
         if height_m <= 0.0 {
             return Err(ctx(&format!("camera height {height_m} m must be > 0")));
         }
-        let sun_cam = e.get("sun_direction_camera").and_then(vec3).map(|v| v.normalize());
+        let sun_cam = match e.get("sun_direction_camera") {
+            None | Some(Value::Null) => None,
+            Some(v) => Some(vec3(v).and_then(|v| v.try_normalize(1e-12)).ok_or_else(|| ctx("`sun_direction_camera` is not a non-zero 3-vector"))?),
+        };
         let sol = e.get("sol").and_then(Value::as_i64);
         out.push(RealView { image: root.join(image), sol, camera, up_cam, height_m, sun_cam, geometry: "pds" });
     }
@@ -268,6 +274,28 @@ pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A camera list entry whose rotation is no rotation, or whose sun direction is no
+    /// direction, is refused naming the entry; a good entry is read.
+    #[test]
+    fn camera_list_entries_are_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cameras.json");
+        let entry = |r: &str, sun: &str| format!(r#"{{"image": "a.png", "image_width": 1024, "image_height": 1024, "fx": 1200, "fy": 1200, "cx": 512, "cy": 512, "camera_height_m": 1.9, "sol": 40, "R_cam_from_site": {r}{sun}}}"#);
+        let good = "[[1, 0, 0], [0, 0, -1], [0, 1, 0]]";
+        let read = |text: String| {
+            std::fs::write(&path, text).unwrap();
+            views_from_cameras_json(&path)
+        };
+        let views = read(format!("[{}]", entry(good, r#", "sun_direction_camera": [0, -2, 0]"#))).unwrap();
+        assert_eq!(views.len(), 1);
+        assert!((views[0].sun_cam.unwrap() - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-12);
+        assert!(read(format!("[{}]", entry(good, ""))).unwrap()[0].sun_cam.is_none());
+        for (r, sun, says) in [("[[0, 0, 0], [0, 0, 0], [0, 0, 0]]", "", "not a rotation"), ("[[1, 0, 0], [0, 1, 0], [0, 0, -1]]", "", "not a rotation"), (good, r#", "sun_direction_camera": [0, 0, 0]"#, "not a non-zero 3-vector")] {
+            let e = read(format!("[{}, {}]", entry(good, ""), entry(r, sun))).unwrap_err().to_string();
+            assert!(e.contains("cameras.json: entry 1:") && e.contains(says), "{e}");
+        }
+    }
 
     /// A background the manifest lists but the folder lacks is named, with the manifest, in the
     /// error; one of another split is not opened at all.
