@@ -76,7 +76,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
     }
     let split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
     let grey = (kind != RealKind::Colour).then_some(tubeloc_synth::real_set::GreyView::Pds);
-    if grey.is_some() && kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
+    if kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
         return Ok(None);
     }
     if tubeloc_synth::real_set::split_views(data, split, grey, kind != RealKind::Grey, min_size, seed)?.is_empty() {

@@ -1,7 +1,7 @@
 //! Pose verification: a detection is kept when the pose refined from it explains the image as a
 //! tube does (record 0068).
 //!
-//! Each candidate is refined in mono on the frame's ground ([`refine_frame`]; the ground's
+//! Each candidate is refined in mono on the frame's ground ([`crate::frame::refine_frame`]; the ground's
 //! orientation is a prior, its height is not a constraint), its mask is snapped to the pose's
 //! silhouette ([`snapped_detection`]), and it is scored by a [`PoseEvidence`]: the probability
 //! `P = σ(b + Σ w_i (f_i − μ_i) / s_i)` that the pose is a tube, from the detector's score and
@@ -16,7 +16,7 @@
 //! image's size) the clutter verifier's own cut applies instead.
 
 use crate::error::{PipelineError, Result};
-use crate::frame::{refine_frame, Frame, FrameOptions, SeedItem};
+use crate::frame::{refine_pixels, Frame, FrameOptions, FramePixels, SeedItem};
 use crate::settings::LocatorSettings;
 use crate::stages::snapped_detection;
 use image::DynamicImage;
@@ -127,9 +127,10 @@ impl PoseVerifier {
     /// first (ties in candidate order). `grey`: the image's kind.
     pub fn verify(&self, refiner: &Refiner, settings: &LocatorSettings, frame: &Frame, candidates: &[TubeDetection], grey: bool) -> Result<Vec<PoseVerdict>> {
         let items: Vec<SeedItem> = candidates.iter().cloned().map(SeedItem::Detection).collect();
-        let refined = refine_frame(refiner, settings, frame, &items, &FrameOptions::default())?;
+        // The frame's grey levels, converted once for the fits and the limb check.
+        let px = FramePixels::of(frame.image, settings.colour_ends);
+        let refined = refine_pixels(refiner, settings, frame, &px, &items, &FrameOptions::default())?;
         let snap = settings.stages.snap;
-        let gray = self.max_limb_continuation.map(|_| crate::frame::grey_levels(frame.image));
         let mut verdicts: Vec<PoseVerdict> = candidates
             .iter()
             .zip(refined.poses)
@@ -148,8 +149,8 @@ impl PoseVerifier {
         let above = verdicts.partition_point(|v| v.probability >= self.threshold_for(grey));
         let going_on: Vec<bool> = verdicts[..above]
             .iter()
-            .map(|v| match (&gray, self.max_limb_continuation) {
-                (Some(g), Some(max)) if v.pose.converged => tubeloc_refine::limb_continuation::limb_continuation(g, frame.camera, &settings.tube, &v.pose).is_some_and(|c| c > max),
+            .map(|v| match self.max_limb_continuation {
+                Some(max) if v.pose.converged => tubeloc_refine::limb_continuation::limb_continuation(&px.gray, frame.camera, &settings.tube, &v.pose).is_some_and(|c| c > max),
                 _ => false,
             })
             .collect();
