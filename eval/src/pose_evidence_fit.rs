@@ -7,7 +7,7 @@
 //! method (the loss is convex, so the minimum is unique and reached in a few steps).
 
 use nalgebra::{SMatrix, SVector};
-use tubeloc_core::pose_evidence::{EVIDENCE_FEATURES, EVIDENCE_FEATURE_NAMES};
+use tubeloc_core::pose_evidence::{EVIDENCE_FEATURES, EVIDENCE_FEATURE_NAMES, MIN_EVIDENCE_SCALE};
 use tubeloc_core::{CocoDataset, CocoResult, PoseEvidence, Rle, TubeAxisPose};
 
 const N: usize = EVIDENCE_FEATURES + 1;
@@ -28,8 +28,9 @@ pub fn fit_pose_evidence(samples: &[([f64; EVIDENCE_FEATURES], bool)], fitted_on
     for i in 0..EVIDENCE_FEATURES {
         mean[i] = samples.iter().map(|s| s.0[i]).sum::<f64>() / n;
         let var = samples.iter().map(|s| (s.0[i] - mean[i]).powi(2)).sum::<f64>() / n;
-        // A constant feature carries nothing: scale 1 keeps it at z = 0.
-        scale[i] = if var.sqrt() > 1e-12 { var.sqrt() } else { 1.0 };
+        // A constant feature carries nothing: scale 1 keeps it at z = 0 (below the smallest
+        // scale a model file may carry, the feature counts as constant).
+        scale[i] = if var.sqrt() >= MIN_EVIDENCE_SCALE { var.sqrt() } else { 1.0 };
     }
     let rows: Vec<(SVector<f64, N>, f64)> = samples
         .iter()
