@@ -264,6 +264,7 @@ impl Locator {
         let camera = rig.camera(&name).ok_or_else(|| PipelineError::Input(format!("the rig has no camera named {name:?}")))?.clone();
         camera.model.validate()?;
         check_image_pixels(camera.model.width, camera.model.height, &camera.name)?;
+        settings.validate_cuts().map_err(|e| PipelineError::Input(format!("locator settings: {e}")))?;
         let refiner = Refiner::new(&settings.tube, settings.refine.clone())?;
         let planner = GraspPlanner::new(settings.gripper.clone(), settings.grasp.clone(), &settings.tube)?;
         Ok(Locator { rig: rig.clone(), camera, pair, detector, refiner, planner, settings })

@@ -78,6 +78,24 @@ pub const DEFAULT_MAX_LIMB_CONTINUATION: f64 = 0.6;
 /// rear Hazcam frame (25; `docs/design/0062-underexposed-frames.md`).
 pub const DEFAULT_MIN_HIGHLIGHT_LEVEL: f64 = 48.0;
 
+impl LocatorSettings {
+    /// Checks the cuts `locate` applies after the fit: the pose-evidence floor a probability,
+    /// the limb cut a positive number, the highlight level a grey level in `[0, 255]`. The error
+    /// names the field and its value ([`crate::Locator::new`] refuses such settings).
+    pub fn validate_cuts(&self) -> Result<(), String> {
+        if !(0.0..=1.0).contains(&self.min_pose_evidence) {
+            return Err(format!("min_pose_evidence = {}: expected a probability in [0, 1]", self.min_pose_evidence));
+        }
+        if let Some(c) = self.max_limb_continuation.filter(|c| !(c.is_finite() && *c > 0.0)) {
+            return Err(format!("max_limb_continuation = {c}: expected a positive number (None for no such check)"));
+        }
+        if !(0.0..=255.0).contains(&self.min_highlight_level) {
+            return Err(format!("min_highlight_level = {}: expected a grey level in [0, 255]", self.min_highlight_level));
+        }
+        Ok(())
+    }
+}
+
 impl Default for LocatorSettings {
     fn default() -> Self {
         LocatorSettings {

@@ -308,6 +308,30 @@ fn with_rim_band(image: &DynamicImage, cam: &tubeloc_core::CameraModel, pose: &t
 /// continuation; the same image with a bright band of the tube's width going on past both its
 /// ends (a slab rim, as a cylinder fit sees one) is listed as `limbs_continue`, and handed
 /// over with the check off.
+/// A locator is not built with cuts that cannot mean anything: the error names the field and
+/// its value.
+#[test]
+fn a_locator_refuses_cuts_out_of_their_range() {
+    let (cam, _, _, det) = one_tube_scene();
+    let build = |s: LocatorSettings| Locator::new(&rig(&cam, 0.05), &CameraSelection::default(), Box::new(ExternalDetections::new(vec![det.clone()], "test")), s).err().map(|e| e.to_string());
+    let with = |f: &dyn Fn(&mut LocatorSettings)| {
+        let mut s = LocatorSettings::default();
+        f(&mut s);
+        build(s)
+    };
+    assert_eq!(with(&|_| {}), None);
+    assert_eq!(with(&|s| s.max_limb_continuation = None), None);
+    for (f, says) in [
+        (&(|s: &mut LocatorSettings| s.max_limb_continuation = Some(-1.0)) as &dyn Fn(&mut LocatorSettings), "max_limb_continuation = -1"),
+        (&|s: &mut LocatorSettings| s.max_limb_continuation = Some(f64::NAN), "max_limb_continuation = NaN"),
+        (&|s: &mut LocatorSettings| s.min_pose_evidence = 1.5, "min_pose_evidence = 1.5"),
+        (&|s: &mut LocatorSettings| s.min_highlight_level = 300.0, "min_highlight_level = 300"),
+    ] {
+        let e = with(f).unwrap_or_else(|| panic!("{says}: accepted"));
+        assert!(e.contains("locator settings") && e.contains(says), "{e}");
+    }
+}
+
 #[test]
 fn a_tube_whose_limbs_go_on_past_its_ends_is_not_handed_over() {
     let (cam, image, ground, det) = one_tube_scene();
