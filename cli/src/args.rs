@@ -230,55 +230,88 @@ pub fn far_scale(s: &str) -> Result<(f64, f64), String> {
 }
 
 /// A view assumed for frames without a camera model (`--assumed-view`): a named view
-/// (`navcam`, `mast`), one given by its numbers, `HFOV_DEG,HEIGHT_M,PITCH_DEG`
-/// ([`tubeloc_core::AssumedView::parse`]), or `auto`: each frame's by its kind
-/// ([`tubeloc_core::AssumedView::of_kind`]).
+/// (`navcam`, `mast`, ..., [`tubeloc_core::AssumedView::by_name`]), one given by its numbers,
+/// `HFOV_DEG,HEIGHT_M,PITCH_DEG` ([`tubeloc_core::AssumedView::parse`]), or `auto`: each
+/// frame's from its product name or its kind ([`tubeloc_core::AssumedView::of_frame`]).
 #[derive(Clone, Debug, PartialEq)]
 pub enum AssumedViewArg {
     /// One view for every frame: as given (a name, or the numbers), and its geometry.
     View(String, tubeloc_core::AssumedView),
-    /// `navcam` for a grey frame, `mast` for a colour one (as `tubeloc bench` judges real frames).
+    /// The view of the mast camera a frame's product name names, otherwise `navcam` for a grey
+    /// frame and `mast` for a colour one (as `tubeloc bench` judges real frames).
     Auto,
 }
 
+/// The view of one frame under `--assumed-view`: its name as a frame document gives it, its
+/// geometry, and the camera the frame's product name names where no mast view fits it (`auto`
+/// then takes the view of the frame's kind).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameView {
+    /// The view's name (`navcam`, `m100`, `mastcam-z-110`, or the numbers as given).
+    pub name: String,
+    /// The view.
+    pub view: tubeloc_core::AssumedView,
+    /// With `auto`: the camera the product name names that no mast view fits (a Hazcam, an
+    /// arm camera).
+    pub unfit: Option<tubeloc_core::RoverCamera>,
+}
+
+impl FrameView {
+    /// The note for a frame whose product name names a camera no mast view fits, naming the
+    /// file, the camera and the view taken instead; `None` otherwise.
+    pub fn note(&self, image: &std::path::Path) -> Option<String> {
+        self.unfit.map(|c| {
+            format!(
+                "note: {} comes from the {} (by its product name): no mast view fits that camera, so it is judged under the {} view of its kind; give its camera model (--rig, or --label-cameras with its PDS label) for poses and scale that hold",
+                image.display(),
+                c.name(),
+                self.name
+            )
+        })
+    }
+}
+
 impl AssumedViewArg {
-    /// Whether the view depends on the frame's pixels (`auto`).
-    pub fn by_kind(&self) -> bool {
+    /// Whether the view depends on the frame (`auto`).
+    pub fn by_frame(&self) -> bool {
         matches!(self, AssumedViewArg::Auto)
     }
 
-    /// The size of the image at `image` and its view, with the view's name (as
-    /// [`AssumedViewArg::for_frame`]): `auto` decodes the image to tell grey from colour (as
-    /// `tubeloc bench` does); other views read its size only. The error names the file.
-    pub fn frame_view(&self, image: &std::path::Path) -> Result<((u32, u32), &str, tubeloc_core::AssumedView), String> {
+    /// The size of the image at `image` and its view ([`AssumedViewArg::for_frame`]): `auto`
+    /// decodes the image to tell grey from colour (as `tubeloc bench` does); other views read
+    /// its size only. The error names the file.
+    pub fn frame_view(&self, image: &std::path::Path) -> Result<((u32, u32), FrameView), String> {
         let reading = |e: String| format!("reading {}: {e}", image.display());
-        let (size, grey) = match self.by_kind() {
+        let (size, grey) = match self.by_frame() {
             true => tubeloc_detect::input::open_eight_bit(image).map(|im| ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)).map_err(|e| reading(e.to_string()))?,
             false => (tubeloc_detect::input::image_size(image).map_err(|e| reading(e.to_string()))?, true),
         };
-        let (name, view) = self.for_frame(grey);
-        Ok((size, name, view))
+        let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        Ok((size, self.for_frame(&name, grey)))
     }
 
-    /// The view of a frame, grey or not, and its name as a frame document gives it: the
-    /// name as given (`navcam`, `mast`, or the numbers), or with `auto` the named view of the
-    /// frame's kind.
-    pub fn for_frame(&self, grey: bool) -> (&str, tubeloc_core::AssumedView) {
+    /// The view of the frame in the file `file_name`, grey or not: the view as given (its name
+    /// as given: `navcam`, `mast`, or the numbers), or with `auto` the view of the mast camera
+    /// its product name names, otherwise the named view of its kind.
+    pub fn for_frame(&self, file_name: &str, grey: bool) -> FrameView {
         match self {
-            AssumedViewArg::View(spec, view) => (spec, *view),
-            AssumedViewArg::Auto => tubeloc_core::AssumedView::of_kind(grey),
+            AssumedViewArg::View(spec, view) => FrameView { name: spec.clone(), view: *view, unfit: None },
+            AssumedViewArg::Auto => {
+                let (name, view, unfit) = tubeloc_core::AssumedView::of_frame(file_name, grey);
+                FrameView { name, view, unfit }
+            }
         }
     }
 }
 
-/// Parses `--assumed-view`: `navcam`, `mast`, `auto`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
+/// Parses `--assumed-view`: a named view, `auto`, or `HFOV_DEG,HEIGHT_M,PITCH_DEG`.
 pub fn assumed_view(s: &str) -> Result<AssumedViewArg, String> {
     if s.trim() == "auto" {
         return Ok(AssumedViewArg::Auto);
     }
-    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| match s.contains(',') {
+    let view = tubeloc_core::AssumedView::parse(s).map_err(|e| match s.contains(',') || s.trim().starts_with("mastcam-z-") {
         true => e.to_string(),
-        false => format!("unknown view {:?}: expected navcam, mast, auto, or HFOV_DEG,HEIGHT_M,PITCH_DEG (e.g. 90,2,25)", s.trim()),
+        false => format!("unknown view {:?}: expected {}, auto, or HFOV_DEG,HEIGHT_M,PITCH_DEG (e.g. 90,2,25)", s.trim(), tubeloc_core::AssumedView::names()),
     })?;
     let spec = s.split(',').map(str::trim).collect::<Vec<_>>().join(",");
     Ok(AssumedViewArg::View(spec, view))
@@ -329,19 +362,35 @@ mod tests {
     }
 
     #[test]
-    fn assumed_views_are_named_given_by_their_numbers_or_by_kind() {
+    fn assumed_views_are_named_given_by_their_numbers_or_by_product_or_kind() {
         for (name, view) in tubeloc_core::AssumedView::NAMED {
             let v = assumed_view(name).unwrap();
-            assert!(!v.by_kind());
-            assert_eq!(v.for_frame(true), (name, view));
+            assert!(!v.by_frame());
+            assert_eq!(v.for_frame("NLB_462567646EDR_F0402448NCAM00385M_.jpg", false), FrameView { name: name.to_string(), view, unfit: None });
         }
         let v = assumed_view("96, 2,20").unwrap();
-        let (name, view) = v.for_frame(false);
-        assert_eq!((name, view.hfov_deg, view.height_m, view.pitch_deg), ("96,2,20", 96.0, 2.0, 20.0));
+        let f = v.for_frame("x.png", false);
+        assert_eq!((f.name.as_str(), f.view.hfov_deg, f.view.height_m, f.view.pitch_deg), ("96,2,20", 96.0, 2.0, 20.0));
+        let z = assumed_view("mastcam-z-48").unwrap().for_frame("x.png", true);
+        assert_eq!((z.name.as_str(), z.view), ("mastcam-z-48", tubeloc_core::AssumedView::mastcam_z(48.0)));
         let auto = assumed_view("auto").unwrap();
-        assert!(auto.by_kind());
-        assert_eq!((auto.for_frame(true), auto.for_frame(false)), (("navcam", tubeloc_core::AssumedView::NAVCAM), ("mast", tubeloc_core::AssumedView::MAST)));
+        assert!(auto.by_frame());
+        // Frames without a product name: by kind.
+        let (g, c) = (auto.for_frame("x.png", true), auto.for_frame("x.png", false));
+        assert_eq!((g.name.as_str(), g.view, c.name.as_str(), c.view), ("navcam", tubeloc_core::AssumedView::NAVCAM, "mast", tubeloc_core::AssumedView::MAST));
+        // A product name names the camera, whatever the pixels.
+        let m100 = auto.for_frame("0079MR0005910210103981E01.jpg", false);
+        assert_eq!((m100.name.as_str(), m100.view, m100.unfit), ("m100", tubeloc_core::AssumedView::M100, None));
+        let nav = auto.for_frame("NLF_0053_0671642352_402ECM_N0032046NCAM00500_01_295J.png", false);
+        assert_eq!((nav.name.as_str(), nav.view), ("m2020-navcam", tubeloc_core::AssumedView::M2020_NAVCAM));
+        assert!(m100.note(std::path::Path::new("a.jpg")).is_none());
+        // A Hazcam frame: the kind's view, and a note naming the file and the camera.
+        let haz = auto.for_frame("RLB_701384675RAS_F0933408RHAZ00337M1.png", true);
+        assert_eq!((haz.name.as_str(), haz.view), ("navcam", tubeloc_core::AssumedView::NAVCAM));
+        let note = haz.note(std::path::Path::new("d/RLB_701384675RAS_F0933408RHAZ00337M1.png")).unwrap();
+        assert!(note.contains("d/RLB_701384675RAS") && note.contains("MSL Hazcam") && note.contains("navcam view"), "{note}");
         let e = assumed_view("hazcam").unwrap_err();
-        assert!(e.contains("HFOV_DEG,HEIGHT_M,PITCH_DEG") && e.contains("auto"), "{e}");
+        assert!(e.contains("HFOV_DEG,HEIGHT_M,PITCH_DEG") && e.contains("auto") && e.contains("m2020-navcam"), "{e}");
+        assert!(assumed_view("mastcam-z-200").unwrap_err().contains("26 to 110"));
     }
 }

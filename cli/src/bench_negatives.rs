@@ -1,5 +1,6 @@
-//! The tube-free frames of the real stage of `tubeloc bench`: `negatives_val` under an assumed
-//! camera per frame kind (grey Navcam: 45 degree field of view, 1.9 m high, 30 degrees down;
+//! The tube-free frames of the real stage of `tubeloc bench`: `negatives_val` under the
+//! assumed camera of each frame (`--assumed-view auto`: the mast camera its product name names,
+//! otherwise by kind: grey Navcam, 45 degree field of view, 1.9 m high, 30 degrees down;
 //! colour: the mast view), and the frames of the part's sols with PDS camera models under their
 //! own. Every detection kept and every tube `locate` hands over there is false. Each figure per
 //! frame carries its interval by sol ([`crate::bench_intervals`]) and a breakdown by the data's
@@ -13,10 +14,12 @@ use std::sync::Arc;
 use std::time::Instant;
 use tubeloc_core::AssumedView;
 
-/// Assumed view of a negative frame: grey Navcam-like or the colour mast view
-/// ([`AssumedView::of_kind`], what `tubeloc locate --assumed-view auto` takes).
-fn negative_view(grey: bool) -> AssumedView {
-    AssumedView::of_kind(grey).1
+/// Assumed view of the negative frame at `path`, what `tubeloc locate --assumed-view auto`
+/// takes ([`AssumedView::of_frame`]): the view of the mast camera its product name names,
+/// otherwise grey Navcam-like or the colour mast view.
+fn negative_view(path: &Path, grey: bool) -> AssumedView {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    AssumedView::of_frame(&name, grey).1
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
@@ -30,7 +33,7 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
         // `locate` at its defaults on the frame, with the assumed camera and ground (what
         // `tubeloc locate --assumed-view` builds); its detector runs at the working scale `s`.
-        let view = negative_view(grey);
+        let view = negative_view(p, grey);
         let (rig, ground) = view.rig("assumed", image.width(), image.height())?;
         let s = tubeloc_detect::scale::working_scale(&rig.cameras[0].model, Some(view.ground()), Default::default());
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
@@ -121,7 +124,7 @@ pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) 
         let input = tubeloc_detect::input::rgb8_of(&image);
         let grey = input.info.grey;
         // The assumed camera and ground, as `tubeloc detect --assumed-view` takes them.
-        let view = negative_view(grey);
+        let view = negative_view(p, grey);
         let (camera, ground) = (view.camera(image.width(), image.height()), view.ground_plane()?);
         let t = Instant::now();
         let found = det.detect(&image, Some(&camera), Some(&ground), 0)?.0;

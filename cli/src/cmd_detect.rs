@@ -53,7 +53,8 @@ pub struct DetectArgs {
     /// Instead of --camera, for an --image without a camera model: its camera and ground
     /// (unless --ground) are assumed from its size, as `tubeloc locate --assumed-view` does
     /// (`navcam`: 45 degree field of view, 1.9 m above level ground, 30 degrees down; `mast`: 20
-    /// degrees; `auto`: navcam for a grey image, mast for a colour one; or
+    /// degrees; the other rover cameras' views; `auto`: the view of the camera the image's
+    /// product name names, else navcam for a grey image, mast for a colour one; or
     /// `HFOV_DEG,HEIGHT_M,PITCH_DEG`, e.g. `90,2,25`).
     #[arg(long, value_parser = crate::args::assumed_view, requires = "image", conflicts_with_all = ["camera", "dataset"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
@@ -109,7 +110,11 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 /// image's size and its ground. `None` for any other `--camera`.
 fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (&args.assumed_view, &args.image) {
-        let ((w, h), _, view) = view.frame_view(image).map_err(anyhow::Error::msg)?;
+        let ((w, h), frame) = view.frame_view(image).map_err(anyhow::Error::msg)?;
+        if let Some(note) = frame.note(image) {
+            eprintln!("{note}");
+        }
+        let view = frame.view;
         let ground = match args.ground {
             Some(g) => g,
             None => view.ground_plane()?,

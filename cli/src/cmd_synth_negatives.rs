@@ -56,7 +56,8 @@ pub struct NegativesArgs {
 }
 
 /// Runs `tubeloc synth negatives`: each background of the split is seen under the assumed
-/// view of its kind (navcam for a grey frame, mast for a colour one, as `--assumed-view auto`),
+/// view of its kind (navcam for a grey frame, mast for a colour one, the views the real
+/// composites of `tubeloc synth real` are made under),
 /// searched at its working scale, and a crop cut around each detection whose probability
 /// reaches the floor.
 pub fn run(a: NegativesArgs) -> Result<()> {

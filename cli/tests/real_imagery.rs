@@ -231,14 +231,13 @@ fn bench_real_stage_runs_at_a_small_size() {
     let rows: Vec<&str> = real_md.lines().skip_while(|l| !l.starts_with("| folder of `negatives_val` |")).skip(2).take_while(|l| l.starts_with("| `")).collect();
     let frames: u64 = rows.iter().map(|r| r.split('|').nth(2).unwrap().trim().parse::<u64>().unwrap()).sum();
     assert_eq!(frames, 2, "{real_md}");
-    // Each tube-free frame's figures are what `locate --assumed-view` gives on it (the view of
-    // its kind: navcam for grey frames, mast for colour ones).
-    assert!(real_md.contains("`tubeloc locate --assumed-view navcam|mast --image F`"), "{real_md}");
+    // Each tube-free frame's figures are what `locate --assumed-view auto` gives on it (the
+    // view of the camera its product name names, else of its kind).
+    assert!(real_md.contains("`tubeloc locate --assumed-view auto --image F`"), "{real_md}");
     for f in summary["negatives"]["per_frame"].as_array().unwrap() {
         let image = real_data().join(f["image"].as_str().unwrap());
-        let view = if f["grey"].as_bool().unwrap() { "navcam" } else { "mast" };
         let poses = dir.path().join("frame.json");
-        let o = tubeloc(&["locate", "--assumed-view", view, "--image", p(&image), "--out", p(&poses)]);
+        let o = tubeloc(&["locate", "--assumed-view", "auto", "--image", p(&image), "--out", p(&poses)]);
         assert!(matches!(o.status.code(), Some(0 | 3)), "{}", String::from_utf8_lossy(&o.stderr));
         let doc: Value = serde_json::from_str(&std::fs::read_to_string(&poses).unwrap()).unwrap();
         let located = doc["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").count();
@@ -463,6 +462,45 @@ fn an_assumed_view_stands_in_for_a_missing_camera_model() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2));
     assert!(e.contains("--rig") && e.contains("--label-cameras") && e.contains("--assumed-view"), "{e}");
+}
+
+/// `--assumed-view auto` takes the camera a frame's product name names: a real Curiosity
+/// Mastcam right frame is seen under the M-100's 6.8 degree field, the same pixels under another
+/// name under the colour `mast` view, a frame named as a Hazcam product under its kind's view
+/// with a note naming the file; `detect` takes the same camera.
+#[test]
+fn an_automatic_view_is_the_camera_the_product_name_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let mr = real_data().join("negatives_val/msl_mastcam_marsdata/0079MR0005910210103981E01.jpg");
+    let grey = std::fs::read_dir(real_data().join("negatives_val/msl_navcam_256")).unwrap().map(|e| e.unwrap().path()).min().unwrap();
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    std::fs::copy(&mr, frames.join("0079MR0005910210103981E01.jpg")).unwrap();
+    std::fs::copy(&mr, frames.join("renamed.jpg")).unwrap();
+    std::fs::copy(&grey, frames.join("RLB_701384675RAS_F0933408RHAZ00337M1.jpg")).unwrap();
+    let out = dir.path().join("out");
+    let o = tubeloc(&["locate", "--assumed-view", "auto", "--images", p(&frames), "--out", p(&out)]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{}", stderr(&o));
+    let doc = |stem: &str| -> Value { serde_json::from_str(&std::fs::read_to_string(out.join(format!("frames/{stem}.json"))).unwrap()).unwrap() };
+    for (stem, view, hfov) in [("0079MR0005910210103981E01", "m100", 6.8), ("renamed", "mast", 20.0), ("RLB_701384675RAS_F0933408RHAZ00337M1", "navcam", 45.0)] {
+        let d = doc(stem);
+        assert_eq!(d["assumed_view"], view, "{stem}");
+        let (w, fx) = (d["camera_model"]["width"].as_f64().unwrap(), d["camera_model"]["fx"].as_f64().unwrap());
+        assert!((fx - w / 2.0 / (hfov / 2.0f64).to_radians().tan()).abs() < 1e-6, "{stem}: fx {fx}");
+    }
+    let e = stderr(&o);
+    assert!(e.contains("RLB_701384675RAS_F0933408RHAZ00337M1.jpg comes from the MSL Hazcam") && !e.contains("renamed.jpg comes"), "{e}");
+    // `detect` takes the same camera: the M-100 frame's detections are those of its camera
+    // written by hand.
+    let f = 280.0 / 3.4f64.to_radians().tan();
+    let cam = dir.path().join("cam.json");
+    std::fs::write(&cam, serde_json::json!({"width": 560, "height": 500, "fx": f, "fy": f, "cx": 279.5, "cy": 249.5}).to_string()).unwrap();
+    let ground = format!("--ground=0,{},{},-1.9", -(30f64.to_radians().cos()), -(30f64.to_radians().sin()));
+    let (d_hand, d_auto) = (dir.path().join("d_hand.json"), dir.path().join("d_auto.json"));
+    let image = frames.join("0079MR0005910210103981E01.jpg");
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--camera", p(&cam), &ground, "--out", p(&d_hand)]);
+    ok(&["detect", "--method", "learned", "--image", p(&image), "--assumed-view", "auto", "--out", p(&d_auto)]);
+    assert_eq!(std::fs::read(&d_hand).unwrap(), std::fs::read(&d_auto).unwrap());
 }
 
 /// The arm in view of a real Navcam frame (MSL sol 3423, no tube) is what `locate` hands over

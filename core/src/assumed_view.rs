@@ -6,7 +6,7 @@
 //! rolled by `r` about z sees the ground's up direction as `R_z(r) (0, -cos p, -sin p)`, and
 //! the ground plane `n · X = d` with `n` that direction and `d = -height`.
 
-use crate::{CameraModel, CoreError, GroundPlane, Pose, Rig, RigCamera};
+use crate::{CameraModel, CoreError, GroundPlane, Pose, Rig, RigCamera, RoverCamera};
 use nalgebra::Vector3;
 
 /// An assumed camera for a frame without a camera model.
@@ -32,8 +32,37 @@ impl AssumedView {
     /// m above the ground, looking 30 degrees down, with a 45 degree field of view.
     pub const NAVCAM: AssumedView = AssumedView { hfov_deg: 45.0, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
 
-    /// The named views, as the command line and Python name them.
-    pub const NAMED: [(&'static str, AssumedView); 2] = [("navcam", AssumedView::NAVCAM), ("mast", AssumedView::MAST)];
+    /// Curiosity's Mastcam right, M-100 (100 mm): 6.8 degrees wide, 1.9 m above the ground,
+    /// looking 30 degrees down.
+    pub const M100: AssumedView = AssumedView { hfov_deg: 6.8, height_m: 1.9, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// Perseverance's Navcam: 96 degrees wide, on the mast about 2 m above the ground, looking
+    /// 30 degrees down.
+    pub const M2020_NAVCAM: AssumedView = AssumedView { hfov_deg: 96.0, height_m: 2.0, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// Spirit's and Opportunity's Navcam: 45 degrees wide, about 1.5 m above the ground,
+    /// looking 30 degrees down.
+    pub const MER_NAVCAM: AssumedView = AssumedView { hfov_deg: 45.0, height_m: 1.5, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// Spirit's and Opportunity's Pancam: 16 degrees wide, about 1.5 m above the ground,
+    /// looking 30 degrees down.
+    pub const MER_PANCAM: AssumedView = AssumedView { hfov_deg: 16.0, height_m: 1.5, pitch_deg: 30.0, roll_deg: 0.0 };
+
+    /// The named views, as the command line and Python name them (besides `mastcam-z-F`,
+    /// [`AssumedView::mastcam_z`]).
+    pub const NAMED: [(&'static str, AssumedView); 6] =
+        [("navcam", AssumedView::NAVCAM), ("mast", AssumedView::MAST), ("m100", AssumedView::M100), ("m2020-navcam", AssumedView::M2020_NAVCAM), ("mer-navcam", AssumedView::MER_NAVCAM), ("mer-pancam", AssumedView::MER_PANCAM)];
+
+    /// The shortest and longest zoom focal lengths of Perseverance's Mastcam-Z, mm.
+    pub const MASTCAM_Z_FOCAL_MM: (f64, f64) = (26.0, 110.0);
+
+    /// Perseverance's Mastcam-Z at zoom focal length `focal_mm` (26 to 110 mm): the field of
+    /// view scales from 25.6 degrees at 26 mm as `2 atan(tan(12.8°) · 26 / f)` (6.15 degrees
+    /// at 110 mm); on the mast about 2 m above the ground, looking 30 degrees down.
+    pub fn mastcam_z(focal_mm: f64) -> AssumedView {
+        let half = (12.8f64.to_radians().tan() * Self::MASTCAM_Z_FOCAL_MM.0 / focal_mm).atan();
+        AssumedView { hfov_deg: 2.0 * half.to_degrees(), height_m: 2.0, pitch_deg: 30.0, roll_deg: 0.0 }
+    }
 
     /// The named view a frame without a camera model is judged under by its kind (how `tubeloc
     /// bench` judges real frames, and `--assumed-view auto`): [`AssumedView::NAVCAM`] for a
@@ -46,9 +75,39 @@ impl AssumedView {
         }
     }
 
-    /// The view called `name` (`navcam` or `mast`); the error lists the names.
+    /// The view `--assumed-view auto` takes for the frame in the file `file_name`, grey or
+    /// not: the view of the mast camera its product name names ([`RoverCamera::of_product`],
+    /// [`RoverCamera::view`]), otherwise the named view of its kind
+    /// ([`AssumedView::of_kind`]); with the view's name, and the camera the name names where
+    /// it is one no mast view fits (a Hazcam, an arm camera: the kind's view is taken, and a
+    /// caller should say so).
+    pub fn of_frame(file_name: &str, grey: bool) -> (String, AssumedView, Option<RoverCamera>) {
+        let camera = RoverCamera::of_product(file_name);
+        match camera.and_then(|c| c.view().map(|v| (c.name(), v))) {
+            Some((name, view)) => (name, view, None),
+            None => {
+                let (name, view) = Self::of_kind(grey);
+                (name.to_string(), view, camera)
+            }
+        }
+    }
+
+    /// The view called `name` (one of [`AssumedView::NAMED`], or `mastcam-z-F` with `F` the
+    /// zoom focal length in mm, 26 to 110); the error lists the names.
     pub fn by_name(name: &str) -> Result<AssumedView, CoreError> {
-        Self::NAMED.iter().find(|(n, _)| *n == name).map(|(_, v)| *v).ok_or_else(|| CoreError::invalid("assumed view", format!("unknown view {name:?}: expected one of navcam, mast")))
+        if let Some(f) = name.strip_prefix("mastcam-z-") {
+            let (lo, hi) = Self::MASTCAM_Z_FOCAL_MM;
+            return match f.parse::<f64>() {
+                Ok(f) if (lo..=hi).contains(&f) => Ok(Self::mastcam_z(f)),
+                _ => Err(CoreError::invalid("assumed view", format!("{name:?}: the Mastcam-Z focal length must be a number of mm from {lo} to {hi}"))),
+            };
+        }
+        Self::NAMED.iter().find(|(n, _)| *n == name).map(|(_, v)| *v).ok_or_else(|| CoreError::invalid("assumed view", format!("unknown view {name:?}: expected one of {}", Self::names())))
+    }
+
+    /// The names [`AssumedView::by_name`] takes, for messages: `navcam, mast, ..., mastcam-z-F`.
+    pub fn names() -> String {
+        Self::NAMED.iter().map(|(n, _)| *n).chain(["mastcam-z-F"]).collect::<Vec<_>>().join(", ")
     }
 
     /// The view `spec` names: a named view (`navcam`, `mast`), or one given as
@@ -59,7 +118,10 @@ impl AssumedView {
     pub fn parse(spec: &str) -> Result<AssumedView, CoreError> {
         let spec = spec.trim();
         if !spec.contains(',') {
-            return Self::by_name(spec).map_err(|_| CoreError::invalid("assumed view", format!("unknown view {spec:?}: expected one of navcam, mast, or HFOV_DEG,HEIGHT_M,PITCH_DEG (e.g. 90,2,25)")));
+            return Self::by_name(spec).map_err(|e| match spec.starts_with("mastcam-z-") {
+                true => e,
+                false => CoreError::invalid("assumed view", format!("unknown view {spec:?}: expected one of {}, or HFOV_DEG,HEIGHT_M,PITCH_DEG (e.g. 90,2,25)", Self::names())),
+            });
         }
         let parts: Vec<&str> = spec.split(',').map(str::trim).collect();
         let bad = |m: String| CoreError::invalid("assumed view", format!("{spec:?}: {m}"));
@@ -137,7 +199,12 @@ mod tests {
         assert!(v.rig("empty", 0, 0).is_err(), "an empty image has no camera");
         assert_eq!(AssumedView::by_name("mast").unwrap(), AssumedView::MAST);
         let e = AssumedView::by_name("hazcam").unwrap_err().to_string();
-        assert!(e.contains("hazcam") && e.contains("navcam, mast"), "{e}");
+        assert!(e.contains("hazcam") && e.contains("navcam, mast, m100") && e.contains("mastcam-z-F"), "{e}");
+        assert!((AssumedView::by_name("mastcam-z-26").unwrap().hfov_deg - 25.6).abs() < 1e-9);
+        for bad in ["mastcam-z-25", "mastcam-z-111", "mastcam-z-x", "mastcam-z-NaN"] {
+            let e = AssumedView::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("26 to 110"), "{bad}: {e}");
+        }
         // A view given by its numbers.
         let wide = AssumedView::parse(" 90, 2 ,25").unwrap();
         assert_eq!(wide, AssumedView { hfov_deg: 90.0, height_m: 2.0, pitch_deg: 25.0, roll_deg: 0.0 });

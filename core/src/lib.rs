@@ -26,6 +26,7 @@ pub mod pose;
 pub mod pose_evidence;
 pub mod rectification;
 pub mod rig;
+pub mod rover_camera;
 pub mod tube;
 pub mod tube_pose;
 
@@ -42,5 +43,6 @@ pub use pose::Pose;
 pub use pose_evidence::PoseEvidence;
 pub use rectification::PairRectification;
 pub use rig::{Rig, RigCamera};
+pub use rover_camera::RoverCamera;
 pub use tube::{TubeMaterial, TubeMesh, TubeModel, TubeSection};
 pub use tube_pose::{FailureReason, RefineFailure, ResidualStats, TubeAxisPose};

@@ -48,6 +48,7 @@ fn tubeloc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rig::read_pds_grounds, m)?)?;
     m.add_function(wrap_pyfunction!(rig::write_rig, m)?)?;
     m.add_function(wrap_pyfunction!(rig::assumed_view, m)?)?;
+    m.add_function(wrap_pyfunction!(rig::view_of_product, m)?)?;
     m.add_function(wrap_pyfunction!(image_array::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(image_array::read_product, m)?)?;
     m.add_function(wrap_pyfunction!(locator::detect, m)?)?;

@@ -122,12 +122,27 @@ pub fn read_pds_grounds(py: Python<'_>, path: PathBuf) -> PyResult<std::collecti
 /// For an image without a camera model: the one-camera rig (camera "assumed") and the ground
 /// (nx, ny, nz, d) of an image of width x height pixels under the assumed view `view`, as
 /// `tubeloc locate --assumed-view` takes it: "navcam" (45 degree horizontal field of view,
-/// 1.9 m above level ground, looking 30 degrees down), "mast" (a 20 degree field), or
+/// 1.9 m above level ground, looking 30 degrees down), "mast" (a 20 degree field), the other
+/// rover cameras' views ("m100", "m2020-navcam", "mastcam-z-F" with F the zoom in mm,
+/// "mer-navcam", "mer-pancam"; `view_of_product` names a frame's), or
 /// "HFOV_DEG,HEIGHT_M,PITCH_DEG" (e.g. "90,2,25").
 #[pyfunction]
 pub fn assumed_view(view: &str, width: u32, height: u32) -> PyResult<(PyRig, (f64, f64, f64, f64))> {
     let (rig, g) = tubeloc_core::AssumedView::parse(view).and_then(|v| v.rig("assumed", width, height)).map_err(|e| chain_to_py(&e))?;
     Ok((PyRig { rig }, (g.normal.x, g.normal.y, g.normal.z, g.offset)))
+}
+
+/// view_of_product(file_name) -> str | None
+///
+/// The assumed view (a name `assumed_view` takes) of the mast camera a rover image product's
+/// file name names, as `tubeloc locate --assumed-view auto` reads it: e.g. "m100" for
+/// "0079MR0005910210103981E01.jpg" (Curiosity Mastcam right), "mastcam-z-110" for
+/// "ZL0_0053_..._110085J01.png". None where the name names no camera, or one no mast view fits
+/// (a Hazcam, an arm camera); `auto` then takes "navcam" for a grey frame, "mast" for a
+/// colour one.
+#[pyfunction]
+pub fn view_of_product(file_name: &str) -> Option<String> {
+    tubeloc_core::RoverCamera::of_product(file_name).filter(|c| c.view().is_some()).map(|c| c.name())
 }
 
 /// write_rig(rig, path)

@@ -187,6 +187,28 @@ def test_assumed_view_locates_as_the_command_line_does(cli, tmp_path):
         tubeloc.assumed_view("mast", 0, 0)
 
 
+def test_product_names_give_their_cameras_views(tmp_path):
+    # Curiosity Mastcam right (M-100), Perseverance Mastcam-Z at 110 mm, a Hazcam (no mast
+    # view), a file without a product name.
+    assert tubeloc.view_of_product("negatives_val/x/0079MR0005910210103981E01.jpg") == "m100"
+    name = tubeloc.view_of_product("ZL0_0053_0671642352_402ECM_N0032046ZCAM05025_110085J01.png")
+    assert name == "mastcam-z-110"
+    assert tubeloc.view_of_product("RLB_701384675RAS_F0933408RHAZ00337M1.png") is None
+    assert tubeloc.view_of_product("scene.png") is None
+    # The name gives the camera: a 110 mm Mastcam-Z frame's focal length is 4x the 26 mm one's.
+    rig, ground = tubeloc.assumed_view(name, 1648, 1200)
+    wide, _ = tubeloc.assumed_view("mastcam-z-26", 1648, 1200)
+    fx = []
+    for r, path in ((rig, tmp_path / "z110.json"), (wide, tmp_path / "z26.json")):
+        tubeloc.write_rig(r, path)
+        fx.append(json.loads(path.read_text())["cameras"][0]["model"]["fx"])
+    assert fx[0] == pytest.approx(fx[1] * 110 / 26, rel=1e-9)
+    assert fx[1] == pytest.approx(824 / np.tan(np.radians(12.8)), rel=1e-9)
+    assert ground[3] == pytest.approx(-2.0)
+    with pytest.raises(tubeloc.TubelocError, match="26 to 110"):
+        tubeloc.assumed_view("mastcam-z-200", 1648, 1200)
+
+
 def test_a_camera_lists_fisheye_entries_have_grounds_from_their_labels():
     # The real data's list carries only the linear part of its two Hazcam (CAHVORE) entries;
     # their cameras come from the labels the entries name, as `tubeloc locate --rig` reads them.

@@ -90,8 +90,12 @@ pub struct LocateArgs {
     /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal
     /// field of view, 1.9 m above level ground, looking 30 degrees down (how `tubeloc bench`
     /// judges grey frames without a model); `mast`: the same with a 20 degree field (its
-    /// colour frames); `auto`: `navcam` for a grey frame, `mast` for a colour one (a folder of
-    /// both, judged as the bench judges them); or the view's numbers,
+    /// colour frames; Curiosity's Mastcam M-34); `m100` (6.8 degrees), `m2020-navcam` (96
+    /// degrees, 2 m), `mastcam-z-F` (Perseverance's Mastcam-Z at F mm, 2 m), `mer-navcam`
+    /// (45 degrees, 1.5 m), `mer-pancam` (16 degrees, 1.5 m); `auto`: the view of the camera
+    /// each frame's product name names (e.g. `0079MR...`: m100, `ZL0_..._110085J01`:
+    /// mastcam-z-110), else `navcam` for a grey frame, `mast` for a colour one (as the bench
+    /// judges them); or the view's numbers,
     /// `HFOV_DEG,HEIGHT_M,PITCH_DEG` (e.g. `90,2,25` for a wide mast camera: the field of view
     /// sets the pixel scale the detectors work at). Poses are then only as good as the
     /// assumption; mono only.

@@ -92,7 +92,7 @@ impl Setup {
             }
             let described = match view {
                 crate::args::AssumedViewArg::View(spec, _) => format!("the assumed {spec} view (--assumed-view)"),
-                crate::args::AssumedViewArg::Auto => "the assumed view of each frame's kind (--assumed-view auto: navcam for grey, mast for colour)".to_string(),
+                crate::args::AssumedViewArg::Auto => "the assumed view of each frame's camera or kind (--assumed-view auto: the camera its product name names, else navcam for grey, mast for colour)".to_string(),
             };
             (PathBuf::from(described), Some(cams), errors)
         } else if a.label_cameras {
@@ -330,19 +330,23 @@ fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String
 }
 
 /// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
-/// under `view`, from the image's size (with `auto`, and its pixels: grey or colour); by image
+/// under `view`, from the image's size (with `auto`, and its product name or its pixels: grey
+/// or colour; a frame of a camera no mast view fits is noted on stderr); by image
 /// file name, the view's name; and, by image file name, why an image gives none.
 fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>, BTreeMap<String, String>) {
     use rayon::prelude::*;
     let one = |image: &&Path| {
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let camera = view.frame_view(image).map_err(|e| format!("--assumed-view: {e}")).and_then(|((w, h), view_name, v)| {
-            let (rig, ground) = v.rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
-            Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, view_name.to_string()))
+        let camera = view.frame_view(image).map_err(|e| format!("--assumed-view: {e}")).and_then(|((w, h), frame)| {
+            if let Some(note) = frame.note(image) {
+                eprintln!("{note}");
+            }
+            let (rig, ground) = frame.view.rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
+            Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, frame.name))
         });
         (name, camera)
     };
-    let read: Vec<_> = if view.by_kind() { images.par_iter().map(one).collect() } else { images.iter().map(one).collect() };
+    let read: Vec<_> = if view.by_frame() { images.par_iter().map(one).collect() } else { images.iter().map(one).collect() };
     let (mut cams, mut names, mut errors) = (Vec::new(), BTreeMap::new(), BTreeMap::new());
     for (name, camera) in read {
         match camera {
