@@ -857,6 +857,51 @@ fn a_batch_of_pds3_products_takes_each_frames_camera_from_its_own_label() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
 
+/// Raw-gallery JPEGs with their detached PDS3 labels (the label's version character is `_` in
+/// the JPEG's name; a MER label named after its `.IMG`): `--label-cameras` finds each image's
+/// label in `--label-dir` or beside it, and each frame is the run with that label as the rig.
+/// A JPEG without a label fails alone, named, with what to give instead.
+#[test]
+fn raw_gallery_jpegs_take_their_cameras_from_their_detached_labels() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams = real_data().join("with_cameras");
+    let images = ["NLA_400871510EDR_F0040404NCAM00409M_.jpg", "1n579700548ffld2fcp1981l0m1.png"];
+    let labels = ["NLA_400871510EDR_F0040404NCAM00409M1.LBL", "1n579700548ffld2fcp1981l0m1.img.lbl"];
+    let out = dir.path().join("by_dir");
+    let list = dir.path().join("frames.txt");
+    std::fs::write(&list, images.iter().map(|i| format!("{}\n", cams.join("images").join(i).display())).collect::<String>()).unwrap();
+    let o = tubeloc(&["locate", "--label-cameras", "--label-dir", p(&cams.join("labels")), "--images", p(&list), "--out", p(&out)]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{}", stderr(&o));
+    for (image, label) in images.iter().zip(labels) {
+        let stem = image.rsplit_once('.').unwrap().0;
+        let batch: Value = serde_json::from_str(&std::fs::read_to_string(out.join("frames").join(format!("{stem}.json"))).unwrap()).unwrap();
+        let single_out = dir.path().join(format!("{stem}.single.json"));
+        let o = tubeloc(&["locate", "--rig", p(&cams.join("labels").join(label)), "--image", p(&cams.join("images").join(image)), "--out", p(&single_out)]);
+        assert!(matches!(o.status.code(), Some(0 | 3)), "{}", stderr(&o));
+        let single: Value = serde_json::from_str(&std::fs::read_to_string(&single_out).unwrap()).unwrap();
+        json_close(&batch, &single, 1e-9, &["camera", "run", "overlay"], "").unwrap();
+    }
+    // The label beside its JPEG, and a JPEG without one.
+    let beside = dir.path().join("beside");
+    std::fs::create_dir(&beside).unwrap();
+    std::fs::copy(cams.join("images").join(images[0]), beside.join(images[0])).unwrap();
+    std::fs::copy(cams.join("labels").join(labels[0]), beside.join(labels[0])).unwrap();
+    std::fs::copy(cams.join("images").join(images[0]), beside.join("unlabelled.jpg")).unwrap();
+    let out2 = dir.path().join("beside_out");
+    let o = tubeloc(&["locate", "--label-cameras", "--images", p(&beside), "--out", p(&out2)]);
+    assert_eq!(o.status.code(), Some(1), "one frame failed: {}", stderr(&o));
+    let read = |d: &Path| -> Value { serde_json::from_str(&std::fs::read_to_string(d.join("frames/NLA_400871510EDR_F0040404NCAM00409M_.json")).unwrap()).unwrap() };
+    json_close(&read(&out2), &read(&out), 1e-9, &["image", "run", "overlay"], "").unwrap();
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out2.join("summary.json")).unwrap()).unwrap();
+    let failed: Vec<&Value> = summary["frames"].as_array().unwrap().iter().filter(|f| f["error"].is_string()).collect();
+    assert_eq!(failed.len(), 1, "{summary}");
+    let e = failed[0]["error"].as_str().unwrap();
+    assert!(e.contains("unlabelled.jpg") && e.contains("no label in") && e.contains("--label-dir") && e.contains("--assumed-view"), "{e}");
+    // --label-dir only with --label-cameras.
+    let o = tubeloc(&["locate", "--assumed-view", "navcam", "--label-dir", p(&beside), "--image", p(&beside.join("unlabelled.jpg")), "--out", p(&dir.path().join("x.json"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}
+
 /// Writes a pinhole camera JSON of a `w x h` image with horizontal field of view `hfov_deg`.
 fn camera_json(path: &Path, w: u32, h: u32, hfov_deg: f64) {
     let f = (w as f64 / 2.0) / (hfov_deg / 2.0).to_radians().tan();

@@ -9,12 +9,14 @@
 //! - [`pds`]: rover cameras from their PDS camera models (`cahv_to_pinhole.py`'s JSON list),
 //!   read: one camera per image, in the rover frame, with the ground under it; and
 //!   [`pds_label`]: the PDS3 label of one image (its CAHV / CAHVOR model, [`cahv`], read from
-//!   the label's ODL, [`odl`]), read the same way.
+//!   the label's ODL, [`odl`]), read the same way; [`detached_label`] finds the label of an
+//!   image saved in another format (a raw-gallery JPEG).
 //!
 //! [`read_rig`] tells the formats apart by content, not by file name.
 
 pub mod cahv;
 pub mod cahvore;
+pub mod detached_label;
 pub mod kalibr;
 pub mod linearize;
 pub mod pds;

@@ -83,9 +83,16 @@ pub struct LocateArgs {
     /// its data) whose own label gives its camera (CAHV/CAHVOR, in the rover frame) and ground;
     /// a CAHVORE fisheye's image is resampled into the model's linear camera first. A batch of
     /// products then needs no rig file; each frame's camera is named after its file.
+    /// An image in another format (a raw-gallery JPEG, a PNG) takes its detached label: the
+    /// `.LBL` beside it (or in --label-dir) with its product name, also where the image's name
+    /// has `_` for the product's version character (`NLA_..._M_.jpg` for `NLA_..._M1.LBL`).
     /// With --right (a product of the same moment), the two labels make the stereo pair.
     #[arg(long, conflicts_with_all = ["camera_name", "pair", "right_images"])]
     pub label_cameras: bool,
+    /// With --label-cameras: the folder where the detached labels of images that are no PDS3
+    /// products lie (default: each image's own folder).
+    #[arg(long)]
+    pub label_dir: Option<PathBuf>,
     /// Instead of --rig, for frames that come without a camera model: each image's camera and
     /// ground (unless --ground) are assumed from its size. `navcam`: a 45 degree horizontal
     /// field of view, 1.9 m above level ground, looking 30 degrees down (how `tubeloc bench`
@@ -225,6 +232,7 @@ impl LocateArgs {
             command: None,
             rig: Some(rig),
             label_cameras: false,
+            label_dir: None,
             assumed_view: None,
             fisheye_scale: 1.0,
             image: Some(image),
@@ -278,6 +286,9 @@ pub fn run(a: LocateArgs) -> Result<u8> {
                 return Err(crate::args::usage(format!("{flag} is for batch runs (--images LIST_OR_DIR); a one-image run takes --image, --right and --overlay FILE")));
             }
         }
+    }
+    if a.label_dir.is_some() && !a.label_cameras {
+        return Err(crate::args::usage("--label-dir is where --label-cameras looks for detached labels: give --label-cameras"));
     }
     let located = if a.images.is_some() { batch::run(&a)? } else { single::run(&a)? };
     Ok(if located == 0 { EXIT_NO_TUBE } else { 0 })

@@ -96,7 +96,7 @@ impl Setup {
             };
             (PathBuf::from(described), Some(cams), errors)
         } else if a.label_cameras {
-            let (cams, errors) = label_cameras(&label_images);
+            let (cams, errors) = label_cameras(&label_images, a.label_dir.as_deref());
             if cams.is_empty() || (a.right.is_some() && !errors.is_empty()) {
                 bail!("{}", errors.into_values().next().unwrap_or_else(|| "--label-cameras: no image".into()));
             }
@@ -308,10 +308,24 @@ type LabelCamera = (tubeloc_calib::interchange::pds::PdsCamera, Option<tubeloc_c
 
 /// The cameras of `--label-cameras`: each image's own PDS3 label, the camera named after the
 /// image's file; and, by image file name, why an image gives none.
-fn label_cameras(images: &[&Path]) -> (Vec<LabelCamera>, BTreeMap<String, String>) {
+fn label_cameras(images: &[&Path], label_dir: Option<&Path>) -> (Vec<LabelCamera>, BTreeMap<String, String>) {
+    use tubeloc_calib::interchange::{detached_label::detached_label_of, pds_label::read_resampled_label_camera};
     let read = |image: &Path, name: &str| -> Result<LabelCamera> {
-        let Some((mut c, fisheye)) = tubeloc_calib::interchange::pds_label::read_resampled_label_camera(image).context("--label-cameras")? else {
-            bail!("--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL): it carries no camera", image.display());
+        let own = read_resampled_label_camera(image).context("--label-cameras")?;
+        let own = match own {
+            Some(c) => Some(c),
+            None => match detached_label_of(image, label_dir).context("--label-cameras")? {
+                Some(label) => Some(read_resampled_label_camera(&label).context("--label-cameras")?.with_context(|| format!("--label-cameras: {}, the label of {}, is not a PDS3 label", label.display(), image.display()))?),
+                None => None,
+            },
+        };
+        let Some((mut c, fisheye)) = own else {
+            let folder = label_dir.map(Path::to_path_buf).unwrap_or_else(|| image.parent().map(Path::to_path_buf).unwrap_or_default());
+            bail!(
+                "--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL), and no label in {} names it (its product name with .LBL, the version character may stand for `_`): give --label-dir, --rig with its label or camera, or --assumed-view",
+                image.display(),
+                if folder.as_os_str().is_empty() { ".".into() } else { folder.display().to_string() }
+            );
         };
         (c.camera.name, c.image) = (name.to_string(), Some(name.to_string()));
         Ok((c, fisheye))
