@@ -1167,17 +1167,17 @@ fn read_json(path: &Path) -> Value {
 
 #[test]
 fn the_auto_view_judges_each_frame_of_a_batch_by_its_kind() {
-    // A folder of one grey Navcam frame and one colour Mastcam frame (training sols): `auto`
-    // gives the grey one the navcam view and the colour one the mast view, each frame exactly
-    // as its own named view locates it.
+    // A folder of one grey frame and one colour Mastcam frame (training sols), saved under
+    // names that are no product names: `auto` gives the grey one the navcam view and the
+    // colour one the mast view, each frame exactly as its own named view locates it.
     let dir = tempfile::tempdir().unwrap();
     let tmp = dir.path();
     let frames = tmp.join("frames");
     std::fs::create_dir(&frames).unwrap();
     let bg = real_data().join("backgrounds");
-    let (grey, colour) = ("NLB_524534514EDR_F0562034NCAM00280M_.jpg", "0076MR0005710070103772E01.jpg");
-    std::fs::copy(bg.join("msl_navcam_1024").join(grey), frames.join(grey)).unwrap();
-    std::fs::copy(bg.join("msl_mastcam_marsdata").join(colour), frames.join(colour)).unwrap();
+    let (grey, colour) = ("grey.jpg", "colour.jpg");
+    std::fs::copy(bg.join("msl_navcam_1024/NLB_524534514EDR_F0562034NCAM00280M_.jpg"), frames.join(grey)).unwrap();
+    std::fs::copy(bg.join("msl_mastcam_marsdata/0076MR0005710070103772E01.jpg"), frames.join(colour)).unwrap();
     let out = tmp.join("auto");
     let o = tubeloc(&["locate", "--assumed-view", "auto", "--images", p(&frames), "--out", p(&out)]);
     assert!(matches!(o.status.code(), Some(0) | Some(3)), "{}", stderr(&o));
