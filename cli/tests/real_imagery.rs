@@ -490,6 +490,13 @@ fn an_automatic_view_is_the_camera_the_product_name_names() {
     }
     let e = stderr(&o);
     assert!(e.contains("RLB_701384675RAS_F0933408RHAZ00337M1.jpg comes from the MSL Hazcam") && !e.contains("renamed.jpg comes"), "{e}");
+    // The frame's document and the batch summary carry it among the frame's warnings.
+    let warned = doc("RLB_701384675RAS_F0933408RHAZ00337M1");
+    assert!(warned["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().contains("comes from the MSL Hazcam")), "{warned}");
+    assert!(doc("renamed")["warnings"].as_array().is_none_or(|w| w.iter().all(|w| !w.as_str().unwrap().contains("comes from"))));
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let listed = summary["frames"].as_array().unwrap().iter().find(|f| f["image"].as_str().unwrap().ends_with("RHAZ00337M1.jpg")).unwrap();
+    assert!(listed["warnings"].to_string().contains("comes from the MSL Hazcam"), "{listed}");
     // `detect` takes the same camera: the M-100 frame's detections are those of its camera
     // written by hand.
     let f = 280.0 / 3.4f64.to_radians().tan();

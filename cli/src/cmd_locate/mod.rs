@@ -372,13 +372,15 @@ pub struct LocateDoc<'a> {
     /// those of the resampled image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub resampled_from: Option<&'static str>,
-    /// The view `camera_model` and the ground were assumed from (`--assumed-view`: `navcam`,
-    /// `mast` (given, or by `auto`) or `HFOV_DEG,HEIGHT_M,PITCH_DEG`) when the frame came without a camera model:
-    /// the poses rest on that assumption.
+    /// The view `camera_model` and the ground were assumed from (`--assumed-view`: a named
+    /// view such as `navcam`, `mast`, `m100` (given, or by `auto`), or
+    /// `HFOV_DEG,HEIGHT_M,PITCH_DEG`) when the frame came without a camera model: the poses
+    /// rest on that assumption.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub assumed_view: Option<&'a str>,
     /// What was printed as warnings about the frame (underexposed; tubes narrower than the
-    /// detectors can enlarge to their working width); absent when none.
+    /// detectors can enlarge to their working width; an assumed view that does not fit the
+    /// camera its product name names); absent when none.
     #[serde(skip_serializing_if = "<[String]>::is_empty")]
     pub warnings: &'a [String],
     /// The detections that seeded the refinement (COCO results with tubeloc's seed fields).
@@ -451,6 +453,9 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
                 setup.settings.min_highlight_level
             )
         }));
+        // The view assumed for the frame, and why it may not fit the camera.
+        let assumed = frame.image.file_name().and_then(|n| setup.assumed_views.get(n.to_string_lossy().as_ref()));
+        warnings.extend(assumed.and_then(|(_, note)| note.clone()));
         let tubes: Vec<TubeOut> = found.tubes.iter().map(|t| TubeOut { tube: t, status: "located" }).chain(found.rejected.iter().map(|r| TubeOut { tube: &r.tube, status: r.reason.name() })).collect();
         let overlay_png = match overlay {
             true => {
@@ -480,7 +485,7 @@ pub fn locate_frame(setup: &Setup, a: &LocateArgs, frame: &Frame, started: Optio
             }),
             camera_model: &cam.model,
             resampled_from,
-            assumed_view: frame.image.file_name().and_then(|n| setup.assumed_views.get(n.to_string_lossy().as_ref())).map(String::as_str),
+            assumed_view: assumed.map(|(v, _)| v.as_str()),
             warnings: &warnings,
             detections: &found.detections,
         };

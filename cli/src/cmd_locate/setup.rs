@@ -68,8 +68,9 @@ pub struct Setup {
     /// images are resampled into the camera, the model's linear part, before locating.
     fisheyes: BTreeMap<String, tubeloc_calib::interchange::cahvore::Cahvore>,
     /// With `--assumed-view`: the view each image was given, by image file name (`navcam`,
-    /// `mast`, or the numbers as given).
-    pub(super) assumed_views: BTreeMap<String, String>,
+    /// `m100`, ..., or the numbers as given), and the warning for an image whose product name
+    /// names a camera no mast view fits ([`crate::args::FrameView::note`]).
+    pub(super) assumed_views: BTreeMap<String, (String, Option<String>)>,
     /// `--ignore-mask`: one mask for every frame, or a folder of masks by image stem.
     ignore_mask: Option<IgnoreMasks>,
     /// Name of the detector (`learned`, `line2d`, `external`).
@@ -345,18 +346,17 @@ fn label_cameras(images: &[&Path], label_dir: Option<&Path>) -> (Vec<LabelCamera
 
 /// The cameras of `--assumed-view`: each image's camera (named after its file) and ground
 /// under `view`, from the image's size (with `auto`, and its product name or its pixels: grey
-/// or colour; a frame of a camera no mast view fits is noted on stderr); by image
-/// file name, the view's name; and, by image file name, why an image gives none.
-fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, String>, BTreeMap<String, String>) {
+/// or colour); by image file name, the view's name and the warning for a frame of a camera no
+/// mast view fits; and, by image file name, why an image gives none.
+type AssumedCameras = (Vec<tubeloc_calib::interchange::pds::PdsCamera>, BTreeMap<String, (String, Option<String>)>, BTreeMap<String, String>);
+fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> AssumedCameras {
     use rayon::prelude::*;
     let one = |image: &&Path| {
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let camera = view.frame_view(image).map_err(|e| format!("--assumed-view: {e}")).and_then(|((w, h), frame)| {
-            if let Some(note) = frame.note(image) {
-                eprintln!("{note}");
-            }
             let (rig, ground) = frame.view.rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
-            Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, frame.name))
+            let note = frame.note(image);
+            Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, (frame.name, note)))
         });
         (name, camera)
     };
