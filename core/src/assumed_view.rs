@@ -65,8 +65,9 @@ impl AssumedView {
     }
 
     /// The named view a frame without a camera model is judged under by its kind (how `tubeloc
-    /// bench` judges real frames, and `--assumed-view auto`): [`AssumedView::NAVCAM`] for a
-    /// grey frame, [`AssumedView::MAST`] for a colour one; with its name.
+    /// synth real` composites colour frames, and what `--assumed-view auto` takes for a frame
+    /// without a product name): [`AssumedView::NAVCAM`] for a grey frame, [`AssumedView::MAST`]
+    /// for a colour one; with its name.
     pub fn of_kind(grey: bool) -> (&'static str, AssumedView) {
         if grey {
             ("navcam", AssumedView::NAVCAM)
@@ -110,7 +111,7 @@ impl AssumedView {
         Self::NAMED.iter().map(|(n, _)| *n).chain(["mastcam-z-F"]).collect::<Vec<_>>().join(", ")
     }
 
-    /// The view `spec` names: a named view (`navcam`, `mast`), or one given as
+    /// The view `spec` names: a named view ([`AssumedView::by_name`]), or one given as
     /// `HFOV_DEG,HEIGHT_M,PITCH_DEG` (horizontal field of view in degrees, in (1, 170); camera
     /// height above level ground in metres, in (0, 100]; angle of the optical axis below the
     /// horizon in degrees, in (0, 90]: the image centre sees the ground), e.g. `90,2,25` for a
