@@ -16,10 +16,11 @@ use tubeloc_core::AssumedView;
 
 /// Assumed view of the negative frame at `path`, what `tubeloc locate --assumed-view auto`
 /// takes ([`AssumedView::of_frame`]): the view of the mast camera its product name names,
-/// otherwise grey Navcam-like or the colour mast view.
-fn negative_view(path: &Path, grey: bool) -> AssumedView {
+/// otherwise grey Navcam-like or the colour mast view; with its name.
+fn negative_view(path: &Path, grey: bool) -> (String, AssumedView) {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    AssumedView::of_frame(&name, grey).1
+    let (view_name, view, _) = AssumedView::of_frame(&name, grey);
+    (view_name, view)
 }
 
 /// Learned detections kept at the threshold on each real negative frame.
@@ -33,14 +34,14 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
         let grey = tubeloc_detect::input::rgb8_of(&image).info.grey;
         // `locate` at its defaults on the frame, with the assumed camera and ground (what
         // `tubeloc locate --assumed-view` builds); its detector runs at the working scale `s`.
-        let view = negative_view(p, grey);
+        let (view_name, view) = negative_view(p, grey);
         let (rig, ground) = view.rig("assumed", image.width(), image.height())?;
         let s = tubeloc_detect::scale::working_scale(&rig.cameras[0].model, Some(view.ground()), Default::default());
         let locator = tubeloc_pipeline::Locator::new(&rig, &tubeloc_pipeline::CameraSelection { camera: None, pair: None }, Box::new(detector.clone()), settings.clone())?;
         let out = locator.locate(&tubeloc_pipeline::LocateInput { image: &image, right: None, ground: Some(ground), up: None, ignore: None })?;
         let (found, located) = (&out.detections, out.tubes.len());
         let kept = found.iter().filter(|d| cal.probability(d.score) >= cal.threshold).count();
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "view": view_name, "scale": s, "detections": found.len(), "kept": kept, "located": located}));
     }
     let n = per_frame.len().max(1) as f64;
     let sum = |k: &str| per_frame.iter().filter_map(|f| f[k].as_u64()).sum::<u64>() as f64 / n;
@@ -124,14 +125,14 @@ pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) 
         let input = tubeloc_detect::input::rgb8_of(&image);
         let grey = input.info.grey;
         // The assumed camera and ground, as `tubeloc detect --assumed-view` takes them.
-        let view = negative_view(p, grey);
+        let (view_name, view) = negative_view(p, grey);
         let (camera, ground) = (view.camera(image.width(), image.height()), view.ground_plane()?);
         let t = Instant::now();
         let found = det.detect(&image, Some(&camera), Some(&ground), 0)?.0;
         let dt = t.elapsed().as_secs_f64() * 1e3;
         ms += dt;
         let (sx, sy) = det.line2d().scale_for(Some(&camera));
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
+        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "view": view_name, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
     }
     let n = per_frame.len().max(1) as f64;
     let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;

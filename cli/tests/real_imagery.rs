@@ -240,6 +240,7 @@ fn bench_real_stage_runs_at_a_small_size() {
         let o = tubeloc(&["locate", "--assumed-view", "auto", "--image", p(&image), "--out", p(&poses)]);
         assert!(matches!(o.status.code(), Some(0 | 3)), "{}", String::from_utf8_lossy(&o.stderr));
         let doc: Value = serde_json::from_str(&std::fs::read_to_string(&poses).unwrap()).unwrap();
+        assert_eq!(doc["assumed_view"], f["view"], "each tube-free frame names the view it was judged under: {f}");
         let located = doc["tubes"].as_array().unwrap().iter().filter(|t| t["status"] == "located").count();
         assert_eq!(doc["detections"].as_array().unwrap().len() as u64, f["detections"].as_u64().unwrap(), "{f}");
         assert_eq!(located as u64, f["located"].as_u64().unwrap(), "{f}");
