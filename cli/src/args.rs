@@ -9,6 +9,7 @@
 #![allow(dead_code)]
 
 use clap::error::ErrorKind;
+use tubeloc_core::FrameView;
 
 fn parse_f64(s: &str) -> Result<f64, String> {
     let v: f64 = s.trim().parse().map_err(|_| format!("{s:?} is not a number"))?;
@@ -242,33 +243,18 @@ pub enum AssumedViewArg {
     Auto,
 }
 
-/// The view of one frame under `--assumed-view`: its name as a frame document gives it, its
-/// geometry, and the camera the frame's product name names where no mast view fits it (`auto`
-/// then takes the view of the frame's kind).
-#[derive(Clone, Debug, PartialEq)]
-pub struct FrameView {
-    /// The view's name (`navcam`, `m100`, `mastcam-z-110`, or the numbers as given).
-    pub name: String,
-    /// The view.
-    pub view: tubeloc_core::AssumedView,
-    /// With `auto`: the camera the product name names that no mast view fits (a Hazcam, an
-    /// arm camera).
-    pub unfit: Option<tubeloc_core::RoverCamera>,
-}
-
-impl FrameView {
-    /// The note for a frame whose product name names a camera no mast view fits, naming the
-    /// file, the camera and the view taken instead; `None` otherwise.
-    pub fn note(&self, image: &std::path::Path) -> Option<String> {
-        self.unfit.map(|c| {
-            format!(
-                "note: {} comes from the {} (by its product name): no mast view fits that camera, so it is judged under the {} view of its kind; give its camera model (--rig, or --label-cameras with its PDS label) for poses and scale that hold",
-                image.display(),
-                c.name(),
-                self.name
-            )
-        })
-    }
+/// The warning for a frame whose product name names a camera no mast view fits
+/// ([`FrameView::unfit`]), naming the file at `image`, the camera and the view taken instead;
+/// `None` otherwise.
+pub fn unfit_camera_warning(frame: &FrameView, image: &std::path::Path) -> Option<String> {
+    frame.unfit.map(|c| {
+        format!(
+            "{} comes from the {} (by its product name): no mast view fits that camera, so it is judged under the {} view of its kind; give its camera model (--rig, or --label-cameras with its PDS label) for poses and scale that hold",
+            image.display(),
+            c.name(),
+            frame.name
+        )
+    })
 }
 
 impl AssumedViewArg {
@@ -278,28 +264,26 @@ impl AssumedViewArg {
     }
 
     /// The size of the image at `image` and its view ([`AssumedViewArg::for_frame`]): `auto`
-    /// decodes the image to tell grey from colour (as `tubeloc bench` does); other views read
-    /// its size only. The error names the file.
+    /// decodes the image to tell grey from colour (as `tubeloc bench` does) where its product
+    /// name names no mast camera; otherwise only its size is read. The error names the file.
     pub fn frame_view(&self, image: &std::path::Path) -> Result<((u32, u32), FrameView), String> {
         let reading = |e: String| format!("reading {}: {e}", image.display());
-        let (size, grey) = match self.by_frame() {
+        let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let by_pixels = self.by_frame() && tubeloc_core::RoverCamera::of_product(&name).and_then(|c| c.view()).is_none();
+        let (size, grey) = match by_pixels {
             true => tubeloc_detect::input::open_eight_bit(image).map(|im| ((im.width(), im.height()), tubeloc_detect::input::rgb8_of(&im).info.grey)).map_err(|e| reading(e.to_string()))?,
             false => (tubeloc_detect::input::image_size(image).map_err(|e| reading(e.to_string()))?, true),
         };
-        let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         Ok((size, self.for_frame(&name, grey)))
     }
 
     /// The view of the frame in the file `file_name`, grey or not: the view as given (its name
-    /// as given: `navcam`, `mast`, or the numbers), or with `auto` the view of the mast camera
-    /// its product name names, otherwise the named view of its kind.
+    /// as given: `navcam`, `mast`, or the numbers), or with `auto`
+    /// [`tubeloc_core::AssumedView::of_frame`].
     pub fn for_frame(&self, file_name: &str, grey: bool) -> FrameView {
         match self {
             AssumedViewArg::View(spec, view) => FrameView { name: spec.clone(), view: *view, unfit: None },
-            AssumedViewArg::Auto => {
-                let (name, view, unfit) = tubeloc_core::AssumedView::of_frame(file_name, grey);
-                FrameView { name, view, unfit }
-            }
+            AssumedViewArg::Auto => tubeloc_core::AssumedView::of_frame(file_name, || grey),
         }
     }
 }
@@ -383,11 +367,11 @@ mod tests {
         assert_eq!((m100.name.as_str(), m100.view, m100.unfit), ("m100", tubeloc_core::AssumedView::M100, None));
         let nav = auto.for_frame("NLF_0053_0671642352_402ECM_N0032046NCAM00500_01_295J.png", false);
         assert_eq!((nav.name.as_str(), nav.view), ("m2020-navcam", tubeloc_core::AssumedView::M2020_NAVCAM));
-        assert!(m100.note(std::path::Path::new("a.jpg")).is_none());
+        assert!(unfit_camera_warning(&m100, std::path::Path::new("a.jpg")).is_none());
         // A Hazcam frame: the kind's view, and a note naming the file and the camera.
         let haz = auto.for_frame("RLB_701384675RAS_F0933408RHAZ00337M1.png", true);
         assert_eq!((haz.name.as_str(), haz.view), ("navcam", tubeloc_core::AssumedView::NAVCAM));
-        let note = haz.note(std::path::Path::new("d/RLB_701384675RAS_F0933408RHAZ00337M1.png")).unwrap();
+        let note = unfit_camera_warning(&haz, std::path::Path::new("d/RLB_701384675RAS_F0933408RHAZ00337M1.png")).unwrap();
         assert!(note.contains("d/RLB_701384675RAS") && note.contains("MSL Hazcam") && note.contains("navcam view"), "{note}");
         let e = assumed_view("hazcam").unwrap_err();
         assert!(e.contains("HFOV_DEG,HEIGHT_M,PITCH_DEG") && e.contains("auto") && e.contains("m2020-navcam"), "{e}");

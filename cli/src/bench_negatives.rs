@@ -19,8 +19,8 @@ use tubeloc_core::AssumedView;
 /// otherwise grey Navcam-like or the colour mast view; with its name.
 fn negative_view(path: &Path, grey: bool) -> (String, AssumedView) {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let (view_name, view, _) = AssumedView::of_frame(&name, grey);
-    (view_name, view)
+    let frame = AssumedView::of_frame(&name, || grey);
+    (frame.name, frame.view)
 }
 
 /// Learned detections kept at the threshold on each real negative frame.

@@ -111,8 +111,8 @@ pub(crate) fn line2d_defaults() -> crate::cmd_detect_line2d::Line2dOpts {
 fn image_camera(args: &mut DetectArgs) -> Result<Option<(tubeloc_core::CameraModel, tubeloc_core::GroundPlane)>> {
     if let (Some(view), Some(image)) = (&args.assumed_view, &args.image) {
         let ((w, h), frame) = view.frame_view(image).map_err(anyhow::Error::msg)?;
-        if let Some(note) = frame.note(image) {
-            eprintln!("{note}");
+        if let Some(w) = crate::args::unfit_camera_warning(&frame, image) {
+            eprintln!("warning: {w}");
         }
         let view = frame.view;
         let ground = match args.ground {

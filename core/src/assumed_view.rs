@@ -22,6 +22,19 @@ pub struct AssumedView {
     pub roll_deg: f64,
 }
 
+/// The view a frame is judged under: its name as a frame document gives it (`navcam`, `m100`,
+/// `mastcam-z-110`, or the numbers as given), its geometry, and the camera the frame's product
+/// name names where no mast view fits it (the view is then its kind's).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameView {
+    /// The view's name.
+    pub name: String,
+    /// The view.
+    pub view: AssumedView,
+    /// The camera the product name names that no mast view fits (a Hazcam, an arm camera).
+    pub unfit: Option<RoverCamera>,
+}
+
 impl AssumedView {
     /// A mast science camera (the colour test frames' documented view): 1.9 m above the
     /// ground, looking 30 degrees down, with a 20 degree field of view (the ground at the image
@@ -79,16 +92,16 @@ impl AssumedView {
     /// The view `--assumed-view auto` takes for the frame in the file `file_name`, grey or
     /// not: the view of the mast camera its product name names ([`RoverCamera::of_product`],
     /// [`RoverCamera::view`]), otherwise the named view of its kind
-    /// ([`AssumedView::of_kind`]); with the view's name, and the camera the name names where
-    /// it is one no mast view fits (a Hazcam, an arm camera: the kind's view is taken, and a
-    /// caller should say so).
-    pub fn of_frame(file_name: &str, grey: bool) -> (String, AssumedView, Option<RoverCamera>) {
+    /// ([`AssumedView::of_kind`]), with the camera the name names where it is one no mast view
+    /// fits (a Hazcam, an arm camera: a caller should say so). `grey` is asked only when the
+    /// name names no such mast camera.
+    pub fn of_frame(file_name: &str, grey: impl FnOnce() -> bool) -> FrameView {
         let camera = RoverCamera::of_product(file_name);
         match camera.and_then(|c| c.view().map(|v| (c.name(), v))) {
-            Some((name, view)) => (name, view, None),
+            Some((name, view)) => FrameView { name, view, unfit: None },
             None => {
-                let (name, view) = Self::of_kind(grey);
-                (name.to_string(), view, camera)
+                let (name, view) = Self::of_kind(grey());
+                FrameView { name: name.to_string(), view, unfit: camera }
             }
         }
     }

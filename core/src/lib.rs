@@ -30,7 +30,7 @@ pub mod rover_camera;
 pub mod tube;
 pub mod tube_pose;
 
-pub use assumed_view::AssumedView;
+pub use assumed_view::{AssumedView, FrameView};
 pub use camera::{CameraModel, Distortion};
 pub use coco::{CocoAnnotation, CocoCategory, CocoDataset, CocoImage, CocoResult, Segmentation};
 pub use confidence::ScoreCalibration;

@@ -61,13 +61,13 @@ impl RoverCamera {
     /// folder and extension; any case), or `None` where the name follows none of the
     /// conventions above or names an instrument that takes no surface images.
     pub fn of_product(file_name: &str) -> Option<RoverCamera> {
-        let stem = std::path::Path::new(file_name).file_name()?.to_string_lossy().to_ascii_uppercase();
-        let b = stem.as_bytes();
+        let name = std::path::Path::new(file_name).file_name()?.to_string_lossy().to_ascii_uppercase();
+        let b = name.as_bytes();
         let digits = |r: std::ops::Range<usize>| b.len() >= r.end && b[r].iter().all(u8::is_ascii_digit);
         let letters = |r: std::ops::Range<usize>| b.len() >= r.end && b[r].iter().all(u8::is_ascii_uppercase);
         // MSL MMM: SSSS + ML|MR|MH|MD + sequence digits.
         if digits(0..4) && letters(4..6) && digits(6..7) {
-            return match &stem[4..6] {
+            return match &name[4..6] {
                 "ML" => Some(RoverCamera::MslMastcamLeft),
                 "MR" => Some(RoverCamera::MslMastcamRight),
                 "MH" => Some(RoverCamera::Other { mission: "MSL", instrument: "MAHLI" }),
@@ -95,10 +95,10 @@ impl RoverCamera {
         }
         // Mars 2020: II + filter/configuration + _ + 4-digit sol + venue + 10-digit clock + _.
         if letters(0..2) && b.get(3) == Some(&b'_') && digits(4..8) && digits(9..19) && b.get(19) == Some(&b'_') {
-            return match &stem[0..2] {
+            return match &name[0..2] {
                 "NL" | "NR" => Some(RoverCamera::M2020Navcam),
                 "ZL" | "ZR" => {
-                    let last = stem.split('_').nth(5)?;
+                    let last = name.split('_').nth(5)?;
                     let focal_mm: u32 = last.get(0..3)?.parse().ok()?;
                     (26..=110).contains(&focal_mm).then_some(RoverCamera::M2020MastcamZ { focal_mm })
                 }

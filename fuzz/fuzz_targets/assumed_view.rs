@@ -25,8 +25,8 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     for grey in [false, true] {
-        let (name, view, unfit) = AssumedView::of_frame(text, grey);
-        check(&view);
-        assert!(!name.is_empty() && unfit.is_none_or(|c| c.view().is_none()));
+        let frame = AssumedView::of_frame(text, || grey);
+        check(&frame.view);
+        assert!(!frame.name.is_empty() && frame.unfit.is_none_or(|c| c.view().is_none()));
     }
 });

@@ -69,7 +69,7 @@ pub struct Setup {
     fisheyes: BTreeMap<String, tubeloc_calib::interchange::cahvore::Cahvore>,
     /// With `--assumed-view`: the view each image was given, by image file name (`navcam`,
     /// `m100`, ..., or the numbers as given), and the warning for an image whose product name
-    /// names a camera no mast view fits ([`crate::args::FrameView::note`]).
+    /// names a camera no mast view fits ([`crate::args::unfit_camera_warning`]).
     pub(super) assumed_views: BTreeMap<String, (String, Option<String>)>,
     /// `--ignore-mask`: one mask for every frame, or a folder of masks by image stem.
     ignore_mask: Option<IgnoreMasks>,
@@ -310,22 +310,21 @@ type LabelCamera = (tubeloc_calib::interchange::pds::PdsCamera, Option<tubeloc_c
 /// The cameras of `--label-cameras`: each image's own PDS3 label, the camera named after the
 /// image's file; and, by image file name, why an image gives none.
 fn label_cameras(images: &[&Path], label_dir: Option<&Path>) -> (Vec<LabelCamera>, BTreeMap<String, String>) {
-    use tubeloc_calib::interchange::{detached_label::detached_label_of, pds_label::read_resampled_label_camera};
-    let read = |image: &Path, name: &str| -> Result<LabelCamera> {
-        let own = read_resampled_label_camera(image).context("--label-cameras")?;
-        let own = match own {
+    use tubeloc_calib::interchange::{detached_label::DetachedLabels, pds_label::read_resampled_label_camera};
+    let mut detached = DetachedLabels::new(label_dir);
+    let mut read = |image: &Path, name: &str| -> Result<LabelCamera> {
+        let own = match read_resampled_label_camera(image).context("--label-cameras")? {
             Some(c) => Some(c),
-            None => match detached_label_of(image, label_dir).context("--label-cameras")? {
+            None => match detached.of(image).context("--label-cameras")? {
                 Some(label) => Some(read_resampled_label_camera(&label).context("--label-cameras")?.with_context(|| format!("--label-cameras: {}, the label of {}, is not a PDS3 label", label.display(), image.display()))?),
                 None => None,
             },
         };
         let Some((mut c, fisheye)) = own else {
-            let folder = label_dir.map(Path::to_path_buf).unwrap_or_else(|| image.parent().map(Path::to_path_buf).unwrap_or_default());
             bail!(
                 "--label-cameras: {} is not a PDS3 product (an .IMG with its label at the head, or a .LBL), and no label in {} names it (its product name with .LBL, the version character may stand for `_`): give --label-dir, --rig with its label or camera, or --assumed-view",
                 image.display(),
-                if folder.as_os_str().is_empty() { ".".into() } else { folder.display().to_string() }
+                detached.folder_for(image).display()
             );
         };
         (c.camera.name, c.image) = (name.to_string(), Some(name.to_string()));
@@ -355,7 +354,7 @@ fn assumed_cameras(view: &crate::args::AssumedViewArg, images: &[&Path]) -> Assu
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let camera = view.frame_view(image).map_err(|e| format!("--assumed-view: {e}")).and_then(|((w, h), frame)| {
             let (rig, ground) = frame.view.rig(&name, w, h).map_err(|e| format!("--assumed-view: {e}"))?;
-            let note = frame.note(image);
+            let note = crate::args::unfit_camera_warning(&frame, image);
             Ok((tubeloc_calib::interchange::pds::PdsCamera { camera: rig.cameras[0].clone(), ground, sol: None, image: Some(name.clone()) }, (frame.name, note)))
         });
         (name, camera)
