@@ -158,3 +158,38 @@ fn the_lists_fisheye_entries_are_read_from_their_labels() {
         assert_eq!(format!("{model:?}"), format!("{:?}", label_model.unwrap()));
     }
 }
+
+#[test]
+fn a_rig_read_once_holds_what_the_separate_readers_give() {
+    // `tubeloc locate --rig` reads a list (or a label) once: its pinhole cameras, then its
+    // fisheye entries' cameras from their labels, with their models by camera name.
+    use tubeloc_calib::interchange::pds::{fisheye_cameras, read_rig_cameras};
+    let path = with_cameras().join("cameras.json");
+    let read = read_rig_cameras(&path).unwrap().expect("a PDS camera list");
+    let pinholes = read_pds_cameras(&path).unwrap().unwrap();
+    let fisheyes = fisheye_cameras(&path);
+    assert!(read.errors.is_empty(), "{:?}", read.errors);
+    assert_eq!(read.cameras.len(), pinholes.len() + fisheyes.len());
+    let names: Vec<&str> = read.cameras.iter().map(|c| c.camera.name.as_str()).collect();
+    let expected: Vec<&str> = pinholes.iter().map(|c| c.camera.name.as_str()).chain(fisheyes.iter().map(|(n, _)| n.as_str())).collect();
+    assert_eq!(names, expected);
+    for (name, got) in &fisheyes {
+        let (camera, model) = got.as_ref().unwrap();
+        let mine = read.cameras.iter().find(|c| &c.camera.name == name).unwrap();
+        assert_eq!((&mine.camera.model, mine.ground.offset), (&camera.camera.model, camera.ground.offset));
+        assert_eq!(format!("{:?}", read.fisheye_models[name]), format!("{model:?}"));
+    }
+    assert_eq!(read.fisheye_models.len(), fisheyes.len());
+    // A fisheye's label alone: its linear camera and its model.
+    let label = with_cameras().join("labels").join("1f581291004ednd2fcp1121r0m1.img.lbl");
+    let one = read_rig_cameras(&label).unwrap().expect("a PDS3 label");
+    let (by_label, model) = read_resampled_label_camera(&label).unwrap().unwrap();
+    assert_eq!(one.cameras.len(), 1);
+    assert_eq!(one.cameras[0].camera.model, by_label.camera.model);
+    assert_eq!(one.fisheye_models.get(&by_label.camera.name).map(|m| format!("{m:?}")), model.map(|m| format!("{m:?}")));
+    // A tubeloc rig (a JSON object): not a PDS rig.
+    let rig = std::env::temp_dir().join(format!("tubeloc_rig_once_{}.json", std::process::id()));
+    std::fs::write(&rig, "{\"cameras\": []}").unwrap();
+    assert!(read_rig_cameras(&rig).unwrap().is_none());
+    std::fs::remove_file(&rig).ok();
+}

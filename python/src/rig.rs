@@ -95,25 +95,22 @@ pub fn read_rig(path: PathBuf) -> PyResult<PyRig> {
 /// read_pds_grounds(path) -> dict[str, tuple[float, float, float, float]]
 ///
 /// The ground under each camera of a PDS camera list (`cahv_to_pinhole.py`'s JSON) or of a
-/// PDS3 label, by camera name (the list's image file name, the label's PRODUCT_ID): (nx, ny, nz, d) in that camera's frame, n up, n·X = d,
+/// PDS3 label (a fisheye's too: its linear camera's), by camera name (the list's image file name, the label's PRODUCT_ID): (nx, ny, nz, d) in that camera's frame, n up, n·X = d,
 /// metres, as `Locator.locate(ground=...)` takes it (what `tubeloc locate` uses by itself).
 /// A list's fisheye (CAHVORE) entry has its camera read from the PDS3 label it names; one whose
 /// label cannot be read is left out with a `UserWarning` naming the list, the image and why
 /// (`tubeloc locate` fails that frame with the same message).
 #[pyfunction]
 pub fn read_pds_grounds(py: Python<'_>, path: PathBuf) -> PyResult<std::collections::BTreeMap<String, (f64, f64, f64, f64)>> {
-    let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&path).map_err(|e| chain_to_py(&e))?;
-    let mut cams = cams.ok_or_else(|| to_py(format!("{}: neither a PDS camera list (a JSON list) nor a PDS3 label", path.display())))?;
-    // A list's fisheye (CAHVORE) entries, read from their labels: the ground is their linear camera's.
-    for (_, camera) in tubeloc_calib::interchange::pds::fisheye_cameras(&path) {
-        match camera {
-            Ok((c, _)) => cams.push(c),
-            Err(why) => {
-                let msg = std::ffi::CString::new(format!("{why} (left out of the grounds)")).unwrap_or_default();
-                PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &msg, 1)?;
-            }
-        }
+    let read = tubeloc_calib::interchange::pds::read_rig_cameras(&path).map_err(|e| chain_to_py(&e))?;
+    let read = read.ok_or_else(|| to_py(format!("{}: neither a PDS camera list (a JSON list) nor a PDS3 label", path.display())))?;
+    // A list's fisheye (CAHVORE) entries come read from their labels: the ground is their
+    // linear camera's; those whose label cannot be read are left out, with a warning.
+    for why in read.errors.values() {
+        let msg = std::ffi::CString::new(format!("{why} (left out of the grounds)")).unwrap_or_default();
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &msg, 1)?;
     }
+    let cams = read.cameras;
     Ok(cams.into_iter().map(|c| (c.camera.name, (c.ground.normal.x, c.ground.normal.y, c.ground.normal.z, c.ground.offset))).collect())
 }
 

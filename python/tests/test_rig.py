@@ -234,3 +234,15 @@ def test_a_fisheye_entry_whose_label_is_missing_is_left_out_with_a_warning(tmp_p
     with pytest.warns(UserWarning, match=r"CAHVORE entry for \"RRB_2.jpg\".*RRB_2.LBL.*left out of the grounds"):
         grounds = tubeloc.read_pds_grounds(path)
     assert list(grounds) == ["NLB_1.jpg"]
+
+
+def test_a_fisheye_label_gives_the_ground_of_its_linear_camera():
+    # A Hazcam (CAHVORE) label as the list: the ground `tubeloc locate --rig LABEL` uses, the
+    # same as the list's entry for that image.
+    data = REPO.parent / "shared/data/real_mars/with_cameras"
+    if not (data / "cameras.json").exists():
+        pytest.skip(f"{data} is missing (../shared/data beside the repository)")
+    entry = next(e for e in json.loads((data / "cameras.json").read_text()) if e["model_type"] == "CAHVORE")
+    by_list = tubeloc.read_pds_grounds(data / "cameras.json")[entry["image"].split("/")[-1]]
+    (by_label,) = tubeloc.read_pds_grounds(data / entry["label_file"]).values()
+    assert by_label == pytest.approx(by_list, abs=1e-9)

@@ -13,6 +13,8 @@
 //! ```
 //!
 //! [`read_pds_cameras`] also reads the PDS3 label of one image ([`super::pds_label`]).
+//! [`read_rig_cameras`] reads a list or a label once, with the fisheye entries below, as
+//! `tubeloc locate --rig` takes it.
 //!
 //! CAHVORE (fisheye) entries are left out of the pinhole cameras: a pinhole does not describe
 //! their images. [`fisheye_cameras`] reads each one from the PDS3 label the entry names
@@ -94,7 +96,16 @@ pub fn looks_like_pds_cameras(text: &str) -> bool {
 /// Reads every pinhole camera of a `cahv_to_pinhole.py` list (`path` names the file in errors);
 /// empty when every entry is a CAHVORE (fisheye) model ([`fisheye_cameras`] reads those).
 pub fn pds_cameras(text: &str, path: &Path) -> Result<Vec<PdsCamera>, CalibError> {
-    let list: Vec<Value> = serde_json::from_str(text).map_err(|e| CalibError::parse(path, format!("not a JSON list of PDS cameras: {e}")))?;
+    pinhole_cameras(&parse_list(text, path)?, path)
+}
+
+/// The entries of a PDS camera list (`text`, read from `path`).
+fn parse_list(text: &str, path: &Path) -> Result<Vec<Value>, CalibError> {
+    serde_json::from_str(text).map_err(|e| CalibError::parse(path, format!("not a JSON list of PDS cameras: {e}")))
+}
+
+/// [`pds_cameras`] of a parsed list.
+fn pinhole_cameras(list: &[Value], path: &Path) -> Result<Vec<PdsCamera>, CalibError> {
     let mut out: Vec<PdsCamera> = Vec::with_capacity(list.len());
     for (k, e) in list.iter().enumerate() {
         let fail = |m: String| CalibError::parse(path, format!("entry {k}: {m}"));
@@ -122,12 +133,59 @@ pub fn read_pds_cameras(path: &Path) -> Result<Option<Vec<PdsCamera>>, CalibErro
     if let Some(c) = super::pds_label::read_label_camera(path)? {
         return Ok(Some(vec![c]));
     }
+    read_list(path)?.map(|list| pinhole_cameras(&list, path)).transpose()
+}
+
+/// The entries of the file `path` when it is a PDS camera list (UTF-8 text whose first
+/// character is `[`), `Ok(None)` when it is other UTF-8 text.
+fn read_list(path: &Path) -> Result<Option<Vec<Value>>, CalibError> {
     let bytes = std::fs::read(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
     let text = String::from_utf8(bytes).map_err(|_| CalibError::parse(path, "neither UTF-8 text nor a PDS3 label"))?;
     if !looks_like_pds_cameras(&text) {
         return Ok(None);
     }
-    pds_cameras(&text, path).map(Some)
+    parse_list(&text, path).map(Some)
+}
+
+/// Every camera of a PDS camera list or of a PDS3 label, as `tubeloc locate --rig` takes
+/// them ([`read_rig_cameras`]).
+#[derive(Clone, Debug, Default)]
+pub struct PdsRigCameras {
+    /// The label's camera, or the list's pinhole cameras followed by the linear cameras of its
+    /// CAHVORE (fisheye) entries read from their labels ([`fisheye_cameras`]).
+    pub cameras: Vec<PdsCamera>,
+    /// The CAHVORE model each fisheye camera's image is resampled from, by camera name.
+    pub fisheye_models: std::collections::BTreeMap<String, Cahvore>,
+    /// Why a list's CAHVORE entry gives no camera, by its image's file name.
+    pub errors: std::collections::BTreeMap<String, String>,
+}
+
+/// The cameras of the file `path` when it is a PDS3 label (a fisheye's too, with its model) or
+/// a PDS camera list (with its fisheye entries' cameras read from their labels), `Ok(None)`
+/// when it is some other file; the file is read once (a label's head only).
+pub fn read_rig_cameras(path: &Path) -> Result<Option<PdsRigCameras>, CalibError> {
+    let head = tubeloc_core::odl::read_head(path).map_err(|e| tubeloc_core::CoreError::io(path, e))?;
+    let mut out = PdsRigCameras::default();
+    if tubeloc_core::odl::looks_like_pds3_label(&head) {
+        let (camera, fisheye) = super::pds_label::resampled_label_camera(&head, path)?;
+        out.fisheye_models.extend(fisheye.map(|m| (camera.camera.name.clone(), m)));
+        out.cameras.push(camera);
+        return Ok(Some(out));
+    }
+    let Some(list) = read_list(path)? else { return Ok(None) };
+    out.cameras = pinhole_cameras(&list, path)?;
+    for (name, camera) in fisheye_cameras_of(list, path) {
+        match camera {
+            Ok((c, model)) => {
+                out.fisheye_models.insert(c.camera.name.clone(), model);
+                out.cameras.push(c);
+            }
+            Err(e) => {
+                out.errors.insert(name, e);
+            }
+        }
+    }
+    Ok(Some(out))
 }
 
 /// The camera of `cameras` (read from `path`) that took `image`: the one named after the
@@ -156,7 +214,16 @@ fn is_fisheye(e: &Value) -> bool {
 /// The CAHVORE (fisheye) entries of the PDS camera list at `path`, with their image file
 /// names; empty when the file is not such a list.
 fn fisheye_list_entries(path: &Path) -> Vec<(String, Value)> {
-    let Ok(list) = std::fs::read_to_string(path).map(|t| serde_json::from_str::<Vec<Value>>(&t).unwrap_or_default()) else { return Vec::new() };
+    fisheye_entries_of(list_or_empty(path))
+}
+
+/// The entries of the JSON list at `path`; empty when it cannot be read as one.
+fn list_or_empty(path: &Path) -> Vec<Value> {
+    std::fs::read_to_string(path).ok().and_then(|t| serde_json::from_str(&t).ok()).unwrap_or_default()
+}
+
+/// The CAHVORE (fisheye) entries of a parsed list, with their image file names.
+fn fisheye_entries_of(list: Vec<Value>) -> Vec<(String, Value)> {
     list.into_iter().filter(is_fisheye).filter_map(|e| Some((Path::new(e.get("image")?.as_str()?).file_name()?.to_str()?.to_string(), e))).collect()
 }
 
@@ -177,9 +244,14 @@ pub type FisheyeCamera = (PdsCamera, Cahvore);
 /// ([`super::linearize::LinearResampling`]), or why the entry gives none. Empty when the
 /// file is not such a list.
 pub fn fisheye_cameras(path: &Path) -> Vec<(String, Result<FisheyeCamera, String>)> {
+    fisheye_cameras_of(list_or_empty(path), path)
+}
+
+/// [`fisheye_cameras`] of a parsed list read from `path`.
+fn fisheye_cameras_of(list: Vec<Value>, path: &Path) -> Vec<(String, Result<FisheyeCamera, String>)> {
     let folder = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
-    for (name, e) in fisheye_list_entries(path) {
+    for (name, e) in fisheye_entries_of(list) {
         let camera = match e.get("label_file").and_then(Value::as_str) {
             None => Err(format!("{}: the CAHVORE (fisheye) entry for {name:?} names no `label_file`: give the image's PDS3 label as the rig", path.display())),
             Some(label) => match super::pds_label::read_resampled_label_camera(&folder.join(label)) {

@@ -112,26 +112,12 @@ impl Setup {
             // A PDS3 label is read here with its fisheye model, if any; a PDS camera list with
             // the fisheye models of its CAHVORE entries, from their labels (a frame whose label
             // cannot be read fails, the others run); other rigs as rigs.
-            let mut errors = BTreeMap::new();
-            let pds = match tubeloc_calib::interchange::pds_label::read_resampled_label_camera(&rig_path).context("rig")? {
-                Some((c, fisheye)) => {
-                    fisheyes.extend(fisheye.map(|m| (c.camera.name.clone(), m)));
-                    Some(vec![c])
+            let (pds, errors) = match tubeloc_calib::interchange::pds::read_rig_cameras(&rig_path).context("rig")? {
+                Some(read) => {
+                    fisheyes.extend(read.fisheye_models);
+                    (Some(read.cameras), read.errors)
                 }
-                None => tubeloc_calib::interchange::pds::read_pds_cameras(&rig_path).context("rig")?.map(|mut cams| {
-                    for (name, camera) in tubeloc_calib::interchange::pds::fisheye_cameras(&rig_path) {
-                        match camera {
-                            Ok((c, model)) => {
-                                fisheyes.insert(c.camera.name.clone(), model);
-                                cams.push(c);
-                            }
-                            Err(e) => {
-                                errors.insert(name, e);
-                            }
-                        }
-                    }
-                    cams
-                }),
+                None => (None, BTreeMap::new()),
             };
             (rig_path, pds, errors)
         };
