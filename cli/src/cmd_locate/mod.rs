@@ -105,7 +105,9 @@ pub struct LocateArgs {
     /// judges them); or the view's numbers,
     /// `HFOV_DEG,HEIGHT_M,PITCH_DEG` (e.g. `90,2,25` for a wide mast camera: the field of view
     /// sets the pixel scale the detectors work at). Poses are then only as good as the
-    /// assumption; mono only.
+    /// assumption, and so is detection: within about 20 % of the true pixel scale the learned
+    /// detector keeps its AP50, at twice or half of it between a fifth and two thirds of it
+    /// (docs/design/0083-pixel-scale-tolerance.md). Mono only.
     #[arg(long, value_parser = crate::args::assumed_view, conflicts_with_all = ["camera_name", "pair", "right", "right_images"])]
     pub assumed_view: Option<crate::args::AssumedViewArg>,
     /// Focal length of the pinhole a fisheye (CAHVORE) image is resampled into, relative to the
