@@ -176,7 +176,9 @@ pub fn image_size(path: impl AsRef<Path>) -> Result<(u32, u32), image::ImageErro
     if head.starts_with(b"LBLSIZE=") {
         return Err(invalid_data(vicar_without_label(path)));
     }
-    image::image_dimensions(path)
+    // By the file's content, as `open_image` decodes it, not by its extension (a PNG saved
+    // under a `.jpg` name).
+    image::ImageReader::open(path)?.with_guessed_format()?.into_dimensions()
 }
 
 /// Opens an image file (any format of [`IMAGE_EXTENSIONS`]) by [`open_image`] as [`eight_bit`].
@@ -243,6 +245,11 @@ mod tests {
         std::fs::write(&empty, []).unwrap();
         assert!(image_size(&empty).unwrap_err().to_string().contains("empty (0 bytes)"));
         assert!(image_size(dir.path().join("missing.png")).is_err());
+        // A PNG under a JPEG's name: read by its content, as open_image reads it.
+        let misnamed = dir.path().join("a.jpg");
+        std::fs::copy(&png, &misnamed).unwrap();
+        assert_eq!(image_size(&misnamed).unwrap(), (7, 5));
+        assert_eq!((open_image(&misnamed).unwrap().width(), open_image(&misnamed).unwrap().height()), (7, 5));
     }
 
     #[test]
