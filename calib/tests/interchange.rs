@@ -309,3 +309,19 @@ fn malformed_json_errors_name_the_file() {
 fn name_of(d: &Path, f: &str) -> String {
     d.join(f).display().to_string()
 }
+
+#[test]
+fn one_camera_model_reads_as_a_mono_rig() {
+    // What `--camera` takes is also a rig: the camera, named `camera`, at the rig origin.
+    let dir = tempfile::tempdir().unwrap();
+    let model = default_rig().cameras[0].model.clone();
+    let path = dir.path().join("cam.json");
+    std::fs::write(&path, serde_json::to_string(&model).unwrap()).unwrap();
+    let rig = read_rig(&path).unwrap();
+    let expected = Rig { cameras: vec![tubeloc_core::RigCamera { name: "camera".into(), model, t_rig_cam: Pose::identity() }], stereo_pairs: Vec::new() };
+    assert_same_rig(&expected, &rig, "camera JSON");
+    // A camera with a field missing is refused naming the file, as `--camera` refuses it.
+    std::fs::write(&path, r#"{"width": 100, "height": 80, "fx": 100}"#).unwrap();
+    let err = read_rig(&path).unwrap_err().to_string();
+    assert!(err.contains("cam.json") && err.contains("fy"), "{err}");
+}

@@ -175,11 +175,28 @@ pub fn underexposure_warning(path: &Path, image: &image::DynamicImage) -> Option
     (level < min).then(|| format!("warning: {}: underexposed (its highlights lie at grey level {level:.0} < {min:.0}): its detections are unreliable, and tubeloc locate hands over no tube from it", path.display()))
 }
 
+/// Refuses an `--image` whose size is not its camera's (`--camera`, or the camera
+/// [`image_camera`] found): the working scale and Line2D's ground would be wrong, silently.
+fn check_camera_size(args: &DetectArgs, found: Option<&tubeloc_core::CameraModel>) -> Result<()> {
+    let Some(image) = &args.image else { return Ok(()) };
+    let (camera, from) = match (found, &args.line2d.camera) {
+        (Some(c), _) => (c.clone(), "its camera".to_string()),
+        (None, Some(path)) => (tubeloc_calib::interchange::read_camera(path).with_context(|| format!("reading camera {}", path.display()))?, format!("the camera {}", path.display())),
+        (None, None) => return Ok(()),
+    };
+    let (w, h) = tubeloc_detect::input::image_size(image).with_context(|| format!("reading {}", image.display()))?;
+    if (w, h) != (camera.width, camera.height) {
+        anyhow::bail!("{} is {w}x{h} px but {from} describes {}x{} px images: give the camera of this image", image.display(), camera.width, camera.height);
+    }
+    Ok(())
+}
+
 /// Runs `tubeloc detect`.
 pub fn run(args: DetectArgs) -> Result<()> {
     args.line2d.check()?;
     let mut args = args;
     let pds = image_camera(&mut args)?;
+    check_camera_size(&args, pds.as_ref().map(|(cam, _)| cam))?;
     if let Some(d) = &args.dataset {
         if let Some(note) = cameraless_note(d, args.method, &args.range_m)? {
             eprintln!("{note}");

@@ -310,3 +310,34 @@ fn a_truncated_jpeg_is_refused_naming_the_file() {
     // The whole file is read.
     ok(&["calib", "detect", p(&full), "--out", o]);
 }
+
+/// A camera of another image size gives a wrong working scale and ground, silently: `detect`
+/// refuses it naming both sizes, as `locate` does, and writes nothing; a camera model is
+/// also a mono rig for `locate`.
+#[test]
+fn a_camera_of_another_size_is_refused_and_a_camera_is_a_mono_rig() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = png(d, 64, 48);
+    let cam = |w: u32, h: u32| serde_json::json!({"width": w, "height": h, "fx": 60.0, "fy": 60.0, "cx": w as f64 / 2.0 - 0.5, "cy": h as f64 / 2.0 - 0.5}).to_string();
+    let (wrong, right) = (d.join("wrong.json"), d.join("right.json"));
+    std::fs::write(&wrong, cam(100, 80)).unwrap();
+    std::fs::write(&right, cam(64, 48)).unwrap();
+    let out = d.join("out.json");
+    for method in ["learned", "line2d"] {
+        let run = tubeloc(&["detect", "--method", method, "--image", p(&img), "--camera", p(&wrong), "--out", p(&out)]);
+        let err = stderr(&run);
+        assert!(!run.status.success(), "{method}");
+        assert!(err.contains("img_64x48.png is 64x48 px") && err.contains("wrong.json describes 100x80 px"), "{method}: {err}");
+        assert!(!out.exists());
+    }
+    let run = tubeloc(&["locate", "--rig", p(&wrong), "--image", p(&img), "--out", p(&out)]);
+    assert!(!run.status.success() && stderr(&run).contains("64x48") && stderr(&run).contains("100x80"), "{}", stderr(&run));
+    assert!(!out.exists());
+    ok(&["detect", "--method", "learned", "--image", p(&img), "--camera", p(&right), "--out", p(&out)]);
+    std::fs::remove_file(&out).unwrap();
+    let run = tubeloc(&["locate", "--rig", p(&right), "--image", p(&img), "--out", p(&out)]);
+    assert!(out.exists(), "{}", stderr(&run));
+    let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(doc["camera"], "camera");
+}

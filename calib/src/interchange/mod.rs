@@ -93,6 +93,11 @@ pub fn detect_rig_format(text: &str) -> Result<RigFormat, String> {
     Err(format!("not a rig file in a known format; tried tubeloc JSON (does not start with `{{`), a PDS camera list (does not start with `[`), a PDS3 label (does not start with `PDS_VERSION_ID`), OpenCV FileStorage YAML (no `%YAML:1.0` first line), kalibr camchain and ROS camera_info ({why_yaml})"))
 }
 
+/// Whether tubeloc JSON `text` is one camera model (an object with `fx` and no `cameras`).
+fn is_camera_json(text: &str) -> bool {
+    serde_json::from_str::<serde_json::Value>(text).is_ok_and(|v| v.get("fx").is_some() && v.get("cameras").is_none())
+}
+
 /// Reads a camera model for a `--camera` argument: tubeloc camera JSON
 /// ([`tubeloc_core::CameraModel::load_json`]) or a PDS3 label (`.LBL`, or an `.IMG` with its
 /// label: the linearized CAHV / CAHVOR pinhole, [`pds_label`]), recognised by content.
@@ -103,8 +108,9 @@ pub fn read_camera(path: &Path) -> Result<tubeloc_core::CameraModel, CalibError>
     }
 }
 
-/// Reads a rig from tubeloc JSON, OpenCV FileStorage YAML, a kalibr camchain, or a single ROS
-/// `camera_info` file (a one-camera rig with the camera at the rig origin), a PDS camera list
+/// Reads a rig from tubeloc JSON (a rig, or one camera model: a one-camera rig, the camera
+/// named `camera` at the rig origin), OpenCV FileStorage YAML, a kalibr camchain, or a single
+/// ROS `camera_info` file (a one-camera rig with the camera at the rig origin), a PDS camera list
 /// (one camera per image, in the rover frame; [`pds`]), or a PDS3 label (its camera, in the
 /// rover frame; [`pds_label`]), recognised by content. Errors name the file, and the field
 /// where one is wrong.
@@ -116,6 +122,11 @@ pub fn read_rig(path: &Path) -> Result<Rig, CalibError> {
     }
     let text = String::from_utf8(bytes).map_err(|_| CalibError::parse(path, "neither UTF-8 text nor a PDS3 label"))?;
     match detect_rig_format(&text).map_err(|m| CalibError::parse(path, m))? {
+        // A single camera (`tubeloc calib` output, `--camera` files): a one-camera rig.
+        RigFormat::TubelocJson if is_camera_json(&text) => {
+            let model = tubeloc_core::CameraModel::load_json(path)?;
+            Ok(Rig { cameras: vec![RigCamera { name: "camera".into(), model, t_rig_cam: Pose::identity() }], stereo_pairs: Vec::new() })
+        }
         RigFormat::TubelocJson => Ok(Rig::load_json(path)?),
         RigFormat::OpencvYaml => crate::yaml::rig_from_yaml(&text, path),
         RigFormat::KalibrCamchain => kalibr::rig_from_camchain(&text, path),

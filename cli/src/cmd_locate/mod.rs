@@ -71,7 +71,7 @@ pub struct LocateArgs {
     /// `merge`: combine the folders of a sharded batch run.
     #[command(subcommand)]
     pub command: Option<LocateCommand>,
-    /// Rig file: tubeloc JSON (`tubeloc calib rig`, a synthetic dataset's `rig.json`), OpenCV YAML,
+    /// Rig file: tubeloc JSON (`tubeloc calib rig`, a synthetic dataset's `rig.json`, or one camera model: a mono rig), OpenCV YAML,
     /// a kalibr camchain, one ROS `camera_info`, a PDS camera list (`cahv_to_pinhole.py`'s JSON:
     /// each image's camera, by file name, and ground; a CAHVORE entry's model read from the
     /// label its `label_file` names) or the PDS3 label of the image (`.LBL`, or an `.IMG` with
