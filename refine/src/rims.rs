@@ -18,8 +18,8 @@
 use crate::contour::{build_samples, project_with_normal, AxisState, SampleKind};
 use crate::edges::{build_pyramid_with, roi, GradientLevel};
 use crate::model::CylinderModel;
-use crate::robust::tukey_weight;
-use nalgebra::{Matrix2, Point2, Vector2, Vector3};
+use crate::robust::{tukey_weight, TwoViewNormalEquations};
+use nalgebra::{Point2, Vector2, Vector3};
 use tubeloc_core::{CameraModel, Plane};
 
 /// Result of [`rim_ends`].
@@ -104,10 +104,7 @@ pub fn rim_ends_with_prior(model: &CylinderModel, camera: &CameraModel, left: &P
     let mut rms = 0.0;
     for it in 0..20 {
         let radius = if it < 3 { 4 } else { 2 };
-        let mut jtj = Matrix2::zeros();
-        let mut jtr = Vector2::zeros();
-        let (mut wrr, mut wsum) = (0.0, 0.0);
-        counts = (0, 0);
+        let mut eq = TwoViewNormalEquations::<2>::new();
         for (vi, v) in views.iter().enumerate() {
             let base = project(v, &p);
             let dirs: Vec<_> = (0..2).map(|k| project(v, &(p + Vector2::ith(k, h)))).collect();
@@ -132,28 +129,20 @@ pub fn rim_ends_with_prior(model: &CylinderModel, camera: &CameraModel, left: &P
                 if w <= 0.0 {
                     continue;
                 }
-                if vi == 0 {
-                    counts.0 += 1;
-                } else {
-                    counts.1 += 1;
-                }
-                jtj += j * j.transpose() * w;
-                jtr += j * (w * r);
-                wrr += w * r * r;
-                wsum += w;
+                eq.add(vi, &j, r, w);
             }
         }
+        (counts, rms) = (eq.counts, eq.rms());
         if counts.0 < min_samples || counts.1 < min_samples {
             return None;
         }
-        rms = (wrr / wsum.max(1e-9)).sqrt();
         // Light damping (1e-3 of the diagonal) and a tiny prior keep weakly observed
         // directions (e.g. a tube across the rows) where they are.
-        let mut a = jtj;
+        let mut a = eq.jtj;
         for k in 0..2 {
-            a[(k, k)] += 1e-3 * jtj[(k, k)] + 1e-2;
+            a[(k, k)] += 1e-3 * eq.jtj[(k, k)] + 1e-2;
         }
-        let mut g = jtr;
+        let mut g = eq.jtr;
         if tau_sigma_m.is_finite() && tau_sigma_m > 0.0 {
             let wp = (0.5 / tau_sigma_m).powi(2);
             a[(0, 0)] += wp;

@@ -36,13 +36,12 @@ use crate::edges::{EdgeHit, GradientLevel};
 use crate::model::CylinderModel;
 use crate::photo::Occluders;
 use crate::rims::view;
-use crate::robust::tukey_weight;
-use nalgebra::{Point3, SMatrix, SVector, Vector3, Vector5};
+use crate::robust::{tukey_weight, TwoViewNormalEquations};
+use nalgebra::{Point3, SVector, Vector3, Vector5};
 
 /// Parameters of one iteration: centre move (3), axis turn (2), limb edge offsets (body, other
 /// sections).
 type V7 = SVector<f64, 7>;
-type M7 = SMatrix<f64, 7, 7>;
 use tubeloc_core::{CameraModel, Plane};
 
 /// Settings of [`fit_two_view`] (JSON: missing fields keep their defaults).
@@ -249,10 +248,7 @@ pub fn fit_two_view(model: &CylinderModel, camera: &CameraModel, left: &Plane<f3
         let perturbed: Vec<AxisState> = (0..5).map(|k| state_of(&(Vector5::ith(k, if k < 3 { hc } else { ha })))).collect();
         let f0 = cur.frame()?;
         let frames: Vec<_> = perturbed.iter().map(|s| s.frame()).collect();
-        let mut jtj = M7::zeros();
-        let mut jtr = V7::zeros();
-        let (mut wrr, mut wsum) = (0.0, 0.0);
-        counts = (0, 0);
+        let mut eq = TwoViewNormalEquations::<7>::new();
         let mut votes = [vec![0i32; n_limbs], vec![0i32; n_limbs]];
         for s in &samples {
             let Some(q) = s.eval(model, &f0) else { continue };
@@ -305,15 +301,7 @@ pub fn fit_two_view(model: &CylinderModel, camera: &CameraModel, left: &Plane<f3
                 if w <= 0.0 {
                     continue;
                 }
-                if vi == 0 {
-                    counts.0 += 1;
-                } else {
-                    counts.1 += 1;
-                }
-                jtj += j * j.transpose() * w;
-                jtr += j * (w * r);
-                wrr += w * r * r;
-                wsum += w;
+                eq.add(vi, &j, r, w);
             }
         }
         if it == 0 {
@@ -323,13 +311,13 @@ pub fn fit_two_view(model: &CylinderModel, camera: &CameraModel, left: &Plane<f3
                 }
             }
         }
+        (counts, rms) = (eq.counts, eq.rms());
         if counts.0 < cfg.min_samples || counts.1 < cfg.min_samples {
             return None;
         }
-        rms = (wrr / wsum.max(1e-9)).sqrt();
         // Priors (in the current parameters): the start pose, weakly, and the ground tilt.
-        let mut a = jtj;
-        let mut g = jtr;
+        let mut a = eq.jtj;
+        let mut g = eq.jtr;
         let dc = cur.c - c0;
         for k in 0..3 {
             a[(k, k)] += wc;
@@ -361,7 +349,7 @@ pub fn fit_two_view(model: &CylinderModel, camera: &CameraModel, left: &Plane<f3
             g += jg * (s * nrm.dot(&cur.a));
         }
         for k in 0..7 {
-            a[(k, k)] += 1e-3 * jtj[(k, k)];
+            a[(k, k)] += 1e-3 * eq.jtj[(k, k)];
         }
         let step = a.lu().solve(&(-g))?;
         if !step.iter().all(|v| v.is_finite()) {
