@@ -86,7 +86,8 @@ impl ModelChoice {
 /// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`; images
 /// without one are left out) and the ground planes of those that carry one (`images[].ground`,
 /// as `tubeloc synth real` writes it; [`tubeloc_detect::learned::dataset::image_ground`]), by
-/// image id, from one read of the file.
+/// image id, from one read of the file. A camera that does not parse, or that describes images
+/// of another size than its image's `width` x `height`, is an error naming the image.
 #[allow(clippy::type_complexity)]
 pub fn dataset_cameras_and_grounds(dataset: &Path) -> Result<(std::collections::BTreeMap<u64, tubeloc_core::CameraModel>, std::collections::BTreeMap<u64, tubeloc_core::GroundPlane>)> {
     let ann = dataset.join("annotations.json");
@@ -94,7 +95,10 @@ pub fn dataset_cameras_and_grounds(dataset: &Path) -> Result<(std::collections::
     let mut cameras = std::collections::BTreeMap::new();
     for im in &ds.images {
         if let Some(c) = im.extra.get("camera") {
-            let cam = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {}: camera", ann.display(), im.id))?;
+            let cam: tubeloc_core::CameraModel = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {} ({}): camera", ann.display(), im.id, im.file_name))?;
+            if (cam.width, cam.height) != (im.width, im.height) {
+                bail!("{}: image {} ({}) is {}x{} px but its camera describes {}x{} px images", ann.display(), im.id, im.file_name, im.width, im.height, cam.width, cam.height);
+            }
             cameras.insert(im.id, cam);
         }
     }
@@ -133,6 +137,9 @@ pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -
 pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera: Option<&Path>, ground: Option<&tubeloc_core::GroundPlane>, band: Option<tubeloc_detect::scale::RangeBand>) -> Result<Vec<f64>> {
     let Some(band) = band else { return Ok(vec![1.0; images.len()]) };
     if let Some(d) = dataset {
+        // Every camera read and checked against its image's size (a camera that does not
+        // parse would otherwise leave its image at scale 1, silently).
+        dataset_cameras_and_grounds(d)?;
         let ann = d.join("annotations.json");
         let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
         let by_id: std::collections::HashMap<u64, &tubeloc_core::CocoImage> = ds.images.iter().map(|im| (im.id, im)).collect();

@@ -341,3 +341,32 @@ fn a_camera_of_another_size_is_refused_and_a_camera_is_a_mono_rig() {
     let doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(doc["camera"], "camera");
 }
+
+/// A dataset image whose camera does not parse or is of another size: `detect` names the
+/// image and the problem, for both detectors, instead of detecting it at scale 1.
+#[test]
+fn a_dataset_images_bad_camera_is_refused_naming_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("images")).unwrap();
+    let img = png(&d.join("images"), 64, 48);
+    let name = img.file_name().unwrap().to_str().unwrap().to_string();
+    let cam = |w: u32, h: u32| serde_json::json!({"width": w, "height": h, "fx": 60.0, "fy": 60.0, "cx": 31.5, "cy": 23.5});
+    let mut broken = cam(64, 48);
+    broken.as_object_mut().unwrap().remove("fy");
+    let out = d.join("out.json");
+    for (camera, says) in [(broken, "camera"), (cam(100, 80), "is 64x48 px but its camera describes 100x80 px images")] {
+        let ds = serde_json::json!({"images": [{"id": 7, "width": 64, "height": 48, "file_name": name, "camera": camera}], "annotations": [], "categories": [{"id": 1, "name": "tube"}]});
+        std::fs::write(d.join("annotations.json"), ds.to_string()).unwrap();
+        for method in ["learned", "line2d"] {
+            let run = tubeloc(&["detect", "--method", method, "--dataset", p(d), "--out", p(&out)]);
+            let err = stderr(&run);
+            assert!(!run.status.success(), "{method}");
+            assert!(err.contains(&format!("image 7 ({name})")) && err.contains(says), "{method}: {err}");
+            assert!(!out.exists());
+        }
+    }
+    let ds = serde_json::json!({"images": [{"id": 7, "width": 64, "height": 48, "file_name": name, "camera": cam(64, 48)}], "annotations": [], "categories": [{"id": 1, "name": "tube"}]});
+    std::fs::write(d.join("annotations.json"), ds.to_string()).unwrap();
+    ok(&["detect", "--method", "learned", "--dataset", p(d), "--out", p(&out)]);
+}

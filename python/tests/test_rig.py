@@ -42,6 +42,19 @@ def test_invalid_rig_is_refused():
         tubeloc.Rig.from_json('{"cameras": [], "stereo_pairs": []}')
 
 
+def test_one_camera_model_is_a_mono_rig(tmp_path):
+    # What `--camera` takes is also a rig, as `tubeloc locate --rig camera.json` takes it.
+    cam = {"width": 64, "height": 48, "fx": 60.0, "fy": 60.0, "cx": 31.5, "cy": 23.5}
+    path = tmp_path / "cam.json"
+    path.write_text(json.dumps(cam))
+    rig = tubeloc.read_rig(path)
+    assert "'camera'" in repr(rig)
+    assert tubeloc.Locator(path, detector="learned").camera == "camera"
+    assert tubeloc.detect(np.zeros((48, 64, 3), np.uint8), path) == []
+    with pytest.raises(tubeloc.TubelocError, match="48x64 but rig camera"):
+        tubeloc.detect(np.zeros((64, 48, 3), np.uint8), path)
+
+
 def test_opencv_yaml_round_trip(demo_scene, tmp_path):
     rig_path, _, _ = demo_scene
     rig = tubeloc.read_rig(rig_path)
