@@ -48,7 +48,7 @@ def test_one_camera_model_is_a_mono_rig(tmp_path):
     path = tmp_path / "cam.json"
     path.write_text(json.dumps(cam))
     rig = tubeloc.read_rig(path)
-    assert "'camera'" in repr(rig)
+    assert '"camera"' in repr(rig)
     assert tubeloc.Locator(path, detector="learned").camera == "camera"
     assert tubeloc.detect(np.zeros((48, 64, 3), np.uint8), path) == []
     with pytest.raises(tubeloc.TubelocError, match="48x64 but rig camera"):
