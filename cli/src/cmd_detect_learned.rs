@@ -92,6 +92,14 @@ impl ModelChoice {
 pub fn dataset_cameras_and_grounds(dataset: &Path) -> Result<(std::collections::BTreeMap<u64, tubeloc_core::CameraModel>, std::collections::BTreeMap<u64, tubeloc_core::GroundPlane>)> {
     let ann = dataset.join("annotations.json");
     let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+    let cameras = dataset_cameras(&ds, &ann)?;
+    let grounds = ds.images.iter().filter_map(|im| Some((im.id, tubeloc_detect::learned::dataset::image_ground(im)?))).collect();
+    Ok((cameras, grounds))
+}
+
+/// The cameras of `ds`'s images (read from `ann`), by image id; a camera that does not parse,
+/// or that describes images of another size than its image's, is an error naming the image.
+fn dataset_cameras(ds: &CocoDataset, ann: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {
     let mut cameras = std::collections::BTreeMap::new();
     for im in &ds.images {
         if let Some(c) = im.extra.get("camera") {
@@ -102,8 +110,7 @@ pub fn dataset_cameras_and_grounds(dataset: &Path) -> Result<(std::collections::
             cameras.insert(im.id, cam);
         }
     }
-    let grounds = ds.images.iter().filter_map(|im| Some((im.id, tubeloc_detect::learned::dataset::image_ground(im)?))).collect();
-    Ok((cameras, grounds))
+    Ok(cameras)
 }
 
 /// Parses a tube-range band ([`tubeloc_pipeline::shipped::parse_range_band`]).
@@ -139,9 +146,9 @@ pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera:
     if let Some(d) = dataset {
         // Every camera read and checked against its image's size (a camera that does not
         // parse would otherwise leave its image at scale 1, silently).
-        dataset_cameras_and_grounds(d)?;
         let ann = d.join("annotations.json");
         let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
+        dataset_cameras(&ds, &ann)?;
         let by_id: std::collections::HashMap<u64, &tubeloc_core::CocoImage> = ds.images.iter().map(|im| (im.id, im)).collect();
         return Ok(images.iter().map(|(id, _)| by_id.get(id).map_or(1.0, |im| tubeloc_detect::learned::dataset::image_working_scale(im, band))).collect());
     }

@@ -30,6 +30,7 @@ pub mod local_ground;
 mod mask_check;
 mod model;
 mod mono;
+mod normal_equations;
 pub mod photo;
 pub mod priors;
 mod refiner;

@@ -18,7 +18,8 @@
 use crate::contour::{build_samples, project_with_normal, AxisState, SampleKind};
 use crate::edges::{build_pyramid_with, roi, GradientLevel};
 use crate::model::CylinderModel;
-use crate::robust::{tukey_weight, TwoViewNormalEquations};
+use crate::normal_equations::TwoViewNormalEquations;
+use crate::robust::tukey_weight;
 use nalgebra::{Point2, Vector2, Vector3};
 use tubeloc_core::{CameraModel, Plane};
 

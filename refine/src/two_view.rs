@@ -34,9 +34,10 @@
 use crate::contour::{build_samples, project_with_normal, AxisState, ContourSample, SampleKind};
 use crate::edges::{EdgeHit, GradientLevel};
 use crate::model::CylinderModel;
+use crate::normal_equations::TwoViewNormalEquations;
 use crate::photo::Occluders;
 use crate::rims::view;
-use crate::robust::{tukey_weight, TwoViewNormalEquations};
+use crate::robust::tukey_weight;
 use nalgebra::{Point3, SVector, Vector3, Vector5};
 
 /// Parameters of one iteration: centre move (3), axis turn (2), limb edge offsets (body, other
