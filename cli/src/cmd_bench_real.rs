@@ -2,7 +2,8 @@
 //!
 //! (a) Composites on the real **test** frames (split by sol, `tubeloc synth real`): grey
 //!     frames with their PDS camera models (ground and sun of the frame), and colour Mastcam
-//!     frames under the documented assumed mast view ([`AssumedView::MAST`]); learned
+//!     frames under the view `--assumed-view auto` takes for them (M-100 frames `m100`, the
+//!     others the documented mast view, [`AssumedView::of_frame`]); learned
 //!     detection at the working scale, COCO AP50 / AR, and the reliability of the calibrated
 //!     probability on these held-out detections.
 //! (b) False positives per frame on `negatives_val` (detections kept, and tubes that `locate`
@@ -333,7 +334,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let mut md = String::new();
     let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
     writeln!(md, "{title}").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the assumed mast view (1.9 m high, 30 degrees down, 20 degree field of view). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
     writeln!(
         md,
         "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"

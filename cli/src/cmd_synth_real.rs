@@ -2,7 +2,8 @@
 //!
 //! Validation and test sets use the frames with PDS camera models (grey Navcam and MER
 //! frames: the ground and the sun of the frame) plus the colour Mastcam frames of the same
-//! split under the documented assumed mast view; training sets use every background of the
+//! split under the view `--assumed-view auto` takes for them (M-100 frames `m100`, the others
+//! the documented `mast` view); training sets use every background of the
 //! training split under random assumed views, with appearance randomization.
 
 use anyhow::{bail, Result};

@@ -311,6 +311,30 @@ mod tests {
         assert!(split_views(dir.path(), RealSplit::Val, None, true, 0, 0).unwrap().is_empty());
     }
 
+    /// Colour frames of a validation or test part are composited under the view `locate
+    /// --assumed-view auto` judges them under: an M-100 frame (`SSSSMR...`) under `m100`, an
+    /// M-34 frame and a panorama tile without a product name under `mast`, each camera at the
+    /// frame's own size.
+    #[test]
+    fn colour_frames_take_the_view_of_their_product_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let group = dir.path().join("backgrounds/msl_mastcam_marsdata");
+        std::fs::create_dir_all(&group).unwrap();
+        let names = ["0500MR0001230000100001E01.jpg", "0500ML0001230000100001E01.jpg", "marsscapes_500_1_t0.png"];
+        let mut manifest = String::from("file\tsplit\tgroup\tsol\n");
+        for n in names {
+            image::RgbImage::new(560, 500).save(group.join(n)).unwrap();
+            manifest += &format!("backgrounds/msl_mastcam_marsdata/{n}\tbackgrounds\tmsl_mastcam_marsdata\t500\n");
+        }
+        std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
+        let views = split_views(dir.path(), RealSplit::Test, None, true, 0, 0).unwrap();
+        let fx: Vec<f64> = views.iter().map(|v| v.camera.fx).collect();
+        let want = [AssumedView::M100.camera(560, 500).fx, AssumedView::MAST.camera(560, 500).fx, AssumedView::MAST.camera(560, 500).fx];
+        assert_eq!(fx, want);
+        // 6.8 against 20 degrees across 560 px: the M-100's focal length about 2.97 times the mast view's.
+        assert!((fx[0] / fx[1] - (10f64.to_radians().tan() / 3.4f64.to_radians().tan())).abs() < 1e-9, "{fx:?}");
+    }
+
     #[test]
     fn the_body_diameter_is_the_default_tube_models() {
         assert!((TUBE_BODY_DIAMETER_M - 2.0 * tubeloc_core::TubeModel::default().body_radius()).abs() < 1e-12);
@@ -452,8 +476,10 @@ pub enum GreyView {
 /// The frames of `split` in the real data folder `data` (holding `MANIFEST.tsv`,
 /// `backgrounds/` and `with_cameras/`), with their views. Validation and test: the grey frames
 /// (`grey`: with PDS camera models, and / or the grey backgrounds under
-/// [`AssumedView::NAVCAM`]) and the colour Mastcam backgrounds under [`AssumedView::MAST`],
-/// frames whose smaller side is below `min_size` left out. Training: every background of the
+/// [`AssumedView::NAVCAM`]) and the colour Mastcam backgrounds under the view `--assumed-view
+/// auto` takes for them ([`AssumedView::of_frame`]: an M-100 frame under `m100`, an M-34
+/// frame or a panorama tile without a product name under [`AssumedView::MAST`]), frames whose
+/// smaller side is below `min_size` left out. Training: every background of the
 /// split under a random assumed view drawn with `seed` (the Navcam backgrounds that are also
 /// camera-model frames fall in validation or test by their sol).
 pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour: bool, min_size: u32, seed: u64) -> Result<Vec<RealView>, SynthError> {
@@ -486,7 +512,9 @@ pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour
         }
         let view = match (split, is_colour) {
             (RealSplit::Train, _) => random_view(&mut rng),
-            (_, true) => AssumedView::MAST,
+            // The view `--assumed-view auto` judges the frame under: its mast camera's by the
+            // product name (M-100 frames `m100`), else the colour `mast` view.
+            (_, true) => AssumedView::of_frame(&e.file.to_string_lossy(), || false).view,
             (_, false) => AssumedView::NAVCAM,
         };
         out.push(assumed_real_view(&view, path, w, h, e.sol, &mut rng));
