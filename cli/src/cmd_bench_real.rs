@@ -80,7 +80,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
     if kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
         return Ok(None);
     }
-    if tubeloc_synth::real_set::split_views(data, split, grey, kind != RealKind::Grey, min_size, seed)?.is_empty() {
+    if tubeloc_synth::real_set::split_views(data, split, grey, kind != RealKind::Grey, min_size, tubeloc_synth::real_set::TRAINING_HFOV_DEG, seed)?.is_empty() {
         return Ok(None);
     }
     crate::cmd_synth_real::run(crate::cmd_synth_real::RealArgs {
@@ -91,6 +91,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
         tubes: (1, 4),
         range_m: (1.5, 5.0),
         grey_view: crate::cmd_synth_real::GreyViewArg::Pds,
+        hfov_deg: tubeloc_synth::real_set::TRAINING_HFOV_DEG,
         min_size,
         randomize: Some(false),
         limit: frames,

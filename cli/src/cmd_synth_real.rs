@@ -67,6 +67,11 @@ pub struct RealArgs {
     /// as the bench judges real frames without a camera model), or `both`.
     #[arg(long, value_enum, default_value = "pds")]
     pub grey_view: GreyViewArg,
+    /// Horizontal field of view of the random training views, degrees, "LO:HI" (`--split
+    /// train` only; validation and test frames take their own or the product's view). The
+    /// named views span 6.15 (Mastcam-Z at 110 mm) to 96 (Perseverance Navcam).
+    #[arg(long, default_value = "15:50", value_parser = hfov_range)]
+    pub hfov_deg: (f64, f64),
     /// Smallest frame side used (the 256 px frames binned on board show tubes 1-3 px wide).
     #[arg(long, default_value_t = 500)]
     pub min_size: u32,
@@ -88,6 +93,17 @@ pub struct RealArgs {
     pub out: PathBuf,
 }
 
+/// A field-of-view range "LO:HI" in degrees, `0 < LO <= HI < 180`, checked when the command line
+/// is parsed.
+fn hfov_range(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected LO:HI in degrees"))?;
+    match (a.trim().parse::<f64>(), b.trim().parse::<f64>()) {
+        (Ok(lo), Ok(hi)) if lo > 0.0 && lo <= hi && hi < 180.0 => Ok((lo, hi)),
+        (Ok(_), Ok(_)) => Err(format!("{s:?}: need 0 < LO <= HI < 180 degrees")),
+        _ => Err(format!("{s:?}: expected two numbers LO:HI in degrees")),
+    }
+}
+
 /// Tubes per composite "MIN:MAX", `MIN <= MAX <= 20`, checked when the command line is parsed.
 fn tube_counts(s: &str) -> std::result::Result<(usize, usize), String> {
     let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected MIN:MAX"))?;
@@ -106,7 +122,7 @@ pub fn run(a: RealArgs) -> Result<()> {
         GreyViewArg::Assumed => GreyView::Assumed,
         GreyViewArg::Both => GreyView::Both,
     };
-    let mut views = split_views(&a.data, a.split, (a.kind != RealKind::Colour).then_some(grey_view), a.kind != RealKind::Grey, a.min_size, a.seed)?;
+    let mut views = split_views(&a.data, a.split, (a.kind != RealKind::Colour).then_some(grey_view), a.kind != RealKind::Grey, a.min_size, a.hfov_deg, a.seed)?;
     if let Some(n) = a.limit {
         views.truncate(n);
     }
@@ -143,7 +159,11 @@ pub fn run(a: RealArgs) -> Result<()> {
             })
             .collect::<Result<Vec<_>, tubeloc_synth::SynthError>>()?;
         let samples: Vec<_> = samples.into_iter().flatten().collect();
-        let ds = assemble(samples, json!({"description": "tubeloc composites on real rover frames", "split": format!("{:?}", a.split).to_lowercase(), "seed": a.seed, "range_m": [range.0, range.1]}));
+        let mut info = json!({"description": "tubeloc composites on real rover frames", "split": format!("{:?}", a.split).to_lowercase(), "seed": a.seed, "range_m": [range.0, range.1]});
+        if a.split == RealSplit::Train {
+            info["hfov_deg"] = json!([a.hfov_deg.0, a.hfov_deg.1]);
+        }
+        let ds = assemble(samples, info);
         files::write_json(&tmp.join("annotations.json"), &ds)?;
         spread = tubeloc_synth::real_set::tube_spread(&ds);
         Ok((ds.images.len(), ds.annotations.len()))

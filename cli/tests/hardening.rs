@@ -88,6 +88,9 @@ fn bad_numbers_and_argument_errors_exit_2_naming_the_flag_and_writing_nothing() 
         (vec!["train", "--train", "ds", "--range-m", "1", "--out", oj], "--range-m"),
         (vec!["synth", "real", "--split", "val", "--range-m", "5:1", "--out", o], "--range-m"),
         (vec!["synth", "real", "--split", "val", "--tubes", "3:1", "--out", o], "--tubes"),
+        (vec!["synth", "real", "--split", "train", "--hfov-deg", "20:10", "--out", o], "--hfov-deg"),
+        (vec!["synth", "real", "--split", "train", "--hfov-deg", "0:10", "--out", o], "--hfov-deg"),
+        (vec!["synth", "real", "--split", "train", "--hfov-deg", "10", "--out", o], "--hfov-deg"),
     ];
     let mut failures = Vec::new();
     for (args, flag) in &cases {

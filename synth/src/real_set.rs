@@ -100,10 +100,16 @@ pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError>
 
 pub use tubeloc_core::AssumedView;
 
-/// A random assumed view for training: field of view 15-50 degrees, height 0.8-2.2 m, pitch
-/// 15-60 degrees, roll ±4 degrees.
-pub fn random_view(rng: &mut ChaCha8Rng) -> AssumedView {
-    AssumedView { hfov_deg: rng.random_range(15.0..50.0), height_m: rng.random_range(0.8..2.2), pitch_deg: rng.random_range(15.0..60.0), roll_deg: rng.random_range(-4.0..4.0) }
+/// The horizontal fields of view, degrees, that training views are drawn from by default
+/// ([`random_view`]).
+pub const TRAINING_HFOV_DEG: (f64, f64) = (15.0, 50.0);
+
+/// A random assumed view for training: horizontal field of view uniform in `hfov_deg`
+/// (degrees, `0 < lo <= hi < 180`), height 0.8-2.2 m, pitch 15-60 degrees, roll ±4 degrees.
+pub fn random_view(rng: &mut ChaCha8Rng, hfov_deg: (f64, f64)) -> AssumedView {
+    // A half-open draw (as the default sets were made), or the one field of view given.
+    let hfov = if hfov_deg.0 < hfov_deg.1 { rng.random_range(hfov_deg.0..hfov_deg.1) } else { hfov_deg.0 };
+    AssumedView { hfov_deg: hfov, height_m: rng.random_range(0.8..2.2), pitch_deg: rng.random_range(15.0..60.0), roll_deg: rng.random_range(-4.0..4.0) }
 }
 
 /// `view` for an image of `width x height` pixels at `image`; the sun is drawn from
@@ -305,10 +311,10 @@ mod tests {
         let manifest = "file\tsplit\tgroup\tsol\nbackgrounds/msl_mastcam_marsdata/gone.jpg\tbackgrounds\tmsl_mastcam_marsdata\t500\nbackgrounds/msl_mastcam_marsdata/other.jpg\tbackgrounds\tmsl_mastcam_marsdata\t520\n";
         std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
         assert_eq!((split_of_sol(Some(500)), split_of_sol(Some(520))), (RealSplit::Test, RealSplit::Train));
-        let e = split_views(dir.path(), RealSplit::Test, None, true, 0, 0).unwrap_err().to_string();
+        let e = split_views(dir.path(), RealSplit::Test, None, true, 0, TRAINING_HFOV_DEG, 0).unwrap_err().to_string();
         assert!(e.contains("gone.jpg: listed in") && e.contains("MANIFEST.tsv but not readable as an image"), "{e}");
         assert!(!e.contains("invalid synth parameter"), "{e}");
-        assert!(split_views(dir.path(), RealSplit::Val, None, true, 0, 0).unwrap().is_empty());
+        assert!(split_views(dir.path(), RealSplit::Val, None, true, 0, TRAINING_HFOV_DEG, 0).unwrap().is_empty());
     }
 
     /// Colour frames of a validation or test part are composited under the view `locate
@@ -327,12 +333,38 @@ mod tests {
             manifest += &format!("backgrounds/msl_mastcam_marsdata/{n}\tbackgrounds\tmsl_mastcam_marsdata\t500\n");
         }
         std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
-        let views = split_views(dir.path(), RealSplit::Test, None, true, 0, 0).unwrap();
+        let views = split_views(dir.path(), RealSplit::Test, None, true, 0, TRAINING_HFOV_DEG, 0).unwrap();
         let fx: Vec<f64> = views.iter().map(|v| v.camera.fx).collect();
         let want = [AssumedView::M100.camera(560, 500).fx, AssumedView::MAST.camera(560, 500).fx, AssumedView::MAST.camera(560, 500).fx];
         assert_eq!(fx, want);
         // 6.8 against 20 degrees across 560 px: the M-100's focal length about 2.97 times the mast view's.
         assert!((fx[0] / fx[1] - (10f64.to_radians().tan() / 3.4f64.to_radians().tan())).abs() < 1e-9, "{fx:?}");
+    }
+
+    /// Training views take their field of view from the range given (one value gives exactly
+    /// it); a range outside (0, 180) degrees or upside down is refused, naming it.
+    #[test]
+    fn training_views_draw_their_field_of_view_from_the_range_given() {
+        let dir = tempfile::tempdir().unwrap();
+        let group = dir.path().join("backgrounds/msl_mastcam_marsdata");
+        std::fs::create_dir_all(&group).unwrap();
+        let mut manifest = String::from("file\tsplit\tgroup\tsol\n");
+        for k in 0..20 {
+            image::RgbImage::new(400, 300).save(group.join(format!("f{k}.png"))).unwrap();
+            manifest += &format!("backgrounds/msl_mastcam_marsdata/f{k}.png\tbackgrounds\tmsl_mastcam_marsdata\t{}\n", 520 + k % 5);
+        }
+        std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
+        let hfov = |v: &RealView| 2.0 * (200.0 / v.camera.fx).atan().to_degrees();
+        let exact = split_views(dir.path(), RealSplit::Train, None, true, 0, (6.8, 6.8), 3).unwrap();
+        assert_eq!(exact.len(), 20);
+        assert!(exact.iter().all(|v| (hfov(v) - 6.8).abs() < 1e-9));
+        let drawn: Vec<f64> = split_views(dir.path(), RealSplit::Train, None, true, 0, (5.0, 15.0), 3).unwrap().iter().map(hfov).collect();
+        assert!(drawn.iter().all(|h| (5.0..15.0).contains(h)), "{drawn:?}");
+        assert!(drawn.iter().any(|h| *h < 10.0) && drawn.iter().any(|h| *h >= 10.0), "{drawn:?}");
+        for bad in [(0.0, 10.0), (20.0, 10.0), (10.0, 180.0)] {
+            let e = split_views(dir.path(), RealSplit::Train, None, true, 0, bad, 3).unwrap_err().to_string();
+            assert!(e.contains("training field of view") && e.contains("0 < LO <= HI < 180"), "{e}");
+        }
     }
 
     #[test]
@@ -479,10 +511,14 @@ pub enum GreyView {
 /// [`AssumedView::NAVCAM`]) and the colour Mastcam backgrounds under the view `--assumed-view
 /// auto` takes for them ([`AssumedView::of_frame`]: an M-100 frame under `m100`, an M-34
 /// frame or a panorama tile without a product name under [`AssumedView::MAST`]), frames whose
-/// smaller side is below `min_size` left out. Training: every background of the
-/// split under a random assumed view drawn with `seed` (the Navcam backgrounds that are also
-/// camera-model frames fall in validation or test by their sol).
-pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour: bool, min_size: u32, seed: u64) -> Result<Vec<RealView>, SynthError> {
+/// smaller side is below `min_size` left out. Training: every background of the split under
+/// a random assumed view drawn with `seed`, its field of view from `hfov_deg` ([`random_view`];
+/// the Navcam backgrounds that are also camera-model frames fall in validation or test by
+/// their sol).
+pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour: bool, min_size: u32, hfov_deg: (f64, f64), seed: u64) -> Result<Vec<RealView>, SynthError> {
+    if !(hfov_deg.0 > 0.0 && hfov_deg.0 <= hfov_deg.1 && hfov_deg.1 < 180.0) {
+        return Err(SynthError::Invalid(format!("training field of view {hfov_deg:?} degrees: need 0 < LO <= HI < 180")));
+    }
     let manifest = read_manifest(&data.join("MANIFEST.tsv"))?;
     let mut out = Vec::new();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
@@ -511,7 +547,7 @@ pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour
             continue;
         }
         let view = match (split, is_colour) {
-            (RealSplit::Train, _) => random_view(&mut rng),
+            (RealSplit::Train, _) => random_view(&mut rng, hfov_deg),
             // The view `--assumed-view auto` judges the frame under: its mast camera's by the
             // product name (M-100 frames `m100`), else the colour `mast` view.
             (_, true) => AssumedView::of_frame(&e.file.to_string_lossy(), || false).view,
