@@ -98,8 +98,7 @@ pub struct RealArgs {
 fn hfov_range(s: &str) -> std::result::Result<(f64, f64), String> {
     let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected LO:HI in degrees"))?;
     match (a.trim().parse::<f64>(), b.trim().parse::<f64>()) {
-        (Ok(lo), Ok(hi)) if lo > 0.0 && lo <= hi && hi < 180.0 => Ok((lo, hi)),
-        (Ok(_), Ok(_)) => Err(format!("{s:?}: need 0 < LO <= HI < 180 degrees")),
+        (Ok(lo), Ok(hi)) => tubeloc_synth::real_set::check_hfov_range((lo, hi)).map(|()| (lo, hi)).map_err(|m| format!("{s:?}: {m}")),
         _ => Err(format!("{s:?}: expected two numbers LO:HI in degrees")),
     }
 }

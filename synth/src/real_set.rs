@@ -104,6 +104,16 @@ pub use tubeloc_core::AssumedView;
 /// ([`random_view`]).
 pub const TRAINING_HFOV_DEG: (f64, f64) = (15.0, 50.0);
 
+/// Checks a range of horizontal fields of view `(LO, HI)` in degrees: `0 < LO <= HI < 180`.
+pub fn check_hfov_range(hfov_deg: (f64, f64)) -> Result<(), String> {
+    let (lo, hi) = hfov_deg;
+    if lo > 0.0 && lo <= hi && hi < 180.0 {
+        Ok(())
+    } else {
+        Err("need 0 < LO <= HI < 180 degrees".into())
+    }
+}
+
 /// A random assumed view for training: horizontal field of view uniform in `hfov_deg`
 /// (degrees, `0 < lo <= hi < 180`), height 0.8-2.2 m, pitch 15-60 degrees, roll ±4 degrees.
 pub fn random_view(rng: &mut ChaCha8Rng, hfov_deg: (f64, f64)) -> AssumedView {
@@ -516,9 +526,7 @@ pub enum GreyView {
 /// the Navcam backgrounds that are also camera-model frames fall in validation or test by
 /// their sol).
 pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour: bool, min_size: u32, hfov_deg: (f64, f64), seed: u64) -> Result<Vec<RealView>, SynthError> {
-    if !(hfov_deg.0 > 0.0 && hfov_deg.0 <= hfov_deg.1 && hfov_deg.1 < 180.0) {
-        return Err(SynthError::Invalid(format!("training field of view {hfov_deg:?} degrees: need 0 < LO <= HI < 180")));
-    }
+    check_hfov_range(hfov_deg).map_err(|m| SynthError::Invalid(format!("training field of view {hfov_deg:?} degrees: {m}")))?;
     let manifest = read_manifest(&data.join("MANIFEST.tsv"))?;
     let mut out = Vec::new();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
