@@ -26,6 +26,10 @@ use crate::cmd_synth_stereo::SynthStereoArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::{json, Value};
+
+/// Tubes each real composite set of a full run holds at least (issue: at least 100 tubes on the
+/// real test frames, grey and colour).
+const MIN_REAL_TUBES: usize = 100;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -98,6 +102,11 @@ pub struct BenchArgs {
     /// Real stage: use at most this many frames per set (default: all).
     #[arg(long)]
     pub real_frames: Option<usize>,
+    /// Real stage: tubes each composite set (grey, colour) holds at least; a set made with fewer
+    /// is made again with more composites per frame (up to 32). Default: 100, or none with
+    /// --real-frames.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub real_min_tubes: Option<u64>,
     /// Real stage: score calibration JSON (default: the one beside the model).
     #[arg(long)]
     pub calibration: Option<PathBuf>,
@@ -436,6 +445,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
             calibration,
             frames: a.real_frames,
             per_grey_frame: 4,
+            // A full run's sets hold at least 100 tubes each (grey and colour); a run cut to a
+            // few frames (CI) keeps its sets as made.
+            min_tubes: a.real_min_tubes.map(|n| n as usize).or(a.real_frames.is_none().then_some(MIN_REAL_TUBES)),
             grasp_images: None,
             line2d_far_scale: a.line2d_far_scale,
             line2d_max_upsample: a.line2d_max_upsample,

@@ -46,8 +46,12 @@ pub struct RealStage {
     pub split: tubeloc_synth::real_set::RealSplit,
     /// Keep at most this many frames per set (small runs, e.g. in CI).
     pub frames: Option<usize>,
-    /// Composites per grey test frame.
+    /// Composites per grey test frame (at least; see `min_tubes`).
     pub per_grey_frame: u32,
+    /// Tubes each composite set holds at least: where a set made with its composites per frame
+    /// holds fewer, it is made again with as many more composites per frame as that shortfall
+    /// asks (`None`: as made).
+    pub min_tubes: Option<usize>,
     /// `locate` and its grasp checks on at most this many composites of each set (all when `None`).
     pub grasp_images: Option<usize>,
     /// Line2D far-search factors (colour, grey) (`tubeloc detect --far-scale`).
@@ -66,16 +70,21 @@ fn saved_results(set: &Path, out: &Path, dets: &impl serde::Serialize) -> Result
     Ok((gt, dt))
 }
 
+/// The most composites per frame [`composite_set`] makes to reach its tubes.
+const MAX_PER_VIEW: u32 = 32;
+
 /// The composite set of one kind of frame (`tubeloc synth real --kind KIND`) in `out`, or
 /// `None` where the data holds no frame of that kind in the part (a folder of grey frames only,
-/// or one without `with_cameras/cameras.json`): that kind's rows are then left out.
+/// or one without `with_cameras/cameras.json`): that kind's rows are then left out. With
+/// `min_tubes`, a set of fewer tubes is made again with more composites per frame, the fewest
+/// that the tubes per composite so far say reach it (at most [`MAX_PER_VIEW`]).
 #[allow(clippy::too_many_arguments)]
-fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<Option<PathBuf>> {
+fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_tubes: Option<usize>, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<Option<PathBuf>> {
     use crate::cmd_synth_real::RealKind;
     if out.join("annotations.json").exists() {
         return Ok(Some(out.to_path_buf()));
     }
-    let split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+    let split: tubeloc_synth::real_set::RealSplit = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
     let grey = (kind != RealKind::Colour).then_some(tubeloc_synth::real_set::GreyView::Pds);
     if kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
         return Ok(None);
@@ -83,6 +92,33 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
     if tubeloc_synth::real_set::split_views(data, split, grey, kind != RealKind::Grey, min_size, tubeloc_synth::real_set::TRAINING_HFOV_DEG, seed)?.is_empty() {
         return Ok(None);
     }
+    let mut per_view = per_view.max(1);
+    loop {
+        make_composites(data, split, kind, per_view, min_size, frames, seed, out)?;
+        let (Some(want), Some(tubes)) = (min_tubes, composite_tubes(out)?) else { break };
+        if tubes >= want || per_view >= MAX_PER_VIEW {
+            break;
+        }
+        // The tubes per composite per frame so far, scaled to the shortfall; one more at least.
+        let needed = (per_view as f64 * want as f64 / tubes.max(1) as f64).ceil() as u32;
+        per_view = needed.max(per_view + 1).min(MAX_PER_VIEW);
+    }
+    Ok(Some(out.to_path_buf()))
+}
+
+/// The tubes of the composite set in `dir` (`None` when it was not written).
+fn composite_tubes(dir: &Path) -> Result<Option<usize>> {
+    let ann = dir.join("annotations.json");
+    if !ann.exists() {
+        return Ok(None);
+    }
+    Ok(Some(CocoDataset::load(&ann)?.annotations.len()))
+}
+
+/// `tubeloc synth real` as the real stage runs it: `per_view` composites of one to four tubes at
+/// 1.5-5 m on each frame of `kind` in `split`, no appearance randomization.
+#[allow(clippy::too_many_arguments)]
+fn make_composites(data: &Path, split: tubeloc_synth::real_set::RealSplit, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<()> {
     crate::cmd_synth_real::run(crate::cmd_synth_real::RealArgs {
         data: data.to_path_buf(),
         split,
@@ -98,8 +134,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
         seed,
         force: true,
         out: out.to_path_buf(),
-    })?;
-    Ok(Some(out.to_path_buf()))
+    })
 }
 
 /// `f` on a kind's composite set, or `null` where the data has no such set.
@@ -111,9 +146,9 @@ fn each(set: &Option<PathBuf>, f: impl FnOnce(&Path) -> Result<Value>) -> Result
 /// summary numbers.
 fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: &ScoreCalibration, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
-    let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
-    let band = Some(tubeloc_detect::scale::RangeBand::default());
-    let scales = crate::cmd_detect_learned::working_scales(&images, Some(set), None, None, band)?;
+    let data = crate::detect_dataset::DetectionDataset::load(set)?;
+    let images = data.images();
+    let scales = data.working_scales(&images, Some(tubeloc_detect::scale::RangeBand::default()));
     let t = Instant::now();
     let dets = crate::cmd_detect_learned::run_learned(model, &images, &scales, &DecodeConfig::default())?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / images.len().max(1) as f64;
@@ -225,8 +260,8 @@ fn line2d_opts(lib: &Path, stage: &RealStage) -> crate::cmd_detect_line2d::Line2
 /// COCO segm AP50 / AR, false detections per image, time per image.
 fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, out: &Path) -> Result<Value> {
     std::fs::create_dir_all(out)?;
-    let images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
-    let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
+    let data = crate::detect_dataset::DetectionDataset::load(set)?;
+    let (images, cameras, grounds) = (data.images(), data.cameras(), data.grounds());
     let mut dets = Vec::new();
     let mut ms = 0.0;
     for (id, path) in &images {
@@ -279,8 +314,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     // negatives_val measures false positives only: never run where settings are chosen.
     let negatives_dir = stage.data.join("negatives_val");
     let with_negatives = stage.split == tubeloc_synth::real_set::RealSplit::Test && negatives_dir.is_dir();
-    let grey_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
-    let colour_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
+    let grey_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
+    let colour_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, stage.min_tubes, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
     if grey_set.is_none() && colour_set.is_none() {
         bail!("{}: no frames of the {part} part to composite on: no grey frame with a PDS camera model (with_cameras/cameras.json) and no colour Mastcam background of its sols", stage.data.display());
     }
@@ -335,7 +370,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let mut md = String::new();
     let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
     writeln!(md, "{title}").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.\n", stage.model.name()).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set holds at least {n} tubes: it is made with {} composites per grey frame and 1 per colour frame, and again with more per frame where that gives fewer tubes.", stage.per_grey_frame))).ok();
     writeln!(
         md,
         "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"

@@ -144,18 +144,16 @@ pub fn narrow_tubes_warning(image: &Path, cam: &tubeloc_core::CameraModel, groun
 /// detected as they are, not at the pixel scale the detectors work at (the learned detector's
 /// working scale, unless `--range-m off`; Line2D's library scale), so tubes much narrower or
 /// wider than about 16 px are mostly missed.
-fn cameraless_note(dataset: &Path, method: Method, range_m: &str) -> Result<Option<String>> {
+fn cameraless_note(dataset: &crate::detect_dataset::DetectionDataset, method: Method, range_m: &str) -> Result<Option<String>> {
     if method == Method::External || (method == Method::Learned && crate::cmd_detect_learned::parse_range_band(range_m)?.is_none()) {
         return Ok(None);
     }
-    let ann = dataset.join("annotations.json");
-    let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-    let without = ds.images.iter().filter(|im| !im.extra.contains_key("camera")).count();
+    let without = dataset.cameraless();
     Ok((without > 0).then(|| {
         format!(
             "note: {without} of {} images of {} carry no `camera`: they are detected as they are, not resampled to the pixel scale the detectors work at (tubes about 16 px wide), and tubes much narrower are mostly missed; give each image its `camera` (and `ground`) in the annotations, or locate frames without a model with `tubeloc locate --assumed-view`",
-            ds.images.len(),
-            ann.display()
+            dataset.coco().images.len(),
+            dataset.annotations_path().display()
         )
     }))
 }
@@ -197,7 +195,9 @@ pub fn run(args: DetectArgs) -> Result<()> {
     let mut args = args;
     let pds = image_camera(&mut args)?;
     check_camera_size(&args, pds.as_ref().map(|(cam, _)| cam))?;
-    if let Some(d) = &args.dataset {
+    // The dataset's annotations, read once (images, cameras, grounds, sizes).
+    let dataset = args.dataset.as_deref().map(crate::detect_dataset::DetectionDataset::load).transpose()?;
+    if let Some(d) = &dataset {
         if let Some(note) = cameraless_note(d, args.method, &args.range_m)? {
             eprintln!("{note}");
         }
@@ -210,9 +210,9 @@ pub fn run(args: DetectArgs) -> Result<()> {
     }
     let dets = match args.method {
         Method::Line2d | Method::Fused => {
-            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
-            let (cameras, grounds) = match (&args.dataset, &pds) {
-                (Some(d), _) => crate::cmd_detect_learned::dataset_cameras_and_grounds(d)?,
+            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, dataset.as_ref())?;
+            let (cameras, grounds) = match (&dataset, &pds) {
+                (Some(d), _) => (d.cameras().clone(), d.grounds()),
                 (None, Some((cam, ground))) => ([(args.image_id, cam.clone())].into(), [(args.image_id, *ground)].into()),
                 (None, None) => Default::default(),
             };
@@ -235,13 +235,13 @@ pub fn run(args: DetectArgs) -> Result<()> {
             return Ok(());
         }
         Method::Learned => {
-            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, args.dataset.as_deref())?;
+            let images = crate::cmd_detect_learned::image_list(args.image.as_deref(), args.image_id, dataset.as_ref())?;
             let model = crate::cmd_detect_learned::ModelChoice::of(args.model.as_deref());
             let cfg = decode_config(args.decode_config.as_deref())?;
             let band = crate::cmd_detect_learned::parse_range_band(&args.range_m)?;
             let scales = match (&pds, band) {
                 (Some((cam, ground)), Some(band)) => vec![tubeloc_detect::scale::working_scale(cam, Some((ground.normal, ground.offset)), band)],
-                _ => crate::cmd_detect_learned::working_scales(&images, args.dataset.as_deref(), args.line2d.camera.as_deref(), args.ground.as_ref(), band)?,
+                _ => crate::cmd_detect_learned::working_scales(&images, dataset.as_ref(), args.line2d.camera.as_deref(), args.ground.as_ref(), band)?,
             };
             if band.is_some() && args.dataset.is_none() && args.line2d.camera.is_none() && pds.is_none() {
                 eprintln!("note: no --camera: images are detected as they are, not at the working scale of --range-m {} (tubes about 16 px wide); pass the camera for that, or --range-m off to silence this", args.range_m);
@@ -251,10 +251,8 @@ pub fn run(args: DetectArgs) -> Result<()> {
         Method::External => {
             let results = args.results.as_deref().context("--method external needs --results FILE")?;
             let mut sizes = std::collections::HashMap::new();
-            if let Some(d) = &args.dataset {
-                let ann = d.join("annotations.json");
-                let ds = tubeloc_core::CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-                sizes.extend(ds.images.iter().map(|im| (im.id, (im.width, im.height))));
+            if let Some(d) = &dataset {
+                sizes.extend(d.coco().images.iter().map(|im| (im.id, (im.width, im.height))));
             } else if let Some(p) = &args.image {
                 let (w, h) = tubeloc_detect::input::image_size(p).with_context(|| format!("reading {}", p.display()))?;
                 sizes.insert(args.image_id, (w, h));

@@ -2,12 +2,13 @@
 //! pass COCO results made elsewhere through, writing COCO results (mask RLE, bbox, score) plus
 //! each instance's `axis_seed` and `source` (the fields of `tubeloc_core::TubeDetection`).
 
+use crate::detect_dataset::DetectionDataset;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{CocoDataset, CocoResult, DetectionSource, Segmentation, TubeDetection};
+use tubeloc_core::{CocoResult, DetectionSource, Segmentation, TubeDetection};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
 
 /// One output entry: a COCO result with the detection's seed fields.
@@ -83,57 +84,16 @@ impl ModelChoice {
     }
 }
 
-/// The cameras of a dataset's images (`images[].camera`, written by `tubeloc synth`; images
-/// without one are left out) and the ground planes of those that carry one (`images[].ground`,
-/// as `tubeloc synth real` writes it; [`tubeloc_detect::learned::dataset::image_ground`]), by
-/// image id, from one read of the file. A camera that does not parse, or that describes images
-/// of another size than its image's `width` x `height`, is an error naming the image.
-#[allow(clippy::type_complexity)]
-pub fn dataset_cameras_and_grounds(dataset: &Path) -> Result<(std::collections::BTreeMap<u64, tubeloc_core::CameraModel>, std::collections::BTreeMap<u64, tubeloc_core::GroundPlane>)> {
-    let ann = dataset.join("annotations.json");
-    let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-    let cameras = dataset_cameras(&ds, &ann)?;
-    let grounds = ds.images.iter().filter_map(|im| Some((im.id, tubeloc_detect::learned::dataset::image_ground(im)?))).collect();
-    Ok((cameras, grounds))
-}
-
-/// The cameras of `ds`'s images (read from `ann`), by image id; a camera that does not parse,
-/// or that describes images of another size than its image's, is an error naming the image.
-fn dataset_cameras(ds: &CocoDataset, ann: &Path) -> Result<std::collections::BTreeMap<u64, tubeloc_core::CameraModel>> {
-    let mut cameras = std::collections::BTreeMap::new();
-    for im in &ds.images {
-        if let Some(c) = im.extra.get("camera") {
-            let cam: tubeloc_core::CameraModel = serde_json::from_value(c.clone()).with_context(|| format!("{}: image {} ({}): camera", ann.display(), im.id, im.file_name))?;
-            if (cam.width, cam.height) != (im.width, im.height) {
-                bail!("{}: image {} ({}) is {}x{} px but its camera describes {}x{} px images", ann.display(), im.id, im.file_name, im.width, im.height, cam.width, cam.height);
-            }
-            cameras.insert(im.id, cam);
-        }
-    }
-    Ok(cameras)
-}
-
 /// Parses a tube-range band ([`tubeloc_pipeline::shipped::parse_range_band`]).
 pub fn parse_range_band(s: &str) -> Result<Option<tubeloc_detect::scale::RangeBand>> {
     Ok(tubeloc_pipeline::shipped::parse_range_band(s)?)
 }
 
-/// Images to process: `(image_id, path)`.
-pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -> Result<Vec<(u64, PathBuf)>> {
+/// Images to process: `(image_id, path)`: `--image` (with `image_id`) or a dataset's.
+pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&DetectionDataset>) -> Result<Vec<(u64, PathBuf)>> {
     match (image, dataset) {
         (Some(p), None) => Ok(vec![(image_id, p.to_path_buf())]),
-        (None, Some(d)) => {
-            let ann = d.join("annotations.json");
-            let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-            Ok(ds
-                .images
-                .iter()
-                .map(|im| {
-                    let p = d.join(&im.file_name);
-                    (im.id, if p.exists() { p } else { d.join("images").join(&im.file_name) })
-                })
-                .collect())
-        }
+        (None, Some(d)) => Ok(d.images()),
         _ => bail!("give exactly one of --image or --dataset"),
     }
 }
@@ -141,16 +101,10 @@ pub fn image_list(image: Option<&Path>, image_id: u64, dataset: Option<&Path>) -
 /// The working scale of each image ([`tubeloc_detect::scale`]): from each dataset image's
 /// `camera` and `ground`, or for one image from `--camera` and `--ground`; 1 without a camera
 /// or with the band "off".
-pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&Path>, camera: Option<&Path>, ground: Option<&tubeloc_core::GroundPlane>, band: Option<tubeloc_detect::scale::RangeBand>) -> Result<Vec<f64>> {
+pub fn working_scales(images: &[(u64, PathBuf)], dataset: Option<&DetectionDataset>, camera: Option<&Path>, ground: Option<&tubeloc_core::GroundPlane>, band: Option<tubeloc_detect::scale::RangeBand>) -> Result<Vec<f64>> {
     let Some(band) = band else { return Ok(vec![1.0; images.len()]) };
     if let Some(d) = dataset {
-        // Every camera read and checked against its image's size (a camera that does not
-        // parse would otherwise leave its image at scale 1, silently).
-        let ann = d.join("annotations.json");
-        let ds = CocoDataset::load(&ann).with_context(|| format!("reading {}", ann.display()))?;
-        dataset_cameras(&ds, &ann)?;
-        let by_id: std::collections::HashMap<u64, &tubeloc_core::CocoImage> = ds.images.iter().map(|im| (im.id, im)).collect();
-        return Ok(images.iter().map(|(id, _)| by_id.get(id).map_or(1.0, |im| tubeloc_detect::learned::dataset::image_working_scale(im, band))).collect());
+        return Ok(d.working_scales(images, Some(band)));
     }
     let ground = ground.map(|g| (g.normal, g.offset));
     let Some(cam) = camera else {

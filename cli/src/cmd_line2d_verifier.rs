@@ -16,7 +16,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use tubeloc_core::{files, CocoDataset, Rle};
+use tubeloc_core::{files, Rle};
 use tubeloc_detect::line2d::classify::{Features, Verifier};
 
 /// Arguments of `tubeloc templates fit-verifier`.
@@ -102,13 +102,14 @@ pub fn set_samples(opts: &Line2dOpts, set: &Path, max_images: Option<usize>) -> 
     // Every detection of the first NMS, without the second suppression (which depends on the
     // probabilities being fitted).
     det.params.verified_overlap = f32::INFINITY;
-    let gt = CocoDataset::load(&set.join("annotations.json")).with_context(|| format!("reading {}", set.join("annotations.json").display()))?;
-    let mut images = crate::cmd_detect_learned::image_list(None, 0, Some(set))?;
+    let data = crate::detect_dataset::DetectionDataset::load(set)?;
+    let gt = data.coco();
+    let mut images = data.images();
     if let Some(n) = max_images.filter(|&n| n < images.len()) {
         let step = images.len() as f64 / n.max(1) as f64;
         images = (0..n).map(|i| images[(i as f64 * step) as usize].clone()).collect();
     }
-    let (cameras, grounds) = crate::cmd_detect_learned::dataset_cameras_and_grounds(set)?;
+    let (cameras, grounds) = (data.cameras(), data.grounds());
     let bar = indicatif::ProgressBar::new(images.len() as u64);
     let mut samples = Vec::new();
     let mut per_image = Vec::new();

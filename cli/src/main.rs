@@ -29,6 +29,7 @@ mod cmd_synth_real;
 mod cmd_synth_stereo;
 mod cmd_templates;
 mod cmd_train;
+mod detect_dataset;
 mod figures;
 mod memory;
 pub(crate) mod out;

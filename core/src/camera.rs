@@ -206,8 +206,14 @@ impl CameraModel {
 
     /// Reads a camera from a JSON file and validates it.
     pub fn load_json(path: &std::path::Path) -> Result<Self, CoreError> {
-        let cam: CameraModel = crate::files::read_json(path)?;
-        cam.validate().map_err(|e| CoreError::parse(path, e.to_string()))?;
+        let text = std::fs::read(path).map_err(|e| CoreError::io(path, e))?;
+        Self::from_json_text(&text, path)
+    }
+
+    /// Parses a camera from JSON text and validates it; `origin` names the source in errors.
+    pub fn from_json_text(text: &[u8], origin: &std::path::Path) -> Result<Self, CoreError> {
+        let cam: CameraModel = crate::files::parse_json(text, origin)?;
+        cam.validate().map_err(|e| CoreError::parse(origin, e.to_string()))?;
         Ok(cam)
     }
 }

@@ -286,7 +286,13 @@ pub fn write_json<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), C
 /// Reads and parses a JSON file, with an error naming the file, line and column.
 pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, CoreError> {
     let text = std::fs::read(path).map_err(|e| CoreError::io(path, e))?;
-    serde_json::from_slice(&text).map_err(|e| CoreError::parse(path, format!("invalid JSON: {e}")))
+    parse_json(&text, path)
+}
+
+/// Parses JSON text (bytes of UTF-8) into `T`; `origin` names the source in errors ("invalid
+/// JSON: " and serde's message with its line and column).
+pub fn parse_json<T: DeserializeOwned>(text: &[u8], origin: &Path) -> Result<T, CoreError> {
+    serde_json::from_slice(text).map_err(|e| CoreError::parse(origin, format!("invalid JSON: {e}")))
 }
 
 /// Parses TOML text into `T` and checks it with `validate`; `origin` names the source in

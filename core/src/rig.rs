@@ -67,8 +67,14 @@ impl Rig {
 
     /// Reads and validates a rig JSON file; errors name the file.
     pub fn load_json(path: &Path) -> Result<Rig, CoreError> {
-        let rig: Rig = crate::files::read_json(path)?;
-        rig.validate().map_err(|e| CoreError::parse(path, e.to_string()))?;
+        let text = std::fs::read(path).map_err(|e| CoreError::io(path, e))?;
+        Self::from_json_text(&text, path)
+    }
+
+    /// Parses and validates rig JSON text; `origin` names the source in errors.
+    pub fn from_json_text(text: &[u8], origin: &Path) -> Result<Rig, CoreError> {
+        let rig: Rig = crate::files::parse_json(text, origin)?;
+        rig.validate().map_err(|e| CoreError::parse(origin, e.to_string()))?;
         Ok(rig)
     }
 

@@ -124,10 +124,10 @@ pub fn read_rig(path: &Path) -> Result<Rig, CalibError> {
     match detect_rig_format(&text).map_err(|m| CalibError::parse(path, m))? {
         // A single camera (`tubeloc calib` output, `--camera` files): a one-camera rig.
         RigFormat::TubelocJson if is_camera_json(&text) => {
-            let model = tubeloc_core::CameraModel::load_json(path)?;
+            let model = tubeloc_core::CameraModel::from_json_text(text.as_bytes(), path)?;
             Ok(Rig { cameras: vec![RigCamera { name: "camera".into(), model, t_rig_cam: Pose::identity() }], stereo_pairs: Vec::new() })
         }
-        RigFormat::TubelocJson => Ok(Rig::load_json(path)?),
+        RigFormat::TubelocJson => Ok(Rig::from_json_text(text.as_bytes(), path)?),
         RigFormat::OpencvYaml => crate::yaml::rig_from_yaml(&text, path),
         RigFormat::KalibrCamchain => kalibr::rig_from_camchain(&text, path),
         RigFormat::PdsCameras => pds::rig_from_pds(&text, path),

@@ -28,8 +28,8 @@ pub fn image_working_scale(im: &tubeloc_core::CocoImage, band: crate::scale::Ran
 }
 
 /// The `ground` field of a dataset image as written: `(n, d)` of `n · X = d` (n up, camera
-/// frame, metres).
-fn ground_field(im: &tubeloc_core::CocoImage) -> Option<(nalgebra::Vector3<f64>, f64)> {
+/// frame, metres), unchecked ([`image_ground`] checks it).
+pub fn ground_field(im: &tubeloc_core::CocoImage) -> Option<(nalgebra::Vector3<f64>, f64)> {
     let g = im.extra.get("ground")?;
     let n = g.get("normal")?.as_array()?;
     let d = g.get("d")?.as_f64()?;
