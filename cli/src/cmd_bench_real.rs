@@ -84,46 +84,16 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
     if out.join("annotations.json").exists() {
         return Ok(Some(out.to_path_buf()));
     }
-    let split: tubeloc_synth::real_set::RealSplit = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-    let grey = (kind != RealKind::Colour).then_some(tubeloc_synth::real_set::GreyView::Pds);
     if kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
         return Ok(None);
     }
-    if tubeloc_synth::real_set::split_views(data, split, grey, kind != RealKind::Grey, min_size, tubeloc_synth::real_set::TRAINING_HFOV_DEG, seed)?.is_empty() {
-        return Ok(None);
-    }
-    let mut per_view = per_view.max(1);
-    loop {
-        make_composites(data, split, kind, per_view, min_size, frames, seed, out)?;
-        let (Some(want), Some(tubes)) = (min_tubes, composite_tubes(out)?) else { break };
-        if tubes >= want || per_view >= MAX_PER_VIEW {
-            break;
-        }
-        // The tubes per composite per frame so far, scaled to the shortfall; one more at least.
-        let needed = (per_view as f64 * want as f64 / tubes.max(1) as f64).ceil() as u32;
-        per_view = needed.max(per_view + 1).min(MAX_PER_VIEW);
-    }
-    Ok(Some(out.to_path_buf()))
-}
-
-/// The tubes of the composite set in `dir` (`None` when it was not written).
-fn composite_tubes(dir: &Path) -> Result<Option<usize>> {
-    let ann = dir.join("annotations.json");
-    if !ann.exists() {
-        return Ok(None);
-    }
-    Ok(Some(CocoDataset::load(&ann)?.annotations.len()))
-}
-
-/// `tubeloc synth real` as the real stage runs it: `per_view` composites of one to four tubes at
-/// 1.5-5 m on each frame of `kind` in `split`, no appearance randomization.
-#[allow(clippy::too_many_arguments)]
-fn make_composites(data: &Path, split: tubeloc_synth::real_set::RealSplit, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<()> {
-    crate::cmd_synth_real::run(crate::cmd_synth_real::RealArgs {
+    // `tubeloc synth real` as the real stage runs it: composites of one to four tubes at
+    // 1.5-5 m on each frame of the kind in the part, no appearance randomization.
+    let mut args = crate::cmd_synth_real::RealArgs {
         data: data.to_path_buf(),
-        split,
+        split: split.parse().map_err(|e: String| anyhow::anyhow!(e))?,
         kind,
-        per_view,
+        per_view: per_view.max(1),
         tubes: (1, 4),
         range_m: (1.5, 5.0),
         grey_view: crate::cmd_synth_real::GreyViewArg::Pds,
@@ -134,7 +104,19 @@ fn make_composites(data: &Path, split: tubeloc_synth::real_set::RealSplit, kind:
         seed,
         force: true,
         out: out.to_path_buf(),
-    })
+    };
+    let views = crate::cmd_synth_real::frames(&args)?;
+    if views.is_empty() {
+        return Ok(None);
+    }
+    loop {
+        let (_, tubes) = crate::cmd_synth_real::write_set(&args, &views)?;
+        let Some(want) = min_tubes.filter(|&want| tubes < want && args.per_view < MAX_PER_VIEW) else { break };
+        // The tubes per composite per frame so far, scaled to the shortfall; one more at least.
+        let needed = (args.per_view as f64 * want as f64 / tubes.max(1) as f64).ceil() as u32;
+        args.per_view = needed.max(args.per_view + 1).min(MAX_PER_VIEW);
+    }
+    Ok(Some(out.to_path_buf()))
 }
 
 /// `f` on a kind's composite set, or `null` where the data has no such set.

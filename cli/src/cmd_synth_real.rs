@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tubeloc_core::{files, TubeModel};
 use tubeloc_synth::dataset::write_folder_atomically;
-use tubeloc_synth::real_set::{assemble, render_sample, split_views, GreyView, RealSetConfig, RealSplit};
+use tubeloc_synth::real_set::{assemble, render_sample, split_views, GreyView, RealSetConfig, RealSplit, RealView};
 use tubeloc_synth::TubeShape;
 
 /// Which frames go into the set.
@@ -115,7 +115,15 @@ fn tube_counts(s: &str) -> std::result::Result<(usize, usize), String> {
 
 /// Runs `tubeloc synth real`.
 pub fn run(a: RealArgs) -> Result<()> {
-    let (tubes, range) = (a.tubes, a.range_m);
+    let views = frames(&a)?;
+    if views.is_empty() {
+        bail!("no frames of split {:?} and kind {:?} in {}", a.split, a.kind, a.data.display());
+    }
+    write_set(&a, &views).map(|_| ())
+}
+
+/// The frames `a` composites on, with their views (at most `--limit`).
+pub fn frames(a: &RealArgs) -> Result<Vec<RealView>> {
     let grey_view = match a.grey_view {
         GreyViewArg::Pds => GreyView::Pds,
         GreyViewArg::Assumed => GreyView::Assumed,
@@ -125,9 +133,13 @@ pub fn run(a: RealArgs) -> Result<()> {
     if let Some(n) = a.limit {
         views.truncate(n);
     }
-    if views.is_empty() {
-        bail!("no frames of split {:?} and kind {:?} in {}", a.split, a.kind, a.data.display());
-    }
+    Ok(views)
+}
+
+/// Writes the composite set of `a` on `views` (from [`frames`]) to `a.out`, atomically;
+/// returns its composites and tubes.
+pub fn write_set(a: &RealArgs, views: &[RealView]) -> Result<(usize, usize)> {
+    let (tubes, range) = (a.tubes, a.range_m);
     let randomize = a.randomize.unwrap_or(a.split == RealSplit::Train);
     let cfg = RealSetConfig {
         tubes,
@@ -173,5 +185,5 @@ pub fn run(a: RealArgs) -> Result<()> {
         let [r, w] = [t.range_m, t.width_px];
         eprintln!("tubes at {:.1} / {:.1} / {:.1} m from the camera, {:.1} / {:.1} / {:.1} px wide (p10 / median / p90)", r[0], r[1], r[2], w[0], w[1], w[2]);
     }
-    Ok(())
+    Ok((summary.images, summary.annotations))
 }
