@@ -111,7 +111,11 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
     }
     loop {
         let (_, tubes) = crate::cmd_synth_real::write_set(&args, &views)?;
-        let Some(want) = min_tubes.filter(|&want| tubes < want && args.per_view < MAX_PER_VIEW) else { break };
+        let Some(want) = min_tubes.filter(|&want| tubes < want) else { break };
+        if args.per_view >= MAX_PER_VIEW {
+            eprintln!("warning: {}: {tubes} tubes, fewer than the {want} asked for, at {MAX_PER_VIEW} composites per frame on {} frames", out.display(), views.len());
+            break;
+        }
         // The tubes per composite per frame so far, scaled to the shortfall; one more at least.
         let needed = (args.per_view as f64 * want as f64 / tubes.max(1) as f64).ceil() as u32;
         args.per_view = needed.max(args.per_view + 1).min(MAX_PER_VIEW);
@@ -352,7 +356,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let mut md = String::new();
     let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
     writeln!(md, "{title}").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set holds at least {n} tubes: it is made with {} composites per grey frame and 1 per colour frame, and again with more per frame where that gives fewer tubes.", stage.per_grey_frame))).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
     writeln!(
         md,
         "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"

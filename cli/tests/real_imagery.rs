@@ -100,7 +100,7 @@ fn bench_real_stage_leaves_out_what_the_data_lacks() {
     assert!(summary["negatives"].is_null());
     let report = std::fs::read_to_string(out.join("real/report.md")).unwrap();
     assert!(report.contains(&format!("| colour (assumed view) | {} |", colour["images"])) && !report.contains("| grey (PDS geometry)"), "{report}");
-    assert!(report.contains("Each set holds at least 10 tubes"), "{report}");
+    assert!(report.contains("Each set is made to hold at least 10 tubes"), "{report}");
     assert!(report.contains("No grey frames of the test sols in") && report.contains("the grey rows are left out"), "{report}");
     assert!(report.contains("Real frames without tubes: no `negatives_val` folder in"), "{report}");
     assert!(report.contains("Reliability of the calibrated probability on the colour test detections"), "{report}");
