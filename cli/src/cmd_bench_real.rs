@@ -142,7 +142,7 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
     let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
     let n_gt = gt.annotations.len();
-    let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms});
+    let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms, "found_by_width": crate::bench_widths::found_by_width(&gt, &dt)?});
     merge(&mut v, at_threshold(&ev, cal, n_gt));
     merge(&mut v, crate::bench_intervals::ap_ar_by_sol(&gt, &ev));
     Ok(v)
@@ -205,7 +205,8 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     let pairs: Value = files::read_json(&dir.join("pose_eval").join("pose_eval.json"))?;
     let mono_pairs = pairs.as_array().and_then(|v| v.iter().find(|p| p["label"] == "mono")).map(|p| p["evaluation"]["pairs"].clone()).unwrap_or(Value::Null);
     let median_ci = |field: &str| crate::bench_intervals::median_by_sol(&gt, &mono_pairs, field);
-    let mut snapped_fig = json!({"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64});
+    let mut snapped_fig =
+        json!({"ap50": snapped_eval.stats[1], "ap": snapped_eval.stats[0], "ar": snapped_eval.stats[8], "refine_ms_per_image": refine_ms / gt.images.len().max(1) as f64, "found_by_width": crate::bench_widths::found_by_width(&gt, &dt)?});
     merge(&mut snapped_fig, crate::bench_intervals::ap_ar_by_sol(&gt, &snapped_ev));
     let mut ranked_fig = json!({"ap50": ranked_eval.stats[1], "ap": ranked_eval.stats[0], "ar": ranked_eval.stats[8], "ece": evidence_ece});
     merge(&mut ranked_fig, crate::bench_intervals::ap_ar_by_sol(&gt, &ranked_ev));
@@ -262,7 +263,7 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
     let r = ev.evaluate();
     let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
     let n = gt.images.len().max(1) as f64;
-    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64});
+    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64, "found_by_width": crate::bench_widths::found_by_width(&gt, &dt)?});
     merge(&mut v, crate::bench_intervals::ap_ar_by_sol(&gt, &ev));
     if let Some(cal) = cal {
         merge(&mut v, at_threshold(&ev, cal, gt.annotations.len()));
@@ -405,6 +406,15 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
     for (kind, _) in [("grey", &grey_set), ("colour", &colour_set)].into_iter().filter(|r| r.1.is_none()) {
         writeln!(md, "\nNo {kind} frames of the {part} sols in `{}`: the {kind} rows are left out.", stage.data.display()).ok();
+    }
+    let width_rows: Vec<(String, &Value)> = [("grey", &grey, &grey_poses, &l2_grey, &fused_grey), ("colour", &colour, &colour_poses, &l2_colour, &fused_colour)]
+        .into_iter()
+        .flat_map(|(kind, learned, poses, l2, fused)| {
+            [(format!("learned {kind}"), &learned["found_by_width"]), (format!("learned {kind}, snapped"), &poses["snapped"]["found_by_width"]), (format!("Line2D {kind}"), &l2["found_by_width"]), (format!("fused {kind}"), &fused["found_by_width"])]
+        })
+        .collect();
+    if let Some(t) = crate::bench_widths::table(&width_rows) {
+        writeln!(md, "\nTubes found, by their width in the image (`f D / r`: focal length, body diameter 17.1 mm, distance): a detection of the frame whose mask overlaps the tube's at IoU >= 0.5, whatever its score, i.e. what a perfect ranking of the detections would find (found / tubes):\n\n{}", t.trim_end()).ok();
     }
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)].into_iter().filter(|r| present(&r.1)) {
         use crate::bench_intervals::bracket;

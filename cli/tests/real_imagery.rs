@@ -131,6 +131,15 @@ fn bench_real_stage_runs_at_a_small_size() {
         let ap = v["ap50"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&ap), "{set}: AP50 {ap}");
     }
+    // Tubes found by width: every tube of the set in one band, none found twice.
+    for set in ["grey", "colour"] {
+        let v = &summary["learned"][set];
+        let bands = v["found_by_width"].as_array().unwrap();
+        let sum = |k: &str| bands.iter().map(|b| b[k].as_u64().unwrap()).sum::<u64>();
+        assert_eq!(sum("tubes"), v["tubes"].as_u64().unwrap(), "{set}: {bands:?}");
+        assert!(bands.iter().all(|b| b["found"].as_u64() <= b["tubes"].as_u64()), "{set}: {bands:?}");
+    }
+    assert!(report.contains("Tubes found, by their width in the image") && report.contains("| learned grey, snapped |"), "{report}");
     // The learned masks snapped to their mono-refined poses, scored beside the network's.
     for set in ["poses_grey", "poses_colour"] {
         let ap = summary[set]["snapped"]["ap50"].as_f64().unwrap_or(-1.0);

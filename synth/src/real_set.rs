@@ -267,19 +267,27 @@ pub struct TubeSpread {
     pub width_px: [f64; 3],
 }
 
+/// For each annotation of a composite set, in order, its tube centre's distance from the
+/// camera `r` (metres) and its body's image width `w = f D / r` (pixels; `f` the image camera's
+/// `fx`, `D` = [`TUBE_BODY_DIAMETER_M`]); `None` for an annotation without `T_cam_tube` or
+/// whose image has no camera.
+pub fn tube_ranges_and_widths(ds: &CocoDataset) -> Vec<Option<(f64, f64)>> {
+    let fx: std::collections::HashMap<u64, f64> = ds.images.iter().filter_map(|im| Some((im.id, im.extra.get("camera")?.get("fx")?.as_f64()?))).collect();
+    ds.annotations
+        .iter()
+        .map(|a| {
+            let t = a.extra.get("T_cam_tube")?.get("translation")?.as_array()?;
+            let r = t.iter().filter_map(|v| v.as_f64()).map(|v| v * v).sum::<f64>().sqrt();
+            let f = fx.get(&a.image_id)?;
+            (r > 0.0).then(|| (r, f * TUBE_BODY_DIAMETER_M / r))
+        })
+        .collect()
+}
+
 /// The [`TubeSpread`] of a composite set (annotations with `T_cam_tube`, images with
 /// `camera`), or `None` when it holds no such tube.
 pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
-    let fx: std::collections::HashMap<u64, f64> = ds.images.iter().filter_map(|im| Some((im.id, im.extra.get("camera")?.get("fx")?.as_f64()?))).collect();
-    let (mut ranges, mut widths) = (Vec::new(), Vec::new());
-    for a in &ds.annotations {
-        let Some(t) = a.extra.get("T_cam_tube").and_then(|p| p.get("translation")).and_then(|t| t.as_array()) else { continue };
-        let r = t.iter().filter_map(|v| v.as_f64()).map(|v| v * v).sum::<f64>().sqrt();
-        if let (Some(f), true) = (fx.get(&a.image_id), r > 0.0) {
-            ranges.push(r);
-            widths.push(f * TUBE_BODY_DIAMETER_M / r);
-        }
-    }
+    let (mut ranges, mut widths): (Vec<f64>, Vec<f64>) = tube_ranges_and_widths(ds).into_iter().flatten().unzip();
     let pct = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         [0.1, 0.5, 0.9].map(|q| v[((v.len() - 1) as f64 * q).round() as usize])
