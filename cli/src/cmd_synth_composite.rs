@@ -6,7 +6,7 @@ use serde_json::{json, Map};
 use std::path::PathBuf;
 use std::sync::Arc;
 use tubeloc_core::{files, CocoDataset, CocoImage, TubeMesh, TubeModel};
-use tubeloc_synth::composite::{composite, CompositeConfig};
+use tubeloc_synth::composite::{composite, CompositeConfig, SpectralBand};
 use tubeloc_synth::dataset::{annotation_from_truth, encode_png, pose_json, tube_category};
 use tubeloc_synth::TubeShape;
 
@@ -40,9 +40,25 @@ pub struct CompositeArgs {
     /// Tube geometry from an OBJ mesh instead of data/tube.toml.
     #[arg(long)]
     pub tube_mesh: Option<PathBuf>,
+    /// Spectral band of the photo's camera, for the tubes' albedos: `visible` (colour),
+    /// `red-nir` (600-800 nm, the rovers' monochrome Navcams and Hazcams), `auto`: red-nir
+    /// for a grey photo, visible for a colour one.
+    #[arg(long, value_enum, default_value_t = BandArg::Auto)]
+    pub band: BandArg,
     /// Output folder (images/, annotations.json, camera.json).
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// `--band` of `tubeloc synth composite`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BandArg {
+    /// Red-nir for a grey photo, visible for a colour one.
+    Auto,
+    /// Colour cameras: the materials' sRGB albedos.
+    Visible,
+    /// 600-800 nm: the rovers' monochrome engineering cameras.
+    RedNir,
 }
 
 fn numbers(s: &str, n: usize, what: &str) -> Result<Vec<f64>> {
@@ -65,7 +81,12 @@ pub fn run(a: CompositeArgs) -> Result<()> {
         Some(p) => TubeShape::from_mesh(&TubeMesh::load_obj(p).with_context(|| format!("reading tube mesh {}", p.display()))?),
         None => TubeShape::from_model(&TubeModel::default()),
     };
-    let cfg = CompositeConfig { ground: (a.ground.normal, -a.ground.offset), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0 };
+    let band = match a.band {
+        BandArg::Auto => SpectralBand::of_photo(tubeloc_synth::real_set::is_grey(img.as_raw())),
+        BandArg::Visible => SpectralBand::Visible,
+        BandArg::RedNir => SpectralBand::RedNir,
+    };
+    let cfg = CompositeConfig { ground: (a.ground.normal, -a.ground.offset), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0, band };
     let c = composite(img.as_raw(), &cam, &cfg)?;
     let stem = a.background.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "composite".into());
     let file_name = format!("{stem}_composite.png");

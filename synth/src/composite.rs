@@ -13,6 +13,11 @@
 //! ground pixels in a tube's shadow are darkened by `E_sky / (E_sun cos θ + E_sky)`.
 //! Colours use 2 × 2 samples per pixel at tube borders; the ground-truth masks use the pixel
 //! centre ray, exactly as in the benchmark.
+//!
+//! The materials reflect in the [`SpectralBand`] of the camera that took the photo: sRGB
+//! albedos for colour cameras, one albedo per material in 600-800 nm for the rovers'
+//! monochrome engineering cameras, where the gold (TiN) seal is about as bright as the white
+//! body and both are more than twice the regolith.
 
 use crate::objects::{ObjectHit, Objects, TubeInstance};
 use crate::ray::Ray;
@@ -54,6 +59,56 @@ pub struct CompositeConfig {
     /// Gain on the tubes' shaded radiance (1 = matched to the photo's exposure); appearance
     /// randomization for training sets.
     pub tube_gain: f32,
+    /// Spectral band of the photo's camera: which albedos the tubes and the exposure use.
+    pub band: SpectralBand,
+}
+
+/// The spectral band a composite imitates: the band of the camera that took its photo.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SpectralBand {
+    /// Colour (sRGB primaries): each material's RGB albedo, regolith `REGOLITH_SRGB`.
+    #[default]
+    Visible,
+    /// 600-800 nm, the band of the monochrome engineering cameras (MSL and MER Navcam and
+    /// Hazcam; MER Pancam's 753 nm filter is inside it): one albedo per material in every
+    /// channel ([`band_albedo`]), the regolith's that of its red channel (0.34).
+    RedNir,
+}
+
+impl SpectralBand {
+    /// The band of a photo: [`SpectralBand::RedNir`] for a grey one (the rovers' monochrome
+    /// cameras image 600-800 nm), [`SpectralBand::Visible`] for a colour one.
+    pub fn of_photo(grey: bool) -> Self {
+        if grey {
+            SpectralBand::RedNir
+        } else {
+            SpectralBand::Visible
+        }
+    }
+
+    /// Linear albedo of the regolith in this band, per channel.
+    fn regolith(self) -> [f32; 3] {
+        let reg = srgb_to_linear(REGOLITH_SRGB);
+        match self {
+            SpectralBand::Visible => reg,
+            SpectralBand::RedNir => [reg[0]; 3],
+        }
+    }
+}
+
+/// Linear albedo of a tube material in 600-800 nm ([`SpectralBand::RedNir`]): the white
+/// alumina coating 0.78 (flat across the visible and near infrared, as its sRGB albedo);
+/// the TiN seal 0.62, its normal reflectance `((n - 1)² + k²) / ((n + 1)² + k²)` = 0.59 from
+/// `n` = 1.35, `k` = 2.76 at 633 nm (Pflüger et al. 1984), rising into the near infrared
+/// past its plasma edge near 480 nm (in blue light it reflects about 0.2, hence its gold
+/// colour); titanium 0.5; the black plastic cap 0.05.
+pub fn band_albedo(mat: TubeMaterial) -> f32 {
+    match mat {
+        TubeMaterial::Alumina => 0.78,
+        TubeMaterial::Gold => 0.62,
+        TubeMaterial::Titanium => 0.5,
+        TubeMaterial::Plastic => 0.05,
+    }
 }
 
 /// The result: composited sRGB image, ground truth, and the frames used.
@@ -184,7 +239,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
     let mut lows: Vec<f32> = background[w * 3 * (h / 2)..].chunks(3).map(|p| (lut[p[0] as usize] + lut[p[1] as usize] + lut[p[2] as usize]) / 3.0).collect();
     lows.sort_by(|a, b| a.total_cmp(b));
     let median = lows.get(lows.len() / 2).copied().unwrap_or(0.2).max(0.01);
-    let reg = srgb_to_linear(REGOLITH_SRGB);
+    let reg = cfg.band.regolith();
     let (e_sun, e_sky) = (1.0f32, 0.25f32);
     let cos_sun = sun.z as f32;
     let exposure = cfg.tube_gain * median / (((reg[0] + reg[1] + reg[2]) / 3.0) * (e_sun * cos_sun + e_sky));
@@ -221,7 +276,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
             });
             for ray in near {
                 let c = match objects_ref.intersect(&ray, 0.0, 1e3) {
-                    Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(objects_ref, i, mat, &n, &ray, t, &sun, e_sun, e_sky, exposure, &mut rng),
+                    Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(objects_ref, i, mat, cfg.band, &n, &ray, t, &sun, e_sun, e_sky, exposure, &mut rng),
                     _ => {
                         if ray.dir.z < 0.0 {
                             let t = -ray.origin.z / ray.dir.z;
@@ -252,15 +307,19 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
 }
 
 #[allow(clippy::too_many_arguments)]
-fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, n: &Vector3<f64>, ray: &Ray, t: f64, sun: &Vector3<f64>, e_sun: f32, e_sky: f32, exposure: f32, rng: &mut ChaCha8Rng) -> [f32; 3] {
+fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, band: SpectralBand, n: &Vector3<f64>, ray: &Ray, t: f64, sun: &Vector3<f64>, e_sun: f32, e_sky: f32, exposure: f32, rng: &mut ChaCha8Rng) -> [f32; 3] {
     let (alb, ks, shin) = match mat {
         TubeMaterial::Alumina => ([0.78f32, 0.79, 0.75], 0.12f32, 18.0f32),
         TubeMaterial::Gold => ([0.45, 0.28, 0.05], 0.55, 40.0),
         TubeMaterial::Titanium => ([0.45, 0.46, 0.48], 0.4, 30.0),
         TubeMaterial::Plastic => ([0.05, 0.05, 0.05], 0.1, 10.0),
     };
+    let alb = match band {
+        SpectralBand::Visible => alb,
+        SpectralBand::RedNir => [band_albedo(mat); 3],
+    };
     let dust = objects.tubes[i].dust * (0.55 + 0.45 * n.z.max(0.0) as f32);
-    let reg = srgb_to_linear(REGOLITH_SRGB);
+    let reg = band.regolith();
     let alb = [0, 1, 2].map(|k| alb[k] * (1.0 - dust) + reg[k] * dust);
     let p = ray.at(t);
     let ndl = n.dot(sun).max(0.0) as f32;
@@ -276,6 +335,51 @@ fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, n: &Vector3<f64>, 
 mod tests {
     use super::*;
     use nalgebra::Point3;
+
+    /// Mean 8-bit luminance of the composite's pixels whose centre ray hits `want`.
+    fn mean_of_material(c: &Composite, cam: &CameraModel, want: TubeMaterial) -> f64 {
+        let mut objects = Objects::new(Vec::new(), c.tubes.clone(), Vec::new());
+        objects.build_grid(-3.0, -3.0, 0.05, 120, 120);
+        let (mut sum, mut n) = (0.0, 0usize);
+        for y in 0..cam.height as usize {
+            for x in 0..cam.width as usize {
+                let (ray, _) = pixel_ray(cam, &c.t_ground_cam, x as f64, y as f64);
+                if let Some((_, ObjectHit::Tube(_, mat, _))) = objects.intersect(&ray, 0.0, 1e3) {
+                    if mat == want {
+                        let p = &c.output.rgb[(y * cam.width as usize + x) * 3..][..3];
+                        sum += 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64;
+                        n += 1;
+                    }
+                }
+            }
+        }
+        assert!(n > 20, "{want:?}: {n} pixels");
+        sum / n as f64
+    }
+
+    #[test]
+    fn red_nir_band_makes_the_seal_about_as_bright_as_the_body() {
+        // One tube 1 m below a camera looking straight down, sun overhead, on grey ground.
+        let cam = CameraModel { width: 160, height: 160, fx: 400.0, fy: 400.0, cx: 79.5, cy: 79.5, distortion: Default::default() };
+        let background = vec![60u8; 160 * 160 * 3];
+        let shape = Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default()));
+        let cfg = |band| CompositeConfig { ground: (Vector3::new(0.0, 0.0, -1.0), 1.0), sun_az_el_deg: (0.0, 89.0), tubes: 1, dust: 0.0, seed: 3, tube_shape: shape.clone(), range_m: None, sun_cam: None, tube_gain: 1.0, band };
+        let vis = composite(&background, &cam, &cfg(SpectralBand::Visible)).unwrap();
+        let nir = composite(&background, &cam, &cfg(SpectralBand::RedNir)).unwrap();
+        let ratio = |c: &Composite| mean_of_material(c, &cam, TubeMaterial::Gold) / mean_of_material(c, &cam, TubeMaterial::Alumina);
+        let (rv, rn) = (ratio(&vis), ratio(&nir));
+        // Visible luminance: gold (0.45, 0.28, 0.05) is far darker than the white body; in
+        // 600-800 nm TiN reflects 0.62 against the body's 0.78 (the glossier seal's highlight
+        // aside).
+        assert!(rv < 0.75, "visible seal / body {rv:.2}");
+        assert!(rn > 0.8 && rn > rv + 0.1, "red-nir seal / body {rn:.2} (visible {rv:.2})");
+        // The body is brighter than the ground it lies on: 0.78 / 0.34 of its linear intensity
+        // lit from above, less the cylinder's shading, through the sRGB curve.
+        let body = mean_of_material(&nir, &cam, TubeMaterial::Alumina);
+        assert!(body > 1.25 * 60.0 && body < 2.3 * 60.0, "red-nir body {body:.1} on ground 60");
+        // The ground away from the tube is the photo's own.
+        assert_eq!(&nir.output.rgb[..3], &[60, 60, 60]);
+    }
 
     #[test]
     fn ground_frame_puts_the_plane_at_z0_and_camera_above() {

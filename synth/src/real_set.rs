@@ -11,10 +11,11 @@
 //!   with a given horizontal field of view, a mast height, a pitch below the horizon and a roll;
 //!   the sun is drawn at random above the horizon.
 //!
-//! Grey backgrounds give grey composites (luminance `0.299 R + 0.587 G + 0.114 B`, saved as
-//! 8-bit grey like the camera's own product); colour backgrounds stay colour.
+//! Grey backgrounds give grey composites, their tubes shaded in the 600-800 nm band of the
+//! rovers' monochrome cameras ([`SpectralBand::RedNir`]) and saved as 8-bit grey like the
+//! camera's own product; colour backgrounds stay colour.
 
-use crate::composite::{composite, CompositeConfig};
+use crate::composite::{composite, CompositeConfig, SpectralBand};
 use crate::dataset::{annotation_from_truth, pose_json, tube_category};
 use crate::tube_shape::TubeShape;
 use crate::SynthError;
@@ -168,7 +169,8 @@ pub struct RealSample {
     pub annotations: Vec<tubeloc_core::CocoAnnotation>,
 }
 
-fn is_grey(rgb: &[u8]) -> bool {
+/// Whether interleaved RGB8 `rgb` is grey (every pixel's three channels equal).
+pub fn is_grey(rgb: &[u8]) -> bool {
     rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
 }
 
@@ -201,7 +203,7 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     if far <= cfg.range_m.0 {
         return Ok(None);
     }
-    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some((cfg.range_m.0, far)), sun_cam: view.sun_cam, tube_gain };
+    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some((cfg.range_m.0, far)), sun_cam: view.sun_cam, tube_gain, band: SpectralBand::of_photo(grey) };
     let c = match composite(img.as_raw(), &view.camera, &cc) {
         Ok(c) => c,
         Err(SynthError::Invalid(m)) if m.starts_with("could place only") => return Ok(None),
