@@ -1,7 +1,8 @@
 //! The real stage of `tubeloc bench`: detectors and `locate` on real rover frames.
 //!
 //! (a) Composites on the real **test** frames (split by sol, `tubeloc synth real`): grey
-//!     frames with their PDS camera models (ground and sun of the frame), and colour Mastcam
+//!     frames with their PDS camera models (ground and sun of the frame; tubes shaded in
+//!     600-800 nm, record 0086), and colour Mastcam
 //!     frames under the view `--assumed-view auto` takes for them (M-100 frames `m100`, the
 //!     others the documented mast view, [`AssumedView::of_frame`]); learned
 //!     detection at the working scale, COCO AP50 / AR, and the reliability of the calibrated
@@ -357,7 +358,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let mut md = String::new();
     let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
     writeln!(md, "{title}").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame; tubes shaded in the 600-800 nm band of these monochrome cameras, record 0086), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
     writeln!(
         md,
         "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"
