@@ -331,11 +331,15 @@ fn a_stereo_pair_of_pds3_products_locates_as_its_rig_does() {
     let (a, b) = (by_rig["tubes"].as_array().unwrap(), by_labels["tubes"].as_array().unwrap());
     assert!(!a.is_empty() && a.len() == b.len(), "{} against {} tubes", a.len(), b.len());
     // The labels carry the cameras to rounding, not bit for bit, so a tube at the edge of the
-    // right view (a few stereo points, near the stereo term's minimum) may fall either way:
-    // tubes well inside both views are compared.
+    // right view (a few stereo points, near the stereo term's minimum) or a weak one below the
+    // threshold (its place along the axis ill-determined) may fall either way: the tubes handed
+    // to the planner, well inside both views, are compared.
     let points = |t: &Value| t["residuals"]["stereo_points"].as_f64().unwrap_or(0.0);
     let mut compared = 0;
-    for (ta, tb) in a.iter().zip(b).filter(|(ta, _)| points(ta) >= 50.0) {
+    // Each such tube against the nearest of the other run (two tubes of nearly equal
+    // probability may be listed in either order).
+    for ta in a.iter().filter(|ta| points(ta) >= 50.0 && ta["status"] == "located") {
+        let tb = b.iter().min_by(|x, y| dist(&vec3(&x["centre"]), &vec3(&ta["centre"])).total_cmp(&dist(&vec3(&y["centre"]), &vec3(&ta["centre"])))).unwrap();
         assert_eq!(ta["status"], tb["status"]);
         assert!((points(ta) - points(tb)).abs() <= 0.01 * points(ta), "{} against {} stereo points", points(ta), points(tb));
         for k in ["centre", "axis"] {
