@@ -276,7 +276,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
             });
             for ray in near {
                 let c = match objects_ref.intersect(&ray, 0.0, 1e3) {
-                    Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(objects_ref, i, mat, cfg.band, &n, &ray, t, &sun, e_sun, e_sky, exposure, &mut rng),
+                    Some((t, ObjectHit::Tube(i, mat, n))) => shade_tube(objects_ref, i, mat, cfg.band, reg, &n, &ray, t, &sun, e_sun, e_sky, exposure, &mut rng),
                     _ => {
                         if ray.dir.z < 0.0 {
                             let t = -ray.origin.z / ray.dir.z;
@@ -306,8 +306,10 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
     Ok(Composite { output, truth, t_ground_cam, tubes: objects.tubes })
 }
 
+/// Linear radiance of a tube sample of material `mat` in `band` (dust mixes in the regolith's
+/// albedo `reg` of that band, computed once per composite).
 #[allow(clippy::too_many_arguments)]
-fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, band: SpectralBand, n: &Vector3<f64>, ray: &Ray, t: f64, sun: &Vector3<f64>, e_sun: f32, e_sky: f32, exposure: f32, rng: &mut ChaCha8Rng) -> [f32; 3] {
+fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, band: SpectralBand, reg: [f32; 3], n: &Vector3<f64>, ray: &Ray, t: f64, sun: &Vector3<f64>, e_sun: f32, e_sky: f32, exposure: f32, rng: &mut ChaCha8Rng) -> [f32; 3] {
     let (alb, ks, shin) = match mat {
         TubeMaterial::Alumina => ([0.78f32, 0.79, 0.75], 0.12f32, 18.0f32),
         TubeMaterial::Gold => ([0.45, 0.28, 0.05], 0.55, 40.0),
@@ -319,7 +321,6 @@ fn shade_tube(objects: &Objects, i: usize, mat: TubeMaterial, band: SpectralBand
         SpectralBand::RedNir => [band_albedo(mat); 3],
     };
     let dust = objects.tubes[i].dust * (0.55 + 0.45 * n.z.max(0.0) as f32);
-    let reg = band.regolith();
     let alb = [0, 1, 2].map(|k| alb[k] * (1.0 - dust) + reg[k] * dust);
     let p = ray.at(t);
     let ndl = n.dot(sun).max(0.0) as f32;
