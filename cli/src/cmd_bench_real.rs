@@ -101,6 +101,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
         hfov_deg: tubeloc_synth::real_set::TRAINING_HFOV_DEG,
         min_size,
         randomize: Some(false),
+        colour_as_grey: false,
         limit: frames,
         seed,
         force: true,

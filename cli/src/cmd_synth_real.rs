@@ -79,6 +79,11 @@ pub struct RealArgs {
     /// 55-95 (default for `--split train`; validation and test sets are clean PNGs).
     #[arg(long)]
     pub randomize: Option<bool>,
+    /// Composite on the colour frames as a monochrome 600-800 nm camera (Navcam) would see
+    /// them: each frame's red channel, the tubes shaded in that band, saved grey (more grey
+    /// training composites; `--kind colour` gives only these).
+    #[arg(long)]
+    pub colour_as_grey: bool,
     /// Keep at most this many frames (in file order), e.g. for a small CI set.
     #[arg(long)]
     pub limit: Option<usize>,
@@ -150,6 +155,7 @@ pub fn write_set(a: &RealArgs, views: &[RealView]) -> Result<(usize, usize)> {
         jpeg_quality: randomize.then_some((55, 95)),
         seed: a.seed,
         tube_shape: Arc::new(TubeShape::from_model(&TubeModel::default())),
+        colour_as_grey: a.colour_as_grey,
     };
     let jobs: Vec<(usize, usize)> = (0..views.len()).flat_map(|v| (0..cfg.per_view).map(move |k| (v, k))).collect();
     let pb = ProgressBar::new(jobs.len() as u64);
@@ -171,6 +177,9 @@ pub fn write_set(a: &RealArgs, views: &[RealView]) -> Result<(usize, usize)> {
             .collect::<Result<Vec<_>, tubeloc_synth::SynthError>>()?;
         let samples: Vec<_> = samples.into_iter().flatten().collect();
         let mut info = json!({"description": "tubeloc composites on real rover frames", "split": format!("{:?}", a.split).to_lowercase(), "seed": a.seed, "range_m": [range.0, range.1]});
+        if a.colour_as_grey {
+            info["colour_as_grey"] = json!("red channel, tubes in 600-800 nm");
+        }
         if a.split == RealSplit::Train {
             info["hfov_deg"] = json!([a.hfov_deg.0, a.hfov_deg.1]);
         }

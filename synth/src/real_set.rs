@@ -155,6 +155,10 @@ pub struct RealSetConfig {
     pub seed: u64,
     /// Tube geometry.
     pub tube_shape: Arc<TubeShape>,
+    /// Colour frames as a monochrome 600-800 nm camera would see them ([`red_as_grey`]): the
+    /// frame's red channel, the tubes shaded in [`SpectralBand::RedNir`], saved grey. More
+    /// grey training composites with full-resolution texture than the grey backgrounds give.
+    pub colour_as_grey: bool,
 }
 
 /// One rendered composite: its file name, encoded bytes and COCO entries.
@@ -174,6 +178,16 @@ pub fn is_grey(rgb: &[u8]) -> bool {
     rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
 }
 
+/// Interleaved RGB8 `rgb` as a grey frame of its red channel (in all three channels): the
+/// nearest a colour camera's frame comes to a 600-800 nm monochrome camera's (Mastcam's red
+/// filter peaks near 640 nm, the monochrome Navcams see 600-800 nm).
+pub fn red_as_grey(rgb: &mut [u8]) {
+    for p in rgb.chunks_exact_mut(3) {
+        p[1] = p[0];
+        p[2] = p[0];
+    }
+}
+
 /// Narrowest tube body placed in a composite, pixels (the body is [`TUBE_BODY_DIAMETER_M`]
 /// across).
 pub const MIN_TUBE_WIDTH_PX: f64 = 3.5;
@@ -187,11 +201,15 @@ pub const TUBE_BODY_DIAMETER_M: f64 = 0.0171;
 pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) -> Result<Option<RealSample>, SynthError> {
     let err = |m: String| SynthError::Invalid(format!("{}: {m}", view.image.display()));
     let bytes = tubeloc_core::image_file::read_whole(&view.image).map_err(|e| err(e.to_string()))?;
-    let img = image::load_from_memory(&bytes).map_err(|e| err(e.to_string()))?.to_rgb8();
+    let mut img = image::load_from_memory(&bytes).map_err(|e| err(e.to_string()))?.to_rgb8();
     if (img.width(), img.height()) != (view.camera.width, view.camera.height) {
         return Err(err(format!("image is {}x{} but its camera is {}x{}", img.width(), img.height(), view.camera.width, view.camera.height)));
     }
-    let grey = is_grey(img.as_raw());
+    let photo_grey = is_grey(img.as_raw());
+    if cfg.colour_as_grey && !photo_grey {
+        red_as_grey(&mut img);
+    }
+    let grey = photo_grey || cfg.colour_as_grey;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (k as u64) << 48);
     let tubes = rng.random_range(cfg.tubes.0..=cfg.tubes.1);
     let dust = rng.random_range(cfg.dust.0..=cfg.dust.1);
@@ -222,6 +240,9 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     extra.insert("background".into(), json!(view.image.display().to_string()));
     extra.insert("geometry".into(), json!(view.geometry));
     extra.insert("grey".into(), json!(grey));
+    if grey && !photo_grey {
+        extra.insert("grey_from".into(), json!("red channel"));
+    }
     if let Some(s) = view.sol {
         extra.insert("sol".into(), json!(s));
     }
@@ -321,6 +342,46 @@ mod tests {
             let e = read(format!("[{}, {}]", entry(good, ""), entry(r, sun))).unwrap_err().to_string();
             assert!(e.contains("cameras.json: entry 1:") && e.contains(says), "{e}");
         }
+    }
+
+    /// With `colour_as_grey` a colour frame gives a grey composite whose ground is the frame's
+    /// red channel (not its luminance), with its tubes drawn on it; without it, a colour one.
+    #[test]
+    fn colour_as_grey_composites_on_the_red_channel() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("colour.png");
+        let (w, h) = (400u32, 300u32);
+        // A reddish frame with a little texture: red 140-160, green 60, blue 30.
+        let rgb: Vec<u8> = (0..w * h).flat_map(|i| [140 + (i * 7 % 21) as u8, 60, 30]).collect();
+        image::save_buffer(&path, &rgb, w, h, image::ExtendedColorType::Rgb8).unwrap();
+        let view = AssumedView { hfov_deg: 40.0, height_m: 1.5, pitch_deg: 40.0, roll_deg: 0.0 };
+        let view = assumed_real_view(&view, path, w, h, None, &mut ChaCha8Rng::seed_from_u64(1));
+        let cfg = |colour_as_grey| RealSetConfig {
+            tubes: (2, 2),
+            per_view: 1,
+            range_m: (1.5, 4.0),
+            dust: (0.0, 0.0),
+            tube_gain: (1.0, 1.0),
+            jpeg_quality: None,
+            seed: 3,
+            tube_shape: Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default())),
+            colour_as_grey,
+        };
+        let grey = render_sample(&view, 0, 1, &cfg(true)).unwrap().expect("two tubes fit");
+        assert_eq!(grey.annotations.len(), 2);
+        assert_eq!(grey.image.extra["grey"], json!(true));
+        assert_eq!(grey.image.extra["grey_from"], json!("red channel"));
+        let img = image::load_from_memory(&grey.bytes).unwrap();
+        assert_eq!(img.color(), image::ColorType::L8);
+        let out = img.to_luma8();
+        let same = out.as_raw().iter().zip(rgb.chunks_exact(3)).filter(|(o, p)| **o == p[0]).count();
+        assert!(same as f64 > 0.9 * (w * h) as f64, "{same} of {} pixels keep the red channel", w * h);
+        let changed = out.as_raw().iter().zip(rgb.chunks_exact(3)).filter(|(o, p)| o.abs_diff(p[0]) > 20).count();
+        assert!(changed > 100, "the tubes and shadows change {changed} pixels");
+        let colour = render_sample(&view, 0, 1, &cfg(false)).unwrap().expect("two tubes fit");
+        assert_eq!(colour.image.extra["grey"], json!(false));
+        assert!(colour.image.extra.get("grey_from").is_none());
+        assert_eq!(image::load_from_memory(&colour.bytes).unwrap().color(), image::ColorType::Rgb8);
     }
 
     /// A background the manifest lists but the folder lacks is named, with the manifest, in the

@@ -41,6 +41,7 @@ fn grey_sixteen_bit_rgba_jpeg_pgm_tiff_bmp_and_webp_give_the_detections_of_the_e
         jpeg_quality: None,
         seed: 5,
         tube_shape: std::sync::Arc::new(tubeloc_synth::TubeShape::from_model(&tubeloc_core::TubeModel::default())),
+        colour_as_grey: false,
     };
     let sample = render_sample(view, 0, 1, &cfg).unwrap().expect("three tubes fit on the frame");
     let decoded = image::load_from_memory(&sample.bytes).unwrap();
