@@ -55,13 +55,12 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
 /// None shows a tube, so every located tube is false. A data folder without the camera list
 /// gives no frames.
 pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, settings: &tubeloc_pipeline::LocatorSettings, frames: Option<usize>) -> Result<Value> {
-    use tubeloc_synth::real_set::split_of_sol;
     let list = data.join("with_cameras").join("cameras.json");
     if !list.exists() {
         return Ok(json!({"frames": 0, "located_per_frame": Value::Null, "per_frame": []}));
     }
     let cams = tubeloc_calib::interchange::pds::read_pds_cameras(&list)?.with_context(|| format!("{} is not a PDS camera list", list.display()))?;
-    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split_of_sol(c.sol) == split).collect();
+    let mut chosen: Vec<_> = cams.into_iter().filter(|c| c.camera.model.width.min(c.camera.model.height) >= 512 && split.holds(c.sol)).collect();
     chosen.sort_by(|a, b| a.camera.name.cmp(&b.camera.name));
     chosen.truncate(frames.unwrap_or(usize::MAX));
     let mut per_frame = Vec::new();

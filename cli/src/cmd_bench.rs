@@ -94,9 +94,11 @@ pub struct BenchArgs {
     /// backgrounds, the tube-free rows `negatives_val/`: what the folder lacks is left out.
     #[arg(long, default_value = "../shared/data/real_mars")]
     pub real_data: PathBuf,
-    /// Real stage: the part of the real data, split by sol: `test` (the figures to report) or
+    /// Real stage: the part of the real data, split by sol: `test` (the figures to report),
     /// `val` (the same measures on the validation part, to choose settings on; the tube-free
-    /// `negatives_val` frames are then not run).
+    /// `negatives_val` frames are then not run), or `all` (every frame whatever its sol, as
+    /// `test` measures them: for a real data folder of new frames in the same layout, none of
+    /// which trained the model).
     #[arg(long, default_value = "test")]
     pub real_split: tubeloc_synth::real_set::RealSplit,
     /// Real stage: use at most this many frames per set (default: all).

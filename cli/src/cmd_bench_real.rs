@@ -279,6 +279,7 @@ fn split_name(split: tubeloc_synth::real_set::RealSplit) -> &'static str {
         tubeloc_synth::real_set::RealSplit::Train => "train",
         tubeloc_synth::real_set::RealSplit::Val => "val",
         tubeloc_synth::real_set::RealSplit::Test => "test",
+        tubeloc_synth::real_set::RealSplit::All => "all",
     }
 }
 
@@ -302,7 +303,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let part = split_name(stage.split);
     // negatives_val measures false positives only: never run where settings are chosen.
     let negatives_dir = stage.data.join("negatives_val");
-    let with_negatives = stage.split == tubeloc_synth::real_set::RealSplit::Test && negatives_dir.is_dir();
+    let measures = matches!(stage.split, tubeloc_synth::real_set::RealSplit::Test | tubeloc_synth::real_set::RealSplit::All);
+    let with_negatives = measures && negatives_dir.is_dir();
     let grey_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
     let colour_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, stage.min_tubes, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
     if grey_set.is_none() && colour_set.is_none() {
@@ -357,9 +359,16 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         "fused": {"grasp_grey": fused_grasp, "grasp_colour": fused_grasp_colour, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
-    let title = if with_negatives { "## Real imagery (test part, split by sol)\n".to_string() } else { format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n") };
+    let the_sols = if stage.split == tubeloc_synth::real_set::RealSplit::All { "every sol".to_string() } else { format!("the {part} sols") };
+    let title = match stage.split {
+        tubeloc_synth::real_set::RealSplit::Test => "## Real imagery (test part, split by sol)\n".to_string(),
+        tubeloc_synth::real_set::RealSplit::All => {
+            format!("## Real imagery (every frame of `{}`, whatever its sol: a held-out measurement on frames the model was not trained on; on the shipped data it includes the training backgrounds)\n", stage.data.display())
+        }
+        _ => format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n"),
+    };
     writeln!(md, "{title}").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of the {part} sols (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame; tubes shaded in the 600-800 nm band of these monochrome cameras, record 0086), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of {the_sols} (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame; tubes shaded in the 600-800 nm band of these monochrome cameras, record 0086), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
     writeln!(
         md,
         "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"
@@ -407,7 +416,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let f = |v: &Value| v.as_f64().map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into());
     writeln!(md, "\n\"Snapped to poses\" rows: the learned detections refined in mono on each frame's own ground (`tubeloc refine --ground auto --snapped-out`, default settings), each mask replaced by its converged pose's silhouette within 8 px of it where they agree (record 0048); time: detection + refinement. \"Ranked by pose evidence\" rows: the same masks, each scored by the probability that its pose is a tube from the detector's score and the fit's evidence (`--pose-evidence shipped`, record 0066); their ECE is that probability's against the snapped mask at IoU >= 0.5 with a true tube.").ok();
     for (kind, _) in [("grey", &grey_set), ("colour", &colour_set)].into_iter().filter(|r| r.1.is_none()) {
-        writeln!(md, "\nNo {kind} frames of the {part} sols in `{}`: the {kind} rows are left out.", stage.data.display()).ok();
+        writeln!(md, "\nNo {kind} frames of {the_sols} in `{}`: the {kind} rows are left out.", stage.data.display()).ok();
     }
     let width_rows: Vec<(String, &Value)> = [("grey", &grey, &grey_poses, &l2_grey, &fused_grey), ("colour", &colour, &colour_poses, &l2_colour, &fused_colour)]
         .into_iter()
@@ -450,15 +459,15 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         .ok();
         let columns = [("learned kept", &neg, "kept"), ("`locate`", &neg, "located"), ("Line2D", &l2_neg, "kept"), ("fused", &fused_neg, "kept"), ("`locate --detector fused`", &fused_located, "located")];
         writeln!(md, "By folder of `negatives_val` (camera and frame size; per frame):\n\n{}", crate::bench_negatives::folder_table(&columns)).ok();
-    } else if stage.split == tubeloc_synth::real_set::RealSplit::Test {
+    } else if measures {
         writeln!(md, "\nReal frames without tubes: no `negatives_val` folder in `{}`.\n", stage.data.display()).ok();
     } else {
         writeln!(md, "\nReal frames without tubes (`negatives_val`): not run on the {part} part; they measure false positives only.\n").ok();
     }
     if neg_pds["frames"].as_u64().unwrap_or(0) == 0 {
-        writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, pinhole, at least 512 px): none in `{}`.\n", stage.data.display()).ok();
+        writeln!(md, "Real frames of {the_sols} with PDS camera models (`with_cameras`, pinhole, at least 512 px): none in `{}`.\n", stage.data.display()).ok();
     } else {
-        writeln!(md, "Real frames of the {part} sols with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**{}.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN), crate::bench_intervals::by_sol_note(&neg_pds["located_per_frame_ci"])).ok();
+        writeln!(md, "Real frames of {the_sols} with PDS camera models (`with_cameras`, {} pinhole frames of at least 512 px, none showing a tube), each under its own camera and ground (`tubeloc locate --rig with_cameras/cameras.json --image F`): `locate` at its defaults hands the planner **{:.3} tubes per frame**{}.\n", neg_pds["frames"], neg_pds["located_per_frame"].as_f64().unwrap_or(f64::NAN), crate::bench_intervals::by_sol_note(&neg_pds["located_per_frame_ci"])).ok();
     }
     writeln!(
         md,

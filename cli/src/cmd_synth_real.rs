@@ -46,7 +46,8 @@ pub struct RealArgs {
     /// The real data folder (holding MANIFEST.tsv, backgrounds/ and with_cameras/).
     #[arg(long, default_value = "../shared/data/real_mars")]
     pub data: PathBuf,
-    /// Part of the data: `train` (backgrounds, random assumed views), `val` or `test`.
+    /// Part of the data: `train` (backgrounds, random assumed views), `val`, `test`, or `all`
+    /// (every frame whatever its sol, as validation and test frames are made).
     #[arg(long)]
     pub split: RealSplit,
     /// Grey, colour or all frames.
@@ -122,7 +123,12 @@ fn tube_counts(s: &str) -> std::result::Result<(usize, usize), String> {
 pub fn run(a: RealArgs) -> Result<()> {
     let views = frames(&a)?;
     if views.is_empty() {
-        bail!("no frames of split {:?} and kind {:?} in {}", a.split, a.kind, a.data.display());
+        bail!(
+            "{}: no {} frames of the {} part (a frame's part comes from its sol, and frames of unknown sol are training frames; `--split all` takes every frame)",
+            a.data.display(),
+            format!("{:?}", a.kind).to_lowercase().replace("all", "grey or colour"),
+            format!("{:?}", a.split).to_lowercase()
+        );
     }
     write_set(&a, &views).map(|_| ())
 }

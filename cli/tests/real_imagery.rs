@@ -15,6 +15,35 @@ fn real_data() -> PathBuf {
 
 const TEST_SOLS: [i64; 10] = [53, 344, 372, 688, 729, 3192, 3423, 5086, 5104, 5105];
 
+/// A folder of new frames whose sols are unknown (or training sols by our split): `--split
+/// test` has nothing to composite on and says so; `--split all` takes every frame, under the
+/// view a test frame gets.
+#[test]
+fn the_all_part_takes_frames_of_any_sol() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("new_frames");
+    std::fs::create_dir_all(&data).unwrap();
+    std::os::unix::fs::symlink(real_data().join("backgrounds"), data.join("backgrounds")).unwrap();
+    let manifest = std::fs::read_to_string(real_data().join("MANIFEST.tsv")).unwrap();
+    // Two Mastcam frames of the shipped data, their sols left blank.
+    let rows: Vec<String> = manifest.lines().skip(1).filter(|l| l.contains("\tmsl_mastcam_marsdata\t")).take(2).map(|l| l.split('\t').enumerate().map(|(i, f)| if i == 5 { "" } else { f }).collect::<Vec<_>>().join("\t")).collect();
+    assert_eq!(rows.len(), 2);
+    std::fs::write(data.join("MANIFEST.tsv"), format!("{}\n{}\n", manifest.lines().next().unwrap(), rows.join("\n"))).unwrap();
+    let out = dir.path().join("set");
+    let r = tubeloc(&["synth", "real", "--data", p(&data), "--split", "test", "--kind", "colour", "--min-size", "300", "--out", p(&out)]);
+    let e = stderr(&r);
+    assert!(!r.status.success() && e.contains("new_frames: no colour frames of the test part") && e.contains("`--split all` takes every frame"), "{e}");
+    ok(&["synth", "real", "--data", p(&data), "--split", "all", "--kind", "colour", "--min-size", "300", "--tubes", "2:2", "--out", p(&out)]);
+    let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("annotations.json")).unwrap()).unwrap();
+    let images = gt["images"].as_array().unwrap();
+    assert_eq!(images.len(), 2, "{}", gt["images"]);
+    for im in images {
+        assert_eq!(im["geometry"], "assumed");
+        assert!(im.get("sol").is_none(), "{im}");
+    }
+    assert!(gt["info"].get("hfov_deg").is_none(), "judged views, not random training ones: {}", gt["info"]);
+}
+
 #[test]
 fn test_composites_use_the_frames_geometry_and_only_test_sols() {
     let dir = tempfile::tempdir().unwrap();

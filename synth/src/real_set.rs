@@ -384,6 +384,29 @@ mod tests {
         assert_eq!(image::load_from_memory(&colour.bytes).unwrap().color(), image::ColorType::Rgb8);
     }
 
+    /// `all` takes the frames of every sol, under the views validation and test frames get
+    /// (a training sol's colour frame under the `mast` view, not a random one).
+    #[test]
+    fn the_all_part_takes_every_sol_under_the_judged_views() {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = dir.path().join("backgrounds/msl_mastcam_marsdata");
+        std::fs::create_dir_all(&folder).unwrap();
+        for name in ["test.png", "train.png", "nosol.png"] {
+            image::save_buffer(folder.join(name), &[90u8; 400 * 320 * 3], 400, 320, image::ExtendedColorType::Rgb8).unwrap();
+        }
+        let manifest = "file\tsplit\tgroup\tsol\nbackgrounds/msl_mastcam_marsdata/test.png\tbackgrounds\tmsl_mastcam_marsdata\t500\nbackgrounds/msl_mastcam_marsdata/train.png\tbackgrounds\tmsl_mastcam_marsdata\t520\nbackgrounds/msl_mastcam_marsdata/nosol.png\tbackgrounds\tmsl_mastcam_marsdata\t\n";
+        std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
+        let names = |split| split_views(dir.path(), split, None, true, 300, TRAINING_HFOV_DEG, 0).unwrap().into_iter().map(|v| (v.image.file_name().unwrap().to_string_lossy().to_string(), v.camera.fx)).collect::<Vec<_>>();
+        let mast_fx = AssumedView::MAST.camera(400, 320).fx;
+        assert_eq!(names(RealSplit::Test), vec![("test.png".to_string(), mast_fx)]);
+        assert_eq!(names(RealSplit::Val), vec![]);
+        assert_eq!(names(RealSplit::Train).len(), 2);
+        assert_eq!(names(RealSplit::All), vec![("test.png".to_string(), mast_fx), ("train.png".to_string(), mast_fx), ("nosol.png".to_string(), mast_fx)]);
+        assert!(RealSplit::All.holds(None) && RealSplit::All.holds(Some(38)) && !RealSplit::Test.holds(Some(38)));
+        assert_eq!("all".parse::<RealSplit>(), Ok(RealSplit::All));
+        assert!("every".parse::<RealSplit>().unwrap_err().contains("train, val, test or all"));
+    }
+
     /// A background the manifest lists but the folder lacks is named, with the manifest, in the
     /// error; one of another split is not opened at all.
     #[test]
@@ -501,6 +524,18 @@ pub enum RealSplit {
     Val,
     /// Reporting, once per change.
     Test,
+    /// Every frame, whatever its sol, judged as validation and test frames are: for real data
+    /// the model never saw (an independent check on new frames). On the shipped data it holds
+    /// the training backgrounds too, so its figures are no held-out measurement there.
+    All,
+}
+
+impl RealSplit {
+    /// Whether a frame of `sol` belongs to this part ([`split_of_sol`]; every frame to
+    /// [`RealSplit::All`]).
+    pub fn holds(self, sol: Option<i64>) -> bool {
+        self == RealSplit::All || split_of_sol(sol) == self
+    }
 }
 
 impl std::str::FromStr for RealSplit {
@@ -510,7 +545,8 @@ impl std::str::FromStr for RealSplit {
             "train" => Ok(RealSplit::Train),
             "val" => Ok(RealSplit::Val),
             "test" => Ok(RealSplit::Test),
-            _ => Err(format!("unknown split {s:?}: expected train, val or test")),
+            "all" => Ok(RealSplit::All),
+            _ => Err(format!("unknown split {s:?}: expected train, val, test or all")),
         }
     }
 }
@@ -587,7 +623,7 @@ pub enum GreyView {
 }
 
 /// The frames of `split` in the real data folder `data` (holding `MANIFEST.tsv`,
-/// `backgrounds/` and `with_cameras/`), with their views. Validation and test: the grey frames
+/// `backgrounds/` and `with_cameras/`), with their views. Validation, test and all: the grey frames
 /// (`grey`: with PDS camera models, and / or the grey backgrounds under
 /// [`AssumedView::NAVCAM`]) and the colour Mastcam backgrounds under the view `--assumed-view
 /// auto` takes for them ([`AssumedView::of_frame`]: an M-100 frame under `m100`, an M-34
@@ -604,13 +640,13 @@ pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour
     let assumed_grey = matches!(grey, Some(GreyView::Assumed | GreyView::Both));
     if split != RealSplit::Train && matches!(grey, Some(GreyView::Pds | GreyView::Both)) {
         for v in views_from_cameras_json(&data.join("with_cameras").join("cameras.json"))? {
-            if split_of_sol(v.sol) == split && v.camera.width.min(v.camera.height) >= min_size {
+            if split.holds(v.sol) && v.camera.width.min(v.camera.height) >= min_size {
                 out.push(v);
             }
         }
     }
     for e in &manifest {
-        if e.split != "backgrounds" || split_of_sol(e.sol) != split {
+        if e.split != "backgrounds" || !split.holds(e.sol) {
             continue;
         }
         let is_colour = e.group.contains("mastcam");
