@@ -61,14 +61,12 @@ pub struct RealStage {
     pub line2d_max_upsample: f64,
 }
 
-/// Writes a detector's results on the composite set `set` to `<out>/detections.json` and reads
-/// them back as COCO results with the set's ground truth, as `tubeloc eval` would.
-fn saved_results(set: &Path, out: &Path, dets: &impl serde::Serialize) -> Result<(CocoDataset, Vec<tubeloc_core::coco::CocoResult>)> {
+/// Writes a detector's results on a composite set (ground truth `gt`) to
+/// `<out>/detections.json` and reads them back as COCO results, as `tubeloc eval` would.
+fn saved_results(gt: &CocoDataset, out: &Path, dets: &impl serde::Serialize) -> Result<Vec<tubeloc_core::coco::CocoResult>> {
     let path = out.join("detections.json");
     files::write_json(&path, dets)?;
-    let gt = CocoDataset::load(&set.join("annotations.json"))?;
-    let dt = tubeloc_core::coco::load_results(&path, &gt)?;
-    Ok((gt, dt))
+    Ok(tubeloc_core::coco::load_results(&path, gt)?)
 }
 
 /// The most composites per frame [`composite_set`] makes to reach its tubes.
@@ -140,13 +138,14 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
     let t = Instant::now();
     let dets = crate::cmd_detect_learned::run_learned(model, &images, &scales, &DecodeConfig::default())?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / images.len().max(1) as f64;
-    let (gt, dt) = saved_results(set, out, &dets)?;
-    let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
+    let gt = data.coco();
+    let dt = saved_results(gt, out, &dets)?;
+    let ev = CocoEvaluator::new(gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
     let n_gt = gt.annotations.len();
-    let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms, "found_by_width": crate::bench_widths::found_by_width(&gt, &dt)?});
+    let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms, "found_by_width": crate::bench_widths::found_by_width(gt, &dt)?});
     merge(&mut v, at_threshold(&ev, cal, n_gt));
-    merge(&mut v, crate::bench_intervals::ap_ar_by_sol(&gt, &ev));
+    merge(&mut v, crate::bench_intervals::ap_ar_by_sol(gt, &ev));
     Ok(v)
 }
 
@@ -183,7 +182,8 @@ fn poses(set: &Path, dir: &Path) -> Result<Value> {
     refine_dataset(&job)?;
     let refine_ms = t.elapsed().as_secs_f64() * 1e3;
     let snapped_dets: Value = files::read_json(&snapped)?;
-    let (gt, dt) = saved_results(set, &dir.join("snapped_eval"), &snapped_dets)?;
+    let gt = CocoDataset::load(&set.join("annotations.json"))?;
+    let dt = saved_results(&gt, &dir.join("snapped_eval"), &snapped_dets)?;
     let snapped_ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
     let snapped_eval = snapped_ev.evaluate();
     // The same snapped detections ranked by the shipped pose evidence (what `tubeloc refine
@@ -260,13 +260,14 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
         ms += t.elapsed().as_secs_f64() * 1e3;
         dets.extend(found);
     }
-    let (gt, dt) = saved_results(set, out, &dets)?;
-    let ev = CocoEvaluator::new(&gt, &dt, IouType::Segm)?;
+    let gt = data.coco();
+    let dt = saved_results(gt, out, &dets)?;
+    let ev = CocoEvaluator::new(gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
     let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
     let n = gt.images.len().max(1) as f64;
-    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64, "found_by_width": crate::bench_widths::found_by_width(&gt, &dt)?});
-    merge(&mut v, crate::bench_intervals::ap_ar_by_sol(&gt, &ev));
+    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64, "found_by_width": crate::bench_widths::found_by_width(gt, &dt)?});
+    merge(&mut v, crate::bench_intervals::ap_ar_by_sol(gt, &ev));
     if let Some(cal) = cal {
         merge(&mut v, at_threshold(&ev, cal, gt.annotations.len()));
     }

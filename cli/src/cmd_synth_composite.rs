@@ -82,7 +82,7 @@ pub fn run(a: CompositeArgs) -> Result<()> {
         None => TubeShape::from_model(&TubeModel::default()),
     };
     let band = match a.band {
-        BandArg::Auto => SpectralBand::of_photo(tubeloc_synth::real_set::is_grey(img.as_raw())),
+        BandArg::Auto => SpectralBand::of_photo(tubeloc_core::monochrome::is_grey_rgb8(img.as_raw())),
         BandArg::Visible => SpectralBand::Visible,
         BandArg::RedNir => SpectralBand::RedNir,
     };

@@ -20,6 +20,7 @@ pub mod ground;
 pub mod heap;
 pub mod image_file;
 pub mod mask;
+pub mod monochrome;
 pub mod odl;
 pub mod plane;
 pub mod pose;

@@ -49,11 +49,7 @@ pub struct DetectorInput {
     pub info: InputInfo,
 }
 
-/// Whether an interleaved RGB8 image is grey: its three channels are equal at every pixel
-/// (a grey camera's frame replicated to RGB, e.g. Navcam).
-pub fn is_grey_rgb8(rgb: &[u8]) -> bool {
-    rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
-}
+pub use tubeloc_core::monochrome::is_grey_rgb8;
 
 /// Converts a decoded image (see the module doc).
 pub fn rgb8_of(img: &image::DynamicImage) -> DetectorInput {

@@ -173,11 +173,6 @@ pub struct RealSample {
     pub annotations: Vec<tubeloc_core::CocoAnnotation>,
 }
 
-/// Whether interleaved RGB8 `rgb` is grey (every pixel's three channels equal).
-pub fn is_grey(rgb: &[u8]) -> bool {
-    rgb.chunks_exact(3).all(|p| p[0] == p[1] && p[1] == p[2])
-}
-
 /// Interleaved RGB8 `rgb` as a grey frame of its red channel (in all three channels): the
 /// nearest a colour camera's frame comes to a 600-800 nm monochrome camera's (Mastcam's red
 /// filter peaks near 640 nm, the monochrome Navcams see 600-800 nm).
@@ -205,7 +200,7 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     if (img.width(), img.height()) != (view.camera.width, view.camera.height) {
         return Err(err(format!("image is {}x{} but its camera is {}x{}", img.width(), img.height(), view.camera.width, view.camera.height)));
     }
-    let photo_grey = is_grey(img.as_raw());
+    let photo_grey = tubeloc_core::monochrome::is_grey_rgb8(img.as_raw());
     if cfg.colour_as_grey && !photo_grey {
         red_as_grey(&mut img);
     }
