@@ -3,7 +3,8 @@
 //! Stages (each one's outputs are written atomically and recorded in `<out>/bench_state.json`;
 //! a rerun skips the stages already done, so an interrupted run resumes where it stopped):
 //!
-//! 1. `dataset`: the paper preset (`tubeloc synth --preset paper`), unless `--dataset` is given.
+//! 1. `dataset`: the paper preset (`tubeloc synth --preset paper`), unless `--dataset` is given
+//!    or every part on it (`line2d`, `learned`, `poses`, `tags`, `fullres`) is skipped.
 //! 2. `splits`: one COCO folder per split (`no-tags`, `with-tags`), optionally subsampled.
 //! 3. `templates`: the default Line2D library for the benchmark camera.
 //! 4. `line2d/<split>`, `learned/<split>`: detection and COCO evaluation (PR curves, breakdowns
@@ -218,15 +219,18 @@ fn detect_and_eval(mut detect: DetectArgs, split_dir: &Path, out: &Path, n_image
 /// Runs `tubeloc bench`.
 pub fn run(a: BenchArgs) -> Result<()> {
     if a.real_split == tubeloc_synth::real_set::RealSplit::Train {
-        bail!("--real-split train: the real stage measures on the val or test part (the training part's frames are the model's backgrounds)");
+        bail!("--real-split train: the real stage measures on the val, test or all part (the training part's frames are the model's backgrounds)");
     }
     let out = a.out.clone();
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let mut st = Stages::load(&out, a.fresh)?;
     let t0 = Instant::now();
 
-    // 1. Dataset.
+    // 1. Dataset: only for the parts on the synthetic paper preset (with those skipped, e.g.
+    // the real stage alone, none is rendered or read).
+    let synthetic = [Part::Line2d, Part::Learned, Part::Poses, Part::Tags, Part::Fullres].iter().any(|p| !a.skip.contains(p));
     let dataset = match &a.dataset {
+        _ if !synthetic => PathBuf::new(),
         Some(d) => d.clone(),
         None => {
             let d = out.join("dataset");
@@ -237,27 +241,28 @@ pub fn run(a: BenchArgs) -> Result<()> {
             d
         }
     };
-    if !dataset.join("annotations.json").exists() {
+    if synthetic && !dataset.join("annotations.json").exists() {
         bail!("{}: no annotations.json (render one with `tubeloc synth --preset paper --out DIR`)", dataset.display());
     }
 
     // 2. Splits.
     let split_dir = |split: &str| out.join("splits").join(split);
     let outputs: Vec<PathBuf> = SPLITS.iter().map(|(sp, ..)| split_dir(sp).join("annotations.json")).collect();
-    st.run("splits", &outputs, || {
-        let mut r = serde_json::Map::new();
-        for (sp, ..) in SPLITS {
-            r.insert(sp.into(), json!(write_split(&dataset, sp, a.images_per_split, &split_dir(sp))?));
-        }
-        Ok(Value::Object(r))
-    })?;
-    let n_images = |sp: &str| st.result("splits").and_then(|r| r[sp].as_u64()).unwrap_or(0) as usize;
-    let n_img: BTreeMap<&str, usize> = SPLITS.iter().map(|(sp, ..)| (*sp, n_images(sp))).collect();
-
-    // The benchmark camera: the first image's (crops share the focal length).
-    let gt0: Value = files::read_json(&split_dir(SPLITS[0].0).join("annotations.json"))?;
     let camera = out.join("camera.json");
-    files::write_json(&camera, &gt0["images"][0]["camera"])?;
+    if synthetic {
+        st.run("splits", &outputs, || {
+            let mut r = serde_json::Map::new();
+            for (sp, ..) in SPLITS {
+                r.insert(sp.into(), json!(write_split(&dataset, sp, a.images_per_split, &split_dir(sp))?));
+            }
+            Ok(Value::Object(r))
+        })?;
+        // The benchmark camera: the first image's (crops share the focal length).
+        let gt0: Value = files::read_json(&split_dir(SPLITS[0].0).join("annotations.json"))?;
+        files::write_json(&camera, &gt0["images"][0]["camera"])?;
+    }
+    let n_images = |sp: &str| st.result("splits").and_then(|r| r[sp].as_u64()).unwrap_or(0) as usize;
+    let n_img: BTreeMap<&str, usize> = if synthetic { SPLITS.iter().map(|(sp, ..)| (*sp, n_images(sp))).collect() } else { BTreeMap::new() };
 
     // 3 + 4. Line2D.
     if !a.skip.contains(&Part::Line2d) {
@@ -506,7 +511,7 @@ fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, real_spl
         r,
         "Written by `tubeloc bench` (tubeloc {}). Images per split: {}. Every number below was measured by this run; the paper's figures are its Tables I and II (real Mars-yard images, so they compare the method, not the data).\n",
         env!("CARGO_PKG_VERSION"),
-        n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
+        if n_img.is_empty() { "none (the parts on the synthetic preset skipped)".to_string() } else { n_img.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ") }
     );
     // One table row per split: `stages(sp)` names the stages whose `ms_per_image` add up to
     // the row's time, `eval_dir(sp)` the evaluation folder (relative to `out`).

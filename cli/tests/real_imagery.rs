@@ -295,11 +295,11 @@ fn bench_real_stage_runs_at_a_small_size() {
 #[test]
 fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let dir = tempfile::tempdir().unwrap();
-    let ds = dir.path().join("dataset");
-    ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
     let out = dir.path().join("bench");
     let skip = "line2d,learned,poses,stereo,fullres,tags";
-    ok(&["bench", "--dataset", p(&ds), "--skip", skip, "--real-data", p(&real_data()), "--real-frames", "2", "--real-split", "val", "--out", p(&out)]);
+    // No synthetic dataset: with every part on it skipped, none is rendered or asked for.
+    ok(&["bench", "--skip", skip, "--real-data", p(&real_data()), "--real-frames", "2", "--real-split", "val", "--out", p(&out)]);
+    assert!(!out.join("dataset").exists() && !out.join("splits").exists());
     // Its own folder: a validation run never stands in for the test part's.
     assert!(!out.join("real").exists());
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real_val/summary.json")).unwrap()).unwrap();
@@ -321,10 +321,10 @@ fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
         assert!([38, 100].iter().any(|v: &i64| (v - sol).abs() <= 1), "PDS frame of sol {sol} is not a validation sol");
     }
     let top = std::fs::read_to_string(out.join("report.md")).unwrap();
-    assert!(top.contains("## Real imagery (val part"), "{top}");
+    assert!(top.contains("## Real imagery (val part") && top.contains("Images per split: none"), "{top}");
     let md = std::fs::read_to_string(out.join("real_val/report.md")).unwrap();
     assert!(md.starts_with("## Real imagery (val part") && md.contains("`negatives_val`): not run on the val part"), "{md}");
-    let o = tubeloc(&["bench", "--dataset", p(&ds), "--real-split", "train", "--out", p(&dir.path().join("b2"))]);
+    let o = tubeloc(&["bench", "--real-split", "train", "--out", p(&dir.path().join("b2"))]);
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{e}");
     assert!(e.contains("--real-split train") && !dir.path().join("b2").exists(), "{e}");
