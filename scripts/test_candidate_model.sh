@@ -52,5 +52,5 @@ $T eval --gt "$val/annotations.json" --dt "$out/calibration/f.json" --calibrate 
   --fitted-on "$fit; fused detections with the candidate, its pose evidence, the default template library and the shipped Line2D pose verifier"
 build
 cp data/models/tubenet.calibration.json data/models/tubenet.pose_evidence.json data/models/fused.calibration.json "$out/calibration/"
-$T bench --skip line2d,learned,poses,stereo,fullres,tags --real-data "$data" --out "$out/B"
+$T bench --only real --real-data "$data" --out "$out/B"
 echo "test part of $(basename "$model"): $out/B/real/report.md (fitted files in $out/calibration)"

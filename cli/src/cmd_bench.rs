@@ -38,7 +38,7 @@ use std::time::Instant;
 use tubeloc_core::{files, CameraModel};
 use tubeloc_detect::line2d::ViewParams;
 
-/// The parts of the benchmark that can be skipped.
+/// The parts of the benchmark, as `--skip` and `--only` name them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
 pub enum Part {
     /// Line2D detection and evaluation.
@@ -87,6 +87,10 @@ pub struct BenchArgs {
     /// Parts to skip (comma separated).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub skip: Vec<Part>,
+    /// Parts to run, the others skipped (comma separated; e.g. `--only real`: the real stage
+    /// alone, on no synthetic dataset).
+    #[arg(long, value_enum, value_delimiter = ',', conflicts_with = "skip")]
+    pub only: Vec<Part>,
     /// Scenes of the synthetic stereo set.
     #[arg(long, default_value_t = 4, value_parser = crate::args::positive_usize)]
     pub stereo_scenes: usize,
@@ -217,7 +221,11 @@ fn detect_and_eval(mut detect: DetectArgs, split_dir: &Path, out: &Path, n_image
 }
 
 /// Runs `tubeloc bench`.
-pub fn run(a: BenchArgs) -> Result<()> {
+pub fn run(mut a: BenchArgs) -> Result<()> {
+    if !a.only.is_empty() {
+        use clap::ValueEnum;
+        a.skip = Part::value_variants().iter().filter(|p| !a.only.contains(p)).copied().collect();
+    }
     if a.real_split == tubeloc_synth::real_set::RealSplit::Train {
         bail!("--real-split train: the real stage measures on the val, test or all part (the training part's frames are the model's backgrounds)");
     }

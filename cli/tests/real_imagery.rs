@@ -296,9 +296,8 @@ fn bench_real_stage_runs_at_a_small_size() {
 fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
-    let skip = "line2d,learned,poses,stereo,fullres,tags";
-    // No synthetic dataset: with every part on it skipped, none is rendered or asked for.
-    ok(&["bench", "--skip", skip, "--real-data", p(&real_data()), "--real-frames", "2", "--real-split", "val", "--out", p(&out)]);
+    // `--only real`: no synthetic dataset; with every part on it skipped, none is rendered or asked for.
+    ok(&["bench", "--only", "real", "--real-data", p(&real_data()), "--real-frames", "2", "--real-split", "val", "--out", p(&out)]);
     assert!(!out.join("dataset").exists() && !out.join("splits").exists());
     // Its own folder: a validation run never stands in for the test part's.
     assert!(!out.join("real").exists());
