@@ -121,6 +121,9 @@ fn tube_counts(s: &str) -> std::result::Result<(usize, usize), String> {
 
 /// Runs `tubeloc synth real`.
 pub fn run(a: RealArgs) -> Result<()> {
+    if a.colour_as_grey && a.kind == RealKind::Grey {
+        bail!("--colour-as-grey turns colour frames grey, and --kind grey takes none: use --kind colour or all");
+    }
     let views = frames(&a)?;
     if views.is_empty() {
         bail!(

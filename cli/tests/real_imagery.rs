@@ -42,6 +42,10 @@ fn the_all_part_takes_frames_of_any_sol() {
         assert!(im.get("sol").is_none(), "{im}");
     }
     assert!(gt["info"].get("hfov_deg").is_none(), "judged views, not random training ones: {}", gt["info"]);
+    // Colour frames as a monochrome camera sees them need colour frames to start from.
+    let r = tubeloc(&["synth", "real", "--data", p(&data), "--split", "all", "--kind", "grey", "--colour-as-grey", "--out", p(&dir.path().join("g"))]);
+    let e = stderr(&r);
+    assert!(!r.status.success() && e.contains("--colour-as-grey") && e.contains("--kind colour or all"), "{e}");
 }
 
 #[test]
