@@ -78,7 +78,7 @@ const MAX_PER_VIEW: u32 = 32;
 /// `min_tubes`, a set of fewer tubes is made again with more composites per frame, the fewest
 /// that the tubes per composite so far say reach it (at most [`MAX_PER_VIEW`]).
 #[allow(clippy::too_many_arguments)]
-fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_tubes: Option<usize>, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<Option<PathBuf>> {
+fn composite_set(data: &Path, split: tubeloc_synth::real_set::RealSplit, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_tubes: Option<usize>, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<Option<PathBuf>> {
     use crate::cmd_synth_real::RealKind;
     if out.join("annotations.json").exists() {
         return Ok(Some(out.to_path_buf()));
@@ -90,7 +90,7 @@ fn composite_set(data: &Path, split: &str, kind: crate::cmd_synth_real::RealKind
     // 1.5-5 m on each frame of the kind in the part, no appearance randomization.
     let mut args = crate::cmd_synth_real::RealArgs {
         data: data.to_path_buf(),
-        split: split.parse().map_err(|e: String| anyhow::anyhow!(e))?,
+        split,
         kind,
         per_view: per_view.max(1),
         tubes: (1, 4),
@@ -274,23 +274,13 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
     Ok(v)
 }
 
-/// The name of a part of the real data (`val`, `test`, `train`), as `tubeloc synth real --split` takes it.
-fn split_name(split: tubeloc_synth::real_set::RealSplit) -> &'static str {
-    match split {
-        tubeloc_synth::real_set::RealSplit::Train => "train",
-        tubeloc_synth::real_set::RealSplit::Val => "val",
-        tubeloc_synth::real_set::RealSplit::Test => "test",
-        tubeloc_synth::real_set::RealSplit::All => "all",
-    }
-}
-
 /// The folder of the real stage of `split` under the bench's output folder `out`:
 /// `<out>/real` for the test part, `<out>/real_val` for the validation part, so that a run of
 /// one part never stands in for the other.
 pub fn stage_dir(out: &Path, split: tubeloc_synth::real_set::RealSplit) -> PathBuf {
     match split {
         tubeloc_synth::real_set::RealSplit::Test => out.join("real"),
-        other => out.join(format!("real_{}", split_name(other))),
+        other => out.join(format!("real_{}", other.name())),
     }
 }
 
@@ -301,13 +291,13 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     }
     let dir = stage_dir(out, stage.split);
     std::fs::create_dir_all(&dir)?;
-    let part = split_name(stage.split);
+    let part = stage.split.name();
     // negatives_val measures false positives only: never run where settings are chosen.
     let negatives_dir = stage.data.join("negatives_val");
     let measures = matches!(stage.split, tubeloc_synth::real_set::RealSplit::Test | tubeloc_synth::real_set::RealSplit::All);
     let with_negatives = measures && negatives_dir.is_dir();
-    let grey_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
-    let colour_set = composite_set(&stage.data, part, crate::cmd_synth_real::RealKind::Colour, 1, stage.min_tubes, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
+    let grey_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
+    let colour_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Colour, 1, stage.min_tubes, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
     if grey_set.is_none() && colour_set.is_none() {
         bail!("{}: no frames of the {part} part to composite on: no grey frame with a PDS camera model (with_cameras/cameras.json) and no colour Mastcam background of its sols", stage.data.display());
     }

@@ -65,7 +65,7 @@ pub fn run(a: NegativesArgs) -> Result<()> {
         bail!("--min-probability {} is not a probability in [0, 1]", a.min_probability);
     }
     if a.split != RealSplit::Train {
-        eprintln!("warning: --split {}: these crops are of frames held out for choosing and reporting; never train on them", format!("{:?}", a.split).to_lowercase());
+        eprintln!("warning: --split {}: these crops are of frames held out for choosing and reporting; never train on them", a.split.name());
     }
     let model_choice = crate::cmd_detect_learned::ModelChoice::of(a.model.as_deref());
     if let (Some(m), None) = (&a.model, &a.calibration) {
@@ -119,13 +119,13 @@ pub fn run(a: NegativesArgs) -> Result<()> {
         }
         let n = images.len();
         let doc = json!({
-            "info": {"description": "tubeloc hard negatives: crops of tube-free real frames around a learned model's detections", "split": format!("{:?}", a.split).to_lowercase(), "model": model_choice.name(), "min_probability": a.min_probability, "crop": a.crop, "range_m": a.range_m},
+            "info": {"description": "tubeloc hard negatives: crops of tube-free real frames around a learned model's detections", "split": a.split.name(), "model": model_choice.name(), "min_probability": a.min_probability, "crop": a.crop, "range_m": a.range_m},
             "images": images, "annotations": [], "categories": [{"id": 1, "name": "tube", "supercategory": "object"}],
         });
         files::write_json(&tmp.join("annotations.json"), &doc)?;
         Ok((n, 0))
     })?;
     pb.finish_and_clear();
-    eprintln!("{} crops from {with_crops} of {searched} frames of split {} (probability >= {}) -> {}", summary.images, format!("{:?}", a.split).to_lowercase(), a.min_probability, summary.out.display());
+    eprintln!("{} crops from {with_crops} of {searched} frames of split {} (probability >= {}) -> {}", summary.images, a.split.name(), a.min_probability, summary.out.display());
     Ok(())
 }

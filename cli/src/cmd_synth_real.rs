@@ -129,8 +129,12 @@ pub fn run(a: RealArgs) -> Result<()> {
         bail!(
             "{}: no {} frames of the {} part (a frame's part comes from its sol, and frames of unknown sol are training frames; `--split all` takes every frame)",
             a.data.display(),
-            format!("{:?}", a.kind).to_lowercase().replace("all", "grey or colour"),
-            format!("{:?}", a.split).to_lowercase()
+            match a.kind {
+                RealKind::Grey => "grey",
+                RealKind::Colour => "colour",
+                RealKind::All => "grey or colour",
+            },
+            a.split.name()
         );
     }
     write_set(&a, &views).map(|_| ())
@@ -185,7 +189,7 @@ pub fn write_set(a: &RealArgs, views: &[RealView]) -> Result<(usize, usize)> {
             })
             .collect::<Result<Vec<_>, tubeloc_synth::SynthError>>()?;
         let samples: Vec<_> = samples.into_iter().flatten().collect();
-        let mut info = json!({"description": "tubeloc composites on real rover frames", "split": format!("{:?}", a.split).to_lowercase(), "seed": a.seed, "range_m": [range.0, range.1]});
+        let mut info = json!({"description": "tubeloc composites on real rover frames", "split": a.split.name(), "seed": a.seed, "range_m": [range.0, range.1]});
         if a.colour_as_grey {
             info["colour_as_grey"] = json!("red channel, tubes in 600-800 nm");
         }

@@ -398,7 +398,9 @@ mod tests {
         assert_eq!(names(RealSplit::Train).len(), 2);
         assert_eq!(names(RealSplit::All), vec![("test.png".to_string(), mast_fx), ("train.png".to_string(), mast_fx), ("nosol.png".to_string(), mast_fx)]);
         assert!(RealSplit::All.holds(None) && RealSplit::All.holds(Some(38)) && !RealSplit::Test.holds(Some(38)));
-        assert_eq!("all".parse::<RealSplit>(), Ok(RealSplit::All));
+        for split in [RealSplit::Train, RealSplit::Val, RealSplit::Test, RealSplit::All] {
+            assert_eq!(split.to_string().parse::<RealSplit>(), Ok(split));
+        }
         assert!("every".parse::<RealSplit>().unwrap_err().contains("train, val, test or all"));
     }
 
@@ -530,6 +532,22 @@ impl RealSplit {
     /// [`RealSplit::All`]).
     pub fn holds(self, sol: Option<i64>) -> bool {
         self == RealSplit::All || split_of_sol(sol) == self
+    }
+
+    /// The part's name as `--split` takes it (`train`, `val`, `test`, `all`).
+    pub fn name(self) -> &'static str {
+        match self {
+            RealSplit::Train => "train",
+            RealSplit::Val => "val",
+            RealSplit::Test => "test",
+            RealSplit::All => "all",
+        }
+    }
+}
+
+impl std::fmt::Display for RealSplit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
