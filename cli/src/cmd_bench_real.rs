@@ -6,7 +6,9 @@
 //!     frames under the view `--assumed-view auto` takes for them (M-100 frames `m100`, the
 //!     others the documented mast view, [`AssumedView::of_frame`]); learned
 //!     detection at the working scale, COCO AP50 / AR, and the reliability of the calibrated
-//!     probability on these held-out detections.
+//!     probability on these held-out detections. Besides, the part's grey backgrounds under
+//!     the assumed Navcam view (what a grey frame without a camera model gets), for both
+//!     detectors.
 //! (b) False positives per frame on `negatives_val` (detections kept, and tubes that `locate`
 //!     at its defaults hands the planner) (real frames without tubes, never used for
 //!     training or choosing settings): learned detections kept at the calibration's
@@ -74,16 +76,28 @@ const MAX_PER_VIEW: u32 = 32;
 
 /// The composite set of one kind of frame (`tubeloc synth real --kind KIND`) in `out`, or
 /// `None` where the data holds no frame of that kind in the part (a folder of grey frames only,
-/// or one without `with_cameras/cameras.json`): that kind's rows are then left out. With
+/// or one without `with_cameras/cameras.json`): that kind's rows are then left out. Grey frames
+/// are taken under `grey_view` (`tubeloc synth real --grey-view`). With
 /// `min_tubes`, a set of fewer tubes is made again with more composites per frame, the fewest
 /// that the tubes per composite so far say reach it (at most [`MAX_PER_VIEW`]).
 #[allow(clippy::too_many_arguments)]
-fn composite_set(data: &Path, split: tubeloc_synth::real_set::RealSplit, kind: crate::cmd_synth_real::RealKind, per_view: u32, min_tubes: Option<usize>, min_size: u32, frames: Option<usize>, seed: u64, out: &Path) -> Result<Option<PathBuf>> {
+fn composite_set(
+    data: &Path,
+    split: tubeloc_synth::real_set::RealSplit,
+    kind: crate::cmd_synth_real::RealKind,
+    grey_view: crate::cmd_synth_real::GreyViewArg,
+    per_view: u32,
+    min_tubes: Option<usize>,
+    min_size: u32,
+    frames: Option<usize>,
+    seed: u64,
+    out: &Path,
+) -> Result<Option<PathBuf>> {
     use crate::cmd_synth_real::RealKind;
     if out.join("annotations.json").exists() {
         return Ok(Some(out.to_path_buf()));
     }
-    if kind == RealKind::Grey && !data.join("with_cameras").join("cameras.json").exists() {
+    if kind == RealKind::Grey && grey_view == crate::cmd_synth_real::GreyViewArg::Pds && !data.join("with_cameras").join("cameras.json").exists() {
         return Ok(None);
     }
     // `tubeloc synth real` as the real stage runs it: composites of one to four tubes at
@@ -95,7 +109,7 @@ fn composite_set(data: &Path, split: tubeloc_synth::real_set::RealSplit, kind: c
         per_view: per_view.max(1),
         tubes: (1, 4),
         range_m: (1.5, 5.0),
-        grey_view: crate::cmd_synth_real::GreyViewArg::Pds,
+        grey_view,
         hfov_deg: tubeloc_synth::real_set::TRAINING_HFOV_DEG,
         min_size,
         randomize: Some(false),
@@ -296,13 +310,20 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let negatives_dir = stage.data.join("negatives_val");
     let measures = matches!(stage.split, tubeloc_synth::real_set::RealSplit::Test | tubeloc_synth::real_set::RealSplit::All);
     let with_negatives = measures && negatives_dir.is_dir();
-    let grey_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Grey, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
-    let colour_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Colour, 1, stage.min_tubes, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
+    use crate::cmd_synth_real::GreyViewArg;
+    let grey_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Grey, GreyViewArg::Pds, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
+    // The part's grey backgrounds of at least 500 px under the assumed Navcam view (45 degree
+    // field, 1.9 m high, 30 degrees down): what `locate --assumed-view navcam` makes of a grey
+    // frame without a camera model, and a view down onto nearer ground than the validation
+    // sols' camera-model frames show (record 0088).
+    let grey_assumed_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Grey, GreyViewArg::Assumed, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 24, &dir.join(format!("{part}_grey_assumed")))?;
+    let colour_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Colour, GreyViewArg::Pds, 1, stage.min_tubes, 300, stage.frames, 23, &dir.join(format!("{part}_colour")))?;
     if grey_set.is_none() && colour_set.is_none() {
         bail!("{}: no frames of the {part} part to composite on: no grey frame with a PDS camera model (with_cameras/cameras.json) and no colour Mastcam background of its sols", stage.data.display());
     }
     let grey = each(&grey_set, |s| detect_eval(s, &stage.model, &stage.calibration, &dir.join("learned_grey")))?;
     let colour = each(&colour_set, |s| detect_eval(s, &stage.model, &stage.calibration, &dir.join("learned_colour")))?;
+    let grey_assumed = each(&grey_assumed_set, |s| detect_eval(s, &stage.model, &stage.calibration, &dir.join("learned_grey_assumed")))?;
     let grey_poses = each(&grey_set, |s| poses(s, &dir.join("learned_grey")))?;
     let colour_poses = each(&colour_set, |s| poses(s, &dir.join("learned_colour")))?;
     let learned_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(stage.model.detector()?);
@@ -324,6 +345,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None, l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
     let l2_grey = each(&grey_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_grey")))?;
     let l2_colour = each(&colour_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_colour")))?;
+    let l2_grey_assumed = each(&grey_assumed_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_grey_assumed")))?;
     let l2_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
     drop(l2);
     // Fused: the learned detections and the verified Line2D ones by their pose evidence (record 0069).
@@ -345,8 +367,8 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let verifier = tubeloc_detect::line2d::Verifier::shipped();
     let (threshold, threshold_grey, threshold_far) = (verifier.threshold, verifier.threshold_for(true), verifier.threshold_for_search(true, true));
     let pose_verifier = tubeloc_pipeline::shipped::line2d_pose_verifier("shipped")?;
-    let summary = json!({"split": part, "model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
-        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "pose_verifier": {"threshold": pose_verifier.threshold, "threshold_grey": pose_verifier.threshold_grey, "nms_iou": pose_verifier.nms_iou}, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "negatives": l2_neg},
+    let summary = json!({"split": part, "model": stage.model.name(), "calibration": stage.calibration, "learned": {"grey": grey, "colour": colour, "grey_assumed": grey_assumed}, "poses_grey": grey_poses, "poses_colour": colour_poses, "negatives": neg, "negatives_pds": neg_pds, "grasp_grey": grasp, "grasp_colour": grasp_colour,
+        "line2d": {"library": lib.display().to_string(), "verifier_threshold": threshold, "verifier_threshold_grey": threshold_grey, "verifier_threshold_far": threshold_far, "pose_verifier": {"threshold": pose_verifier.threshold, "threshold_grey": pose_verifier.threshold_grey, "nms_iou": pose_verifier.nms_iou}, "far_scale": [stage.line2d_far_scale.0, stage.line2d_far_scale.1], "max_upsample": stage.line2d_max_upsample, "grey": l2_grey, "colour": l2_colour, "grey_assumed": l2_grey_assumed, "negatives": l2_neg},
         "fused": {"grasp_grey": fused_grasp, "grasp_colour": fused_grasp_colour, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
@@ -359,7 +381,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         _ => format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n"),
     };
     writeln!(md, "{title}").ok();
-    writeln!(md, "Composites of rendered tubes on real rover frames of {the_sols} (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame; tubes shaded in the 600-800 nm band of these monochrome cameras, record 0086), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
+    writeln!(md, "Composites of rendered tubes on real rover frames of {the_sols} (`tubeloc synth real --split {part}`): grey frames with their PDS camera models (ground and sun of the frame; tubes shaded in the 600-800 nm band of these monochrome cameras, record 0086), colour Mastcam frames under the view `--assumed-view auto` takes for them (1.9 m high, 30 degrees down; a 6.8 degree field of view for the M-100 frames by their product names, 20 degrees for the M-34 frames and the panorama tiles). \"Assumed Navcam view\" rows: the grey backgrounds of {the_sols} (at least 500 px) under the view `--assumed-view navcam` takes for a grey frame without a camera model (45 degree field of view, 1.9 m high, 30 degrees down), a frame whose own camera model sees sky where that view puts tubes left out; the tubes nearer and wider than on the validation sols' camera-model frames, which look 17 degrees down or above the horizon (record 0088). Learned model `{}`, each image at its working scale.{}\n", stage.model.name(), stage.min_tubes.map_or(String::new(), |n| format!(" Each set is made to hold at least {n} tubes: with {} composites per grey frame and 1 per colour frame, and again with more per frame (up to {MAX_PER_VIEW}) where that gives fewer tubes.", stage.per_grey_frame))).ok();
     writeln!(
         md,
         "AP50 and AR carry their 95 % interval in brackets, from a bootstrap that resamples the sols (2000 resamples, seed 0: frames of one sol share terrain and light, so a sol is drawn whole); so do the figures per tube-free frame below.\n"
@@ -375,7 +397,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         format!("| {name} | {} | {} | {:.3}{} | {:.3}{} | {:.0} | {rest} |", v["images"], v["tubes"], num(v, "ap50"), bracket(&v["ap50_ci"]), num(v, "ar"), bracket(&v["ar_ci"]), num(v, "ms_per_image"))
     };
     let present = |v: &&Value| !v.is_null();
-    for (name, v) in [("grey (PDS geometry)", &grey), ("colour (assumed view)", &colour)].into_iter().filter(|r| present(&r.1)) {
+    for (name, v) in [("grey (PDS geometry)", &grey), ("grey (assumed Navcam view)", &grey_assumed), ("colour (assumed view)", &colour)].into_iter().filter(|r| present(&r.1)) {
         writeln!(md, "{}", row(name, v, format!("{:.3} / {:.3} | {:.3}", num(v, "precision_at_threshold"), num(v, "recall_at_threshold"), num(v, "ece")))).ok();
     }
     // The same detections with their masks snapped to their mono-refined poses: the masks of a
@@ -391,7 +413,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         let merged = json!({"images": v["images"], "tubes": v["tubes"], "ap50": s["ap50"], "ap50_ci": s["ap50_ci"], "ar": s["ar"], "ar_ci": s["ar_ci"], "ms_per_image": num(v, "ms_per_image") + num(&p["snapped"], "refine_ms_per_image")});
         writeln!(md, "{}", row(name, &merged, format!("- | {:.3}", num(s, "ece")))).ok();
     }
-    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D colour (assumed view)", &l2_colour)].into_iter().filter(|r| present(&r.1)) {
+    for (name, v) in [("Line2D grey (PDS geometry)", &l2_grey), ("Line2D grey (assumed Navcam view)", &l2_grey_assumed), ("Line2D colour (assumed view)", &l2_colour)].into_iter().filter(|r| present(&r.1)) {
         writeln!(md, "{}", row(name, v, format!("{:.2} false / image | -", num(v, "false_per_image")))).ok();
     }
     for (name, v) in [("fused grey (PDS geometry)", &fused_grey), ("fused colour (assumed view)", &fused_colour)].into_iter().filter(|r| present(&r.1)) {
@@ -409,12 +431,16 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     for (kind, _) in [("grey", &grey_set), ("colour", &colour_set)].into_iter().filter(|r| r.1.is_none()) {
         writeln!(md, "\nNo {kind} frames of {the_sols} in `{}`: the {kind} rows are left out.", stage.data.display()).ok();
     }
-    let width_rows: Vec<(String, &Value)> = [("grey", &grey, &grey_poses, &l2_grey, &fused_grey), ("colour", &colour, &colour_poses, &l2_colour, &fused_colour)]
+    if grey_assumed_set.is_none() {
+        writeln!(md, "\nNo grey background of {the_sols} of at least 500 px in `{}`: the assumed Navcam view rows are left out.", stage.data.display()).ok();
+    }
+    let mut width_rows: Vec<(String, &Value)> = [("grey", &grey, &grey_poses, &l2_grey, &fused_grey), ("colour", &colour, &colour_poses, &l2_colour, &fused_colour)]
         .into_iter()
         .flat_map(|(kind, learned, poses, l2, fused)| {
             [(format!("learned {kind}"), &learned["found_by_width"]), (format!("learned {kind}, snapped"), &poses["snapped"]["found_by_width"]), (format!("Line2D {kind}"), &l2["found_by_width"]), (format!("fused {kind}"), &fused["found_by_width"])]
         })
         .collect();
+    width_rows.extend([("learned grey, assumed Navcam view".to_string(), &grey_assumed["found_by_width"]), ("Line2D grey, assumed Navcam view".to_string(), &l2_grey_assumed["found_by_width"])]);
     if let Some(t) = crate::bench_widths::table(&width_rows) {
         writeln!(md, "\nTubes found, by their width in the image (`f D / r`: focal length, body diameter 17.1 mm, distance): a detection of the frame whose mask overlaps the tube's at IoU >= 0.5, whatever its score, i.e. what a perfect ranking of the detections would find (found / tubes):\n\n{}", t.trim_end()).ok();
     }

@@ -34,7 +34,7 @@ pub enum RealKind {
 pub enum GreyViewArg {
     /// Each frame's PDS camera and ground.
     Pds,
-    /// The assumed Navcam view.
+    /// The assumed Navcam view (a frame whose own camera model sees sky where that view puts tubes is left out).
     Assumed,
     /// Both.
     Both,
@@ -65,7 +65,7 @@ pub struct RealArgs {
     /// Geometry of the grey frames of `val` and `test`: `pds` (the frames with PDS camera
     /// models, each under its own camera and ground), `assumed` (the part's grey backgrounds
     /// under the assumed Navcam view: 45 degree field of view, 1.9 m high, 30 degrees down,
-    /// as the bench judges real frames without a camera model), or `both`.
+    /// as the bench judges real frames without a camera model; a frame whose own camera model sees sky where that view puts tubes is left out), or `both`.
     #[arg(long, value_enum, default_value = "pds")]
     pub grey_view: GreyViewArg,
     /// Horizontal field of view of the random training views, degrees, "LO:HI" (`--split
@@ -148,6 +148,16 @@ pub fn frames(a: &RealArgs) -> Result<Vec<RealView>> {
         GreyViewArg::Both => GreyView::Both,
     };
     let mut views = split_views(&a.data, a.split, (a.kind != RealKind::Colour).then_some(grey_view), a.kind != RealKind::Grey, a.min_size, a.hfov_deg, a.seed)?;
+    // A grey background that has a camera model of its own is not composited under the assumed
+    // view where its own camera sees sky (record 0088).
+    let cameras = a.data.join("with_cameras").join("cameras.json");
+    if a.kind != RealKind::Colour && grey_view != GreyView::Pds && cameras.exists() {
+        let own = tubeloc_synth::real_set::views_from_cameras_json(&cameras)?;
+        let dropped = tubeloc_synth::real_set::drop_sky_under_assumed_views(&mut views, &own, a.range_m.1);
+        if !dropped.is_empty() {
+            eprintln!("{} grey frame(s) left out of the assumed Navcam view: their own camera models ({}) see no ground where it puts tubes up to {} m: {}", dropped.len(), cameras.display(), a.range_m.1, dropped.join(", "));
+        }
+    }
     if let Some(n) = a.limit {
         views.truncate(n);
     }

@@ -116,7 +116,10 @@ fn bench_real_stage_leaves_out_what_the_data_lacks() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("colour_only");
     std::fs::create_dir_all(&data).unwrap();
-    std::fs::copy(real_data().join("MANIFEST.tsv"), data.join("MANIFEST.tsv")).unwrap();
+    // The manifest's colour rows only (and its header): no grey background, no camera list.
+    let manifest = std::fs::read_to_string(real_data().join("MANIFEST.tsv")).unwrap();
+    let colour_rows: Vec<&str> = manifest.lines().enumerate().filter(|(k, l)| *k == 0 || l.contains("mastcam")).map(|(_, l)| l).collect();
+    std::fs::write(data.join("MANIFEST.tsv"), colour_rows.join("\n") + "\n").unwrap();
     std::os::unix::fs::symlink(real_data().join("backgrounds"), data.join("backgrounds")).unwrap();
     let ds = dir.path().join("dataset");
     ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
@@ -126,6 +129,7 @@ fn bench_real_stage_leaves_out_what_the_data_lacks() {
     ok(&["bench", "--dataset", p(&ds), "--skip", skip, "--real-data", p(&data), "--real-frames", "2", "--real-min-tubes", "10", "--out", p(&out)]);
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/summary.json")).unwrap()).unwrap();
     assert!(summary["learned"]["grey"].is_null() && summary["line2d"]["grey"].is_null() && summary["fused"]["grey"].is_null(), "{}", summary["learned"]);
+    assert!(summary["learned"]["grey_assumed"].is_null() && summary["line2d"]["grey_assumed"].is_null(), "{}", summary["learned"]);
     let colour = &summary["learned"]["colour"];
     assert!(colour["tubes"].as_u64().unwrap() >= 10 && colour["images"].as_u64().unwrap() > 2, "{colour}");
     assert!((0.0..=1.0).contains(&summary["line2d"]["colour"]["ap50"].as_f64().unwrap()));
@@ -135,6 +139,7 @@ fn bench_real_stage_leaves_out_what_the_data_lacks() {
     assert!(report.contains(&format!("| colour (assumed view) | {} |", colour["images"])) && !report.contains("| grey (PDS geometry)"), "{report}");
     assert!(report.contains("Each set is made to hold at least 10 tubes"), "{report}");
     assert!(report.contains("No grey frames of the test sols in") && report.contains("the grey rows are left out"), "{report}");
+    assert!(report.contains("No grey background of the test sols of at least 500 px in") && !report.contains("| grey (assumed Navcam view)"), "{report}");
     assert!(report.contains("Real frames without tubes: no `negatives_val` folder in"), "{report}");
     assert!(report.contains("Reliability of the calibrated probability on the colour test detections"), "{report}");
     // Nothing of the part: its manifest lists no background, and there is no camera list.
@@ -173,6 +178,17 @@ fn bench_real_stage_runs_at_a_small_size() {
         assert!(bands.iter().all(|b| b["found"].as_u64() <= b["tubes"].as_u64()), "{set}: {bands:?}");
     }
     assert!(report.contains("Tubes found, by their width in the image") && report.contains("| learned grey, snapped |"), "{report}");
+    // The grey backgrounds under the assumed Navcam view (a grey frame without a camera model),
+    // for both detectors: their own composites, looking 30 degrees down.
+    for (detector, row) in [("learned", "| grey (assumed Navcam view) |"), ("line2d", "| Line2D grey (assumed Navcam view) |")] {
+        let v = &summary[detector]["grey_assumed"];
+        assert!(v["images"].as_u64().unwrap() >= 1 && v["tubes"].as_u64().unwrap() >= 1, "{detector}: {v}");
+        assert!((0.0..=1.0).contains(&v["ap50"].as_f64().unwrap()), "{detector}: {v}");
+        assert!(report.contains(row), "{row}: {report}");
+    }
+    let assumed: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/test_grey_assumed/annotations.json")).unwrap()).unwrap();
+    let pitch_down = |im: &Value| -im["ground"]["normal"][2].as_f64().unwrap();
+    assert!(assumed["images"].as_array().unwrap().iter().all(|im| (pitch_down(im) - 0.5).abs() < 1e-9), "every composite under the 30 degree view");
     // The learned masks snapped to their mono-refined poses, scored beside the network's.
     for set in ["poses_grey", "poses_colour"] {
         let ap = summary[set]["snapped"]["ap50"].as_f64().unwrap_or(-1.0);
@@ -296,6 +312,22 @@ fn bench_real_stage_runs_at_a_small_size() {
 /// The real stage on the validation part: composites and PDS frames of validation sols only,
 /// `negatives_val` not run, the report saying which part it measured; `--real-split train` is
 /// refused before any stage runs.
+/// Under the assumed Navcam view (30 degrees down) the validation part's grey frames of sol 60,
+/// whose own cameras look 10 degrees above the horizon, would have tubes pasted onto their sky:
+/// they are left out, named; sol 38's, looking 17 degrees down, are kept.
+#[test]
+fn grey_frames_looking_at_the_horizon_are_not_composited_under_the_navcam_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("assumed");
+    let o = tubeloc(&["synth", "real", "--data", p(&real_data()), "--split", "val", "--kind", "grey", "--grey-view", "assumed", "--tubes", "1:1", "--out", p(&out)]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("12 grey frame(s) left out of the assumed Navcam view") && e.contains("NLA_402815759EDR_F0050104NCAM00451M_.jpg"), "{e}");
+    let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("annotations.json")).unwrap()).unwrap();
+    let sols: Vec<i64> = gt["images"].as_array().unwrap().iter().map(|im| im["sol"].as_i64().unwrap()).collect();
+    assert_eq!(sols, vec![38; 6]);
+}
+
 #[test]
 fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let dir = tempfile::tempdir().unwrap();
@@ -308,10 +340,11 @@ fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real_val/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["split"], "val");
     assert!(summary["negatives"].is_null() && summary["line2d"]["negatives"].is_null() && summary["fused"]["negatives"].is_null(), "{}", summary["negatives"]);
-    for set in ["val_grey", "val_colour"] {
+    for set in ["val_grey", "val_colour", "val_grey_assumed"] {
         let gt: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real_val").join(set).join("annotations.json")).unwrap()).unwrap();
         let images = gt["images"].as_array().unwrap();
         assert!(!images.is_empty(), "{set}");
+        assert!(images.iter().any(|im| im["sol"].is_i64()), "{set}: no image names its sol");
         for im in images.iter().filter(|im| im["sol"].is_i64()) {
             let sol = im["sol"].as_i64().unwrap();
             assert!(!TEST_SOLS.iter().any(|t| (t - sol).abs() <= 1), "{set}: sol {sol} is a test sol");

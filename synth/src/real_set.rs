@@ -136,6 +136,44 @@ pub fn assumed_real_view(view: &AssumedView, image: PathBuf, width: u32, height:
     RealView { image, sol, camera, up_cam, height_m: view.height_m, sun_cam, geometry: "assumed" }
 }
 
+/// Whether `own`, a frame's own camera-model view, sees ground wherever `assumed` (the view the
+/// same frame is composited under) puts ground within `far_m` metres of the camera: a pixel
+/// whose assumed ground point lies within `far_m` must look below the horizon under the frame's
+/// own camera. A frame that looks at the horizon (say 10 degrees up) composited under a view
+/// 30 degrees down would have tubes pasted onto its sky and far hills. The two views must be of
+/// the same image size. Checked on a grid of 32 x 32 pixels.
+pub fn ground_where_assumed(own: &RealView, assumed: &RealView, far_m: f64) -> bool {
+    let (w, h) = (assumed.camera.width as f64, assumed.camera.height as f64);
+    (0..32 * 32).all(|k| {
+        let p = nalgebra::Point2::new(((k % 32) as f64 + 0.5) / 32.0 * w - 0.5, ((k / 32) as f64 + 0.5) / 32.0 * h - 0.5);
+        let ray = |v: &RealView| {
+            let (x, y) = v.camera.normalize(&p);
+            Vector3::new(x, y, 1.0).normalize()
+        };
+        // Distance along the assumed ray to the assumed ground (`up · X = -height`).
+        let down = -assumed.up_cam.dot(&ray(assumed));
+        let assumed_ground_near = down > 1e-9 && assumed.height_m / down <= far_m;
+        !assumed_ground_near || own.up_cam.dot(&ray(own)) < 0.0
+    })
+}
+
+/// Leaves out of `views` each frame under an assumed view whose own camera model (in
+/// `own`, matched by file name and size) does not see ground where the assumed view puts
+/// ground within `far_m` metres ([`ground_where_assumed`]); frames without a model of their
+/// own are kept. Returns the file names left out.
+pub fn drop_sky_under_assumed_views(views: &mut Vec<RealView>, own: &[RealView], far_m: f64) -> Vec<String> {
+    let mut dropped = Vec::new();
+    views.retain(|v| {
+        let name = v.image.file_name();
+        let keep = v.geometry != "assumed" || own.iter().filter(|o| o.image.file_name() == name && (o.camera.width, o.camera.height) == (v.camera.width, v.camera.height)).all(|o| ground_where_assumed(o, v, far_m));
+        if !keep {
+            dropped.push(v.image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+        }
+        keep
+    });
+    dropped
+}
+
 /// Options of a composite set.
 #[derive(Clone, Debug)]
 pub struct RealSetConfig {
@@ -316,6 +354,29 @@ pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A frame of its own camera 10 degrees up (the Navcam frames of sol 60) sees sky where the
+    /// Navcam view 30 degrees down puts tubes; 16.6 degrees down (sol 38) sees ground there up
+    /// to 5 m, not up to 20 m; a frame looking down as far as the view is kept, as is one
+    /// without a model of its own.
+    #[test]
+    fn frames_whose_own_camera_sees_sky_are_left_out_of_the_assumed_view() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let mut view = |pitch_deg: f64, name: &str| assumed_real_view(&AssumedView { pitch_deg, ..AssumedView::NAVCAM }, PathBuf::from(name), 1024, 1024, None, &mut rng);
+        let assumed = view(30.0, "a.png");
+        assert!(!ground_where_assumed(&view(-10.0, "a.png"), &assumed, 5.0));
+        assert!(ground_where_assumed(&view(16.6, "a.png"), &assumed, 5.0));
+        assert!(!ground_where_assumed(&view(16.6, "a.png"), &assumed, 20.0));
+        assert!(ground_where_assumed(&view(30.0, "a.png"), &assumed, 20.0));
+        let mut own = vec![view(-10.0, "up.png"), view(16.6, "down.png")];
+        for o in &mut own {
+            o.geometry = "pds";
+        }
+        let mut views = vec![view(30.0, "up.png"), view(30.0, "down.png"), view(30.0, "no_model.png"), own[0].clone()];
+        assert_eq!(drop_sky_under_assumed_views(&mut views, &own, 5.0), vec!["up.png".to_string()]);
+        let kept: Vec<_> = views.iter().map(|v| (v.image.to_string_lossy().into_owned(), v.geometry)).collect();
+        assert_eq!(kept, [("down.png".to_string(), "assumed"), ("no_model.png".to_string(), "assumed"), ("up.png".to_string(), "pds")]);
+    }
 
     /// A camera list entry whose rotation is no rotation, or whose sun direction is no
     /// direction, is refused naming the entry; a good entry is read.
@@ -629,7 +690,9 @@ pub enum GreyView {
     #[default]
     Pds,
     /// The grey backgrounds of the part (Navcam frames, without their camera models) under
-    /// [`AssumedView::NAVCAM`], as a frame with no camera model is judged.
+    /// [`AssumedView::NAVCAM`], as a frame with no camera model is judged (those whose own
+    /// camera model sees sky where that view puts tubes are left out by
+    /// [`drop_sky_under_assumed_views`]).
     Assumed,
     /// Both.
     Both,
