@@ -34,7 +34,8 @@ pub enum RealKind {
 pub enum GreyViewArg {
     /// Each frame's PDS camera and ground.
     Pds,
-    /// The assumed Navcam view (a frame whose own camera model sees sky where that view puts tubes is left out).
+    /// The assumed Navcam view (a frame whose own camera model sees sky where that view puts
+    /// tubes is left out).
     Assumed,
     /// Both.
     Both,
@@ -65,7 +66,8 @@ pub struct RealArgs {
     /// Geometry of the grey frames of `val` and `test`: `pds` (the frames with PDS camera
     /// models, each under its own camera and ground), `assumed` (the part's grey backgrounds
     /// under the assumed Navcam view: 45 degree field of view, 1.9 m high, 30 degrees down,
-    /// as the bench judges real frames without a camera model; a frame whose own camera model sees sky where that view puts tubes is left out), or `both`.
+    /// as the bench judges real frames without a camera model; a frame whose own camera model
+    /// sees sky where that view puts tubes is left out), or `both`.
     #[arg(long, value_enum, default_value = "pds")]
     pub grey_view: GreyViewArg,
     /// Horizontal field of view of the random training views, degrees, "LO:HI" (`--split

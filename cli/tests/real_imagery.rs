@@ -309,9 +309,6 @@ fn bench_real_stage_runs_at_a_small_size() {
     }
 }
 
-/// The real stage on the validation part: composites and PDS frames of validation sols only,
-/// `negatives_val` not run, the report saying which part it measured; `--real-split train` is
-/// refused before any stage runs.
 /// Under the assumed Navcam view (30 degrees down) the validation part's grey frames of sol 60,
 /// whose own cameras look 10 degrees above the horizon, would have tubes pasted onto their sky:
 /// they are left out, named; sol 38's, looking 17 degrees down, are kept.
@@ -328,6 +325,9 @@ fn grey_frames_looking_at_the_horizon_are_not_composited_under_the_navcam_view()
     assert_eq!(sols, vec![38; 6]);
 }
 
+/// The real stage on the validation part: composites and PDS frames of validation sols only,
+/// `negatives_val` not run, the report saying which part it measured; `--real-split train` is
+/// refused before any stage runs.
 #[test]
 fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let dir = tempfile::tempdir().unwrap();

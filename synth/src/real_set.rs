@@ -690,9 +690,9 @@ pub enum GreyView {
     #[default]
     Pds,
     /// The grey backgrounds of the part (Navcam frames, without their camera models) under
-    /// [`AssumedView::NAVCAM`], as a frame with no camera model is judged (those whose own
-    /// camera model sees sky where that view puts tubes are left out by
-    /// [`drop_sky_under_assumed_views`]).
+    /// [`AssumedView::NAVCAM`], as a frame with no camera model is judged
+    /// ([`drop_sky_under_assumed_views`] leaves out those whose own camera model sees sky
+    /// where that view puts tubes; `tubeloc synth real` applies it).
     Assumed,
     /// Both.
     Both,
