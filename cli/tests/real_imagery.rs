@@ -159,7 +159,7 @@ fn bench_real_stage_runs_at_a_small_size() {
     ok(&["synth", "--preset", "tiny", "--scenes", "2", "--scale", "0.25", "--resolution", "256", "--seed", "7", "--out", p(&ds)]);
     let out = dir.path().join("bench");
     // Line2D's far search on grey frames set for the bench (default 1.4): recorded and reported.
-    ok(&["bench", "--dataset", p(&ds), "--skip", "line2d,learned,poses,stereo,fullres,tags", "--real-data", p(&real_data()), "--real-frames", "2", "--line2d-far-scale", "1:1.2", "--out", p(&out)]);
+    ok(&["bench", "--dataset", p(&ds), "--skip", "line2d,learned,poses,stereo,fullres,tags", "--real-data", p(&real_data()), "--real-frames", "1", "--line2d-far-scale", "1:1.2", "--out", p(&out)]);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("## Real imagery"), "{report}");
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("real/summary.json")).unwrap()).unwrap();
@@ -232,9 +232,9 @@ fn bench_real_stage_runs_at_a_small_size() {
         let x = v[key].as_f64().unwrap();
         assert!(ci["lo"].as_f64().unwrap() <= x && x <= ci["hi"].as_f64().unwrap() && ci["sols"].as_u64().unwrap() >= 1, "{key}: {x} {ci}");
     }
-    assert_eq!(summary["negatives"]["frames"], 2);
+    assert_eq!(summary["negatives"]["frames"], 1);
     // The test-sol frames with PDS cameras, each under its own camera and ground.
-    assert_eq!(summary["negatives_pds"]["frames"], 2);
+    assert_eq!(summary["negatives_pds"]["frames"], 1);
     assert!(summary["negatives_pds"]["located_per_frame"].as_f64().unwrap() >= 0.0);
     for f in summary["negatives_pds"]["per_frame"].as_array().unwrap() {
         let sol = f["sol"].as_i64().unwrap();
@@ -253,7 +253,7 @@ fn bench_real_stage_runs_at_a_small_size() {
     }
     assert_eq!(summary["line2d"]["far_scale"], serde_json::json!([1.0, 1.2]));
     assert_eq!(summary["line2d"]["max_upsample"], 2.0);
-    assert_eq!(summary["line2d"]["negatives"]["frames"], 2);
+    assert_eq!(summary["line2d"]["negatives"]["frames"], 1);
     assert!(summary["line2d"]["negatives"]["kept_per_frame"].as_f64().unwrap() >= 0.0);
     // The fused detector (the learned and the verified Line2D detections by their pose
     // evidence) beside both; Line2D's pose verifier is reported with its cuts.
@@ -264,9 +264,9 @@ fn bench_real_stage_runs_at_a_small_size() {
     }
     let pv = &summary["line2d"]["pose_verifier"];
     assert!(pv["threshold"].as_f64().unwrap() > 0.0 && pv["threshold_grey"].as_f64().unwrap() > 0.0, "{pv}");
-    assert_eq!(summary["fused"]["negatives"]["frames"], 2);
+    assert_eq!(summary["fused"]["negatives"]["frames"], 1);
     // `locate --detector fused` at its embedded calibration's threshold on the same frames.
-    assert_eq!(summary["fused"]["locate_negatives"]["frames"], 2);
+    assert_eq!(summary["fused"]["locate_negatives"]["frames"], 1);
     assert_eq!(summary["fused"]["calibration"]["target_precision"], 0.95);
     for set in ["grey", "colour"] {
         let r = summary["fused"][set]["recall_at_threshold"].as_f64().unwrap();
@@ -289,10 +289,10 @@ fn bench_real_stage_runs_at_a_small_size() {
     assert!(real_md.contains("searched again 1.2x further enlarged"), "{real_md}");
     assert!(real_md.contains("| colour, snapped to poses |") && real_md.contains("| grey, snapped, ranked by pose evidence |"), "{real_md}");
     assert_eq!(real_md.matches("centre along the axis").count(), 2, "{real_md}");
-    // The tube-free frames' figures by folder: the two frames, each in its folder's row.
+    // The tube-free frames' figures by folder: the one frame, in its folder's row.
     let rows: Vec<&str> = real_md.lines().skip_while(|l| !l.starts_with("| folder of `negatives_val` |")).skip(2).take_while(|l| l.starts_with("| `")).collect();
     let frames: u64 = rows.iter().map(|r| r.split('|').nth(2).unwrap().trim().parse::<u64>().unwrap()).sum();
-    assert_eq!(frames, 2, "{real_md}");
+    assert_eq!(frames, 1, "{real_md}");
     // Each tube-free frame's figures are what `locate --assumed-view auto` gives on it (the
     // view of the camera its product name names, else of its kind).
     assert!(real_md.contains("`tubeloc locate --assumed-view auto --image F`"), "{real_md}");
@@ -333,7 +333,7 @@ fn bench_real_stage_on_the_validation_part_uses_only_validation_sols() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
     // `--only real`: no synthetic dataset; with every part on it skipped, none is rendered or asked for.
-    ok(&["bench", "--only", "real", "--real-data", p(&real_data()), "--real-frames", "2", "--real-split", "val", "--out", p(&out)]);
+    ok(&["bench", "--only", "real", "--real-data", p(&real_data()), "--real-frames", "1", "--real-split", "val", "--out", p(&out)]);
     assert!(!out.join("dataset").exists() && !out.join("splits").exists());
     // Its own folder: a validation run never stands in for the test part's.
     assert!(!out.join("real").exists());
