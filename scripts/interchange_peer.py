@@ -1,4 +1,4 @@
-"""Peer for tubeloc's calibration interchange test (calib/tests/interchange_peer.rs).
+"""Peer for tubeloc's calibration interchange test (calib/tests/integration/interchange_peer.rs).
 
   interchange_peer.py JOB.json    prints JSON with the pixels each written file projects to
 

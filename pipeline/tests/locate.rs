@@ -1,7 +1,7 @@
 //! The pipeline on rendered scenes: `Locator::locate` returns the rendered tube, mono with a
 //! ground plane and with a stereo pair.
 
-#[path = "../../refine/tests/common/mod.rs"]
+#[path = "../../refine/tests/integration/common/mod.rs"]
 #[allow(clippy::too_many_arguments)]
 mod common;
 

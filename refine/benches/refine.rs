@@ -10,7 +10,7 @@
 //! Run: `cargo bench -p tubeloc-refine --bench refine` (criterion reports the median time per
 //! tube).
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/integration/common/mod.rs"]
 mod common;
 
 use common::*;

@@ -9,7 +9,7 @@
 //!
 //! Run: `cargo run --release -p tubeloc-refine --example refine_speed [N] [CASE]`
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/integration/common/mod.rs"]
 mod common;
 
 use common::*;

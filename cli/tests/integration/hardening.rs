@@ -3,7 +3,7 @@
 //! images the C detector cannot take, template libraries too large to build, stale temporaries,
 //! outputs that are not regular files, and a closed stdout.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::{Path, PathBuf};

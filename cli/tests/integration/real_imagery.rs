@@ -1,7 +1,7 @@
 //! Real imagery: composite sets on real rover frames split by sol, and the bench's real stage
 //! at a small size. These need `../shared/data/real_mars` beside the repository.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

@@ -3,7 +3,7 @@
 //! and the binary names no path of the workspace that built it. The demo uses the shipped
 //! learned model (embedded) and `locate` uses the model's shipped score calibration.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

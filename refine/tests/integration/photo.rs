@@ -1,6 +1,6 @@
 //! Photometric depth from a rendered rectified pair (tubeloc_refine::photo).
 
-mod common;
+use crate::common;
 
 use common::*;
 use rand::SeedableRng;

@@ -1,7 +1,7 @@
 //! `tubeloc calib rig` writes ROS camera_info and kalibr camchain files, and every `--rig`
 //! reads them back through one reader.
 
-mod common;
+use crate::common;
 use common::{ok, p, stderr, tubeloc};
 
 #[test]

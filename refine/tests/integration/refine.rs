@@ -1,6 +1,6 @@
 //! End-to-end refinement on rendered scenes with exact ground truth.
 
-mod common;
+use crate::common;
 
 use common::*;
 use nalgebra::{Rotation3, Unit, Vector3};

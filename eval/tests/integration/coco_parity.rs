@@ -6,7 +6,7 @@
 //! Needs `python3` with pycocotools. Without it the test is skipped with a message, unless the
 //! environment variable `CI` is set, in which case it fails.
 
-mod common;
+use crate::common;
 
 use std::process::Command;
 use tubeloc_core::coco::load_results;

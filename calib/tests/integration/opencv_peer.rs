@@ -2,7 +2,7 @@
 //! same synthetic set, both against the truth.
 //!
 //! Needs python3 with OpenCV, which CI does not install: the test is `#[ignore]`d; run it with
-//! `cargo test --release -p tubeloc-calib --test opencv_peer -- --ignored`. It fails when python3
+//! `cargo test --release -p tubeloc-calib --test integration opencv_peer:: -- --ignored`. It fails when python3
 //! or cv2 is missing.
 
 use std::process::Command;

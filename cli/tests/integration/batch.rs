@@ -3,7 +3,7 @@
 //! merge refuses missing and overlapping shards; a bad frame is recorded and the others go on;
 //! bad shards are bad command lines.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

@@ -1,6 +1,6 @@
 //! Two-view contour fit on rendered rectified pairs (tubeloc_refine::two_view).
 
-mod common;
+use crate::common;
 
 use common::*;
 use rand::SeedableRng;

@@ -1,7 +1,7 @@
 //! End-to-end tests of the `tubeloc` program: exit codes, error messages, `locate` on a rendered
 //! scene (checked against the renderer's exact poses) and `bench` resuming an interrupted run.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

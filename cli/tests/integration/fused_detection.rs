@@ -3,7 +3,7 @@
 //! their own and the learned detections refined and scored by `tubeloc refine`. Needs
 //! `../shared/data/real_mars` beside the repository (composites on real grey frames).
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

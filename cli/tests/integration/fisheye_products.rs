@@ -2,7 +2,7 @@
 //! through a CAHVORE lens whose linear part is the render's pinhole, written as PDS3 products,
 //! locates as the render does once resampled, and worse taken as its pinhole.
 
-mod common;
+use crate::common;
 
 use common::{ok, p, stderr, tubeloc};
 use nalgebra::{Matrix3, Vector3};

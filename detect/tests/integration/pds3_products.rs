@@ -5,7 +5,7 @@
 //! test data), and is skipped otherwise:
 //!
 //! ```sh
-//! TUBELOC_PDS_PRODUCTS=DIR cargo test --release -p tubeloc-detect --test pds3_products -- --ignored
+//! TUBELOC_PDS_PRODUCTS=DIR cargo test --release -p tubeloc-detect --test integration pds3_products:: -- --ignored
 //! ```
 
 use std::path::{Path, PathBuf};

@@ -1,7 +1,7 @@
 //! COCO evaluation without Python: numbers recorded from pycocotools 2.0.11 on a committed
 //! fixture, breakdown semantics, hand-checked small cases and error messages.
 
-mod common;
+use crate::common;
 
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -19,7 +19,8 @@ fn floats(v: &Value) -> Vec<f64> {
 }
 
 /// Regenerates the committed fixture (needs pycocotools):
-/// `cargo test --release -p tubeloc-eval --test coco_eval -- --ignored regenerate`.
+/// `cargo test --release -p tubeloc-eval --test integration -- --ignored
+/// coco_eval::regenerate`.
 #[test]
 #[ignore]
 fn regenerate_fixture() {

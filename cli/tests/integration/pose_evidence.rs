@@ -1,7 +1,7 @@
 //! The pose evidence: fitted by `tubeloc eval --fit-pose-evidence`, applied by `tubeloc refine
 //! --snapped-out --pose-evidence`, checked on scenes it was not fitted on.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

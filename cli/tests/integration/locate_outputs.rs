@@ -4,7 +4,7 @@
 //! refused as a bad command line before any work; no tube handed over from an underexposed
 //! frame.
 
-mod common;
+use crate::common;
 
 use common::*;
 use nalgebra::Vector3;

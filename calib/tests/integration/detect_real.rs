@@ -161,7 +161,8 @@ fn agreement(photos: &[Photo], config: &DetectorConfig, decoder: Decoder, shift:
 
 /// The measurement behind docs/design/0026: every combination of JPEG decoder, encoding, edge
 /// refinement and decimation against the reference corners, as a markdown table.
-/// `cargo test --release -p tubeloc-calib --test detect_real -- --ignored --nocapture settings_table`
+/// `cargo test --release -p tubeloc-calib --test integration -- --ignored --nocapture
+/// detect_real::settings_table`
 #[test]
 #[ignore = "measurement (prints a table); needs ../shared/data"]
 fn settings_table_on_real_photos() {

@@ -3,7 +3,7 @@
 //! steps (`refine --snapped-out --pose-evidence`). Needs `../shared/data/real_mars` beside the
 //! repository (composites on real grey frames with their cameras and ground).
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::Value;

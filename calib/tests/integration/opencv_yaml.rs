@@ -2,7 +2,7 @@
 //! and a file we write is read by `cv2.FileStorage` with the same numbers.
 //!
 //! Needs python3 with OpenCV, which CI does not install: the test is `#[ignore]`d; run it with
-//! `cargo test --release -p tubeloc-calib --test opencv_yaml -- --ignored`. It fails when python3
+//! `cargo test --release -p tubeloc-calib --test integration opencv_yaml:: -- --ignored`. It fails when python3
 //! or cv2 is missing.
 
 use std::path::Path;

@@ -1,7 +1,7 @@
 //! `tubeloc refine --dataset --stereo` on a small rendered stereo set (3 pairs of 384 px crops
 //! of the paper preset, 20 cm baseline): seeds = exact poses perturbed by 10 mm / 5 degrees.
 
-mod common;
+use crate::common;
 
 use serde_json::Value;
 use std::path::Path;
