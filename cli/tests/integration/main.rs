@@ -1,6 +1,6 @@
-//! Integration tests of the `tubeloc` command line (most run the built binary), one module per subject in one test binary
-//! (built and linked once). One subject: `cargo test --release -p tubeloc --test integration
-//! <module>::`.
+//! Integration tests of the `tubeloc` command line (most run the built binary), one module
+//! per subject in one test binary (built and linked once). One subject:
+//! `cargo test --release -p tubeloc --test integration <module>::`.
 
 mod batch;
 mod calib_interchange;
