@@ -7,12 +7,6 @@ use common::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-fn real_data() -> PathBuf {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
-    assert!(d.join("MANIFEST.tsv").exists(), "{} is missing: these tests need ../shared/data beside the repository", d.display());
-    d
-}
-
 const TEST_SOLS: [i64; 10] = [53, 344, 372, 688, 729, 3192, 3423, 5086, 5104, 5105];
 
 /// A folder of new frames whose sols are unknown (or training sols by our split): `--split

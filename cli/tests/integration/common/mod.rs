@@ -80,13 +80,20 @@ pub fn score(v: &serde_json::Value) -> f64 {
     v["score"].as_f64().unwrap()
 }
 
+/// The shared real rover data, `../shared/data/real_mars` beside the repository; a test that
+/// needs it fails naming the missing folder.
+pub fn real_data() -> std::path::PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
+    assert!(d.join("MANIFEST.tsv").exists(), "{} is missing: this test needs ../shared/data beside the repository", d.display());
+    d
+}
+
 /// Three composites on real grey Navcam frames of the validation sols (each frame's own camera
 /// and ground; `tubeloc synth real --split val --kind grey --limit 3 --seed 3`) in `dir/set`,
 /// and the default template library in `dir/default.tlt`. Needs `../shared/data/real_mars`
 /// beside the repository.
 pub fn real_grey_val_set_and_library(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");
-    assert!(real.join("MANIFEST.tsv").exists(), "{} is missing: this test needs ../shared/data beside the repository", real.display());
+    let real = real_data();
     let set = dir.join("set");
     ok(&["synth", "real", "--data", p(&real), "--split", "val", "--kind", "grey", "--per-view", "1", "--limit", "3", "--seed", "3", "--out", p(&set)]);
     let lib = dir.join("default.tlt");
