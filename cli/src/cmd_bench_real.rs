@@ -160,6 +160,7 @@ fn detect_eval(set: &Path, model: &crate::cmd_detect_learned::ModelChoice, cal: 
     let mut v = json!({"images": gt.images.len(), "tubes": n_gt, "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "ms_per_image": ms, "found_by_width": crate::bench_widths::found_by_width(gt, &dt)?});
     merge(&mut v, at_threshold(&ev, cal, n_gt));
     merge(&mut v, crate::bench_intervals::ap_ar_by_sol(gt, &ev));
+    v["by_sol"] = crate::bench_sols::by_sol(gt, &ev)?;
     Ok(v)
 }
 
@@ -282,6 +283,7 @@ fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, o
     let n = gt.images.len().max(1) as f64;
     let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64, "found_by_width": crate::bench_widths::found_by_width(gt, &dt)?});
     merge(&mut v, crate::bench_intervals::ap_ar_by_sol(gt, &ev));
+    v["by_sol"] = crate::bench_sols::by_sol(gt, &ev)?;
     if let Some(cal) = cal {
         merge(&mut v, at_threshold(&ev, cal, gt.annotations.len()));
     }
@@ -443,6 +445,9 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     width_rows.extend([("learned grey, assumed Navcam view".to_string(), &grey_assumed["found_by_width"]), ("Line2D grey, assumed Navcam view".to_string(), &l2_grey_assumed["found_by_width"])]);
     if let Some(t) = crate::bench_widths::table(&width_rows) {
         writeln!(md, "\nTubes found, by their width in the image (`f D / r`: focal length, body diameter 17.1 mm, distance): a detection of the frame whose mask overlaps the tube's at IoU >= 0.5, whatever its score, i.e. what a perfect ranking of the detections would find (found / tubes):\n\n{}", t.trim_end()).ok();
+    }
+    if let Some(t) = crate::bench_sols::table(&[("learned AP50 / AR", &grey["by_sol"]), ("Line2D", &l2_grey["by_sol"]), ("fused", &fused_grey["by_sol"])]) {
+        writeln!(md, "\nGrey composites (PDS geometry) by sol, each scored on its own frames (camera: the background's product name, `--assumed-view` names):\n\n{}", t.trim_end()).ok();
     }
     for (kind, p) in [("grey", &grey_poses), ("colour", &colour_poses)].into_iter().filter(|r| present(&r.1)) {
         use crate::bench_intervals::bracket;

@@ -9,6 +9,7 @@ pub(crate) mod args;
 mod bench_grasp;
 mod bench_intervals;
 mod bench_negatives;
+mod bench_sols;
 mod bench_widths;
 mod cmd_bench;
 mod cmd_bench_real;

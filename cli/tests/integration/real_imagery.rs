@@ -172,6 +172,17 @@ fn bench_real_stage_runs_at_a_small_size() {
         assert!(bands.iter().all(|b| b["found"].as_u64() <= b["tubes"].as_u64()), "{set}: {bands:?}");
     }
     assert!(report.contains("Tubes found, by their width in the image") && report.contains("| learned grey, snapped |"), "{report}");
+    // Each sol of the composite sets scored on its own frames, with its camera: the sols' images
+    // and tubes add up to the set's.
+    for (detector, set) in [("learned", "grey"), ("learned", "colour"), ("line2d", "grey"), ("fused", "grey")] {
+        let v = &summary[detector][set];
+        let rows = v["by_sol"].as_array().unwrap_or_else(|| panic!("{detector} {set}: {v}"));
+        for key in ["images", "tubes"] {
+            assert_eq!(rows.iter().map(|r| r[key].as_u64().unwrap()).sum::<u64>(), v[key].as_u64().unwrap(), "{detector} {set} {key}: {rows:?}");
+        }
+        assert!(rows.iter().all(|r| r["cameras"].as_array().is_some_and(|c| !c.is_empty()) && (0.0..=1.0).contains(&r["ap50"].as_f64().unwrap_or(0.0))), "{rows:?}");
+    }
+    assert!(report.contains("Grey composites (PDS geometry) by sol") && report.contains("| sol | camera | images | tubes | learned AP50 / AR | Line2D | fused |"), "{report}");
     // The grey backgrounds under the assumed Navcam view (a grey frame without a camera model),
     // for both detectors: their own composites, looking 30 degrees down.
     for (detector, row) in [("learned", "| grey (assumed Navcam view) |"), ("line2d", "| Line2D grey (assumed Navcam view) |")] {
