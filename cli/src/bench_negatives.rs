@@ -6,13 +6,13 @@
 //! frame carries its interval by sol ([`crate::bench_intervals`]) and a breakdown by the data's
 //! folder (camera and frame size).
 
-use crate::cmd_detect_line2d::Line2dRunner;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 use tubeloc_core::AssumedView;
+use tubeloc_pipeline::FusedTubeDetector;
 
 /// Assumed view of the negative frame at `path`, what `tubeloc locate --assumed-view auto`
 /// takes ([`AssumedView::of_frame`]): the view of the mast camera its product name names,
@@ -112,13 +112,13 @@ fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
     Ok(paths)
 }
 
-/// Line2D detections (alone at the default threshold, or fused) on each real negative frame, under the same assumed
-/// cameras as the learned detector's negatives.
-pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) -> Result<Value> {
+/// Line2D's detections verified by pose, and the fused detections made from the same Line2D
+/// matches, on each real negative frame, under the same assumed cameras as the learned
+/// detector's negatives: `[line2d, fused]`.
+pub fn line2d_negatives(data: &Path, det: &FusedTubeDetector, frames: Option<usize>) -> Result<[Value; 2]> {
     let paths = negative_paths(data, frames)?;
     let sols = negative_sols(data, &paths)?;
-    let mut per_frame = Vec::new();
-    let mut ms = 0.0;
+    let (mut l2_frames, mut fused_frames) = (Vec::new(), Vec::new());
     for p in &paths {
         let image = tubeloc_detect::input::open_eight_bit(p).with_context(|| format!("reading {}", p.display()))?;
         let input = tubeloc_detect::input::rgb8_of(&image);
@@ -127,17 +127,26 @@ pub fn line2d_negatives(data: &Path, det: &Line2dRunner, frames: Option<usize>) 
         let (view_name, view) = negative_view(p, grey);
         let (camera, ground) = (view.camera(image.width(), image.height()), view.ground_plane()?);
         let t = Instant::now();
-        let found = det.detect(&image, Some(&camera), Some(&ground), 0)?.0;
-        let dt = t.elapsed().as_secs_f64() * 1e3;
-        ms += dt;
+        let (found, _) = det.line2d_verified(&image, Some(&camera), Some(&ground), 0)?;
+        let l2_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let fused = det.fuse(&image, &camera, Some(&ground), 0, found.clone())?;
+        let fused_ms = l2_ms + t.elapsed().as_secs_f64() * 1e3;
         let (sx, sy) = det.line2d().scale_for(Some(&camera));
-        per_frame.push(json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "view": view_name, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": dt, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()}));
+        // As `tubeloc detect` writes them (COCO results entries).
+        let frame = |found: Vec<Value>, ms: f64| json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "view": view_name, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": ms, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()});
+        l2_frames.push(frame(found.iter().map(|d| d.to_coco_json(0)).collect(), l2_ms));
+        fused_frames.push(frame(crate::cmd_detect_line2d::fused_json(fused, 0), fused_ms));
     }
-    let n = per_frame.len().max(1) as f64;
-    let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
-    let max = per_frame.iter().filter_map(|f| f["kept"].as_u64()).max().unwrap_or(0);
-    let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "kept");
-    Ok(json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "kept_per_frame_ci": ci, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame}))
+    let summary = |per_frame: Vec<Value>| {
+        let n = per_frame.len().max(1) as f64;
+        let kept = per_frame.iter().filter_map(|f| f["kept"].as_u64()).sum::<u64>() as f64;
+        let max = per_frame.iter().filter_map(|f| f["kept"].as_u64()).max().unwrap_or(0);
+        let ms = per_frame.iter().filter_map(|f| f["ms"].as_f64()).sum::<f64>();
+        let ci = crate::bench_intervals::per_frame_by_sol(&per_frame, &sols, "kept");
+        json!({"frames": per_frame.len(), "kept_per_frame": kept / n, "kept_per_frame_ci": ci, "max_per_frame": max, "ms_per_image": ms / n, "per_frame": per_frame})
+    };
+    Ok([summary(l2_frames), summary(fused_frames)])
 }
 
 /// The folder of `negatives_val` a frame lies in (`negatives_val/<folder>/<file>`: the data's

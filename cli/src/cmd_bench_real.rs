@@ -34,6 +34,7 @@ use std::time::Instant;
 use tubeloc_core::{files, CocoDataset, ScoreCalibration};
 use tubeloc_detect::learned::DecodeConfig;
 use tubeloc_eval::coco_eval::{CocoEvaluator, IouType};
+use tubeloc_pipeline::FusedTubeDetector;
 
 /// Options of the real stage.
 pub struct RealStage {
@@ -260,28 +261,56 @@ fn line2d_opts(lib: &Path, stage: &RealStage) -> crate::cmd_detect_line2d::Line2
     opts
 }
 
-/// Line2D (alone or fused) on a composite set (each image's own camera, resampled to the library's scale):
-/// COCO segm AP50 / AR, false detections per image, time per image.
-fn line2d_eval(set: &Path, det: &Line2dRunner, cal: Option<&ScoreCalibration>, out: &Path) -> Result<Value> {
-    std::fs::create_dir_all(out)?;
+/// Line2D verified by pose on a composite set (each image's own camera, resampled to the
+/// library's scale), and with `fused` (its calibration and folder) the fused detections made
+/// from the same Line2D matches (record 0069): for each, COCO segm AP50 / AR, false detections
+/// per image, time per image (the fused row's: Line2D's and its own). `[line2d, fused]`, the
+/// second `Null` without `fused`.
+fn line2d_eval(set: &Path, det: &FusedTubeDetector, fused: Option<(&ScoreCalibration, &Path)>, out: &Path) -> Result<[Value; 2]> {
     let data = crate::detect_dataset::DetectionDataset::load(set)?;
     let (images, cameras, grounds) = (data.images(), data.cameras(), data.grounds());
-    let mut dets = Vec::new();
-    let mut ms = 0.0;
+    let (mut l2_dets, mut fused_dets) = (Vec::new(), Vec::new());
+    let (mut l2_ms, mut fused_ms) = (0.0, 0.0);
     for (id, path) in &images {
         let img = image::DynamicImage::ImageRgb8(tubeloc_detect::input::open_eight_bit(path).with_context(|| format!("reading {}", path.display()))?.into_rgb8());
+        let (camera, ground) = (cameras.get(id), grounds.get(id));
         let t = Instant::now();
-        let (found, _) = det.detect(&img, cameras.get(id), grounds.get(id), *id)?;
-        ms += t.elapsed().as_secs_f64() * 1e3;
-        dets.extend(found);
+        let (found, _) = det.line2d_verified(&img, camera, ground, *id)?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        l2_ms += ms;
+        if fused.is_some() {
+            let t = Instant::now();
+            let both = match crate::cmd_detect_line2d::fused_camera(det, &img, camera) {
+                (c, true) => det.fuse(&img, &c, ground, *id, found.clone())?,
+                // Under another camera than Line2D's row, the fused detector matches again.
+                (c, false) => det.detect_fused(&img, &c, ground, *id)?,
+            };
+            fused_ms += ms + t.elapsed().as_secs_f64() * 1e3;
+            fused_dets.extend(crate::cmd_detect_line2d::fused_json(both, *id));
+        }
+        l2_dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
     }
     let gt = data.coco();
+    let n = images.len().max(1) as f64;
+    let l2 = scored(gt, &l2_dets, l2_ms / n, None, out)?;
+    let fused = match fused {
+        Some((cal, dir)) => scored(gt, &fused_dets, fused_ms / n, Some(cal), dir)?,
+        None => Value::Null,
+    };
+    Ok([l2, fused])
+}
+
+/// Saves detections `dets` (COCO results entries) of the composite set `gt` in `out` and scores
+/// them: COCO segm AP50 / AR with their intervals by sol, by sol, by tube width, false
+/// detections per image, `ms` per image, and with `cal` the precision / recall at its threshold.
+fn scored(gt: &CocoDataset, dets: &[Value], ms: f64, cal: Option<&ScoreCalibration>, out: &Path) -> Result<Value> {
+    std::fs::create_dir_all(out)?;
     let dt = saved_results(gt, out, &dets)?;
     let ev = CocoEvaluator::new(gt, &dt, IouType::Segm)?;
     let r = ev.evaluate();
     let fp = ev.outcomes_at_iou50().iter().filter(|o| !o.2).count();
     let n = gt.images.len().max(1) as f64;
-    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms / images.len().max(1) as f64, "found_by_width": crate::bench_widths::found_by_width(gt, &dt)?});
+    let mut v = json!({"images": gt.images.len(), "tubes": gt.annotations.len(), "detections": dets.len(), "ap50": r.stats[1], "ap": r.stats[0], "ar": r.stats[8], "false_per_image": fp as f64 / n, "ms_per_image": ms, "found_by_width": crate::bench_widths::found_by_width(gt, &dt)?});
     merge(&mut v, crate::bench_intervals::ap_ar_by_sol(gt, &ev));
     v["by_sol"] = crate::bench_sols::by_sol(gt, &ev)?;
     if let Some(cal) = cal {
@@ -343,21 +372,19 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     // Line2D: the default library, every frame resampled to its scale, shipped verifier.
     let lib = line2d_library(&dir)?;
     let l2_opts = line2d_opts(&lib, stage);
-    // Libraries and models are loaded outside the timings.
-    let l2 = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, None, l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
-    let l2_grey = each(&grey_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_grey")))?;
-    let l2_colour = each(&colour_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_colour")))?;
-    let l2_grey_assumed = each(&grey_assumed_set, |s| line2d_eval(s, &l2, None, &dir.join("line2d_grey_assumed")))?;
-    let l2_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &l2, stage.frames)? } else { Value::Null };
-    drop(l2);
-    // Fused: the learned detections and the verified Line2D ones by their pose evidence (record 0069).
+    // Line2D verified by pose, and fused: the learned detections and the verified Line2D ones
+    // by their pose evidence (record 0069), from one runner, so that each image's Line2D
+    // matches are made once. Libraries and models are loaded outside the timings.
     let fusion = crate::cmd_detect_line2d::Fusion { model: stage.model.load()?, decode: DecodeConfig::default(), range: Some(tubeloc_detect::scale::RangeBand::default()), origin: stage.model.name() };
-    let fused = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion), l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
+    let runner = Line2dRunner::new(crate::cmd_detect_line2d::detector_from_opts(&l2_opts)?.0, Some(fusion), l2_opts.pose_verifier()?, tubeloc_pipeline::pose_verifier::CLUTTER_FLOOR)?;
+    let fused = runner.fused().context("the fused runner")?;
     let fused_cal = tubeloc_pipeline::shipped::fused_calibration(stage.model.path())?;
-    let fused_grey = each(&grey_set, |s| line2d_eval(s, &fused, Some(&fused_cal), &dir.join("fused_grey")))?;
-    let fused_colour = each(&colour_set, |s| line2d_eval(s, &fused, Some(&fused_cal), &dir.join("fused_colour")))?;
-    let fused_neg = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, &fused, stage.frames)? } else { Value::Null };
-    drop(fused);
+    let none = || [Value::Null, Value::Null];
+    let [l2_grey, fused_grey] = grey_set.as_deref().map_or(Ok(none()), |s| line2d_eval(s, fused, Some((&fused_cal, &dir.join("fused_grey"))), &dir.join("line2d_grey")))?;
+    let [l2_colour, fused_colour] = colour_set.as_deref().map_or(Ok(none()), |s| line2d_eval(s, fused, Some((&fused_cal, &dir.join("fused_colour"))), &dir.join("line2d_colour")))?;
+    let [l2_grey_assumed, _] = grey_assumed_set.as_deref().map_or(Ok(none()), |s| line2d_eval(s, fused, None, &dir.join("line2d_grey_assumed")))?;
+    let [l2_neg, fused_neg] = if with_negatives { crate::bench_negatives::line2d_negatives(&stage.data, fused, stage.frames)? } else { none() };
+    drop(runner);
     // `locate --detector fused` at its defaults (its calibration's threshold) on the same frames.
     let fused_detector: Arc<dyn tubeloc_pipeline::TubeDetector> = Arc::new(tubeloc_pipeline::shipped::fused_detector(Some(&lib), stage.model.path(), "1:4")?);
     let mut fused_settings = tubeloc_pipeline::LocatorSettings::default();

@@ -177,6 +177,14 @@ impl Line2dRunner {
         })
     }
 
+    /// The fused detector, where this runner is one.
+    pub fn fused(&self) -> Option<&tubeloc_pipeline::FusedTubeDetector> {
+        match self {
+            Line2dRunner::Fused(f) => Some(f),
+            _ => None,
+        }
+    }
+
     /// The Line2D detector (library and matching parameters).
     pub fn line2d(&self) -> &Line2dDetector {
         match self {
@@ -196,18 +204,9 @@ impl Line2dRunner {
                 Ok((json(dets), verified))
             }
             Line2dRunner::Fused(f) => {
-                let (w, h) = (image.width(), image.height());
-                let own = camera.filter(|c| (c.width, c.height) == (w, h)).cloned();
-                let camera = own.clone().unwrap_or_else(|| {
-                    let k = &f.line2d().library.params.camera;
-                    CameraModel { width: w, height: h, fx: k.fx, fy: k.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0, distortion: Default::default() }
-                });
+                let (camera, own) = fused_camera(f, image, camera);
                 let found = f.detect_fused(image, &camera, ground, image_id)?;
-                let out = found.into_iter().map(|d| match d.line2d {
-                    Some(l) => l.to_coco_json(image_id),
-                    None => serde_json::to_value(&d.detection).unwrap_or_default(),
-                });
-                Ok((out.collect(), own.is_some() && ground.is_some()))
+                Ok((fused_json(found, image_id), own && ground.is_some()))
             }
             Line2dRunner::Plain(d) => {
                 let rgb = tubeloc_detect::input::rgb8_pixels(image);
@@ -216,6 +215,31 @@ impl Line2dRunner {
             }
         }
     }
+}
+
+/// The camera the fused detector takes `image` under: `camera` where it is of the image's size
+/// (and `true`), else the template library's focal lengths centred on the image (and `false`).
+pub fn fused_camera(f: &tubeloc_pipeline::FusedTubeDetector, image: &image::DynamicImage, camera: Option<&CameraModel>) -> (CameraModel, bool) {
+    let (w, h) = (image.width(), image.height());
+    match camera.filter(|c| (c.width, c.height) == (w, h)) {
+        Some(c) => (c.clone(), true),
+        None => {
+            let k = &f.line2d().library.params.camera;
+            (CameraModel { width: w, height: h, fx: k.fx, fy: k.fy, cx: (w as f64 - 1.0) / 2.0, cy: (h as f64 - 1.0) / 2.0, distortion: Default::default() }, false)
+        }
+    }
+}
+
+/// Fused detections as COCO results entries of image `image_id`: Line2D's with their template
+/// and probabilities, the learned ones as detections.
+pub fn fused_json(found: Vec<tubeloc_pipeline::FusedDetection>, image_id: u64) -> Vec<serde_json::Value> {
+    found
+        .into_iter()
+        .map(|d| match d.line2d {
+            Some(l) => l.to_coco_json(image_id),
+            None => serde_json::to_value(&d.detection).unwrap_or_default(),
+        })
+        .collect()
 }
 
 /// Default `--far-scale` (colour:grey): [`MatchParams::far_scale`] and

@@ -201,6 +201,21 @@ impl FusedTubeDetector {
     /// first. Without a ground, the learned detections are refined without one and Line2D's
     /// candidates are kept at the clutter verifier's cut with its probability as their score.
     pub fn detect_fused(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64) -> Result<Vec<FusedDetection>> {
+        let (line2d, _) = self.line2d_verified(image, Some(camera), ground, image_id)?;
+        self.fuse(image, camera, ground, image_id, line2d)
+    }
+
+    /// Line2D's candidates of `image` verified by their poses as the fused list takes them
+    /// ([`PoseVerification::detect`] with this detector's matcher and verifier), and whether
+    /// poses verified them (a camera of the image's size and a ground).
+    pub fn line2d_verified(&self, image: &DynamicImage, camera: Option<&CameraModel>, ground: Option<&GroundPlane>, image_id: u64) -> Result<(Vec<tubeloc_detect::line2d::Line2dDetection>, bool)> {
+        self.verification.detect(&self.line2d, image, camera, ground, image_id)
+    }
+
+    /// [`Self::detect_fused`] with Line2D's verified detections of the image given: `line2d`
+    /// is what [`Self::line2d_verified`] returns for `image` with `Some(camera)` and `ground`
+    /// (e.g. kept from a Line2D run on the same image), so that Line2D is not matched twice.
+    pub fn fuse(&self, image: &DynamicImage, camera: &CameraModel, ground: Option<&GroundPlane>, image_id: u64, line2d: Vec<tubeloc_detect::line2d::Line2dDetection>) -> Result<Vec<FusedDetection>> {
         let learned = self.learned.detect(image, camera, ground, image_id)?;
         let grey = tubeloc_detect::input::is_grey_rgb8(&tubeloc_detect::input::rgb8_pixels(image));
         let mut all: Vec<FusedDetection> = Vec::new();
@@ -210,7 +225,6 @@ impl FusedTubeDetector {
             let verdicts = self.learned_evidence.verify(refiner, settings, &frame, &learned, grey)?;
             all.extend(verdicts.into_iter().map(|v| FusedDetection { detection: v.detection, line2d: None }));
         }
-        let (line2d, _) = self.verification.detect(&self.line2d, image, Some(camera), ground, image_id)?;
         all.extend(line2d.into_iter().map(|d| FusedDetection { detection: d.to_tube_detection(image_id), line2d: Some(d) }));
         all.sort_by(|a, b| b.detection.score.total_cmp(&a.detection.score));
         let keep = tubeloc_core::keep_by_iou(&all.iter().map(|d| d.detection.mask.as_ref()).collect::<Vec<_>>(), Self::NMS_IOU);
