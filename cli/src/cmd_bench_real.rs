@@ -280,12 +280,13 @@ fn line2d_eval(set: &Path, det: &FusedTubeDetector, fused: Option<(&ScoreCalibra
         l2_ms += ms;
         if fused.is_some() {
             let t = Instant::now();
-            let both = match crate::cmd_detect_line2d::fused_camera(det, &img, camera) {
-                (c, true) => det.fuse(&img, &c, ground, *id, found.clone())?,
-                // Under another camera than Line2D's row, the fused detector matches again.
-                (c, false) => det.detect_fused(&img, &c, ground, *id)?,
+            // Line2D's time counts where its matches are reused; under another camera than
+            // Line2D's row (an image without one of its size), the fused detector matches again.
+            let (both, reused_ms) = match crate::cmd_detect_line2d::fused_camera(det, &img, camera) {
+                (c, true) => (det.fuse(&img, &c, ground, *id, found.clone())?, ms),
+                (c, false) => (det.detect_fused(&img, &c, ground, *id)?, 0.0),
             };
-            fused_ms += ms + t.elapsed().as_secs_f64() * 1e3;
+            fused_ms += reused_ms + t.elapsed().as_secs_f64() * 1e3;
             fused_dets.extend(crate::cmd_detect_line2d::fused_json(both, *id));
         }
         l2_dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
