@@ -16,29 +16,29 @@ fn camera_of(im: &tubeloc_core::CocoImage) -> String {
 
 /// For each sol of `gt`'s images (the `sol` field; images without one are left out), in
 /// increasing order: `{"sol", "cameras", "images", "tubes", "ap50", "ar"}` of `ev` (prepared on
-/// `gt`) on that sol's images alone; `cameras` lists the distinct cameras of its frames
-/// ([`camera_of`]). `Null` when no image carries a sol.
+/// `gt`) on that sol's images alone ([`tubeloc_eval::breakdown::breakdown`] by `sol`);
+/// `cameras` lists the distinct cameras of its frames ([`camera_of`]). `Null` when no image
+/// carries a sol.
 pub fn by_sol(gt: &CocoDataset, ev: &CocoEvaluator) -> Result<Value> {
-    let mut sols: BTreeMap<i64, (BTreeSet<u64>, BTreeSet<String>)> = BTreeMap::new();
+    let mut cameras: BTreeMap<i64, BTreeSet<String>> = BTreeMap::new();
     for im in &gt.images {
         if let Some(s) = im.extra.get("sol").and_then(Value::as_i64) {
-            let e = sols.entry(s).or_default();
-            e.0.insert(im.id);
-            e.1.insert(camera_of(im));
+            cameras.entry(s).or_default().insert(camera_of(im));
         }
     }
-    if sols.is_empty() {
+    if cameras.is_empty() {
         return Ok(Value::Null);
     }
-    let rows = sols
+    let rows: BTreeMap<i64, Value> = tubeloc_eval::breakdown::breakdown(ev, gt, "sol")?
+        .rows
         .into_iter()
-        .map(|(sol, (ids, cameras))| {
-            let r = ev.evaluate_with(&|id| ids.contains(&id), &|_| false);
-            let tubes = gt.annotations.iter().filter(|a| a.iscrowd == 0 && ids.contains(&a.image_id)).count();
-            json!({"sol": sol, "cameras": cameras.into_iter().collect::<Vec<_>>(), "images": ids.len(), "tubes": tubes, "ap50": r.stats[1], "ar": r.stats[8]})
+        .filter_map(|r| {
+            let sol: i64 = r.value.parse().ok()?;
+            let cameras: Vec<&String> = cameras.get(&sol)?.iter().collect();
+            Some((sol, json!({"sol": sol, "cameras": cameras, "images": r.num_images, "tubes": r.num_objects, "ap50": r.result.stats[1], "ar": r.result.stats[8]})))
         })
         .collect();
-    Ok(Value::Array(rows))
+    Ok(Value::Array(rows.into_values().collect()))
 }
 
 /// A markdown table of [`by_sol`] results of several detectors on one set: one row per sol
