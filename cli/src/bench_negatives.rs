@@ -129,13 +129,14 @@ pub fn line2d_negatives(data: &Path, det: &FusedTubeDetector, frames: Option<usi
         let t = Instant::now();
         let (found, _) = det.line2d_verified(&image, Some(&camera), Some(&ground), 0)?;
         let l2_ms = t.elapsed().as_secs_f64() * 1e3;
+        let l2_json: Vec<Value> = found.iter().map(|d| d.to_coco_json(0)).collect();
         let t = Instant::now();
-        let fused = det.fuse(&image, &camera, Some(&ground), 0, found.clone())?;
+        let fused = det.fuse(&image, &camera, Some(&ground), 0, found)?;
         let fused_ms = l2_ms + t.elapsed().as_secs_f64() * 1e3;
         let (sx, sy) = det.line2d().scale_for(Some(&camera));
         // As `tubeloc detect` writes them (COCO results entries).
         let frame = |found: Vec<Value>, ms: f64| json!({"image": p.strip_prefix(data).unwrap_or(p).display().to_string(), "grey": grey, "view": view_name, "scale": (sx * sy).sqrt(), "kept": found.len(), "ms": ms, "scores": found.iter().map(|d| d["score"].as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()});
-        l2_frames.push(frame(found.iter().map(|d| d.to_coco_json(0)).collect(), l2_ms));
+        l2_frames.push(frame(l2_json, l2_ms));
         fused_frames.push(frame(crate::cmd_detect_line2d::fused_json(fused, 0), fused_ms));
     }
     let summary = |per_frame: Vec<Value>| {

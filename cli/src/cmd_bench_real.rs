@@ -278,18 +278,18 @@ fn line2d_eval(set: &Path, det: &FusedTubeDetector, fused: Option<(&ScoreCalibra
         let (found, _) = det.line2d_verified(&img, camera, ground, *id)?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         l2_ms += ms;
+        l2_dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
         if fused.is_some() {
             let t = Instant::now();
             // Line2D's time counts where its matches are reused; under another camera than
             // Line2D's row (an image without one of its size), the fused detector matches again.
             let (both, reused_ms) = match crate::cmd_detect_line2d::fused_camera(det, &img, camera) {
-                (c, true) => (det.fuse(&img, &c, ground, *id, found.clone())?, ms),
+                (c, true) => (det.fuse(&img, &c, ground, *id, found)?, ms),
                 (c, false) => (det.detect_fused(&img, &c, ground, *id)?, 0.0),
             };
             fused_ms += reused_ms + t.elapsed().as_secs_f64() * 1e3;
             fused_dets.extend(crate::cmd_detect_line2d::fused_json(both, *id));
         }
-        l2_dets.extend(found.iter().map(|d| d.to_coco_json(*id)));
     }
     let gt = data.coco();
     let n = images.len().max(1) as f64;
