@@ -6,7 +6,7 @@
 //! frame carries its interval by sol ([`crate::bench_intervals`]) and a breakdown by the data's
 //! folder (camera and frame size).
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -88,20 +88,25 @@ fn negative_sols(data: &Path, paths: &[PathBuf]) -> Result<Vec<Option<i64>>> {
     Ok(paths.iter().map(|p| p.strip_prefix(data).ok().and_then(|r| sols.get(r).copied())).collect())
 }
 
-/// The `negatives_val` frames (all, or `frames` spread over the folders), sorted.
+/// The `negatives_val` frames (all, or `frames` spread over the folders), sorted: the image
+/// files ([`tubeloc_detect::input::image_files`]) of the folder itself and of every folder below
+/// it. A folder without one is an error naming it, not a figure over no frames.
 fn negative_paths(data: &Path, frames: Option<usize>) -> Result<Vec<PathBuf>> {
     let dir = data.join("negatives_val");
     let mut paths: Vec<PathBuf> = Vec::new();
-    for sub in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
-        let sub = sub?.path();
-        if sub.is_dir() {
-            for f in std::fs::read_dir(&sub)? {
-                let f = f?.path();
-                if f.extension().is_some_and(|e| e == "png" || e == "jpg" || e == "jpeg") {
-                    paths.push(f);
-                }
+    let mut folders = vec![dir.clone()];
+    while let Some(folder) = folders.pop() {
+        let read = || format!("reading {}", folder.display());
+        paths.extend(tubeloc_detect::input::image_files(&folder).with_context(read)?);
+        for entry in std::fs::read_dir(&folder).with_context(read)? {
+            let p = entry.with_context(read)?.path();
+            if p.is_dir() {
+                folders.push(p);
             }
         }
+    }
+    if paths.is_empty() {
+        bail!("{}: no image files in it or in the folders below it ({}): the tube-free frames are measured on them", dir.display(), tubeloc_detect::input::IMAGE_EXTENSIONS.map(|e| format!(".{e}")).join(" "));
     }
     paths.sort();
     if let Some(n) = frames {
@@ -151,10 +156,15 @@ pub fn line2d_negatives(data: &Path, det: &FusedTubeDetector, frames: Option<usi
 }
 
 /// The folder of `negatives_val` a frame lies in (`negatives_val/<folder>/<file>`: the data's
-/// group, one camera and frame size), from its path relative to the data folder.
+/// group, one camera and frame size; `a/b` for a folder below another; `.` for a frame in
+/// `negatives_val` itself), from its path relative to the data folder.
 fn folder_of(image: &str) -> String {
-    let mut parts = Path::new(image).components().skip(1);
-    parts.next().map(|c| c.as_os_str().to_string_lossy().into_owned()).unwrap_or_else(|| "(none)".into())
+    let parts: Vec<String> = Path::new(image).components().skip(1).map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+    match parts.len() {
+        0 => "(none)".into(),
+        1 => ".".into(),
+        n => parts[..n - 1].join("/"),
+    }
 }
 
 /// Per folder of `negatives_val`: how many frames, and the mean of `field` over them, from a
@@ -198,5 +208,27 @@ mod tests {
         let md = folder_table(&[("kept", &run, "kept"), ("located", &run, "located")]);
         assert!(md.contains("| `msl_navcam_1024` | 2 | 1.50 | 0.50 |"), "{md}");
         assert!(md.starts_with("| folder of `negatives_val` | frames | kept | located |\n|---|---:|---:|---:|\n"), "{md}");
+    }
+
+    #[test]
+    fn frames_are_read_from_the_folder_itself_and_every_folder_below_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let neg = dir.path().join("negatives_val");
+        std::fs::create_dir_all(neg.join("navcam/deep")).unwrap();
+        std::fs::create_dir_all(neg.join("empty")).unwrap();
+        for f in ["top.png", "navcam/a.JPG", "navcam/deep/b.tif", "navcam/notes.txt", "navcam/p.img", "navcam/p.lbl"] {
+            std::fs::write(neg.join(f), b"x").unwrap();
+        }
+        let rel: Vec<String> = negative_paths(dir.path(), None).unwrap().iter().map(|p| p.strip_prefix(dir.path()).unwrap().display().to_string()).collect();
+        assert_eq!(rel, ["negatives_val/navcam/a.JPG", "negatives_val/navcam/deep/b.tif", "negatives_val/navcam/p.lbl", "negatives_val/top.png"]);
+        let folders: Vec<String> = rel.iter().map(|r| folder_of(r)).collect();
+        assert_eq!(folders, ["navcam", "navcam/deep", "navcam", "."]);
+        assert_eq!(negative_paths(dir.path(), Some(2)).unwrap().len(), 2);
+
+        let empty = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(empty.path().join("negatives_val/navcam")).unwrap();
+        std::fs::write(empty.path().join("negatives_val/navcam/readme.txt"), b"x").unwrap();
+        let e = negative_paths(empty.path(), None).unwrap_err().to_string();
+        assert!(e.contains("negatives_val: no image files in it or in the folders below it (.png .jpg"), "{e}");
     }
 }

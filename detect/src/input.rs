@@ -124,6 +124,35 @@ pub fn has_image_extension(path: &Path) -> bool {
     path.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)))
 }
 
+/// The image files of the folder `dir` (not of its subfolders), sorted: those with one of
+/// [`IMAGE_EXTENSIONS`], a PDS3 product's detached `.lbl` label in place of the `.img` of the
+/// same stem beside it (the `.img` holds no label of its own). An empty list where there are
+/// none; an error where the folder cannot be read.
+pub fn image_files(dir: &Path) -> std::io::Result<Vec<std::path::PathBuf>> {
+    let (mut paths, mut labels) = (Vec::new(), Vec::new());
+    for entry in std::fs::read_dir(dir)? {
+        let p = entry?.path();
+        if !p.is_file() {
+            continue;
+        }
+        if has_image_extension(&p) {
+            paths.push(p);
+        } else if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("lbl")) {
+            labels.push(p);
+        }
+    }
+    let stem = |p: &Path| p.file_stem().map(|s| s.to_ascii_lowercase());
+    let is_product = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("img"));
+    let products: std::collections::HashMap<_, usize> = paths.iter().enumerate().filter(|(_, p)| is_product(p)).map(|(k, p)| (stem(p), k)).collect();
+    for label in labels {
+        if let Some(&k) = products.get(&stem(&label)) {
+            paths[k] = label;
+        }
+    }
+    paths.sort();
+    Ok(paths)
+}
+
 /// Decodes an image file (PNG, JPEG, TIFF, PGM / PPM / PNM, BMP, WebP, or a PDS3 product:
 /// [`crate::pds3_image`]), its format told by its bytes; a JPEG cut short is an error
 /// ([`tubeloc_core::image_file::read_whole`]), not an image with blank rows.

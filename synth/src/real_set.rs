@@ -440,6 +440,33 @@ mod tests {
         assert_eq!(image::load_from_memory(&colour.bytes).unwrap().color(), image::ColorType::Rgb8);
     }
 
+    /// A colour photo of `w` x `h` px at `path`: Mars-coloured ground, (150, 90, 60) everywhere.
+    fn save_colour_photo(path: &Path, w: u32, h: u32) {
+        image::RgbImage::from_pixel(w, h, image::Rgb([150, 90, 60])).save(path).unwrap();
+    }
+
+    /// A background is colour or grey by its pixels, whatever its group is called: a grey frame
+    /// saved in three equal channels (or one) in a `mastcam` group joins the grey frames under
+    /// the assumed Navcam view, and a colour frame in a `navcam` group the colour ones under the
+    /// view of its product name.
+    #[test]
+    fn a_background_is_colour_or_grey_by_its_pixels_not_its_group_name() {
+        let dir = tempfile::tempdir().unwrap();
+        for g in ["backgrounds/msl_mastcam_x", "backgrounds/m2020_navcam"] {
+            std::fs::create_dir_all(dir.path().join(g)).unwrap();
+        }
+        image::RgbImage::from_pixel(400, 320, image::Rgb([90, 90, 90])).save(dir.path().join("backgrounds/msl_mastcam_x/grey3.png")).unwrap();
+        image::GrayImage::from_pixel(400, 320, image::Luma([90])).save(dir.path().join("backgrounds/msl_mastcam_x/grey1.png")).unwrap();
+        save_colour_photo(&dir.path().join("backgrounds/m2020_navcam/colour.png"), 400, 320);
+        let manifest =
+            "file\tsplit\tgroup\tsol\nbackgrounds/msl_mastcam_x/grey3.png\tbackgrounds\tmsl_mastcam_x\t500\nbackgrounds/msl_mastcam_x/grey1.png\tbackgrounds\tmsl_mastcam_x\t500\nbackgrounds/m2020_navcam/colour.png\tbackgrounds\tm2020_navcam\t500\n";
+        std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
+        let names = |grey, colour| split_views(dir.path(), RealSplit::Test, grey, colour, 0, TRAINING_HFOV_DEG, 0).unwrap().into_iter().map(|v| (v.image.file_name().unwrap().to_string_lossy().to_string(), v.camera.fx)).collect::<Vec<_>>();
+        let navcam_fx = AssumedView::NAVCAM.camera(400, 320).fx;
+        assert_eq!(names(Some(GreyView::Assumed), false), vec![("grey3.png".to_string(), navcam_fx), ("grey1.png".to_string(), navcam_fx)]);
+        assert_eq!(names(None, true), vec![("colour.png".to_string(), AssumedView::MAST.camera(400, 320).fx)]);
+    }
+
     /// `all` takes the frames of every sol, under the views validation and test frames get
     /// (a training sol's colour frame under the `mast` view, not a random one).
     #[test]
@@ -448,7 +475,7 @@ mod tests {
         let folder = dir.path().join("backgrounds/msl_mastcam_marsdata");
         std::fs::create_dir_all(&folder).unwrap();
         for name in ["test.png", "train.png", "nosol.png"] {
-            image::save_buffer(folder.join(name), &[90u8; 400 * 320 * 3], 400, 320, image::ExtendedColorType::Rgb8).unwrap();
+            save_colour_photo(&folder.join(name), 400, 320);
         }
         let manifest = "file\tsplit\tgroup\tsol\nbackgrounds/msl_mastcam_marsdata/test.png\tbackgrounds\tmsl_mastcam_marsdata\t500\nbackgrounds/msl_mastcam_marsdata/train.png\tbackgrounds\tmsl_mastcam_marsdata\t520\nbackgrounds/msl_mastcam_marsdata/nosol.png\tbackgrounds\tmsl_mastcam_marsdata\t\n";
         std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
@@ -491,7 +518,7 @@ mod tests {
         let names = ["0500MR0001230000100001E01.jpg", "0500ML0001230000100001E01.jpg", "marsscapes_500_1_t0.png"];
         let mut manifest = String::from("file\tsplit\tgroup\tsol\n");
         for n in names {
-            image::RgbImage::new(560, 500).save(group.join(n)).unwrap();
+            save_colour_photo(&group.join(n), 560, 500);
             manifest += &format!("backgrounds/msl_mastcam_marsdata/{n}\tbackgrounds\tmsl_mastcam_marsdata\t500\n");
         }
         std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
@@ -512,7 +539,7 @@ mod tests {
         std::fs::create_dir_all(&group).unwrap();
         let mut manifest = String::from("file\tsplit\tgroup\tsol\n");
         for k in 0..20 {
-            image::RgbImage::new(400, 300).save(group.join(format!("f{k}.png"))).unwrap();
+            save_colour_photo(&group.join(format!("f{k}.png")), 400, 300);
             manifest += &format!("backgrounds/msl_mastcam_marsdata/f{k}.png\tbackgrounds\tmsl_mastcam_marsdata\t{}\n", 520 + k % 5);
         }
         std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
@@ -683,6 +710,20 @@ pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, SynthError> {
     Ok(out)
 }
 
+/// The width, height and kind (`true`: colour) of the photo at `path`: a file of one or two
+/// channels is grey by its header; one of three or four is decoded and is grey where every
+/// pixel's channels are equal ([`tubeloc_core::monochrome::is_grey_rgb8`]).
+fn photo_kind(path: &Path) -> Result<(u32, u32, bool), image::ImageError> {
+    use image::ImageDecoder;
+    let decoder = image::ImageReader::open(path)?.with_guessed_format()?.into_decoder()?;
+    let (w, h) = decoder.dimensions();
+    if decoder.color_type().channel_count() <= 2 {
+        return Ok((w, h, false));
+    }
+    let img = image::DynamicImage::from_decoder(decoder)?;
+    Ok((w, h, !tubeloc_core::monochrome::is_grey_rgb8(img.to_rgb8().as_raw())))
+}
+
 /// The geometry of the grey frames of a validation or test part.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum GreyView {
@@ -701,8 +742,8 @@ pub enum GreyView {
 /// The frames of `split` in the real data folder `data` (holding `MANIFEST.tsv`,
 /// `backgrounds/` and `with_cameras/`), with their views. Validation, test and all: the grey frames
 /// (`grey`: with PDS camera models, and / or the grey backgrounds under
-/// [`AssumedView::NAVCAM`]) and the colour Mastcam backgrounds under the view `--assumed-view
-/// auto` takes for them ([`AssumedView::of_frame`]: an M-100 frame under `m100`, an M-34
+/// [`AssumedView::NAVCAM`]) and the colour backgrounds (colour by their pixels, whatever their
+/// group: Mastcam frames in the shared data) under the view `--assumed-view auto` takes for them ([`AssumedView::of_frame`]: an M-100 frame under `m100`, an M-34
 /// frame or a panorama tile without a product name under [`AssumedView::MAST`]), frames whose
 /// smaller side is below `min_size` left out. Training: every background of the split under
 /// a random assumed view drawn with `seed`, its field of view from `hfov_deg` ([`random_view`];
@@ -725,15 +766,18 @@ pub fn split_views(data: &Path, split: RealSplit, grey: Option<GreyView>, colour
         if e.split != "backgrounds" || !split.holds(e.sol) {
             continue;
         }
-        let is_colour = e.group.contains("mastcam");
+        let path = data.join(&e.file);
+        let unreadable = |er: image::ImageError| SynthError::Image { path: path.clone(), message: format!("listed in {} but not readable as an image: {er}", data.join("MANIFEST.tsv").display()) };
+        // Colour or grey by the pixels, not by the group's name: a grey frame is saved with one
+        // channel or with three equal ones (`monochrome::is_grey_rgb8`, what the detectors take
+        // for grey).
+        let (w, h, is_colour) = photo_kind(&path).map_err(unreadable)?;
         // Colour backgrounds when asked for; grey ones for training, or under the assumed
         // Navcam view, when asked for.
         let wanted = if is_colour { colour } else { grey.is_some() && (split == RealSplit::Train || assumed_grey) };
         if !wanted {
             continue;
         }
-        let path = data.join(&e.file);
-        let (w, h) = image::image_dimensions(&path).map_err(|er| SynthError::Image { path: path.clone(), message: format!("listed in {} but not readable as an image: {er}", data.join("MANIFEST.tsv").display()) })?;
         if w.min(h) < min_size && split != RealSplit::Train {
             continue;
         }

@@ -3,7 +3,7 @@
 
 use super::Frame;
 use anyhow::{bail, Context, Result};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tubeloc_detect::input::{has_image_extension, IMAGE_EXTENSIONS};
 
@@ -15,26 +15,7 @@ use tubeloc_detect::input::{has_image_extension, IMAGE_EXTENSIONS};
 pub fn image_paths(arg: &Path, flag: &str) -> Result<Vec<PathBuf>> {
     let mut paths = Vec::new();
     if arg.is_dir() {
-        let mut labels = Vec::new();
-        for entry in std::fs::read_dir(arg).with_context(|| format!("{flag} {}: reading the folder", arg.display()))? {
-            let p = entry.with_context(|| format!("{flag} {}: reading the folder", arg.display()))?.path();
-            if !p.is_file() {
-                continue;
-            }
-            if has_image_extension(&p) {
-                paths.push(p);
-            } else if has_extension(&p, "lbl") {
-                labels.push(p);
-            }
-        }
-        // A detached label reads its product (the `.img` beside it holds no label of its own).
-        let stem = |p: &Path| p.file_stem().map(|s| s.to_ascii_lowercase());
-        let products: HashMap<_, usize> = paths.iter().enumerate().filter(|(_, p)| has_extension(p, "img")).map(|(k, p)| (stem(p), k)).collect();
-        for label in labels {
-            if let Some(&k) = products.get(&stem(&label)) {
-                paths[k] = label;
-            }
-        }
+        paths = tubeloc_detect::input::image_files(arg).with_context(|| format!("{flag} {}: reading the folder", arg.display()))?;
     } else {
         if (has_image_extension(arg) || has_extension(arg, "lbl")) && arg.is_file() {
             bail!("{flag} {}: an image file; {flag} takes a folder of images or a list file of image paths (for one image, give {})", arg.display(), if flag.starts_with("--right") { "--right" } else { "--image" });
