@@ -54,7 +54,7 @@ pub fn median_by_sol(gt: &CocoDataset, pairs: &Value, field: &str) -> Value {
 
 /// The sol of each frame in `data`'s `MANIFEST.tsv`, by its path relative to `data`.
 pub fn manifest_sols(data: &Path) -> Result<HashMap<PathBuf, i64>> {
-    let rows = tubeloc_synth::real_set::read_manifest(&data.join("MANIFEST.tsv"))?;
+    let rows = tubeloc_synth::real_frames::read_manifest(&data.join("MANIFEST.tsv"))?;
     Ok(rows.into_iter().filter_map(|r| Some((r.file, r.sol?))).collect())
 }
 

@@ -54,7 +54,7 @@ pub fn negatives(data: &Path, detector: &Arc<dyn tubeloc_pipeline::TubeDetector>
 /// under its own camera and ground (the rig of `with_cameras/cameras.json`, record 0057).
 /// None shows a tube, so every located tube is false. A data folder without the camera list
 /// gives no frames.
-pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_set::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, settings: &tubeloc_pipeline::LocatorSettings, frames: Option<usize>) -> Result<Value> {
+pub fn pds_negatives(data: &Path, split: tubeloc_synth::real_frames::RealSplit, model: &crate::cmd_detect_learned::ModelChoice, settings: &tubeloc_pipeline::LocatorSettings, frames: Option<usize>) -> Result<Value> {
     let list = data.join("with_cameras").join("cameras.json");
     if !list.exists() {
         return Ok(json!({"frames": 0, "located_per_frame": Value::Null, "per_frame": []}));

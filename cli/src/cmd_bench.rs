@@ -105,7 +105,7 @@ pub struct BenchArgs {
     /// `test` measures them: for a real data folder of new frames in the same layout, none of
     /// which trained the model).
     #[arg(long, default_value = "test")]
-    pub real_split: tubeloc_synth::real_set::RealSplit,
+    pub real_split: tubeloc_synth::real_frames::RealSplit,
     /// Real stage: use at most this many frames per set (default: all).
     #[arg(long)]
     pub real_frames: Option<usize>,
@@ -226,7 +226,7 @@ pub fn run(mut a: BenchArgs) -> Result<()> {
         use clap::ValueEnum;
         a.skip = Part::value_variants().iter().filter(|p| !a.only.contains(p)).copied().collect();
     }
-    if a.real_split == tubeloc_synth::real_set::RealSplit::Train {
+    if a.real_split == tubeloc_synth::real_frames::RealSplit::Train {
         bail!("--real-split train: the real stage measures on the val, test or all part (the training part's frames are the model's backgrounds)");
     }
     let out = a.out.clone();
@@ -512,7 +512,7 @@ fn f3(x: f64) -> String {
 }
 
 /// Writes `<out>/report.md` from the stage results; returns its path.
-fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, real_split: tubeloc_synth::real_set::RealSplit) -> Result<PathBuf> {
+fn write_report(out: &Path, st: &Stages, n_img: &BTreeMap<&str, usize>, real_split: tubeloc_synth::real_frames::RealSplit) -> Result<PathBuf> {
     let mut r = String::new();
     let _ = writeln!(r, "# tubeloc bench: the paper's experiments on the synthetic paper preset\n");
     let _ = writeln!(

@@ -47,7 +47,7 @@ pub struct RealStage {
     /// The part of the real data the composites and the PDS frames come from: `Test` (the
     /// figures to report) or `Val` (the figures to choose settings on; `negatives_val`, kept for
     /// measuring false positives, is then not run).
-    pub split: tubeloc_synth::real_set::RealSplit,
+    pub split: tubeloc_synth::real_frames::RealSplit,
     /// Keep at most this many frames per set (small runs, e.g. in CI).
     pub frames: Option<usize>,
     /// Composites per grey test frame (at least; see `min_tubes`).
@@ -84,7 +84,7 @@ const MAX_PER_VIEW: u32 = 32;
 #[allow(clippy::too_many_arguments)]
 fn composite_set(
     data: &Path,
-    split: tubeloc_synth::real_set::RealSplit,
+    split: tubeloc_synth::real_frames::RealSplit,
     kind: crate::cmd_synth_real::RealKind,
     grey_view: crate::cmd_synth_real::GreyViewArg,
     per_view: u32,
@@ -111,7 +111,7 @@ fn composite_set(
         tubes: (1, 4),
         range_m: (1.5, 5.0),
         grey_view,
-        hfov_deg: tubeloc_synth::real_set::TRAINING_HFOV_DEG,
+        hfov_deg: tubeloc_synth::real_frames::TRAINING_HFOV_DEG,
         min_size,
         randomize: Some(false),
         colour_as_grey: false,
@@ -323,9 +323,9 @@ fn scored(gt: &CocoDataset, dets: &[Value], ms: f64, cal: Option<&ScoreCalibrati
 /// The folder of the real stage of `split` under the bench's output folder `out`:
 /// `<out>/real` for the test part, `<out>/real_val` for the validation part, so that a run of
 /// one part never stands in for the other.
-pub fn stage_dir(out: &Path, split: tubeloc_synth::real_set::RealSplit) -> PathBuf {
+pub fn stage_dir(out: &Path, split: tubeloc_synth::real_frames::RealSplit) -> PathBuf {
     match split {
-        tubeloc_synth::real_set::RealSplit::Test => out.join("real"),
+        tubeloc_synth::real_frames::RealSplit::Test => out.join("real"),
         other => out.join(format!("real_{}", other.name())),
     }
 }
@@ -340,7 +340,7 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
     let part = stage.split.name();
     // negatives_val measures false positives only: never run where settings are chosen.
     let negatives_dir = stage.data.join("negatives_val");
-    let measures = matches!(stage.split, tubeloc_synth::real_set::RealSplit::Test | tubeloc_synth::real_set::RealSplit::All);
+    let measures = matches!(stage.split, tubeloc_synth::real_frames::RealSplit::Test | tubeloc_synth::real_frames::RealSplit::All);
     let with_negatives = measures && negatives_dir.is_dir();
     use crate::cmd_synth_real::GreyViewArg;
     let grey_set = composite_set(&stage.data, stage.split, crate::cmd_synth_real::RealKind::Grey, GreyViewArg::Pds, stage.per_grey_frame, stage.min_tubes, 500, stage.frames, 22, &dir.join(format!("{part}_grey")))?;
@@ -402,10 +402,10 @@ pub fn run(stage: &RealStage, out: &Path) -> Result<String> {
         "fused": {"grasp_grey": fused_grasp, "grasp_colour": fused_grasp_colour, "calibration": fused_cal, "grey": fused_grey, "colour": fused_colour, "negatives": fused_neg, "locate_negatives": fused_located}});
     files::write_json(&dir.join("summary.json"), &summary)?;
     let mut md = String::new();
-    let the_sols = if stage.split == tubeloc_synth::real_set::RealSplit::All { "every sol".to_string() } else { format!("the {part} sols") };
+    let the_sols = if stage.split == tubeloc_synth::real_frames::RealSplit::All { "every sol".to_string() } else { format!("the {part} sols") };
     let title = match stage.split {
-        tubeloc_synth::real_set::RealSplit::Test => "## Real imagery (test part, split by sol)\n".to_string(),
-        tubeloc_synth::real_set::RealSplit::All => {
+        tubeloc_synth::real_frames::RealSplit::Test => "## Real imagery (test part, split by sol)\n".to_string(),
+        tubeloc_synth::real_frames::RealSplit::All => {
             format!("## Real imagery (every frame of `{}`, whatever its sol: a held-out measurement on frames the model was not trained on; on the shipped data it includes the training backgrounds)\n", stage.data.display())
         }
         _ => format!("## Real imagery ({part} part, split by sol: for choosing settings, not for reporting)\n"),

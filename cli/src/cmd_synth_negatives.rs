@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use tubeloc_core::files;
 use tubeloc_detect::learned::hard_negatives::{negative_centres, working_scale_crops};
 use tubeloc_synth::dataset::write_folder_atomically;
-use tubeloc_synth::real_set::{read_manifest, split_of_sol, RealSplit};
+use tubeloc_synth::real_frames::{read_manifest, split_of_sol, RealSplit};
 
 /// Arguments of `tubeloc synth negatives`.
 #[derive(Args)]

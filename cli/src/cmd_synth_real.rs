@@ -15,7 +15,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tubeloc_core::{files, TubeModel};
 use tubeloc_synth::dataset::write_folder_atomically;
-use tubeloc_synth::real_set::{assemble, render_sample, split_views, GreyView, RealSetConfig, RealSplit, RealView};
+use tubeloc_synth::real_frames::{split_views, ChosenFrames, FrameChoice, GreyView, RealSplit, RealView};
+use tubeloc_synth::real_set::{assemble, render_sample, RealSetConfig};
 use tubeloc_synth::TubeShape;
 
 /// Which frames go into the set.
@@ -106,7 +107,7 @@ pub struct RealArgs {
 fn hfov_range(s: &str) -> std::result::Result<(f64, f64), String> {
     let (a, b) = s.split_once(':').ok_or_else(|| format!("{s:?}: expected LO:HI in degrees"))?;
     match (a.trim().parse::<f64>(), b.trim().parse::<f64>()) {
-        (Ok(lo), Ok(hi)) => tubeloc_synth::real_set::check_hfov_range((lo, hi)).map(|()| (lo, hi)).map_err(|m| format!("{s:?}: {m}")),
+        (Ok(lo), Ok(hi)) => tubeloc_synth::real_frames::check_hfov_range((lo, hi)).map(|()| (lo, hi)).map_err(|m| format!("{s:?}: {m}")),
         _ => Err(format!("{s:?}: expected two numbers LO:HI in degrees")),
     }
 }
@@ -149,16 +150,16 @@ pub fn frames(a: &RealArgs) -> Result<Vec<RealView>> {
         GreyViewArg::Assumed => GreyView::Assumed,
         GreyViewArg::Both => GreyView::Both,
     };
-    let mut views = split_views(&a.data, a.split, (a.kind != RealKind::Colour).then_some(grey_view), a.kind != RealKind::Grey, a.min_size, a.hfov_deg, a.seed)?;
-    // A grey background that has a camera model of its own is not composited under the assumed
-    // view where its own camera sees sky (record 0088).
-    let cameras = a.data.join("with_cameras").join("cameras.json");
-    if a.kind != RealKind::Colour && grey_view != GreyView::Pds && cameras.exists() {
-        let own = tubeloc_synth::real_set::views_from_cameras_json(&cameras)?;
-        let dropped = tubeloc_synth::real_set::drop_sky_under_assumed_views(&mut views, &own, a.range_m.1);
-        if !dropped.is_empty() {
-            eprintln!("{} grey frame(s) left out of the assumed Navcam view: their own camera models ({}) see no ground where it puts tubes up to {} m: {}", dropped.len(), cameras.display(), a.range_m.1, dropped.join(", "));
-        }
+    let choice = FrameChoice { split: a.split, grey: (a.kind != RealKind::Colour).then_some(grey_view), colour: a.kind != RealKind::Grey, min_size: a.min_size, training_hfov_deg: a.hfov_deg, far_m: a.range_m.1, seed: a.seed };
+    let ChosenFrames { mut views, sky_dropped } = split_views(&a.data, &choice)?;
+    if !sky_dropped.is_empty() {
+        eprintln!(
+            "{} grey frame(s) left out of the assumed Navcam view: their own camera models ({}) see no ground where it puts tubes up to {} m: {}",
+            sky_dropped.len(),
+            a.data.join("with_cameras").join("cameras.json").display(),
+            a.range_m.1,
+            sky_dropped.join(", ")
+        );
     }
     if let Some(n) = a.limit {
         views.truncate(n);

@@ -27,6 +27,7 @@ pub mod mount;
 pub mod noise;
 pub mod objects;
 pub mod ray;
+pub mod real_frames;
 pub mod real_set;
 pub mod render;
 pub mod rig;

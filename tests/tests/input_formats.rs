@@ -6,7 +6,8 @@
 
 use std::path::{Path, PathBuf};
 use tubeloc_detect::learned::{detect_rgb_at_scale, DecodeConfig, LearnedModel};
-use tubeloc_synth::real_set::{render_sample, views_from_cameras_json, RealSetConfig};
+use tubeloc_synth::real_frames::views_from_cameras_json;
+use tubeloc_synth::real_set::{render_sample, RealSetConfig};
 
 fn data() -> PathBuf {
     let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real_mars");

@@ -1360,7 +1360,7 @@ fn rectangle_masks_fit_real_composites_better_and_keep_the_detections() {
     assert!(rect_ar > net_ar + 0.02 && rect_ap50 >= net_ap50, "AP50 / AR: rectangles {rect_ap50:.3} / {rect_ar:.3}, network masks {net_ap50:.3} / {net_ar:.3}");
 }
 
-/// The split of a sol as `tubeloc_synth::real_set::split_of_sol` gives it (validation sols 38
+/// The split of a sol as `tubeloc_synth::real_frames::split_of_sol` gives it (validation sols 38
 /// and 100 and the test sols, each with its neighbours; else by tens).
 fn split_of(sol: Option<i64>) -> &'static str {
     let Some(s) = sol else { return "train" };
