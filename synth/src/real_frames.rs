@@ -32,7 +32,8 @@ pub struct RealView {
     pub up_cam: Vector3<f64>,
     /// Height of the camera centre above the ground, metres.
     pub height_m: f64,
-    /// Unit direction toward the sun in the camera frame, when known.
+    /// Unit direction toward the sun in the camera frame, when known (a composite of a frame
+    /// without one draws one: [`random_sun`]).
     pub sun_cam: Option<Vector3<f64>>,
     /// Where the geometry came from (`pds` or `assumed`).
     pub geometry: &'static str,
@@ -129,12 +130,19 @@ pub fn random_view(rng: &mut ChaCha8Rng, hfov_deg: (f64, f64)) -> AssumedView {
 pub fn assumed_real_view(view: &AssumedView, image: PathBuf, width: u32, height: u32, sol: Option<i64>, rng: &mut ChaCha8Rng) -> RealView {
     let camera = view.camera(width, height);
     let up_cam = view.up_cam();
-    // Sun: elevation e above the ground, azimuth a about the up axis.
+    let sun_cam = Some(random_sun(rng, &up_cam));
+    RealView { image, sol, camera, up_cam, height_m: view.height_m, sun_cam, geometry: "assumed" }
+}
+
+/// A sun drawn for a frame whose sun is not known, as a unit direction in the camera frame:
+/// azimuth `a` uniform about the ground's unit up direction `up_cam` (camera frame; from the
+/// camera's forward direction on the ground), elevation `e` uniform in 20-75 degrees above
+/// the ground: `(fwd cos a + side sin a) cos e + up sin e`.
+pub fn random_sun(rng: &mut ChaCha8Rng, up_cam: &Vector3<f64>) -> Vector3<f64> {
     let (a, e) = (rng.random_range(0.0..std::f64::consts::TAU), rng.random_range(20f64..75.0).to_radians());
     let fwd = (Vector3::z() - up_cam * up_cam.z).normalize();
     let side = up_cam.cross(&fwd);
-    let sun_cam = Some(((fwd * a.cos() + side * a.sin()) * e.cos() + up_cam * e.sin()).normalize());
-    RealView { image, sol, camera, up_cam, height_m: view.height_m, sun_cam, geometry: "assumed" }
+    ((fwd * a.cos() + side * a.sin()) * e.cos() + up_cam * e.sin()).normalize()
 }
 
 /// Whether `own`, a frame's own camera-model view, sees ground wherever `assumed` (the view the

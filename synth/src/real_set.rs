@@ -98,7 +98,10 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     if far <= cfg.range_m.0 {
         return Ok(None);
     }
-    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some((cfg.range_m.0, far)), sun_cam: view.sun_cam, tube_gain, band: SpectralBand::of_photo(grey) };
+    // A frame without a known sun gets one drawn for each composite
+    // ([`crate::real_frames::random_sun`]); one with a sun draws nothing more.
+    let sun_cam = view.sun_cam.unwrap_or_else(|| crate::real_frames::random_sun(&mut rng, &view.up_cam));
+    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some((cfg.range_m.0, far)), sun_cam: Some(sun_cam), tube_gain, band: SpectralBand::of_photo(grey) };
     let c = match composite(img.as_raw(), &view.camera, &cc) {
         Ok(c) => c,
         Err(SynthError::Invalid(m)) if m.starts_with("could place only") => return Ok(None),
@@ -238,6 +241,36 @@ mod tests {
         assert_eq!(colour.image.extra["grey"], json!(false));
         assert!(colour.image.extra.get("grey_from").is_none());
         assert_eq!(image::load_from_memory(&colour.bytes).unwrap().color(), image::ColorType::Rgb8);
+    }
+
+    /// A frame whose sun is not known is lit by a sun drawn for each composite from its seed:
+    /// the same composite again is the same bytes, and another seed lights it otherwise.
+    #[test]
+    fn a_frame_without_a_known_sun_is_lit_by_a_drawn_one_reproducibly() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grey.png");
+        let (w, h) = (400u32, 300u32);
+        let luma: Vec<u8> = (0..w * h).map(|i| 100 + (i * 7 % 21) as u8).collect();
+        image::save_buffer(&path, &luma, w, h, image::ExtendedColorType::L8).unwrap();
+        let view = AssumedView { hfov_deg: 40.0, height_m: 1.5, pitch_deg: 40.0, roll_deg: 0.0 };
+        let mut view = assumed_real_view(&view, path, w, h, None, &mut ChaCha8Rng::seed_from_u64(1));
+        view.sun_cam = None;
+        let cfg = |seed| RealSetConfig {
+            tubes: (2, 2),
+            per_view: 1,
+            range_m: (1.5, 4.0),
+            dust: (0.0, 0.0),
+            tube_gain: (1.0, 1.0),
+            jpeg_quality: None,
+            seed,
+            tube_shape: Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default())),
+            colour_as_grey: false,
+        };
+        let a = render_sample(&view, 0, 1, &cfg(3)).unwrap().expect("two tubes fit");
+        let b = render_sample(&view, 0, 1, &cfg(3)).unwrap().expect("two tubes fit");
+        assert_eq!(a.bytes, b.bytes);
+        assert_eq!(a.annotations.len(), 2);
+        assert_ne!(render_sample(&view, 0, 1, &cfg(4)).unwrap().expect("two tubes fit").bytes, a.bytes);
     }
 
     #[test]
