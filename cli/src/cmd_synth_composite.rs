@@ -86,7 +86,19 @@ pub fn run(a: CompositeArgs) -> Result<()> {
         BandArg::Visible => SpectralBand::Visible,
         BandArg::RedNir => SpectralBand::RedNir,
     };
-    let cfg = CompositeConfig { ground: (a.ground.normal, -a.ground.offset), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0, band };
+    let cfg = CompositeConfig {
+        ground: (a.ground.normal, -a.ground.offset),
+        sun_az_el_deg: (s[0], s[1]),
+        tubes: a.tubes,
+        dust: a.dust,
+        seed: a.seed,
+        tube_shape: Arc::new(shape),
+        range_m: None,
+        sun_cam: None,
+        tube_gain: 1.0,
+        band,
+        encoding: tubeloc_synth::composite::PhotoEncoding::Srgb,
+    };
     let c = composite(img.as_raw(), &cam, &cfg)?;
     let stem = a.background.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "composite".into());
     let file_name = format!("{stem}_composite.png");

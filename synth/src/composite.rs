@@ -9,7 +9,8 @@
 //! camera's right) and elevation (degrees above the plane).
 //!
 //! Tube pixels are shaded like the benchmark renderer with an exposure matched to the photo
-//! (the median linear intensity of the lower image half is taken as regolith in sunlight);
+//! (the median linear intensity of the lower image half is taken as regolith in sunlight; the
+//! photo's values are read as light, and the tubes written back, by its [`PhotoEncoding`]);
 //! ground pixels in a tube's shadow are darkened by `E_sky / (E_sun cos θ + E_sky)`.
 //! Colours use 2 × 2 samples per pixel at tube borders; the ground-truth masks use the pixel
 //! centre ray, exactly as in the benchmark.
@@ -61,6 +62,55 @@ pub struct CompositeConfig {
     pub tube_gain: f32,
     /// Spectral band of the photo's camera: which albedos the tubes and the exposure use.
     pub band: SpectralBand,
+    /// How the photo's pixel values relate to the light the camera received.
+    pub encoding: PhotoEncoding,
+}
+
+/// How a photo's 8-bit pixel values `p` relate to the light `L` the camera received (linear,
+/// 1 at the value 255): what the composite reads the photo's exposure in and writes its
+/// tubes and shadows back in.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum PhotoEncoding {
+    /// The sRGB transfer curve (about `p ∝ L^(1/2.2)`): JPEGs and browse products, whose
+    /// square-root companding it approximates.
+    #[default]
+    Srgb,
+    /// Linear with an offset, `p = black + L (255 - black)`: a linear stretch of a product's
+    /// raw or radiance values, `black` (pixel units, negative where the stretch's low end is
+    /// above zero) the value of no light.
+    Linear {
+        /// The pixel value of no light.
+        black: f32,
+    },
+}
+
+impl PhotoEncoding {
+    /// The encoding of a linear stretch of data values `lo..hi` onto 0..255: no light (data
+    /// value 0) is `black = -255 lo / (hi - lo)`. `None` unless `0 <= lo < hi`, finite.
+    pub fn linear_stretch(lo: f64, hi: f64) -> Option<PhotoEncoding> {
+        (lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo).then(|| PhotoEncoding::Linear { black: (-255.0 * lo / (hi - lo)) as f32 })
+    }
+
+    /// Light `L` of pixel value `p` (0-255).
+    pub fn to_linear(self, p: u8) -> f32 {
+        match self {
+            PhotoEncoding::Srgb => srgb_to_linear([p, 0, 0])[0],
+            PhotoEncoding::Linear { black } => (p as f32 - black) / (255.0 - black),
+        }
+    }
+
+    /// The pixel value of light `l`, rounded and clipped to 0-255.
+    pub fn to_pixel(self, l: f32) -> u8 {
+        let v = match self {
+            PhotoEncoding::Srgb => {
+                let v = l.clamp(0.0, 1.0);
+                let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+                s * 255.0
+            }
+            PhotoEncoding::Linear { black } => black + l * (255.0 - black),
+        };
+        (v.clamp(0.0, 255.0) + 0.5) as u8
+    }
 }
 
 /// The spectral band a composite imitates: the band of the camera that took its photo.
@@ -235,7 +285,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
     objects.build_grid(-ext, -ext, 0.05, n, n);
 
     // Exposure from the photo: median linear intensity of the lower half = sunlit regolith.
-    let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear([i as u8, 0, 0])[0]).collect();
+    let lut: Vec<f32> = (0..256).map(|i| cfg.encoding.to_linear(i as u8)).collect();
     let mut lows: Vec<f32> = background[w * 3 * (h / 2)..].chunks(3).map(|p| (lut[p[0] as usize] + lut[p[1] as usize] + lut[p[2] as usize]) / 3.0).collect();
     lows.sort_by(|a, b| a.total_cmp(b));
     let median = lows.get(lows.len() / 2).copied().unwrap_or(0.2).max(0.01);
@@ -249,11 +299,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
     let mut depth = Plane::filled(w, h, f32::INFINITY);
     let mut instance = Plane::<u16>::new(w, h);
     let mut surface = Plane::<u8>::new(w, h);
-    let to_srgb = |v: f32| -> u8 {
-        let v = v.clamp(0.0, 1.0);
-        let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
-        (s * 255.0 + 0.5) as u8
-    };
+    let to_pixel = |v: f32| cfg.encoding.to_pixel(v);
     let objects_ref = &objects;
     rgb.par_chunks_mut(w * 3).zip(depth.data.par_chunks_mut(w)).zip(instance.data.par_chunks_mut(w)).zip(surface.data.par_chunks_mut(w)).enumerate().for_each(|(y, (((row, drow), irow), srow))| {
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ (y as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15));
@@ -297,7 +343,7 @@ pub fn composite(background: &[u8], cam: &CameraModel, cfg: &CompositeConfig) ->
                 }
             }
             for k in 0..3 {
-                row[x * 3 + k] = to_srgb(acc[k]);
+                row[x * 3 + k] = to_pixel(acc[k]);
             }
         }
     });
@@ -338,6 +384,57 @@ mod tests {
     use nalgebra::Point3;
 
     /// Mean 8-bit luminance of the composite's pixels whose centre ray hits `want`.
+    /// Both encodings give back every pixel value they read; a linear stretch of `lo..hi` puts
+    /// no light at `-255 lo / (hi - lo)`, and a stretch that starts below zero or is empty is
+    /// none.
+    #[test]
+    fn photo_encodings_read_and_write_every_pixel_value_unchanged() {
+        let stretch = PhotoEncoding::linear_stretch(562.0, 1959.0).unwrap();
+        let PhotoEncoding::Linear { black } = stretch else { panic!("{stretch:?}") };
+        assert!((black as f64 + 255.0 * 562.0 / 1397.0).abs() < 1e-4, "{black}");
+        for enc in [PhotoEncoding::Srgb, stretch, PhotoEncoding::Linear { black: 0.0 }] {
+            for p in 0..=255u8 {
+                assert_eq!(enc.to_pixel(enc.to_linear(p)), p, "{enc:?} {p}");
+            }
+        }
+        // Twice the light of pixel 120: 240 - black above black, clipped at 255.
+        assert_eq!(PhotoEncoding::Linear { black: 0.0 }.to_pixel(2.0 * PhotoEncoding::Linear { black: 0.0 }.to_linear(100)), 200);
+        assert_eq!(stretch.to_pixel(2.0 * stretch.to_linear(120)), 255);
+        assert_eq!(PhotoEncoding::linear_stretch(-1.0, 10.0), None);
+        assert_eq!(PhotoEncoding::linear_stretch(10.0, 10.0), None);
+    }
+
+    /// On a photo that is a linear stretch, the white body's light above the stretch's black
+    /// is its albedo over the regolith's (0.78 / 0.34) times the ground's, less the cylinder's
+    /// shading: far brighter than the same light written through the sRGB curve.
+    #[test]
+    fn a_linear_photo_takes_its_tubes_light_linearly() {
+        let cam = CameraModel { width: 160, height: 160, fx: 400.0, fy: 400.0, cx: 79.5, cy: 79.5, distortion: Default::default() };
+        let background = vec![60u8; 160 * 160 * 3];
+        let shape = Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default()));
+        let cfg = |encoding| CompositeConfig {
+            ground: (Vector3::new(0.0, 0.0, -1.0), 1.0),
+            sun_az_el_deg: (0.0, 89.0),
+            tubes: 1,
+            dust: 0.0,
+            seed: 3,
+            tube_shape: shape.clone(),
+            range_m: None,
+            sun_cam: None,
+            tube_gain: 1.0,
+            band: SpectralBand::RedNir,
+            encoding,
+        };
+        let black = -40.0f32;
+        let linear = composite(&background, &cam, &cfg(PhotoEncoding::Linear { black })).unwrap();
+        let srgb = composite(&background, &cam, &cfg(PhotoEncoding::Srgb)).unwrap();
+        let (bl, bs) = (mean_of_material(&linear, &cam, TubeMaterial::Alumina), mean_of_material(&srgb, &cam, TubeMaterial::Alumina));
+        let gain = (bl - black as f64) / (60.0 - black as f64);
+        assert!(gain > 1.5 && gain < 0.78 / 0.34 + 0.05, "body {bl:.1} on ground 60, black {black}: {gain:.2}x the light");
+        assert!(bl > bs + 20.0, "linear {bl:.1} against sRGB {bs:.1}");
+        assert_eq!(&linear.output.rgb[..3], &[60, 60, 60]);
+    }
+
     fn mean_of_material(c: &Composite, cam: &CameraModel, want: TubeMaterial) -> f64 {
         let mut objects = Objects::new(Vec::new(), c.tubes.clone(), Vec::new());
         objects.build_grid(-3.0, -3.0, 0.05, 120, 120);
@@ -364,7 +461,19 @@ mod tests {
         let cam = CameraModel { width: 160, height: 160, fx: 400.0, fy: 400.0, cx: 79.5, cy: 79.5, distortion: Default::default() };
         let background = vec![60u8; 160 * 160 * 3];
         let shape = Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default()));
-        let cfg = |band| CompositeConfig { ground: (Vector3::new(0.0, 0.0, -1.0), 1.0), sun_az_el_deg: (0.0, 89.0), tubes: 1, dust: 0.0, seed: 3, tube_shape: shape.clone(), range_m: None, sun_cam: None, tube_gain: 1.0, band };
+        let cfg = |band| CompositeConfig {
+            ground: (Vector3::new(0.0, 0.0, -1.0), 1.0),
+            sun_az_el_deg: (0.0, 89.0),
+            tubes: 1,
+            dust: 0.0,
+            seed: 3,
+            tube_shape: shape.clone(),
+            range_m: None,
+            sun_cam: None,
+            tube_gain: 1.0,
+            band,
+            encoding: PhotoEncoding::Srgb,
+        };
         let vis = composite(&background, &cam, &cfg(SpectralBand::Visible)).unwrap();
         let nir = composite(&background, &cam, &cfg(SpectralBand::RedNir)).unwrap();
         let ratio = |c: &Composite| mean_of_material(c, &cam, TubeMaterial::Gold) / mean_of_material(c, &cam, TubeMaterial::Alumina);

@@ -11,6 +11,7 @@
 //!   with a given horizontal field of view, a mast height, a pitch below the horizon and a roll;
 //!   the sun is drawn at random above the horizon.
 
+use crate::composite::PhotoEncoding;
 use crate::SynthError;
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -37,6 +38,9 @@ pub struct RealView {
     pub sun_cam: Option<Vector3<f64>>,
     /// Where the geometry came from (`pds` or `assumed`).
     pub geometry: &'static str,
+    /// How the photograph's pixel values encode light: sRGB, or the linear stretch its
+    /// `MANIFEST.tsv` row's `conversion` names ([`encoding_of_conversion`]).
+    pub encoding: PhotoEncoding,
 }
 
 impl RealView {
@@ -96,7 +100,7 @@ pub fn views_from_cameras_json(path: &Path) -> Result<Vec<RealView>, SynthError>
             None => direction("sun_direction_site")?.map(|s| r * s),
         };
         let sol = e.get("sol").and_then(Value::as_i64);
-        out.push(RealView { image: root.join(image), sol, camera, up_cam, height_m, sun_cam, geometry: "pds" });
+        out.push(RealView { image: root.join(image), sol, camera, up_cam, height_m, sun_cam, geometry: "pds", encoding: PhotoEncoding::Srgb });
     }
     Ok(out)
 }
@@ -131,7 +135,7 @@ pub fn assumed_real_view(view: &AssumedView, image: PathBuf, width: u32, height:
     let camera = view.camera(width, height);
     let up_cam = view.up_cam();
     let sun_cam = Some(random_sun(rng, &up_cam));
-    RealView { image, sol, camera, up_cam, height_m: view.height_m, sun_cam, geometry: "assumed" }
+    RealView { image, sol, camera, up_cam, height_m: view.height_m, sun_cam, geometry: "assumed", encoding: PhotoEncoding::Srgb }
 }
 
 /// A sun drawn for a frame whose sun is not known, as a unit direction in the camera frame:
@@ -273,6 +277,20 @@ pub struct ManifestEntry {
     pub group: String,
     /// Sol, when known.
     pub sol: Option<i64>,
+    /// How the file was made from its source (`conversion` column; empty without one).
+    pub conversion: String,
+}
+
+/// The pixel encoding a `MANIFEST.tsv` `conversion` names: a linear stretch of data values
+/// (`... linear stretch DN LO..HI ...`, as the PDS products converted to PNG say) is
+/// [`PhotoEncoding::linear_stretch`]; anything else is sRGB.
+pub fn encoding_of_conversion(conversion: &str) -> PhotoEncoding {
+    let stretch = conversion.split_once("linear stretch DN ").and_then(|(_, rest)| {
+        let range = rest.split_whitespace().next()?;
+        let (lo, hi) = range.split_once("..")?;
+        PhotoEncoding::linear_stretch(lo.parse().ok()?, hi.trim_end_matches([',', ';', ')']).parse().ok()?)
+    });
+    stretch.unwrap_or_default()
 }
 
 /// Reads `MANIFEST.tsv` (tab-separated with a header naming `file`, `split`, `group`, `sol`).
@@ -283,13 +301,15 @@ pub fn read_manifest(path: &Path) -> Result<Vec<ManifestEntry>, SynthError> {
     let header: Vec<&str> = lines.next().ok_or_else(|| err("empty file".into()))?.split('\t').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).ok_or_else(|| err(format!("no `{name}` column")));
     let (cf, cs, cg, csol) = (col("file")?, col("split")?, col("group")?, col("sol")?);
+    let cconv = header.iter().position(|h| *h == "conversion");
     let mut out = Vec::new();
     for (i, line) in lines.enumerate() {
         let f: Vec<&str> = line.split('\t').collect();
         if f.len() <= cf.max(cs).max(cg).max(csol) {
             return Err(err(format!("line {}: {} columns, expected {}", i + 2, f.len(), header.len())));
         }
-        out.push(ManifestEntry { file: PathBuf::from(f[cf]), split: f[cs].to_string(), group: f[cg].to_string(), sol: f[csol].trim().parse().ok() });
+        let conversion = cconv.and_then(|c| f.get(c)).map_or(String::new(), |c| c.to_string());
+        out.push(ManifestEntry { file: PathBuf::from(f[cf]), split: f[cs].to_string(), group: f[cg].to_string(), sol: f[csol].trim().parse().ok(), conversion });
     }
     Ok(out)
 }
@@ -380,10 +400,13 @@ pub fn split_views(data: &Path, choice: &FrameChoice) -> Result<ChosenFrames, Sy
     let pds_grey = split != RealSplit::Train && matches!(grey, Some(GreyView::Pds | GreyView::Both));
     let cameras = data.join("with_cameras").join("cameras.json");
     let own = if pds_grey || (assumed_grey && cameras.exists()) { views_from_cameras_json(&cameras)? } else { Vec::new() };
+    // Each PDS frame's pixel encoding from its row of the manifest, when it has one.
+    let encodings: std::collections::HashMap<PathBuf, PhotoEncoding> = manifest.iter().map(|e| (data.join(&e.file), encoding_of_conversion(&e.conversion))).collect();
     if pds_grey {
         for v in &own {
             if split.holds(v.sol) && v.camera.width.min(v.camera.height) >= min_size {
-                out.push(v.clone());
+                let encoding = encodings.get(&v.image).copied().unwrap_or_default();
+                out.push(RealView { encoding, ..v.clone() });
             }
         }
     }
@@ -413,7 +436,8 @@ pub fn split_views(data: &Path, choice: &FrameChoice) -> Result<ChosenFrames, Sy
             (_, true) => AssumedView::of_frame(&e.file.to_string_lossy(), || false).view,
             (_, false) => AssumedView::NAVCAM,
         };
-        out.push(assumed_real_view(&view, path, w, h, e.sol, &mut rng));
+        let encoding = encoding_of_conversion(&e.conversion);
+        out.push(RealView { encoding, ..assumed_real_view(&view, path, w, h, e.sol, &mut rng) });
     }
     let sky_dropped = if assumed_grey { drop_sky_under_assumed_views(&mut out, &own, far_m) } else { Vec::new() };
     Ok(ChosenFrames { views: out, sky_dropped })
@@ -489,6 +513,26 @@ mod tests {
     /// A colour photo of `w` x `h` px at `path`: Mars-coloured ground, (150, 90, 60) everywhere.
     fn save_colour_photo(path: &Path, w: u32, h: u32) {
         image::RgbImage::from_pixel(w, h, image::Rgb([150, 90, 60])).save(path).unwrap();
+    }
+
+    /// A manifest's conversion that names a linear stretch of data values gives a linear
+    /// encoding, black at -255 lo / (hi - lo); any other conversion, or none, sRGB.
+    #[test]
+    fn a_linear_stretch_in_the_manifest_is_the_frames_encoding() {
+        let pds = ">i2 1024x1024 PDS IMAGE (12-bit data in 16-bit words) -> 8-bit PNG, linear stretch DN 562.0..1959.0 (0.5/99.5 percentiles of DN>=1)";
+        assert_eq!(encoding_of_conversion(pds), PhotoEncoding::linear_stretch(562.0, 1959.0).unwrap());
+        for other in ["none (original bytes)", "", "linear stretch DN 10..5", "linear stretch DN x..y"] {
+            assert_eq!(encoding_of_conversion(other), PhotoEncoding::Srgb, "{other}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("backgrounds/pds")).unwrap();
+        image::GrayImage::from_pixel(400, 320, image::Luma([90])).save(dir.path().join("backgrounds/pds/a.png")).unwrap();
+        image::GrayImage::from_pixel(400, 320, image::Luma([90])).save(dir.path().join("backgrounds/pds/b.png")).unwrap();
+        let manifest = format!("file\tsplit\tgroup\tsol\tconversion\nbackgrounds/pds/a.png\tbackgrounds\tpds\t500\t{pds}\nbackgrounds/pds/b.png\tbackgrounds\tpds\t500\tnone\n");
+        std::fs::write(dir.path().join("MANIFEST.tsv"), manifest).unwrap();
+        let views = split_views(dir.path(), &choose(RealSplit::Test, Some(GreyView::Assumed), false, 0, TRAINING_HFOV_DEG, 0)).unwrap().views;
+        let enc: Vec<PhotoEncoding> = views.iter().map(|v| v.encoding).collect();
+        assert_eq!(enc, [PhotoEncoding::linear_stretch(562.0, 1959.0).unwrap(), PhotoEncoding::Srgb]);
     }
 
     /// A background is colour or grey by its pixels, whatever its group is called: a grey frame

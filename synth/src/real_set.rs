@@ -101,7 +101,19 @@ pub fn render_sample(view: &RealView, k: usize, id: u64, cfg: &RealSetConfig) ->
     // A frame without a known sun gets one drawn for each composite
     // ([`crate::real_frames::random_sun`]); one with a sun draws nothing more.
     let sun_cam = view.sun_cam.unwrap_or_else(|| crate::real_frames::random_sun(&mut rng, &view.up_cam));
-    let cc = CompositeConfig { ground: (n, -d), sun_az_el_deg: (0.0, 45.0), tubes, dust, seed, tube_shape: cfg.tube_shape.clone(), range_m: Some((cfg.range_m.0, far)), sun_cam: Some(sun_cam), tube_gain, band: SpectralBand::of_photo(grey) };
+    let cc = CompositeConfig {
+        ground: (n, -d),
+        sun_az_el_deg: (0.0, 45.0),
+        tubes,
+        dust,
+        seed,
+        tube_shape: cfg.tube_shape.clone(),
+        range_m: Some((cfg.range_m.0, far)),
+        sun_cam: Some(sun_cam),
+        tube_gain,
+        band: SpectralBand::of_photo(grey),
+        encoding: view.encoding,
+    };
     let c = match composite(img.as_raw(), &view.camera, &cc) {
         Ok(c) => c,
         Err(SynthError::Invalid(m)) if m.starts_with("could place only") => return Ok(None),
