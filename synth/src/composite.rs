@@ -409,30 +409,24 @@ mod tests {
     /// shading: far brighter than the same light written through the sRGB curve.
     #[test]
     fn a_linear_photo_takes_its_tubes_light_linearly() {
-        let cam = CameraModel { width: 160, height: 160, fx: 400.0, fy: 400.0, cx: 79.5, cy: 79.5, distortion: Default::default() };
-        let background = vec![60u8; 160 * 160 * 3];
-        let shape = Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default()));
-        let cfg = |encoding| CompositeConfig {
-            ground: (Vector3::new(0.0, 0.0, -1.0), 1.0),
-            sun_az_el_deg: (0.0, 89.0),
-            tubes: 1,
-            dust: 0.0,
-            seed: 3,
-            tube_shape: shape.clone(),
-            range_m: None,
-            sun_cam: None,
-            tube_gain: 1.0,
-            band: SpectralBand::RedNir,
-            encoding,
-        };
         let black = -40.0f32;
-        let linear = composite(&background, &cam, &cfg(PhotoEncoding::Linear { black })).unwrap();
-        let srgb = composite(&background, &cam, &cfg(PhotoEncoding::Srgb)).unwrap();
+        let (cam, background, cfg) = overhead(SpectralBand::RedNir, PhotoEncoding::Linear { black });
+        let linear = composite(&background, &cam, &cfg).unwrap();
+        let srgb = composite(&background, &cam, &CompositeConfig { encoding: PhotoEncoding::Srgb, ..cfg }).unwrap();
         let (bl, bs) = (mean_of_material(&linear, &cam, TubeMaterial::Alumina), mean_of_material(&srgb, &cam, TubeMaterial::Alumina));
         let gain = (bl - black as f64) / (60.0 - black as f64);
         assert!(gain > 1.5 && gain < 0.78 / 0.34 + 0.05, "body {bl:.1} on ground 60, black {black}: {gain:.2}x the light");
         assert!(bl > bs + 20.0, "linear {bl:.1} against sRGB {bs:.1}");
         assert_eq!(&linear.output.rgb[..3], &[60, 60, 60]);
+    }
+
+    /// One tube 1 m below a camera looking straight down (160 px, f 400 px), sun 89 degrees
+    /// up, on grey ground of pixel value 60: the camera, the photo and the configuration.
+    fn overhead(band: SpectralBand, encoding: PhotoEncoding) -> (CameraModel, Vec<u8>, CompositeConfig) {
+        let cam = CameraModel { width: 160, height: 160, fx: 400.0, fy: 400.0, cx: 79.5, cy: 79.5, distortion: Default::default() };
+        let shape = Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default()));
+        let cfg = CompositeConfig { ground: (Vector3::new(0.0, 0.0, -1.0), 1.0), sun_az_el_deg: (0.0, 89.0), tubes: 1, dust: 0.0, seed: 3, tube_shape: shape, range_m: None, sun_cam: None, tube_gain: 1.0, band, encoding };
+        (cam, vec![60u8; 160 * 160 * 3], cfg)
     }
 
     fn mean_of_material(c: &Composite, cam: &CameraModel, want: TubeMaterial) -> f64 {
@@ -457,25 +451,9 @@ mod tests {
 
     #[test]
     fn red_nir_band_makes_the_seal_about_as_bright_as_the_body() {
-        // One tube 1 m below a camera looking straight down, sun overhead, on grey ground.
-        let cam = CameraModel { width: 160, height: 160, fx: 400.0, fy: 400.0, cx: 79.5, cy: 79.5, distortion: Default::default() };
-        let background = vec![60u8; 160 * 160 * 3];
-        let shape = Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default()));
-        let cfg = |band| CompositeConfig {
-            ground: (Vector3::new(0.0, 0.0, -1.0), 1.0),
-            sun_az_el_deg: (0.0, 89.0),
-            tubes: 1,
-            dust: 0.0,
-            seed: 3,
-            tube_shape: shape.clone(),
-            range_m: None,
-            sun_cam: None,
-            tube_gain: 1.0,
-            band,
-            encoding: PhotoEncoding::Srgb,
-        };
-        let vis = composite(&background, &cam, &cfg(SpectralBand::Visible)).unwrap();
-        let nir = composite(&background, &cam, &cfg(SpectralBand::RedNir)).unwrap();
+        let (cam, background, cfg) = overhead(SpectralBand::RedNir, PhotoEncoding::Srgb);
+        let vis = composite(&background, &cam, &CompositeConfig { band: SpectralBand::Visible, ..cfg.clone() }).unwrap();
+        let nir = composite(&background, &cam, &cfg).unwrap();
         let ratio = |c: &Composite| mean_of_material(c, &cam, TubeMaterial::Gold) / mean_of_material(c, &cam, TubeMaterial::Alumina);
         let (rv, rn) = (ratio(&vis), ratio(&nir));
         // Visible luminance: gold (0.45, 0.28, 0.05) is far darker than the white body; in

@@ -214,6 +214,18 @@ pub fn tube_spread(ds: &CocoDataset) -> Option<TubeSpread> {
 mod tests {
     use super::*;
     use crate::real_frames::{assumed_real_view, AssumedView};
+    use std::path::PathBuf;
+
+    /// Two tubes per composite at 1.5-4 m, no dust, gain or JPEG: the options of these tests.
+    fn two_tubes(seed: u64, colour_as_grey: bool) -> RealSetConfig {
+        RealSetConfig { tubes: (2, 2), per_view: 1, range_m: (1.5, 4.0), dust: (0.0, 0.0), tube_gain: (1.0, 1.0), jpeg_quality: None, seed, tube_shape: Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default())), colour_as_grey }
+    }
+
+    /// The photo at `path` under a camera 1.5 m up looking 40 degrees down (40 degree field).
+    fn view_of(path: PathBuf, w: u32, h: u32) -> RealView {
+        let view = AssumedView { hfov_deg: 40.0, height_m: 1.5, pitch_deg: 40.0, roll_deg: 0.0 };
+        assumed_real_view(&view, path, w, h, None, &mut ChaCha8Rng::seed_from_u64(1))
+    }
 
     /// With `colour_as_grey` a colour frame gives a grey composite whose ground is the frame's
     /// red channel (not its luminance), with its tubes drawn on it; without it, a colour one.
@@ -225,19 +237,8 @@ mod tests {
         // A reddish frame with a little texture: red 140-160, green 60, blue 30.
         let rgb: Vec<u8> = (0..w * h).flat_map(|i| [140 + (i * 7 % 21) as u8, 60, 30]).collect();
         image::save_buffer(&path, &rgb, w, h, image::ExtendedColorType::Rgb8).unwrap();
-        let view = AssumedView { hfov_deg: 40.0, height_m: 1.5, pitch_deg: 40.0, roll_deg: 0.0 };
-        let view = assumed_real_view(&view, path, w, h, None, &mut ChaCha8Rng::seed_from_u64(1));
-        let cfg = |colour_as_grey| RealSetConfig {
-            tubes: (2, 2),
-            per_view: 1,
-            range_m: (1.5, 4.0),
-            dust: (0.0, 0.0),
-            tube_gain: (1.0, 1.0),
-            jpeg_quality: None,
-            seed: 3,
-            tube_shape: Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default())),
-            colour_as_grey,
-        };
+        let view = view_of(path, w, h);
+        let cfg = |colour_as_grey| two_tubes(3, colour_as_grey);
         let grey = render_sample(&view, 0, 1, &cfg(true)).unwrap().expect("two tubes fit");
         assert_eq!(grey.annotations.len(), 2);
         assert_eq!(grey.image.extra["grey"], json!(true));
@@ -264,20 +265,9 @@ mod tests {
         let (w, h) = (400u32, 300u32);
         let luma: Vec<u8> = (0..w * h).map(|i| 100 + (i * 7 % 21) as u8).collect();
         image::save_buffer(&path, &luma, w, h, image::ExtendedColorType::L8).unwrap();
-        let view = AssumedView { hfov_deg: 40.0, height_m: 1.5, pitch_deg: 40.0, roll_deg: 0.0 };
-        let mut view = assumed_real_view(&view, path, w, h, None, &mut ChaCha8Rng::seed_from_u64(1));
+        let mut view = view_of(path, w, h);
         view.sun_cam = None;
-        let cfg = |seed| RealSetConfig {
-            tubes: (2, 2),
-            per_view: 1,
-            range_m: (1.5, 4.0),
-            dust: (0.0, 0.0),
-            tube_gain: (1.0, 1.0),
-            jpeg_quality: None,
-            seed,
-            tube_shape: Arc::new(TubeShape::from_model(&tubeloc_core::TubeModel::default())),
-            colour_as_grey: false,
-        };
+        let cfg = |seed| two_tubes(seed, false);
         let a = render_sample(&view, 0, 1, &cfg(3)).unwrap().expect("two tubes fit");
         let b = render_sample(&view, 0, 1, &cfg(3)).unwrap().expect("two tubes fit");
         assert_eq!(a.bytes, b.bytes);
