@@ -6,7 +6,7 @@ use serde_json::{json, Map};
 use std::path::PathBuf;
 use std::sync::Arc;
 use tubeloc_core::{files, CocoDataset, CocoImage, TubeMesh, TubeModel};
-use tubeloc_synth::composite::{composite, CompositeConfig, SpectralBand};
+use tubeloc_synth::composite::{composite, CompositeConfig, PhotoEncoding, SpectralBand};
 use tubeloc_synth::dataset::{annotation_from_truth, encode_png, pose_json, tube_category};
 use tubeloc_synth::TubeShape;
 
@@ -45,9 +45,25 @@ pub struct CompositeArgs {
     /// for a grey photo, visible for a colour one.
     #[arg(long, value_enum, default_value_t = BandArg::Auto)]
     pub band: BandArg,
+    /// How the photo's pixel values encode light: `srgb` (JPEGs, browse products), or
+    /// `linear:LO..HI` for a photo made by a linear stretch of data values LO..HI onto 0..255
+    /// (a PDS product's DN; no light is data value 0), in which the tubes are written linearly.
+    #[arg(long, default_value = "srgb", value_parser = parse_encoding)]
+    pub encoding: PhotoEncoding,
     /// Output folder (images/, annotations.json, camera.json).
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// `--encoding`: `srgb` or `linear:LO..HI` ([`PhotoEncoding::linear_stretch`]).
+fn parse_encoding(s: &str) -> Result<PhotoEncoding, String> {
+    let bad = || format!("{s:?}: expected srgb, or linear:LO..HI with 0 <= LO < HI (the data values the photo's 0..255 stretch spans)");
+    if s == "srgb" {
+        return Ok(PhotoEncoding::Srgb);
+    }
+    let (lo, hi) = s.strip_prefix("linear:").and_then(|r| r.split_once("..")).ok_or_else(bad)?;
+    let (lo, hi) = (lo.trim().parse::<f64>().map_err(|_| bad())?, hi.trim().parse::<f64>().map_err(|_| bad())?);
+    PhotoEncoding::linear_stretch(lo, hi).ok_or_else(bad)
 }
 
 /// `--band` of `tubeloc synth composite`.
@@ -86,19 +102,8 @@ pub fn run(a: CompositeArgs) -> Result<()> {
         BandArg::Visible => SpectralBand::Visible,
         BandArg::RedNir => SpectralBand::RedNir,
     };
-    let cfg = CompositeConfig {
-        ground: (a.ground.normal, -a.ground.offset),
-        sun_az_el_deg: (s[0], s[1]),
-        tubes: a.tubes,
-        dust: a.dust,
-        seed: a.seed,
-        tube_shape: Arc::new(shape),
-        range_m: None,
-        sun_cam: None,
-        tube_gain: 1.0,
-        band,
-        encoding: tubeloc_synth::composite::PhotoEncoding::Srgb,
-    };
+    let cfg =
+        CompositeConfig { ground: (a.ground.normal, -a.ground.offset), sun_az_el_deg: (s[0], s[1]), tubes: a.tubes, dust: a.dust, seed: a.seed, tube_shape: Arc::new(shape), range_m: None, sun_cam: None, tube_gain: 1.0, band, encoding: a.encoding };
     let c = composite(img.as_raw(), &cam, &cfg)?;
     let stem = a.background.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "composite".into());
     let file_name = format!("{stem}_composite.png");
@@ -117,4 +122,19 @@ pub fn run(a: CompositeArgs) -> Result<()> {
     ds.save(&a.out.join("annotations.json"))?;
     println!("{}: {} tubes composited onto {}", a.out.display(), c.truth.len(), a.background.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_encoding_is_srgb_or_a_linear_stretch() {
+        assert_eq!(parse_encoding("srgb"), Ok(PhotoEncoding::Srgb));
+        assert_eq!(parse_encoding("linear:562..1959"), Ok(PhotoEncoding::linear_stretch(562.0, 1959.0).unwrap()));
+        for bad in ["linear", "linear:5..5", "linear:-1..9", "linear:a..9", "gamma"] {
+            let e = parse_encoding(bad).unwrap_err();
+            assert!(e.contains("expected srgb, or linear:LO..HI"), "{bad}: {e}");
+        }
+    }
 }
