@@ -24,7 +24,7 @@ use crate::objects::{ObjectHit, Objects, TubeInstance};
 use crate::ray::Ray;
 use crate::render::{pixel_ray, RenderOutput, SurfaceKind};
 use crate::scene::lying_rotation;
-use crate::terrain::{srgb_to_linear, REGOLITH_SRGB};
+use crate::terrain::{linear_to_srgb8, srgb_to_linear, REGOLITH_SRGB};
 use crate::truth::{projected_rect, tube_truth, TubeTruth};
 use crate::tube_shape::TubeShape;
 use crate::SynthError;
@@ -101,15 +101,10 @@ impl PhotoEncoding {
 
     /// The pixel value of light `l`, rounded and clipped to 0-255.
     pub fn to_pixel(self, l: f32) -> u8 {
-        let v = match self {
-            PhotoEncoding::Srgb => {
-                let v = l.clamp(0.0, 1.0);
-                let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
-                s * 255.0
-            }
-            PhotoEncoding::Linear { black } => black + l * (255.0 - black),
-        };
-        (v.clamp(0.0, 255.0) + 0.5) as u8
+        match self {
+            PhotoEncoding::Srgb => linear_to_srgb8(l),
+            PhotoEncoding::Linear { black } => ((black + l * (255.0 - black)).clamp(0.0, 255.0) + 0.5) as u8,
+        }
     }
 }
 

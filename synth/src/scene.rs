@@ -164,12 +164,6 @@ pub struct Scene {
     pub terrain: TerrainParams,
 }
 
-fn linear_to_srgb8(v: f32) -> u8 {
-    let v = v.clamp(0.0, 1.0);
-    let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
-    (s * 255.0 + 0.5) as u8
-}
-
 /// Rotation whose z axis is the horizontal direction at `yaw` (radians), rolled by `roll`.
 pub fn lying_rotation(yaw: f64, roll: f64) -> Rotation3<f64> {
     let z = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
@@ -406,7 +400,7 @@ impl Scene {
         }
         rocks.extend(case_rocks);
 
-        let albedo: Vec<[u8; 4]> = lin.par_iter().zip(labels.par_iter()).map(|(a, &l)| [linear_to_srgb8(a[0]), linear_to_srgb8(a[1]), linear_to_srgb8(a[2]), l]).collect();
+        let albedo: Vec<[u8; 4]> = lin.par_iter().zip(labels.par_iter()).map(|(a, &l)| [crate::terrain::linear_to_srgb8(a[0]), crate::terrain::linear_to_srgb8(a[1]), crate::terrain::linear_to_srgb8(a[2]), l]).collect();
         let mut objects = Objects::new(rocks, tubes, plates);
         let gcell = 0.1;
         let gn = (config.extent_m / gcell).ceil() as usize;

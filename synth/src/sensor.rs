@@ -34,13 +34,7 @@ pub fn develop(linear: &mut [f32], w: usize, h: usize, opts: &SensorOptions, see
     if opts.blur_sigma_px > 0.0 {
         blur_rgb(linear, w, h, opts.blur_sigma_px);
     }
-    let lut: Vec<u8> = (0..4096)
-        .map(|i| {
-            let v = i as f32 / 4095.0;
-            let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
-            (s * 255.0 + 0.5).clamp(0.0, 255.0) as u8
-        })
-        .collect();
+    let lut: Vec<u8> = (0..4096).map(|i| crate::terrain::linear_to_srgb8(i as f32 / 4095.0)).collect();
     let mut out = vec![0u8; w * h * 3];
     out.par_chunks_mut(w * 3).zip(linear.par_chunks(w * 3)).enumerate().for_each(|(y, (orow, lrow))| {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (y as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));

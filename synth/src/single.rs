@@ -77,11 +77,7 @@ pub fn single_tube_scene_with(t_cam_tube: &Pose, ground: Ground, sun: Sun, seed:
                 Ground::Plain => plain,
                 Ground::Textured => params.sample(-3.0 + (k % n) as f64 * 0.01, -3.0 + (k / n) as f64 * 0.01).1,
             };
-            let enc = |v: f32| -> u8 {
-                let v = v.clamp(0.0, 1.0);
-                let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
-                (s * 255.0 + 0.5) as u8
-            };
+            let enc = crate::terrain::linear_to_srgb8;
             [enc(a[0]), enc(a[1]), enc(a[2]), 0]
         })
         .collect();

@@ -47,6 +47,13 @@ impl TerrainKind {
     }
 }
 
+/// Linear (0-1, clipped) to sRGB (0-255, rounded): the inverse of [`srgb_to_linear`].
+pub fn linear_to_srgb8(v: f32) -> u8 {
+    let v = v.clamp(0.0, 1.0);
+    let s = if v <= 0.0031308 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0 + 0.5) as u8
+}
+
 /// sRGB (0-255) to linear.
 pub fn srgb_to_linear(c: [u8; 3]) -> [f32; 3] {
     c.map(|v| {
